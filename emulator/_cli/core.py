@@ -1,0 +1,191 @@
+"""``exposim info``, ``exposim emulate`` and ``exposim demo``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from emulator.errors import ExposimError
+
+__all__ = ["register", "emulate_cycle"]
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "info",
+        help="describe a recording: cameras, brackets, cycles, partial cycles and gaps",
+        description="Describe a BorealHDR-layout recording (cycles are grouped by timestamp).",
+    )
+    p.add_argument("sequence", type=Path, help="recording folder holding camera_left/ and camera_right/")
+    p.add_argument("--json", action="store_true", help="print one JSON object (cycles as a list)")
+    p.set_defaults(func=_info)
+
+    p = sub.add_parser(
+        "emulate",
+        help="emulate one cycle at any exposure time and write 16-bit PNGs",
+        description=(
+            "Emulate the image(s) a camera would have captured at --exposure-ms from the bracket "
+            "the selector picks in cycle --cycle (one choice for both cameras of a stereo pair)."
+        ),
+    )
+    p.add_argument("sequence", type=Path)
+    p.add_argument("--exposure-ms", type=float, required=True, help="target exposure time in ms")
+    p.add_argument("--cycle", type=int, required=True, help="cycle index (see `exposim info`)")
+    p.add_argument("--camera", choices=("left", "right", "both"), default="both")
+    p.add_argument("--selector", choices=("higher-no-sat", "closest", "reference"), default="higher-no-sat")
+    p.add_argument("--response", type=Path, help="pcalib file (default: found beside the recording)")
+    p.add_argument("-o", "--output", type=Path, required=True, help="output folder for the PNG(s)")
+    p.add_argument("--force", action="store_true", help="overwrite existing output files")
+    p.add_argument("--json", action="store_true", help="print the result as one JSON object")
+    p.set_defaults(func=_emulate)
+
+    p = sub.add_parser(
+        "demo",
+        help="run the main job end to end on the embedded synthetic default",
+        description=(
+            "Synthesise a small scene, emulate it, run the AE methods in closed loop and "
+            "write a short report into a new output folder."
+        ),
+    )
+    p.add_argument("-o", "--output", type=Path, default=None, help="output folder (default: a new exposim-demo-N)")
+    p.add_argument("--quick", action="store_true", help="smallest configuration (for tests)")
+    p.set_defaults(func=_demo)
+
+
+# ---------------------------------------------------------------------------- info
+def _info(args) -> int:
+    from emulator.dataset import load_sequence
+
+    seq = load_sequence(args.sequence)
+    desc = seq.describe()
+    if args.json:
+        print(json.dumps(desc, indent=1))
+        return 0
+    print(f"sequence   {seq.path}")
+    print(f"cameras    {', '.join(seq.cameras)}")
+    print(f"brackets   {', '.join(f'{b:g}' for b in seq.brackets)} ms")
+    print(f"levels     black {seq.black_level}, white {seq.white_level}")
+    print(f"cycles     {len(seq)} ({len(seq) - len(seq.partial_cycles)} complete, partial: {seq.partial_cycles or 'none'})")
+    for c in desc["cycles"]:
+        cams = "  ".join(f"{cam}: {len(c.get(cam, {}))}/{len(seq.brackets)}" for cam in seq.cameras)
+        print(f"  cycle {c['index']:4d}  t0 {c['timestamp_ns']}  {cams}{'  partial' if c['partial'] else ''}")
+    if seq.gaps:
+        print("gaps")
+        for g in seq.gaps:
+            print(f"  {g}")
+    return 0
+
+
+# ---------------------------------------------------------------------------- emulate
+def emulate_cycle(
+    sequence,
+    cycle_index: int,
+    exposure_ms: float,
+    *,
+    cameras: tuple[str, ...] = ("left", "right"),
+    selector: str = "higher-no-sat",
+    response=None,
+):
+    """Emulate one cycle; returns (info dict, {camera: image}).
+
+    The selector sees the brackets present for every requested camera and decides on the
+    first camera's saturation (the left one for a stereo pair), once for all cameras.
+    """
+    from emulator.dataset import sequence_response
+    from emulator.emulate import check_exposure, emulate
+    from emulator.select import saturated_fraction, select
+
+    exposure_ms = check_exposure(exposure_ms, "--exposure-ms")
+    if not 0 <= cycle_index < len(sequence):
+        raise ExposimError(f"cycle {cycle_index} out of range: {sequence.path} has cycles 0..{len(sequence) - 1}")
+    missing = [c for c in cameras if c not in sequence.cameras]
+    if missing:
+        raise ExposimError(f"{sequence.path}: no {', '.join(missing)} camera in this recording")
+    cycle = sequence[cycle_index]
+    available = cycle.available(cameras)
+    if not available:
+        raise ExposimError(
+            f"{sequence.path}: cycle {cycle_index} has no bracket present for {' and '.join(cameras)}"
+        )
+    response = response or sequence_response(sequence)
+    lead = cameras[0]
+    levels = dict(white_level=sequence.white_level, black_level=sequence.black_level)
+    images = {}
+
+    def frac(b):
+        return lambda: saturated_fraction(_load(lead, b), **levels)
+
+    def _load(cam, b):
+        key = (cam, b)
+        if key not in images:
+            images[key] = cycle.frames[cam][b].load()
+        return images[key]
+
+    chosen = select(selector, exposure_ms, {b: frac(b) for b in available}, **levels)
+    info = {
+        "sequence": str(sequence.path),
+        "cycle": cycle_index,
+        "target_ms": exposure_ms,
+        "selector": selector,
+        "bracket_ms": chosen,
+        "ratio": exposure_ms / chosen,
+        "response": response.name,
+        "cameras": {},
+    }
+    out = {}
+    for cam in cameras:
+        frame = cycle.frames[cam][chosen]
+        img, valid = emulate(_load(cam, chosen), chosen, exposure_ms, response, return_mask=True)
+        out[cam] = img
+        info["cameras"][cam] = {
+            "source": str(frame.path),
+            "timestamp_ns": frame.timestamp_ns,
+            "valid_fraction": float(valid.mean()),
+            "saturated_fraction_source": saturated_fraction(_load(cam, chosen), **levels),
+        }
+    info["valid_fraction"] = min(c["valid_fraction"] for c in info["cameras"].values())
+    return info, out
+
+
+def _emulate(args) -> int:
+    from emulator.dataset import load_sequence, write_png16
+    from emulator.response import CameraResponse
+
+    seq = load_sequence(args.sequence)
+    cams = ("left", "right") if args.camera == "both" else (args.camera,)
+    if args.camera == "both":
+        cams = tuple(c for c in cams if c in seq.cameras) or cams
+    response = None
+    if args.response is not None:
+        response = CameraResponse.from_pcalib(args.response, white_level=max(4095, seq.white_level)).with_levels(
+            white_level=seq.white_level, black_level=seq.black_level
+        )
+    info, images = emulate_cycle(seq, args.cycle, args.exposure_ms, cameras=cams, selector=args.selector, response=response)
+    targets = {
+        cam: args.output / f"{cam}_cycle{args.cycle:04d}_{args.exposure_ms:g}ms.png" for cam in images
+    }
+    if not args.force:
+        for path in targets.values():
+            if path.exists():
+                raise ExposimError(f"{path}: exists; refusing to overwrite (use --force)")
+    for cam, path in targets.items():
+        write_png16(path, images[cam], overwrite=args.force)
+        info["cameras"][cam]["output"] = str(path)
+    if args.json:
+        print(json.dumps(info, indent=1))
+    else:
+        print(
+            f"cycle {info['cycle']}: target {info['target_ms']:g} ms from bracket {info['bracket_ms']:g} ms "
+            f"(ratio {info['ratio']:.4g}, {info['selector']}), valid pixels {100 * info['valid_fraction']:.2f} %"
+        )
+        for cam, c in info["cameras"].items():
+            print(f"  {cam:5s} {c['source']} (t = {c['timestamp_ns']} ns) -> {c['output']}")
+    return 0
+
+
+# ---------------------------------------------------------------------------- demo
+def _demo(args) -> int:
+    from validation.demo import run_demo
+
+    return run_demo(args.output, quick=args.quick)

@@ -1,0 +1,269 @@
+"""Camera response: the inverse response g = f^-1 (DN -> linear exposure) and its forward f.
+
+The response is held as a table of g at every integer DN in ``0..white_level``, strictly
+increasing, so that
+
+* ``inverse(dn)`` is a table lookup (linear interpolation between integers for
+  non-integer DN), and
+* ``forward(h)`` is the piecewise-linear inverse of that table, so that
+  ``forward(inverse(d)) == d`` exactly for every integer ``d``.
+
+Units of g are arbitrary (the TUM / BorealHDR ``pcalib`` files use g(white) = 255);
+emulation only uses ratios of g, so a global scale is irrelevant.  An *offset* is not
+neutral under a ratio, which is why pcalib samples are read exactly as given
+(DESIGN.md, "How the table is read matters").
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections import OrderedDict
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from emulator.errors import ResponseError
+
+__all__ = ["CameraResponse", "read_pcalib", "write_pcalib"]
+
+#: How many per-ratio emulation tables a response keeps (each is 8 KiB for 12 bits).
+LUT_CACHE_SIZE = 512
+
+
+def read_pcalib(path: str | os.PathLike) -> np.ndarray:
+    """Read a TUM / BorealHDR ``pcalib`` file: whitespace-separated samples of g.
+
+    Returns the samples as float64, unchanged.  Raises :class:`ResponseError` naming the
+    file for an empty file, unparsable tokens or non-finite values.  Monotonicity and
+    count are checked by :meth:`CameraResponse.from_pcalib`, which knows the bit depth.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{path}: response file not found") from None
+    except UnicodeDecodeError:
+        raise ResponseError(f"{path}: not a text file (pcalib files hold whitespace-separated numbers)") from None
+    tokens = text.split()
+    if not tokens:
+        raise ResponseError(f"{path}: empty file, expected whitespace-separated samples of the inverse response")
+    values = np.empty(len(tokens), dtype=np.float64)
+    for i, tok in enumerate(tokens):
+        try:
+            values[i] = float(tok)
+        except ValueError:
+            raise ResponseError(f"{path}: sample {i} is {tok!r}, not a number") from None
+    bad = ~np.isfinite(values)
+    if bad.any():
+        first = int(np.flatnonzero(bad)[0])
+        raise ResponseError(
+            f"{path}: {int(bad.sum())} non-finite sample(s), the first at index {first} ({tokens[first]!r})"
+        )
+    return values
+
+
+def write_pcalib(path: str | os.PathLike, samples: np.ndarray) -> None:
+    """Write samples of g in the pcalib format (one line, space-separated, full precision)."""
+    samples = np.asarray(samples, dtype=np.float64)
+    Path(path).write_text(" ".join(repr(float(v)) for v in samples) + "\n")
+
+
+def _check_increasing(g: np.ndarray, source: str) -> None:
+    steps = np.diff(g)
+    bad = ~(steps > 0)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise ResponseError(
+            f"{source}: inverse response is not strictly increasing: sample {i + 1} ({float(g[i + 1])!r}) "
+            f"<= sample {i} ({float(g[i])!r}); {int(bad.sum())} such step(s)"
+        )
+
+
+@dataclass(eq=False)
+class CameraResponse:
+    """A strictly increasing inverse response g over DN ``0..white_level``.
+
+    Parameters
+    ----------
+    g : ndarray, shape (white_level + 1,), float64
+        Linear exposure (arbitrary units) at each integer DN.
+    white_level : int
+        Highest DN the sensor produces; emulated images are clipped to it and pixels at
+        or above it count as saturated.
+    black_level : int
+        Lowest DN; pixels at or below it count as clipped dark.
+    name : str
+        Where the response came from (file path or constructor), used in messages.
+    knots : ndarray or None
+        The raw samples when loaded from a pcalib file (the reference AE code needs them).
+    """
+
+    g: np.ndarray
+    white_level: int = 4095
+    black_level: int = 0
+    name: str = "custom"
+    knots: np.ndarray | None = None
+    _luts: OrderedDict = field(default_factory=OrderedDict, init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        g = np.asarray(self.g, dtype=np.float64)
+        self.white_level = int(self.white_level)
+        self.black_level = int(self.black_level)
+        if g.ndim != 1 or g.size != self.white_level + 1:
+            raise ResponseError(
+                f"{self.name}: inverse response must have white_level + 1 = {self.white_level + 1} "
+                f"samples, got shape {g.shape}"
+            )
+        if not 0 <= self.black_level < self.white_level:
+            raise ResponseError(
+                f"{self.name}: need 0 <= black_level < white_level, got {self.black_level}, {self.white_level}"
+            )
+        if not np.all(np.isfinite(g)):
+            first = int(np.flatnonzero(~np.isfinite(g))[0])
+            raise ResponseError(f"{self.name}: non-finite inverse response at DN {first}")
+        _check_increasing(g, self.name)
+        g.setflags(write=False)
+        self.g = g
+        self._dn = np.arange(self.white_level + 1, dtype=np.float64)
+
+    # ------------------------------------------------------------------ constructors
+    @classmethod
+    def from_samples(
+        cls,
+        samples: np.ndarray,
+        white_level: int = 4095,
+        *,
+        black_level: int = 0,
+        name: str = "samples",
+    ) -> "CameraResponse":
+        """Build from N samples of g placed evenly over DN ``0..white_level``.
+
+        Sample k sits at DN ``white_level * k / (N - 1)``; g at integer DN is the
+        piecewise-linear interpolation through the samples, exactly as given.
+        """
+        samples = np.asarray(samples, dtype=np.float64)
+        if samples.ndim != 1 or samples.size < 2:
+            raise ResponseError(f"{name}: need at least 2 samples of the inverse response, got {samples.size}")
+        if not np.all(np.isfinite(samples)):
+            first = int(np.flatnonzero(~np.isfinite(samples))[0])
+            raise ResponseError(f"{name}: non-finite sample at index {first}")
+        _check_increasing(samples, name)
+        knots_dn = np.linspace(0.0, float(white_level), samples.size)
+        g = np.interp(np.arange(int(white_level) + 1, dtype=np.float64), knots_dn, samples)
+        return cls(g, white_level, black_level, name, samples)
+
+    @classmethod
+    def from_pcalib(
+        cls,
+        path: str | os.PathLike,
+        white_level: int = 4095,
+        *,
+        black_level: int = 0,
+        expected_count: int | None = 256,
+    ) -> "CameraResponse":
+        """Read a TUM / BorealHDR pcalib file (N samples of g over DN 0..white_level).
+
+        The samples are used as given: no renormalisation, no forcing of the end knots.
+        ``expected_count`` (256 for the TUM format) is enforced unless None; a table with
+        ``white_level + 1`` samples (one per DN) is always accepted.
+        """
+        samples = read_pcalib(path)
+        n = samples.size
+        if expected_count is not None and n not in (expected_count, int(white_level) + 1):
+            raise ResponseError(
+                f"{path}: expected {expected_count} samples (or {int(white_level) + 1}, one per DN), got {n}"
+            )
+        return cls.from_samples(samples, white_level, black_level=black_level, name=str(path))
+
+    @classmethod
+    def linear(cls, white_level: int = 4095, *, black_level: int = 0) -> "CameraResponse":
+        """g(d) = (d - black) / (white - black): a linear sensor with its black offset.
+
+        DN below the black level map to negative exposure (they only arise from noise).
+        """
+        dn = np.arange(int(white_level) + 1, dtype=np.float64)
+        return cls((dn - black_level) / (white_level - black_level), white_level, black_level, "linear")
+
+    @classmethod
+    def gamma(cls, gamma: float, white_level: int = 4095, *, black_level: int = 0) -> "CameraResponse":
+        """g(d) = x ** gamma with x = (d - black) / (white - black), i.e. f(h) = black + (white - black) h ** (1/gamma).
+
+        Below the black level the curve is continued odd-symmetrically (-|x| ** gamma) so it
+        stays strictly increasing.
+        """
+        if not (math.isfinite(gamma) and gamma > 0):
+            raise ResponseError(f"gamma must be finite and positive, got {gamma!r}")
+        dn = np.arange(int(white_level) + 1, dtype=np.float64)
+        x = (dn - black_level) / (white_level - black_level)
+        g = np.sign(x) * np.abs(x) ** float(gamma)
+        return cls(g, white_level, black_level, f"gamma{gamma:g}")
+
+    @classmethod
+    def from_function(
+        cls, g_of_dn, white_level: int = 4095, *, black_level: int = 0, name: str = "function"
+    ) -> "CameraResponse":
+        """Tabulate a vectorised callable g(dn) at every integer DN."""
+        dn = np.arange(int(white_level) + 1, dtype=np.float64)
+        return cls(np.asarray(g_of_dn(dn), dtype=np.float64), white_level, black_level, name)
+
+    def with_levels(self, *, white_level: int | None = None, black_level: int | None = None) -> "CameraResponse":
+        """The same curve with other clip levels (a white level below the table top truncates it)."""
+        white = self.white_level if white_level is None else int(white_level)
+        black = self.black_level if black_level is None else int(black_level)
+        if white > self.white_level:
+            raise ResponseError(f"{self.name}: cannot raise white_level above the table top {self.white_level}")
+        return CameraResponse(self.g[: white + 1].copy(), white, black, self.name, self.knots)
+
+    # ------------------------------------------------------------------ evaluation
+    @property
+    def bit_depth(self) -> int:
+        return int(self.white_level).bit_length()
+
+    def inverse(self, dn) -> np.ndarray:
+        """g(dn): linear exposure for DN values (float64, same shape). Integer DN index the table."""
+        dn = np.asarray(dn)
+        if dn.dtype.kind in "ui":
+            return self.g[np.clip(dn, 0, self.white_level)]
+        return np.interp(dn.astype(np.float64), self._dn, self.g)
+
+    def forward(self, h) -> np.ndarray:
+        """f(h): continuous DN (float64) for linear exposure h, clamped to [0, white_level]."""
+        return np.interp(np.asarray(h, dtype=np.float64), self.g, self._dn)
+
+    # ------------------------------------------------------------------ emulation tables
+    def lut(self, ratio: float) -> tuple[np.ndarray, np.ndarray]:
+        """(uint16 table L_k, bool validity table) for ratio k, cached (see emulator.emulate)."""
+        key = float(ratio)
+        hit = self._luts.get(key)
+        if hit is not None:
+            self._luts.move_to_end(key)
+            return hit
+        if key == 1.0:
+            table = np.arange(self.white_level + 1, dtype=np.uint16)
+        else:
+            target = self.forward(key * self.g)
+            table = np.clip(np.rint(target), self.black_level, self.white_level).astype(np.uint16)
+        dn = np.arange(self.white_level + 1)
+        clipped_high = dn >= self.white_level
+        clipped_low = dn <= self.black_level
+        valid = ~(clipped_high | clipped_low)
+        if key >= 1.0:
+            valid |= clipped_high  # a saturated pixel stays saturated when brightened
+        if key <= 1.0:
+            valid |= clipped_low  # a black pixel stays black when darkened
+        table.setflags(write=False)
+        valid.setflags(write=False)
+        self._luts[key] = (table, valid)
+        if len(self._luts) > LUT_CACHE_SIZE:
+            self._luts.popitem(last=False)
+        return table, valid
+
+    def to_pcalib(self, path: str | os.PathLike, n_samples: int = 256) -> None:
+        """Write g sampled at N evenly spaced DN in the pcalib format."""
+        knots_dn = np.linspace(0.0, float(self.white_level), n_samples)
+        write_pcalib(path, self.inverse(knots_dn))
+
+    def __repr__(self) -> str:
+        return f"CameraResponse({self.name!r}, white_level={self.white_level}, black_level={self.black_level})"

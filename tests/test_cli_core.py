@@ -1,0 +1,68 @@
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from emulator.cli import main
+from emulator.dataset import read_png16
+
+
+def test_help_lists_commands(capsys):
+    with pytest.raises(SystemExit) as e:
+        main(["--help"])
+    assert e.value.code == 0
+    out = capsys.readouterr().out
+    for cmd in ("info", "emulate", "demo"):
+        assert cmd in out
+
+
+def test_console_script_runs():
+    r = subprocess.run([sys.executable, "-m", "emulator.cli", "info", "--help"], capture_output=True, text=True)
+    assert r.returncode == 0 and "--json" in r.stdout
+
+
+def test_info_json_real_sample(sample_seq, capsys):
+    assert main(["info", str(sample_seq), "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert isinstance(d["cycles"], list) and len(d["cycles"]) == 4
+    c1 = d["cycles"][1]
+    assert c1["index"] == 1
+    assert set(c1["left"]) == {"1.0", "2.0", "4.0", "8.0", "16.0", "32.0"}
+    assert c1["left"] == c1["right"]
+    assert d["cycles"][0]["right"] == {
+        "8.0": 1695668703364771328,
+        "16.0": 1695668703411462400,
+        "32.0": 1695668703456804608,
+    }
+    assert d["partial_cycles"] == [0, 3]
+
+
+def test_emulate_cli_real_sample(sample_seq, tmp_path, capsys):
+    args = ["emulate", str(sample_seq), "--exposure-ms", "5.3", "--cycle", "1", "-o", str(tmp_path), "--json"]
+    assert main(args) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["bracket_ms"] == 8.0 and d["ratio"] == pytest.approx(5.3 / 8.0)
+    ts = {c["timestamp_ns"] for c in d["cameras"].values()}
+    assert ts == {1695668703639032576}
+    left = read_png16(d["cameras"]["left"]["output"])
+    assert left.dtype == np.uint16 and left.shape == (1200, 1920) and left.max() <= 4094
+    assert 0.99 < d["valid_fraction"] <= 1.0
+    # refuses to overwrite, then --force works
+    assert main(args) == 1
+    assert "exists; refusing to overwrite" in capsys.readouterr().err
+    assert main(args + ["--force"]) == 0
+
+
+def test_emulate_cli_errors(sample_seq, tmp_path, capsys):
+    base = ["emulate", str(sample_seq), "-o", str(tmp_path)]
+    assert main(base + ["--exposure-ms", "5", "--cycle", "9"]) == 1
+    assert "cycle 9 out of range" in capsys.readouterr().err
+    assert main(base + ["--exposure-ms", "nan", "--cycle", "1"]) == 1
+    assert "--exposure-ms must be finite and positive" in capsys.readouterr().err
+    # cycle 3 has only the 1 ms bracket: outside the range above it, so 1 ms is used
+    assert main(base + ["--exposure-ms", "20", "--cycle", "3", "--camera", "right", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["bracket_ms"] == 1.0
+    assert main(["info", str(tmp_path / "nope")]) == 1
+    assert "sequence folder not found" in capsys.readouterr().err

@@ -1,0 +1,76 @@
+import numpy as np
+import pytest
+
+from emulator import ExposimError, closest, higher_no_sat, saturated_fraction, select
+from emulator.select import reference_rule
+
+BR = [1.0, 2.0, 4.0, 8.0, 16.0, 32.0]
+LV = dict(white_level=4095, black_level=0)
+
+
+def fractions(**over):
+    f = {b: 0.0 for b in BR}
+    f.update({float(k): v for k, v in over.items()})
+    return f
+
+
+def test_inside_range_picks_higher_when_unsaturated():
+    assert higher_no_sat(5.3, fractions(), **LV) == 8.0
+    assert higher_no_sat(1.01, fractions(), **LV) == 2.0
+
+
+def test_equal_to_a_bracket_uses_it_even_if_saturated():
+    assert higher_no_sat(8.0, fractions(**{"8.0": 0.9}), **LV) == 8.0
+    assert higher_no_sat(8.0 * (1 + 1e-12), fractions(), **LV) == 8.0
+
+
+def test_below_and_above_range_use_closest_end():
+    assert higher_no_sat(0.02, fractions(**{"1.0": 0.5}), **LV) == 1.0
+    assert higher_no_sat(50.0, fractions(**{"32.0": 0.9}), **LV) == 32.0
+
+
+def test_threshold_is_strict_at_one_percent():
+    assert higher_no_sat(5.0, fractions(**{"8.0": 0.01}), **LV) == 4.0
+    assert higher_no_sat(5.0, fractions(**{"8.0": 0.0099999}), **LV) == 8.0
+    assert higher_no_sat(5.0, fractions(**{"8.0": 0.5, "4.0": 0.9}), **LV) == 4.0
+
+
+def test_images_both_clip_ends_count():
+    white, black = 4094, 0
+    hi = np.full((100, 100), 2000, np.uint16)
+    lo = np.full((100, 100), 1000, np.uint16)
+    hi.flat[:50] = white  # 0.5 % high
+    hi.flat[50:100] = black  # 0.5 % low -> 1.0 % total: not below 1 %
+    assert saturated_fraction(hi, white_level=white, black_level=black) == pytest.approx(0.01)
+    assert higher_no_sat(5.0, {4.0: lo, 8.0: hi}, white_level=white, black_level=black) == 4.0
+    hi.flat[99] = 1500
+    assert higher_no_sat(5.0, {4.0: lo, 8.0: hi}, white_level=white, black_level=black) == 8.0
+
+
+def test_keys_are_returned_as_given():
+    assert higher_no_sat(3.0, {"2.0": 0.0, "4.0": 0.0}, **LV) == "4.0"
+
+
+def test_closest_in_log_space():
+    f = fractions()
+    assert closest(5.0, f) == 4.0
+    assert closest(6.0, f) == 8.0  # log(6/4) = 0.405 > log(8/6) = 0.288
+    assert closest(np.sqrt(32.0), f) == 8.0  # exact tie in log space -> higher
+    assert closest(0.02, f) == 1.0 and closest(99.0, f) == 32.0
+
+
+def test_reference_rule():
+    assert reference_rule(5.0, fractions(**{"8.0": 0.3, "4.0": 0.4}), **LV) == 8.0
+    assert reference_rule(5.0, fractions(**{"8.0": 0.3, "4.0": 0.2}), **LV) == 4.0
+
+
+def test_front_function_and_errors():
+    assert select("higher-no-sat", 5.0, fractions(), **LV) == 8.0
+    with pytest.raises(ExposimError, match="unknown selector 'best'; choose one of higher-no-sat, closest"):
+        select("best", 5.0, fractions(), **LV)
+    with pytest.raises(ExposimError, match="no brackets"):
+        higher_no_sat(5.0, {}, **LV)
+    with pytest.raises(ExposimError, match="target_ms"):
+        higher_no_sat(float("nan"), fractions(), **LV)
+    with pytest.raises(ExposimError, match=r"saturated fraction must lie in \[0, 1\]"):
+        higher_no_sat(5.0, fractions(**{"8.0": 1.5}), **LV)

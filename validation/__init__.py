@@ -1,0 +1,1 @@
+"""Experiments that combine emulator, synth and scenes and write reports (markdown + png + json)."""
