@@ -1,0 +1,238 @@
+"""``exposim bench features|vo|rpe``: the paper's section V-D benchmarks.
+
+Only parses arguments and calls one library function of :mod:`emulator.metrics`;
+OpenCV, evo, tqdm and matplotlib are imported inside the command functions.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import shlex
+import sys
+
+__all__ = ["register"]
+
+
+def _command_line(args: argparse.Namespace, positional: tuple[str, ...]) -> str:
+    """The command, rebuilt from the parsed arguments (also right when ``main(argv)`` is
+    called in-process, where ``sys.argv`` is someone else's)."""
+    parts = ["exposim", "bench", args.bench_command]
+    for name in positional:
+        value = getattr(args, name)
+        parts += [str(v) for v in value] if isinstance(value, list) else [str(value)]
+    for name, value in vars(args).items():
+        if name in positional or name in ("func", "command", "bench_command") or value is None or value is False:
+            continue
+        flag = "--" + name.replace("_", "-")
+        if value is True:
+            parts.append(flag)
+        elif isinstance(value, list):
+            parts += [flag, ",".join(f"{v:g}" if isinstance(v, float) else str(v) for v in value)]
+        else:
+            parts += [flag, str(value)]
+    return shlex.join(parts)
+
+
+def _methods(value: str | None) -> list[str] | None:
+    return [m.strip() for m in value.split(",") if m.strip()] if value else None
+
+
+def _floats(value: str) -> list[float]:
+    try:
+        return [float(v) for v in value.split(",") if v.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {value!r}") from None
+
+
+def _features(args: argparse.Namespace) -> int:
+    from emulator.metrics.bench import bench_features
+
+    results = bench_features(
+        args.run_dirs,
+        args.output,
+        methods=_methods(args.methods),
+        grid=(args.grid, args.grid),
+        ratio=args.ratio,
+        n_features=args.n_features,
+        matcher=args.matcher,
+        scale=args.scale,
+        max_frames=args.max_frames,
+        force=args.force,
+        progress=not args.quiet,
+        command=_command_line(args, ("run_dirs",)),
+    )
+    if not args.quiet:
+        for name, m in results["methods"].items():
+            u = m["median_uniformity"]
+            print(
+                f"{name}: median uniformity {'-' if u is None else f'{100 * u:.1f} %'}, "
+                f"median matches {m['median_matches']}, min matches {m['min_matches']}",
+                file=sys.stderr,
+            )
+        print(f"wrote {args.output}/results.json, fig4_features.png, report.md", file=sys.stderr)
+    return 0
+
+
+def _vo(args: argparse.Namespace) -> int:
+    from emulator.metrics.bench import bench_vo
+    from emulator.metrics.vo import VOParameters
+
+    params = VOParameters(
+        ratio=args.ratio,
+        n_features=args.n_features,
+        matcher=args.matcher,
+        min_matches=args.min_matches,
+        min_inliers=args.min_inliers,
+        max_step_m=args.max_step_m,
+        seed=args.seed,
+    )
+    results = bench_vo(
+        args.run_dir,
+        args.output,
+        reference=args.reference,
+        calibration=args.calibration,
+        methods=_methods(args.methods),
+        parameters=params,
+        scale=args.scale,
+        baseline_m=args.baseline_m,
+        refine_extrinsics=args.refine_extrinsics,
+        deltas_m=args.deltas,
+        align_scale=not args.no_align_scale,
+        max_diff_s=args.max_diff,
+        rpe_on_failure=args.rpe_on_failure,
+        max_frames=args.max_frames,
+        force=args.force,
+        progress=not args.quiet,
+        command=_command_line(args, ("run_dir",)),
+    )
+    if not args.quiet:
+        for name, m in results["methods"].items():
+            line = f"{name}: {m['status']}, {m['n_tracked']}/{m['n_frames']} frames tracked"
+            if m["rpe"]:
+                first = next((e for e in m["rpe"]["deltas"] if e["trans_pct"]), None)
+                if first:
+                    line += (
+                        f", RPE at {first['delta_m']:.2f} m: {first['trans_pct']['median']:.2f} % "
+                        f"{first['rot_deg_per_m']['median']:.3f} deg/m"
+                    )
+            print(line, file=sys.stderr)
+        print(f"wrote {args.output}/results.json, fig6_rpe.png, trajectories.png, report.md", file=sys.stderr)
+    return 0
+
+
+def _rpe(args: argparse.Namespace) -> int:
+    from emulator.metrics.rpe import rpe_files
+
+    # evo may print notices on stdout (e.g. when it creates its settings file); keep
+    # stdout for the result only.
+    with contextlib.redirect_stdout(sys.stderr):
+        stats = rpe_files(
+            args.est,
+            args.ref,
+            delta=args.delta,
+            delta_unit=args.delta_unit,
+            align_scale=args.align_scale,
+            max_diff_s=args.max_diff,
+        )
+    if args.json:
+        print(json.dumps({"rmse": stats["rmse"], "mean": stats["mean"], "median": stats["median"]}))
+    else:
+        unit = "frames" if args.delta_unit == "f" else "m"
+        scaled = f", scale corrected x{stats['scale']:.6f}" if args.align_scale else ""
+        print(
+            f"RPE translation (m), delta {args.delta:g} {unit}, {stats['n_pairs']} pairs{scaled}: "
+            f"rmse {stats['rmse']:.6f}  mean {stats['mean']:.6f}  median {stats['median']:.6f}  "
+            f"std {stats['std']:.6f}  min {stats['min']:.6f}  max {stats['max']:.6f}"
+        )
+    return 0
+
+
+def _help(parser: argparse.ArgumentParser):
+    def show(args: argparse.Namespace) -> int:
+        parser.print_help()
+        return 2
+
+    return show
+
+
+def _common_sift(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--ratio", type=float, default=0.8, help="Lowe ratio test threshold (default 0.8)")
+    p.add_argument("--n-features", type=int, default=0, help="SIFT keypoints kept per image, 0 = all (default)")
+    p.add_argument("--matcher", choices=("flann", "bf"), default="flann",
+                   help="nearest neighbours: kd-trees (default) or exact brute force")
+    p.add_argument("--methods", help="comma-separated subset of the run's methods")
+    p.add_argument("--max-frames", type=int, help="use only the first N images of each method (a reduced run)")
+    p.add_argument("-o", "--output", required=True, help="output folder (results.json, figures, report.md)")
+    p.add_argument("--force", action="store_true", help="overwrite an existing results.json")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bars or summary")
+
+
+def register(subparsers) -> None:
+    """Add ``bench`` with ``features``, ``vo`` and ``rpe`` to the ``exposim`` parser."""
+    bench = subparsers.add_parser(
+        "bench",
+        help="benchmarks of paper section V-D: SIFT features, stereo VO, RPE",
+        description="Measure what each AE method does to a VSLAM pipeline (paper section V-D).",
+    )
+    bench.set_defaults(func=_help(bench))
+    sub = bench.add_subparsers(dest="bench_command", metavar="BENCHMARK")
+
+    f = sub.add_parser(
+        "features",
+        help="SIFT uniformity, matches and success rate (Fig. 4)",
+        description="SIFT on the emulated left images of each method: uniformity on a grid, ratio-test matches "
+        "between consecutive images, success rate against tau_matches. Several run folders (one per sequence) "
+        "give the success rate over sequences.",
+    )
+    f.add_argument("run_dirs", nargs="+", metavar="RUN_DIR", help="output folder(s) of `exposim run`")
+    f.add_argument("--grid", type=int, default=20, help="grid cells per side for uniformity (default 20)")
+    f.add_argument("--scale", type=float, default=1.0, help="image scale before SIFT, (0, 1] (default 1)")
+    _common_sift(f)
+    f.set_defaults(func=_features)
+
+    v = sub.add_parser(
+        "vo",
+        help="stereo VO per method and RPE against a reference (Fig. 6)",
+        description="Minimal OpenCV stereo VO (rectification, SIFT stereo depth, PnP RANSAC) on each method's "
+        "images; RPE through evo against the reference as a function of trajectory length.",
+    )
+    v.add_argument("run_dir", metavar="RUN_DIR", help="output folder of `exposim run` (left and right images saved)")
+    v.add_argument("--reference", help="reference trajectory, TUM format, left camera-to-world (default: the "
+                   "sequence's ground_truth/poses_left.txt if it exists)")
+    v.add_argument("--calibration", help="folder with left.yaml, right.yaml (default: <sequence>/calibration)")
+    v.add_argument("--baseline-m", type=float, help="override the calibration's stereo baseline (m)")
+    v.add_argument("--refine-extrinsics", type=int, default=0, metavar="N",
+                   help="re-estimate the rig's relative rotation from left-right matches of N stereo pairs "
+                   "(BorealHDR Sept. 2023 files lack it); default 0: calibration as given")
+    v.add_argument("--scale", type=float, default=1.0, help="rectified image scale, (0, 1] (default 1)")
+    v.add_argument("--deltas", type=_floats, help="RPE pair lengths in m, comma-separated (default: 10..50 %% "
+                   "of the reference path length)")
+    v.add_argument("--no-align-scale", action="store_true", help="do not correct the estimate's scale before RPE")
+    v.add_argument("--max-diff", type=float, default=0.06,
+                   help="max time difference image-reference in s (default 0.06)")
+    v.add_argument("--rpe-on-failure", action="store_true", help="also compute the RPE of runs where VO failed")
+    v.add_argument("--min-matches", type=int, default=20, help="fewest temporal matches for PnP (default 20)")
+    v.add_argument("--min-inliers", type=int, default=15, help="fewest PnP inliers (default 15)")
+    v.add_argument("--max-step-m", type=float, default=1.0,
+                   help="largest plausible motion between frames in m (default 1)")
+    v.add_argument("--seed", type=int, default=0, help="OpenCV RNG seed for RANSAC and kd-trees (default 0)")
+    _common_sift(v)
+    v.set_defaults(func=_vo)
+
+    r = sub.add_parser(
+        "rpe",
+        help="translation RPE of two TUM files, as evo_rpe computes it",
+        description="Translation RPE of EST against REF through evo's library; equals "
+        "`evo_rpe tum REF EST --pose_relation trans_part --delta D --delta_unit U [--correct_scale]`.",
+    )
+    r.add_argument("est", metavar="EST.txt", help="estimated trajectory (TUM)")
+    r.add_argument("ref", metavar="REF.txt", help="reference trajectory (TUM)")
+    r.add_argument("--delta", type=float, default=1.0, help="pair spacing (default 1)")
+    r.add_argument("--delta-unit", choices=("m", "f"), default="f", help="metres or frames (default f)")
+    r.add_argument("--align-scale", action="store_true", help="correct the estimate's scale (evo --correct_scale)")
+    r.add_argument("--max-diff", type=float, default=0.01,
+                   help="max timestamp difference for association in s (default 0.01, as evo_rpe)")
+    r.add_argument("--json", action="store_true", help='print {"rmse": ..., "mean": ..., "median": ...} only')
+    r.set_defaults(func=_rpe)

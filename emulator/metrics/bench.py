@@ -1,0 +1,489 @@
+"""The feature and VO benchmarks over run folders: compute, then write results.
+
+:func:`bench_features` and :func:`bench_vo` are what ``exposim bench features|vo`` call.
+Each writes into its output folder ``results.json`` (every number, and the arrays
+behind the figures), PNG figures drawn by :mod:`emulator.metrics.report`, and
+``report.md``.  They refuse an output folder that already holds ``results.json``
+unless ``force`` is given, and check every input (run folders, calibration, image size,
+reference overlap) before the long computation starts.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+from collections.abc import Sequence
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+
+from emulator.errors import OutputExistsError
+from emulator.metrics.errors import MetricsError, RunFolderError, TrajectoryError
+from emulator.metrics.features import (
+    DEFAULT_TAUS,
+    GRID_CELLS,
+    RATIO_TEST,
+    analyse_sequence,
+    load_gray8,
+    success_curve,
+)
+from emulator.metrics.runfolder import MethodRun, RunFolder, read_run_folder
+from emulator.metrics.rpe import associate, read_tum, rpe_by_length, trajectory_from_poses, write_tum
+from emulator.metrics.vo import (
+    VOParameters,
+    estimate_stereo_extrinsics,
+    find_calibration,
+    load_stereo_calibration,
+    run_stereo_vo,
+    stereo_rectification,
+)
+
+__all__ = [
+    "bench_features",
+    "bench_vo",
+    "prepare_output",
+    "CONVERSION",
+    "FAILURE_POLICY",
+    "DEFAULT_DELTA_FRACTIONS",
+    "REFERENCE_MAX_DIFF_S",
+    "SYNTHETIC_REFERENCE",
+]
+
+#: The 12-bit to 8-bit conversion, as stated in the results.
+CONVERSION = (
+    "gray8 = clip(round((cv2.cvtColor(raw, COLOR_BayerRG2GRAY) - black_level) * 255 / "
+    "(white_level - black_level)), 0, 255) for png16 Bayer images; png8 images are used as saved"
+)
+#: What happens when the VO loses track, as stated in the results.
+FAILURE_POLICY = (
+    "a frame that fails (too few stereo points, too few matches, PnP failure, too few inliers, "
+    "implausible jump) keeps the previous motion (constant velocity) and tracking restarts from its own "
+    "stereo points; a run with any failed frame is marked failed and, like the paper, its RPE is not "
+    "computed unless asked (rpe_on_failure)."
+)
+#: RPE pair lengths as fractions of the reference path length over the run (Fig. 6 x axis).
+DEFAULT_DELTA_FRACTIONS = (0.1, 0.2, 0.3, 0.4, 0.5)
+#: Association tolerance between run images and the reference, seconds: over half the
+#: period of a 10 Hz lidar reference, so every image inside the reference's time span is
+#: associated; the reference is then interpolated at the image times.
+REFERENCE_MAX_DIFF_S = 0.06
+#: Reference that synthetic sequences write, used when no reference is given.
+SYNTHETIC_REFERENCE = Path("ground_truth") / "poses_left.txt"
+
+
+def prepare_output(out_dir: str | Path, force: bool = False) -> Path:
+    """Create ``out_dir``; refuse one holding ``results.json`` unless ``force``.
+
+    Raises
+    ------
+    OutputExistsError
+    """
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise OutputExistsError(f"{out}: exists and is not a folder")
+    if (out / "results.json").exists() and not force:
+        raise OutputExistsError(f"{out / 'results.json'} exists; pass --force to overwrite")
+    out.mkdir(parents=True, exist_ok=True)
+    return out
+
+
+def _version() -> str:
+    from emulator import __version__
+
+    return __version__
+
+
+def _progress(iterable, progress: bool, desc: str, total: int):
+    from tqdm import tqdm
+
+    return tqdm(iterable, desc=desc, total=total, unit="img", disable=not progress, leave=False)
+
+
+def _frames(method: MethodRun, max_frames: int | None):
+    frames = method.frames
+    if max_frames is not None:
+        if max_frames < 2:
+            raise MetricsError(f"max_frames must be at least 2, got {max_frames}")
+        frames = frames[:max_frames]
+    return frames
+
+
+def _write_json(path: Path, data: dict) -> None:
+    path.write_text(json.dumps(data, indent=2, allow_nan=False) + "\n")
+
+
+# --------------------------------------------------------------------------- features
+
+
+def bench_features(
+    run_dirs: str | Path | Sequence[str | Path],
+    out_dir: str | Path,
+    *,
+    methods: Sequence[str] | None = None,
+    grid: tuple[int, int] = GRID_CELLS,
+    ratio: float = RATIO_TEST,
+    n_features: int = 0,
+    matcher: str = "flann",
+    scale: float = 1.0,
+    max_frames: int | None = None,
+    taus: Sequence[int] = DEFAULT_TAUS,
+    seed: int = 0,
+    force: bool = False,
+    progress: bool = False,
+    command: str | None = None,
+) -> dict:
+    """SIFT uniformity, consecutive matches and success rate of every method (Fig. 4).
+
+    Parameters
+    ----------
+    run_dirs : path or sequence of paths
+        Run folders of ``exposim run`` (one per sequence); the success rate of a method
+        is the fraction of these runs it completes.
+    out_dir : path
+        Output folder: ``results.json``, ``fig4_features.png``, ``report.md``.
+    methods : sequence of str, optional
+        Restrict to these methods.
+    grid, ratio, n_features, matcher, seed
+        See :mod:`emulator.metrics.features`.
+    scale : float
+        Image scale before SIFT, (0, 1]; 1 = full resolution (the paper).
+    max_frames : int, optional
+        Use only the first ``max_frames`` images of each method (a reduced run).
+    taus : sequence of int
+        Thresholds of the success curve.
+    force : bool
+        Overwrite an existing ``results.json``.
+    progress : bool
+        Show tqdm progress bars (on stderr).
+    command : str, optional
+        The command line, recorded in the results.
+
+    Returns
+    -------
+    dict
+        The content of ``results.json``.
+    """
+    if isinstance(run_dirs, (str, Path)):
+        run_dirs = [run_dirs]
+    if not run_dirs:
+        raise MetricsError("bench_features: no run folder given")
+    out = prepare_output(out_dir, force)
+    runs: list[RunFolder] = [read_run_folder(d, list(methods) if methods else None) for d in run_dirs]
+    parameters = {
+        "grid": [int(grid[0]), int(grid[1])],
+        "ratio": ratio,
+        "n_features": n_features,
+        "matcher": matcher,
+        "scale": scale,
+        "max_frames": max_frames,
+        "seed": seed,
+        "conversion": CONVERSION,
+        "sift": "cv2.SIFT_create defaults: nOctaveLayers=3, contrastThreshold=0.04, edgeThreshold=10, sigma=1.6",
+    }
+    run_results = []
+    for run in runs:
+        per_method = {}
+        for name, method in run.methods.items():
+            frames = _frames(method, max_frames)
+            images = (
+                (f.timestamp_ns, f.exposure_ms, load_gray8(f.left, white_level=run.white_level,
+                                                           black_level=run.black_level))
+                for f in _progress(frames, progress, f"features {name}", len(frames))
+            )
+            seq = analyse_sequence(images, grid=grid, ratio=ratio, n_features=n_features, matcher=matcher,
+                                   scale=scale, seed=seed)
+            per_method[name] = seq.to_dict()
+        run_results.append({
+            "run_dir": str(run.path),
+            "sequence": None if run.sequence is None else str(run.sequence),
+            "white_level": run.white_level,
+            "black_level": run.black_level,
+            "methods": per_method,
+        })
+    names: list[str] = []
+    for r in run_results:
+        names += [m for m in r["methods"] if m not in names]
+    taus = [int(t) for t in taus]
+    summary, rates = {}, {}
+    for name in names:
+        seqs = [r["methods"][name] for r in run_results if name in r["methods"]]
+        uniformity = [u for s in seqs for u in s["uniformity"]]
+        matches = [c for s in seqs for c in s["matches"]]
+        with_pairs = [s["matches"] for s in seqs if s["matches"]]
+        curve = success_curve(with_pairs, taus) if with_pairs else None
+        rates[name] = None if curve is None else [float(v) for v in curve]
+        summary[name] = {
+            "n_runs": len(seqs),
+            "n_runs_with_pairs": len(with_pairs),
+            "n_images": sum(s["n_images"] for s in seqs),
+            "median_uniformity": float(np.median(uniformity)) if uniformity else None,
+            "median_matches": float(np.median(matches)) if matches else None,
+            "quartiles_matches": [float(q) for q in np.percentile(matches, [25, 75])] if matches else None,
+            "min_matches": int(min(matches)) if matches else None,
+            "success_at_100": float(success_curve(with_pairs, [100])[0]) if with_pairs else None,
+        }
+    results = {
+        "benchmark": "features",
+        "exposim_version": _version(),
+        "command": command,
+        "parameters": parameters,
+        "n_runs": len(run_results),
+        "methods": summary,
+        "success_curve": {"taus": taus, "rate": rates},
+        "runs": run_results,
+        "figures": {"fig4": "fig4_features.png"},
+        "report": "report.md",
+    }
+    from emulator.metrics import report
+
+    report.plot_features(results, out / "fig4_features.png")
+    (out / "report.md").write_text(report.features_report(results, "fig4_features.png"))
+    _write_json(out / "results.json", results)
+    return results
+
+
+# --------------------------------------------------------------------------- VO
+
+
+def _reference_path(run: RunFolder, reference: str | Path | None) -> tuple[Path | None, str]:
+    if reference is not None:
+        return Path(reference), "given"
+    if run.sequence is not None and (run.sequence / SYNTHETIC_REFERENCE).is_file():
+        return run.sequence / SYNTHETIC_REFERENCE, "synthetic ground truth of the sequence"
+    return None, "none"
+
+
+def _aligned_for_plot(est, ref) -> np.ndarray:
+    """Estimate positions Sim(3)-aligned to the reference (evo Umeyama), for the top view."""
+    from evo.core.geometry import GeometryException
+
+    shown = copy.deepcopy(est)
+    try:
+        shown.align(ref, correct_scale=True)
+    except GeometryException:  # degenerate (straight) path: align the origins only
+        shown.align_origin(ref)
+    return shown.positions_xyz
+
+
+def bench_vo(
+    run_dir: str | Path,
+    out_dir: str | Path,
+    *,
+    reference: str | Path | None = None,
+    calibration: str | Path | None = None,
+    methods: Sequence[str] | None = None,
+    parameters: VOParameters = VOParameters(),
+    scale: float = 1.0,
+    baseline_m: float | None = None,
+    refine_extrinsics: int = 0,
+    deltas_m: Sequence[float] | None = None,
+    delta_fractions: Sequence[float] = DEFAULT_DELTA_FRACTIONS,
+    align_scale: bool = True,
+    rel_delta_tol: float = 0.1,
+    max_diff_s: float = REFERENCE_MAX_DIFF_S,
+    rpe_on_failure: bool = False,
+    max_frames: int | None = None,
+    force: bool = False,
+    progress: bool = False,
+    command: str | None = None,
+) -> dict:
+    """Stereo VO on every method's images of a run, and its RPE against a reference (Fig. 6).
+
+    Parameters
+    ----------
+    run_dir : path
+        Run folder of ``exposim run`` with left and right images saved.
+    out_dir : path
+        Output folder: ``<method>/trajectory.txt`` (TUM, left camera, camera-to-world,
+        first frame at the origin), ``results.json``, ``fig6_rpe.png``,
+        ``trajectories.png``, ``report.md``.
+    reference : path, optional
+        Reference trajectory (TUM, camera-to-world of the left camera, OpenCV axes);
+        default: ``<sequence>/ground_truth/poses_left.txt`` when the sequence has one;
+        otherwise no RPE.
+    calibration : path, optional
+        Folder with ``left.yaml`` and ``right.yaml``; default ``<sequence>/calibration``.
+    methods : sequence of str, optional
+    parameters : VOParameters
+    scale : float
+        Size of the rectified images relative to the originals, (0, 1].
+    baseline_m : float, optional
+        Override the calibration's baseline, metres.
+    refine_extrinsics : int
+        When > 0, re-estimate the rig's relative rotation (and baseline direction) from
+        left-right matches of this many stereo pairs, spread over the first method's
+        frames (:func:`emulator.metrics.vo.estimate_stereo_extrinsics`), and rectify with
+        it.  Needed for the BorealHDR September 2023 files (identity rotation, while the
+        rig is pitched by about 0.8 deg).  0 (default) uses the calibration as given.
+    deltas_m : sequence of float, optional
+        RPE pair lengths in metres; default ``delta_fractions`` of the reference path
+        length over the run's time span.
+    align_scale : bool
+        Correct the estimate's scale before RPE (the paper's evo scale alignment).
+    rel_delta_tol : float
+        Relative tolerance on the pair length.
+    max_diff_s : float
+        Association tolerance between image and reference timestamps, seconds; the
+        reference is interpolated at the image times (evo ``SyncMethod.interpolation``).
+    rpe_on_failure : bool
+        Also compute the RPE of runs where the VO failed (marked as such).
+    max_frames : int, optional
+        Use only the first ``max_frames`` frames of each method.
+    force, progress, command
+        See :func:`bench_features`.
+
+    Returns
+    -------
+    dict
+        The content of ``results.json``.
+    """
+    out = prepare_output(out_dir, force)
+    run = read_run_folder(run_dir, list(methods) if methods else None, require_right=True)
+    calib_dir = find_calibration(run.sequence, calibration)
+    calib = load_stereo_calibration(calib_dir, baseline_m=baseline_m)
+    selected = {name: _frames(m, max_frames) for name, m in run.methods.items()}
+    for name, frames in selected.items():
+        first = load_gray8(frames[0].left, white_level=run.white_level, black_level=run.black_level)
+        calib.check_image_shape(first.shape, frames[0].left)
+        if len(frames) < 2:
+            raise RunFolderError(f"{run.methods[name].directory}: VO needs at least two frames, found {len(frames)}")
+    ref_path, ref_source = _reference_path(run, reference)
+    ref_traj = None
+    deltas = None
+    if ref_path is not None:
+        ref_traj = read_tum(ref_path)
+        for name, frames in selected.items():  # fail now, not after the VO: overlap check
+            stamps = [f.timestamp_ns for f in frames]
+            dummy = trajectory_from_poses(stamps, np.tile(np.eye(4), (len(stamps), 1, 1)))
+            ref_s, _ = associate(ref_traj, dummy, max_diff_s=max_diff_s, interpolate=True,
+                                 ref_name=str(ref_path), est_name=f"images of {name} in {run.path}")
+            if ref_s.num_poses < 2:
+                raise MetricsError(f"{ref_path}: only {ref_s.num_poses} reference pose overlaps the images of {name}")
+        if deltas_m is None:
+            t0 = min(f.timestamp_ns for fr in selected.values() for f in fr) / 1e9
+            t1 = max(f.timestamp_ns for fr in selected.values() for f in fr) / 1e9
+            span = [i for i, t in enumerate(ref_traj.timestamps) if t0 - max_diff_s <= t <= t1 + max_diff_s]
+            length = float(np.sum(np.linalg.norm(np.diff(ref_traj.positions_xyz[span], axis=0), axis=1)))
+            if not length > 0:
+                raise MetricsError(f"{ref_path}: the reference does not move during the run; give deltas_m")
+            deltas = [float(f) * length for f in delta_fractions]
+        else:
+            deltas = [float(d) for d in deltas_m]
+    extrinsics = None
+    if refine_extrinsics > 0:
+        frames = next(iter(selected.values()))
+        picks = np.unique(np.linspace(0, len(frames) - 1, min(refine_extrinsics, len(frames))).round().astype(int))
+        pairs = (
+            (load_gray8(frames[i].left, white_level=run.white_level, black_level=run.black_level),
+             load_gray8(frames[i].right, white_level=run.white_level, black_level=run.black_level))
+            for i in picks
+        )
+        extrinsics = estimate_stereo_extrinsics(calib, pairs, seed=parameters.seed)
+        calib = calib.with_extrinsics(extrinsics.R, extrinsics.T)
+    rect = stereo_rectification(calib, scale=scale)
+
+    method_results, aligned_xyz, ref_xyz = {}, {}, None
+    for name, frames in selected.items():
+        stream = (
+            (f.timestamp_ns,
+             load_gray8(f.left, white_level=run.white_level, black_level=run.black_level),
+             load_gray8(f.right, white_level=run.white_level, black_level=run.black_level))
+            for f in _progress(frames, progress, f"VO {name}", len(frames))
+        )
+        vo = run_stereo_vo(stream, rect, parameters)
+        (out / name).mkdir(exist_ok=True)
+        write_tum(out / name / "trajectory.txt", vo.timestamps_ns, vo.poses)
+        entry = {
+            "status": "success" if vo.succeeded else "failed",
+            "n_frames": int(vo.timestamps_ns.size),
+            "n_tracked": int(vo.tracked.sum()),
+            "failures": vo.failures_as_dicts(),
+            "trajectory": f"{name}/trajectory.txt",
+            "frames": {
+                "timestamps_ns": vo.timestamps_ns.tolist(),
+                "tracked": vo.tracked.tolist(),
+                "n_stereo_points": vo.n_stereo.tolist(),
+                "n_matches": vo.n_matches.tolist(),
+                "n_inliers": vo.n_inliers.tolist(),
+                "row_offset_px": [None if not np.isfinite(v) else round(float(v), 3) for v in vo.row_offset_px],
+            },
+            "rpe": None,
+            "rpe_skipped": None,
+        }
+        est = trajectory_from_poses(vo.timestamps_ns, vo.poses, name)
+        if ref_traj is None:
+            entry["rpe_skipped"] = "no reference"
+            aligned_xyz[name] = est.positions_xyz
+        else:
+            ref_s, est_s = associate(ref_traj, est, max_diff_s=max_diff_s, interpolate=True,
+                                     ref_name=str(ref_path), est_name=name)
+            if vo.succeeded or rpe_on_failure:
+                try:
+                    entry["rpe"] = rpe_by_length(ref_s, est_s, deltas, align_scale=align_scale,
+                                                 rel_delta_tol=rel_delta_tol)
+                except TrajectoryError as exc:
+                    entry["rpe_skipped"] = str(exc)
+                else:
+                    entry["rpe"]["n_associated"] = int(ref_s.num_poses)
+                    entry["rpe"]["computed_on_failed_run"] = not vo.succeeded
+            else:
+                entry["rpe_skipped"] = "VO failed (see failures); rerun with rpe_on_failure to compute it anyway"
+            aligned_xyz[name] = _aligned_for_plot(est_s, ref_s)
+            if ref_xyz is None or ref_s.num_poses > len(ref_xyz):
+                ref_xyz = ref_s.positions_xyz
+        method_results[name] = entry
+
+    if ref_xyz is not None:  # plot the whole reference over the run's span, in its own frame
+        t0 = min(float(vo_e["frames"]["timestamps_ns"][0]) for vo_e in method_results.values()) / 1e9
+        t1 = max(float(vo_e["frames"]["timestamps_ns"][-1]) for vo_e in method_results.values()) / 1e9
+        keep = (ref_traj.timestamps >= t0 - max_diff_s) & (ref_traj.timestamps <= t1 + max_diff_s)
+        ref_xyz = ref_traj.positions_xyz[keep]
+    results = {
+        "benchmark": "vo",
+        "exposim_version": _version(),
+        "command": command,
+        "run_dir": str(run.path),
+        "sequence": None if run.sequence is None else str(run.sequence),
+        "reference": None if ref_path is None else str(ref_path),
+        "reference_source": ref_source,
+        "calibration": {
+            "folder": str(calib_dir),
+            "baseline_m": calib.baseline_m,
+            "rectified_fx_px": float(rect.K[0, 0]),
+            "rectified_size": list(rect.size),
+            "image_size": list(calib.image_size),
+            "method": "cv2.stereoRectify from K, D of both cameras, R = R_r^T R_l, T = -R_r^T [b, 0, 0], alpha 0"
+            + ("; R and T direction re-estimated from left-right matches" if extrinsics else ""),
+            "refined_extrinsics": None if extrinsics is None else extrinsics.to_dict(),
+        },
+        "parameters": {
+            "vo": asdict(parameters),
+            "scale": scale,
+            "align_scale": align_scale,
+            "rel_delta_tol": rel_delta_tol,
+            "deltas_m": deltas,
+            "delta_fractions": None if deltas_m is not None else list(delta_fractions),
+            "max_diff_s": max_diff_s,
+            "association": "evo sync.associate_trajectories, SyncMethod.interpolation",
+            "rpe_on_failure": rpe_on_failure,
+            "max_frames": max_frames,
+            "conversion": CONVERSION,
+        },
+        "failure_policy": FAILURE_POLICY,
+        "n_runs": len(method_results),
+        "n_failed": sum(1 for m in method_results.values() if m["status"] != "success"),
+        "methods": method_results,
+        "figures": {"fig6": "fig6_rpe.png", "trajectories": "trajectories.png"},
+        "report": "report.md",
+    }
+    from emulator.metrics import report
+
+    report.plot_rpe(results, out / "fig6_rpe.png")
+    report.plot_trajectories(aligned_xyz, ref_xyz if ref_traj is not None else None, out / "trajectories.png")
+    (out / "report.md").write_text(
+        report.vo_report(results, {"RPE against trajectory length (Fig. 6)": "fig6_rpe.png",
+                                   "trajectories": "trajectories.png"})
+    )
+    _write_json(out / "results.json", results)
+    return results

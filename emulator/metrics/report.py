@@ -1,0 +1,250 @@
+"""Figures and markdown reports of the feature and VO benchmarks.
+
+The only module of :mod:`emulator.metrics` that plots.  Matplotlib is imported lazily
+and drives an Agg canvas directly (no ``pyplot``, no global backend change), so the
+functions work headless and never open a window.  Every figure is drawn from the
+dictionaries the benchmarks save in ``results.json``, so it can be redrawn without
+recomputing.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+__all__ = [
+    "plot_features",
+    "plot_rpe",
+    "plot_trajectories",
+    "features_report",
+    "vo_report",
+    "PAPER_FEATURES",
+    "PAPER_VO",
+]
+
+#: The paper's Fig. 4 numbers (section V-D-1), for the report.
+PAPER_FEATURES = {
+    "median matches of M_fixed": 674,
+    "success rate at tau = 100, best (M_fixed)": "44 %",
+    "success rate at tau = 100, worst (M_30%, M_70%, M_Kim)": "20 %",
+}
+#: The paper's Fig. 6 numbers (section V-D-2), for the report.
+PAPER_VO = {
+    "VO failures": "11 of 55 trajectories (20 %)",
+    "minimal translation error, best (M_50%)": "4.21 %",
+    "minimal translation error, worst (M_Kim)": "5.75 %",
+    "minimal rotation error, best (M_Zhang, M_50%)": "0.07 deg/m",
+    "M_fixed": "5.1 % and 0.09 deg/m",
+}
+
+
+def _figure(ncols: int, width: float = 5.0, height: float = 4.0):
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(width * ncols, height), layout="constrained")
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(1, ncols, squeeze=False)[0]
+    return fig, axes
+
+
+def _boxplot(ax, data: list, labels: list[str]) -> None:
+    present = [(d, name) for d, name in zip(data, labels) if len(d)]
+    if not present:
+        ax.text(0.5, 0.5, "no data", ha="center", va="center", transform=ax.transAxes)
+        return
+    values, names = zip(*present)
+    ax.boxplot(values, tick_labels=names, showfliers=True)
+    ax.tick_params(axis="x", labelrotation=30)
+
+
+def plot_features(results: dict, path: str | Path) -> Path:
+    """Paper Fig. 4: (a) uniformity, (b) matches per pair, (c) success rate against tau.
+
+    Parameters
+    ----------
+    results : dict
+        The ``results.json`` of the feature benchmark.
+    path : str or pathlib.Path
+        PNG to write.
+    """
+    methods = list(results["methods"])
+    uniformity = [[100.0 * u for run in results["runs"] for u in run["methods"].get(m, {}).get("uniformity", [])]
+                  for m in methods]
+    matches = [[c for run in results["runs"] for c in run["methods"].get(m, {}).get("matches", [])] for m in methods]
+    fig, (a, b, c) = _figure(3)
+    _boxplot(a, uniformity, methods)
+    a.set_ylabel("grid cells with a keypoint (%)")
+    rows, cols = results["parameters"]["grid"]
+    a.set_title(f"(a) uniformity, {rows}x{cols} grid")
+    _boxplot(b, matches, methods)
+    b.set_ylabel("matches between consecutive images")
+    b.set_title(f"(b) matches (ratio test {results['parameters']['ratio']})")
+    curve = results["success_curve"]
+    for m in methods:
+        rate = curve["rate"].get(m)
+        if rate is not None:
+            c.plot(curve["taus"], 100.0 * np.asarray(rate), label=m, drawstyle="steps-post")
+    c.set_xlabel(r"$\tau_\mathrm{matches}$")
+    c.set_ylabel("successful runs (%)")
+    c.set_ylim(-2, 102)
+    c.set_title(f"(c) success rate over {results['n_runs']} run folder(s)")
+    c.legend(fontsize="small")
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    return path
+
+
+def plot_rpe(results: dict, path: str | Path) -> Path:
+    """Paper Fig. 6: median translation (%) and rotation (deg/m) RPE against distance."""
+    fig, (a, b) = _figure(2)
+    drawn = False
+    for name, method in results["methods"].items():
+        rpe = method.get("rpe")
+        if not rpe:
+            continue
+        d = [e["delta_m"] for e in rpe["deltas"] if e["trans_pct"]]
+        if not d:
+            continue
+        style = "-" if method["status"] == "success" else ":"
+        a.plot(d, [e["trans_pct"]["median"] for e in rpe["deltas"] if e["trans_pct"]], style, marker="o", label=name)
+        b.plot(d, [e["rot_deg_per_m"]["median"] for e in rpe["deltas"] if e["rot_deg_per_m"]], style, marker="o",
+               label=name)
+        drawn = True
+    for ax, label in ((a, "median translation error (%)"), (b, "median rotation error (deg/m)")):
+        ax.set_xlabel("trajectory length (m)")
+        ax.set_ylabel(label)
+        if drawn:
+            ax.legend(fontsize="small")
+        else:
+            ax.text(0.5, 0.5, "no RPE (no reference or every run failed)", ha="center", va="center",
+                    transform=ax.transAxes)
+    a.set_title("RPE, translation")
+    b.set_title("RPE, rotation")
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    return path
+
+
+def plot_trajectories(trajectories: dict, reference_xyz: np.ndarray | None, path: str | Path) -> Path:
+    """Top view of VO trajectories (the two axes of largest extent).
+
+    Parameters
+    ----------
+    trajectories : dict of str to numpy.ndarray
+        (N, 3) positions per method, metres (aligned to the reference when one exists).
+    reference_xyz : numpy.ndarray or None
+        (M, 3) reference positions, metres.
+    """
+    fig, (ax,) = _figure(1, 6.0, 5.0)
+    everything = [np.asarray(x).reshape(-1, 3) for x in trajectories.values()]
+    if reference_xyz is not None and len(reference_xyz):
+        everything.append(np.asarray(reference_xyz).reshape(-1, 3))
+    stacked = np.concatenate(everything) if everything else np.zeros((1, 3))
+    # Top view: the two axes along which the trajectories extend most (x-z for camera
+    # frames with y down, x-y for a z-up lidar map).
+    a, b = sorted(np.argsort(np.ptp(stacked, axis=0))[-2:])
+    if reference_xyz is not None and len(reference_xyz):
+        ax.plot(reference_xyz[:, a], reference_xyz[:, b], "k--", lw=2, label="reference")
+    for name, xyz in trajectories.items():
+        xyz = np.asarray(xyz)
+        ax.plot(xyz[:, a], xyz[:, b], marker=".", label=name)
+    ax.set_xlabel(f"{'xyz'[a]} (m)")
+    ax.set_ylabel(f"{'xyz'[b]} (m)")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.legend(fontsize="small")
+    ax.set_title("VO trajectories (Sim(3)-aligned to the reference)" if reference_xyz is not None
+                 else "VO trajectories")
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    return path
+
+
+def _fmt(value, spec: str = ".1f") -> str:
+    return "-" if value is None else format(value, spec)
+
+
+def features_report(results: dict, figure: str) -> str:
+    """Markdown report of the feature benchmark, beside the paper's Fig. 4 numbers."""
+    p = results["parameters"]
+    lines = [
+        "# Feature tracking and uniformity (paper section V-D-1, Fig. 4)",
+        "",
+        f"Run folders: {', '.join('`' + r['run_dir'] + '`' for r in results['runs'])}",
+        "",
+        f"SIFT (OpenCV defaults, n_features={p['n_features']}) on the emulated left images, "
+        f"image scale {p['scale']}; 8-bit conversion: {p['conversion']}. "
+        f"Uniformity: fraction of the {p['grid'][0]}x{p['grid'][1]} grid cells with a keypoint. "
+        f"Matches: {p['matcher']} nearest neighbours with Lowe's ratio test < {p['ratio']}. "
+        "A run succeeds for tau when every consecutive pair has at least tau matches.",
+        "",
+        f"![Fig. 4]({figure})",
+        "",
+        "| method | runs | images | median uniformity (%) | median matches | min matches | success at tau=100 |",
+        "| --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for name, m in results["methods"].items():
+        u = m["median_uniformity"]
+        lines.append(
+            f"| {name} | {m['n_runs']} | {m['n_images']} | {_fmt(None if u is None else 100 * u)} | "
+            f"{_fmt(m['median_matches'], '.0f')} | {_fmt(m['min_matches'], 'd')} | "
+            f"{_fmt(None if m['success_at_100'] is None else 100 * m['success_at_100'], '.0f')} % |"
+        )
+    lines += ["", "Paper (55 trajectories):", ""]
+    lines += [f"- {k}: {v}" for k, v in PAPER_FEATURES.items()]
+    lines += ["", f"Command: `{results.get('command') or '(library call)'}`", ""]
+    return "\n".join(lines)
+
+
+def vo_report(results: dict, figures: dict[str, str]) -> str:
+    """Markdown report of the stereo VO benchmark, beside the paper's Fig. 6 numbers."""
+    p = results["parameters"]
+    n_failed = sum(1 for m in results["methods"].values() if m["status"] != "success")
+    lines = [
+        "# Stereo visual odometry (paper section V-D-2, Fig. 6)",
+        "",
+        f"Run folder: `{results['run_dir']}`; calibration: `{results['calibration']['folder']}` "
+        f"(baseline {results['calibration']['baseline_m']:.4f} m, rectified fx "
+        f"{results['calibration']['rectified_fx_px']:.1f} px, image scale {p['scale']}); "
+        f"reference: `{results['reference'] or 'none'}`.",
+        "",
+        "Minimal OpenCV stereo VO: rectification, SIFT left-right matches for depth, PnP with RANSAC "
+        f"between consecutive left images (inlier threshold {p['vo']['pnp_reprojection_px']} px), poses chained. "
+        f"Failure policy: {results['failure_policy']}",
+        "",
+        f"RPE through evo: estimate scale corrected ({'on' if p['align_scale'] else 'off'}), pairs of "
+        f"reference path length delta +/- {100 * p['rel_delta_tol']:.0f} %, translation in % of the pair's "
+        "length, rotation in deg/m.",
+        "",
+        f"VO failed on {n_failed} of {len(results['methods'])} method run(s).",
+        "",
+        "| method | status | frames | tracked | failures | scale | RPE trans. (%) per delta | RPE rot. (deg/m) per delta |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for name, m in results["methods"].items():
+        rpe = m.get("rpe")
+        if rpe:
+            trans = ", ".join(
+                f"{e['delta_m']:.2f} m: {_fmt(e['trans_pct'] and e['trans_pct']['median'], '.2f')}" for e in rpe["deltas"]
+            )
+            rot = ", ".join(
+                f"{e['delta_m']:.2f} m: {_fmt(e['rot_deg_per_m'] and e['rot_deg_per_m']['median'], '.3f')}"
+                for e in rpe["deltas"]
+            )
+            scale = f"{rpe['scale']:.4f}"
+        else:
+            trans = rot = m.get("rpe_skipped") or "-"
+            scale = "-"
+        reasons = sorted({f["reason"] for f in m["failures"]})
+        lines.append(
+            f"| {name} | {m['status']} | {m['n_frames']} | {m['n_tracked']} | "
+            f"{len(m['failures'])}{' (' + ', '.join(reasons) + ')' if reasons else ''} | {scale} | {trans} | {rot} |"
+        )
+    lines += [""]
+    for title, fig in figures.items():
+        lines += [f"![{title}]({fig})", ""]
+    lines += ["Paper (55 trajectories, lidar reference):", ""]
+    lines += [f"- {k}: {v}" for k, v in PAPER_VO.items()]
+    lines += ["", f"Command: `{results.get('command') or '(library call)'}`", ""]
+    return "\n".join(lines)

@@ -1,0 +1,330 @@
+"""Relative pose error through evo (paper section V-D-2, Fig. 6).
+
+Trajectories are TUM text files, ``timestamp_s tx ty tz qx qy qz qw``, camera-to-world.
+
+Two entry points:
+
+* :func:`rpe_files` reproduces ``evo_rpe tum REF EST --pose_relation trans_part`` exactly
+  (same reader, same nearest-time association with ``--t_max_diff 0.01``, same
+  ``evo.main_rpe.rpe`` call; ``align_scale`` is evo's ``--correct_scale``).
+* :func:`rpe_by_length` gives the RPE as a function of the travelled distance, like the
+  paper's Fig. 6: for each distance ``delta`` (metres of *reference* path), all pose pairs
+  whose reference path length is within 10 % of ``delta`` (evo's ``all_pairs`` mode with
+  ``pairs_from_reference``); the translation error of a pair is its evo RPE translation
+  part in percent of the pair's reference path length, the rotation error its evo RPE
+  angle in degrees per metre of that length.  The estimate's scale is first corrected to
+  the reference's (evo's ``correct_scale`` without SE(3) alignment, "the scale alignment
+  feature from the evo library" of the paper); RPE does not depend on the world frame.
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from emulator.metrics.errors import MetricsError, TrajectoryError
+
+__all__ = [
+    "write_tum",
+    "read_tum",
+    "trajectory_from_poses",
+    "associate",
+    "rpe_files",
+    "rpe_by_length",
+    "EVO_T_MAX_DIFF_S",
+    "DELTA_UNITS",
+]
+
+#: evo_rpe's default maximum timestamp difference for association, seconds.
+EVO_T_MAX_DIFF_S = 0.01
+#: Delta units of :func:`rpe_files`: metres of travelled path or frames.
+DELTA_UNITS = ("m", "f")
+
+
+def _format_stamp(timestamp_ns: int) -> str:
+    ts = int(timestamp_ns)
+    sign = "-" if ts < 0 else ""
+    ts = abs(ts)
+    return f"{sign}{ts // 1_000_000_000}.{ts % 1_000_000_000:09d}"
+
+
+def write_tum(path: str | Path, timestamps_ns: Sequence[int], poses: np.ndarray) -> None:
+    """Write camera-to-world poses as a TUM trajectory file.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+    timestamps_ns : sequence of int
+        Pose times in integer nanoseconds; written as seconds with 9 decimals (exact).
+    poses : numpy.ndarray
+        (N, 4, 4) camera-to-world transforms, metres.
+    """
+    from scipy.spatial.transform import Rotation
+
+    poses = np.asarray(poses, dtype=np.float64)
+    if poses.ndim != 3 or poses.shape[1:] != (4, 4) or poses.shape[0] != len(timestamps_ns):
+        raise MetricsError(f"write_tum: need (N, 4, 4) poses for N timestamps, got {poses.shape}")
+    quats = Rotation.from_matrix(poses[:, :3, :3]).as_quat()  # x, y, z, w
+    lines = [
+        f"{_format_stamp(ts)} " + " ".join(f"{v:.9f}" for v in (*pose[:3, 3], *q))
+        for ts, pose, q in zip(timestamps_ns, poses, quats)
+    ]
+    Path(path).write_text("\n".join(lines) + "\n")
+
+
+def read_tum(path: str | Path):
+    """Read a TUM trajectory file with evo.
+
+    Returns
+    -------
+    evo.core.trajectory.PoseTrajectory3D
+
+    Raises
+    ------
+    TrajectoryError
+        When the file is missing, malformed, or its timestamps are not increasing.
+    """
+    from evo.tools import file_interface
+
+    path = Path(path)
+    if not path.is_file():
+        raise TrajectoryError(f"{path}: trajectory file does not exist")
+    try:
+        traj = file_interface.read_tum_trajectory_file(str(path))
+    except Exception as exc:  # evo raises FileInterfaceException, numpy ValueError
+        raise TrajectoryError(f"{path}: not a TUM trajectory ('timestamp tx ty tz qx qy qz qw'): {exc}") from None
+    if traj.num_poses == 0:
+        raise TrajectoryError(f"{path}: trajectory is empty")
+    if np.any(np.diff(traj.timestamps) <= 0):
+        raise TrajectoryError(f"{path}: timestamps must be strictly increasing")
+    return traj
+
+
+def trajectory_from_poses(timestamps_ns: Sequence[int], poses: np.ndarray, name: str = ""):
+    """An evo ``PoseTrajectory3D`` from (N, 4, 4) camera-to-world poses and ns timestamps."""
+    from evo.core.trajectory import PoseTrajectory3D
+
+    stamps = np.asarray(timestamps_ns, dtype=np.int64).astype(np.float64) / 1e9
+    traj = PoseTrajectory3D(poses_se3=list(np.asarray(poses, dtype=np.float64)), timestamps=stamps)
+    traj.name = name
+    return traj
+
+
+def associate(traj_ref, traj_est, *, max_diff_s: float = EVO_T_MAX_DIFF_S, interpolate: bool = False,
+              ref_name: str = "reference", est_name: str = "estimate"):
+    """Associate two trajectories by time with ``evo.core.sync.associate_trajectories``.
+
+    Parameters
+    ----------
+    traj_ref, traj_est : evo.core.trajectory.PoseTrajectory3D
+    max_diff_s : float
+        Largest time difference of an associated pair, seconds.
+    interpolate : bool
+        Resample the denser trajectory at the times of the sparser one (evo's
+        ``SyncMethod.interpolation``) instead of taking the nearest pose.
+    ref_name, est_name : str
+        Names for error messages (file paths).
+
+    Returns
+    -------
+    tuple
+        (reference, estimate), synchronised copies of equal length.
+
+    Raises
+    ------
+    TrajectoryError
+        When no timestamps overlap within ``max_diff_s``.
+    """
+    from evo.core import sync
+    from evo.core.sync_method import SyncMethod
+
+    method = SyncMethod.interpolation if interpolate else SyncMethod.nearest_time
+    try:
+        ref, est = sync.associate_trajectories(traj_ref, traj_est, sync_method=method, max_diff=max_diff_s)
+    except sync.SyncException:
+        r0, r1 = traj_ref.timestamps[0], traj_ref.timestamps[-1]
+        e0, e1 = traj_est.timestamps[0], traj_est.timestamps[-1]
+        raise TrajectoryError(
+            f"{ref_name} and {est_name}: no timestamps overlap within {max_diff_s} s (reference spans "
+            f"{r0:.3f}..{r1:.3f} s, estimate {e0:.3f}..{e1:.3f} s; timestamps in seconds expected)"
+        ) from None
+    return ref, est
+
+
+def rpe_files(
+    est_path: str | Path,
+    ref_path: str | Path,
+    *,
+    delta: float = 1,
+    delta_unit: str = "f",
+    align_scale: bool = False,
+    max_diff_s: float = EVO_T_MAX_DIFF_S,
+) -> dict:
+    """Translation RPE of two TUM files, exactly as ``evo_rpe`` computes it.
+
+    Equivalent to ``evo_rpe tum REF EST --pose_relation trans_part --delta D --delta_unit
+    U [--correct_scale] --t_max_diff max_diff_s``: evo reads both files, associates them
+    by nearest timestamp, optionally corrects the estimate's scale (Umeyama Sim(3) scale
+    only), and computes the RPE over consecutive pairs ``delta`` apart (pairs taken on the
+    estimate, evo's default).
+
+    Parameters
+    ----------
+    est_path, ref_path : str or pathlib.Path
+        Estimate and reference TUM files (note the order: estimate first).
+    delta : float
+        Pair spacing, in ``delta_unit``.
+    delta_unit : {"f", "m"}
+        Frames or metres of travelled path.
+    align_scale : bool
+        Correct the estimate's scale first (evo's ``--correct_scale``).
+    max_diff_s : float
+        Association tolerance, seconds (evo's ``--t_max_diff``).
+
+    Returns
+    -------
+    dict
+        ``rmse``, ``mean``, ``median``, ``std``, ``min``, ``max`` in metres, ``n_pairs``,
+        and ``scale`` (1.0 without ``align_scale``).
+    """
+    from evo.core import metrics
+    from evo.main_rpe import rpe
+
+    if delta_unit not in DELTA_UNITS:
+        raise MetricsError(f"delta_unit must be one of {DELTA_UNITS}, got {delta_unit!r}")
+    if not delta > 0:
+        raise MetricsError(f"delta must be positive, got {delta}")
+    if delta_unit == "f" and float(delta) != int(delta):
+        raise MetricsError(f"delta must be an integer number of frames, got {delta}")
+    ref = read_tum(ref_path)
+    est = read_tum(est_path)
+    # evo_rpe: traj_ref.sync_with(traj_est, nearest_time, max_diff, offset 0), which is
+    # sync.associate_trajectories(ref, est, ...), wrapped here for a clear error.
+    ref, est = associate(ref, est, max_diff_s=max_diff_s, ref_name=str(ref_path), est_name=str(est_path))
+    unit = metrics.Unit.frames if delta_unit == "f" else metrics.Unit.meters
+    try:
+        result = rpe(
+            traj_ref=ref,
+            traj_est=est,
+            pose_relation=metrics.PoseRelation.translation_part,
+            delta=int(delta) if delta_unit == "f" else float(delta),
+            delta_unit=unit,
+            correct_scale=align_scale,
+        )
+    except Exception as exc:  # evo's FilterException / MetricsException
+        raise TrajectoryError(f"{est_path} vs {ref_path}: RPE failed: {exc}") from None
+    stats = {k: float(v) for k, v in result.stats.items()}
+    scale = 1.0
+    if align_scale:
+        sim3 = result.np_arrays["alignment_transformation_sim3"]
+        scale = float(np.cbrt(np.linalg.det(sim3[:3, :3])))
+    return {
+        "rmse": stats["rmse"],
+        "mean": stats["mean"],
+        "median": stats["median"],
+        "std": stats["std"],
+        "min": stats["min"],
+        "max": stats["max"],
+        "n_pairs": int(result.np_arrays["error_array"].size),
+        "scale": scale,
+    }
+
+
+def _stats(values: np.ndarray) -> dict:
+    return {
+        "median": float(np.median(values)),
+        "mean": float(np.mean(values)),
+        "rmse": float(np.sqrt(np.mean(values**2))),
+        "max": float(np.max(values)),
+    }
+
+
+def rpe_by_length(
+    traj_ref,
+    traj_est,
+    deltas_m: Sequence[float],
+    *,
+    align_scale: bool = True,
+    rel_delta_tol: float = 0.1,
+) -> dict:
+    """RPE as a function of travelled distance (paper Fig. 6), through evo.
+
+    Parameters
+    ----------
+    traj_ref, traj_est : evo.core.trajectory.PoseTrajectory3D
+        Associated trajectories of equal length (see :func:`associate`); not modified.
+    deltas_m : sequence of float
+        Path lengths of the pose pairs, metres of reference path.
+    align_scale : bool
+        Correct the estimate's scale first (Umeyama Sim(3) scale, evo's
+        ``correct_scale`` without alignment).
+    rel_delta_tol : float
+        A pair is used when its reference path length is within ``rel_delta_tol * delta``
+        of ``delta``.
+
+    Returns
+    -------
+    dict
+        ``scale`` applied to the estimate, ``path_length_m`` of the reference, and
+        ``deltas``: one entry per delta with ``delta_m``, ``n_pairs``, ``trans_pct``
+        (translation error in % of the pair's path length: median, mean, rmse, max) and
+        ``rot_deg_per_m`` (rotation error in degrees per metre, same statistics); the
+        statistics are None when no pair has that length.
+
+    Raises
+    ------
+    TrajectoryError
+        When fewer than two poses are given, or the scale alignment is degenerate
+        (evo's Umeyama needs positions spanning at least a plane).
+    """
+    from evo.core import filters, geometry, metrics
+
+    if traj_ref.num_poses != traj_est.num_poses:
+        raise MetricsError("rpe_by_length: trajectories must be associated (equal number of poses)")
+    if traj_ref.num_poses < 2:
+        raise TrajectoryError("rpe_by_length: fewer than two associated poses")
+    est = copy.deepcopy(traj_est)
+    scale = 1.0
+    if align_scale:
+        from evo.core.geometry import GeometryException
+
+        try:
+            _, _, scale = est.align(traj_ref, correct_scale=False, correct_only_scale=True)
+        except GeometryException as exc:
+            raise TrajectoryError(
+                f"scale alignment (Umeyama) impossible on these {traj_ref.num_poses} poses: {exc} "
+                "(a straight or static trajectory); compute the RPE without scale alignment"
+            ) from None
+        scale = float(scale)
+    ref_poses = traj_ref.poses_se3
+    cumulative = geometry.accumulated_distances(traj_ref.positions_xyz)
+    out = []
+    for delta in deltas_m:
+        delta = float(delta)
+        if not delta > 0:
+            raise MetricsError(f"deltas must be positive, got {delta}")
+        entry = {"delta_m": delta, "n_pairs": 0, "trans_pct": None, "rot_deg_per_m": None}
+        errors = {}
+        try:
+            for relation in (metrics.PoseRelation.translation_part, metrics.PoseRelation.rotation_angle_deg):
+                metric = metrics.RPE(
+                    relation, delta, metrics.Unit.meters, rel_delta_tol, all_pairs=True, pairs_from_reference=True
+                )
+                metric.process_data((traj_ref, est))
+                errors[relation] = np.asarray(metric.error, dtype=np.float64)
+        except filters.FilterException:  # no pair of this length
+            out.append(entry)
+            continue
+        # The same pairs evo used (deterministic), for each pair's reference path length.
+        pairs = np.asarray(
+            metrics.id_pairs_from_delta(ref_poses, delta, metrics.Unit.meters, rel_delta_tol, all_pairs=True)
+        )
+        length = cumulative[pairs[:, 1]] - cumulative[pairs[:, 0]]
+        entry["n_pairs"] = int(pairs.shape[0])
+        entry["trans_pct"] = _stats(errors[metrics.PoseRelation.translation_part] / length * 100.0)
+        entry["rot_deg_per_m"] = _stats(errors[metrics.PoseRelation.rotation_angle_deg] / length)
+        out.append(entry)
+    return {"scale": scale, "path_length_m": float(cumulative[-1]), "deltas": out}

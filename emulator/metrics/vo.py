@@ -1,0 +1,846 @@
+"""A minimal stereo visual odometry with OpenCV (paper section V-D-2).
+
+Pipeline, per frame ``k`` (left and right 8-bit grey images of one capture):
+
+1. **Rectification** from the stereo calibration (:func:`stereo_rectification`).
+2. **Stereo depth**: SIFT on both rectified images, left-right matches with the ratio
+   test, kept when on the same row (``|y_l - y_r| <= max_row_diff_px``) with a disparity
+   in ``[min_disparity_px, max_disparity_px]``; depth ``Z = f b / d``.
+3. **Motion**: SIFT matches between the left images of frames ``k - 1`` and ``k``; the
+   3-D points of frame ``k - 1`` and their 2-D positions in frame ``k`` give the motion
+   by PnP inside RANSAC (``cv2.solvePnPRansac``, seeded by ``cv2.setRNGSeed``), refined by
+   Levenberg-Marquardt on the inliers.
+4. **Chaining**: ``T_world_k = T_world_(k-1) @ inv(T_(k)_(k-1))``; the first frame is the
+   world origin.  Poses are of the *left camera* (unrectified), camera-to-world, OpenCV
+   axes (x right, y down, z forward), in metres.
+
+Failures are detected, never hidden.  A frame fails when the previous frame has too few
+stereo points, there are too few temporal matches, PnP finds no solution, it has too
+few inliers, or the motion is implausible (a jump larger than ``max_step_m`` or
+``max_step_deg`` between consecutive frames).
+
+Failure policy (explicit, see :class:`VOResult`): a failed frame gets the previous
+frame's motion again (constant velocity; identity when no motion was estimated yet), it
+is recorded in ``VOResult.failures`` with its index, timestamp and reason, and tracking
+re-initialises from the failed frame's own stereo points.  A run with any failure is
+*failed* (``VOResult.succeeded`` is False); the benchmark computes its RPE only on
+request, like the paper, which reports RPE for the runs where VO converged.
+
+Calibration: ROS ``camera_info`` YAML files ``left.yaml`` and ``right.yaml``
+(:func:`read_camera_info`).  The rig's relative pose is built from the files'
+rectification matrices R_l, R_r and the baseline ``b = -P_r[0, 3] / P_r[0, 0]`` (ROS:
+``Tx = -fx' b``): ``R = R_r^T R_l``, ``T = -R_r^T [b, 0, 0]`` (left to right camera).
+The images are then rectified by ``cv2.stereoRectify`` from K, D of both cameras and
+(R, T), with ``alpha = 0`` (only valid pixels) and zero disparity at infinity.  The
+files' own projection matrices are *not* used for rectification: in the BorealHDR
+September 2023 files they are not a rectified pair (the two P differ in fy and cy), and
+their rectification matrices are identity, so ``R = I`` and ``T = [-b, 0, 0]`` with
+``b = 180 / 1009.77 = 0.178 m``.
+
+That identity rotation is not the real rig's: on the shared sample, matches are 16 px
+apart vertically after rectification (a relative pitch of about 0.8 deg), so no stereo
+match survives the row check and the VO reports ``too_few_stereo_points`` with the
+measured row offset.  :func:`estimate_stereo_extrinsics` re-estimates R (and the
+direction of T, scaled to the calibrated baseline) from left-right matches of a few
+frames; with it the row offset on the sample drops to 0.1-0.2 px.  It is an explicit
+option, never applied silently.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Iterable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from emulator.metrics.errors import CalibrationError, MetricsError
+from emulator.metrics.features import RATIO_TEST, SiftFeatures, detect_sift, match_descriptors
+
+__all__ = [
+    "CameraInfo",
+    "read_camera_info",
+    "StereoCalibration",
+    "load_stereo_calibration",
+    "find_calibration",
+    "ExtrinsicsEstimate",
+    "estimate_stereo_extrinsics",
+    "StereoRectification",
+    "stereo_rectification",
+    "VOParameters",
+    "VOFailure",
+    "VOResult",
+    "FAILURE_REASONS",
+    "run_stereo_vo",
+]
+
+#: Why a frame failed, as recorded in :class:`VOFailure`.
+FAILURE_REASONS = {
+    "too_few_stereo_points": "the previous frame has too few left-right matches with valid depth",
+    "too_few_matches": "too few matches between the previous and the current left image",
+    "pnp_failed": "PnP with RANSAC found no pose",
+    "too_few_inliers": "the PnP pose has too few RANSAC inliers",
+    "implausible_jump": "the motion between consecutive frames exceeds max_step_m or max_step_deg",
+}
+
+_SUPPORTED_DISTORTION = {"plumb_bob": (4, 5, 8), "rational_polynomial": (8,), "none": (0,), "": (0,)}
+
+
+# --------------------------------------------------------------------------- calibration
+
+
+@dataclass(frozen=True)
+class CameraInfo:
+    """One camera of a ROS ``camera_info`` file.
+
+    Attributes
+    ----------
+    path : pathlib.Path
+        The YAML file.
+    width, height : int
+        Image size in pixels.
+    K : numpy.ndarray
+        (3, 3) intrinsic matrix, pixels.
+    D : numpy.ndarray
+        Distortion coefficients (OpenCV order k1, k2, p1, p2[, k3, ...]).
+    R : numpy.ndarray
+        (3, 3) rectification rotation.
+    P : numpy.ndarray
+        (3, 4) projection matrix; ``P[0, 3] = -fx' * baseline`` on the right camera.
+    distortion_model : str
+    name : str
+    """
+
+    path: Path
+    width: int
+    height: int
+    K: np.ndarray
+    D: np.ndarray
+    R: np.ndarray
+    P: np.ndarray
+    distortion_model: str = "plumb_bob"
+    name: str = ""
+
+
+def _strip_comments(text: str) -> str:
+    return "\n".join(line.split("#", 1)[0] for line in text.splitlines())
+
+
+def _scalar(text: str, key: str, path: Path, required: bool = True) -> str | None:
+    m = re.search(rf"^{key}\s*:\s*(.*?)\s*$", text, flags=re.MULTILINE)
+    if m is None or m.group(1) == "":
+        if required:
+            raise CalibrationError(f"{path}: missing '{key}'")
+        return None
+    return m.group(1).strip().strip("'\"")
+
+
+def _matrix(text: str, key: str, path: Path, shape: tuple[int, int] | None) -> np.ndarray:
+    m = re.search(
+        rf"^{key}\s*:\s*\n\s*rows\s*:\s*(\d+)\s*\n\s*cols\s*:\s*(\d+)\s*\n\s*data\s*:\s*\[(.*?)\]",
+        text,
+        flags=re.MULTILINE | re.DOTALL,
+    )
+    if m is None:
+        raise CalibrationError(f"{path}: missing or malformed '{key}' (expected rows, cols, data: [...])")
+    rows, cols = int(m.group(1)), int(m.group(2))
+    items = [s.strip() for s in m.group(3).replace("\n", " ").split(",")]
+    try:
+        values = np.array([float(s) for s in items if s], dtype=np.float64)
+    except ValueError:
+        raise CalibrationError(f"{path}: '{key}' data holds a non-number") from None
+    if values.size != rows * cols:
+        raise CalibrationError(f"{path}: '{key}' has {values.size} values for rows={rows} cols={cols}")
+    if shape is not None and (rows, cols) != shape:
+        raise CalibrationError(f"{path}: '{key}' must be {shape[0]}x{shape[1]}, got {rows}x{cols}")
+    if not np.all(np.isfinite(values)):
+        raise CalibrationError(f"{path}: '{key}' holds a non-finite value")
+    return values.reshape(rows, cols)
+
+
+def read_camera_info(path: str | Path) -> CameraInfo:
+    """Read a ROS ``camera_info`` YAML file (as written by ``camera_calibration``).
+
+    A small dedicated parser (no YAML library needed): scalar keys ``image_width``,
+    ``image_height``, ``camera_name``, ``distortion_model`` and the matrices
+    ``camera_matrix``, ``distortion_coefficients``, ``rectification_matrix``,
+    ``projection_matrix`` as ``rows/cols/data: [...]`` blocks (flow lists may span lines
+    and end with a comma; ``#`` comments are ignored).
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+
+    Returns
+    -------
+    CameraInfo
+
+    Raises
+    ------
+    CalibrationError
+        When the file is missing, a key is missing or a matrix is malformed.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise CalibrationError(f"{path}: calibration file does not exist")
+    text = _strip_comments(path.read_text())
+    try:
+        width = int(_scalar(text, "image_width", path))
+        height = int(_scalar(text, "image_height", path))
+    except ValueError:
+        raise CalibrationError(f"{path}: image_width and image_height must be integers") from None
+    if width < 1 or height < 1:
+        raise CalibrationError(f"{path}: image size must be positive, got {width}x{height}")
+    K = _matrix(text, "camera_matrix", path, (3, 3))
+    D = _matrix(text, "distortion_coefficients", path, None).ravel()
+    R = _matrix(text, "rectification_matrix", path, (3, 3))
+    P = _matrix(text, "projection_matrix", path, (3, 4))
+    model = (_scalar(text, "distortion_model", path, required=False) or "plumb_bob").lower()
+    if model not in _SUPPORTED_DISTORTION:
+        raise CalibrationError(
+            f"{path}: distortion_model {model!r} is not supported; use one of plumb_bob, rational_polynomial"
+        )
+    if D.size not in _SUPPORTED_DISTORTION[model] and not (D.size == 0 or np.all(D == 0)):
+        raise CalibrationError(f"{path}: {D.size} distortion coefficients do not fit the {model} model")
+    if K[0, 0] <= 0 or K[1, 1] <= 0:
+        raise CalibrationError(f"{path}: camera_matrix must have positive focal lengths")
+    if abs(np.linalg.det(R) - 1.0) > 1e-3:
+        raise CalibrationError(f"{path}: rectification_matrix is not a rotation (det = {np.linalg.det(R):.6f})")
+    name = _scalar(text, "camera_name", path, required=False) or ""
+    return CameraInfo(path, width, height, K, D, R, P, model, name)
+
+
+@dataclass(frozen=True)
+class StereoCalibration:
+    """A calibrated stereo rig.
+
+    Attributes
+    ----------
+    left, right : CameraInfo
+    baseline_m : float
+        Distance between the optical centres, metres (``-P_r[0, 3] / P_r[0, 0]``).
+    R : numpy.ndarray
+        (3, 3) rotation from the left to the right camera frame, ``R_r^T R_l``.
+    T : numpy.ndarray
+        (3,) translation from the left to the right camera frame, metres,
+        ``-R_r^T [b, 0, 0]`` (``X_r = R X_l + T``, OpenCV's ``stereoRectify`` convention).
+    """
+
+    left: CameraInfo
+    right: CameraInfo
+    baseline_m: float
+    R: np.ndarray
+    T: np.ndarray
+
+    @property
+    def image_size(self) -> tuple[int, int]:
+        """(width, height) in pixels."""
+        return (self.left.width, self.left.height)
+
+    def with_extrinsics(self, R: np.ndarray, T: np.ndarray) -> "StereoCalibration":
+        """The same cameras with another relative pose (left to right, ``X_r = R X_l + T``)."""
+        R = np.asarray(R, dtype=np.float64).reshape(3, 3)
+        T = np.asarray(T, dtype=np.float64).reshape(3)
+        return StereoCalibration(self.left, self.right, float(np.linalg.norm(T)), R, T)
+
+    def check_image_shape(self, shape: tuple[int, ...], image: str | Path = "image") -> None:
+        """Raise :class:`CalibrationError` unless ``shape`` (H, W) matches the calibration."""
+        if tuple(shape[:2]) != (self.left.height, self.left.width):
+            raise CalibrationError(
+                f"{image}: image is {shape[1]}x{shape[0]} but the calibration {self.left.path} is for "
+                f"{self.left.width}x{self.left.height} images; use the calibration of this rig (--calibration DIR)"
+            )
+
+
+def load_stereo_calibration(directory: str | Path, *, baseline_m: float | None = None) -> StereoCalibration:
+    """Load ``left.yaml`` and ``right.yaml`` from a calibration folder.
+
+    Parameters
+    ----------
+    directory : str or pathlib.Path
+        Folder with ``left.yaml`` and ``right.yaml`` (ROS ``camera_info``).
+    baseline_m : float, optional
+        Override the baseline, metres (default: ``-P_r[0, 3] / P_r[0, 0]`` from the
+        right file).  The BorealHDR April 2023 files give 180 / 1171.9 = 0.154 m this
+        way, while the rig's baseline is 0.18 m (their commented-out rectified P gives
+        207.3 / 1148.1 = 0.181 m).
+
+    Returns
+    -------
+    StereoCalibration
+
+    Raises
+    ------
+    CalibrationError
+        When a file is missing or malformed, the two image sizes differ, or the right
+        projection matrix does not give a positive baseline.
+    """
+    directory = Path(directory)
+    if not directory.is_dir():
+        raise CalibrationError(f"{directory}: calibration folder does not exist")
+    left = read_camera_info(directory / "left.yaml")
+    right = read_camera_info(directory / "right.yaml")
+    if (left.width, left.height) != (right.width, right.height):
+        raise CalibrationError(
+            f"{directory}: left is {left.width}x{left.height} but right is {right.width}x{right.height}"
+        )
+    if baseline_m is not None:
+        if not (math.isfinite(baseline_m) and baseline_m > 0):
+            raise CalibrationError(f"baseline_m must be a positive number of metres, got {baseline_m}")
+        baseline = float(baseline_m)
+    else:
+        fx_r, tx = right.P[0, 0], right.P[0, 3]
+        if fx_r <= 0 or not tx < 0:
+            raise CalibrationError(
+                f"{right.path}: projection_matrix must hold Tx = P[0,3] = -fx * baseline < 0 "
+                f"(the right camera to the right of the left one), got P[0,3] = {tx}"
+            )
+        baseline = float(-tx / fx_r)
+    R = right.R.T @ left.R
+    T = -right.R.T @ np.array([baseline, 0.0, 0.0])
+    return StereoCalibration(left, right, baseline, R, T)
+
+
+def find_calibration(sequence: str | Path | None, override: str | Path | None = None) -> Path:
+    """The calibration folder: ``override`` if given, else ``<sequence>/calibration``.
+
+    Raises
+    ------
+    CalibrationError
+        When neither holds ``left.yaml`` and ``right.yaml``.
+    """
+    if override is not None:
+        folder = Path(override)
+        if not ((folder / "left.yaml").is_file() and (folder / "right.yaml").is_file()):
+            raise CalibrationError(f"{folder}: no left.yaml and right.yaml (ROS camera_info) in this folder")
+        return folder
+    if sequence is None:
+        raise CalibrationError(
+            "no stereo calibration: the run's sequence is unknown or missing; pass --calibration DIR "
+            "(a folder with left.yaml and right.yaml)"
+        )
+    folder = Path(sequence) / "calibration"
+    if not ((folder / "left.yaml").is_file() and (folder / "right.yaml").is_file()):
+        raise CalibrationError(
+            f"{folder}: no left.yaml and right.yaml; pass --calibration DIR (real BorealHDR: "
+            f"calibration/september_2023 or april_2023)"
+        )
+    return folder
+
+
+@dataclass(frozen=True)
+class ExtrinsicsEstimate:
+    """The rig's relative pose estimated from left-right matches.
+
+    Attributes
+    ----------
+    R : numpy.ndarray
+        (3, 3) rotation left to right camera.
+    T : numpy.ndarray
+        (3,) translation left to right, metres: the estimated direction scaled to the
+        calibration's baseline.
+    rotation_deg : list of float
+        ``R`` as a rotation vector in degrees (x: pitch, y: yaw, z: roll offsets).
+    rotation_change_deg : float
+        Angle between the estimated and the calibrated rotation, degrees.
+    n_matches, n_inliers : int
+        Left-right matches used, and RANSAC inliers of the essential matrix.
+    """
+
+    R: np.ndarray
+    T: np.ndarray
+    rotation_deg: list[float]
+    rotation_change_deg: float
+    n_matches: int
+    n_inliers: int
+
+    def to_dict(self) -> dict:
+        """JSON-ready dictionary."""
+        return {
+            "R": self.R.tolist(),
+            "T_m": self.T.tolist(),
+            "rotation_deg": [float(v) for v in self.rotation_deg],
+            "rotation_change_deg": float(self.rotation_change_deg),
+            "n_matches": self.n_matches,
+            "n_inliers": self.n_inliers,
+        }
+
+
+def estimate_stereo_extrinsics(
+    calibration: StereoCalibration,
+    pairs: Iterable[tuple[np.ndarray, np.ndarray]],
+    *,
+    ratio: float = 0.7,
+    threshold_px: float = 1.0,
+    max_translation_deviation_deg: float = 15.0,
+    seed: int = 0,
+) -> ExtrinsicsEstimate:
+    """Estimate the rig's relative rotation from left-right SIFT matches (self-calibration).
+
+    For rigs whose files carry intrinsics and a baseline but no measured relative
+    rotation (the BorealHDR September 2023 files hold identity rectification matrices,
+    yet their images are 16 px apart vertically after rectification: a relative pitch
+    of about 0.8 deg).  The matches of all given pairs, undistorted with each camera's
+    K and D, give an essential matrix by RANSAC (``cv2.findEssentialMat``); its pose
+    (``cv2.recoverPose``) gives R and the direction of T, scaled to the calibration's
+    baseline.
+
+    Parameters
+    ----------
+    calibration : StereoCalibration
+    pairs : iterable of (left8, right8)
+        Unrectified (H, W) ``uint8`` stereo pairs of the calibration's size.
+    ratio : float
+        Ratio test threshold (stricter than for tracking).
+    threshold_px : float
+        RANSAC threshold on the epipolar distance, pixels of the left focal length.
+    max_translation_deviation_deg : float
+        Largest accepted angle between the estimated baseline direction and the
+        calibrated one, degrees.
+    seed : int
+        ``cv2.setRNGSeed`` before RANSAC.
+
+    Returns
+    -------
+    ExtrinsicsEstimate
+
+    Raises
+    ------
+    CalibrationError
+        When there are too few matches or the estimate contradicts the calibration (a
+        baseline direction off by more than ``max_translation_deviation_deg``).
+    """
+    nl, nr = [], []
+    for left8, right8 in pairs:
+        calibration.check_image_shape(left8.shape, "left image")
+        fl, fr = detect_sift(left8), detect_sift(right8)
+        m = match_descriptors(fl.descriptors, fr.descriptors, ratio=ratio, seed=seed)
+        if m.shape[0] == 0:
+            continue
+        nl.append(cv2.undistortPoints(fl.points[m[:, 0]].reshape(-1, 1, 2).astype(np.float64),
+                                      calibration.left.K, calibration.left.D).reshape(-1, 2))
+        nr.append(cv2.undistortPoints(fr.points[m[:, 1]].reshape(-1, 1, 2).astype(np.float64),
+                                      calibration.right.K, calibration.right.D).reshape(-1, 2))
+    n_matches = int(sum(len(a) for a in nl))
+    if n_matches < 50:
+        raise CalibrationError(f"estimate_stereo_extrinsics: only {n_matches} left-right matches (need 50)")
+    nl_all, nr_all = np.concatenate(nl), np.concatenate(nr)
+    cv2.setRNGSeed(int(seed))
+    E, mask = cv2.findEssentialMat(nl_all, nr_all, np.eye(3), method=cv2.RANSAC, prob=0.9999,
+                                   threshold=threshold_px / calibration.left.K[0, 0])
+    if E is None or E.shape != (3, 3):
+        raise CalibrationError("estimate_stereo_extrinsics: no essential matrix found")
+    n_inliers, R, t, _ = cv2.recoverPose(E, nl_all, nr_all, np.eye(3), mask=mask)
+    t = t.ravel() / np.linalg.norm(t)
+    expected = calibration.T / np.linalg.norm(calibration.T)
+    deviation = math.degrees(math.acos(max(-1.0, min(1.0, float(t @ expected)))))
+    if deviation > max_translation_deviation_deg:
+        raise CalibrationError(
+            f"estimate_stereo_extrinsics: estimated baseline direction {np.round(t, 3).tolist()} is "
+            f"{deviation:.1f} deg from the calibrated {np.round(expected, 3).tolist()}; estimate rejected"
+        )
+    from scipy.spatial.transform import Rotation
+
+    return ExtrinsicsEstimate(
+        R=R,
+        T=t * calibration.baseline_m,
+        rotation_deg=list(np.degrees(Rotation.from_matrix(R).as_rotvec())),
+        rotation_change_deg=_rotation_angle_deg(R @ calibration.R.T),
+        n_matches=n_matches,
+        n_inliers=int(n_inliers),
+    )
+
+
+@dataclass(frozen=True)
+class StereoRectification:
+    """Rectification maps and the rectified camera of a stereo rig.
+
+    Attributes
+    ----------
+    K : numpy.ndarray
+        (3, 3) intrinsic matrix of both rectified images, pixels.
+    baseline_m : float
+        Rectified baseline, metres.
+    R1 : numpy.ndarray
+        (3, 3) rotation from the left camera frame to the rectified left frame.
+    size : tuple of int
+        (width, height) of the rectified images, pixels.
+    input_size : tuple of int
+        (width, height) of the images to rectify (the calibration's), pixels.
+    """
+
+    K: np.ndarray
+    baseline_m: float
+    R1: np.ndarray
+    size: tuple[int, int]
+    input_size: tuple[int, int]
+    _maps: tuple = field(repr=False, default=())
+
+    def rectify(self, left8: np.ndarray, right8: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Rectify a left/right pair of (H, W) ``uint8`` images (bilinear)."""
+        (l1, l2), (r1, r2) = self._maps
+        if self.size != self.input_size:
+            sigma = 0.5 * self.input_size[0] / self.size[0]
+            left8 = cv2.GaussianBlur(left8, (0, 0), sigma)
+            right8 = cv2.GaussianBlur(right8, (0, 0), sigma)
+        return (
+            cv2.remap(left8, l1, l2, cv2.INTER_LINEAR),
+            cv2.remap(right8, r1, r2, cv2.INTER_LINEAR),
+        )
+
+
+def stereo_rectification(
+    calibration: StereoCalibration, *, alpha: float = 0.0, scale: float = 1.0
+) -> StereoRectification:
+    """Rectification of a stereo rig by ``cv2.stereoRectify`` (zero disparity at infinity).
+
+    Parameters
+    ----------
+    calibration : StereoCalibration
+    alpha : float
+        OpenCV's free scaling: 0 keeps only valid pixels (no black borders, which would
+        add spurious SIFT keypoints), 1 keeps all source pixels.
+    scale : float
+        Size of the rectified images relative to the calibration's, in (0, 1]; below 1
+        the rectification also downsamples (bilinear, after a Gaussian pre-filter of
+        ``sigma = 0.5 / scale`` pixels against aliasing), for quick runs.
+
+    Returns
+    -------
+    StereoRectification
+    """
+    if not 0.0 < scale <= 1.0:
+        raise MetricsError(f"scale must lie in (0, 1], got {scale}")
+    size = calibration.image_size
+    out_size = (max(1, round(size[0] * scale)), max(1, round(size[1] * scale)))
+    R1, R2, P1, P2, *_ = cv2.stereoRectify(
+        calibration.left.K,
+        calibration.left.D,
+        calibration.right.K,
+        calibration.right.D,
+        size,
+        calibration.R,
+        calibration.T.reshape(3, 1),
+        flags=cv2.CALIB_ZERO_DISPARITY,
+        alpha=alpha,
+        newImageSize=out_size,
+    )
+    maps = (
+        cv2.initUndistortRectifyMap(calibration.left.K, calibration.left.D, R1, P1, out_size, cv2.CV_16SC2),
+        cv2.initUndistortRectifyMap(calibration.right.K, calibration.right.D, R2, P2, out_size, cv2.CV_16SC2),
+    )
+    baseline = float(-P2[0, 3] / P2[0, 0])
+    if not baseline > 0:
+        raise CalibrationError(f"{calibration.right.path}: rectification gives a non-positive baseline {baseline}")
+    return StereoRectification(
+        K=P1[:3, :3].copy(), baseline_m=baseline, R1=R1.copy(), size=out_size, input_size=size, _maps=maps
+    )
+
+
+# --------------------------------------------------------------------------- odometry
+
+
+@dataclass(frozen=True)
+class VOParameters:
+    """Parameters of :func:`run_stereo_vo` (pixels refer to the rectified images).
+
+    Attributes
+    ----------
+    ratio : float
+        Lowe's ratio test threshold for left-right and temporal matches.
+    n_features : int
+        SIFT keypoints kept per image (0: all, the OpenCV default).
+    matcher : {"flann", "bf"}
+    max_row_diff_px : float
+        Largest row difference of a left-right match, pixels.
+    min_disparity_px, max_disparity_px : float
+        Accepted disparity range, pixels (``min`` bounds the depth: ``Z <= f b / min``).
+    pnp_reprojection_px : float
+        RANSAC inlier threshold of the reprojection error, pixels.
+    pnp_iterations : int
+    pnp_confidence : float
+    min_stereo_points : int
+        Fewest 3-D points a frame needs to be tracked from.
+    min_matches : int
+        Fewest temporal 3-D to 2-D matches for PnP.
+    min_inliers : int
+        Fewest RANSAC inliers for an accepted pose.
+    max_step_m : float
+        Largest plausible translation between consecutive frames, metres.
+    max_step_deg : float
+        Largest plausible rotation between consecutive frames, degrees.
+    seed : int
+        Seed of OpenCV's RNG (``cv2.setRNGSeed``) before every RANSAC and kd-tree search.
+    """
+
+    ratio: float = RATIO_TEST
+    n_features: int = 0
+    matcher: str = "flann"
+    max_row_diff_px: float = 2.0
+    min_disparity_px: float = 1.0
+    max_disparity_px: float = 400.0
+    pnp_reprojection_px: float = 2.0
+    pnp_iterations: int = 500
+    pnp_confidence: float = 0.999
+    min_stereo_points: int = 20
+    min_matches: int = 20
+    min_inliers: int = 15
+    max_step_m: float = 1.0
+    max_step_deg: float = 30.0
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.min_inliers < 4 or self.min_matches < self.min_inliers:
+            raise MetricsError(
+                f"need 4 <= min_inliers <= min_matches, got min_inliers={self.min_inliers}, "
+                f"min_matches={self.min_matches}"
+            )
+        if not 0 < self.min_disparity_px < self.max_disparity_px:
+            raise MetricsError("need 0 < min_disparity_px < max_disparity_px")
+        if self.max_step_m <= 0 or self.max_step_deg <= 0:
+            raise MetricsError("max_step_m and max_step_deg must be positive")
+
+
+@dataclass(frozen=True)
+class VOFailure:
+    """A frame the odometry could not track.
+
+    Attributes
+    ----------
+    index : int
+        Frame index in the run (0-based).
+    timestamp_ns : int
+    reason : str
+        One of :data:`FAILURE_REASONS`.
+    detail : str
+        Counts or values behind the decision.
+    """
+
+    index: int
+    timestamp_ns: int
+    reason: str
+    detail: str = ""
+
+
+@dataclass
+class VOResult:
+    """Output of :func:`run_stereo_vo`.
+
+    Attributes
+    ----------
+    timestamps_ns : numpy.ndarray
+        (N,) ``int64`` frame timestamps.
+    poses : numpy.ndarray
+        (N, 4, 4) camera-to-world poses of the left camera, metres; frame 0 is identity.
+        Failed frames hold the constant-velocity prediction.
+    tracked : numpy.ndarray
+        (N,) ``bool``: the pose was measured (frame 0 counts as tracked).
+    n_stereo, n_matches, n_inliers : numpy.ndarray
+        (N,) ``int64``: 3-D points of the frame, temporal matches and PnP inliers into the
+        frame (0 for frame 0).
+    row_offset_px : numpy.ndarray
+        (N,) ``float64`` median ``y_left - y_right`` of the frame's left-right matches in
+        the rectified images, pixels (about 0 when the calibration is right; NaN without
+        matches).
+    failures : list of VOFailure
+    """
+
+    timestamps_ns: np.ndarray
+    poses: np.ndarray
+    tracked: np.ndarray
+    n_stereo: np.ndarray
+    n_matches: np.ndarray
+    n_inliers: np.ndarray
+    row_offset_px: np.ndarray
+    failures: list[VOFailure] = field(default_factory=list)
+
+    @property
+    def succeeded(self) -> bool:
+        """True when every frame was tracked (no failure)."""
+        return not self.failures
+
+    def failures_as_dicts(self) -> list[dict]:
+        """The failures as JSON-ready dictionaries."""
+        return [asdict(f) for f in self.failures]
+
+
+def _rotation_angle_deg(R: np.ndarray) -> float:
+    c = (np.trace(R) - 1.0) / 2.0
+    return math.degrees(math.acos(max(-1.0, min(1.0, c))))
+
+
+def _stereo_points(
+    left: SiftFeatures, right: SiftFeatures, rect: StereoRectification, p: VOParameters
+) -> tuple[SiftFeatures, np.ndarray, float]:
+    """Left features with valid stereo depth, their 3-D points (rectified left frame), and
+    the median row offset y_l - y_r of all left-right matches (pixels; NaN if none)."""
+    pairs = match_descriptors(left.descriptors, right.descriptors, ratio=p.ratio, matcher=p.matcher, seed=p.seed)
+    if pairs.shape[0] == 0:
+        return left.subset(np.zeros(0, np.int64)), np.zeros((0, 3)), float("nan")
+    pl = left.points[pairs[:, 0]].astype(np.float64)
+    pr = right.points[pairs[:, 1]].astype(np.float64)
+    row_offset = float(np.median(pl[:, 1] - pr[:, 1]))
+    disparity = pl[:, 0] - pr[:, 0]
+    ok = (
+        (np.abs(pl[:, 1] - pr[:, 1]) <= p.max_row_diff_px)
+        & (disparity >= p.min_disparity_px)
+        & (disparity <= p.max_disparity_px)
+    )
+    # One 3-D point per left keypoint: drop left keypoints matched twice (duplicates).
+    idx = pairs[ok, 0]
+    _, first = np.unique(idx, return_index=True)
+    keep = np.flatnonzero(ok)[first]
+    pl, d = pl[keep], disparity[keep]
+    fx, fy, cx, cy = rect.K[0, 0], rect.K[1, 1], rect.K[0, 2], rect.K[1, 2]
+    Z = fx * rect.baseline_m / d
+    X = (pl[:, 0] - cx) * Z / fx
+    Y = (pl[:, 1] - cy) * Z / fy
+    return left.subset(pairs[keep, 0]), np.column_stack([X, Y, Z]), row_offset
+
+
+def _estimate_motion(
+    prev_feats: SiftFeatures,
+    prev_points3d: np.ndarray,
+    prev_row_offset: float,
+    cur: SiftFeatures,
+    rect: StereoRectification,
+    p: VOParameters,
+) -> tuple[np.ndarray | None, str | None, str, int, int]:
+    """(T_cur_prev 4x4 in the rectified frame or None, failure reason, detail, matches, inliers)."""
+    if prev_points3d.shape[0] < p.min_stereo_points:
+        detail = f"{prev_points3d.shape[0]} < {p.min_stereo_points}"
+        if np.isfinite(prev_row_offset) and abs(prev_row_offset) > p.max_row_diff_px:
+            detail += (
+                f"; median row offset of the left-right matches {prev_row_offset:.1f} px: the calibration does "
+                "not rectify these images (refine the extrinsics: --refine-extrinsics N)"
+            )
+        return None, "too_few_stereo_points", detail, 0, 0
+    pairs = match_descriptors(prev_feats.descriptors, cur.descriptors, ratio=p.ratio, matcher=p.matcher, seed=p.seed)
+    n_matches = int(pairs.shape[0])
+    if n_matches < p.min_matches:
+        return None, "too_few_matches", f"{n_matches} < {p.min_matches}", n_matches, 0
+    obj = np.ascontiguousarray(prev_points3d[pairs[:, 0]], dtype=np.float64)
+    img = np.ascontiguousarray(cur.points[pairs[:, 1]], dtype=np.float64)
+    cv2.setRNGSeed(int(p.seed))
+    try:
+        ok, rvec, tvec, inliers = cv2.solvePnPRansac(
+            obj,
+            img,
+            rect.K,
+            None,
+            iterationsCount=p.pnp_iterations,
+            reprojectionError=p.pnp_reprojection_px,
+            confidence=p.pnp_confidence,
+            flags=cv2.SOLVEPNP_EPNP,
+        )
+    except cv2.error as exc:  # degenerate configurations
+        return None, "pnp_failed", f"OpenCV: {str(exc).strip().splitlines()[-1]}", n_matches, 0
+    if not ok or inliers is None:
+        return None, "pnp_failed", "no consensus", n_matches, 0
+    inliers = inliers.ravel()
+    n_inliers = int(inliers.size)
+    if n_inliers < p.min_inliers:
+        return None, "too_few_inliers", f"{n_inliers} < {p.min_inliers} (of {n_matches} matches)", n_matches, n_inliers
+    rvec, tvec = cv2.solvePnPRefineLM(obj[inliers], img[inliers], rect.K, None, rvec, tvec)
+    T = np.eye(4)
+    T[:3, :3] = cv2.Rodrigues(rvec)[0]
+    T[:3, 3] = tvec.ravel()
+    if not np.all(np.isfinite(T)):
+        return None, "pnp_failed", "non-finite pose", n_matches, n_inliers
+    return T, None, "", n_matches, n_inliers
+
+
+def run_stereo_vo(
+    frames: Iterable[tuple[int, np.ndarray, np.ndarray]],
+    rectification: StereoRectification,
+    parameters: VOParameters = VOParameters(),
+) -> VOResult:
+    """Track a stereo sequence and chain the poses of the left camera.
+
+    Parameters
+    ----------
+    frames : iterable of (timestamp_ns, left8, right8)
+        Unrectified (H, W) ``uint8`` grey stereo pairs in time order, matching the
+        calibration's image size.  Consumed lazily.
+    rectification : StereoRectification
+        From :func:`stereo_rectification`.
+    parameters : VOParameters
+
+    Returns
+    -------
+    VOResult
+        See the module docstring for the failure policy.
+
+    Raises
+    ------
+    CalibrationError
+        When an image does not have the calibration's size.
+    MetricsError
+        When no frame is given.
+    """
+    p = parameters
+    C = np.eye(4)
+    C[:3, :3] = rectification.R1  # left camera frame -> rectified left frame
+    C_inv = np.linalg.inv(C)
+    width, height = rectification.input_size
+    stamps, poses, tracked, n_stereo, n_matches, n_inliers, row_offsets = [], [], [], [], [], [], []
+    prev_row_offset = float("nan")
+    failures: list[VOFailure] = []
+    prev_feats: SiftFeatures | None = None
+    prev_points: np.ndarray | None = None
+    last_motion = np.eye(4)  # T_(k-1)_k in the left camera frame (constant velocity)
+    pose = np.eye(4)
+    for k, (timestamp_ns, left8, right8) in enumerate(frames):
+        for name, img in (("left", left8), ("right", right8)):
+            if img.shape[:2] != (height, width):
+                raise CalibrationError(
+                    f"frame {k} ({timestamp_ns}): {name} image is {img.shape[1]}x{img.shape[0]} but the "
+                    f"calibration is for {width}x{height} images"
+                )
+        left_r, right_r = rectification.rectify(left8, right8)
+        feats_l = detect_sift(left_r, n_features=p.n_features)
+        feats_r = detect_sift(right_r, n_features=p.n_features)
+        stereo_feats, points3d, row_offset = _stereo_points(feats_l, feats_r, rectification, p)
+        m = i = 0
+        ok = True
+        if prev_feats is not None:
+            T_rect, reason, detail, m, i = _estimate_motion(
+                prev_feats, prev_points, prev_row_offset, feats_l, rectification, p
+            )
+            if T_rect is not None:
+                T_cur_prev = C_inv @ T_rect @ C  # in the (unrectified) left camera frame
+                motion = np.linalg.inv(T_cur_prev)  # T_prev_cur
+                step_m = float(np.linalg.norm(motion[:3, 3]))
+                step_deg = _rotation_angle_deg(motion[:3, :3])
+                if step_m > p.max_step_m or step_deg > p.max_step_deg:
+                    reason = "implausible_jump"
+                    detail = f"{step_m:.3f} m, {step_deg:.2f} deg (limits {p.max_step_m} m, {p.max_step_deg} deg)"
+                else:
+                    last_motion = motion
+            if reason is not None:
+                ok = False
+                failures.append(VOFailure(k, int(timestamp_ns), reason, detail))
+            pose = pose @ last_motion
+        stamps.append(int(timestamp_ns))
+        poses.append(pose.copy())
+        tracked.append(ok)
+        n_stereo.append(points3d.shape[0])
+        n_matches.append(m)
+        n_inliers.append(i)
+        row_offsets.append(row_offset)
+        prev_feats, prev_points, prev_row_offset = stereo_feats, points3d, row_offset
+    if not stamps:
+        raise MetricsError("run_stereo_vo: no frames")
+    return VOResult(
+        timestamps_ns=np.asarray(stamps, dtype=np.int64),
+        poses=np.asarray(poses),
+        tracked=np.asarray(tracked, dtype=bool),
+        n_stereo=np.asarray(n_stereo, dtype=np.int64),
+        n_matches=np.asarray(n_matches, dtype=np.int64),
+        n_inliers=np.asarray(n_inliers, dtype=np.int64),
+        row_offset_px=np.asarray(row_offsets, dtype=np.float64),
+        failures=failures,
+    )
