@@ -1,0 +1,569 @@
+"""Bracket-cycle capture: a radiance source -> a BorealHDR-layout recording plus ground truth.
+
+The camera sweeps the brackets (default 1, 2, 4, 8, 16, 32 ms), one shot per frame period
+(default 22 frames/s), each shot at its own timestamp; a stereo rig shoots both cameras at
+the same instants, the right one ``baseline_m`` along the left camera's x axis.  For every
+shot the source gives the radiance and pose of each camera at that instant (the scene is
+sampled at the trigger instant: no motion blur within an exposure), and the camera model
+(:func:`synth.capture`) turns it into a raw image.
+
+Written layout (``emulator.dataset.load_sequence`` reads the first two lines and ignores
+the rest)::
+
+    <seq>/camera_left/<exposure_ms>/<timestamp_ns>.png    16-bit PNG, raw Bayer DN
+    <seq>/camera_right/<exposure_ms>/<timestamp_ns>.png   (stereo)
+    <seq>/exposim.json                 levels, brackets, fps, baseline, camera, seed, source, ...
+    <seq>/calibration/response.txt     the exact inverse response, one sample per DN (pcalib)
+    <seq>/calibration/left.yaml        ROS camera_info (right.yaml for stereo: P[0,3] = -fx * B)
+    <seq>/ground_truth/poses_left.txt  TUM: timestamp_s tx ty tz qx qy qz qw, camera-to-world
+    <seq>/ground_truth/poses_right.txt (stereo)
+    <seq>/ground_truth/radiance/camera_left/<timestamp_ns>.exr             (save_radiance)
+    <seq>/ground_truth/captures_noiseless/camera_left/<exposure_ms>/<timestamp_ns>.png
+    <seq>/ground_truth/captures_noisy/camera_left/<exposure_ms>/<timestamp_ns>.png
+                                       (gt_exposures_ms; which of the two: gt_captures)
+
+Poses are 4x4 camera-to-world in the camera frame x right, y down, z forward.  The whole
+recording is written into a hidden staging folder beside ``out_dir`` and renamed into place
+at the end, so an interrupted run leaves no dataset (and no file) under a final name; an
+existing non-empty ``out_dir`` is replaced only with ``overwrite=True``, and only if it is an
+exposim dataset.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+import os
+import shutil
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from emulator.dataset import (
+    CAMERA_FOLDERS,
+    METADATA_FILE,
+    atomic_write_bytes,
+    exposure_folder_name,
+    write_frame,
+    write_png16,
+)
+from emulator.errors import OutputExistsError
+from emulator.response import CameraResponse, write_pcalib
+from synth.camera import PCALIB_TABLE_TOP, Camera, _extend_table, capture, check_exposure_ms
+from synth.errors import RadianceError, SourceError, SynthError
+
+__all__ = [
+    "BRACKETS_MS",
+    "FPS",
+    "BASELINE_M",
+    "GT_CAPTURES",
+    "Shot",
+    "shot_schedule",
+    "capture_sequence",
+    "load_camera",
+    "write_exr",
+    "read_exr",
+    "pose_to_tum",
+    "camera_info_yaml",
+    "GENERATOR",
+]
+
+#: The BorealHDR bracket set, ms (paper section V-A).
+BRACKETS_MS: tuple[float, ...] = (1.0, 2.0, 4.0, 8.0, 16.0, 32.0)
+#: Shots per second (paper: 22 frames/s).
+FPS = 22.0
+#: Stereo baseline, m (paper: 18 cm).
+BASELINE_M = 0.18
+#: Which ground-truth captures ``gt_captures`` asks for.
+GT_CAPTURES = {"noiseless": ("noiseless",), "noisy": ("noisy",), "both": ("noiseless", "noisy")}
+#: Name recorded in ``exposim.json``.
+GENERATOR = "exposim.synth.capture_sequence"
+#: Tolerances of the stereo-rig check on the source's poses (m, and rotation entries).
+_RIG_TOL = 1e-6
+
+
+@dataclass(frozen=True)
+class Shot:
+    """One trigger of the bracket sweep.
+
+    Attributes
+    ----------
+    index : int
+        Shot number from the start of the recording (0-based).
+    timestamp_ns : int
+        Trigger time, nanoseconds (the image file name).
+    exposure_ms : float
+        Exposure time, ms.
+    cycle : int
+        Sweep number (0-based; a recording that starts mid-sweep has a partial sweep 0).
+    bracket_index : int
+        Position of the exposure in the sorted bracket set.
+    time_s : float
+        Seconds since the recording start, ``(timestamp_ns - start_time_ns) / 1e9``: the
+        instant the radiance source is asked for.
+    """
+
+    index: int
+    timestamp_ns: int
+    exposure_ms: float
+    cycle: int
+    bracket_index: int
+    time_s: float
+
+
+def _check_brackets(brackets_ms) -> tuple[float, ...]:
+    try:
+        values = tuple(check_exposure_ms(b, "brackets_ms") for b in brackets_ms)
+    except TypeError:
+        raise SynthError(f"brackets_ms must be a sequence of exposures in ms, got {brackets_ms!r}") from None
+    if not values:
+        raise SynthError("brackets_ms is empty")
+    if any(b >= a for a, b in zip(values[1:], values[:-1])):
+        raise SynthError(f"brackets_ms must be strictly increasing (one sweep, short to long), got {values}")
+    return values
+
+
+def shot_schedule(
+    n_shots: int,
+    *,
+    brackets_ms=BRACKETS_MS,
+    fps: float = FPS,
+    start_bracket_index: int = 0,
+    start_time_ns: int = 0,
+) -> list[Shot]:
+    """The shots of a bracket-cycling recording.
+
+    Shot k is triggered at ``start_time_ns + round(k * 1e9 / fps)`` ns with exposure
+    ``brackets_ms[(start_bracket_index + k) % n]``; ``start_bracket_index > 0`` starts
+    mid-sweep.  Refuses an exposure longer than the frame period ``1000 / fps`` ms.
+    """
+    brackets = _check_brackets(brackets_ms)
+    if isinstance(n_shots, bool) or not isinstance(n_shots, (int, np.integer)) or n_shots < 1:
+        raise SynthError(f"the number of shots must be a positive integer, got {n_shots!r}")
+    try:
+        fps = float(fps)
+    except (TypeError, ValueError):
+        raise SynthError(f"fps must be a number of frames per second, got {fps!r}") from None
+    if not (math.isfinite(fps) and fps > 0):
+        raise SynthError(f"fps must be finite and positive, got {fps!r}")
+    if brackets[-1] > 1000.0 / fps:
+        raise SynthError(
+            f"the longest bracket ({brackets[-1]:g} ms) exceeds the frame period at {fps:g} frames/s "
+            f"({1000.0 / fps:.3g} ms)"
+        )
+    n = len(brackets)
+    if isinstance(start_bracket_index, bool) or not isinstance(start_bracket_index, (int, np.integer)) or not (
+        0 <= start_bracket_index < n
+    ):
+        raise SynthError(f"start_bracket_index must be an integer in [0, {n - 1}], got {start_bracket_index!r}")
+    if isinstance(start_time_ns, bool) or not isinstance(start_time_ns, (int, np.integer)) or start_time_ns < 0:
+        raise SynthError(f"start_time_ns must be a non-negative integer, got {start_time_ns!r}")
+    shots = []
+    for k in range(int(n_shots)):
+        pos = int(start_bracket_index) + k
+        offset_ns = int(round(k * 1e9 / fps))
+        shots.append(Shot(k, int(start_time_ns) + offset_ns, brackets[pos % n], pos // n, pos % n, offset_ns * 1e-9))
+    return shots
+
+
+# ---------------------------------------------------------------------------- file formats
+def write_exr(path: str | os.PathLike, radiance: np.ndarray, *, overwrite: bool = False) -> Path:
+    """Write float32 radiance as OpenEXR (ZIP, channel "RGB" or "Y"), atomically."""
+    import OpenEXR
+
+    radiance = np.ascontiguousarray(radiance, dtype=np.float32)
+    channels = {"RGB": radiance} if radiance.ndim == 3 else {"Y": radiance}
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    buf = io.BytesIO()
+    OpenEXR.File(header, channels).write(buf)
+    return atomic_write_bytes(path, buf.getvalue(), overwrite=overwrite)
+
+
+def read_exr(path: str | os.PathLike) -> np.ndarray:
+    """Read an EXR written by :func:`write_exr`: float32 (H, W, 3) or (H, W)."""
+    import OpenEXR
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: EXR file not found")
+    channels = OpenEXR.File(str(path)).channels()
+    for name in ("RGB", "Y"):
+        if name in channels:
+            return np.asarray(channels[name].pixels, dtype=np.float32)
+    raise SynthError(f"{path}: expected an 'RGB' or 'Y' channel, found {', '.join(channels)}")
+
+
+def _timestamp_s(timestamp_ns: int) -> str:
+    """Seconds with nanosecond digits, exactly (no float rounding)."""
+    return f"{timestamp_ns // 1_000_000_000}.{timestamp_ns % 1_000_000_000:09d}"
+
+
+def pose_to_tum(timestamp_ns: int, pose: np.ndarray) -> str:
+    """One TUM line ``timestamp_s tx ty tz qx qy qz qw`` (quaternion with qw >= 0)."""
+    from scipy.spatial.transform import Rotation
+
+    q = Rotation.from_matrix(pose[:3, :3]).as_quat()
+    if q[3] < 0:
+        q = -q
+    values = [*pose[:3, 3], *q]
+    return _timestamp_s(timestamp_ns) + " " + " ".join(f"{v:.9f}" for v in values)
+
+
+def camera_info_yaml(camera: Camera, side: str, baseline_m: float) -> str:
+    """ROS camera_info YAML of a synthetic camera: no distortion, identity rectification.
+
+    The projection matrix carries the stereo baseline as ``P[0, 3] = -fx * baseline_m`` for
+    the right camera (0 for the left one), as in the BorealHDR calibration files.
+    """
+    k = camera.intrinsics()
+    fx, fy, cx, cy = k[0, 0], k[1, 1], k[0, 2], k[1, 2]
+    tx = -fx * baseline_m if side == "right" else 0.0
+    fmt = lambda vals: "[" + ", ".join(repr(float(v)) for v in vals) + "]"  # noqa: E731
+    return (
+        f"image_width: {camera.width}\n"
+        f"image_height: {camera.height}\n"
+        f"camera_name: exposim_synth/{side}\n"
+        "camera_matrix:\n  rows: 3\n  cols: 3\n"
+        f"  data: {fmt([fx, 0, cx, 0, fy, cy, 0, 0, 1])}\n"
+        "distortion_model: plumb_bob\n"
+        "distortion_coefficients:\n  rows: 1\n  cols: 5\n"
+        f"  data: {fmt([0, 0, 0, 0, 0])}\n"
+        "rectification_matrix:\n  rows: 3\n  cols: 3\n"
+        f"  data: {fmt([1, 0, 0, 0, 1, 0, 0, 0, 1])}\n"
+        "projection_matrix:\n  rows: 3\n  cols: 4\n"
+        f"  data: {fmt([fx, 0, cx, tx, 0, fy, cy, 0, 0, 0, 1, 0])}\n"
+    )
+
+
+def _response_table(camera: Camera) -> np.ndarray:
+    """g over DN 0..max(4095, white): what ``emulator.dataset.sequence_response`` reads back.
+
+    Above the white level the table continues the last step; those DN never occur (the
+    camera and the emulator clip at white), so they change no output.
+    """
+    return _extend_table(np.asarray(camera.response.g), max(PCALIB_TABLE_TOP, camera.white_level))
+
+
+def load_camera(sequence_path: str | os.PathLike) -> Camera:
+    """The :class:`Camera` of a dataset written by :func:`capture_sequence`.
+
+    Reads ``exposim.json`` and the exact response in ``calibration/response.txt``.
+    """
+    root = Path(sequence_path)
+    meta_path = root / METADATA_FILE
+    if not meta_path.is_file():
+        raise FileNotFoundError(f"{meta_path}: not found (not a synthetic dataset?)")
+    try:
+        meta = json.loads(meta_path.read_text())
+        desc = meta["camera"]
+    except (json.JSONDecodeError, KeyError) as exc:
+        raise SynthError(f"{meta_path}: no readable camera description ({exc})") from None
+    top = max(PCALIB_TABLE_TOP, int(desc["white_level"]))
+    table = CameraResponse.from_pcalib(root / "calibration" / "response.txt", white_level=top)
+    response = CameraResponse(table.g, top, 0, str(desc.get("response", table.name)))
+    return Camera.from_dict(desc, response)
+
+
+# ---------------------------------------------------------------------------- sources
+def _check_pose(pose, where: str) -> np.ndarray:
+    m = np.asarray(pose, dtype=np.float64) if isinstance(pose, (np.ndarray, list, tuple)) else None
+    if m is None or m.shape != (4, 4) or not np.all(np.isfinite(m)):
+        raise SourceError(f"{where}: pose must be a finite 4x4 matrix, got {getattr(m, 'shape', type(pose).__name__)}")
+    if not np.allclose(m[3], (0.0, 0.0, 0.0, 1.0), atol=1e-12):
+        raise SourceError(f"{where}: pose bottom row must be (0, 0, 0, 1), got {m[3].tolist()}")
+    r = m[:3, :3]
+    if not np.allclose(r.T @ r, np.eye(3), atol=1e-6) or np.linalg.det(r) < 0:
+        raise SourceError(f"{where}: the pose's 3x3 block is not a rotation")
+    return m
+
+
+def _frame_getter(source, stereo: bool):
+    """``get(shot, side) -> (radiance, pose)`` and the number of frames (None: unbounded)."""
+    if callable(source):
+        return (lambda shot, side: source(shot.time_s, side)), None
+    if isinstance(source, (list, tuple)):
+        frames = source
+
+        def get(shot, side):
+            item = frames[shot.index]
+            if isinstance(item, dict):
+                if side not in item:
+                    raise SourceError(f"frame {shot.index} has no {side!r} entry (keys: {', '.join(map(str, item))})")
+                item = item[side]
+            elif stereo:
+                raise SourceError(
+                    f"frame {shot.index}: a stereo capture needs {{'left': (radiance, pose), 'right': ...}} "
+                    f"per frame, got {type(item).__name__}"
+                )
+            return item
+
+        return get, len(frames)
+    raise SourceError(
+        f"source must be a callable (timestamp_s, camera) -> (radiance, pose) or a list of frames, "
+        f"got {type(source).__name__}"
+    )
+
+
+def _describe(source, description) -> object:
+    if description is not None:
+        return description
+    describe = getattr(source, "describe", None)
+    if callable(describe):
+        return describe()
+    if isinstance(source, (list, tuple)):
+        return {"type": "precomputed frames", "n_frames": len(source)}
+    return {"type": getattr(source, "__qualname__", type(source).__qualname__)}
+
+
+# ---------------------------------------------------------------------------- writer
+def _prepare_target(out_dir: Path, overwrite: bool) -> None:
+    if out_dir.exists() or out_dir.is_symlink():
+        if not out_dir.is_dir():
+            raise OutputExistsError(f"{out_dir}: exists and is not a folder; refusing to replace it")
+        if not overwrite and any(out_dir.iterdir()):
+            raise OutputExistsError(f"{out_dir}: exists; refusing to overwrite (use overwrite=True)")
+        if any(out_dir.iterdir()) and not (out_dir / METADATA_FILE).is_file():
+            raise OutputExistsError(
+                f"{out_dir}: exists and is not an exposim dataset (no {METADATA_FILE}); refusing to replace it"
+            )
+
+
+def _publish(staging: Path, out_dir: Path, overwrite: bool) -> None:
+    """Rename the finished staging folder to ``out_dir`` (replacing an old dataset if asked)."""
+    _prepare_target(out_dir, overwrite)
+    old = None
+    if out_dir.exists():
+        old = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.old-", dir=out_dir.parent))
+        os.replace(out_dir, old / out_dir.name)
+    os.replace(staging, out_dir)
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+
+
+def capture_sequence(
+    source,
+    out_dir: str | os.PathLike,
+    camera: Camera,
+    *,
+    brackets_ms=BRACKETS_MS,
+    fps: float = FPS,
+    n_cycles: int | None = None,
+    n_shots: int | None = None,
+    start_bracket_index: int = 0,
+    start_time_ns: int = 0,
+    stereo: bool = True,
+    baseline_m: float = BASELINE_M,
+    seed: int = 0,
+    noise: bool = True,
+    gt_exposures_ms=(),
+    gt_captures: str = "noiseless",
+    save_radiance: bool = False,
+    overwrite: bool = False,
+    progress=None,
+    source_description=None,
+) -> Path:
+    """Capture a bracket-cycling recording of a radiance source and write it with its ground truth.
+
+    Parameters
+    ----------
+    source : callable or list
+        ``source(timestamp_s, camera) -> (radiance, pose)`` with ``timestamp_s`` the
+        seconds since the recording start (float), ``camera`` ``"left"`` or ``"right"``,
+        ``radiance`` float32 (H, W, 3) or (H, W) in W m^-2 sr^-1 and ``pose`` a 4x4
+        camera-to-world matrix (x right, y down, z forward).  Or a list with one entry per
+        shot: ``(radiance, pose)``, or ``{"left": (radiance, pose), "right": (...)}`` for
+        stereo.  A stereo source must place the right camera ``baseline_m`` along the left
+        camera's x axis with the same orientation (checked to 1e-6).
+    out_dir : path
+        Dataset folder to create.
+    camera : Camera
+        The camera model (both cameras of a stereo rig are identical).
+    brackets_ms : sequence of float
+        One sweep, strictly increasing, ms.
+    fps : float
+        Shots per second; every bracket must fit in the frame period.
+    n_cycles, n_shots : int or None
+        Length: ``n_shots`` shots, or enough to end sweep ``n_cycles - 1`` (counting a
+        partial first sweep when ``start_bracket_index > 0``), or for a list every frame.
+    start_bracket_index : int
+        Bracket of the first shot (> 0 starts mid-sweep, like the BorealHDR right camera).
+    start_time_ns : int
+        Timestamp of the first shot, ns (file names; TUM timestamps are these in seconds).
+    stereo : bool
+        Capture the right camera too.
+    baseline_m : float
+        Stereo baseline, m (written to ``right.yaml``).
+    seed : int
+        Base seed.  The noise of camera c (0 left, 1 right) at shot k comes from
+        ``numpy.random.SeedSequence([seed, c, k])``; that of its noisy ground-truth
+        capture at ``gt_exposures_ms[j]`` from ``SeedSequence([seed, c, k, 1 + j])``.
+    noise : bool
+        Noisy (default) or exact noiseless bracket captures.
+    gt_exposures_ms : sequence of float
+        Ground-truth captures at these exposures, at every shot's instant and pose.
+    gt_captures : str
+        ``"noiseless"`` (exact, ``ground_truth/captures_noiseless``), ``"noisy"``
+        (``captures_noisy``, independent noise) or ``"both"``.
+    save_radiance : bool
+        Also write each shot's radiance as OpenEXR.
+    overwrite : bool
+        Replace an existing ``out_dir`` that holds an exposim dataset (an empty folder is
+        always used).
+    progress : callable or None
+        Called as ``progress(shots_done, shots_total)`` after every shot.
+    source_description : JSON-ready object or None
+        Recorded in ``exposim.json``; default: ``source.describe()`` when it exists.
+
+    Returns
+    -------
+    Path
+        ``out_dir``.
+
+    Raises
+    ------
+    OutputExistsError
+        ``out_dir`` exists, is not empty and ``overwrite`` is False, or is not an exposim
+        dataset (checked before any work and again before the final rename).
+    SourceError, RadianceError, SynthError
+        A bad source frame (named by shot, camera and timestamp) or bad arguments.
+    """
+    if not isinstance(camera, Camera):
+        raise SynthError(f"camera must be a synth.Camera, got {type(camera).__name__}")
+    out_dir = Path(out_dir)
+    _prepare_target(out_dir, overwrite)
+    sides = ("left", "right") if stereo else ("left",)
+    if stereo:
+        try:
+            baseline_m = float(baseline_m)
+        except (TypeError, ValueError):
+            raise SynthError(f"baseline_m must be a number of metres, got {baseline_m!r}") from None
+        if not (math.isfinite(baseline_m) and baseline_m > 0):
+            raise SynthError(f"baseline_m must be finite and positive, got {baseline_m!r}")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise SynthError(f"seed must be a non-negative integer, got {seed!r}")
+    if gt_captures not in GT_CAPTURES:
+        raise SynthError(f"gt_captures must be one of {', '.join(GT_CAPTURES)}, got {gt_captures!r}")
+    gt_exposures = tuple(check_exposure_ms(t, "gt_exposures_ms") for t in gt_exposures_ms)
+    brackets = _check_brackets(brackets_ms)
+    get_frame, n_frames = _frame_getter(source, stereo)
+    if n_shots is None:
+        if n_cycles is not None:
+            if isinstance(n_cycles, bool) or not isinstance(n_cycles, (int, np.integer)) or n_cycles < 1:
+                raise SynthError(f"n_cycles must be a positive integer, got {n_cycles!r}")
+            n_shots = int(n_cycles) * len(brackets) - int(start_bracket_index)
+        elif n_frames is not None:
+            n_shots = n_frames
+        else:
+            raise SynthError("give n_cycles or n_shots for a callable source")
+    if n_frames is not None and n_shots > n_frames:
+        raise SourceError(f"{n_shots} shots need {n_shots} frames, the source list has {n_frames}")
+    shots = shot_schedule(n_shots, brackets_ms=brackets, fps=fps, start_bracket_index=start_bracket_index,
+                          start_time_ns=start_time_ns)
+
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.partial-", dir=out_dir.parent))
+    try:
+        poses = {side: [] for side in sides}
+        for shot in shots:
+            left_pose = None
+            for c, side in enumerate(sides):
+                where = f"shot {shot.index} ({side} camera, t = {shot.time_s:.6f} s)"
+                item = get_frame(shot, side)
+                try:
+                    radiance, pose = item
+                except (TypeError, ValueError):
+                    raise SourceError(
+                        f"{where}: the source must return (radiance, pose), got {type(item).__name__}"
+                    ) from None
+                pose = _check_pose(pose, where)
+                if side == "left":
+                    left_pose = pose
+                else:
+                    _check_rig(left_pose, pose, baseline_m, where)
+                poses[side].append(pose)
+                try:
+                    raw = capture(radiance, shot.exposure_ms, camera,
+                                  seed=np.random.SeedSequence([seed, c, shot.index]), noise=noise)
+                except RadianceError as exc:
+                    raise RadianceError(f"{where}: {exc}") from None
+                write_frame(staging, side, shot.exposure_ms, shot.timestamp_ns, raw)
+                folder = CAMERA_FOLDERS[side]
+                if save_radiance:
+                    write_exr(staging / "ground_truth" / "radiance" / folder / f"{shot.timestamp_ns}.exr", radiance)
+                for j, t in enumerate(gt_exposures):
+                    for kind in GT_CAPTURES[gt_captures]:
+                        gt = capture(radiance, t, camera, noise=kind == "noisy",
+                                     seed=np.random.SeedSequence([seed, c, shot.index, 1 + j]))
+                        write_png16(staging / "ground_truth" / f"captures_{kind}" / folder / exposure_folder_name(t)
+                                    / f"{shot.timestamp_ns}.png", gt)
+            if progress is not None:
+                progress(shot.index + 1, len(shots))
+
+        gt_dir = staging / "ground_truth"
+        for side in sides:
+            lines = [pose_to_tum(s.timestamp_ns, p) for s, p in zip(shots, poses[side])]
+            atomic_write_bytes(gt_dir / f"poses_{side}.txt", ("\n".join(lines) + "\n").encode())
+        calib = staging / "calibration"
+        calib.mkdir(parents=True, exist_ok=True)
+        write_pcalib(calib / "response.txt", _response_table(camera))
+        for side in sides:
+            yaml_text = camera_info_yaml(camera, side, baseline_m if stereo else 0.0)
+            atomic_write_bytes(calib / f"{side}.yaml", yaml_text.encode())
+        meta = _metadata(camera, shots, brackets, fps=fps, stereo=stereo, baseline_m=baseline_m, seed=seed,
+                         noise=noise, gt_exposures=gt_exposures, gt_captures=gt_captures,
+                         save_radiance=save_radiance, start_time_ns=start_time_ns,
+                         start_bracket_index=start_bracket_index,
+                         source=_describe(source, source_description))
+        atomic_write_bytes(staging / METADATA_FILE, (json.dumps(meta, indent=2, default=str) + "\n").encode())
+        _publish(staging, out_dir, overwrite)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    return out_dir
+
+
+def _check_rig(left: np.ndarray, right: np.ndarray, baseline_m: float, where: str) -> None:
+    expected = left[:3, 3] + baseline_m * left[:3, 0]
+    if not np.allclose(right[:3, :3], left[:3, :3], atol=_RIG_TOL) or not np.allclose(
+        right[:3, 3], expected, atol=_RIG_TOL
+    ):
+        raise SourceError(
+            f"{where}: the right camera must have the left one's orientation and sit baseline_m = "
+            f"{baseline_m:g} m along its x axis (expected position {expected.tolist()}, got "
+            f"{right[:3, 3].tolist()})"
+        )
+
+
+def _metadata(camera: Camera, shots: list[Shot], brackets, *, fps, stereo, baseline_m, seed, noise,
+              gt_exposures, gt_captures, save_radiance, start_time_ns, start_bracket_index, source) -> dict:
+    from emulator import __version__
+
+    return {
+        "generator": {"name": GENERATOR, "version": __version__},
+        "white_level": camera.white_level,
+        "black_level": camera.black_level,
+        "brackets_ms": list(brackets),
+        "fps": float(fps),
+        "cameras": ["left", "right"] if stereo else ["left"],
+        "baseline_m": baseline_m if stereo else None,
+        "n_shots": len(shots),
+        "n_cycles": shots[-1].cycle + 1,
+        "start_bracket_index": int(start_bracket_index),
+        "start_time_ns": int(start_time_ns),
+        "timestamps": "trigger instant of each shot; the scene is sampled there (no motion blur)",
+        "seed": int(seed),
+        "seeds": "bracket: SeedSequence([seed, camera (0 left, 1 right), shot]); noisy ground truth at "
+                 "gt_exposures_ms[j]: SeedSequence([seed, camera, shot, 1 + j])",
+        "noise": bool(noise),
+        "gt_exposures_ms": list(gt_exposures),
+        "gt_captures": list(GT_CAPTURES[gt_captures]) if gt_exposures else [],
+        "save_radiance": bool(save_radiance),
+        "radiance_units": "W m^-2 sr^-1 (float32, linear)",
+        "poses": "ground_truth/poses_<camera>.txt, TUM (timestamp_s tx ty tz qx qy qz qw), camera-to-world, "
+                 "camera frame x right, y down, z forward",
+        "camera": camera.to_dict(),
+        "source": source,
+    }
