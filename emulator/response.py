@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 import os
+import threading
 from collections import OrderedDict
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -106,6 +107,7 @@ class CameraResponse:
     name: str = "custom"
     knots: np.ndarray | None = None
     _luts: OrderedDict = field(default_factory=OrderedDict, init=False, repr=False)
+    _lock: threading.Lock = field(default_factory=threading.Lock, init=False, repr=False)
 
     def __post_init__(self) -> None:
         g = np.asarray(self.g, dtype=np.float64)
@@ -236,10 +238,11 @@ class CameraResponse:
     def lut(self, ratio: float) -> tuple[np.ndarray, np.ndarray]:
         """(uint16 table L_k, bool validity table) for ratio k, cached (see emulator.emulate)."""
         key = float(ratio)
-        hit = self._luts.get(key)
-        if hit is not None:
-            self._luts.move_to_end(key)
-            return hit
+        with self._lock:  # methods of one run may emulate from several threads
+            hit = self._luts.get(key)
+            if hit is not None:
+                self._luts.move_to_end(key)
+                return hit
         if key == 1.0:
             table = np.arange(self.white_level + 1, dtype=np.uint16)
         else:
@@ -255,9 +258,11 @@ class CameraResponse:
             valid |= clipped_low  # a black pixel stays black when darkened
         table.setflags(write=False)
         valid.setflags(write=False)
-        self._luts[key] = (table, valid)
-        if len(self._luts) > LUT_CACHE_SIZE:
-            self._luts.popitem(last=False)
+        with self._lock:
+            self._luts[key] = (table, valid)
+            self._luts.move_to_end(key)
+            while len(self._luts) > LUT_CACHE_SIZE:
+                self._luts.popitem(last=False)
         return table, valid
 
     def to_pcalib(self, path: str | os.PathLike, n_samples: int = 256) -> None:

@@ -174,3 +174,18 @@ def test_mask_by_comparison_equals_mask_table(ratio):
     r = CameraResponse.gamma(2.2, black_level=10).with_levels(white_level=4094)
     raw = np.arange(4095, dtype=np.uint16).reshape(63, 65)
     np.testing.assert_array_equal(validity_mask(raw, ratio, r), r.lut(ratio)[1][raw])
+
+
+def test_lut_cache_is_thread_safe_under_eviction(monkeypatch):
+    from concurrent.futures import ThreadPoolExecutor
+
+    import emulator.response as resp
+
+    monkeypatch.setattr(resp, "LUT_CACHE_SIZE", 4)
+    r = CameraResponse.gamma(2.2)
+    ratios = [1 + (i % 23) / 7 for i in range(400)]
+    with ThreadPoolExecutor(4) as pool:
+        tables = list(pool.map(lambda k: r.lut(k)[0], ratios))
+    for k, t in zip(ratios[:30], tables[:30]):
+        np.testing.assert_array_equal(t, CameraResponse.gamma(2.2).lut(k)[0])
+    assert len(r._luts) <= 4

@@ -1,0 +1,180 @@
+"""``exposim run``: AE methods in closed loop on a recording (calls :func:`emulator.playback.run_to_folder`)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shlex
+import sys
+from pathlib import Path
+
+from emulator.errors import ExposimError
+
+__all__ = ["register", "parse_option"]
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    from emulator.autoexposure import METHOD_NAMES
+
+    p = sub.add_parser(
+        "run",
+        help="run AE methods in closed loop on a recording and write a run folder",
+        description=(
+            "Per cycle: each method's target exposure selects a bracket (once, on the left camera's "
+            "saturation, among brackets present for both cameras), the left and right images are "
+            "emulated at the target, the method reads the left image and proposes the next exposure, "
+            "clamped to --range-ms. Writes OUTDIR/run.json, OUTDIR/<method>/exposures.csv, optional "
+            "images, exposure.png, results.json and report.md."
+        ),
+    )
+    p.add_argument("sequence", type=Path, help="recording folder (BorealHDR layout)")
+    p.add_argument("--methods", default=None,
+                   help=f"'all' (default) or a comma-separated list of: {', '.join(METHOD_NAMES)}")
+    p.add_argument("-o", "--output", type=Path, required=True, help="run folder to create (must not exist or be empty)")
+    p.add_argument("--save", choices=("none", "png16", "png8"), default=None,
+                   help="save emulated images: none (default), png16 (12-bit Bayer DN) or png8 (8-bit gray)")
+    p.add_argument("--jobs", type=int, default=1, help="threads across methods (same output for any value)")
+    p.add_argument("--mode", choices=("paper", "borealhdr"), default=None,
+                   help="method behaviour: paper (default, reference defects corrected) or borealhdr (reference code)")
+    p.add_argument("--initial-ms", type=float, default=None, help="initial exposure of every method (default 4.0)")
+    p.add_argument("--range-ms", type=float, nargs=2, metavar=("LOW", "HIGH"), default=None,
+                   help="clamp of every proposal, ms (default 0.02 50)")
+    p.add_argument("--selector", choices=("higher-no-sat", "closest", "reference"), default=None,
+                   help="bracket selector (default higher-no-sat)")
+    p.add_argument("--response", type=Path, default=None, help="pcalib file (default: found beside the recording)")
+    p.add_argument("--seed", type=int, default=None, help="seed of kim's Gaussian-process optimizer (default 0)")
+    p.add_argument("--option", action="append", default=[], metavar="METHOD.KEY=VALUE",
+                   help="a method option, e.g. zhang.percentile=0.7 or kim.window=8 (VALUE is JSON or text); repeatable")
+    p.add_argument("--resume", action="store_true",
+                   help="continue an interrupted run in OUTDIR (its run.json gives the configuration)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--json", action="store_true", help="print the results summary as JSON")
+    p.set_defaults(func=_run)
+
+
+def parse_option(text: str) -> tuple[str, str, object]:
+    """``METHOD.KEY=VALUE`` -> (method, key, value); VALUE parsed as JSON when it can be."""
+    head, sep, value = text.partition("=")
+    method, dot, key = head.partition(".")
+    if not sep or not dot or not method or not key:
+        raise ExposimError(f"--option {text!r}: expected METHOD.KEY=VALUE, e.g. kim.seed=3")
+    try:
+        parsed = json.loads(value)
+    except json.JSONDecodeError:
+        parsed = value
+    return method.strip(), key.strip(), parsed
+
+
+def _command(args) -> str:
+    """The command line that reproduces this run (rebuilt from the parsed arguments)."""
+    parts = ["exposim", "run", str(args.sequence), "-o", str(args.output)]
+    for flag, value in (("--methods", args.methods), ("--save", args.save), ("--mode", args.mode),
+                        ("--initial-ms", args.initial_ms), ("--selector", args.selector),
+                        ("--response", args.response), ("--seed", args.seed)):
+        if value is not None:
+            parts += [flag, str(value)]
+    if args.range_ms is not None:
+        parts += ["--range-ms", *(str(v) for v in args.range_ms)]
+    for text in args.option:
+        parts += ["--option", text]
+    if args.jobs != 1:
+        parts += ["--jobs", str(args.jobs)]
+    if args.resume:
+        parts.append("--resume")
+    return shlex.join(parts)
+
+
+def _run(args) -> int:
+    from emulator.playback import (
+        DEFAULT_INITIAL_MS,
+        DEFAULT_RANGE_MS,
+        DEFAULT_SELECTOR,
+        RUN_FILE,
+        run_to_folder,
+    )
+
+    given = {
+        "methods": args.methods,
+        "save": args.save,
+        "mode": args.mode,
+        "initial_ms": args.initial_ms,
+        "range_ms": args.range_ms,
+        "selector": args.selector,
+    }
+    options: dict[str, dict] = {}
+    for text in args.option:
+        method, key, value = parse_option(text)
+        options.setdefault(method, {})[key] = value
+    if args.seed is not None:
+        options.setdefault("kim", {})["seed"] = args.seed
+    defaults = {
+        "methods": "all",
+        "save": "none",
+        "mode": "paper",
+        "initial_ms": DEFAULT_INITIAL_MS,
+        "range_ms": list(DEFAULT_RANGE_MS),
+        "selector": DEFAULT_SELECTOR,
+    }
+    response_path = args.response
+    if args.resume:
+        # The recorded configuration wins; arguments given explicitly must agree with it.
+        run_json = args.output / RUN_FILE
+        if not run_json.is_file():
+            raise ExposimError(f"{run_json}: no run to resume (run.json missing)")
+        recorded = json.loads(run_json.read_text())
+        for key, value in given.items():
+            if value is None:
+                given[key] = recorded.get(key, defaults[key])
+        if not options:
+            options = recorded.get("options") or {}
+        if response_path is None and recorded.get("response") and Path(recorded["response"]).is_file():
+            response_path = Path(recorded["response"])
+    cfg = {k: (defaults[k] if v is None else v) for k, v in given.items()}
+
+    progress = None
+    bar = None
+    if not args.no_progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=None, unit="cycle", desc="exposim run", file=sys.stderr, dynamic_ncols=True)
+
+        def progress(done: int, total: int) -> None:
+            if bar.total != total:
+                bar.total = total
+            bar.n = done
+            bar.refresh()
+
+    try:
+        summary = run_to_folder(
+            args.sequence,
+            cfg["methods"],
+            args.output,
+            save=cfg["save"],
+            response_path=response_path,
+            initial_ms=cfg["initial_ms"],
+            range_ms=tuple(cfg["range_ms"]),
+            selector=cfg["selector"],
+            mode=cfg["mode"],
+            options=options,
+            jobs=args.jobs,
+            resume=args.resume,
+            progress=progress,
+            command=_command(args),
+        )
+    finally:
+        if bar is not None:
+            bar.close()
+    if args.json:
+        print(json.dumps(summary, indent=1))
+        return 0
+    print(f"run folder  {args.output}")
+    print(f"cycles      {summary['cycles_done']}/{summary['n_cycles']}"
+          + (f" ({len(summary['skipped_cycles'])} skipped)" if summary["skipped_cycles"] else ""))
+    for name, m in summary["methods"].items():
+        mean = m["mean_exposure_ms"]
+        print(f"  {name:13s} mean {mean:8.3f} ms  final {m['final_exposure_ms']:8.3f} ms  "
+              f"sat {m['mean_saturated_fraction']:.2%}" if mean is not None else f"  {name:13s} no cycle")
+    timing = summary.get("timing") or {}
+    if timing.get("cycles_per_s"):
+        print(f"speed       {timing['cycles_per_s']:.2f} cycles/s")
+    return 0

@@ -1,0 +1,969 @@
+"""Closed-loop playback of AE methods on a bracketed recording (paper sections III-B, V-D).
+
+For each cycle (one sweep of the brackets) and each method: the method's current target
+exposure selects a bracket (once per cycle, among the brackets present for both cameras;
+the **left** camera's saturation decides), the emulator renders the left and right images
+at the target from that bracket, the method reads the emulated left image and proposes the
+next exposure, which is clamped to the configured range.  Every method starts from the
+same initial exposure.  The timestamp of an emulated image is the timestamp of the bracket
+it came from, so a stereo pair always comes from one capture instant.
+
+Many methods on one sequence share the decoded brackets: a cycle's images are decoded at
+most once (lazily: only the brackets some method selects or whose saturation the selector
+asks for), their histogram is computed once, and from it each method's saturated and valid
+fractions follow without touching the pixels again; each ratio's lookup table is built once
+(cached on the :class:`~emulator.response.CameraResponse`), and methods with the same target
+in a cycle share one emulated image.  The images handed to methods are read-only.  ``jobs > 1`` runs the methods of
+a cycle on threads (NumPy and OpenCV release the GIL); results do not depend on ``jobs``.
+
+Library API: :func:`iter_run` (a generator of :class:`CycleStep`), :func:`run` (tables in
+memory), :func:`run_to_folder` (the run folder below, with ``resume``) and :func:`report`
+(re-draws the plot and summaries of a run folder without recomputing).  Nothing here prints.
+
+Run folder layout (a contract with the feature / VO benchmark)::
+
+    RUN_DIR/run.json                     configuration, status, cycles done, timing
+    RUN_DIR/<method>/exposures.csv       cycle,timestamp_ns,target_ms,bracket_ms,ratio,
+                                         saturated_fraction,valid_fraction, then extras
+    RUN_DIR/<method>/images/left/<timestamp_ns>.png    (--save png16 | png8)
+    RUN_DIR/<method>/images/right/<timestamp_ns>.png
+    RUN_DIR/<method>/images/times.txt    "<timestamp_ns> <timestamp_s> <exposure_ms>", by time
+    RUN_DIR/exposure.png, RUN_DIR/results.json, RUN_DIR/report.md
+
+``saturated_fraction`` and ``valid_fraction`` describe the emulated left image the method
+saw: pixels at or below black or at or above white, and pixels whose source carried the
+information the target needs (see :func:`emulator.emulate.emulate`).
+"""
+
+from __future__ import annotations
+
+import csv
+import datetime as _dt
+import functools
+import io
+import json
+import math
+import threading
+import time
+from collections.abc import Callable, Iterable, Iterator, Mapping
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from emulator.autoexposure import METHOD_NAMES, AutoExposureMethod, accepts_option, make_method
+from emulator.dataset import CAMERAS, Sequence, atomic_write_bytes, load_sequence, sequence_response, write_png16
+from emulator.emulate import apply_lut, check_exposure
+from emulator.errors import DatasetError, ExposimError, OutputExistsError
+from emulator.select import SELECTORS, select
+
+__all__ = [
+    "run",
+    "iter_run",
+    "run_to_folder",
+    "report",
+    "build_methods",
+    "parse_methods",
+    "MethodStep",
+    "CycleStep",
+    "RunResult",
+    "RunStats",
+    "PlaybackError",
+    "CSV_COLUMNS",
+    "EXTRA_COLUMNS",
+    "SAVE_MODES",
+    "DEFAULT_INITIAL_MS",
+    "DEFAULT_RANGE_MS",
+    "DEFAULT_SELECTOR",
+    "RUN_FILE",
+]
+
+#: Fixed leading columns of ``<method>/exposures.csv`` (the contract).
+CSV_COLUMNS = ("cycle", "timestamp_ns", "target_ms", "bracket_ms", "ratio", "saturated_fraction", "valid_fraction")
+#: Columns appended after the contract's: the proposal, guards, and per-camera figures.
+EXTRA_COLUMNS = (
+    "next_ms",
+    "proposed_ms",
+    "guarded",
+    "clamped",
+    "bracket_saturated_fraction",
+    "saturated_fraction_right",
+    "valid_fraction_right",
+    "missing_left_ms",
+    "missing_right_ms",
+)
+SAVE_MODES = ("none", "png16", "png8")
+DEFAULT_INITIAL_MS = 4.0
+DEFAULT_RANGE_MS = (0.02, 50.0)
+DEFAULT_SELECTOR = "higher-no-sat"
+RUN_FILE = "run.json"
+RESULTS_FILE = "results.json"
+REPORT_FILE = "report.md"
+PLOT_FILE = "exposure.png"
+CSV_FILE = "exposures.csv"
+TIMES_FILE = "times.txt"
+#: Camera whose emulated image the methods read and whose saturation selects the bracket.
+METHOD_CAMERA = "left"
+
+
+class PlaybackError(ExposimError):
+    """A run cannot proceed: bad configuration, or a resumed run that does not match its folder."""
+
+
+# ============================================================================ records
+@dataclass
+class MethodStep:
+    """What one method did in one cycle."""
+
+    method: str
+    cycle: int
+    timestamp_ns: int
+    target_ms: float
+    bracket_ms: float
+    ratio: float
+    saturated_fraction: float
+    valid_fraction: float
+    next_ms: float
+    proposed_ms: float
+    guarded: bool
+    clamped: bool
+    bracket_saturated_fraction: float
+    saturated_fraction_right: float | None = None
+    valid_fraction_right: float | None = None
+    missing_left_ms: tuple[float, ...] = ()
+    missing_right_ms: tuple[float, ...] = ()
+    left: np.ndarray | None = field(default=None, repr=False)
+    right: np.ndarray | None = field(default=None, repr=False)
+
+    def row(self) -> list[str]:
+        """The CSV row (contract columns, then :data:`EXTRA_COLUMNS`), floats at full precision."""
+
+        def f(x):
+            return "" if x is None else repr(float(x))
+
+        def ms(values):
+            return ";".join(f"{v:g}" for v in values)
+
+        return [
+            str(self.cycle),
+            str(self.timestamp_ns),
+            f(self.target_ms),
+            f(self.bracket_ms),
+            f(self.ratio),
+            f(self.saturated_fraction),
+            f(self.valid_fraction),
+            f(self.next_ms),
+            f(self.proposed_ms),
+            str(int(self.guarded)),
+            str(int(self.clamped)),
+            f(self.bracket_saturated_fraction),
+            f(self.saturated_fraction_right),
+            f(self.valid_fraction_right),
+            ms(self.missing_left_ms),
+            ms(self.missing_right_ms),
+        ]
+
+
+@dataclass
+class CycleStep:
+    """One cycle of a run: each method's step, or why the cycle was skipped."""
+
+    cycle: int
+    steps: dict[str, MethodStep]
+    missing: dict[str, list[float]]
+    skipped: str | None = None
+
+
+@dataclass
+class RunStats:
+    """Counters and timers of a run (wall-clock seconds; thread-safe)."""
+
+    decodes: int = 0
+    decode_s: float = 0.0
+    histogram_s: float = 0.0
+    emulate_s: float = 0.0
+    emulations: int = 0
+    method_s: dict[str, float] = field(default_factory=dict)
+    method_calls: dict[str, int] = field(default_factory=dict)
+    cycles: int = 0
+    wall_s: float = 0.0
+    _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
+
+    def add(self, name: str, seconds: float, count: int = 1) -> None:
+        with self._lock:
+            setattr(self, name, getattr(self, name) + seconds)
+            if name == "decode_s":
+                self.decodes += count
+            elif name == "emulate_s":
+                self.emulations += count
+
+    def add_method(self, method: str, seconds: float) -> None:
+        with self._lock:
+            self.method_s[method] = self.method_s.get(method, 0.0) + seconds
+            self.method_calls[method] = self.method_calls.get(method, 0) + 1
+
+    def as_dict(self) -> dict:
+        def per(total, n):
+            return 1000.0 * total / n if n else None
+
+        return {
+            "cycles": self.cycles,
+            "wall_s": self.wall_s,
+            "cycles_per_s": self.cycles / self.wall_s if self.wall_s > 0 else None,
+            "decodes": self.decodes,
+            "decode_ms_per_image": per(self.decode_s, self.decodes),
+            "emulations": self.emulations,
+            "emulate_ms_per_image": per(self.emulate_s, self.emulations),
+            "method_ms_per_frame": {m: per(s, self.method_calls.get(m, 0)) for m, s in self.method_s.items()},
+        }
+
+
+@dataclass
+class RunResult:
+    """In-memory result of :func:`run`: per-method steps (images dropped) and skipped cycles."""
+
+    steps: dict[str, list[MethodStep]]
+    skipped: list[tuple[int, str]]
+    methods: dict[str, AutoExposureMethod]
+    stats: RunStats
+
+    def column(self, method: str, name: str) -> np.ndarray:
+        """One field of every step of ``method`` as an array (e.g. ``"target_ms"``)."""
+        return np.array([getattr(s, name) for s in self.steps[method]])
+
+
+# ============================================================================ methods
+def parse_methods(spec) -> list[str]:
+    """``"all"``, ``"m1,m2"`` or an iterable of names -> list of method names (checked, no repeats)."""
+    if isinstance(spec, str):
+        names = list(METHOD_NAMES) if spec.strip() == "all" else [s.strip() for s in spec.split(",") if s.strip()]
+    else:
+        names = list(spec)
+    if not names:
+        raise PlaybackError("no AE method given; use 'all' or a comma-separated list of: " + ", ".join(METHOD_NAMES))
+    bad = [n for n in names if isinstance(n, str) and n not in METHOD_NAMES]
+    if bad:
+        raise PlaybackError(f"unknown AE method(s) {', '.join(map(repr, bad))}; choose from {', '.join(METHOD_NAMES)}")
+    dup = {n for n in names if isinstance(n, str) and names.count(n) > 1}
+    if dup:
+        raise PlaybackError(f"AE method(s) given twice: {', '.join(sorted(dup))}")
+    return names
+
+
+def build_methods(spec, *, mode: str = "paper", response=None, options: Mapping | None = None) -> dict[str, AutoExposureMethod]:
+    """Instantiate methods by name (or pass instances through), keyed by their name.
+
+    ``options`` maps a method name to keyword options for its factory; ``mode`` is the
+    default mode; ``response`` goes to the factories that accept it (zhang).  Methods built
+    here have no clamp of their own (``range_ms=None``): the loop clamps.
+    """
+    options = dict(options or {})
+    unknown = set(options) - set(METHOD_NAMES)
+    if unknown:
+        raise PlaybackError(f"options given for unknown method(s): {', '.join(sorted(unknown))}")
+    if isinstance(spec, str):
+        spec = parse_methods(spec)
+    out: dict[str, AutoExposureMethod] = {}
+    for item in spec:
+        if isinstance(item, str):
+            parse_methods([item])
+            opts = dict(options.get(item, {}))
+            opts.setdefault("mode", mode)
+            opts.setdefault("range_ms", None)
+            if accepts_option(item, "response"):
+                opts.setdefault("response", response)
+            method = make_method(item, **opts)
+            name = item
+        else:
+            method = item
+            name = getattr(item, "name", None)
+            if not name or not callable(getattr(item, "next_exposure", None)):
+                raise PlaybackError(f"{item!r} is neither a method name nor an AE method (name, next_exposure)")
+        if name in out:
+            raise PlaybackError(f"two methods are named {name!r}")
+        out[name] = method
+    return out
+
+
+# ============================================================================ the loop
+class _CycleImages:
+    """Decoded brackets of one cycle, each decoded at most once (thread-safe), with histograms."""
+
+    def __init__(self, cycle, white_level: int, black_level: int, stats: RunStats) -> None:
+        self.cycle = cycle
+        self.white = white_level
+        self.black = black_level
+        self.stats = stats
+        self._lock = threading.Lock()
+        self._locks: dict = {}
+        self._data: dict = {}
+
+    def get(self, camera: str, exposure_ms: float) -> tuple[np.ndarray, np.ndarray]:
+        key = (camera, exposure_ms)
+        with self._lock:
+            lock = self._locks.setdefault(key, threading.Lock())
+        with lock:
+            hit = self._data.get(key)
+            if hit is not None:
+                return hit
+            frame = self.cycle.frames[camera][exposure_ms]
+            t0 = time.perf_counter()
+            raw = frame.load()
+            t1 = time.perf_counter()
+            hist = cv2.calcHist([raw], [0], None, [self.white + 1], [0, self.white + 1]).ravel().astype(np.int64)
+            t2 = time.perf_counter()
+            self.stats.add("decode_s", t1 - t0)
+            self.stats.add("histogram_s", t2 - t1, 0)
+            raw.setflags(write=False)
+            hist.setflags(write=False)
+            self._data[key] = (raw, hist)
+            return raw, hist
+
+    def emulated(self, camera: str, exposure_ms: float, ratio: float, table: np.ndarray, stats: RunStats) -> np.ndarray:
+        """The bracket emulated at ``ratio`` (read-only; shared by methods with the same target)."""
+        key = (camera, exposure_ms, ratio)
+        with self._lock:
+            lock = self._locks.setdefault(key, threading.Lock())
+        with lock:
+            hit = self._data.get(key)
+            if hit is not None:
+                return hit
+            raw, _ = self.get(camera, exposure_ms)
+            if ratio == 1.0:
+                out = raw
+            else:
+                t0 = time.perf_counter()
+                out = apply_lut(table, raw)
+                stats.add("emulate_s", time.perf_counter() - t0)
+                out.setflags(write=False)
+            self._data[key] = out
+            return out
+
+    def saturated(self, camera: str, exposure_ms: float) -> float:
+        _, hist = self.get(camera, exposure_ms)
+        n = int(hist[: self.black + 1].sum() + hist[self.white :].sum())
+        return n / float(hist.sum())
+
+
+def _fractions(hist: np.ndarray, table: np.ndarray, valid: np.ndarray, white: int, black: int) -> tuple[float, float]:
+    """(saturated fraction of the emulated image, valid fraction) from the source histogram."""
+    n = float(hist.sum())
+    tab = table[: hist.size]
+    clipped = (tab >= white) | (tab <= black)
+    return float(hist[clipped].sum()) / n, float(hist[valid[: hist.size]].sum()) / n
+
+
+def _clamp(value: float, range_ms) -> float:
+    lo, hi = range_ms
+    return min(max(value, lo), hi)
+
+
+def _check_range(range_ms) -> tuple[float, float]:
+    try:
+        lo, hi = (float(v) for v in range_ms)
+    except (TypeError, ValueError):
+        raise PlaybackError(f"range_ms must be (low_ms, high_ms), got {range_ms!r}") from None
+    if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo <= hi):
+        raise PlaybackError(f"range_ms must satisfy 0 < low <= high (ms), got {range_ms!r}")
+    return lo, hi
+
+
+def _resolve_sequence(sequence) -> Sequence:
+    return sequence if isinstance(sequence, Sequence) else load_sequence(sequence)
+
+
+def iter_run(
+    sequence,
+    methods,
+    *,
+    initial_ms: float = DEFAULT_INITIAL_MS,
+    range_ms=DEFAULT_RANGE_MS,
+    selector: str = DEFAULT_SELECTOR,
+    response=None,
+    mode: str = "paper",
+    options: Mapping | None = None,
+    jobs: int = 1,
+    emulate_right: bool = False,
+    keep_images: bool = False,
+    on_step: Callable[[MethodStep], None] | None = None,
+    stats: RunStats | None = None,
+) -> Iterator[CycleStep]:
+    """Run the closed loop cycle by cycle, yielding a :class:`CycleStep` per cycle.
+
+    Parameters
+    ----------
+    sequence : Sequence or path
+        The recording (BorealHDR layout).
+    methods : "all", "m1,m2", names, or AE method instances
+        Methods built by name get ``mode``, ``options[name]`` and the response (zhang).
+    initial_ms, range_ms : float, (float, float)
+        Shared first exposure, and the clamp applied to every proposal (ms).
+    selector : str
+        Bracket selector (``emulator.select.SELECTORS``), run once per method and cycle on
+        the brackets present for both cameras; the left camera's saturation decides.
+    response : CameraResponse or None
+        Default: the sequence's own (:func:`emulator.dataset.sequence_response`).
+    jobs : int
+        Threads across methods within a cycle (output does not depend on it).
+    emulate_right, keep_images : bool
+        Also emulate the right image (its fractions are computed anyway); keep the emulated
+        images on the yielded steps (else they are dropped after ``on_step``).
+    on_step : callable(MethodStep) or None
+        Called in the worker right after each method's step, with the images attached
+        (used to write them in parallel).
+    stats : RunStats or None
+        Filled with counters and timings.
+    """
+    seq = _resolve_sequence(sequence)
+    initial_ms = check_exposure(initial_ms, "initial_ms")
+    lo_hi = _check_range(range_ms)
+    if selector not in SELECTORS:
+        raise PlaybackError(f"unknown selector {selector!r}; choose one of {', '.join(SELECTORS)}")
+    if int(jobs) < 1:
+        raise PlaybackError(f"jobs must be >= 1, got {jobs!r}")
+    if response is None:
+        response = sequence_response(seq)
+    white, black = int(seq.white_level), int(seq.black_level)
+    if response.white_level != white or response.black_level != black:
+        response = response.with_levels(white_level=white, black_level=black)
+    built = build_methods(methods, mode=mode, response=response, options=options)
+    stats = stats if stats is not None else RunStats()
+    cams = tuple(c for c in CAMERAS if c in seq.cameras)
+    method_cam = METHOD_CAMERA if METHOD_CAMERA in cams else cams[0]
+    other_cam = next((c for c in cams if c != method_cam), None)
+    targets = {name: float(initial_ms) for name in built}
+    select_kw = {"white_level": white, "black_level": black}
+
+    def step_one(name: str, method, images: _CycleImages, brackets: dict, missing: dict, cycle) -> MethodStep:
+        target = targets[name]
+        key = select(selector, target, brackets, **select_kw)
+        frame = cycle.frames[method_cam][key]
+        raw, hist = images.get(method_cam, key)
+        ratio = target / key
+        table, valid = response.lut(ratio)  # thread-safe, cached per ratio
+        left = images.emulated(method_cam, key, ratio, table, stats)
+        sat, val = _fractions(hist, table, valid, white, black)
+        bracket_sat = images.saturated(method_cam, key)
+        before = getattr(method, "guard_count", 0)
+        t0 = time.perf_counter()
+        proposed = method.next_exposure(left, target)
+        stats.add_method(name, time.perf_counter() - t0)
+        guarded = getattr(method, "guard_count", 0) > before
+        try:
+            proposed = float(proposed)
+        except (TypeError, ValueError):
+            proposed = math.nan
+        nxt = proposed
+        if not (math.isfinite(nxt) and nxt > 0):
+            guarded = True
+            nxt = target
+        clamped_value = _clamp(nxt, lo_hi)
+        right_img = None
+        sat_r = val_r = None
+        if other_cam is not None:
+            rframe = cycle.frames[other_cam][key]
+            if rframe.timestamp_ns != frame.timestamp_ns:
+                raise DatasetError(
+                    f"{rframe.path}: stereo pair mismatch, {other_cam} timestamp {rframe.timestamp_ns} != "
+                    f"{method_cam} timestamp {frame.timestamp_ns} for bracket {key} ms"
+                )
+            _, rhist = images.get(other_cam, key)
+            sat_r, val_r = _fractions(rhist, table, valid, white, black)
+            if emulate_right:
+                right_img = images.emulated(other_cam, key, ratio, table, stats)
+        st = MethodStep(
+            method=name,
+            cycle=cycle.index,
+            timestamp_ns=int(frame.timestamp_ns),
+            target_ms=target,
+            bracket_ms=float(key),
+            ratio=float(ratio),
+            saturated_fraction=sat,
+            valid_fraction=val,
+            next_ms=clamped_value,
+            proposed_ms=proposed,
+            guarded=bool(guarded),
+            clamped=clamped_value != nxt,
+            bracket_saturated_fraction=bracket_sat,
+            saturated_fraction_right=sat_r,
+            valid_fraction_right=val_r,
+            missing_left_ms=tuple(missing.get(method_cam, ())),
+            missing_right_ms=tuple(missing.get(other_cam, ())) if other_cam else (),
+            left=left,
+            right=right_img,
+        )
+        if on_step is not None:
+            on_step(st)
+        if not keep_images:
+            st.left = st.right = None
+        return st
+
+    pool = ThreadPoolExecutor(max_workers=int(jobs), thread_name_prefix="exposim-run") if int(jobs) > 1 else None
+    start = time.perf_counter()
+    try:
+        for cycle in seq.cycles:
+            missing = {c: cycle.missing(c) for c in cams}
+            avail = cycle.available(cams)
+            if not avail:
+                stats.cycles += 1
+                yield CycleStep(cycle.index, {}, missing, skipped="no bracket present for every camera")
+                continue
+            images = _CycleImages(cycle, white, black, stats)
+            brackets = {e: (lambda e=e: images.saturated(method_cam, e)) for e in avail}
+            args = [(name, m, images, brackets, missing, cycle) for name, m in built.items()]
+            if pool is None:
+                results = [step_one(*a) for a in args]
+            else:
+                results = list(pool.map(lambda a: step_one(*a), args))
+            for st in results:
+                targets[st.method] = st.next_ms
+            stats.cycles += 1
+            stats.wall_s = time.perf_counter() - start
+            yield CycleStep(cycle.index, {st.method: st for st in results}, missing)
+    finally:
+        stats.wall_s = time.perf_counter() - start
+        if pool is not None:
+            pool.shutdown(wait=True)
+
+
+def run(
+    sequence,
+    methods="all",
+    *,
+    initial_ms: float = DEFAULT_INITIAL_MS,
+    range_ms=DEFAULT_RANGE_MS,
+    selector: str = DEFAULT_SELECTOR,
+    response=None,
+    mode: str = "paper",
+    options: Mapping | None = None,
+    jobs: int = 1,
+    progress: Callable[[int, int], None] | None = None,
+) -> RunResult:
+    """Run the closed loop over a whole sequence in memory (no images kept); see :func:`iter_run`."""
+    seq = _resolve_sequence(sequence)
+    if response is None:
+        response = sequence_response(seq)
+    built = build_methods(methods, mode=mode, response=response, options=options)
+    stats = RunStats()
+    steps: dict[str, list[MethodStep]] = {name: [] for name in built}
+    skipped: list[tuple[int, str]] = []
+    gen = iter_run(seq, list(built.values()), initial_ms=initial_ms, range_ms=range_ms, selector=selector,
+                   response=response, jobs=jobs, stats=stats)
+    for i, cs in enumerate(gen, 1):
+        if cs.skipped:
+            skipped.append((cs.cycle, cs.skipped))
+        for name, st in cs.steps.items():
+            steps[name].append(st)
+        if progress is not None:
+            progress(i, len(seq.cycles))
+    return RunResult(steps, skipped, built, stats)
+
+
+# ============================================================================ run folder
+def _now() -> str:
+    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+
+
+def _write_json(path: Path, data: dict) -> None:
+    atomic_write_bytes(path, (json.dumps(data, indent=2, default=str) + "\n").encode(), overwrite=True)
+
+
+@functools.lru_cache(maxsize=4)
+def _png8_table(white_level: int) -> np.ndarray:
+    """round(gray * 255 / white_level) for every uint16 gray value (half to even), clipped to 255."""
+    table = np.clip(np.rint(np.arange(65536, dtype=np.float64) * 255 / white_level), 0, 255).astype(np.uint8)
+    table.setflags(write=False)
+    return table
+
+
+def _png8(img: np.ndarray, white_level: int) -> np.ndarray:
+    """8-bit gray of a mosaic: ``cv2.COLOR_BayerRG2GRAY`` then ``round(gray * 255 / white_level)``."""
+    gray = cv2.cvtColor(np.ascontiguousarray(img), cv2.COLOR_BayerRG2GRAY)
+    return np.take(_png8_table(int(white_level)), gray)
+
+
+def _timestamp_s(ns: int) -> str:
+    return f"{ns // 1_000_000_000}.{ns % 1_000_000_000:09d}"
+
+
+def _read_csv_rows(path: Path) -> list[list[str]]:
+    """Rows of an exposures.csv (header checked); a torn last line is cut off the file."""
+    if not path.is_file():
+        return []
+    data = path.read_bytes()
+    if data and not data.endswith(b"\n"):
+        cut = data.rfind(b"\n") + 1
+        with open(path, "r+b") as fh:
+            fh.truncate(cut)
+        data = data[:cut]
+    rows = list(csv.reader(io.StringIO(data.decode())))
+    if not rows:
+        return []
+    header = tuple(rows[0])
+    if header[: len(CSV_COLUMNS)] != CSV_COLUMNS:
+        raise PlaybackError(f"{path}: unexpected header {','.join(header)}")
+    return rows[1:]
+
+
+def _canon(value) -> str:
+    return json.dumps(value, sort_keys=True, default=str)
+
+
+def _config_of(run_json: dict) -> dict:
+    return {k: run_json.get(k) for k in ("sequence", "methods", "selector", "initial_ms", "range_ms", "save", "mode",
+                                         "options", "response")}
+
+
+def run_to_folder(
+    sequence,
+    methods="all",
+    out_dir=None,
+    *,
+    save: str = "none",
+    response=None,
+    response_path=None,
+    initial_ms: float = DEFAULT_INITIAL_MS,
+    range_ms=DEFAULT_RANGE_MS,
+    selector: str = DEFAULT_SELECTOR,
+    mode: str = "paper",
+    options: Mapping | None = None,
+    jobs: int = 1,
+    resume: bool = False,
+    progress: Callable[[int, int], None] | None = None,
+    command: str | None = None,
+    make_report: bool = True,
+) -> dict:
+    """Run AE methods on a recording and write a run folder (layout in the module docstring).
+
+    Refuses an existing, non-empty ``out_dir`` (:class:`OutputExistsError`) unless ``resume``:
+    then the configuration comes from ``out_dir/run.json`` (arguments that differ raise
+    :class:`PlaybackError`), every method is re-run deterministically from cycle 0, rows
+    already in the CSVs are checked against the replay (a mismatch raises) and not written
+    again, missing images are written, and the run continues where it stopped.
+
+    Returns the summary written to ``results.json`` (per-method figures, skipped cycles,
+    timing).  ``progress(done, total)`` is called after every cycle.
+    """
+    if out_dir is None:
+        raise PlaybackError("out_dir is required")
+    out = Path(out_dir)
+    if save not in SAVE_MODES:
+        raise PlaybackError(f"save must be one of {', '.join(SAVE_MODES)}, got {save!r}")
+    seq = _resolve_sequence(sequence)
+    if response is None:
+        response = sequence_response(seq, response_path)
+    response_name = str(response_path) if response_path is not None else str(getattr(response, "name", "custom"))
+    built = build_methods(parse_methods(methods) if isinstance(methods, str) else list(methods), mode=mode,
+                          response=response, options=options)
+    names = list(built)
+    user_options = {k: {kk: vv for kk, vv in v.items()} for k, v in dict(options or {}).items()}
+    config = {
+        "sequence": str(Path(seq.path).resolve()),
+        "methods": names,
+        "selector": selector,
+        "initial_ms": float(initial_ms),
+        "range_ms": [float(v) for v in _check_range(range_ms)],
+        "save": save,
+        "mode": mode,
+        "options": user_options,
+        "response": response_name,
+    }
+    run_path = out / RUN_FILE
+    recorded: dict[str, dict[int, list[str]]] = {}
+    if resume:
+        if not run_path.is_file():
+            raise PlaybackError(f"{run_path}: no run to resume (run.json missing)")
+        try:
+            previous = json.loads(run_path.read_text())
+        except json.JSONDecodeError as exc:
+            raise PlaybackError(f"{run_path}: malformed JSON ({exc})") from None
+        old = _config_of(previous)
+        diff = [k for k in config if _canon(old.get(k)) != _canon(config[k])]
+        if diff:
+            raise PlaybackError(
+                f"{run_path}: --resume with a different configuration ({', '.join(diff)}): recorded "
+                + "; ".join(f"{k}={old.get(k)!r}" for k in diff)
+            )
+        for name in names:
+            rows = _read_csv_rows(out / name / CSV_FILE)
+            recorded[name] = {int(r[0]): r for r in rows}
+        run_json = previous
+        run_json["resumed"] = run_json.get("resumed", 0) + 1
+        run_json.setdefault("resume_commands", []).append(command)
+    else:
+        if out.exists() and (not out.is_dir() or any(out.iterdir())):
+            raise OutputExistsError(f"{out}: run folder exists and is not empty; refusing to overwrite (use --resume "
+                                    "to continue an interrupted run, or choose another folder)")
+        out.mkdir(parents=True, exist_ok=True)
+        from emulator import __version__
+
+        run_json = {
+            **config,
+            "white_level": int(seq.white_level),
+            "black_level": int(seq.black_level),
+            "cameras": list(seq.cameras),
+            "brackets_ms": list(seq.brackets),
+            "method_camera": METHOD_CAMERA,
+            "selector_camera": METHOD_CAMERA,
+            "method_options": {n: m.config() if hasattr(m, "config") else {} for n, m in built.items()},
+            "command": command,
+            "version": __version__,
+            "jobs": int(jobs),
+            "created": _now(),
+            "n_cycles": len(seq.cycles),
+            "status": "running",
+            "cycles_done": 0,
+            "skipped_cycles": [],
+        }
+    run_json.update(status="running", updated=_now(), jobs=int(jobs))
+    _write_json(run_path, run_json)
+
+    image_root = {name: out / name / "images" for name in names}
+    if save != "none":
+        for name in names:
+            for cam in seq.cameras:
+                (image_root[name] / cam).mkdir(parents=True, exist_ok=True)
+
+    def write_images(st: MethodStep) -> None:
+        if save == "none":
+            return
+        rec = recorded.get(st.method, {}).get(st.cycle)
+        for cam, img in (("left", st.left), ("right", st.right)):
+            if img is None:
+                continue
+            path = image_root[st.method] / cam / f"{st.timestamp_ns}.png"
+            if rec is not None and path.exists():
+                continue
+            data = img if save == "png16" else _png8(img, int(seq.white_level))
+            write_png16(path, data, overwrite=True)
+
+    writers = {}
+    handles = {}
+    for name in names:
+        path = out / name / CSV_FILE
+        path.parent.mkdir(parents=True, exist_ok=True)
+        new = not path.exists() or path.stat().st_size == 0
+        fh = open(path, "a", newline="")
+        handles[name] = fh
+        writers[name] = csv.writer(fh, lineterminator="\n")
+        if new:
+            writers[name].writerow(CSV_COLUMNS + EXTRA_COLUMNS)
+            fh.flush()
+
+    stats = RunStats()
+    skipped: list[dict] = []
+    guarded_counts = {name: 0 for name in names}
+    done = 0
+    status = "failed"
+    try:
+        gen = iter_run(seq, list(built.values()), initial_ms=initial_ms, range_ms=range_ms, selector=selector,
+                       response=response, jobs=jobs, emulate_right=save != "none", on_step=write_images, stats=stats)
+        for cs in gen:
+            if cs.skipped:
+                skipped.append({"cycle": cs.cycle, "reason": cs.skipped, "missing": cs.missing})
+            for name in names:
+                st = cs.steps.get(name)
+                if st is None:
+                    continue
+                row = st.row()
+                rec = recorded.get(name, {}).get(st.cycle)
+                if rec is not None:
+                    if rec != row:
+                        raise PlaybackError(
+                            f"{out / name / CSV_FILE}: resume replay of cycle {st.cycle} differs from the recorded "
+                            f"row ({','.join(rec[:len(CSV_COLUMNS)])} recorded, {','.join(row[:len(CSV_COLUMNS)])} "
+                            "replayed); the folder was written by another configuration or version"
+                        )
+                else:
+                    writers[name].writerow(row)
+                    handles[name].flush()
+            done += 1
+            run_json.update(cycles_done=done, skipped_cycles=skipped, updated=_now())
+            _write_json(run_path, run_json)
+            if progress is not None:
+                progress(done, len(seq.cycles))
+        status = "complete"
+    except KeyboardInterrupt:
+        status = "interrupted"
+        raise
+    except BaseException as exc:
+        run_json["error"] = f"{type(exc).__name__}: {exc}"
+        raise
+    finally:
+        for fh in handles.values():
+            fh.close()
+        run_json.update(status=status, cycles_done=done, skipped_cycles=skipped, updated=_now())
+        if status == "complete":
+            run_json.pop("error", None)
+        run_json["timing"] = stats.as_dict()
+        _write_json(run_path, run_json)
+    if save != "none":
+        for name in names:
+            _write_times(out / name)
+    if make_report:
+        return report(out)
+    return _summary(out)
+
+
+def _write_times(method_dir: Path) -> None:
+    rows = _read_csv_rows(method_dir / CSV_FILE)
+    lines = sorted((int(r[1]), float(r[2])) for r in rows)
+    text = "".join(f"{ns} {_timestamp_s(ns)} {ms!r}\n" for ns, ms in lines)
+    atomic_write_bytes(method_dir / "images" / TIMES_FILE, text.encode(), overwrite=True)
+
+
+# ============================================================================ report
+def _load_tables(run_dir: Path, names: Iterable[str]) -> dict[str, dict[str, np.ndarray]]:
+    tables = {}
+    for name in names:
+        path = run_dir / name / CSV_FILE
+        if not path.is_file():
+            raise PlaybackError(f"{path}: missing; not a complete run folder")
+        with open(path, newline="") as fh:
+            reader = csv.DictReader(fh)
+            rows = list(reader)
+        cols = {}
+        for col in CSV_COLUMNS + ("next_ms", "guarded", "clamped", "valid_fraction_right"):
+            vals = [r.get(col, "") for r in rows]
+            if col in ("cycle", "timestamp_ns", "guarded", "clamped"):
+                cols[col] = np.array([int(v) if v else 0 for v in vals], dtype=np.int64)
+            else:
+                cols[col] = np.array([float(v) if v else math.nan for v in vals], dtype=np.float64)
+        tables[name] = cols
+    return tables
+
+
+def _summary(run_dir: Path) -> dict:
+    run_dir = Path(run_dir)
+    info = json.loads((run_dir / RUN_FILE).read_text())
+    names = info["methods"]
+    tables = _load_tables(run_dir, names)
+    methods = {}
+    for name in names:
+        t = tables[name]
+        target = t["target_ms"]
+        n = target.size
+
+        def stat(fn, arr):
+            return float(fn(arr)) if arr.size else None
+
+        brackets, counts = np.unique(t["bracket_ms"], return_counts=True) if n else (np.array([]), np.array([]))
+        methods[name] = {
+            "mode": info.get("method_options", {}).get(name, {}).get("mode"),
+            "cycles": int(n),
+            "mean_exposure_ms": stat(np.mean, target),
+            "median_exposure_ms": stat(np.median, target),
+            "min_exposure_ms": stat(np.min, target),
+            "max_exposure_ms": stat(np.max, target),
+            "final_exposure_ms": float(t["next_ms"][-1]) if n else None,
+            "mean_saturated_fraction": stat(np.mean, t["saturated_fraction"]),
+            "mean_valid_fraction": stat(np.mean, t["valid_fraction"]),
+            "non_finite_proposals": int(t["guarded"].sum()),
+            "clamped": int(t["clamped"].sum()),
+            "bracket_use": {f"{b:g}": int(c) for b, c in zip(brackets, counts)},
+            "method_ms_per_frame": (info.get("timing") or {}).get("method_ms_per_frame", {}).get(name),
+        }
+    return {
+        "run": str(run_dir),
+        "sequence": info.get("sequence"),
+        "status": info.get("status"),
+        "cycles_done": info.get("cycles_done"),
+        "n_cycles": info.get("n_cycles"),
+        "skipped_cycles": info.get("skipped_cycles", []),
+        "selector": info.get("selector"),
+        "initial_ms": info.get("initial_ms"),
+        "range_ms": info.get("range_ms"),
+        "methods": methods,
+        "timing": info.get("timing"),
+    }
+
+
+def _plot(run_dir: Path, info: dict, tables: dict) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(9, 4.5), dpi=110)
+    t0 = min((int(t["timestamp_ns"][0]) for t in tables.values() if t["timestamp_ns"].size), default=0)
+    for b in info.get("brackets_ms", []):
+        ax.axhline(b, color="0.85", lw=0.8, zorder=0)
+    for name, t in tables.items():
+        if not t["timestamp_ns"].size:
+            continue
+        x = (t["timestamp_ns"] - t0) / 1e9
+        ax.step(x, t["target_ms"], where="post", marker="o", ms=3, lw=1.3, label=name)
+    ax.set_yscale("log")
+    ax.set_xlabel("time since first bracket [s]")
+    ax.set_ylabel("exposure [ms]")
+    ax.set_title(f"Exposure per cycle ({info.get('mode', '')} mode, start {info.get('initial_ms')} ms)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8, ncol=2)
+    fig.tight_layout()
+    path = run_dir / PLOT_FILE
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png")
+    plt.close(fig)
+    atomic_write_bytes(path, buf.getvalue(), overwrite=True)
+    return path
+
+
+def report(run_dir) -> dict:
+    """(Re)write ``results.json``, ``exposure.png`` and ``report.md`` of a run folder from its CSVs.
+
+    Returns the results dictionary.  Needs no recomputation: everything comes from
+    ``run.json`` and the per-method CSVs.
+    """
+    run_dir = Path(run_dir)
+    if not (run_dir / RUN_FILE).is_file():
+        raise PlaybackError(f"{run_dir}: not a run folder ({RUN_FILE} missing)")
+    summary = _summary(run_dir)
+    info = json.loads((run_dir / RUN_FILE).read_text())
+    tables = _load_tables(run_dir, info["methods"])
+    _plot(run_dir, info, tables)
+    _write_json(run_dir / RESULTS_FILE, summary)
+    lines = [
+        f"# AE closed-loop run: {Path(info.get('sequence', '')).name}",
+        "",
+        f"- sequence: `{info.get('sequence')}`",
+        f"- status: {info.get('status')}, cycles {info.get('cycles_done')}/{info.get('n_cycles')}",
+        f"- mode: {info.get('mode')}, selector: {info.get('selector')} (left camera's saturation decides)",
+        f"- initial exposure {info.get('initial_ms')} ms, clamp {info.get('range_ms')} ms, response `{info.get('response')}`",
+        f"- images: {info.get('save')}",
+        f"- command: `{info.get('command')}`, exposim {info.get('version')}",
+        "",
+        "![exposure against time](exposure.png)",
+        "",
+        "The paper (section V-D) compares the methods through features and VO, and shows no",
+        "exposure-against-time figure; this plot is the run's own record.",
+        "",
+        "| method | mode | cycles | mean ms | median ms | min ms | max ms | mean sat. | mean valid | non-finite | ms/frame |",
+        "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
+    ]
+
+    def fmt(v, spec=".3g"):
+        return "-" if v is None else format(v, spec)
+
+    for name, m in summary["methods"].items():
+        lines.append(
+            f"| {name} | {m['mode']} | {m['cycles']} | {fmt(m['mean_exposure_ms'])} | {fmt(m['median_exposure_ms'])} | "
+            f"{fmt(m['min_exposure_ms'])} | {fmt(m['max_exposure_ms'])} | {fmt(m['mean_saturated_fraction'], '.2%')} | "
+            f"{fmt(m['mean_valid_fraction'], '.2%')} | {m['non_finite_proposals']} | {fmt(m['method_ms_per_frame'], '.1f')} |"
+        )
+    skipped = summary.get("skipped_cycles") or []
+    lines += ["", f"Skipped cycles: {len(skipped)}"]
+    for s in skipped:
+        lines.append(f"- cycle {s['cycle']}: {s['reason']}")
+    timing = summary.get("timing") or {}
+    if timing:
+        lines += [
+            "",
+            f"Timing: {timing.get('cycles')} cycles in {fmt(timing.get('wall_s'))} s "
+            f"({fmt(timing.get('cycles_per_s'))} cycles/s), {timing.get('decodes')} PNG decodes "
+            f"({fmt(timing.get('decode_ms_per_image'), '.1f')} ms each), {timing.get('emulations')} emulations "
+            f"({fmt(timing.get('emulate_ms_per_image'), '.1f')} ms each).",
+        ]
+    atomic_write_bytes(run_dir / REPORT_FILE, ("\n".join(lines) + "\n").encode(), overwrite=True)
+    return summary
