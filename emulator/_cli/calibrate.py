@@ -1,0 +1,182 @@
+"""``exposim calibrate``: recover the inverse camera response (pcalib file + plot).
+
+Two sources::
+
+    exposim calibrate STACK -o response.txt                 # static stack, TUM layout (ALS)
+    exposim calibrate --from-recording SEQ -o response.txt  # a recording's own sweeps
+
+The plot goes beside the output as ``<output stem>.png``.  Existing outputs are kept
+unless ``--force``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+__all__ = ["register"]
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "calibrate",
+        help="recover the inverse camera response f^-1 from a static stack or a recording",
+        description=(
+            "Recover the inverse camera response f^-1 and write it as a pcalib file (256 samples "
+            "over DN 0..4095, g(4095) = 255) plus a plot <output stem>.png. From a static-scene "
+            "stack in the TUM layout (STACK/images/*.png, STACK/times.txt: '<name> <timestamp_s> "
+            "<exposure_ms>') by alternating least squares (Engel et al. 2016), or with "
+            "--from-recording from a bracketed recording's own sweeps by histogram matching "
+            "(comparametric, Grossberg and Nayar 2003)."
+        ),
+    )
+    p.add_argument("stack", nargs="?", type=Path, help="stack folder (TUM layout: images/ and times.txt)")
+    p.add_argument("--from-recording", type=Path, metavar="SEQ",
+                   help="a BorealHDR-layout recording instead of a stack")
+    p.add_argument("-o", "--output", type=Path, required=True, help="pcalib file to write (e.g. response.txt)")
+    p.add_argument("--force", action="store_true", help="overwrite the output and its plot")
+    p.add_argument("--knots", type=int, default=None,
+                   help="knots of the piecewise-linear response (stack: 256, recording: 128)")
+    p.add_argument("--smoothness", type=float, default=None, help="weight of the curvature prior (default 0.1)")
+    p.add_argument("--margin", type=int, default=8, help="DN at each end treated as clipped (default 8)")
+    p.add_argument("--pixels", type=int, default=65536, help="stack: random pixels used (default 65536)")
+    p.add_argument("--white-level", type=int, default=None, help="stack: white level (default exposim.json or 4095)")
+    p.add_argument("--black-level", type=int, default=None, help="stack: black level (default exposim.json or 0)")
+    p.add_argument("--no-static-check", action="store_true",
+                   help="stack: do not refuse a fit whose residual is far above the noise")
+    p.add_argument("--camera", choices=("left", "right", "both"), default="both", help="recording: cameras to use")
+    p.add_argument("--stride", type=int, default=4,
+                   help="recording: read every n-th pixel of each Bayer plane (default 4)")
+    p.add_argument("--no-score", action="store_true", help="recording: skip the cross-bracket score")
+    p.add_argument("--seed", type=int, default=0, help="random seed (pixel subset, dither)")
+    p.add_argument("--json", action="store_true", help="print the result as one JSON object")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=_calibrate)
+
+
+def _progress_bar(enabled: bool):
+    """A progress(done, total, label) callable drawing a tqdm bar (per phase), and a closer."""
+    if not enabled:
+        return None, lambda: None
+    from tqdm import tqdm
+
+    state: dict = {}
+
+    def progress(done: int, total: int, label: str) -> None:
+        phase = label.split(":")[0].split(" ")[0]
+        bar = state.get("bar")
+        if bar is None or state.get("phase") != phase or state.get("total") != total:
+            if bar is not None:
+                bar.close()
+            bar = tqdm(total=total, desc=phase, unit="step", leave=False, dynamic_ncols=True)
+            state.update(bar=bar, phase=phase, total=total)
+        bar.n = done
+        bar.set_postfix_str(label, refresh=False)
+        bar.refresh()
+
+    def close() -> None:
+        if state.get("bar") is not None:
+            state["bar"].close()
+
+    return progress, close
+
+
+def _calibrate(args) -> int:
+    from emulator.calibrate import (
+        calibrate_from_recording,
+        calibrate_stack,
+        cross_bracket_error,
+        plot_calibration,
+        write_response,
+    )
+    from emulator.errors import ExposimError, OutputExistsError
+
+    if (args.stack is None) == (args.from_recording is None):
+        raise ExposimError("give either a STACK folder or --from-recording SEQ (not both)")
+    out = args.output
+    plot_path = out.with_name(out.stem + ".png")
+    if not args.force:
+        for p in (out, plot_path):
+            if p.exists():
+                raise OutputExistsError(f"{p}: exists; refusing to overwrite (use --force)")
+
+    progress, close = _progress_bar(not args.no_progress and not args.json)
+    score = None
+    reference = None
+    try:
+        if args.stack is not None:
+            kw = {"margin_dn": args.margin}
+            if args.knots is not None:
+                kw["n_knots"] = args.knots
+            if args.smoothness is not None:
+                kw["smoothness"] = args.smoothness
+            from emulator.calibrate import read_stack
+
+            stack = read_stack(args.stack, white_level=args.white_level, black_level=args.black_level)
+            result = calibrate_stack(
+                stack, max_pixels=args.pixels, check_static=not args.no_static_check, rng=args.seed,
+                progress=progress, **kw,
+            )
+        else:
+            from emulator.dataset import find_response, load_sequence, sequence_response
+
+            seq = load_sequence(args.from_recording)
+            cams = None if args.camera == "both" else (args.camera,)
+            kw = {"margin_dn": args.margin, "stride": args.stride}
+            if args.knots is not None:
+                kw["n_knots"] = args.knots
+            if args.smoothness is not None:
+                kw["smoothness"] = args.smoothness
+            result = calibrate_from_recording(seq, cameras=cams, rng=args.seed, progress=progress, **kw)
+            if not args.no_score:
+                score = {"recovered": cross_bracket_error(seq, result.response, cameras=cams, stride=args.stride,
+                                                          progress=progress)}
+                found = find_response(seq.path)
+                if found is not None:
+                    reference = sequence_response(seq, found)
+                    score["existing"] = cross_bracket_error(seq, reference, cameras=cams, stride=args.stride,
+                                                            progress=progress)
+    finally:
+        close()
+
+    write_response(result, out, overwrite=args.force)
+    plot_calibration(result, plot_path, reference=reference,
+                     reference_label=f"existing {reference.name}" if reference is not None else "reference",
+                     overwrite=args.force)
+
+    if args.json:
+        d = result.to_dict()
+        d["output"] = str(out)
+        d["plot"] = str(plot_path)
+        if score:
+            d["cross_bracket"] = {k: {"response": v.response_name, "median_pct": v.median_pct,
+                                      "mean_pct": v.mean_pct, "n_pairs": len(v.pairs)} for k, v in score.items()}
+        print(json.dumps(d))
+        return 0
+    info = result.info
+    print(f"method      {result.method}")
+    if args.stack is not None:
+        print(f"stack       {info['stack']}: {info['n_images']} images, {info['n_exposures']} exposures "
+              f"{min(info['exposures_ms']):g}..{max(info['exposures_ms']):g} ms, "
+              f"{info['image_size'][0]}x{info['image_size'][1]}")
+        print(f"samples     {info['n_pixels']} pixels, {info['n_samples']} unclipped samples "
+              f"({100 * info['clipped_fraction']:.1f} % clipped), solver {info['solver']}, "
+              f"{info['iterations']} iteration(s){'' if info['converged'] else ' (not converged)'}")
+    else:
+        print(f"recording   {info['sequence']}: {info['n_pairs']} bracket pairs in {info['n_cycles']} sweeps, "
+              f"cameras {', '.join(info['cameras'])}, {info['n_matched_quantiles']} matched quantiles")
+    print(f"DN range    observed {result.observed_dn[0]}..{result.observed_dn[1]} "
+          f"(extrapolated outside), levels {result.black_level}..{result.white_level}")
+    noise = "" if result.noise_dn != result.noise_dn else f", noise ~{result.noise_dn:.2f} DN"
+    print(f"residual    {result.residual_rms_dn:.2f} DN RMS ({result.residual_rms_pct:.3f} % of range), "
+          f"robust {result.residual_robust_dn:.2f} DN{noise}")
+    for w in info.get("warnings", []):
+        print(f"warning     {w}")
+    print(f"vignetting  {info['vignetting']}")
+    if score:
+        for k, v in score.items():
+            print(f"cross-bracket error ({k}: {v.response_name}): median {v.median_pct:.3f} %, "
+                  f"mean {v.mean_pct:.3f} % over {len(v.pairs)} emulations")
+    print(f"wrote       {out} and {plot_path}")
+    return 0
