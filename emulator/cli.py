@@ -23,7 +23,8 @@ COMMAND_MODULES = (
     "emulator._cli.run",  # run
     "emulator._cli.calibrate",  # calibrate
     "emulator._cli.bench",  # bench features|vo|rpe
-    "scenes.cli",  # render, synth
+    "scenes.cli",  # render
+    "scenes.synth_cli",  # synth
     "validation.cli",  # validate
 )
 

@@ -1,0 +1,168 @@
+"""On-disk render cache: OpenEXR float32 RGB files named by a content hash.
+
+The key hashes everything that affects the pixels: the scene (name, every
+parameter, seed, and a fingerprint of the scene-building source code), the
+pose, the image size, the field of view, spp, the sampler seed, the Mitsuba
+variant and the Mitsuba and Dr.Jit versions.  A hit is read back exactly (EXR
+float32 with lossless ZIP compression) and costs only the read.  Files are
+written to a temporary name and moved into place with :func:`os.replace`, so a
+reader never sees a partial file.  The EXR bytes are deterministic: the same
+render writes the same file.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import json
+import os
+import tempfile
+from importlib import metadata
+from pathlib import Path
+
+import numpy as np
+
+from scenes.errors import RenderError
+
+__all__ = ["ENV_CACHE_DIR", "default_cache_dir", "resolve_cache_dir", "canonical_json", "library_versions",
+           "render_key", "cache_path", "write_exr", "read_exr"]
+
+#: Environment variable overriding the default cache folder.
+ENV_CACHE_DIR = "EXPOSIM_CACHE"
+
+#: Bump when the key layout changes.
+KEY_VERSION = 1
+
+
+def default_cache_dir() -> Path:
+    """``$EXPOSIM_CACHE`` if set, else ``~/.cache/exposim/renders``."""
+    env = os.environ.get(ENV_CACHE_DIR, "").strip()
+    return Path(env).expanduser() if env else Path.home() / ".cache" / "exposim" / "renders"
+
+
+def resolve_cache_dir(cache_dir) -> Path | None:
+    """None -> the default folder; False -> no caching (returns None); else the given path."""
+    if cache_dir is False:
+        return None
+    if cache_dir is None:
+        return default_cache_dir()
+    return Path(cache_dir).expanduser()
+
+
+def _jsonable(obj):
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _jsonable(obj.tolist())
+    if isinstance(obj, (np.floating,)):
+        return float(obj)
+    if isinstance(obj, (np.integer,)):
+        return int(obj)
+    if isinstance(obj, (np.bool_,)):
+        return bool(obj)
+    if isinstance(obj, float) and obj == 0.0:
+        return 0.0  # -0.0 and 0.0 hash alike
+    return obj
+
+
+def canonical_json(obj) -> str:
+    """Deterministic JSON (sorted keys, no spaces, floats as shortest round-trip repr)."""
+    return json.dumps(_jsonable(obj), sort_keys=True, separators=(",", ":"), allow_nan=False)
+
+
+@functools.lru_cache(maxsize=1)
+def library_versions() -> dict:
+    """Installed Mitsuba and Dr.Jit versions (from package metadata: no import)."""
+    out = {}
+    for pkg in ("mitsuba", "drjit"):
+        try:
+            out[pkg] = metadata.version(pkg)
+        except metadata.PackageNotFoundError:
+            out[pkg] = "missing"
+    return out
+
+
+def render_key(scene, pose, *, width: int, height: int, spp: int, seed: int, fov_deg: float,
+               variant: str) -> tuple[str, dict]:
+    """(hex SHA-256 key, the JSON-ready material it hashes) of one render."""
+    material = {
+        "v": KEY_VERSION,
+        "scene": scene.key_material(),
+        "pose": np.asarray(pose, dtype=np.float64).round(12).tolist(),
+        "width": int(width),
+        "height": int(height),
+        "spp": int(spp),
+        "seed": int(seed),
+        "fov_deg": round(float(fov_deg), 12),
+        "variant": str(variant),
+        "versions": library_versions(),
+    }
+    return hashlib.sha256(canonical_json(material).encode()).hexdigest(), material
+
+
+def cache_path(cache_dir: Path, key: str) -> Path:
+    """Where a key lives: ``cache_dir/<first two hex>/<key>.exr``."""
+    return Path(cache_dir) / key[:2] / f"{key}.exr"
+
+
+def write_exr(path, radiance: np.ndarray, attributes: dict | None = None) -> Path:
+    """Write float32 RGB radiance as OpenEXR (ZIP, scanlines), atomically.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        Destination; its folder is created.
+    radiance : numpy.ndarray
+        float32 (H, W, 3).
+    attributes : dict, optional
+        Extra string header attributes (e.g. the cache key material).
+    """
+    import OpenEXR
+
+    a = np.ascontiguousarray(radiance)
+    if a.dtype != np.float32 or a.ndim != 3 or a.shape[2] != 3:
+        raise RenderError(f"write_exr: radiance must be float32 (H, W, 3), got {a.dtype} {a.shape} for {path}")
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    for k, v in (attributes or {}).items():
+        header[str(k)] = str(v)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem[:16]}.", suffix=".exr.tmp", dir=path.parent)
+    os.close(fd)
+    try:
+        with OpenEXR.File(header, {"RGB": a}) as f:
+            f.write(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def read_exr(path) -> np.ndarray:
+    """Read an RGB OpenEXR file as float32 (H, W, 3).
+
+    Raises
+    ------
+    FileNotFoundError
+        The file does not exist.
+    RenderError
+        The file is not a readable RGB EXR.
+    """
+    import OpenEXR
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"no such EXR file: {path}")
+    try:
+        with OpenEXR.File(str(path)) as f:
+            channels = f.channels()
+            if "RGB" in channels:
+                a = channels["RGB"].pixels
+            else:
+                a = np.stack([channels[c].pixels for c in "RGB"], axis=-1)
+    except (KeyError, RuntimeError, OSError, ValueError) as exc:
+        raise RenderError(f"{path}: not a readable RGB OpenEXR file ({exc})") from exc
+    return np.ascontiguousarray(a, dtype=np.float32)

@@ -1,0 +1,122 @@
+"""Pinhole camera model shared by the renderer and the visual-odometry code.
+
+Poses are 4x4 camera-to-world matrices in the OpenCV / robotics camera frame:
+x right, y down, z forward (optical axis).  Mitsuba's perspective sensor looks
+along its local +z with +y up and +x to the *left* of the image, so its
+``to_world`` is the pose times ``diag(-1, -1, 1, 1)``: a half turn about the
+optical axis, which keeps the frame right-handed.  Pixel (0, 0) is the centre of
+the top-left pixel (OpenCV convention), so the principal point of a centred
+sensor is ((W - 1) / 2, (H - 1) / 2).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from scenes.errors import RenderError
+
+__all__ = ["DEFAULT_FOV_DEG", "intrinsics", "intrinsics_matrix", "pose_to_mitsuba", "check_pose", "project"]
+
+#: Horizontal field of view matching the BorealHDR cameras (fx ~ 1180 px at
+#: 1920 px wide): 2 * atan(960 / 1180) = 78.26 degrees.
+DEFAULT_FOV_DEG = math.degrees(2.0 * math.atan(960.0 / 1180.0))
+
+#: OpenCV camera frame -> Mitsuba camera frame (half turn about z).
+_CV_TO_MITSUBA = np.diag([-1.0, -1.0, 1.0, 1.0])
+
+
+def _check_size(width: int, height: int) -> None:
+    for name, v in (("width", width), ("height", height)):
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+            raise RenderError(f"{name} must be a positive integer, got {v!r}")
+
+
+def _check_fov(fov_deg: float) -> float:
+    f = float(fov_deg)
+    if not (math.isfinite(f) and 1.0 <= f <= 170.0):
+        raise RenderError(f"fov_deg must be in [1, 170] degrees, got {fov_deg!r}")
+    return f
+
+
+def intrinsics(width: int, height: int, fov_deg: float = DEFAULT_FOV_DEG) -> tuple[float, float, float, float]:
+    """Pinhole intrinsics (fx, fy, cx, cy) in pixels of a render.
+
+    Parameters
+    ----------
+    width, height : int
+        Image size in pixels.
+    fov_deg : float
+        Horizontal field of view in degrees (the render's ``fov_deg``).
+
+    Returns
+    -------
+    tuple of float
+        ``fx = fy = (W / 2) / tan(fov / 2)`` (square pixels), ``cx = (W - 1) / 2``,
+        ``cy = (H - 1) / 2`` (OpenCV pixel-centre convention).
+
+    Examples
+    --------
+    >>> fx, fy, cx, cy = intrinsics(1920, 1200)
+    >>> round(fx), cx, cy
+    (1180, 959.5, 599.5)
+    """
+    _check_size(width, height)
+    f = _check_fov(fov_deg)
+    fx = (width / 2.0) / math.tan(math.radians(f) / 2.0)
+    return fx, fx, (width - 1) / 2.0, (height - 1) / 2.0
+
+
+def intrinsics_matrix(width: int, height: int, fov_deg: float = DEFAULT_FOV_DEG) -> np.ndarray:
+    """The 3x3 camera matrix K (float64) of :func:`intrinsics`."""
+    fx, fy, cx, cy = intrinsics(width, height, fov_deg)
+    return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+
+
+def check_pose(pose, name: str = "pose") -> np.ndarray:
+    """Validate a 4x4 rigid camera-to-world pose; return it as float64.
+
+    Raises
+    ------
+    RenderError
+        Wrong shape, non-finite, bottom row not (0, 0, 0, 1), or a rotation
+        block that is not orthonormal with determinant +1 (tolerance 1e-6).
+    """
+    m = np.asarray(pose, dtype=np.float64)
+    if m.shape != (4, 4) or not np.all(np.isfinite(m)):
+        raise RenderError(f"{name} must be a finite 4x4 matrix, got shape {m.shape}")
+    if not np.allclose(m[3], (0.0, 0.0, 0.0, 1.0), atol=1e-12):
+        raise RenderError(f"{name}: bottom row must be (0, 0, 0, 1), got {m[3].tolist()}")
+    r = m[:3, :3]
+    if not np.allclose(r.T @ r, np.eye(3), atol=1e-6) or np.linalg.det(r) < 0:
+        raise RenderError(f"{name}: the 3x3 block is not a rotation")
+    return m
+
+
+def pose_to_mitsuba(pose) -> np.ndarray:
+    """Mitsuba sensor ``to_world`` (4x4 float64) of an OpenCV-frame camera-to-world pose."""
+    return check_pose(pose) @ _CV_TO_MITSUBA
+
+
+def project(points_world, pose, width: int, height: int, fov_deg: float = DEFAULT_FOV_DEG) -> np.ndarray:
+    """Pixel coordinates (u, v) of world points; rows behind the camera are NaN.
+
+    Parameters
+    ----------
+    points_world : array-like
+        (N, 3) points, metres.
+    pose : array-like
+        4x4 camera-to-world pose (OpenCV frame).
+
+    Returns
+    -------
+    numpy.ndarray
+        float64 (N, 2).
+    """
+    fx, fy, cx, cy = intrinsics(width, height, fov_deg)
+    m = check_pose(pose)
+    p = np.atleast_2d(np.asarray(points_world, dtype=np.float64))
+    pc = (p - m[:3, 3]) @ m[:3, :3]
+    z = np.where(pc[:, 2] > 0, pc[:, 2], np.nan)
+    return np.stack([fx * pc[:, 0] / z + cx, fy * pc[:, 1] / z + cy], axis=-1)

@@ -1,0 +1,266 @@
+"""``exposim demo``: the main job end to end on the embedded synthetic default.
+
+1. Synthesise a short stereo walk through ``forest_winter`` (Mitsuba render -> synthetic
+   BorealHDR camera with noise), with noiseless ground-truth captures at a few target
+   exposures at every shot instant.
+2. Check the emulator against that exact ground truth (HigherNoSat, per target exposure).
+3. Run all seven AE methods in closed loop on the recording (``emulator.playback``).
+4. Reduced feature (SIFT uniformity, matches) and stereo-VO benchmarks on the run.
+5. Write ``report.md`` (tables + figures) and ``results.json`` in a new output folder.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["run_demo", "demo_config", "emulation_check", "new_output_dir"]
+
+GT_EXPOSURES_MS = (0.5, 3.0, 6.0, 12.0, 24.0, 45.0)
+
+
+def demo_config(quick: bool = False) -> dict:
+    """Size of the demo: the default takes a few minutes on 2 cores, ``quick`` well under one."""
+    if quick:
+        return dict(scene="forest_winter", n_cycles=4, width=96, height=60, spp=4, vo_frames=4)
+    return dict(scene="forest_winter", n_cycles=12, width=192, height=120, spp=8, vo_frames=12)
+
+
+def new_output_dir(base: str | Path = "exposim-demo") -> Path:
+    """The first of ``exposim-demo-1``, ``-2``, ... that does not exist (never overwrites)."""
+    base = Path(base)
+    i = 1
+    while True:
+        cand = base.with_name(f"{base.name}-{i}")
+        if not cand.exists():
+            return cand
+        i += 1
+
+
+def emulation_check(dataset: Path, selector: str = "higher-no-sat") -> dict:
+    """Emulate every ground-truth capture of ``dataset`` from the selected bracket of its cycle.
+
+    Ground truth sits at the instants of the shots; for each cycle and target exposure the
+    selector picks a bracket of the cycle and the emulated image is compared with the
+    noiseless capture at that bracket's instant (same pose), so only emulation error and
+    the bracket's own sensor noise remain.  RMSE in % of the DN range, over valid pixels.
+    """
+    from emulator.dataset import load_sequence, read_png16, sequence_response
+    from emulator.emulate import emulate
+    from emulator.select import saturated_fraction, select
+
+    seq = load_sequence(dataset)
+    response = sequence_response(seq)
+    rng = seq.white_level - seq.black_level
+    levels = dict(white_level=seq.white_level, black_level=seq.black_level)
+    gt_root = Path(dataset) / "ground_truth" / "captures_noiseless" / "camera_left"
+    rows = []
+    for cycle in seq:
+        frames = cycle.frames["left"]
+        if not frames:
+            continue
+        images = {b: f.load() for b, f in frames.items()}
+        fractions = {b: saturated_fraction(img, **levels) for b, img in images.items()}
+        for target in GT_EXPOSURES_MS:
+            b = select(selector, target, fractions, **levels)
+            frame = frames[b]
+            from emulator.dataset import exposure_folder_name
+
+            gt_path = gt_root / exposure_folder_name(target) / f"{frame.timestamp_ns}.png"
+            if not gt_path.is_file():
+                continue
+            gt = read_png16(gt_path).astype(np.float64)
+            emu, valid = emulate(images[b], b, target, response, return_mask=True)
+            diff = (emu.astype(np.float64) - gt)[valid]
+            rows.append(
+                {
+                    "cycle": cycle.index,
+                    "target_ms": target,
+                    "bracket_ms": b,
+                    "rmse_percent": float(100 * np.sqrt(np.mean(diff**2)) / rng) if diff.size else float("nan"),
+                    "valid_fraction": float(valid.mean()),
+                }
+            )
+    per_target = {}
+    for t in GT_EXPOSURES_MS:
+        vals = [r["rmse_percent"] for r in rows if r["target_ms"] == t]
+        if vals:
+            per_target[f"{t:g}"] = {"median_rmse_percent": float(np.median(vals)), "n": len(vals)}
+    all_vals = [r["rmse_percent"] for r in rows]
+    return {
+        "selector": selector,
+        "rows": rows,
+        "per_target": per_target,
+        "median_rmse_percent": float(np.median(all_vals)) if all_vals else float("nan"),
+        "max_rmse_percent": float(np.max(all_vals)) if all_vals else float("nan"),
+    }
+
+
+def _say(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+def run_demo(output=None, *, quick: bool = False) -> int:
+    from tqdm import tqdm
+
+    import scenes
+    from emulator.metrics.bench import bench_features, bench_vo
+    from emulator.playback import run_to_folder
+    from scenes.synthesize import synthesize
+
+    cfg = demo_config(quick)
+    out = Path(output) if output is not None else new_output_dir()
+    if out.exists() and any(out.iterdir()):
+        from emulator.errors import OutputExistsError
+
+        raise OutputExistsError(f"{out}: exists and is not empty; choose another --output")
+    out.mkdir(parents=True, exist_ok=True)
+    t_start = time.perf_counter()
+    timings = {}
+
+    # 1. synthetic recording -----------------------------------------------------------
+    scene = scenes.get_scene(cfg["scene"], seed=0)
+    n_imgs = cfg["n_cycles"] * 6
+    with tqdm(total=n_imgs, desc=f"1/4 synthesise {scene.name}", unit="shot", file=sys.stderr) as bar:
+
+        def progress(done, total):
+            bar.total = total
+            bar.n = done
+            bar.refresh()
+
+        t0 = time.perf_counter()
+        dataset = synthesize(
+            scene, out / "dataset", n_cycles=cfg["n_cycles"], width=cfg["width"], height=cfg["height"],
+            spp=cfg["spp"], gt_exposures_ms=GT_EXPOSURES_MS, gt_captures="noiseless", seed=0, progress=progress,
+        )
+        timings["synthesise_s"] = time.perf_counter() - t0
+
+    # 2. emulator against exact ground truth ----------------------------------------------
+    _say("2/4 emulation against ground truth")
+    t0 = time.perf_counter()
+    emu = emulation_check(dataset)
+    timings["emulation_check_s"] = time.perf_counter() - t0
+
+    # 3. closed loop ---------------------------------------------------------------------
+    from emulator.dataset import load_sequence
+
+    seq = load_sequence(dataset)
+    run_dir = out / "run"
+    with tqdm(total=len(seq), desc="3/4 closed loop, 7 methods", unit="cycle", file=sys.stderr) as bar:
+        t0 = time.perf_counter()
+        run_summary = run_to_folder(
+            seq, "all", run_dir, save="png16", progress=lambda d, t: (setattr(bar, "n", d), bar.refresh()),
+            command="exposim demo",
+        )
+        timings["closed_loop_s"] = time.perf_counter() - t0
+
+    # 4. features and VO -------------------------------------------------------------------
+    _say("4/4 features and stereo VO")
+    t0 = time.perf_counter()
+    feats = bench_features(run_dir, out / "features", command="exposim demo")
+    vo = bench_vo(run_dir, out / "vo", max_frames=cfg["vo_frames"], rpe_on_failure=True, command="exposim demo")
+    timings["benchmarks_s"] = time.perf_counter() - t0
+    timings["total_s"] = time.perf_counter() - t_start
+
+    results = {
+        "config": cfg,
+        "dataset": str(dataset),
+        "emulation": {k: v for k, v in emu.items() if k != "rows"},
+        "run": run_summary,
+        "features": feats,
+        "vo": vo,
+        "timings": timings,
+    }
+    (out / "results.json").write_text(json.dumps(results, indent=1, default=_jsonable))
+    report = _report(out, cfg, emu, run_dir, feats, vo, timings)
+    (out / "report.md").write_text(report)
+    print(report)
+    print(f"\nexposim demo: wrote {out} in {timings['total_s']:.0f} s (report.md, results.json, figures)")
+    return 0
+
+
+def _jsonable(o):
+    if isinstance(o, (np.floating, np.integer)):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, Path):
+        return str(o)
+    return str(o)
+
+
+def _method_rows(feats: dict, vo: dict, run_summary_path: Path) -> list[str]:
+    run_results = json.loads(run_summary_path.read_text()) if run_summary_path.is_file() else {}
+    methods = run_results.get("methods", {})
+    fm = feats.get("methods", {})
+    vm = vo.get("methods", {})
+    lines = [
+        "| method | median exposure (ms) | mean saturated (%) | median uniformity | median matches | VO failed frames | RPE trans. median (%), longest delta |",
+        "| --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for name in methods or fm:
+        m = methods.get(name, {})
+        f = fm.get(name, {})
+        v = vm.get(name, {})
+        lines.append(
+            f"| {name} | {_fmt(m.get('median_exposure_ms'))} | {_fmt(100 * m['mean_saturated_fraction'] if 'mean_saturated_fraction' in m else None)} "
+            f"| {_fmt(f.get('median_uniformity'))} | {_fmt(f.get('median_matches'))} "
+            f"| {len(v.get('failures', []))} of {v.get('n_frames', '-')} frames | {_fmt(_rpe_median(v))} |"
+        )
+    return lines
+
+
+def _rpe_median(v: dict):
+    """Median translation RPE (%) at the longest delta that has pairs, or None."""
+    rpe = v.get("rpe") or {}
+    for entry in reversed(rpe.get("deltas", [])):
+        stats = entry.get("trans_pct")
+        if entry.get("n_pairs") and stats:
+            return stats.get("median")
+    return None
+
+
+def _fmt(v) -> str:
+    if v is None:
+        return "-"
+    try:
+        return f"{float(v):.3g}"
+    except (TypeError, ValueError):
+        return str(v)
+
+
+def _report(out: Path, cfg: dict, emu: dict, run_dir: Path, feats: dict, vo: dict, timings: dict) -> str:
+    lines = [
+        "# exposim demo",
+        "",
+        f"Scene `{cfg['scene']}`, {cfg['n_cycles']} bracket cycles (1..32 ms, 22 frames/s), "
+        f"{cfg['width']}x{cfg['height']} px, {cfg['spp']} spp, synthetic BorealHDR camera (noise on), stereo.",
+        "",
+        "## Emulation against exact ground truth (HigherNoSat)",
+        "",
+        "| target (ms) | median RMSE (% of range) | captures |",
+        "| --- | --- | --- |",
+    ]
+    for t, v in emu["per_target"].items():
+        lines.append(f"| {t} | {v['median_rmse_percent']:.3f} | {v['n']} |")
+    lines += [
+        "",
+        f"Overall median {emu['median_rmse_percent']:.3f} %, max {emu['max_rmse_percent']:.3f} % "
+        "(sensor noise of the source bracket included; paper: median 0.21 %, max 1.78 % after noise subtraction).",
+        "",
+        "## Seven AE methods in closed loop",
+        "",
+        *_method_rows(feats, vo, run_dir / "results.json"),
+        "",
+        f"![exposure against time]({(run_dir / 'exposure.png').relative_to(out)})",
+        "",
+        f"Feature and VO details: `features/report.md`, `vo/report.md`; run tables: `run/<method>/exposures.csv`.",
+        "",
+        "Timings: " + ", ".join(f"{k} {v:.1f}" for k, v in timings.items()),
+        "",
+    ]
+    return "\n".join(lines)
