@@ -213,13 +213,9 @@ def read_stack(path: str | os.PathLike, *, white_level: int | None = None, black
     times = root / TIMES_FILE
     if not times.is_file():
         raise CalibrationError(f"{root}: no {TIMES_FILE} (expected the TUM layout: times.txt and images/)")
-    meta: dict = {}
-    meta_path = root / STACK_METADATA
-    if meta_path.is_file():
-        try:
-            meta = json.loads(meta_path.read_text())
-        except json.JSONDecodeError as exc:
-            raise CalibrationError(f"{meta_path}: malformed JSON ({exc})") from None
+    from emulator.dataset import read_metadata
+
+    meta = read_metadata(root / STACK_METADATA, CalibrationError)
     white = int(white_level if white_level is not None else meta.get("white_level", 4095))
     black = int(black_level if black_level is not None else meta.get("black_level", 0))
 

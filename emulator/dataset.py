@@ -43,6 +43,7 @@ __all__ = [
     "find_response",
     "atomic_write_bytes",
     "sequence_response",
+    "read_metadata",
 ]
 
 CAMERAS = ("left", "right")
@@ -248,6 +249,20 @@ class Sequence:
 
 
 # ---------------------------------------------------------------------------- reader
+def read_metadata(path: str | os.PathLike, error: type[Exception] = DatasetError) -> dict:
+    """The JSON object in an optional metadata file (``{}`` if absent); ``error`` if malformed."""
+    path = Path(path)
+    if not path.is_file():
+        return {}
+    try:
+        meta = json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise error(f"{path}: malformed JSON ({exc})") from None
+    if not isinstance(meta, dict):
+        raise error(f"{path}: expected a JSON object, got {type(meta).__name__}")
+    return meta
+
+
 def _parse_exposure(folder: Path) -> float:
     try:
         v = float(folder.name)
@@ -312,13 +327,7 @@ def load_sequence(path: str | os.PathLike, *, white_level: int | None = None, bl
     root = Path(path)
     if not root.is_dir():
         raise FileNotFoundError(f"{root}: sequence folder not found")
-    meta: dict = {}
-    meta_path = root / METADATA_FILE
-    if meta_path.is_file():
-        try:
-            meta = json.loads(meta_path.read_text())
-        except json.JSONDecodeError as exc:
-            raise DatasetError(f"{meta_path}: malformed JSON ({exc})") from None
+    meta = read_metadata(root / METADATA_FILE)
     white = int(white_level if white_level is not None else meta.get("white_level", BOREALHDR_WHITE_LEVEL))
     black = int(black_level if black_level is not None else meta.get("black_level", BOREALHDR_BLACK_LEVEL))
 
