@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 from concurrent.futures import ThreadPoolExecutor
 
+import cv2
 import numpy as np
 
 from emulator.errors import EmulationError
@@ -72,8 +73,43 @@ def check_raw(raw, white_level: int, name: str = "raw") -> np.ndarray:
     return raw
 
 
+def _padded_u16_table(table: np.ndarray) -> np.ndarray:
+    """A uint16 table extended to all 65536 inputs (entries above its end repeat the last)."""
+    full = np.empty(1 << 16, dtype=np.uint16)
+    full[: table.size] = table
+    full[table.size :] = table[-1]
+    return full
+
+
+def _opencv_lut_u16() -> bool:
+    """Whether this OpenCV's ``cv2.LUT`` maps uint16 images (OpenCV >= 5), checked once."""
+    global _CV_LUT_U16
+    if _CV_LUT_U16 is None:
+        try:
+            probe = np.arange(4, dtype=np.uint16).reshape(2, 2)
+            table = np.arange(1 << 16, dtype=np.uint16)[::-1].copy()
+            _CV_LUT_U16 = bool(np.array_equal(cv2.LUT(probe, table), table[probe]))
+        except cv2.error:
+            _CV_LUT_U16 = False
+    return _CV_LUT_U16
+
+
+_CV_LUT_U16: bool | None = None
+
+
 def apply_lut(table: np.ndarray, raw: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-    """``table[raw]`` as a blocked gather (two threads on large images)."""
+    """``table[raw]`` for a uint16 image: one native gather.
+
+    With OpenCV >= 5, ``cv2.LUT`` on a uint16 image and a 65536-entry table (about 2 ms for
+    1920x1200 on this project's machine); otherwise a blocked ``np.take`` whose index
+    conversion stays in the CPU cache, on two threads for large images.  Both are exact.
+    """
+    if table.dtype == np.uint16 and raw.dtype == np.uint16 and _opencv_lut_u16():
+        result = cv2.LUT(raw, _padded_u16_table(table))
+        if out is None:
+            return result
+        out[...] = result
+        return out
     if out is None:
         out = np.empty(raw.shape, dtype=table.dtype)
     rows = raw.shape[0]

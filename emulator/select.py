@@ -2,7 +2,11 @@
 
 ``higher_no_sat`` is the paper's HigherNoSat (section III-A); ``closest`` picks the nearest
 bracket in log-exposure; ``reference_rule`` reproduces the published reference code's rule
-(higher bracket unless its saturation exceeds the lower one's).  All take a mapping
+(higher bracket unless its saturation exceeds the lower one's).  ``predicted_error`` picks
+the bracket whose emulation error it predicts from the bracket's DN histogram, the response
+and a sensor noise model; on held-out synthetic scenes it beat HigherNoSat (validation
+study, ``exposim validate selectors``), but it needs a noise model, so it is not in
+``SELECTORS``, whose members need only the bracket images.  All take a mapping
 ``exposure_ms -> raw image`` or ``exposure_ms -> saturated fraction`` (float in [0, 1]),
 and both clip ends (pixels at or below black, at or above white) count as saturated.
 """
@@ -11,13 +15,25 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 
 import numpy as np
 
 from emulator.emulate import check_exposure
 from emulator.errors import ExposimError
 
-__all__ = ["saturated_fraction", "higher_no_sat", "closest", "reference_rule", "select", "SELECTORS", "bounding"]
+__all__ = [
+    "saturated_fraction",
+    "higher_no_sat",
+    "closest",
+    "reference_rule",
+    "select",
+    "SELECTORS",
+    "bounding",
+    "NoiseModel",
+    "predicted_mse_table",
+    "predicted_error",
+]
 
 #: HigherNoSat takes the higher bracket while its saturated fraction is below this.
 SATURATION_THRESHOLD = 0.01
@@ -126,6 +142,119 @@ def reference_rule(target_ms: float, brackets: Mapping, *, white_level: int, bla
     sat_low = _fraction(brackets[_key(brackets, low)], **lv)
     sat_high = _fraction(brackets[_key(brackets, high)], **lv)
     return _key(brackets, low if sat_high > sat_low else high)
+
+
+# ---------------------------------------------------------------------------- predicted error (validated)
+@dataclass(frozen=True)
+class NoiseModel:
+    """Variance of one capture's linear exposure, ``var_h(h) = shot * h + floor``.
+
+    ``h`` is in the units of the response's inverse table g (linear exposure); ``shot``
+    (g units) is the g-value of one photo-electron, ``floor`` (g units squared) the read
+    noise variance.  Quantisation of the source is handled separately.
+    """
+
+    shot: float
+    floor: float
+
+    def var_h(self, h) -> np.ndarray:
+        return self.shot * np.maximum(np.asarray(h, dtype=np.float64), 0.0) + self.floor
+
+
+def predicted_mse_table(response, ratio: float, noise: NoiseModel, *, white_level: int, black_level: int,
+                        clip_weight: float = 1.0) -> np.ndarray:
+    """Predicted squared emulation error (DN^2, float64) for every source DN at one ratio.
+
+    For a source DN ``d`` the true exposure lies in ``[g(d - 1/2), g(d + 1/2)]``; scaled by
+    ``k`` and mapped through ``f`` it becomes an interval ``[lo, hi]`` of target DN, of which
+    the emulator outputs ``mid = f(k g(d))``.  Taking the truth uniform on that interval,
+    the quantisation term is ``((mid - lo)^3 + (hi - mid)^3) / (3 (hi - lo))``.  A source at
+    white with ``k < 1`` stands for anything up to white in the target (``hi = white``); a
+    black one with ``k > 1`` for anything from black (``lo = black``): those clipped terms
+    are multiplied by ``clip_weight``.  The noise term is the source's noise carried
+    through the mapping: ``((f(k (g + s)) - f(k (g - s))) / 2)^2`` with ``s^2 = var_h(g)``.
+    """
+    k = float(ratio)
+    g = response.g[: white_level + 1]
+    dn = np.arange(white_level + 1, dtype=np.float64)
+    top = float(white_level)
+    f = response.forward
+    mid = np.clip(f(k * g), black_level, white_level)
+    lo = np.clip(f(k * response.inverse(np.clip(dn - 0.5, 0.0, top))), black_level, white_level)
+    hi = np.clip(f(k * response.inverse(np.clip(dn + 0.5, 0.0, top))), black_level, white_level)
+    clipped = np.zeros(dn.shape, dtype=bool)
+    if k < 1.0:
+        hi[white_level:] = white_level
+        clipped[white_level:] = True
+    if k > 1.0:
+        lo[: black_level + 1] = black_level
+        clipped[: black_level + 1] = True
+    width = hi - lo
+    with np.errstate(invalid="ignore", divide="ignore"):
+        quant = np.where(width > 1e-12, ((mid - lo) ** 3 + (hi - mid) ** 3) / (3.0 * width), 0.0)
+    quant = np.where(clipped, clip_weight * quant, quant)
+    s = np.sqrt(noise.var_h(g))
+    noise_dn = 0.5 * (np.clip(f(k * (g + s)), black_level, white_level) - np.clip(f(k * (g - s)), black_level,
+                                                                                   white_level))
+    noise_dn = np.where(clipped, 0.0, noise_dn)
+    return quant + noise_dn * noise_dn
+
+
+def _histogram(value, white_level: int) -> np.ndarray:
+    if isinstance(value, np.ndarray) and value.ndim == 1 and value.size == white_level + 1:
+        return value.astype(np.float64)
+    if isinstance(value, np.ndarray) and value.ndim == 2 and value.dtype.kind in "ui":
+        return np.bincount(np.minimum(value.ravel(), white_level), minlength=white_level + 1).astype(np.float64)
+    raise ExposimError("predicted_error needs the bracket images (2-D uint16) or their DN histograms "
+                       f"(1-D, white_level + 1 = {white_level + 1} bins)")
+
+
+def predicted_error(
+    target_ms: float,
+    brackets: Mapping,
+    *,
+    response,
+    noise: NoiseModel,
+    white_level: int,
+    black_level: int,
+    clip_weight: float = 1.0,
+    return_scores: bool = False,
+):
+    """Pick the bracket whose emulation error at ``target_ms`` is predicted to be smallest.
+
+    Parameters
+    ----------
+    target_ms : float
+        Target exposure, ms.
+    brackets : mapping
+        ``exposure_ms -> raw image`` (uint16) or ``exposure_ms -> DN histogram`` (length
+        ``white_level + 1``).
+    response : emulator.CameraResponse
+    noise : NoiseModel
+        Noise of one capture in the response's linear units.
+    white_level, black_level : int
+    clip_weight : float
+        Weight of clipped source pixels (see :func:`predicted_mse_table`).
+    return_scores : bool
+        Also return ``{exposure_ms: predicted RMSE (DN)}``.
+
+    Returns
+    -------
+    The chosen key of ``brackets`` (ties go to the longer exposure), and the scores if asked.
+    """
+    target_ms = check_exposure(target_ms, "target_ms")
+    if not brackets:
+        raise ExposimError("no brackets to select from")
+    scores = {}
+    for key, value in brackets.items():
+        b = check_exposure(key, "bracket exposure_ms")
+        hist = _histogram(value, white_level)
+        table = predicted_mse_table(response, target_ms / b, noise, white_level=white_level,
+                                    black_level=black_level, clip_weight=clip_weight)
+        scores[key] = math.sqrt(float(hist @ table) / float(hist.sum()))
+    best = min(scores, key=lambda kk: (round(scores[kk], 9), -float(kk)))
+    return (best, scores) if return_scores else best
+
 
 
 SELECTORS: dict[str, Callable] = {

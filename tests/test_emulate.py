@@ -189,3 +189,19 @@ def test_lut_cache_is_thread_safe_under_eviction(monkeypatch):
     for k, t in zip(ratios[:30], tables[:30]):
         np.testing.assert_array_equal(t, CameraResponse.gamma(2.2).lut(k)[0])
     assert len(r._luts) <= 4
+
+
+def test_both_gather_paths_agree(monkeypatch):
+    import importlib
+
+    em = importlib.import_module("emulator.emulate")  # the module, not the re-exported function
+
+    rng = np.random.default_rng(9)
+    raw = rng.integers(0, 4096, (1200, 1920), dtype=np.uint16)
+    table = CameraResponse.gamma(2.2).lut(1.7)[0]
+    fast = em.apply_lut(table, raw)
+    monkeypatch.setattr(em, "_CV_LUT_U16", False)  # the OpenCV 4 fallback: blocked np.take
+    slow = em.apply_lut(table, raw)
+    np.testing.assert_array_equal(fast, table[raw])
+    np.testing.assert_array_equal(slow, table[raw])
+    assert fast.dtype == slow.dtype == np.uint16

@@ -74,3 +74,28 @@ def test_front_function_and_errors():
         higher_no_sat(float("nan"), fractions(), **LV)
     with pytest.raises(ExposimError, match=r"saturated fraction must lie in \[0, 1\]"):
         higher_no_sat(5.0, fractions(**{"8.0": 1.5}), **LV)
+
+
+def test_predicted_error_selector():
+    from emulator import CameraResponse
+    from emulator.select import NoiseModel, predicted_error, predicted_mse_table
+
+    r = CameraResponse.linear()
+    quiet = NoiseModel(shot=0.0, floor=0.0)
+    mid = np.full((50, 50), 1500, np.uint16)
+    # noiseless linear camera: darkening (k < 1) has less quantisation error than brightening
+    assert predicted_error(5.0, {4.0: mid, 8.0: mid}, response=r, noise=quiet, **LV) == 8.0
+    # k = 1/2 maps source DN d exactly to d/2 +- 1/4: predicted MSE is (1/4)^2 / 3 per pixel
+    table = predicted_mse_table(r, 0.5, quiet, **LV)
+    assert table[1500] == pytest.approx((0.25**3 + 0.25**3) / (3 * 0.5))
+    # a bracket mostly saturated at white loses to the unsaturated shorter one
+    hot = mid.copy()
+    hot[:40] = 4095
+    choice, scores = predicted_error(5.0, {4.0: mid, 8.0: hot}, response=r, noise=quiet, clip_weight=2.0,
+                                     return_scores=True, **LV)
+    assert choice == 4.0 and scores[8.0] > scores[4.0]
+    # histograms work as well as images
+    hist = np.bincount(mid.ravel(), minlength=4096)
+    assert predicted_error(5.0, {4.0: hist, 8.0: hist}, response=r, noise=quiet, **LV) == 8.0
+    with pytest.raises(ExposimError, match="no brackets"):
+        predicted_error(5.0, {}, response=r, noise=quiet, **LV)
