@@ -745,8 +745,6 @@ def fit_inverse_response(
     -------
     CalibrationResult
     """
-    from scipy.linalg import solveh_banded
-
     dn = np.asarray(dn)
     if dn.ndim != 2:
         raise CalibrationError(f"{source}: samples must be (images, pixels), got shape {dn.shape}")

@@ -54,7 +54,15 @@ import cv2
 import numpy as np
 
 from emulator.autoexposure import METHOD_NAMES, AutoExposureMethod, accepts_option, make_method
-from emulator.dataset import CAMERAS, Sequence, atomic_write_bytes, load_sequence, sequence_response, write_png16
+from emulator.dataset import (
+    CAMERAS,
+    Sequence,
+    atomic_write_bytes,
+    load_sequence,
+    read_metadata,
+    sequence_response,
+    write_png16,
+)
 from emulator.emulate import apply_lut, check_exposure
 from emulator.errors import DatasetError, ExposimError, OutputExistsError
 from emulator.select import SELECTORS, select
@@ -675,10 +683,7 @@ def run_to_folder(
     if resume:
         if not run_path.is_file():
             raise PlaybackError(f"{run_path}: no run to resume (run.json missing)")
-        try:
-            previous = json.loads(run_path.read_text())
-        except json.JSONDecodeError as exc:
-            raise PlaybackError(f"{run_path}: malformed JSON ({exc})") from None
+        previous = read_metadata(run_path, PlaybackError)
         old = _config_of(previous)
         diff = [k for k in config if _canon(old.get(k)) != _canon(config[k])]
         if diff:
@@ -754,7 +759,6 @@ def run_to_folder(
 
     stats = RunStats()
     skipped: list[dict] = []
-    guarded_counts = {name: 0 for name in names}
     done = 0
     status = "failed"
     try:

@@ -16,7 +16,6 @@ import functools
 import hashlib
 import json
 import os
-import tempfile
 from importlib import metadata
 from pathlib import Path
 
@@ -108,7 +107,7 @@ def cache_path(cache_dir: Path, key: str) -> Path:
 
 
 def write_exr(path, radiance: np.ndarray, attributes: dict | None = None) -> Path:
-    """Write float32 RGB radiance as OpenEXR (ZIP, scanlines), atomically.
+    """Write float32 RGB radiance as OpenEXR (ZIP, scanlines), atomically, replacing ``path``.
 
     Parameters
     ----------
@@ -119,26 +118,12 @@ def write_exr(path, radiance: np.ndarray, attributes: dict | None = None) -> Pat
     attributes : dict, optional
         Extra string header attributes (e.g. the cache key material).
     """
-    import OpenEXR
+    from synth.sequence import write_exr as _write
 
     a = np.ascontiguousarray(radiance)
     if a.dtype != np.float32 or a.ndim != 3 or a.shape[2] != 3:
         raise RenderError(f"write_exr: radiance must be float32 (H, W, 3), got {a.dtype} {a.shape} for {path}")
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-    for k, v in (attributes or {}).items():
-        header[str(k)] = str(v)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem[:16]}.", suffix=".exr.tmp", dir=path.parent)
-    os.close(fd)
-    try:
-        with OpenEXR.File(header, {"RGB": a}) as f:
-            f.write(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+    return _write(path, a, overwrite=True, attributes=attributes)
 
 
 def read_exr(path) -> np.ndarray:
@@ -151,18 +136,15 @@ def read_exr(path) -> np.ndarray:
     RenderError
         The file is not a readable RGB EXR.
     """
-    import OpenEXR
+    from synth.errors import SynthError
+    from synth.sequence import read_exr as _read
 
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"no such EXR file: {path}")
     try:
-        with OpenEXR.File(str(path)) as f:
-            channels = f.channels()
-            if "RGB" in channels:
-                a = channels["RGB"].pixels
-            else:
-                a = np.stack([channels[c].pixels for c in "RGB"], axis=-1)
-    except (KeyError, RuntimeError, OSError, ValueError) as exc:
-        raise RenderError(f"{path}: not a readable RGB OpenEXR file ({exc})") from exc
-    return np.ascontiguousarray(a, dtype=np.float32)
+        a = _read(path)
+    except FileNotFoundError:
+        raise FileNotFoundError(f"no such EXR file: {path}") from None
+    except SynthError as exc:
+        raise RenderError(str(exc)) from exc
+    if a.ndim != 3:
+        raise RenderError(f"{path}: not an RGB OpenEXR file (one channel)")
+    return a

@@ -170,30 +170,55 @@ def shot_schedule(
 
 
 # ---------------------------------------------------------------------------- file formats
-def write_exr(path: str | os.PathLike, radiance: np.ndarray, *, overwrite: bool = False) -> Path:
-    """Write float32 radiance as OpenEXR (ZIP, channel "RGB" or "Y"), atomically."""
+def write_exr(
+    path: str | os.PathLike,
+    radiance: np.ndarray,
+    *,
+    overwrite: bool = False,
+    attributes: dict | None = None,
+) -> Path:
+    """Write float32 radiance as OpenEXR (ZIP, scanlines, channel "RGB" or "Y"), atomically.
+
+    ``attributes`` are extra string header attributes (e.g. a render-cache key).  The same
+    array and attributes give the same bytes.
+    """
     import OpenEXR
 
     radiance = np.ascontiguousarray(radiance, dtype=np.float32)
     channels = {"RGB": radiance} if radiance.ndim == 3 else {"Y": radiance}
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    for key, value in (attributes or {}).items():
+        header[str(key)] = str(value)
     buf = io.BytesIO()
     OpenEXR.File(header, channels).write(buf)
     return atomic_write_bytes(path, buf.getvalue(), overwrite=overwrite)
 
 
 def read_exr(path: str | os.PathLike) -> np.ndarray:
-    """Read an EXR written by :func:`write_exr`: float32 (H, W, 3) or (H, W)."""
+    """Read a radiance EXR: float32 (H, W, 3) from "RGB" or "R", "G", "B" channels, or (H, W) from "Y".
+
+    Raises FileNotFoundError for a missing file and :class:`SynthError` naming the file for
+    one that is not a readable OpenEXR radiance image.
+    """
     import OpenEXR
 
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: EXR file not found")
-    channels = OpenEXR.File(str(path)).channels()
-    for name in ("RGB", "Y"):
-        if name in channels:
-            return np.asarray(channels[name].pixels, dtype=np.float32)
-    raise SynthError(f"{path}: expected an 'RGB' or 'Y' channel, found {', '.join(channels)}")
+    try:
+        with OpenEXR.File(str(path)) as f:
+            channels = f.channels()
+            if "RGB" in channels:
+                a = channels["RGB"].pixels
+            elif all(c in channels for c in "RGB"):
+                a = np.stack([channels[c].pixels for c in "RGB"], axis=-1)
+            elif "Y" in channels:
+                a = channels["Y"].pixels
+            else:
+                raise SynthError(f"{path}: expected an 'RGB' or 'Y' channel, found {', '.join(channels)}")
+    except (KeyError, RuntimeError, OSError, ValueError) as exc:
+        raise SynthError(f"{path}: not a readable OpenEXR file ({exc})") from exc
+    return np.ascontiguousarray(a, dtype=np.float32)
 
 
 def _timestamp_s(timestamp_ns: int) -> str:

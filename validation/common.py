@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from emulator.errors import ExposimError, OutputExistsError
+from synth.sequence import BRACKETS_MS
 
 __all__ = [
     "BRACKETS_MS",
@@ -52,8 +53,6 @@ __all__ = [
     "Progress",
 ]
 
-#: The BorealHDR bracket set (paper section V-A), ms.
-BRACKETS_MS: tuple[float, ...] = (1.0, 2.0, 4.0, 8.0, 16.0, 32.0)
 #: Paper section V-B: median and maximum emulation RMSE over five static test sequences.
 PAPER_MEDIAN_RMSE_PERCENT = 0.21
 PAPER_MAX_RMSE_PERCENT = 1.78

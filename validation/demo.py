@@ -49,7 +49,7 @@ def emulation_check(dataset: Path, selector: str = "higher-no-sat") -> dict:
     noiseless capture at that bracket's instant (same pose), so only emulation error and
     the bracket's own sensor noise remain.  RMSE in % of the DN range, over valid pixels.
     """
-    from emulator.dataset import load_sequence, read_png16, sequence_response
+    from emulator.dataset import exposure_folder_name, load_sequence, read_png16, sequence_response
     from emulator.emulate import emulate
     from emulator.select import saturated_fraction, select
 
@@ -68,8 +68,6 @@ def emulation_check(dataset: Path, selector: str = "higher-no-sat") -> dict:
         for target in GT_EXPOSURES_MS:
             b = select(selector, target, fractions, **levels)
             frame = frames[b]
-            from emulator.dataset import exposure_folder_name
-
             gt_path = gt_root / exposure_folder_name(target) / f"{frame.timestamp_ns}.png"
             if not gt_path.is_file():
                 continue
@@ -258,7 +256,7 @@ def _report(out: Path, cfg: dict, emu: dict, run_dir: Path, feats: dict, vo: dic
         "",
         f"![exposure against time]({(run_dir / 'exposure.png').relative_to(out)})",
         "",
-        f"Feature and VO details: `features/report.md`, `vo/report.md`; run tables: `run/<method>/exposures.csv`.",
+        "Feature and VO details: `features/report.md`, `vo/report.md`; run tables: `run/<method>/exposures.csv`.",
         "",
         "Timings: " + ", ".join(f"{k} {v:.1f}" for k, v in timings.items()),
         "",

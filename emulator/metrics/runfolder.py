@@ -16,10 +16,10 @@ needs no further description.
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from emulator.dataset import read_metadata
 from emulator.metrics.errors import RunFolderError
 
 __all__ = [
@@ -216,12 +216,7 @@ def read_run_folder(
     run_json = run_dir / "run.json"
     if not run_json.is_file():
         raise RunFolderError(f"{run_dir}: not a run folder (no run.json); expected the output of `exposim run`")
-    try:
-        meta = json.loads(run_json.read_text())
-    except json.JSONDecodeError as exc:
-        raise RunFolderError(f"{run_json}: not valid JSON ({exc})") from None
-    if not isinstance(meta, dict):
-        raise RunFolderError(f"{run_json}: expected a JSON object")
+    meta = read_metadata(run_json, RunFolderError)
     if meta.get("save") == "none":
         raise RunFolderError(
             f"{run_json}: the run saved no images (save = 'none'); rerun `exposim run` with --save png16"
