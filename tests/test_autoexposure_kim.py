@@ -127,3 +127,22 @@ def test_gp_failure_removes_newest_point(monkeypatch):
     monkeypatch.setattr(k, "_fit", boom)
     assert k.update(6.0, 120.0) == 6.0
     assert k.window_t == before and "GP fit failed" in k.last["guard"]
+
+
+def test_paper_mode_explores_at_the_real_metric_scale():
+    """Paper-mode E is ~1e4-1e5 on real frames; with REF's amplitude bound (1e5, prior std
+    316) the first sample's posterior mean beat every exploration bonus and the method never
+    left 4 ms.  The paper-mode amplitude bound lets it find the optimum of a 3e4 metric."""
+    import math
+
+    from emulator.autoexposure.kim import Kim2018
+
+    m = Kim2018(mode="paper", seed=0)
+    t, traj = 4.0, []
+    for _ in range(30):
+        t = m.update(t, 30000.0 * math.exp(-((t - 10.0) ** 2) / 32.0))
+        traj.append(t)
+    assert abs(traj[4] - 10.0) <= 0.5
+    assert sum(9.0 <= x <= 11.0 for x in traj[4:]) / len(traj[4:]) >= 0.7
+    assert all(0.5 <= x <= 35.0 for x in traj)
+    assert len({round(x, 3) for x in traj}) > 3  # it explores, it does not lock
