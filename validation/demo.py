@@ -26,8 +26,12 @@ GT_EXPOSURES_MS = (0.5, 3.0, 6.0, 12.0, 24.0, 45.0)
 def demo_config(quick: bool = False) -> dict:
     """Size of the demo: the default takes a few minutes on 2 cores, ``quick`` well under one."""
     if quick:
-        return dict(scene="forest_winter", n_cycles=4, width=96, height=60, spp=4, vo_frames=4)
-    return dict(scene="forest_winter", n_cycles=12, width=192, height=120, spp=8, vo_frames=12)
+        return dict(scene="forest_winter", n_cycles=4, width=96, height=60, spp=4, vo_frames=4, vo_ratio=0.9)
+    # 256x160 at 8 spp: the cheapest size at which SIFT survives the renders' own noise and
+    # the stereo VO tracks every frame of forest_winter (measured in validation.ae_study;
+    # 192x120 at 8 spp failed 58 of 77 VO steps).  The VO's ratio test is 0.9 for the same
+    # reason; the feature benchmark keeps the paper's 0.8.
+    return dict(scene="forest_winter", n_cycles=12, width=256, height=160, spp=8, vo_frames=12, vo_ratio=0.9)
 
 
 def new_output_dir(base: str | Path = "exposim-demo") -> Path:
@@ -107,6 +111,7 @@ def run_demo(output=None, *, quick: bool = False) -> int:
 
     import scenes
     from emulator.metrics.bench import bench_features, bench_vo
+    from emulator.metrics.vo import VOParameters
     from emulator.playback import run_to_folder
     from scenes.synthesize import synthesize
 
@@ -160,7 +165,8 @@ def run_demo(output=None, *, quick: bool = False) -> int:
     _say("4/4 features and stereo VO")
     t0 = time.perf_counter()
     feats = bench_features(run_dir, out / "features", command="exposim demo")
-    vo = bench_vo(run_dir, out / "vo", max_frames=cfg["vo_frames"], rpe_on_failure=True, command="exposim demo")
+    vo = bench_vo(run_dir, out / "vo", max_frames=cfg["vo_frames"], rpe_on_failure=True, command="exposim demo",
+                  parameters=VOParameters(ratio=cfg["vo_ratio"]))
     timings["benchmarks_s"] = time.perf_counter() - t0
     timings["total_s"] = time.perf_counter() - t_start
 
@@ -236,7 +242,8 @@ def _report(out: Path, cfg: dict, emu: dict, run_dir: Path, feats: dict, vo: dic
         "# exposim demo",
         "",
         f"Scene `{cfg['scene']}`, {cfg['n_cycles']} bracket cycles (1..32 ms, 22 frames/s), "
-        f"{cfg['width']}x{cfg['height']} px, {cfg['spp']} spp, synthetic BorealHDR camera (noise on), stereo.",
+        f"{cfg['width']}x{cfg['height']} px, {cfg['spp']} spp, synthetic BorealHDR camera (noise on), stereo; "
+        f"VO ratio test {cfg['vo_ratio']}.",
         "",
         "## Emulation against exact ground truth (HigherNoSat)",
         "",
