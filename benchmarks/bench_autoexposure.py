@@ -27,6 +27,7 @@ import numpy as np
 
 from emulator.autoexposure import METHOD_NAMES, METHODS
 from emulator.dataset import load_sequence, sequence_response
+from _timing import median_ms
 
 DEFAULT_SEQ = Path(__file__).resolve().parents[2] / "shared/data/borealhdr_sample/backpack_2023-09-25-15-05-03"
 
@@ -236,14 +237,6 @@ def ref_methods(response) -> dict:
 
 
 # ============================================================================ bench
-def _median_ms(fn, repeat):
-    times = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return 1e3 * statistics.median(times)
-
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -258,7 +251,7 @@ def main(argv=None):
     cycle = seq[1]
     frames = [cycle.frames["left"][b].load() for b in (4.0, 8.0, 16.0, 2.0, 1.0, 32.0)[: args.frames]]
     exposures = (4.0, 8.0, 16.0, 2.0, 1.0, 32.0)[: args.frames]
-    gray_ms = _median_ms(lambda: cv2.cvtColor(frames[0], cv2.COLOR_BayerRG2GRAY), 10)
+    gray_ms = median_ms(lambda: cv2.cvtColor(frames[0], cv2.COLOR_BayerRG2GRAY), 10)
     print(f"frames: {len(frames)} x {frames[0].shape[1]}x{frames[0].shape[0]} from {seq.path.name}, cycle 1 "
           f"({', '.join(f'{e:g}' for e in exposures)} ms); gray conversion alone {gray_ms:.1f} ms")
     print(f"{'method':13s} {'mode':9s} {'ms/frame':>9s} {'REF-style':>10s} {'speed-up':>9s}  max rel. diff to REF")

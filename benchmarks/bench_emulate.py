@@ -11,25 +11,16 @@ validity mask, and the reference implementation's per-pixel interpolation
 from __future__ import annotations
 
 import argparse
-import statistics
-import time
 from pathlib import Path
 
 import numpy as np
 
 from emulator import emulate
 from emulator.dataset import load_sequence, read_png16, sequence_response
+from _timing import median_ms
 
 DEFAULT_SEQ = Path(__file__).resolve().parents[2] / "shared/data/borealhdr_sample/backpack_2023-09-25-15-05-03"
 
-
-def timeit(fn, repeat):
-    times = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return 1e3 * statistics.median(times)
 
 
 def main(argv=None):
@@ -44,11 +35,11 @@ def main(argv=None):
     raw = frame.load()
     ratios = iter(np.linspace(0.3, 0.9, 10_000))
 
-    decode = timeit(lambda: read_png16(frame.path), max(5, args.repeat // 3))
+    decode = median_ms(lambda: read_png16(frame.path), max(5, args.repeat // 3))
     emulate(raw, 8.0, 5.3, response)  # warm the table and the thread pool
-    cached = timeit(lambda: emulate(raw, 8.0, 5.3, response), args.repeat)
-    cold = timeit(lambda: emulate(raw, 8.0, 8.0 * next(ratios), response), args.repeat)
-    masked = timeit(lambda: emulate(raw, 8.0, 5.3, response, return_mask=True), args.repeat)
+    cached = median_ms(lambda: emulate(raw, 8.0, 5.3, response), args.repeat)
+    cold = median_ms(lambda: emulate(raw, 8.0, 8.0 * next(ratios), response), args.repeat)
+    masked = median_ms(lambda: emulate(raw, 8.0, 5.3, response, return_mask=True), args.repeat)
 
     g, dn = response.g, np.arange(response.white_level + 1, dtype=np.float64)
 
@@ -56,7 +47,7 @@ def main(argv=None):
         h = np.interp(raw.astype(np.float64), dn, g) * (5.3 / 8.0)
         return np.clip(np.rint(np.interp(h, g, dn)), 0, response.white_level).astype(np.uint16)
 
-    ref = timeit(per_pixel, max(3, args.repeat // 5))
+    ref = median_ms(per_pixel, max(3, args.repeat // 5))
     assert np.array_equal(per_pixel(), emulate(raw, 8.0, 5.3, response))
 
     h, w = raw.shape

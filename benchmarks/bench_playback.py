@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import statistics
 import sys
 import time
 from pathlib import Path
@@ -37,19 +36,12 @@ from emulator.dataset import load_sequence, read_png16, sequence_response  # noq
 from emulator.emulate import apply_lut  # noqa: E402
 from emulator.playback import RunStats, iter_run  # noqa: E402
 from emulator.select import higher_no_sat, saturated_fraction  # noqa: E402
+from _timing import median_ms  # noqa: E402
 
 DEFAULT_SEQ = Path(__file__).resolve().parents[2] / "shared/data/borealhdr_sample/backpack_2023-09-25-15-05-03"
 RECORDER_CYCLES_PER_S = 3.66
 INITIAL_MS, RANGE_MS = 4.0, (0.02, 50.0)
 
-
-def _median_ms(fn, repeat):
-    times = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return 1e3 * statistics.median(times)
 
 
 def build(name, mode, response, ref_methods):
@@ -130,10 +122,10 @@ def main(argv=None):
 
     frame = seq[1].frames["left"][8.0]
     raw = frame.load()
-    decode_ms = _median_ms(lambda: read_png16(frame.path), 5)
+    decode_ms = median_ms(lambda: read_png16(frame.path), 5)
     table, _ = response.lut(5.3 / 8.0)
-    lut_ms = _median_ms(lambda: apply_lut(table, raw), 10)
-    interp_ms = _median_ms(lambda: per_pixel_emulation(raw, 5.3 / 8.0, response), 3)
+    lut_ms = median_ms(lambda: apply_lut(table, raw), 10)
+    interp_ms = median_ms(lambda: per_pixel_emulation(raw, 5.3 / 8.0, response), 3)
     assert np.array_equal(apply_lut(table, raw), per_pixel_emulation(raw, 5.3 / 8.0, response))
     print(f"decode {decode_ms:.1f} ms/image; emulation {lut_ms:.1f} ms/image (lookup table) vs "
           f"{interp_ms:.1f} ms/image (per-pixel np.interp)")
