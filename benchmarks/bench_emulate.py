@@ -16,7 +16,8 @@ from pathlib import Path
 import numpy as np
 
 from emulator import emulate
-from emulator.dataset import load_sequence, read_png16, sequence_response
+from emulator.io.borealhdr import load_sequence, sequence_response
+from emulator.io.png import read_png16
 from _timing import median_ms
 
 DEFAULT_SEQ = Path(__file__).resolve().parents[2] / "shared/data/borealhdr_sample/backpack_2023-09-25-15-05-03"

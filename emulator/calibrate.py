@@ -65,24 +65,19 @@ Library code never prints; long loops take a ``progress(done, total, label)`` ca
 
 from __future__ import annotations
 
-import io
-import json
 import math
 import os
 from dataclasses import dataclass, field
-from pathlib import Path
-from typing import Callable, Iterable, Sequence as SequenceType
+from typing import Callable, Sequence as SequenceType
 
 import numpy as np
 
-from emulator.errors import ExposimError
+from emulator.errors import CalibrationError
+from emulator.io.pcalib import PCALIB_SAMPLES, PCALIB_TOP_VALUE
+from emulator.io.stack import Stack, read_stack
 from emulator.response import CameraResponse
 
 __all__ = [
-    "CalibrationError",
-    "Stack",
-    "read_stack",
-    "write_stack",
     "CalibrationResult",
     "fit_inverse_response",
     "calibrate_stack",
@@ -94,26 +89,14 @@ __all__ = [
     "bayer_subsample",
     "estimate_noise_dn",
     "response_error",
-    "write_response",
-    "plot_calibration",
     "table_top_for",
     "DEFAULT_QUANTILES",
 ]
 
 Progress = Callable[[int, int, str], None] | None
 
-TIMES_FILE = "times.txt"
-IMAGES_DIR = "images"
-STACK_METADATA = "exposim.json"
-#: pcalib files hold 256 samples of g with g(table_top) = 255.
-PCALIB_SAMPLES = 256
-PCALIB_TOP_VALUE = 255.0
 #: Quantile levels of the cross-bracket score: 1 %, 2 %, ... 99 %.
 DEFAULT_QUANTILES = np.arange(1, 100) / 100.0
-
-
-class CalibrationError(ExposimError):
-    """A stack or recording cannot give a response: too few exposures, clipped, moving, ..."""
 
 
 def _blas_single_thread():
@@ -137,172 +120,6 @@ def _report(progress: Progress, done: int, total: int, label: str) -> None:
 def table_top_for(white_level: int) -> int:
     """Top DN of a response table for this white level: 2**bits - 1 (4095 for 12-bit data)."""
     return (1 << int(white_level).bit_length()) - 1
-
-
-# ============================================================================ stack I/O
-@dataclass
-class Stack:
-    """A static-scene exposure stack in the TUM monoVO layout.
-
-    Attributes
-    ----------
-    path : Path
-        The stack folder (holding ``times.txt`` and ``images/``).
-    names : list of str
-        Image names (file stems), in the order of ``times.txt``.
-    timestamps_s : ndarray, float64, shape (N,)
-        Capture times in seconds.
-    exposures_ms : ndarray, float64, shape (N,)
-        Exposure times in milliseconds.
-    white_level, black_level : int
-        Clip levels (``exposim.json`` in the stack, else 4095 and 0 for 12-bit data).
-    """
-
-    path: Path
-    names: list[str]
-    timestamps_s: np.ndarray
-    exposures_ms: np.ndarray
-    white_level: int = 4095
-    black_level: int = 0
-    _images: np.ndarray | None = field(default=None, repr=False)
-
-    def __len__(self) -> int:
-        return len(self.names)
-
-    def image_path(self, i: int) -> Path:
-        return self.path / IMAGES_DIR / f"{self.names[i]}.png"
-
-    def load(self, i: int) -> np.ndarray:
-        """Decode image ``i`` (uint16, (H, W), DN)."""
-        from emulator.dataset import read_png16
-
-        return read_png16(self.image_path(i), white_level=self.white_level)
-
-    @property
-    def images(self) -> np.ndarray:
-        """All images as one uint16 array (N, H, W), decoded on first use; mixed sizes refused."""
-        if self._images is None:
-            first = None
-            out = []
-            for i in range(len(self)):
-                img = self.load(i)
-                if first is None:
-                    first = img.shape
-                elif img.shape != first:
-                    raise CalibrationError(
-                        f"{self.image_path(i)}: image size {img.shape[1]}x{img.shape[0]} differs from the "
-                        f"first image's {first[1]}x{first[0]} (mixed sizes in one stack)"
-                    )
-                out.append(img)
-            self._images = np.stack(out)
-        return self._images
-
-
-def read_stack(path: str | os.PathLike, *, white_level: int | None = None, black_level: int | None = None) -> Stack:
-    """Read a TUM-layout stack: ``STACK/times.txt`` and ``STACK/images/<name>.png``.
-
-    ``times.txt`` lines are ``<name> <timestamp_s> <exposure_ms>``; blank lines and lines
-    starting with ``#`` are skipped.  Images decode lazily (:meth:`Stack.load`,
-    :attr:`Stack.images`).  Raises :class:`CalibrationError` naming the file and line for a
-    malformed or empty ``times.txt``, a non-positive exposure, a duplicate name, or a
-    missing image, and FileNotFoundError for a missing folder.
-    """
-    root = Path(path)
-    if not root.is_dir():
-        raise FileNotFoundError(f"{root}: stack folder not found")
-    times = root / TIMES_FILE
-    if not times.is_file():
-        raise CalibrationError(f"{root}: no {TIMES_FILE} (expected the TUM layout: times.txt and images/)")
-    from emulator.dataset import read_metadata
-
-    meta = read_metadata(root / STACK_METADATA, CalibrationError)
-    white = int(white_level if white_level is not None else meta.get("white_level", 4095))
-    black = int(black_level if black_level is not None else meta.get("black_level", 0))
-
-    names: list[str] = []
-    stamps: list[float] = []
-    exps: list[float] = []
-    for lineno, line in enumerate(times.read_text().splitlines(), start=1):
-        s = line.strip()
-        if not s or s.startswith("#"):
-            continue
-        parts = s.split()
-        if len(parts) < 3:
-            raise CalibrationError(
-                f"{times}:{lineno}: expected '<name> <timestamp_s> <exposure_ms>', got {s!r}"
-            )
-        try:
-            stamp, exp = float(parts[1]), float(parts[2])
-        except ValueError:
-            raise CalibrationError(f"{times}:{lineno}: timestamp or exposure is not a number: {s!r}") from None
-        if not (math.isfinite(exp) and exp > 0):
-            raise CalibrationError(f"{times}:{lineno}: exposure must be a positive number of ms, got {parts[2]!r}")
-        if parts[0] in names:
-            raise CalibrationError(f"{times}:{lineno}: image name {parts[0]!r} listed twice")
-        names.append(parts[0])
-        stamps.append(stamp)
-        exps.append(exp)
-    if not names:
-        raise CalibrationError(f"{times}: lists no images")
-    for n in names:
-        p = root / IMAGES_DIR / f"{n}.png"
-        if not p.is_file():
-            raise CalibrationError(f"{p}: image listed in {TIMES_FILE} not found")
-    return Stack(root, names, np.asarray(stamps, float), np.asarray(exps, float), white, black)
-
-
-def write_stack(
-    path: str | os.PathLike,
-    images: Iterable[np.ndarray],
-    exposures_ms: SequenceType[float],
-    names: SequenceType[str] | None = None,
-    *,
-    timestamps_s: SequenceType[float] | None = None,
-    white_level: int | None = None,
-    black_level: int | None = None,
-    overwrite: bool = False,
-) -> Path:
-    """Write a stack in the TUM layout (``images/<name>.png`` 16-bit, ``times.txt``).
-
-    Parameters
-    ----------
-    images : iterable of ndarray, uint16, (H, W)
-        DN images (12-bit data in uint16), all of one size.
-    exposures_ms : sequence of float
-        Exposure time of each image in milliseconds.
-    names : sequence of str, optional
-        File stems; default ``00000``, ``00001``, ...
-    timestamps_s : sequence of float, optional
-        Capture times in seconds; default 0.1 s apart.
-    white_level, black_level : int, optional
-        Written to ``exposim.json`` beside ``times.txt`` when given.
-    overwrite : bool
-        Replace existing files (else :class:`~emulator.errors.OutputExistsError`).
-    """
-    from emulator.dataset import atomic_write_bytes, write_png16
-
-    root = Path(path)
-    images = list(images)
-    exposures = [float(e) for e in exposures_ms]
-    if len(images) != len(exposures):
-        raise CalibrationError(f"{root}: {len(images)} images but {len(exposures)} exposure times")
-    if names is None:
-        names = [f"{i:05d}" for i in range(len(images))]
-    names = [str(n) for n in names]
-    if len(names) != len(images) or len(set(names)) != len(names):
-        raise CalibrationError(f"{root}: need one distinct name per image")
-    stamps = [0.1 * i for i in range(len(images))] if timestamps_s is None else [float(s) for s in timestamps_s]
-    for img, name in zip(images, names):
-        if not isinstance(img, np.ndarray) or img.dtype != np.uint16 or img.ndim != 2:
-            raise CalibrationError(f"{root}: image {name!r} must be a 2-D uint16 array")
-        write_png16(root / IMAGES_DIR / f"{name}.png", img, overwrite=overwrite)
-    text = "".join(f"{n} {s:.6f} {e!r}\n" for n, s, e in zip(names, stamps, exposures))
-    atomic_write_bytes(root / TIMES_FILE, text.encode(), overwrite=overwrite)
-    if white_level is not None or black_level is not None:
-        meta = {"white_level": int(white_level if white_level is not None else 4095),
-                "black_level": int(black_level if black_level is not None else 0)}
-        atomic_write_bytes(root / STACK_METADATA, json.dumps(meta).encode(), overwrite=overwrite)
-    return root
 
 
 # ============================================================================ numerics
@@ -1163,7 +980,8 @@ def calibrate_from_recording(
     every ``stride``-th pixel of each Bayer plane.  See :func:`comparagram_pairs` and
     :func:`fit_comparametric`.
     """
-    from emulator.dataset import Sequence, load_sequence
+    from emulator.dataset import Sequence
+    from emulator.io.borealhdr import load_sequence
 
     seq = sequence if isinstance(sequence, Sequence) else load_sequence(sequence)
     pairs = comparagram_pairs(
@@ -1229,7 +1047,8 @@ def cross_bracket_error(
     clipped to the recording's levels.  Motion between the brackets (~46 ms) barely changes
     the distributions, so this needs no alignment.
     """
-    from emulator.dataset import Sequence, load_sequence
+    from emulator.dataset import Sequence
+    from emulator.io.borealhdr import load_sequence
     from emulator.emulate import emulate
 
     seq = sequence if isinstance(sequence, Sequence) else load_sequence(sequence)
@@ -1325,85 +1144,3 @@ def response_error(
         "dn_range": [lo, hi],
         "align": align,
     }
-
-
-def write_response(
-    result: CalibrationResult | CameraResponse,
-    path: str | os.PathLike,
-    *,
-    n_samples: int = PCALIB_SAMPLES,
-    overwrite: bool = False,
-) -> Path:
-    """Write g as a pcalib file (``n_samples`` samples over the table top), atomically.
-
-    The fitted knots are written as they are when there are ``n_samples`` of them (the
-    default 256 knots of the stack fit), so that ``CameraResponse.from_pcalib`` gives back
-    exactly ``result.response``; otherwise g is sampled at evenly spaced DN.
-    """
-    from emulator.dataset import atomic_write_bytes
-
-    resp = result.response if isinstance(result, CalibrationResult) else result
-    n_samples = int(n_samples)
-    if isinstance(result, CalibrationResult) and result.knots_g.size == n_samples:
-        samples = result.knots_g  # the fitted knots are the pcalib samples: exact round trip
-    elif resp.knots is not None and resp.knots.size == n_samples:
-        samples = resp.knots
-    else:
-        samples = resp.inverse(np.linspace(0.0, float(resp.white_level), n_samples))
-    text = " ".join(repr(float(v)) for v in samples) + "\n"
-    return atomic_write_bytes(path, text.encode(), overwrite=overwrite)
-
-
-def plot_calibration(
-    result: CalibrationResult,
-    path: str | os.PathLike,
-    *,
-    reference: CameraResponse | None = None,
-    reference_label: str = "reference",
-    overwrite: bool = False,
-) -> Path:
-    """Plot the recovered g with the fitted samples (and a reference curve) into a PNG."""
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
-    from emulator.dataset import atomic_write_bytes
-
-    fig, (ax, axr) = plt.subplots(1, 2, figsize=(11, 4.2))
-    resp = result.response
-    dn = np.arange(resp.white_level + 1)
-    ax.scatter(result.samples_dn, result.samples_g, s=1, alpha=0.15, color="tab:gray", rasterized=True,
-               label="samples (DN, t*B)" if result.method.startswith("als") else "samples (d_hi, r*g(d_lo))")
-    ax.plot(dn, resp.g, color="tab:blue", lw=1.5, label=f"recovered ({result.method})")
-    if reference is not None:
-        gref = reference.g * (PCALIB_TOP_VALUE / reference.g[-1])
-        ax.plot(np.arange(gref.size), gref, color="tab:red", lw=1, ls="--", label=reference_label)
-    lo, hi = result.observed_dn
-    ax.axvspan(0, lo, color="k", alpha=0.06)
-    ax.axvspan(hi, resp.white_level, color="k", alpha=0.06, label="extrapolated")
-    ax.set_xlabel("DN")
-    ax.set_ylabel("g = f^-1 (pcalib units, g(top) = 255)")
-    ax.set_title(f"inverse response; residual {result.residual_rms_dn:.2f} DN RMS")
-    ax.legend(loc="upper left", fontsize=8)
-    # residual in DN, binned
-    pred_dn = resp.forward(result.samples_g)
-    r = result.samples_dn - pred_dn
-    bins = np.linspace(0, resp.white_level, 65)
-    which = np.digitize(result.samples_dn, bins)
-    centers, rms = [], []
-    for k in range(1, bins.size):
-        m = which == k
-        if m.sum() >= 5:
-            centers.append(0.5 * (bins[k - 1] + bins[k]))
-            rms.append(np.sqrt(np.mean(r[m] ** 2)))
-    axr.plot(centers, rms, "o-", ms=3)
-    axr.set_xlabel("DN")
-    axr.set_ylabel("RMS residual (DN)")
-    axr.set_title("fit residual by DN")
-    axr.grid(alpha=0.3)
-    fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
-    plt.close(fig)
-    return atomic_write_bytes(path, buf.getvalue(), overwrite=overwrite)

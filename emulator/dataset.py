@@ -1,161 +1,63 @@
-"""BorealHDR recordings: reader and writer of the folder layout.
+"""Recordings in memory: :class:`Sequence` of :class:`Cycle` of :class:`Frame`.
 
-Layout (BorealHDR, also written by ``synth``)::
+A sequence is a list of cycles; a cycle is one sweep of the brackets (1 -> 32 ms).  Shots
+are grouped into cycles by timestamp, never by file index (:func:`build_sequence`): a new
+cycle starts when the exposure stops increasing or when a whole sweep's time has passed.
+Left and right frames of one capture share a timestamp and are paired by it.
 
-    <sequence>/camera_left/<exposure_ms>/<timestamp_ns>.png    16-bit PNG, 12-bit Bayer DN
-    <sequence>/camera_right/<exposure_ms>/<timestamp_ns>.png
-    <sequence>/exposim.json        optional metadata (white/black level, brackets) from synth
-
-A sequence is a list of :class:`Cycle`; a cycle is one sweep of the brackets (1 -> 32 ms).
-Shots are grouped into cycles by timestamp, never by file index: a new cycle starts when
-the exposure stops increasing or when a whole sweep's time has passed.  Left and right
-frames of one capture share a timestamp and are paired by it.  Images decode lazily.
+Reading and writing the BorealHDR folder layout is :mod:`emulator.io.borealhdr`'s job
+(:func:`emulator.io.borealhdr.load_sequence`); a :class:`Frame` decodes its image on
+demand through it.
 """
 
 from __future__ import annotations
 
-import json
-import math
-import os
-import re
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import cv2
 import numpy as np
 
-from emulator.errors import DatasetError, OutputExistsError
+from emulator.errors import DatasetError
 
-__all__ = [
-    "CAMERAS",
-    "CAMERA_FOLDERS",
-    "BOREALHDR_WHITE_LEVEL",
-    "BOREALHDR_BLACK_LEVEL",
-    "Frame",
-    "Cycle",
-    "Sequence",
-    "load_sequence",
-    "read_png16",
-    "write_png16",
-    "write_frame",
-    "exposure_folder_name",
-    "find_response",
-    "atomic_write_bytes",
-    "sequence_response",
-    "read_metadata",
-]
+__all__ = ["CAMERAS", "Frame", "Cycle", "Sequence", "build_sequence", "group_cycles"]
 
+#: Camera names of a stereo rig, the method (and selector) camera first.
 CAMERAS = ("left", "right")
-CAMERA_FOLDERS = {"left": "camera_left", "right": "camera_right"}
-#: The BorealHDR sample saturates at 4094 and its black level is 0 (DESIGN.md).
-BOREALHDR_WHITE_LEVEL = 4094
-BOREALHDR_BLACK_LEVEL = 0
-METADATA_FILE = "exposim.json"
-_TIMESTAMP_RE = re.compile(r"^(\d+)\.png$")
 
 
-# ---------------------------------------------------------------------------- PNG I/O
-def read_png16(path: str | os.PathLike, *, white_level: int | None = None) -> np.ndarray:
-    """Decode a 16-bit single-channel PNG holding 12-bit DN; clear errors for bad files."""
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: image not found")
-    data = np.fromfile(path, dtype=np.uint8)
-    img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
-    if img is None:
-        raise DatasetError(f"{path}: cannot decode image (corrupt or truncated PNG, {data.size} bytes)")
-    if img.dtype != np.uint16:
-        raise DatasetError(
-            f"{path}: expected a 16-bit PNG holding 12-bit DN, got {img.dtype} "
-            f"({'8-bit' if img.dtype == np.uint8 else 'other'} image)"
-        )
-    if img.ndim != 2:
-        raise DatasetError(f"{path}: expected a single-channel Bayer mosaic, got shape {img.shape}")
-    if white_level is not None:
-        top = int(img.max())
-        if top > white_level:
-            raise DatasetError(
-                f"{path}: maximum DN {top} exceeds white_level {white_level} (not 12-bit data?)"
-            )
-    return img
-
-
-def atomic_write_bytes(path: str | os.PathLike, data: bytes, *, overwrite: bool = False) -> Path:
-    """Write ``data`` to ``path`` through a temporary file and a rename.
-
-    An interrupted write never leaves a partial file under the final name.  Refuses to
-    replace an existing file unless ``overwrite``.
-    """
-    path = Path(path)
-    if path.exists() and not overwrite:
-        raise OutputExistsError(f"{path}: exists; refusing to overwrite (use --force / overwrite=True)")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
-
-
-def write_png16(path: str | os.PathLike, image: np.ndarray, *, overwrite: bool = False) -> Path:
-    """Encode a uint16 (or uint8) 2-D image as PNG, atomically."""
-    image = np.asarray(image)
-    if image.dtype not in (np.uint16, np.uint8) or image.ndim != 2:
-        raise DatasetError(f"{path}: can only write 2-D uint16/uint8 images, got {image.dtype} {image.shape}")
-    ok, buf = cv2.imencode(".png", image, [cv2.IMWRITE_PNG_COMPRESSION, 1])
-    if not ok:  # pragma: no cover - OpenCV failure
-        raise DatasetError(f"{path}: PNG encoding failed")
-    return atomic_write_bytes(path, buf.tobytes(), overwrite=overwrite)
-
-
-def exposure_folder_name(exposure_ms: float) -> str:
-    """Folder name for an exposure: ``1.0``, ``32.0`` as BorealHDR; full precision otherwise."""
-    v = float(exposure_ms)
-    short = f"{v:.1f}"
-    return short if float(short) == v else repr(v)
-
-
-def write_frame(
-    sequence_path: str | os.PathLike,
-    camera: str,
-    exposure_ms: float,
-    timestamp_ns: int,
-    raw: np.ndarray,
-    *,
-    overwrite: bool = False,
-) -> Path:
-    """Write one shot in the BorealHDR layout (atomic); returns its path."""
-    if camera not in CAMERA_FOLDERS:
-        raise DatasetError(f"camera must be one of {CAMERAS}, got {camera!r}")
-    if raw.dtype != np.uint16:
-        raise DatasetError(f"raw image must be uint16, got {raw.dtype}")
-    path = (
-        Path(sequence_path)
-        / CAMERA_FOLDERS[camera]
-        / exposure_folder_name(exposure_ms)
-        / f"{int(timestamp_ns)}.png"
-    )
-    return write_png16(path, raw, overwrite=overwrite)
-
-
-# ---------------------------------------------------------------------------- model
 @dataclass(frozen=True)
 class Frame:
-    """One shot of one camera; the image is decoded on demand by :meth:`load`."""
+    """One shot of one camera; the image is decoded on demand by :meth:`load`.
+
+    Attributes
+    ----------
+    camera : str
+        ``"left"`` or ``"right"``.
+    exposure_ms : float
+        Exposure time, ms.
+    timestamp_ns : int
+        Capture time, integer nanoseconds.
+    path : pathlib.Path
+        Where the image is (the name used in messages).
+    white_level : int
+        Highest valid DN; :meth:`load` refuses an image above it.
+    source : object or None
+        The file source the frame was found in (:class:`emulator.io.borealhdr.FileSource`);
+        None for the file system.
+    """
 
     camera: str
     exposure_ms: float
     timestamp_ns: int
     path: Path
-    white_level: int = BOREALHDR_WHITE_LEVEL
+    white_level: int
+    source: object = field(default=None, compare=False, repr=False)
 
     def load(self) -> np.ndarray:
-        return read_png16(self.path, white_level=self.white_level)
+        """The raw image: (H, W) ``uint16`` Bayer mosaic in DN."""
+        from emulator.io.borealhdr import read_frame
+
+        return read_frame(self)
 
     @property
     def exposure_name(self) -> str:
@@ -197,14 +99,18 @@ class Cycle:
 
 @dataclass
 class Sequence:
-    """A recording: cycles of bracket sweeps from one or two cameras."""
+    """A recording: cycles of bracket sweeps from one or two cameras.
+
+    ``white_level`` and ``black_level`` are the camera's clip levels in DN (BorealHDR:
+    4094 and 0, :data:`emulator.io.borealhdr.BOREALHDR_WHITE_LEVEL`).
+    """
 
     path: Path
     cycles: list[Cycle]
     cameras: tuple[str, ...]
     brackets: tuple[float, ...]
-    white_level: int = BOREALHDR_WHITE_LEVEL
-    black_level: int = BOREALHDR_BLACK_LEVEL
+    white_level: int
+    black_level: int
     metadata: dict = field(default_factory=dict)
     gaps: list[str] = field(default_factory=list)
 
@@ -248,55 +154,15 @@ class Sequence:
         }
 
 
-# ---------------------------------------------------------------------------- reader
-def read_metadata(path: str | os.PathLike, error: type[Exception] = DatasetError) -> dict:
-    """The JSON object in an optional metadata file (``{}`` if absent); ``error`` if malformed."""
-    path = Path(path)
-    if not path.is_file():
-        return {}
-    try:
-        meta = json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
-        raise error(f"{path}: malformed JSON ({exc})") from None
-    if not isinstance(meta, dict):
-        raise error(f"{path}: expected a JSON object, got {type(meta).__name__}")
-    return meta
+def group_cycles(shots: list[tuple[int, float]], n_brackets: int) -> list[list[tuple[int, float]]]:
+    """Split time-sorted (timestamp_ns, exposure_ms) shots into sweeps.
 
+    A new sweep starts when the exposure stops increasing, or when the sweep would last
+    longer than ``n_brackets`` shot periods (the median time between shots).
 
-def _parse_exposure(folder: Path) -> float:
-    try:
-        v = float(folder.name)
-    except ValueError:
-        raise DatasetError(
-            f"{folder}: unknown folder name {folder.name!r} (expected an exposure in ms, e.g. '8.0')"
-        ) from None
-    if not math.isfinite(v) or v <= 0:
-        raise DatasetError(f"{folder}: exposure folder {folder.name!r} is not a positive finite number of ms")
-    return v
-
-
-def _scan_camera(cam_dir: Path, camera: str, white_level: int) -> list[Frame]:
-    frames: list[Frame] = []
-    for entry in sorted(cam_dir.iterdir()):
-        if entry.name.startswith("."):
-            continue
-        if not entry.is_dir():
-            raise DatasetError(f"{entry}: unexpected file in {cam_dir.name}/ (expected exposure folders like '8.0/')")
-        exposure_ms = _parse_exposure(entry)
-        for f in sorted(entry.iterdir()):
-            if f.name.startswith(".") or f.name.endswith(".part"):
-                continue
-            m = _TIMESTAMP_RE.match(f.name)
-            if not m:
-                raise DatasetError(f"{f}: unexpected file name (expected <timestamp_ns>.png)")
-            frames.append(Frame(camera, exposure_ms, int(m.group(1)), f, white_level))
-    if not frames:
-        raise DatasetError(f"{cam_dir}: camera folder holds no images")
-    return frames
-
-
-def _group_cycles(shots: list[tuple[int, float]], n_brackets: int) -> list[list[tuple[int, float]]]:
-    """Split time-sorted (timestamp_ns, exposure_ms) shots into sweeps."""
+    >>> group_cycles([(0, 1.0), (10, 2.0), (20, 1.0), (30, 2.0)], 2)
+    [[(0, 1.0), (10, 2.0)], [(20, 1.0), (30, 2.0)]]
+    """
     if len(shots) > 1:
         dt = np.diff([t for t, _ in shots])
         shot_period = float(np.median(dt))
@@ -315,48 +181,59 @@ def _group_cycles(shots: list[tuple[int, float]], n_brackets: int) -> list[list[
     return groups
 
 
-def load_sequence(path: str | os.PathLike, *, white_level: int | None = None, black_level: int | None = None) -> Sequence:
-    """Read a recording in the BorealHDR layout into cycles (images decode lazily).
+def build_sequence(
+    path: Path,
+    per_camera: dict[str, list[Frame]],
+    *,
+    white_level: int,
+    black_level: int,
+    brackets_ms=(),
+    metadata: dict | None = None,
+    gaps: list[str] | None = None,
+) -> Sequence:
+    """Group the frames of each camera into cycles by timestamp.
 
-    White and black levels come from the arguments, else from ``exposim.json`` written by
-    ``synth``, else the BorealHDR defaults (4094, 0).  Raises :class:`DatasetError` for an
-    unknown folder, an empty camera folder, shots whose left/right exposures disagree at
-    one timestamp, or a sequence without any camera folder; a missing second camera or
-    missing brackets are reported in ``Sequence.gaps``.
+    Parameters
+    ----------
+    path : pathlib.Path
+        The recording (for messages and :attr:`Sequence.path`).
+    per_camera : dict of str to list of Frame
+        Every frame found, per camera.
+    white_level, black_level : int
+        The camera's clip levels, DN.
+    brackets_ms : sequence of float
+        Brackets the recording was made with, beyond those seen (from its metadata).
+    metadata : dict, optional
+        The recording's metadata, kept on the sequence.
+    gaps : list of str, optional
+        Gaps found while reading (e.g. a missing camera); missing brackets are added.
+
+    Raises
+    ------
+    DatasetError
+        When one timestamp is filed under two exposures, or one camera has the same shot
+        twice (e.g. in folders ``8`` and ``8.0``).
     """
-    root = Path(path)
-    if not root.is_dir():
-        raise FileNotFoundError(f"{root}: sequence folder not found")
-    meta = read_metadata(root / METADATA_FILE)
-    white = int(white_level if white_level is not None else meta.get("white_level", BOREALHDR_WHITE_LEVEL))
-    black = int(black_level if black_level is not None else meta.get("black_level", BOREALHDR_BLACK_LEVEL))
-
-    per_camera: dict[str, list[Frame]] = {}
-    gaps: list[str] = []
-    for cam, folder in CAMERA_FOLDERS.items():
-        d = root / folder
-        if d.is_dir():
-            per_camera[cam] = _scan_camera(d, cam, white)
-        else:
-            gaps.append(f"{folder}/ missing: no {cam} camera")
-    if not per_camera:
-        raise DatasetError(f"{root}: no camera_left/ or camera_right/ folder (not a BorealHDR sequence)")
-
-    # One exposure per capture instant, shared by both cameras.
-    shot_exposure: dict[int, float] = {}
+    gaps = list(gaps or [])
+    shot_exposure: dict[int, tuple[float, Frame]] = {}
     for cam, frames in per_camera.items():
+        seen: dict[int, Frame] = {}
         for fr in frames:
-            prev = shot_exposure.setdefault(fr.timestamp_ns, fr.exposure_ms)
-            if prev != fr.exposure_ms:
+            twin = seen.setdefault(fr.timestamp_ns, fr)
+            if twin is not fr:
+                raise DatasetError(
+                    f"{fr.path}: the same {cam} shot (timestamp {fr.timestamp_ns}) is also {twin.path}; "
+                    "remove one copy"
+                )
+            prev = shot_exposure.setdefault(fr.timestamp_ns, (fr.exposure_ms, fr))
+            if prev[0] != fr.exposure_ms:
                 raise DatasetError(
                     f"{fr.path}: timestamp {fr.timestamp_ns} is filed under {fr.exposure_ms} ms here but "
-                    f"{prev} ms for another camera or folder"
+                    f"{prev[0]} ms for another camera or folder"
                 )
-    brackets = tuple(sorted(set(shot_exposure.values())))
-    if "brackets_ms" in meta:
-        brackets = tuple(sorted(set(brackets) | {float(b) for b in meta["brackets_ms"]}))
-    shots = sorted(shot_exposure.items())
-    groups = _group_cycles(shots, len(brackets))
+    brackets = tuple(sorted({e for e, _ in shot_exposure.values()} | {float(b) for b in brackets_ms}))
+    shots = sorted((t, e) for t, (e, _) in shot_exposure.items())
+    groups = group_cycles(shots, len(brackets))
 
     index_of: dict[int, int] = {t: i for i, g in enumerate(groups) for t, _ in g}
     cycles = [Cycle(i, {cam: {} for cam in per_camera}, brackets) for i in range(len(groups))]
@@ -368,42 +245,5 @@ def load_sequence(path: str | os.PathLike, *, white_level: int | None = None, bl
             miss = c.missing(cam)
             if miss:
                 gaps.append(f"cycle {c.index}: {cam} missing {', '.join(f'{m:g}' for m in miss)} ms")
-    return Sequence(root, cycles, tuple(per_camera), brackets, white, black, meta, gaps)
-
-
-def find_response(sequence_path: str | os.PathLike) -> Path | None:
-    """Locate the inverse-response file of a recording, or None.
-
-    Looks for ``<seq>/calibration/response.txt`` or ``pcalib*.txt`` (synthetic datasets),
-    then ``<seq>/../calibration/pcalib*.txt`` (the BorealHDR sample layout).
-    """
-    seq = Path(sequence_path)
-    for d in (seq / "calibration", seq.parent / "calibration"):
-        if not d.is_dir():
-            continue
-        if (d / "response.txt").is_file():
-            return d / "response.txt"
-        found = sorted(d.glob("pcalib*.txt"))
-        if found:
-            return found[0]
-    return None
-
-
-def sequence_response(sequence: Sequence, path: str | os.PathLike | None = None):
-    """The camera response of a recording, clipped to the recording's levels.
-
-    ``path`` (a pcalib file) overrides discovery through :func:`find_response`.  The table
-    spans DN 0..4095 (12 bits) as the pcalib format does; the sequence's white level
-    (BorealHDR: 4094) and black level then bound emulation and saturation.
-    """
-    from emulator.response import CameraResponse
-
-    resp_path = Path(path) if path is not None else find_response(sequence.path)
-    if resp_path is None:
-        raise DatasetError(
-            f"{sequence.path}: no response file found (looked for calibration/response.txt or "
-            f"pcalib*.txt in the sequence and beside it); pass one explicitly"
-        )
-    table_top = max(4095, sequence.white_level)
-    response = CameraResponse.from_pcalib(resp_path, white_level=table_top)
-    return response.with_levels(white_level=sequence.white_level, black_level=sequence.black_level)
+    return Sequence(Path(path), cycles, tuple(per_camera), brackets, int(white_level), int(black_level),
+                    dict(metadata or {}), gaps)

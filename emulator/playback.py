@@ -17,18 +17,11 @@ in a cycle share one emulated image.  The images handed to methods are read-only
 a cycle on threads (NumPy and OpenCV release the GIL); results do not depend on ``jobs``.
 
 Library API: :func:`iter_run` (a generator of :class:`CycleStep`), :func:`run` (tables in
-memory), :func:`run_to_folder` (the run folder below, with ``resume``) and :func:`report`
+memory), :func:`run_to_folder` (a run folder, with ``resume``) and :func:`report`
 (re-draws the plot and summaries of a run folder without recomputing).  Nothing here prints.
-
-Run folder layout (a contract with the feature / VO benchmark)::
-
-    RUN_DIR/run.json                     configuration, status, cycles done, timing
-    RUN_DIR/<method>/exposures.csv       cycle,timestamp_ns,target_ms,bracket_ms,ratio,
-                                         saturated_fraction,valid_fraction, then extras
-    RUN_DIR/<method>/images/left/<timestamp_ns>.png    (--save png16 | png8)
-    RUN_DIR/<method>/images/right/<timestamp_ns>.png
-    RUN_DIR/<method>/images/times.txt    "<timestamp_ns> <timestamp_s> <exposure_ms>", by time
-    RUN_DIR/exposure.png, RUN_DIR/results.json, RUN_DIR/report.md
+The run folder's layout, its writer (lock, resume) and its reader are
+:mod:`emulator.io.runfolder`; its report is :mod:`emulator.report.run`.  The clamp default
+is :data:`emulator.autoexposure.DEFAULT_RANGE_MS`, shared with the paper-mode methods.
 
 ``saturated_fraction`` and ``valid_fraction`` describe the emulated left image the method
 saw: pixels at or below black or at or above white, and pixels whose source carried the
@@ -37,15 +30,11 @@ information the target needs (see :func:`emulator.emulate.emulate`).
 
 from __future__ import annotations
 
-import csv
-import datetime as _dt
-import functools
-import io
 import json
 import math
 import threading
 import time
-from collections.abc import Callable, Iterable, Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -53,18 +42,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from emulator.autoexposure import METHOD_NAMES, AutoExposureMethod, accepts_option, make_method
-from emulator.dataset import (
-    CAMERAS,
-    Sequence,
-    atomic_write_bytes,
-    load_sequence,
-    read_metadata,
-    sequence_response,
-    write_png16,
-)
+from emulator.autoexposure import DEFAULT_RANGE_MS, METHOD_NAMES, AutoExposureMethod, accepts_option, make_method
+from emulator.dataset import CAMERAS, Sequence
 from emulator.emulate import apply_lut, check_exposure
-from emulator.errors import DatasetError, ExposimError, OutputExistsError
+from emulator.errors import DatasetError, ExposimError
+from emulator.gray import bayer_to_gray8
+from emulator.io.borealhdr import load_sequence, sequence_response
+from emulator.io.runfolder import CSV_COLUMNS, CSV_FILE, RUN_FILE, SAVE_MODES, RunWriter, format_row
 from emulator.select import SELECTORS, select
 
 __all__ = [
@@ -79,39 +63,13 @@ __all__ = [
     "RunResult",
     "RunStats",
     "PlaybackError",
-    "CSV_COLUMNS",
-    "EXTRA_COLUMNS",
-    "SAVE_MODES",
     "DEFAULT_INITIAL_MS",
-    "DEFAULT_RANGE_MS",
     "DEFAULT_SELECTOR",
-    "RUN_FILE",
 ]
 
-#: Fixed leading columns of ``<method>/exposures.csv`` (the contract).
-CSV_COLUMNS = ("cycle", "timestamp_ns", "target_ms", "bracket_ms", "ratio", "saturated_fraction", "valid_fraction")
-#: Columns appended after the contract's: the proposal, guards, and per-camera figures.
-EXTRA_COLUMNS = (
-    "next_ms",
-    "proposed_ms",
-    "guarded",
-    "clamped",
-    "bracket_saturated_fraction",
-    "saturated_fraction_right",
-    "valid_fraction_right",
-    "missing_left_ms",
-    "missing_right_ms",
-)
-SAVE_MODES = ("none", "png16", "png8")
+#: First exposure of every method, ms.
 DEFAULT_INITIAL_MS = 4.0
-DEFAULT_RANGE_MS = (0.02, 50.0)
 DEFAULT_SELECTOR = "higher-no-sat"
-RUN_FILE = "run.json"
-RESULTS_FILE = "results.json"
-REPORT_FILE = "report.md"
-PLOT_FILE = "exposure.png"
-CSV_FILE = "exposures.csv"
-TIMES_FILE = "times.txt"
 #: Camera whose emulated image the methods read and whose saturation selects the bracket.
 METHOD_CAMERA = "left"
 
@@ -123,7 +81,7 @@ class PlaybackError(ExposimError):
 # ============================================================================ records
 @dataclass
 class MethodStep:
-    """What one method did in one cycle."""
+    """What one method did in one cycle (its CSV row: :func:`emulator.io.runfolder.format_row`)."""
 
     method: str
     cycle: int
@@ -144,34 +102,6 @@ class MethodStep:
     missing_right_ms: tuple[float, ...] = ()
     left: np.ndarray | None = field(default=None, repr=False)
     right: np.ndarray | None = field(default=None, repr=False)
-
-    def row(self) -> list[str]:
-        """The CSV row (contract columns, then :data:`EXTRA_COLUMNS`), floats at full precision."""
-
-        def f(x):
-            return "" if x is None else repr(float(x))
-
-        def ms(values):
-            return ";".join(f"{v:g}" for v in values)
-
-        return [
-            str(self.cycle),
-            str(self.timestamp_ns),
-            f(self.target_ms),
-            f(self.bracket_ms),
-            f(self.ratio),
-            f(self.saturated_fraction),
-            f(self.valid_fraction),
-            f(self.next_ms),
-            f(self.proposed_ms),
-            str(int(self.guarded)),
-            str(int(self.clamped)),
-            f(self.bracket_saturated_fraction),
-            f(self.saturated_fraction_right),
-            f(self.valid_fraction_right),
-            ms(self.missing_left_ms),
-            ms(self.missing_right_ms),
-        ]
 
 
 @dataclass
@@ -570,51 +500,6 @@ def run(
 
 
 # ============================================================================ run folder
-def _now() -> str:
-    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
-
-
-def _write_json(path: Path, data: dict) -> None:
-    atomic_write_bytes(path, (json.dumps(data, indent=2, default=str) + "\n").encode(), overwrite=True)
-
-
-@functools.lru_cache(maxsize=4)
-def _png8_table(white_level: int) -> np.ndarray:
-    """round(gray * 255 / white_level) for every uint16 gray value (half to even), clipped to 255."""
-    table = np.clip(np.rint(np.arange(65536, dtype=np.float64) * 255 / white_level), 0, 255).astype(np.uint8)
-    table.setflags(write=False)
-    return table
-
-
-def _png8(img: np.ndarray, white_level: int) -> np.ndarray:
-    """8-bit gray of a mosaic: ``cv2.COLOR_BayerRG2GRAY`` then ``round(gray * 255 / white_level)``."""
-    gray = cv2.cvtColor(np.ascontiguousarray(img), cv2.COLOR_BayerRG2GRAY)
-    return np.take(_png8_table(int(white_level)), gray)
-
-
-def _timestamp_s(ns: int) -> str:
-    return f"{ns // 1_000_000_000}.{ns % 1_000_000_000:09d}"
-
-
-def _read_csv_rows(path: Path) -> list[list[str]]:
-    """Rows of an exposures.csv (header checked); a torn last line is cut off the file."""
-    if not path.is_file():
-        return []
-    data = path.read_bytes()
-    if data and not data.endswith(b"\n"):
-        cut = data.rfind(b"\n") + 1
-        with open(path, "r+b") as fh:
-            fh.truncate(cut)
-        data = data[:cut]
-    rows = list(csv.reader(io.StringIO(data.decode())))
-    if not rows:
-        return []
-    header = tuple(rows[0])
-    if header[: len(CSV_COLUMNS)] != CSV_COLUMNS:
-        raise PlaybackError(f"{path}: unexpected header {','.join(header)}")
-    return rows[1:]
-
-
 def _canon(value) -> str:
     return json.dumps(value, sort_keys=True, default=str)
 
@@ -643,16 +528,20 @@ def run_to_folder(
     command: str | None = None,
     make_report: bool = True,
 ) -> dict:
-    """Run AE methods on a recording and write a run folder (layout in the module docstring).
+    """Run AE methods on a recording and write a run folder (:mod:`emulator.io.runfolder`).
 
     Refuses an existing, non-empty ``out_dir`` (:class:`OutputExistsError`) unless ``resume``:
     then the configuration comes from ``out_dir/run.json`` (arguments that differ raise
     :class:`PlaybackError`), every method is re-run deterministically from cycle 0, rows
     already in the CSVs are checked against the replay (a mismatch raises) and not written
-    again, missing images are written, and the run continues where it stopped.
+    again, missing images are written, and the run continues where it stopped.  The folder
+    is locked while the run writes it: a second run on it (``resume`` while the first is
+    alive) raises :class:`~emulator.errors.RunLockedError`; the lock of a killed run is
+    taken over.
 
     Returns the summary written to ``results.json`` (per-method figures, skipped cycles,
-    timing).  ``progress(done, total)`` is called after every cycle.
+    timing; :func:`emulator.report.run.write_run_report`).  ``progress(done, total)`` is
+    called after every cycle.
     """
     if out_dir is None:
         raise PlaybackError("out_dir is required")
@@ -671,303 +560,127 @@ def run_to_folder(
         "sequence": str(Path(seq.path).resolve()),
         "methods": names,
         "selector": selector,
-        "initial_ms": float(initial_ms),
+        "initial_ms": float(check_exposure(initial_ms, "initial_ms")),
         "range_ms": [float(v) for v in _check_range(range_ms)],
         "save": save,
         "mode": mode,
         "options": user_options,
         "response": response_name,
     }
-    run_path = out / RUN_FILE
-    recorded: dict[str, dict[int, list[str]]] = {}
-    if resume:
-        if not run_path.is_file():
-            raise PlaybackError(f"{run_path}: no run to resume (run.json missing)")
-        previous = read_metadata(run_path, PlaybackError)
-        old = _config_of(previous)
-        diff = [k for k in config if _canon(old.get(k)) != _canon(config[k])]
-        if diff:
-            raise PlaybackError(
-                f"{run_path}: --resume with a different configuration ({', '.join(diff)}): recorded "
-                + "; ".join(f"{k}={old.get(k)!r}" for k in diff)
-            )
-        for name in names:
-            rows = _read_csv_rows(out / name / CSV_FILE)
-            recorded[name] = {int(r[0]): r for r in rows}
-        run_json = previous
-        run_json["resumed"] = run_json.get("resumed", 0) + 1
-        run_json.setdefault("resume_commands", []).append(command)
-    else:
-        if out.exists() and (not out.is_dir() or any(out.iterdir())):
-            raise OutputExistsError(f"{out}: run folder exists and is not empty; refusing to overwrite (use --resume "
-                                    "to continue an interrupted run, or choose another folder)")
-        out.mkdir(parents=True, exist_ok=True)
-        from emulator import __version__
+    if selector not in SELECTORS:
+        raise PlaybackError(f"unknown selector {selector!r}; choose one of {', '.join(SELECTORS)}")
+    if int(jobs) < 1:
+        raise PlaybackError(f"jobs must be >= 1, got {jobs!r}")
+    white, black = int(seq.white_level), int(seq.black_level)
 
-        run_json = {
-            **config,
-            "white_level": int(seq.white_level),
-            "black_level": int(seq.black_level),
-            "cameras": list(seq.cameras),
-            "brackets_ms": list(seq.brackets),
-            "method_camera": METHOD_CAMERA,
-            "selector_camera": METHOD_CAMERA,
-            "method_options": {n: m.config() if hasattr(m, "config") else {} for n, m in built.items()},
-            "command": command,
-            "version": __version__,
-            "jobs": int(jobs),
-            "created": _now(),
-            "n_cycles": len(seq.cycles),
-            "status": "running",
-            "cycles_done": 0,
-            "skipped_cycles": [],
-        }
-    run_json.update(status="running", updated=_now(), jobs=int(jobs))
-    _write_json(run_path, run_json)
+    with RunWriter(out, resume=resume) as writer:
+        if resume:
+            run_json = writer.run_json
+            old = _config_of(run_json)
+            diff = [k for k in config if _canon(old.get(k)) != _canon(config[k])]
+            if diff:
+                raise PlaybackError(
+                    f"{out / RUN_FILE}: --resume with a different configuration ({', '.join(diff)}): recorded "
+                    + "; ".join(f"{k}={old.get(k)!r}" for k in diff)
+                )
+            run_json["resumed"] = run_json.get("resumed", 0) + 1
+            run_json.setdefault("resume_commands", []).append(command)
+            if writer.lock.stale_owner:
+                run_json.setdefault("stale_locks", []).append(writer.lock.stale_owner)
+        else:
+            from emulator import __version__
 
-    image_root = {name: out / name / "images" for name in names}
-    if save != "none":
-        for name in names:
-            for cam in seq.cameras:
-                (image_root[name] / cam).mkdir(parents=True, exist_ok=True)
+            run_json = {
+                **config,
+                "white_level": white,
+                "black_level": black,
+                "cameras": list(seq.cameras),
+                "brackets_ms": list(seq.brackets),
+                "method_camera": METHOD_CAMERA,
+                "selector_camera": METHOD_CAMERA,
+                "method_options": {n: m.config() if hasattr(m, "config") else {} for n, m in built.items()},
+                "command": command,
+                "version": __version__,
+                "jobs": int(jobs),
+                "created": writer.lock.owner["started"],
+                "n_cycles": len(seq.cycles),
+                "status": "running",
+                "cycles_done": 0,
+                "skipped_cycles": [],
+            }
+        run_json["jobs"] = int(jobs)
+        writer.start(run_json, names, seq.cameras, save)
 
-    def write_images(st: MethodStep) -> None:
-        if save == "none":
-            return
-        rec = recorded.get(st.method, {}).get(st.cycle)
-        for cam, img in (("left", st.left), ("right", st.right)):
-            if img is None:
-                continue
-            path = image_root[st.method] / cam / f"{st.timestamp_ns}.png"
-            if rec is not None and path.exists():
-                continue
-            data = img if save == "png16" else _png8(img, int(seq.white_level))
-            write_png16(path, data, overwrite=True)
-
-    writers = {}
-    handles = {}
-    for name in names:
-        path = out / name / CSV_FILE
-        path.parent.mkdir(parents=True, exist_ok=True)
-        new = not path.exists() or path.stat().st_size == 0
-        fh = open(path, "a", newline="")
-        handles[name] = fh
-        writers[name] = csv.writer(fh, lineterminator="\n")
-        if new:
-            writers[name].writerow(CSV_COLUMNS + EXTRA_COLUMNS)
-            fh.flush()
-
-    stats = RunStats()
-    skipped: list[dict] = []
-    done = 0
-    status = "failed"
-    try:
-        gen = iter_run(seq, list(built.values()), initial_ms=initial_ms, range_ms=range_ms, selector=selector,
-                       response=response, jobs=jobs, emulate_right=save != "none", on_step=write_images, stats=stats)
-        for cs in gen:
-            if cs.skipped:
-                skipped.append({"cycle": cs.cycle, "reason": cs.skipped, "missing": cs.missing})
-            for name in names:
-                st = cs.steps.get(name)
-                if st is None:
+        def write_images(st: MethodStep) -> None:
+            if save == "none":
+                return
+            rec = writer.recorded(st.method, st.cycle)
+            for cam, img in (("left", st.left), ("right", st.right)):
+                if img is None:
                     continue
-                row = st.row()
-                rec = recorded.get(name, {}).get(st.cycle)
-                if rec is not None:
-                    if rec != row:
-                        raise PlaybackError(
-                            f"{out / name / CSV_FILE}: resume replay of cycle {st.cycle} differs from the recorded "
-                            f"row ({','.join(rec[:len(CSV_COLUMNS)])} recorded, {','.join(row[:len(CSV_COLUMNS)])} "
-                            "replayed); the folder was written by another configuration or version"
-                        )
-                else:
-                    writers[name].writerow(row)
-                    handles[name].flush()
-            done += 1
-            run_json.update(cycles_done=done, skipped_cycles=skipped, updated=_now())
-            _write_json(run_path, run_json)
-            if progress is not None:
-                progress(done, len(seq.cycles))
-        status = "complete"
-    except KeyboardInterrupt:
-        status = "interrupted"
-        raise
-    except BaseException as exc:
-        run_json["error"] = f"{type(exc).__name__}: {exc}"
-        raise
-    finally:
-        for fh in handles.values():
-            fh.close()
-        run_json.update(status=status, cycles_done=done, skipped_cycles=skipped, updated=_now())
-        if status == "complete":
-            run_json.pop("error", None)
-        run_json["timing"] = stats.as_dict()
-        _write_json(run_path, run_json)
-    if save != "none":
-        for name in names:
-            _write_times(out / name)
+                if rec is not None and writer.image_path(st.method, cam, st.timestamp_ns).exists():
+                    continue
+                data = img if save == "png16" else bayer_to_gray8(img, white_level=white, black_level=black)
+                writer.write_image(st.method, cam, st.timestamp_ns, data)
+
+        stats = RunStats()
+        skipped: list[dict] = []
+        done = 0
+        status = "failed"
+        try:
+            gen = iter_run(seq, list(built.values()), initial_ms=initial_ms, range_ms=range_ms, selector=selector,
+                           response=response, jobs=jobs, emulate_right=save != "none", on_step=write_images,
+                           stats=stats)
+            for cs in gen:
+                if cs.skipped:
+                    skipped.append({"cycle": cs.cycle, "reason": cs.skipped, "missing": cs.missing})
+                for name in names:
+                    st = cs.steps.get(name)
+                    if st is None:
+                        continue
+                    row = format_row(st)
+                    rec = writer.recorded(name, st.cycle)
+                    if rec is not None:
+                        if rec != row:
+                            raise PlaybackError(
+                                f"{out / name / CSV_FILE}: resume replay of cycle {st.cycle} differs from the recorded "
+                                f"row ({','.join(rec[:len(CSV_COLUMNS)])} recorded, "
+                                f"{','.join(row[:len(CSV_COLUMNS)])} replayed); the folder was written by another "
+                                "configuration or version"
+                            )
+                    else:
+                        writer.append_row(name, row)
+                done += 1
+                writer.update(cycles_done=done, skipped_cycles=skipped)
+                if progress is not None:
+                    progress(done, len(seq.cycles))
+            status = "complete"
+        except KeyboardInterrupt:
+            status = "interrupted"
+            raise
+        except BaseException as exc:
+            run_json["error"] = f"{type(exc).__name__}: {exc}"
+            raise
+        finally:
+            if status == "complete":
+                run_json.pop("error", None)
+            writer.update(status=status, cycles_done=done, skipped_cycles=skipped, timing=stats.as_dict())
+        if save != "none":
+            writer.write_times(names)
     if make_report:
-        return report(out)
-    return _summary(out)
+        from emulator.report.run import write_run_report
 
+        return write_run_report(out)
+    from emulator.report.run import summarise_run
 
-def _write_times(method_dir: Path) -> None:
-    rows = _read_csv_rows(method_dir / CSV_FILE)
-    lines = sorted((int(r[1]), float(r[2])) for r in rows)
-    text = "".join(f"{ns} {_timestamp_s(ns)} {ms!r}\n" for ns, ms in lines)
-    atomic_write_bytes(method_dir / "images" / TIMES_FILE, text.encode(), overwrite=True)
-
-
-# ============================================================================ report
-def _load_tables(run_dir: Path, names: Iterable[str]) -> dict[str, dict[str, np.ndarray]]:
-    tables = {}
-    for name in names:
-        path = run_dir / name / CSV_FILE
-        if not path.is_file():
-            raise PlaybackError(f"{path}: missing; not a complete run folder")
-        with open(path, newline="") as fh:
-            reader = csv.DictReader(fh)
-            rows = list(reader)
-        cols = {}
-        for col in CSV_COLUMNS + ("next_ms", "guarded", "clamped", "valid_fraction_right"):
-            vals = [r.get(col, "") for r in rows]
-            if col in ("cycle", "timestamp_ns", "guarded", "clamped"):
-                cols[col] = np.array([int(v) if v else 0 for v in vals], dtype=np.int64)
-            else:
-                cols[col] = np.array([float(v) if v else math.nan for v in vals], dtype=np.float64)
-        tables[name] = cols
-    return tables
-
-
-def _summary(run_dir: Path) -> dict:
-    run_dir = Path(run_dir)
-    info = json.loads((run_dir / RUN_FILE).read_text())
-    names = info["methods"]
-    tables = _load_tables(run_dir, names)
-    methods = {}
-    for name in names:
-        t = tables[name]
-        target = t["target_ms"]
-        n = target.size
-
-        def stat(fn, arr):
-            return float(fn(arr)) if arr.size else None
-
-        brackets, counts = np.unique(t["bracket_ms"], return_counts=True) if n else (np.array([]), np.array([]))
-        methods[name] = {
-            "mode": info.get("method_options", {}).get(name, {}).get("mode"),
-            "cycles": int(n),
-            "mean_exposure_ms": stat(np.mean, target),
-            "median_exposure_ms": stat(np.median, target),
-            "min_exposure_ms": stat(np.min, target),
-            "max_exposure_ms": stat(np.max, target),
-            "final_exposure_ms": float(t["next_ms"][-1]) if n else None,
-            "mean_saturated_fraction": stat(np.mean, t["saturated_fraction"]),
-            "mean_valid_fraction": stat(np.mean, t["valid_fraction"]),
-            "non_finite_proposals": int(t["guarded"].sum()),
-            "clamped": int(t["clamped"].sum()),
-            "bracket_use": {f"{b:g}": int(c) for b, c in zip(brackets, counts)},
-            "method_ms_per_frame": (info.get("timing") or {}).get("method_ms_per_frame", {}).get(name),
-        }
-    return {
-        "run": str(run_dir),
-        "sequence": info.get("sequence"),
-        "status": info.get("status"),
-        "cycles_done": info.get("cycles_done"),
-        "n_cycles": info.get("n_cycles"),
-        "skipped_cycles": info.get("skipped_cycles", []),
-        "selector": info.get("selector"),
-        "initial_ms": info.get("initial_ms"),
-        "range_ms": info.get("range_ms"),
-        "methods": methods,
-        "timing": info.get("timing"),
-    }
-
-
-def _plot(run_dir: Path, info: dict, tables: dict) -> Path:
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(9, 4.5), dpi=110)
-    t0 = min((int(t["timestamp_ns"][0]) for t in tables.values() if t["timestamp_ns"].size), default=0)
-    for b in info.get("brackets_ms", []):
-        ax.axhline(b, color="0.85", lw=0.8, zorder=0)
-    for name, t in tables.items():
-        if not t["timestamp_ns"].size:
-            continue
-        x = (t["timestamp_ns"] - t0) / 1e9
-        ax.step(x, t["target_ms"], where="post", marker="o", ms=3, lw=1.3, label=name)
-    ax.set_yscale("log")
-    ax.set_xlabel("time since first bracket [s]")
-    ax.set_ylabel("exposure [ms]")
-    ax.set_title(f"Exposure per cycle ({info.get('mode', '')} mode, start {info.get('initial_ms')} ms)")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8, ncol=2)
-    fig.tight_layout()
-    path = run_dir / PLOT_FILE
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png")
-    plt.close(fig)
-    atomic_write_bytes(path, buf.getvalue(), overwrite=True)
-    return path
+    return summarise_run(out)
 
 
 def report(run_dir) -> dict:
     """(Re)write ``results.json``, ``exposure.png`` and ``report.md`` of a run folder from its CSVs.
 
-    Returns the results dictionary.  Needs no recomputation: everything comes from
-    ``run.json`` and the per-method CSVs.
+    The same as :func:`emulator.report.run.write_run_report` (needs no recomputation).
     """
-    run_dir = Path(run_dir)
-    if not (run_dir / RUN_FILE).is_file():
-        raise PlaybackError(f"{run_dir}: not a run folder ({RUN_FILE} missing)")
-    summary = _summary(run_dir)
-    info = json.loads((run_dir / RUN_FILE).read_text())
-    tables = _load_tables(run_dir, info["methods"])
-    _plot(run_dir, info, tables)
-    _write_json(run_dir / RESULTS_FILE, summary)
-    lines = [
-        f"# AE closed-loop run: {Path(info.get('sequence', '')).name}",
-        "",
-        f"- sequence: `{info.get('sequence')}`",
-        f"- status: {info.get('status')}, cycles {info.get('cycles_done')}/{info.get('n_cycles')}",
-        f"- mode: {info.get('mode')}, selector: {info.get('selector')} (left camera's saturation decides)",
-        f"- initial exposure {info.get('initial_ms')} ms, clamp {info.get('range_ms')} ms, response `{info.get('response')}`",
-        f"- images: {info.get('save')}",
-        f"- command: `{info.get('command')}`, exposim {info.get('version')}",
-        "",
-        "![exposure against time](exposure.png)",
-        "",
-        "The paper (section V-D) compares the methods through features and VO, and shows no",
-        "exposure-against-time figure; this plot is the run's own record.",
-        "",
-        "| method | mode | cycles | mean ms | median ms | min ms | max ms | mean sat. | mean valid | non-finite | ms/frame |",
-        "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
-    ]
+    from emulator.report.run import write_run_report
 
-    def fmt(v, spec=".3g"):
-        return "-" if v is None else format(v, spec)
-
-    for name, m in summary["methods"].items():
-        lines.append(
-            f"| {name} | {m['mode']} | {m['cycles']} | {fmt(m['mean_exposure_ms'])} | {fmt(m['median_exposure_ms'])} | "
-            f"{fmt(m['min_exposure_ms'])} | {fmt(m['max_exposure_ms'])} | {fmt(m['mean_saturated_fraction'], '.2%')} | "
-            f"{fmt(m['mean_valid_fraction'], '.2%')} | {m['non_finite_proposals']} | {fmt(m['method_ms_per_frame'], '.1f')} |"
-        )
-    skipped = summary.get("skipped_cycles") or []
-    lines += ["", f"Skipped cycles: {len(skipped)}"]
-    for s in skipped:
-        lines.append(f"- cycle {s['cycle']}: {s['reason']}")
-    timing = summary.get("timing") or {}
-    if timing:
-        lines += [
-            "",
-            f"Timing: {timing.get('cycles')} cycles in {fmt(timing.get('wall_s'))} s "
-            f"({fmt(timing.get('cycles_per_s'))} cycles/s), {timing.get('decodes')} PNG decodes "
-            f"({fmt(timing.get('decode_ms_per_image'), '.1f')} ms each), {timing.get('emulations')} emulations "
-            f"({fmt(timing.get('emulate_ms_per_image'), '.1f')} ms each).",
-        ]
-    atomic_write_bytes(run_dir / REPORT_FILE, ("\n".join(lines) + "\n").encode(), overwrite=True)
-    return summary
+    return write_run_report(run_dir)

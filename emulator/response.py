@@ -11,64 +11,25 @@ increasing, so that
 Units of g are arbitrary (the TUM / BorealHDR ``pcalib`` files use g(white) = 255);
 emulation only uses ratios of g, so a global scale is irrelevant.  An *offset* is not
 neutral under a ratio, which is why pcalib samples are read exactly as given
-(DESIGN.md, "How the table is read matters").
+(DESIGN.md, "How the table is read matters").  Files are read and written by
+:mod:`emulator.io.pcalib` (:func:`~emulator.io.pcalib.read_response`).
 """
 
 from __future__ import annotations
 
 import math
-import os
 import threading
 from collections import OrderedDict
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
 from emulator.errors import ResponseError
 
-__all__ = ["CameraResponse", "read_pcalib", "write_pcalib"]
+__all__ = ["CameraResponse"]
 
 #: How many per-ratio emulation tables a response keeps (each is 8 KiB for 12 bits).
 LUT_CACHE_SIZE = 512
-
-
-def read_pcalib(path: str | os.PathLike) -> np.ndarray:
-    """Read a TUM / BorealHDR ``pcalib`` file: whitespace-separated samples of g.
-
-    Returns the samples as float64, unchanged.  Raises :class:`ResponseError` naming the
-    file for an empty file, unparsable tokens or non-finite values.  Monotonicity and
-    count are checked by :meth:`CameraResponse.from_pcalib`, which knows the bit depth.
-    """
-    path = Path(path)
-    try:
-        text = path.read_text()
-    except FileNotFoundError:
-        raise FileNotFoundError(f"{path}: response file not found") from None
-    except UnicodeDecodeError:
-        raise ResponseError(f"{path}: not a text file (pcalib files hold whitespace-separated numbers)") from None
-    tokens = text.split()
-    if not tokens:
-        raise ResponseError(f"{path}: empty file, expected whitespace-separated samples of the inverse response")
-    values = np.empty(len(tokens), dtype=np.float64)
-    for i, tok in enumerate(tokens):
-        try:
-            values[i] = float(tok)
-        except ValueError:
-            raise ResponseError(f"{path}: sample {i} is {tok!r}, not a number") from None
-    bad = ~np.isfinite(values)
-    if bad.any():
-        first = int(np.flatnonzero(bad)[0])
-        raise ResponseError(
-            f"{path}: {int(bad.sum())} non-finite sample(s), the first at index {first} ({tokens[first]!r})"
-        )
-    return values
-
-
-def write_pcalib(path: str | os.PathLike, samples: np.ndarray) -> None:
-    """Write samples of g in the pcalib format (one line, space-separated, full precision)."""
-    samples = np.asarray(samples, dtype=np.float64)
-    Path(path).write_text(" ".join(repr(float(v)) for v in samples) + "\n")
 
 
 def _check_increasing(g: np.ndarray, source: str) -> None:
@@ -157,29 +118,6 @@ class CameraResponse:
         return cls(g, white_level, black_level, name, samples)
 
     @classmethod
-    def from_pcalib(
-        cls,
-        path: str | os.PathLike,
-        white_level: int = 4095,
-        *,
-        black_level: int = 0,
-        expected_count: int | None = 256,
-    ) -> "CameraResponse":
-        """Read a TUM / BorealHDR pcalib file (N samples of g over DN 0..white_level).
-
-        The samples are used as given: no renormalisation, no forcing of the end knots.
-        ``expected_count`` (256 for the TUM format) is enforced unless None; a table with
-        ``white_level + 1`` samples (one per DN) is always accepted.
-        """
-        samples = read_pcalib(path)
-        n = samples.size
-        if expected_count is not None and n not in (expected_count, int(white_level) + 1):
-            raise ResponseError(
-                f"{path}: expected {expected_count} samples (or {int(white_level) + 1}, one per DN), got {n}"
-            )
-        return cls.from_samples(samples, white_level, black_level=black_level, name=str(path))
-
-    @classmethod
     def linear(cls, white_level: int = 4095, *, black_level: int = 0) -> "CameraResponse":
         """g(d) = (d - black) / (white - black): a linear sensor with its black offset.
 
@@ -264,11 +202,6 @@ class CameraResponse:
             while len(self._luts) > LUT_CACHE_SIZE:
                 self._luts.popitem(last=False)
         return table, valid
-
-    def to_pcalib(self, path: str | os.PathLike, n_samples: int = 256) -> None:
-        """Write g sampled at N evenly spaced DN in the pcalib format."""
-        knots_dn = np.linspace(0.0, float(self.white_level), n_samples)
-        write_pcalib(path, self.inverse(knots_dn))
 
     def __repr__(self) -> str:
         return f"CameraResponse({self.name!r}, white_level={self.white_level}, black_level={self.black_level})"

@@ -20,7 +20,7 @@ from __future__ import annotations
 from scenes import library as _library  # registers the scenes  # noqa: F401
 from scenes import trajectory
 from scenes.base import SCENES, Scene, code_fingerprint, get_scene
-from scenes.cache import default_cache_dir, read_exr, render_key, write_exr
+from scenes.cache import default_cache_dir, render_key
 from scenes.camera import DEFAULT_FOV_DEG, intrinsics, intrinsics_matrix, pose_to_mitsuba, project
 from scenes.dynamic_range import dynamic_range_db, luminance
 from scenes.errors import RenderError, SceneError
@@ -62,8 +62,6 @@ __all__ = [
     "BASELINE_M",
     "WALKING_SPEED_MPS",
     "default_cache_dir",
-    "read_exr",
-    "write_exr",
     "render_key",
     "code_fingerprint",
     "SceneError",

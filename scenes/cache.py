@@ -1,4 +1,4 @@
-"""On-disk render cache: OpenEXR float32 RGB files named by a content hash.
+"""On-disk render cache: OpenEXR float32 RGB files (:mod:`emulator.io.exr`) named by a content hash.
 
 The key hashes everything that affects the pixels: the scene (name, every
 parameter, seed, and a fingerprint of the scene-building source code), the
@@ -24,7 +24,7 @@ import numpy as np
 from scenes.errors import RenderError
 
 __all__ = ["ENV_CACHE_DIR", "default_cache_dir", "resolve_cache_dir", "canonical_json", "library_versions",
-           "render_key", "cache_path", "write_exr", "read_exr"]
+           "render_key", "cache_path", "store_entry", "load_entry"]
 
 #: Environment variable overriding the default cache folder.
 ENV_CACHE_DIR = "EXPOSIM_CACHE"
@@ -106,8 +106,8 @@ def cache_path(cache_dir: Path, key: str) -> Path:
     return Path(cache_dir) / key[:2] / f"{key}.exr"
 
 
-def write_exr(path, radiance: np.ndarray, attributes: dict | None = None) -> Path:
-    """Write float32 RGB radiance as OpenEXR (ZIP, scanlines), atomically, replacing ``path``.
+def store_entry(path, radiance: np.ndarray, attributes: dict | None = None) -> Path:
+    """Write one cache entry: float32 RGB radiance as OpenEXR (:mod:`emulator.io.exr`), replacing ``path``.
 
     Parameters
     ----------
@@ -118,16 +118,16 @@ def write_exr(path, radiance: np.ndarray, attributes: dict | None = None) -> Pat
     attributes : dict, optional
         Extra string header attributes (e.g. the cache key material).
     """
-    from synth.sequence import write_exr as _write
+    from emulator.io.exr import write_exr
 
     a = np.ascontiguousarray(radiance)
     if a.dtype != np.float32 or a.ndim != 3 or a.shape[2] != 3:
-        raise RenderError(f"write_exr: radiance must be float32 (H, W, 3), got {a.dtype} {a.shape} for {path}")
-    return _write(path, a, overwrite=True, attributes=attributes)
+        raise RenderError(f"{path}: a cache entry must be float32 (H, W, 3) radiance, got {a.dtype} {a.shape}")
+    return write_exr(path, a, overwrite=True, attributes=attributes)
 
 
-def read_exr(path) -> np.ndarray:
-    """Read an RGB OpenEXR file as float32 (H, W, 3).
+def load_entry(path) -> np.ndarray:
+    """Read one cache entry as float32 (H, W, 3).
 
     Raises
     ------
@@ -136,14 +136,12 @@ def read_exr(path) -> np.ndarray:
     RenderError
         The file is not a readable RGB EXR.
     """
-    from synth.errors import SynthError
-    from synth.sequence import read_exr as _read
+    from emulator.errors import DatasetError
+    from emulator.io.exr import read_exr
 
     try:
-        a = _read(path)
-    except FileNotFoundError:
-        raise FileNotFoundError(f"no such EXR file: {path}") from None
-    except SynthError as exc:
+        a = read_exr(path)
+    except DatasetError as exc:
         raise RenderError(str(exc)) from exc
     if a.ndim != 3:
         raise RenderError(f"{path}: not an RGB OpenEXR file (one channel)")

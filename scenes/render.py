@@ -15,7 +15,7 @@ import warnings
 import numpy as np
 
 from scenes.base import Scene, get_scene
-from scenes.cache import cache_path, canonical_json, read_exr, render_key, resolve_cache_dir, write_exr
+from scenes.cache import cache_path, canonical_json, load_entry, render_key, resolve_cache_dir, store_entry
 from scenes.camera import DEFAULT_FOV_DEG, _check_fov, _check_size, check_pose
 from scenes.errors import RenderError
 from scenes.variant import check_variant_name, choose_variant, ensure_variant
@@ -151,7 +151,7 @@ def render(
         path = cache_path(folder, key)
         if path.is_file():
             try:
-                cached = read_exr(path)
+                cached = load_entry(path)
             except RenderError:
                 cached = None  # unreadable (e.g. truncated by a crash elsewhere): render again
             if cached is not None and cached.shape == (height, width, 3):
@@ -166,7 +166,7 @@ def render(
         raise RenderError(f"render of {scene.name} produced negative radiance (variant {variant})")
     if path is not None:
         try:
-            write_exr(path, image, {"exposim_render_key": canonical_json(material)})
+            store_entry(path, image, {"exposim_render_key": canonical_json(material)})
         except OSError as exc:  # a read-only or full cache must not lose a finished render
             warnings.warn(f"render cache: could not write {path}: {exc}", RuntimeWarning, stacklevel=2)
     return image

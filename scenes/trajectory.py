@@ -3,8 +3,8 @@
 A trajectory maps a timestamp (seconds) to a 4x4 camera-to-world pose of the
 left camera in the OpenCV camera frame (x right, y down, z forward); the world
 frame has z up and the ground at z = 0.  :func:`stereo_right` gives the right
-camera of the rig.  On disk, poses use the TUM format that evo reads:
-``timestamp_s tx ty tz qx qy qz qw``.
+camera of the rig.  On disk, poses use the TUM format that evo reads
+(:mod:`emulator.io.tum`).
 """
 
 from __future__ import annotations
@@ -25,9 +25,6 @@ __all__ = [
     "static",
     "look_pose",
     "stereo_right",
-    "pose_to_tum",
-    "write_tum",
-    "read_tum",
 ]
 
 #: 2 km/h, the BorealHDR walking pace, in m/s.
@@ -275,56 +272,3 @@ def stereo_right(pose, baseline_m: float = BASELINE_M) -> np.ndarray:
     m = check_pose(pose).copy()
     m[:3, 3] = m[:3, 3] + float(baseline_m) * m[:3, 0]
     return m
-
-
-def _quat_xyzw(r: np.ndarray) -> np.ndarray:
-    from scipy.spatial.transform import Rotation
-
-    q = Rotation.from_matrix(r).as_quat()  # (x, y, z, w)
-    return q if q[3] >= 0 else -q
-
-
-def pose_to_tum(timestamp_s: float, pose) -> str:
-    """One TUM line ``timestamp tx ty tz qx qy qz qw`` (17 significant digits)."""
-    from scenes.camera import check_pose
-
-    m = check_pose(pose)
-    vals = [float(timestamp_s), *m[:3, 3], *_quat_xyzw(m[:3, :3])]
-    return " ".join(f"{v:.17g}" for v in vals)
-
-
-def write_tum(path, timestamps_s, poses) -> Path:
-    """Write poses in TUM format (what evo reads); returns the path.
-
-    Parameters
-    ----------
-    path : str or pathlib.Path
-        Output text file (overwritten).
-    timestamps_s : array-like
-        (N,) seconds.
-    poses : array-like
-        (N, 4, 4) camera-to-world poses.
-    """
-    ts = np.atleast_1d(np.asarray(timestamps_s, dtype=np.float64))
-    ps = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
-    if ts.shape[0] != ps.shape[0]:
-        raise SceneError(f"write_tum: {ts.shape[0]} timestamps but {ps.shape[0]} poses for {path}")
-    path = Path(path)
-    path.write_text("".join(pose_to_tum(t, p) + "\n" for t, p in zip(ts, ps)))
-    return path
-
-
-def read_tum(path) -> tuple[np.ndarray, np.ndarray]:
-    """Read a TUM file: (timestamps float64 (N,), poses float64 (N, 4, 4))."""
-    from scipy.spatial.transform import Rotation
-
-    path = Path(path)
-    rows = [ln.split() for ln in path.read_text().splitlines() if ln.strip() and not ln.startswith("#")]
-    if any(len(r) != 8 for r in rows):
-        raise SceneError(f"{path}: every TUM line needs 8 numbers: timestamp tx ty tz qx qy qz qw")
-    a = np.array(rows, dtype=np.float64).reshape(-1, 8)
-    poses = np.tile(np.eye(4), (a.shape[0], 1, 1))
-    if a.shape[0]:
-        poses[:, :3, :3] = Rotation.from_quat(a[:, 4:8]).as_matrix()
-        poses[:, :3, 3] = a[:, 1:4]
-    return a[:, 0], poses

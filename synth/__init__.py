@@ -20,9 +20,7 @@ from synth.sequence import (
     Shot,
     capture_sequence,
     load_camera,
-    read_exr,
     shot_schedule,
-    write_exr,
 )
 from synth.errors import CameraError, RadianceError, SourceError, SynthError
 
@@ -33,8 +31,6 @@ __all__ = [
     "shot_schedule",
     "Shot",
     "load_camera",
-    "read_exr",
-    "write_exr",
     "noise_model_g",
     "procedural",
     "PRESETS",

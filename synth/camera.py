@@ -60,6 +60,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from emulator.io.borealhdr import BOREALHDR_WHITE_LEVEL
 from emulator.response import CameraResponse
 from synth.errors import CameraError, RadianceError, SynthError
 from synth.response_fit import FIT_TABLE_TOP, inverse_response_curve
@@ -91,7 +92,7 @@ REFERENCE_RADIANCE = 1000.0 / math.pi
 #: Horizontal field of view of the BorealHDR left camera: 2 atan(960 / 1180.805) (fx from
 #: ``calibration/september_2023/left.yaml``), degrees.
 BOREALHDR_FOV_X_DEG = math.degrees(2.0 * math.atan(960.0 / 1180.80514))
-#: The pcalib format (and ``emulator.dataset.sequence_response``) spans DN 0..4095.
+#: The pcalib format (and ``emulator.io.borealhdr.sequence_response``) spans DN 0..4095.
 PCALIB_TABLE_TOP = FIT_TABLE_TOP
 
 BAYER_PATTERNS = ("RGGB", "BGGR", "GRBG", "GBRG")
@@ -311,7 +312,7 @@ class Camera:
         except (KeyError, TypeError):
             raise CameraError(f"unknown camera preset {name!r}; choose from {', '.join(PRESETS)}") from None
         fields = dict(_PRESET_SENSOR)
-        fields["white_level"] = 4094 if name == "borealhdr" else 4095
+        fields["white_level"] = BOREALHDR_WHITE_LEVEL if name == "borealhdr" else 4095
         fields.update(overrides)
         if "response" not in overrides:
             fields["response"] = _preset_response(

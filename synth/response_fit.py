@@ -169,7 +169,7 @@ def main(argv: list[str] | None = None) -> int:
     else:
         path = (Path(__file__).resolve().parents[2] / "shared" / "data" / "borealhdr_sample" / "calibration"
                 / "pcalib_inside1.txt")
-    from emulator.response import read_pcalib
+    from emulator.io.pcalib import read_pcalib
 
     samples = read_pcalib(path)
     params = fit_inverse_response(samples)

@@ -7,8 +7,8 @@ shot the source gives the radiance and pose of each camera at that instant (the 
 sampled at the trigger instant: no motion blur within an exposure), and the camera model
 (:func:`synth.capture`) turns it into a raw image.
 
-Written layout (``emulator.dataset.load_sequence`` reads the first two lines and ignores
-the rest)::
+Written layout (``emulator.io.borealhdr.load_sequence`` reads the first two lines and
+ignores the rest; every file goes through :mod:`emulator.io`)::
 
     <seq>/camera_left/<exposure_ms>/<timestamp_ns>.png    16-bit PNG, raw Bayer DN
     <seq>/camera_right/<exposure_ms>/<timestamp_ns>.png   (stereo)
@@ -31,8 +31,6 @@ exposim dataset.
 
 from __future__ import annotations
 
-import io
-import json
 import math
 import os
 import shutil
@@ -42,16 +40,21 @@ from pathlib import Path
 
 import numpy as np
 
-from emulator.dataset import (
+from emulator.errors import OutputExistsError
+from emulator.io.borealhdr import (
     CAMERA_FOLDERS,
     METADATA_FILE,
-    atomic_write_bytes,
     exposure_folder_name,
+    read_recording_metadata,
     write_frame,
-    write_png16,
+    write_recording_metadata,
 )
-from emulator.errors import OutputExistsError
-from emulator.response import CameraResponse, write_pcalib
+from emulator.io.camera_info import CameraInfo, write_camera_info
+from emulator.io.exr import write_exr
+from emulator.io.pcalib import read_response, write_pcalib
+from emulator.io.png import write_png16
+from emulator.io.tum import write_tum
+from emulator.response import CameraResponse
 from synth.camera import PCALIB_TABLE_TOP, Camera, _extend_table, capture, check_exposure_ms
 from synth.errors import RadianceError, SourceError, SynthError
 
@@ -64,10 +67,7 @@ __all__ = [
     "shot_schedule",
     "capture_sequence",
     "load_camera",
-    "write_exr",
-    "read_exr",
-    "pose_to_tum",
-    "camera_info_yaml",
+    "camera_info",
     "GENERATOR",
 ]
 
@@ -169,76 +169,9 @@ def shot_schedule(
     return shots
 
 
-# ---------------------------------------------------------------------------- file formats
-def write_exr(
-    path: str | os.PathLike,
-    radiance: np.ndarray,
-    *,
-    overwrite: bool = False,
-    attributes: dict | None = None,
-) -> Path:
-    """Write float32 radiance as OpenEXR (ZIP, scanlines, channel "RGB" or "Y"), atomically.
-
-    ``attributes`` are extra string header attributes (e.g. a render-cache key).  The same
-    array and attributes give the same bytes.
-    """
-    import OpenEXR
-
-    radiance = np.ascontiguousarray(radiance, dtype=np.float32)
-    channels = {"RGB": radiance} if radiance.ndim == 3 else {"Y": radiance}
-    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-    for key, value in (attributes or {}).items():
-        header[str(key)] = str(value)
-    buf = io.BytesIO()
-    OpenEXR.File(header, channels).write(buf)
-    return atomic_write_bytes(path, buf.getvalue(), overwrite=overwrite)
-
-
-def read_exr(path: str | os.PathLike) -> np.ndarray:
-    """Read a radiance EXR: float32 (H, W, 3) from "RGB" or "R", "G", "B" channels, or (H, W) from "Y".
-
-    Raises FileNotFoundError for a missing file and :class:`SynthError` naming the file for
-    one that is not a readable OpenEXR radiance image.
-    """
-    import OpenEXR
-
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: EXR file not found")
-    try:
-        with OpenEXR.File(str(path)) as f:
-            channels = f.channels()
-            if "RGB" in channels:
-                a = channels["RGB"].pixels
-            elif all(c in channels for c in "RGB"):
-                a = np.stack([channels[c].pixels for c in "RGB"], axis=-1)
-            elif "Y" in channels:
-                a = channels["Y"].pixels
-            else:
-                raise SynthError(f"{path}: expected an 'RGB' or 'Y' channel, found {', '.join(channels)}")
-    except (KeyError, RuntimeError, OSError, ValueError) as exc:
-        raise SynthError(f"{path}: not a readable OpenEXR file ({exc})") from exc
-    return np.ascontiguousarray(a, dtype=np.float32)
-
-
-def _timestamp_s(timestamp_ns: int) -> str:
-    """Seconds with nanosecond digits, exactly (no float rounding)."""
-    return f"{timestamp_ns // 1_000_000_000}.{timestamp_ns % 1_000_000_000:09d}"
-
-
-def pose_to_tum(timestamp_ns: int, pose: np.ndarray) -> str:
-    """One TUM line ``timestamp_s tx ty tz qx qy qz qw`` (quaternion with qw >= 0)."""
-    from scipy.spatial.transform import Rotation
-
-    q = Rotation.from_matrix(pose[:3, :3]).as_quat()
-    if q[3] < 0:
-        q = -q
-    values = [*pose[:3, 3], *q]
-    return _timestamp_s(timestamp_ns) + " " + " ".join(f"{v:.9f}" for v in values)
-
-
-def camera_info_yaml(camera: Camera, side: str, baseline_m: float) -> str:
-    """ROS camera_info YAML of a synthetic camera: no distortion, identity rectification.
+# ---------------------------------------------------------------------------- calibration files
+def camera_info(camera: Camera, side: str, baseline_m: float) -> CameraInfo:
+    """ROS camera_info of a synthetic camera: no distortion, identity rectification.
 
     The projection matrix carries the stereo baseline as ``P[0, 3] = -fx * baseline_m`` for
     the right camera (0 for the left one), as in the BorealHDR calibration files.
@@ -246,25 +179,20 @@ def camera_info_yaml(camera: Camera, side: str, baseline_m: float) -> str:
     k = camera.intrinsics()
     fx, fy, cx, cy = k[0, 0], k[1, 1], k[0, 2], k[1, 2]
     tx = -fx * baseline_m if side == "right" else 0.0
-    fmt = lambda vals: "[" + ", ".join(repr(float(v)) for v in vals) + "]"  # noqa: E731
-    return (
-        f"image_width: {camera.width}\n"
-        f"image_height: {camera.height}\n"
-        f"camera_name: exposim_synth/{side}\n"
-        "camera_matrix:\n  rows: 3\n  cols: 3\n"
-        f"  data: {fmt([fx, 0, cx, 0, fy, cy, 0, 0, 1])}\n"
-        "distortion_model: plumb_bob\n"
-        "distortion_coefficients:\n  rows: 1\n  cols: 5\n"
-        f"  data: {fmt([0, 0, 0, 0, 0])}\n"
-        "rectification_matrix:\n  rows: 3\n  cols: 3\n"
-        f"  data: {fmt([1, 0, 0, 0, 1, 0, 0, 0, 1])}\n"
-        "projection_matrix:\n  rows: 3\n  cols: 4\n"
-        f"  data: {fmt([fx, 0, cx, tx, 0, fy, cy, 0, 0, 0, 1, 0])}\n"
+    return CameraInfo(
+        width=camera.width,
+        height=camera.height,
+        K=np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1]], dtype=np.float64),
+        D=np.zeros(5),
+        R=np.eye(3),
+        P=np.array([[fx, 0, cx, tx], [0, fy, cy, 0], [0, 0, 1, 0]], dtype=np.float64),
+        distortion_model="plumb_bob",
+        name=f"exposim_synth/{side}",
     )
 
 
 def _response_table(camera: Camera) -> np.ndarray:
-    """g over DN 0..max(4095, white): what ``emulator.dataset.sequence_response`` reads back.
+    """g over DN 0..max(4095, white): what ``emulator.io.borealhdr.sequence_response`` reads back.
 
     Above the white level the table continues the last step; those DN never occur (the
     camera and the emulator clip at white), so they change no output.
@@ -281,13 +209,12 @@ def load_camera(sequence_path: str | os.PathLike) -> Camera:
     meta_path = root / METADATA_FILE
     if not meta_path.is_file():
         raise FileNotFoundError(f"{meta_path}: not found (not a synthetic dataset?)")
-    try:
-        meta = json.loads(meta_path.read_text())
-        desc = meta["camera"]
-    except (json.JSONDecodeError, KeyError) as exc:
-        raise SynthError(f"{meta_path}: no readable camera description ({exc})") from None
+    meta = read_recording_metadata(root)
+    desc = meta.get("camera")
+    if not isinstance(desc, dict) or "white_level" not in desc:
+        raise SynthError(f"{meta_path}: no readable camera description ('camera' with a 'white_level')")
     top = max(PCALIB_TABLE_TOP, int(desc["white_level"]))
-    table = CameraResponse.from_pcalib(root / "calibration" / "response.txt", white_level=top)
+    table = read_response(root / "calibration" / "response.txt", white_level=top)
     response = CameraResponse(table.g, top, 0, str(desc.get("response", table.name)))
     return Camera.from_dict(desc, response)
 
@@ -529,20 +456,18 @@ def capture_sequence(
 
         gt_dir = staging / "ground_truth"
         for side in sides:
-            lines = [pose_to_tum(s.timestamp_ns, p) for s, p in zip(shots, poses[side])]
-            atomic_write_bytes(gt_dir / f"poses_{side}.txt", ("\n".join(lines) + "\n").encode())
+            write_tum(gt_dir / f"poses_{side}.txt", [s.timestamp_ns for s in shots], np.stack(poses[side]),
+                      overwrite=False)
         calib = staging / "calibration"
-        calib.mkdir(parents=True, exist_ok=True)
         write_pcalib(calib / "response.txt", _response_table(camera))
         for side in sides:
-            yaml_text = camera_info_yaml(camera, side, baseline_m if stereo else 0.0)
-            atomic_write_bytes(calib / f"{side}.yaml", yaml_text.encode())
+            write_camera_info(calib / f"{side}.yaml", camera_info(camera, side, baseline_m if stereo else 0.0))
         meta = _metadata(camera, shots, brackets, fps=fps, stereo=stereo, baseline_m=baseline_m, seed=seed,
                          noise=noise, gt_exposures=gt_exposures, gt_captures=gt_captures,
                          save_radiance=save_radiance, start_time_ns=start_time_ns,
                          start_bracket_index=start_bracket_index,
                          source=_describe(source, source_description))
-        atomic_write_bytes(staging / METADATA_FILE, (json.dumps(meta, indent=2, default=str) + "\n").encode())
+        write_recording_metadata(staging, meta)
         _publish(staging, out_dir, overwrite)
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)

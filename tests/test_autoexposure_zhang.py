@@ -9,6 +9,7 @@ import pytest
 
 from emulator.autoexposure import Zhang2017
 from emulator.autoexposure.zhang import REF_PIXELS, ref_icrf_derivative, sine_weights
+from emulator.io.pcalib import read_response
 from emulator.response import CameraResponse
 
 FULL = (1200, 1920)
@@ -16,7 +17,7 @@ FULL = (1200, 1920)
 
 @pytest.fixture(scope="module")
 def pcalib(pcalib_path):
-    return CameraResponse.from_pcalib(pcalib_path)
+    return read_response(pcalib_path)
 
 
 @pytest.fixture(scope="module")

@@ -14,7 +14,9 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from emulator.cli import main
-from emulator.metrics.rpe import write_tum
+from emulator.gray import bayer_to_gray8
+from emulator.io.runfolder import read_run_folder
+from emulator.io.tum import write_tum
 
 try:
     from test_metrics_vo import SHARED, make_synthetic_run
@@ -141,7 +143,7 @@ def test_bench_features_cli(tmp_path, capsys):
     assert "Fig. 4" in (out / "report.md").read_text()
     # never overwrite silently
     code, _, err = run_cli(capsys, "bench", "features", str(run), "-o", str(out), "-q")
-    assert code == 1 and "results.json exists" in err and err.count("\n") == 1
+    assert code == 1 and "results.json: exists; refusing to overwrite" in err and err.count("\n") == 1
     code, _, err = run_cli(capsys, "bench", "features", str(run), "-o", str(out), "-q", "--force",
                            "--methods", "fixed", "--max-frames", "2")
     assert code == 0, err
@@ -152,9 +154,10 @@ def test_bench_features_two_runs_and_png8(tmp_path, capsys):
     a = write_feature_run(tmp_path / "a", methods=("fixed",), n=3)
     b = tmp_path / "b"
     write_feature_run(b, methods=("fixed",), n=3)
+    levels = read_run_folder(b)
     for p in (b / "fixed" / "images" / "left").glob("*.png"):  # the same run saved as png8
         raw = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
-        cv2.imwrite(str(p), np.rint(cv2.cvtColor(raw, cv2.COLOR_BayerRG2GRAY).astype(np.float64) * 255 / 4095).astype(np.uint8))
+        cv2.imwrite(str(p), bayer_to_gray8(raw, white_level=levels.white_level, black_level=levels.black_level))
     code, _, err = run_cli(capsys, "bench", "features", str(a), str(b), "-o", str(tmp_path / "out"), "-q")
     assert code == 0, err
     results = json.loads((tmp_path / "out" / "results.json").read_text())

@@ -20,13 +20,12 @@ from emulator.calibrate import (
     cross_bracket_error,
     estimate_noise_dn,
     fit_inverse_response,
-    read_stack,
     response_error,
-    write_response,
-    write_stack,
 )
 from emulator.cli import main
-from emulator.dataset import load_sequence, write_frame
+from emulator.io.borealhdr import load_sequence, write_frame
+from emulator.io.pcalib import read_response, write_response
+from emulator.io.stack import read_stack, write_stack
 from emulator.response import CameraResponse
 
 SHARED = Path(__file__).resolve().parents[2] / "shared"
@@ -160,7 +159,7 @@ def test_offset_is_identified():
 
 
 def test_noisy_recovery_is_monotone_and_close():
-    truth = CameraResponse.from_pcalib(PCALIB) if PCALIB.is_file() else CameraResponse.gamma(2.0)
+    truth = read_response(PCALIB)
     imgs, t = stack_arrays(truth, n=16, noise_e=10000.0)
     res = fit_inverse_response(imgs.reshape(len(t), -1), t)
     assert np.all(np.diff(res.response.g) > 0)
@@ -192,18 +191,18 @@ def test_geometric_exposures_are_flagged():
 def test_pcalib_roundtrip(tmp_path):
     imgs, t = stack_arrays(CameraResponse.gamma(2.2), n=12)
     res = fit_inverse_response(imgs.reshape(len(t), -1), t)
-    path = write_response(res, tmp_path / "response.txt")
-    back = CameraResponse.from_pcalib(path)
+    path = write_response(tmp_path / "response.txt", res.response)
+    back = read_response(path)
     assert back.knots.size == 256 and back.knots[-1] == pytest.approx(255.0)
     np.testing.assert_allclose(back.g, res.response.g, rtol=1e-12, atol=1e-12)
     with pytest.raises(FileExistsError):
-        write_response(res, path)
+        write_response(path, res.response)
 
 
 # ---------------------------------------------------------------------------- bad stacks
 def test_bad_stack_one_exposure(tmp_path):
     imgs, t = stack_arrays(CameraResponse.linear(), n=3)
-    root = write_stack(tmp_path / "st", imgs, [5.0, 5.0, 5.0])
+    root = write_stack(tmp_path / "st", imgs, [5.0, 5.0, 5.0], white_level=4095)
     with pytest.raises(CalibrationError, match=r"st: needs at least two distinct exposure times, got 1 \(5 ms"):
         calibrate_stack(root)
 
@@ -211,14 +210,14 @@ def test_bad_stack_one_exposure(tmp_path):
 def test_bad_stack_all_saturated(tmp_path):
     sat = np.full((3, 16, 16), 4095, np.uint16)
     sat[1, :8] = 0
-    root = write_stack(tmp_path / "st", sat, [1.0, 2.0, 4.0])
+    root = write_stack(tmp_path / "st", sat, [1.0, 2.0, 4.0], white_level=4095)
     with pytest.raises(CalibrationError, match="all images saturated or black"):
         calibrate_stack(root)
 
 
 def test_bad_stack_mixed_sizes(tmp_path):
     imgs, t = stack_arrays(CameraResponse.linear(), n=3)
-    root = write_stack(tmp_path / "st", list(imgs[:2]) + [imgs[2][:, :32].copy()], t)
+    root = write_stack(tmp_path / "st", list(imgs[:2]) + [imgs[2][:, :32].copy()], t, white_level=4095)
     with pytest.raises(CalibrationError, match=r"00002\.png: image size 32x48 differs .*mixed sizes"):
         calibrate_stack(root)
 
@@ -228,12 +227,12 @@ def test_bad_stack_moving_scene(tmp_path):
     truth = CameraResponse.linear()
     t = exposures_for(big[:48, :64], truth, 12)
     imgs = [render(big[3 * i: 3 * i + 48, 2 * i: 2 * i + 64], ti, truth, noise_e=10000.0, seed=i) for i, ti in enumerate(t)]
-    root = write_stack(tmp_path / "moving", imgs, t)
+    root = write_stack(tmp_path / "moving", imgs, t, white_level=4095)
     with pytest.raises(CalibrationError, match="scene is not static: fit residual .* far above the noise"):
         calibrate_stack(root)
     # the same stack, static, passes
     imgs = [render(big[:48, :64], ti, truth, noise_e=10000.0, seed=i) for i, ti in enumerate(t)]
-    res = calibrate_stack(write_stack(tmp_path / "static", imgs, t))
+    res = calibrate_stack(write_stack(tmp_path / "static", imgs, t, white_level=4095))
     assert res.residual_rms_dn < res.info["static_limit_dn"]
     assert np.isfinite(res.noise_dn) and res.noise_dn > 1
 
@@ -290,7 +289,7 @@ def test_comparagram_excludes_clipped_tails(tmp_path):
 @pytest.mark.skipif(not SAMPLE_SEQ.is_dir() or not PCALIB.is_file(), reason="shared BorealHDR sample not found")
 def test_cross_bracket_error_real_sample():
     seq = load_sequence(SAMPLE_SEQ)
-    pc = CameraResponse.from_pcalib(PCALIB)
+    pc = read_response(PCALIB)
     a = cross_bracket_error(seq, pc, cameras=("left",))
     b = cross_bracket_error(seq, CameraResponse.linear(), cameras=("left",))
     # 14 consecutive pairs in the left camera's sweeps, both directions
@@ -302,13 +301,13 @@ def test_cross_bracket_error_real_sample():
 # ---------------------------------------------------------------------------- CLI
 def test_cli_calibrate_stack(tmp_path, capsys):
     imgs, t = stack_arrays(CameraResponse.gamma(2.2), n=12)
-    root = write_stack(tmp_path / "st", imgs, t)
+    root = write_stack(tmp_path / "st", imgs, t, white_level=4095)
     out = tmp_path / "resp" / "response.txt"
     args = ["calibrate", str(root), "-o", str(out), "--no-progress"]
     assert main(args) == 0
     text = capsys.readouterr().out
     assert "residual" in text and "DN RMS" in text and "observed" in text
-    assert CameraResponse.from_pcalib(out).knots[-1] == pytest.approx(255.0)
+    assert read_response(out).knots[-1] == pytest.approx(255.0)
     assert (tmp_path / "resp" / "response.png").stat().st_size > 1000
     assert main(args) == 1
     assert "exists; refusing to overwrite" in capsys.readouterr().err
@@ -319,7 +318,7 @@ def test_cli_calibrate_stack(tmp_path, capsys):
 
 def test_cli_calibrate_errors(tmp_path, capsys):
     imgs, _ = stack_arrays(CameraResponse.linear(), n=3)
-    root = write_stack(tmp_path / "st", imgs, [2.0, 2.0, 2.0])
+    root = write_stack(tmp_path / "st", imgs, [2.0, 2.0, 2.0], white_level=4095)
     assert main(["calibrate", str(root), "-o", str(tmp_path / "r.txt"), "--no-progress"]) == 1
     err = capsys.readouterr().err
     assert err.startswith("exposim calibrate: error: ") and "two distinct exposure times" in err
@@ -333,5 +332,5 @@ def test_cli_calibrate_from_recording(tmp_path, capsys):
     assert main(["calibrate", "--from-recording", str(seq.path), "-o", str(out), "--stride", "1", "--no-progress"]) == 0
     text = capsys.readouterr().out
     assert "comparametric" in text and "cross-bracket error" in text
-    assert CameraResponse.from_pcalib(out).white_level == 4095
+    assert read_response(out).white_level == 4095
     assert (tmp_path / "insitu.png").is_file()

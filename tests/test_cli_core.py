@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from emulator.cli import main
-from emulator.dataset import read_png16
+from emulator.io.png import read_png16
 
 
 def test_help_lists_commands(capsys):

@@ -6,15 +6,8 @@ import numpy as np
 import pytest
 
 from emulator import DatasetError
-from emulator.dataset import (
-    exposure_folder_name,
-    find_response,
-    load_sequence,
-    read_png16,
-    sequence_response,
-    write_frame,
-    write_png16,
-)
+from emulator.io.borealhdr import exposure_folder_name, find_response, load_sequence, sequence_response, write_frame
+from emulator.io.png import read_png16, write_png16
 from emulator.errors import OutputExistsError
 
 
@@ -172,12 +165,12 @@ def test_writer_is_atomic_and_refuses_overwrite(tmp_path, monkeypatch):
     with pytest.raises(OutputExistsError, match="123.png: exists"):
         write_frame(tmp_path / "s", "left", 8.0, 123, np.ones((4, 4), np.uint16))
 
-    import emulator.dataset as ds
+    import emulator.io.files as files_io
 
     def boom(*a, **k):
         raise OSError("disk full")
 
-    monkeypatch.setattr(ds.os, "replace", boom)
+    monkeypatch.setattr(files_io.os, "replace", boom)
     with pytest.raises(OSError, match="disk full"):
         write_frame(tmp_path / "s", "left", 8.0, 456, np.ones((4, 4), np.uint16))
     assert sorted(x.name for x in (tmp_path / "s" / "camera_left" / "8.0").iterdir()) == ["123.png"]

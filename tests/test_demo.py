@@ -4,6 +4,7 @@ import json
 
 import pytest
 
+from emulator.cli import main
 from emulator.errors import OutputExistsError
 from validation.demo import new_output_dir, run_demo
 
@@ -12,9 +13,10 @@ pytestmark = [pytest.mark.render, pytest.mark.slow]
 
 def test_quick_demo_end_to_end(tmp_path, capsys):
     out = tmp_path / "demo"
-    assert run_demo(out, quick=True) == 0
+    assert main(["demo", "--quick", "-q", "-o", str(out)]) == 0
     printed = capsys.readouterr().out
-    assert "# exposim demo" in printed and "wrote" in printed
+    assert "# exposim demo" in printed and f"wrote {out}" in printed
+    assert (out / "report.md").read_text() in printed
     results = json.loads((out / "results.json").read_text())
     assert (out / "report.md").is_file() and (out / "run" / "exposure.png").is_file()
     assert set(results["run"]["methods"]) == {

@@ -8,10 +8,11 @@ import cv2
 import numpy as np
 import pytest
 
-from emulator.metrics.errors import MetricsError, RunFolderError
+from emulator.errors import MetricsError, RunFolderError
+from emulator.gray import bayer_to_gray8
+from emulator.io.borealhdr import BOREALHDR_WHITE_LEVEL
 from emulator.metrics.features import (
     analyse_sequence,
-    bayer_to_gray8,
     detect_sift,
     grid_occupancy,
     grid_uniformity,
@@ -21,7 +22,7 @@ from emulator.metrics.features import (
     success_curve,
     to_gray8,
 )
-from emulator.metrics.runfolder import read_run_folder
+from emulator.io.runfolder import read_run_folder
 
 
 def blob_image(cells, grid=20, cell_px=20, sigma_px=3.0) -> np.ndarray:
@@ -45,36 +46,40 @@ def texture(shape=(240, 320), seed=0) -> np.ndarray:
 
 
 def test_bayer_to_gray8_is_a_fixed_linear_scale():
+    levels = dict(white_level=4095, black_level=0)
     flat = np.full((8, 8), 4095, np.uint16)
-    out = bayer_to_gray8(flat)
+    out = bayer_to_gray8(flat, **levels)
     assert out.dtype == np.uint8 and out.shape == (8, 8)
     assert (out == 255).all()
-    assert (bayer_to_gray8(np.zeros((8, 8), np.uint16)) == 0).all()
+    assert (bayer_to_gray8(np.zeros((8, 8), np.uint16), **levels) == 0).all()
     # A dark image stays dark: no per-image normalisation (1000 DN -> round(62.27) = 62).
-    assert (bayer_to_gray8(np.full((8, 8), 1000, np.uint16)) == 62).all()
+    assert (bayer_to_gray8(np.full((8, 8), 1000, np.uint16), **levels) == 62).all()
     # Levels: the white level maps to 255, values above clip, the black level maps to 0.
-    assert (bayer_to_gray8(np.full((4, 4), 1023, np.uint16), white_level=1023) == 255).all()
-    assert (bayer_to_gray8(np.full((4, 4), 3000, np.uint16), white_level=1023) == 255).all()
-    assert (bayer_to_gray8(np.full((4, 4), 64, np.uint16), black_level=64) == 0).all()
+    assert (bayer_to_gray8(np.full((4, 4), 1023, np.uint16), white_level=1023, black_level=0) == 255).all()
+    assert (bayer_to_gray8(np.full((4, 4), 3000, np.uint16), white_level=1023, black_level=0) == 255).all()
+    assert (bayer_to_gray8(np.full((4, 4), 64, np.uint16), white_level=4095, black_level=64) == 0).all()
     # It is OpenCV's BayerRG2GRAY followed by the stated scale.
     rng = np.random.default_rng(3)
     raw = rng.integers(0, 4096, (16, 16)).astype(np.uint16)
     expected = np.clip(np.rint(cv2.cvtColor(raw, cv2.COLOR_BayerRG2GRAY) * (255 / 4095)), 0, 255)
-    np.testing.assert_array_equal(bayer_to_gray8(raw), expected.astype(np.uint8))
+    np.testing.assert_array_equal(bayer_to_gray8(raw, **levels), expected.astype(np.uint8))
+    # ... and with a black level: (g - black) * 255 / (white - black)
+    expected = np.clip(np.rint((cv2.cvtColor(raw, cv2.COLOR_BayerRG2GRAY) - 100.0) * (255 / 3994)), 0, 255)
+    np.testing.assert_array_equal(bayer_to_gray8(raw, white_level=4094, black_level=100), expected.astype(np.uint8))
 
 
 def test_conversion_input_checks(tmp_path):
     with pytest.raises(MetricsError, match="uint16"):
-        bayer_to_gray8(np.zeros((4, 4), np.uint8))
+        bayer_to_gray8(np.zeros((4, 4), np.uint8), white_level=4094, black_level=0)
     with pytest.raises(MetricsError, match="black_level"):
         bayer_to_gray8(np.zeros((4, 4), np.uint16), white_level=10, black_level=10)
     gray = np.arange(16, dtype=np.uint8).reshape(4, 4)
-    assert to_gray8(gray) is gray  # png8 images are used as saved
+    assert to_gray8(gray, white_level=4094, black_level=0) is gray  # png8 images are used as saved
     with pytest.raises(MetricsError, match="expected"):
-        to_gray8(np.zeros((4, 4), np.float32))
+        to_gray8(np.zeros((4, 4), np.float32), white_level=4094, black_level=0)
     (tmp_path / "x.png").write_bytes(b"not a png")
     with pytest.raises(RunFolderError, match="x.png: cannot read"):
-        load_gray8(tmp_path / "x.png")
+        load_gray8(tmp_path / "x.png", white_level=4094, black_level=0)
 
 
 # --------------------------------------------------------------------------- uniformity
@@ -181,7 +186,7 @@ def test_analyse_sequence_counts_pairs():
 def test_run_folder_errors(tmp_path):
     with pytest.raises(RunFolderError, match="does not exist"):
         read_run_folder(tmp_path / "missing")
-    with pytest.raises(RunFolderError, match="no run.json"):
+    with pytest.raises(RunFolderError, match=r"not a run folder \(run.json missing\)"):
         read_run_folder(tmp_path)
     (tmp_path / "run.json").write_text(json.dumps({"methods": ["fixed"], "save": "none"}))
     with pytest.raises(RunFolderError, match="saved no images"):
@@ -196,7 +201,7 @@ def test_run_folder_errors(tmp_path):
         read_run_folder(tmp_path)
     (tmp_path / "fixed" / "images" / "times.txt").write_text("100 0.0000001 4.0\n")
     run = read_run_folder(tmp_path)
-    assert run.white_level == 4095 and run.methods["fixed"].frames[0].exposure_ms == 4.0
+    assert run.white_level == BOREALHDR_WHITE_LEVEL == 4094 and run.methods["fixed"].frames[0].exposure_ms == 4.0
     with pytest.raises(RunFolderError, match="no right image"):
         read_run_folder(tmp_path, require_right=True)
     with pytest.raises(RunFolderError, match="not in this run"):

@@ -18,8 +18,9 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from emulator.metrics import vo as vo_mod
-from emulator.metrics.errors import CalibrationError, MetricsError, TrajectoryError
-from emulator.metrics.rpe import associate, read_tum, rpe_by_length, trajectory_from_poses, write_tum
+from emulator.errors import CalibrationError, MetricsError, TrajectoryError
+from emulator.io.tum import write_tum
+from emulator.metrics.rpe import associate, read_trajectory, rpe_by_length, trajectory_from_poses
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "borealhdr_sample" / "calibration"
 
@@ -135,7 +136,7 @@ def make_synthetic_run(root: Path, n_frames: int = 6, methods=("fixed",), right_
     run.mkdir()
     (run / "run.json").write_text(json.dumps({
         "sequence": str(seq), "methods": list(methods), "selector": "higher_no_sat",
-        "initial_ms": 4.0, "range_ms": [1.0, 32.0], "save": "png16",
+        "initial_ms": 4.0, "range_ms": [1.0, 32.0], "save": "png16", "white_level": 4095, "black_level": 0,
     }))
     images = []
     pitch = Rotation.from_euler("x", right_pitch_deg, degrees=True).as_matrix()
@@ -169,7 +170,9 @@ def _frames(run: Path, method: str = "fixed"):
 
     lefts = sorted((run / method / "images" / "left").glob("*.png"))
     for p in lefts:
-        yield int(p.stem), load_gray8(p), load_gray8(run / method / "images" / "right" / p.name)
+        levels = dict(white_level=4095, black_level=0)  # make_synthetic_run scales grey to 0..4095
+        yield (int(p.stem), load_gray8(p, **levels),
+               load_gray8(run / method / "images" / "right" / p.name, **levels))
 
 
 # --------------------------------------------------------------------------- calibration
@@ -305,11 +308,11 @@ def test_tum_round_trip_keeps_nanoseconds(tmp_path):
     write_tum(tmp_path / "t.txt", stamps, poses)
     first = (tmp_path / "t.txt").read_text().split()[0]
     assert first == "1700000000.000000001"
-    traj = read_tum(tmp_path / "t.txt")
+    traj = read_trajectory(tmp_path / "t.txt")
     np.testing.assert_allclose(np.array(traj.poses_se3), poses, atol=1e-8)
     (tmp_path / "bad.txt").write_text("1 2 3\n")
     with pytest.raises(TrajectoryError, match="bad.txt"):
-        read_tum(tmp_path / "bad.txt")
+        read_trajectory(tmp_path / "bad.txt")
 
 
 def test_rpe_by_length_scale_and_errors():
@@ -362,7 +365,7 @@ def test_bench_vo_on_synthetic_run(synthetic, tmp_path):
         assert entry["n_pairs"] > 0
         assert entry["trans_pct"]["median"] < 1.0
         assert entry["rot_deg_per_m"]["median"] < 0.5
-    est = read_tum(tmp_path / "out" / "fixed" / "trajectory.txt")
+    est = read_trajectory(tmp_path / "out" / "fixed" / "trajectory.txt")
     assert est.num_poses == 3
     for name in ("results.json", "report.md", "fig6_rpe.png", "trajectories.png"):
         assert (tmp_path / "out" / name).is_file()

@@ -18,8 +18,11 @@ import pytest
 
 from emulator import playback
 from emulator.autoexposure import METHOD_NAMES, MODES
-from emulator.dataset import Frame, load_sequence, write_frame
-from emulator.playback import CSV_COLUMNS, iter_run, run, run_to_folder
+from emulator.dataset import Frame
+from emulator.io.borealhdr import load_sequence, write_frame
+from emulator.io.runfolder import CSV_COLUMNS, format_row
+from emulator.playback import iter_run, run, run_to_folder
+from emulator.io.pcalib import write_response
 from emulator.response import CameraResponse
 
 BRACKETS = (1.0, 2.0, 4.0, 8.0, 16.0, 32.0)
@@ -53,7 +56,7 @@ def write_static_sequence(root: Path, *, n_cycles=14, shape=(48, 64), cameras=("
             ts += SHOT_NS
     (root / "exposim.json").write_text(json.dumps({"white_level": 4095, "black_level": 0}))
     (root / "calibration").mkdir(exist_ok=True)
-    CameraResponse.linear().to_pcalib(root / "calibration" / "pcalib_linear.txt")
+    write_response(root / "calibration" / "pcalib_linear.txt", CameraResponse.linear())
     return root, bases
 
 
@@ -121,7 +124,7 @@ def test_jobs_do_not_change_results(static_seq):
     a = run(root, "all", initial_ms=1.3, jobs=1)
     b = run(root, "all", initial_ms=1.3, jobs=3)
     for name in METHOD_NAMES:
-        assert [s.row() for s in a.steps[name]] == [s.row() for s in b.steps[name]]
+        assert [format_row(s) for s in a.steps[name]] == [format_row(s) for s in b.steps[name]]
 
 
 def test_each_image_decoded_at_most_once_per_run(static_seq, monkeypatch):

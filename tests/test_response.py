@@ -2,11 +2,11 @@ import numpy as np
 import pytest
 
 from emulator import CameraResponse, ResponseError
-from emulator.response import read_pcalib
+from emulator.io.pcalib import read_pcalib, read_response, write_response
 
 
 def test_pcalib_read_as_given(pcalib_path):
-    r = CameraResponse.from_pcalib(pcalib_path)
+    r = read_response(pcalib_path)
     samples = read_pcalib(pcalib_path)
     assert r.white_level == 4095 and r.g.shape == (4096,)
     # Samples sit at DN 4095*k/255 and are used exactly as given (no renormalisation).
@@ -20,7 +20,7 @@ def test_pcalib_read_as_given(pcalib_path):
 @pytest.mark.parametrize(
     "make",
     [
-        lambda p: CameraResponse.from_pcalib(p),
+        lambda p: read_response(p),
         lambda p: CameraResponse.linear(),
         lambda p: CameraResponse.gamma(2.2),
         lambda p: CameraResponse.gamma(0.45),
@@ -60,30 +60,30 @@ def _write(tmp_path, text, name="bad.txt"):
 def test_bad_tables_name_file_and_defect(tmp_path):
     good = np.linspace(0, 255, 256)
     with pytest.raises(ResponseError, match=r"empty\.txt: empty file"):
-        CameraResponse.from_pcalib(_write(tmp_path, "   \n", "empty.txt"))
+        read_response(_write(tmp_path, "   \n", "empty.txt"))
     with pytest.raises(ResponseError, match=r"count\.txt: expected 256 samples .* got 255"):
-        CameraResponse.from_pcalib(_write(tmp_path, " ".join(map(str, good[:-1])), "count.txt"))
+        read_response(_write(tmp_path, " ".join(map(str, good[:-1])), "count.txt"))
     vals = good.astype(str)
     vals[7] = "nan"
     with pytest.raises(ResponseError, match=r"nan\.txt: 1 non-finite sample\(s\), the first at index 7"):
-        CameraResponse.from_pcalib(_write(tmp_path, " ".join(vals), "nan.txt"))
+        read_response(_write(tmp_path, " ".join(vals), "nan.txt"))
     vals = good.copy()
     vals[100] = vals[99]
     with pytest.raises(ResponseError, match=r"flat\.txt: .*not strictly increasing: sample 100"):
-        CameraResponse.from_pcalib(_write(tmp_path, " ".join(str(float(v)) for v in vals), "flat.txt"))
+        read_response(_write(tmp_path, " ".join(str(float(v)) for v in vals), "flat.txt"))
     vals = good.astype(str)
     vals[3] = "abc"
     with pytest.raises(ResponseError, match=r"word\.txt: sample 3 is 'abc'"):
-        CameraResponse.from_pcalib(_write(tmp_path, " ".join(vals), "word.txt"))
+        read_response(_write(tmp_path, " ".join(vals), "word.txt"))
     with pytest.raises(FileNotFoundError, match="missing.txt"):
-        CameraResponse.from_pcalib(tmp_path / "missing.txt")
+        read_response(tmp_path / "missing.txt")
 
 
 def test_per_dn_table_and_pcalib_round_trip(tmp_path):
     r = CameraResponse.gamma(2.2)
     p = tmp_path / "resp.txt"
-    r.to_pcalib(p, n_samples=4096)
-    back = CameraResponse.from_pcalib(p)
+    write_response(p, r, n_samples=4096)
+    back = read_response(p)
     np.testing.assert_allclose(back.g, r.g, rtol=0, atol=1e-15)
 
 
@@ -97,8 +97,8 @@ def test_bad_constructor_args():
 
 
 def test_with_levels_truncates_table(pcalib_path):
-    r = CameraResponse.from_pcalib(pcalib_path).with_levels(white_level=4094)
+    r = read_response(pcalib_path).with_levels(white_level=4094)
     assert r.white_level == 4094 and r.g.size == 4095
-    assert r.g[4094] == CameraResponse.from_pcalib(pcalib_path).g[4094]
+    assert r.g[4094] == read_response(pcalib_path).g[4094]
     with pytest.raises(ResponseError):
         r.with_levels(white_level=4095)

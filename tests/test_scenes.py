@@ -22,6 +22,9 @@ from scenes import trajectory as tr
 from scenes import variant as var
 from scenes.base import Scene
 from scenes.description import SceneDescription, Shape
+from emulator.io.exr import read_exr, write_exr
+from emulator.io.tum import read_tum, write_tum
+from scenes.cache import store_entry
 from scenes.errors import RenderError, SceneError
 
 SCENE_NAMES = ("forest_winter", "forest_summer", "sun_glare", "forest_edge", "static_lab")
@@ -286,12 +289,15 @@ def test_static_trajectory_and_tum_round_trip(tmp_path):
     walk = tr.walk(3.0, seed=2)
     ts = walk.timestamps(4.0)
     assert ts.tolist() == [i / 4 for i in range(13)]
-    path = tr.write_tum(tmp_path / "poses.txt", ts, walk.poses(ts))
+    stamps_ns = [round(t * 1e9) for t in ts]
+    path = write_tum(tmp_path / "poses.txt", stamps_ns, walk.poses(ts))
     first = path.read_text().splitlines()[0].split()
     assert len(first) == 8 and float(first[0]) == 0.0
-    ts2, poses2 = tr.read_tum(path)
-    np.testing.assert_array_equal(ts2, ts)
-    np.testing.assert_allclose(poses2, walk.poses(ts), atol=1e-12)
+    back = read_tum(path)
+    np.testing.assert_array_equal(back.timestamps_s, ts)
+    assert back.timestamps_ns.tolist() == stamps_ns
+    assert np.all(back.quaternions_xyzw[:, 3] >= 0)
+    np.testing.assert_allclose(back.poses, walk.poses(ts), atol=1e-12)
 
 
 # --------------------------------------------------------------------------------------------
@@ -402,7 +408,7 @@ def test_unreadable_cache_file_is_rendered_again(built, tmp_path):
     path.write_bytes(b"not an exr")
     again = scenes.render(scene, pose, width=16, height=10, spp=1, seed=0, cache_dir=tmp_path)
     assert again.tobytes() == first.tobytes()
-    assert scenes.read_exr(path).tobytes() == first.tobytes()
+    assert read_exr(path).tobytes() == first.tobytes()
 
 
 @pytest.mark.render
@@ -417,15 +423,15 @@ def test_unwritable_cache_warns_and_keeps_the_render(built, tmp_path):
 
 def test_exr_bytes_are_deterministic(tmp_path):
     img = np.random.default_rng(0).random((5, 7, 3), dtype=np.float32) * 1e4
-    a = scenes.write_exr(tmp_path / "a.exr", img, {"note": "x"})
-    b = scenes.write_exr(tmp_path / "b.exr", img, {"note": "x"})
+    a = store_entry(tmp_path / "a.exr", img, {"note": "x"})
+    b = write_exr(tmp_path / "b.exr", img, attributes={"note": "x"})
     assert a.read_bytes() == b.read_bytes()
-    assert scenes.read_exr(a).tobytes() == img.tobytes()
+    assert read_exr(a).tobytes() == img.tobytes()
     assert not list(tmp_path.glob("*.tmp"))
     with pytest.raises(RenderError, match="float32"):
-        scenes.write_exr(tmp_path / "c.exr", img.astype(np.float64))
+        store_entry(tmp_path / "c.exr", img.astype(np.float64))
     with pytest.raises(FileNotFoundError):
-        scenes.read_exr(tmp_path / "missing.exr")
+        read_exr(tmp_path / "missing.exr")
 
 
 def test_cache_key_covers_everything_that_changes_pixels(built):
@@ -499,7 +505,7 @@ def test_variant_override_and_validation(monkeypatch, _restore_variant_state, tm
     key, _ = scenes.render_key(scene, np.eye(4), width=4, height=2, spp=1, seed=0,
                                fov_deg=scenes.DEFAULT_FOV_DEG, variant="llvm_ad_rgb")
     img = np.arange(24, dtype=np.float32).reshape(2, 4, 3)
-    scenes.write_exr(tmp_path / key[:2] / f"{key}.exr", img)
+    store_entry(tmp_path / key[:2] / f"{key}.exr", img)
     monkeypatch.setenv("EXPOSIM_MITSUBA_VARIANT", "llvm_ad_rgb")
     hit = scenes.render(scene, np.eye(4), width=4, height=2, spp=1, seed=0, cache_dir=tmp_path)
     assert hit.tobytes() == img.tobytes() and "llvm_ad_rgb" not in var._probed
@@ -544,9 +550,10 @@ def test_cli_render_writes_frames_poses_and_json(tmp_path, capsys):
     for cam in ("left", "right"):
         names = sorted(p.name for p in (out / "frames" / cam).iterdir())
         assert names == ["0.exr", "500000000.exr"]
-        assert scenes.read_exr(out / "frames" / cam / "0.exr").shape == (20, 32, 3)
-    ts, poses = tr.read_tum(out / "poses_left.txt")
-    _, right = tr.read_tum(out / "poses_right.txt")
+        assert read_exr(out / "frames" / cam / "0.exr").shape == (20, 32, 3)
+    left_file = read_tum(out / "poses_left.txt")
+    ts, poses = left_file.timestamps_s, left_file.poses
+    right = read_tum(out / "poses_right.txt").poses
     assert ts.tolist() == [0.0, 0.5]
     np.testing.assert_allclose((np.linalg.inv(poses[0]) @ right[0])[:3, 3], [0.18, 0, 0], atol=1e-9)
     info = json.loads((out / "scene.json").read_text())

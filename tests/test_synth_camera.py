@@ -14,7 +14,8 @@ import pytest
 
 import synth
 from emulator.errors import ExposimError
-from emulator.response import CameraResponse, read_pcalib
+from emulator.io.pcalib import read_pcalib
+from emulator.response import CameraResponse
 from synth import Camera, capture
 from synth.camera import check_radiance, mean_electrons
 from synth.errors import CameraError, RadianceError, SynthError

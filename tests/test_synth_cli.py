@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from emulator.cli import main
-from emulator.dataset import load_sequence, read_png16, sequence_response
+from emulator.io.borealhdr import load_sequence, sequence_response
+from emulator.io.png import read_png16
 from emulator.emulate import emulate
 
 pytestmark = pytest.mark.render

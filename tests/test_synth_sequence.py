@@ -15,8 +15,10 @@ from scipy.spatial.transform import Rotation
 import synth
 import synth.sequence
 from emulator import emulate
-from emulator.dataset import exposure_folder_name, load_sequence, read_png16, sequence_response
+from emulator.io.borealhdr import exposure_folder_name, load_sequence, sequence_response
+from emulator.io.png import read_png16
 from emulator.errors import OutputExistsError
+from emulator.io.exr import read_exr
 from synth import Camera, capture_sequence, shot_schedule
 from synth.errors import RadianceError, SourceError, SynthError
 from synth.procedural import TranslatingChart
@@ -147,7 +149,7 @@ def test_ground_truth_layout(noiseless_dataset, camera, chart):
         exr = sorted((root / "ground_truth" / "radiance" / f"camera_{side}").glob("*.exr"))
         assert len(exr) == len(shots)
         s = shots[3]
-        radiance = synth.read_exr(root / "ground_truth" / "radiance" / f"camera_{side}" / f"{s.timestamp_ns}.exr")
+        radiance = read_exr(root / "ground_truth" / "radiance" / f"camera_{side}" / f"{s.timestamp_ns}.exr")
         np.testing.assert_array_equal(radiance, chart(s.time_s, side)[0])
     np.testing.assert_allclose(poses["right"][:, 0] - poses["left"][:, 0], 0.18, atol=1e-9)
 

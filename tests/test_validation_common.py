@@ -10,11 +10,12 @@ import pytest
 
 from emulator import CameraResponse, emulate
 from emulator.errors import ExposimError, OutputExistsError
+from emulator.io.files import prepare_output, write_results
+from emulator.io.pcalib import read_response
 from validation.common import (
     ValidationError,
     gt_exposures,
     pair_noise_map,
-    prepare_output,
     quantisation_bound,
     rmse_dn,
     seed_for,
@@ -22,7 +23,6 @@ from validation.common import (
     subtract_quadrature,
     summary_stats,
     to_percent,
-    write_json,
 )
 from validation.selectors import NoiseModel, _oracle, evaluate_choices, predicted_error, predicted_mse_table
 
@@ -87,7 +87,7 @@ def test_noise_subtraction_recovers_the_clean_error():
 @pytest.mark.parametrize("source_ms,target_ms", [(1, 32), (2, 9.5), (8, 16), (32, 0.02), (4, 3.99), (1, 50)])
 def test_quantisation_bound_holds_for_exact_captures(pcalib_path, resp, source_ms, target_ms):
     r = {"linear": CameraResponse.linear(4094), "gamma": CameraResponse.gamma(2.2, 4094),
-         "pcalib": CameraResponse.from_pcalib(pcalib_path).with_levels(white_level=4094)}[resp]
+         "pcalib": read_response(pcalib_path).with_levels(white_level=4094)}[resp]
     rng = np.random.default_rng(3)
     h = np.exp(rng.uniform(np.log(1e-4), np.log(1.0), (64, 64))) * r.g[-1] / 8.0
 
@@ -109,23 +109,25 @@ def test_summary_stats_ignores_none_and_nan():
 
 def test_prepare_output_refuses_existing_results(tmp_path):
     out = prepare_output(tmp_path / "a")
-    write_json(out / "results.json", {"x": 1.0})
+    write_results(out / "results.json", {"x": 1.0})
     with pytest.raises(OutputExistsError, match="--force"):
         prepare_output(out)
     assert prepare_output(out, force=True) == out
     (tmp_path / "f").write_text("")
-    with pytest.raises(NotADirectoryError):
+    with pytest.raises(OutputExistsError, match="not a folder"):
         prepare_output(tmp_path / "f")
 
 
-def test_write_json_is_deterministic_and_refuses_nan(tmp_path):
-    p = write_json(tmp_path / "r.json", {"b": np.float64(0.1) + np.float64(0.2), "a": np.arange(3), "c": None})
+def test_write_results_is_deterministic_and_refuses_nan(tmp_path):
+    # the validation studies write results.json with 12 significant digits: stable text
+    p = write_results(tmp_path / "r.json", {"b": np.float64(0.1) + np.float64(0.2), "a": np.arange(3), "c": None},
+                      float_digits=12)
     first = p.read_text()
-    write_json(p, {"c": None, "a": [0, 1, 2], "b": 0.30000000000000004})
+    write_results(p, {"b": 0.30000000000000004, "a": [0, 1, 2], "c": None}, float_digits=12)
     assert p.read_text() == first
     assert json.loads(first) == {"a": [0, 1, 2], "b": 0.3, "c": None}
-    with pytest.raises(ValidationError, match="non-finite"):
-        write_json(tmp_path / "bad.json", {"x": float("nan")})
+    with pytest.raises(ExposimError, match="non-finite .* at x"):
+        write_results(tmp_path / "bad.json", {"x": float("nan")})
 
 
 # ----------------------------------------------------------------------------------- predicted-error selector

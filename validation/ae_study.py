@@ -48,7 +48,6 @@ per image) still failed 51 % and 16 %.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import shlex
 import shutil
@@ -64,6 +63,15 @@ if __package__ in (None, ""):  # run as a script: make the repository importable
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from emulator.errors import ExposimError  # noqa: E402
+from emulator.io.files import (  # noqa: E402
+    REPORT_FILE,
+    RESULTS_FILE,
+    prepare_output,
+    read_results,
+    save_figure,
+    write_results,
+    write_text,
+)
 
 __all__ = [
     "StudyConfig",
@@ -869,7 +877,7 @@ def plot_summary(results: dict, path: Path) -> Path:
     axes[0].legend(fontsize=8)
     fig.suptitle(f"Synthetic AE study: {results['config']['n_cycles']} cycles, "
                  f"{results['config']['width']}x{results['config']['height']} px, {results['config']['spp']} spp")
-    fig.savefig(path, dpi=100)
+    save_figure(fig, path, dpi=100)
     return path
 
 
@@ -887,12 +895,6 @@ def _callback(bar):
         bar.refresh()
 
     return cb
-
-
-def _write_json(path: Path, data: dict) -> None:
-    tmp = path.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(data, indent=1, allow_nan=False) + "\n")
-    tmp.replace(path)
 
 
 def run_study(out, config: StudyConfig = CONFIGS["full"], *, force: bool = False, progress: bool = True,
@@ -922,14 +924,14 @@ def run_study(out, config: StudyConfig = CONFIGS["full"], *, force: bool = False
         ``out/results.json`` exists and ``force`` is not given.
     """
     import scenes
-    from emulator.dataset import load_sequence
-    from emulator.metrics.bench import bench_features, bench_vo, prepare_output
+    from emulator.io.borealhdr import load_sequence
+    from emulator.metrics.bench import bench_features, bench_vo
     from emulator.metrics.features import DEFAULT_TAUS
     from emulator.metrics.vo import VOParameters
     from emulator.playback import run_to_folder
     from scenes.synthesize import synthesize
 
-    out = prepare_output(out, force)
+    out = prepare_output(out, force=force)
     cfg = config
     timings: dict[str, float] = {}
     t_start = time.perf_counter()
@@ -996,8 +998,8 @@ def run_study(out, config: StudyConfig = CONFIGS["full"], *, force: bool = False
         },
     }
     plot_summary(results, out / "ae_study_summary.png")
-    (out / "report.md").write_text(report_markdown(results))
-    _write_json(out / "results.json", results)
+    write_text(out / REPORT_FILE, report_markdown(results))
+    write_results(out / RESULTS_FILE, results)
     return results
 
 
@@ -1023,14 +1025,14 @@ def redraw(out) -> dict:
     path = out / "results.json"
     if not path.is_file():
         raise StudyError(f"{path}: no study to redraw")
-    results = json.loads(path.read_text())
+    results = read_results(path)
     cfg = config_from_dict(results["config"])
     try:
-        features = json.loads((out / "features" / "results.json").read_text())
-        vo = {s: json.loads((out / "vo" / s / "results.json").read_text()) for s in cfg.scenes}
-        runs = {s: json.loads((out / "runs" / s / "results.json").read_text()) for s in cfg.scenes}
+        features = read_results(out / "features")
+        vo = {s: read_results(out / "vo" / s) for s in cfg.scenes}
+        runs = {s: read_results(out / "runs" / s) for s in cfg.scenes}
     except FileNotFoundError as exc:
-        raise StudyError(f"{out}: cannot redraw, {exc.filename} is missing") from None
+        raise StudyError(f"{out}: cannot redraw: {exc}") from None
     results["config"] = cfg.to_dict()
     results["vo_configuration_note"] = VO_CONFIGURATION_NOTE
     results["summary"] = summarise(cfg, features, vo, runs)
@@ -1038,8 +1040,8 @@ def redraw(out) -> dict:
     results["findings_paragraph"] = findings_paragraph(results["findings"])
     results["redrawn"] = results.get("redrawn", 0) + 1
     plot_summary(results, out / "ae_study_summary.png")
-    (out / "report.md").write_text(report_markdown(results))
-    _write_json(path, results)
+    write_text(out / REPORT_FILE, report_markdown(results))
+    write_results(path, results)
     return results
 
 

@@ -52,8 +52,10 @@ from emulator.calibrate import (  # noqa: E402
     cross_bracket_error,
     fit_inverse_response,
     response_error,
-    write_stack,
 )
+from emulator.io.files import save_figure  # noqa: E402
+from emulator.io.pcalib import read_response  # noqa: E402
+from emulator.io.stack import write_stack  # noqa: E402
 from emulator.response import CameraResponse  # noqa: E402
 
 __all__ = ["run_study", "main", "opencv_curves", "codes_to_dn_curve", "stack_exposures"]
@@ -301,7 +303,7 @@ def borealhdr_check(ours: CalibrationResult, preset_truth: CameraResponse) -> di
         "pcalib_inside1.txt"
     if not path.is_file():
         return {"skipped": f"{path} not found"}
-    table = CameraResponse.from_pcalib(path)
+    table = read_response(path)
     out = {}
     for name, a, b in (("recovered_vs_table", ours.response, table), ("preset_vs_table", preset_truth, table),
                        ("recovered_vs_preset", ours.response, preset_truth)):
@@ -314,7 +316,7 @@ def borealhdr_check(ours: CalibrationResult, preset_truth: CameraResponse) -> di
 def insitu_synthetic(cfg: dict, out: Path, progress) -> tuple[dict, dict]:
     from synth.procedural import WALK_SPEED_M_S, TranslatingChart
 
-    from emulator.dataset import load_sequence, write_frame
+    from emulator.io.borealhdr import load_sequence, write_frame
     from validation.common import make_camera
 
     w, h, n_sweeps = cfg["insitu_width"], cfg["insitu_height"], cfg["insitu_sweeps"]
@@ -360,7 +362,7 @@ def insitu_synthetic(cfg: dict, out: Path, progress) -> tuple[dict, dict]:
 
 # ---------------------------------------------------------------------------- part 5: real sample
 def real_sample_part(progress) -> tuple[dict, dict]:
-    from emulator.dataset import load_sequence, sequence_response
+    from emulator.io.borealhdr import load_sequence, sequence_response
 
     root = Path(__file__).resolve().parents[2] / "shared" / "data" / "borealhdr_sample"
     seq_path = root / "backpack_2023-09-25-15-05-03"
@@ -374,7 +376,7 @@ def real_sample_part(progress) -> tuple[dict, dict]:
         t0 = time.perf_counter()
         fits[name] = calibrate_from_recording(seq, cameras=cams)
         fits[name].info["seconds"] = time.perf_counter() - t0
-    table = CameraResponse.from_pcalib(root / "calibration" / "pcalib_inside1.txt")
+    table = read_response(root / "calibration" / "pcalib_inside1.txt")
     scores = {}
     pairs = {}
     for rname, resp in (("pcalib_inside1", pcalib), ("linear", linear), ("in_situ_both", fits["both"].response),
@@ -443,7 +445,7 @@ def _plots(results: dict, arrays: dict, out: Path) -> list[str]:
             axe.set_ylim(-3, 3)
             axe.grid(alpha=0.3)
         fig.tight_layout()
-        fig.savefig(out / "static_stacks.png", dpi=100)
+        save_figure(fig, out / "static_stacks.png", dpi=100)
         plt.close(fig)
         names.append("static_stacks.png")
     ins = [p for p in PRESETS if f"insitu_{p}_truth" in arrays]
@@ -459,7 +461,7 @@ def _plots(results: dict, arrays: dict, out: Path) -> list[str]:
             axes[0, j].set_xlabel("DN")
             axes[0, j].legend(fontsize=8)
         fig.tight_layout()
-        fig.savefig(out / "in_situ_synthetic.png", dpi=100)
+        save_figure(fig, out / "in_situ_synthetic.png", dpi=100)
         plt.close(fig)
         names.append("in_situ_synthetic.png")
     real = results.get("real_sample", {})
@@ -484,7 +486,7 @@ def _plots(results: dict, arrays: dict, out: Path) -> list[str]:
         axb.legend(fontsize=8)
         axb.grid(alpha=0.3, which="both")
         fig.tight_layout()
-        fig.savefig(out / "real_sample.png", dpi=100)
+        save_figure(fig, out / "real_sample.png", dpi=100)
         plt.close(fig)
         names.append("real_sample.png")
     return names
@@ -577,7 +579,8 @@ def _report(results: dict, figures: list[str]) -> str:
 def run_study(out, *, quick: bool = False, force: bool = False, radiance_source: str = "static_lab",
               parts=("static", "insitu", "real"), command: str = "", progress=None) -> dict:
     """Run the study into folder ``out``; returns the results dict (also written to results.json)."""
-    from validation.common import prepare_output, provenance, write_json
+    from emulator.io.files import prepare_output, write_arrays, write_results, write_text
+    from validation.common import provenance
 
     out = prepare_output(out, force=force)
     cfg = dict(CONFIGS["quick" if quick else "full"])
@@ -599,10 +602,10 @@ def run_study(out, *, quick: bool = False, force: bool = False, radiance_source:
         results["real_sample"], a = real_sample_part(say)
         arrays.update(a)
     results["seconds"] = time.perf_counter() - t0
-    np.savez_compressed(out / "curves.npz", **arrays)
+    write_arrays(out / "curves.npz", arrays)
     figures = _plots(results, arrays, out)
-    write_json(out / "results.json", results)
-    (out / "report.md").write_text(_report(results, figures))
+    write_results(out / "results.json", results, float_digits=12)
+    write_text(out / "report.md", _report(results, figures))
     return results
 
 

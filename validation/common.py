@@ -1,4 +1,4 @@
-"""Shared helpers of the validation experiments: scenes, cameras, captures, error figures, output.
+"""Shared helpers of the validation experiments: scenes, cameras, captures, error figures, provenance.
 
 Everything here is numpy; Mitsuba is reached only through :func:`scenes.render` and the
 synthetic camera only through :func:`synth.capture`.  No function prints, plots or exits.
@@ -11,16 +11,14 @@ emulated image) and over all pixels.
 from __future__ import annotations
 
 import hashlib
-import json
 import math
 import os
 import sys
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
-from emulator.errors import ExposimError, OutputExistsError
+from emulator.errors import ExposimError
 from synth.sequence import BRACKETS_MS
 
 __all__ = [
@@ -47,8 +45,6 @@ __all__ = [
     "subtract_linear",
     "quantisation_bound",
     "summary_stats",
-    "prepare_output",
-    "write_json",
     "provenance",
     "Progress",
 ]
@@ -279,42 +275,6 @@ def summary_stats(values) -> dict:
 
 
 # ---------------------------------------------------------------------------------- output
-def prepare_output(folder, *, force: bool = False) -> Path:
-    """Create ``folder``; refuse if it already holds a ``results.json`` unless ``force``."""
-    folder = Path(folder)
-    if folder.exists() and not folder.is_dir():
-        raise NotADirectoryError(f"{folder}: exists and is not a folder")
-    if (folder / "results.json").exists() and not force:
-        raise OutputExistsError(f"{folder / 'results.json'}: exists; refusing to overwrite (use --force)")
-    folder.mkdir(parents=True, exist_ok=True)
-    return folder
-
-
-def _clean(obj):
-    if isinstance(obj, dict):
-        return {str(k): _clean(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_clean(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return _clean(obj.tolist())
-    if isinstance(obj, np.generic):
-        obj = obj.item()
-    if isinstance(obj, float):
-        if not math.isfinite(obj):
-            raise ValidationError(f"non-finite number {obj!r} in results (every figure must be finite)")
-        return float(f"{obj:.12g}")  # 12 significant digits: stable text, no loss on small values
-    if isinstance(obj, Path):
-        return str(obj)
-    return obj
-
-
-def write_json(path, obj) -> Path:
-    """Write ``obj`` as sorted, indented JSON; refuses NaN/inf (floats to 12 significant digits)."""
-    path = Path(path)
-    path.write_text(json.dumps(_clean(obj), indent=1, sort_keys=True, allow_nan=False) + "\n")
-    return path
-
-
 def provenance(command: str, config: dict) -> dict:
     """What produced a results file: experiment, configuration, versions (no timestamps: deterministic)."""
     import emulator

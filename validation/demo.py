@@ -11,12 +11,12 @@
 
 from __future__ import annotations
 
-import json
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+from emulator.io.files import REPORT_FILE, RESULTS_FILE, read_results, write_results, write_text
 
 __all__ = ["run_demo", "demo_config", "emulation_check", "new_output_dir"]
 
@@ -53,7 +53,8 @@ def emulation_check(dataset: Path, selector: str = "higher-no-sat") -> dict:
     noiseless capture at that bracket's instant (same pose), so only emulation error and
     the bracket's own sensor noise remain.  RMSE in % of the DN range, over valid pixels.
     """
-    from emulator.dataset import exposure_folder_name, load_sequence, read_png16, sequence_response
+    from emulator.io.borealhdr import exposure_folder_name, load_sequence, sequence_response
+    from emulator.io.png import read_png16
     from emulator.emulate import emulate
     from emulator.select import saturated_fraction, select
 
@@ -83,43 +84,59 @@ def emulation_check(dataset: Path, selector: str = "higher-no-sat") -> dict:
                     "cycle": cycle.index,
                     "target_ms": target,
                     "bracket_ms": b,
-                    "rmse_percent": float(100 * np.sqrt(np.mean(diff**2)) / rng) if diff.size else float("nan"),
+                    "rmse_percent": float(100 * np.sqrt(np.mean(diff**2)) / rng) if diff.size else None,
                     "valid_fraction": float(valid.mean()),
                 }
             )
     per_target = {}
     for t in GT_EXPOSURES_MS:
-        vals = [r["rmse_percent"] for r in rows if r["target_ms"] == t]
+        vals = [r["rmse_percent"] for r in rows if r["target_ms"] == t and r["rmse_percent"] is not None]
         if vals:
             per_target[f"{t:g}"] = {"median_rmse_percent": float(np.median(vals)), "n": len(vals)}
-    all_vals = [r["rmse_percent"] for r in rows]
+    all_vals = [r["rmse_percent"] for r in rows if r["rmse_percent"] is not None]
     return {
         "selector": selector,
         "rows": rows,
         "per_target": per_target,
-        "median_rmse_percent": float(np.median(all_vals)) if all_vals else float("nan"),
-        "max_rmse_percent": float(np.max(all_vals)) if all_vals else float("nan"),
+        "median_rmse_percent": float(np.median(all_vals)) if all_vals else None,
+        "max_rmse_percent": float(np.max(all_vals)) if all_vals else None,
     }
 
 
-def _say(msg: str) -> None:
-    print(msg, file=sys.stderr, flush=True)
+def run_demo(output=None, *, quick: bool = False, progress=None) -> dict:
+    """Run the demo into ``output`` (default: a new ``exposim-demo-N``); nothing is printed.
 
+    Parameters
+    ----------
+    output : path, optional
+        A new or empty folder; an existing non-empty one is refused
+        (:class:`~emulator.errors.OutputExistsError`).
+    quick : bool
+        The smallest configuration (:func:`demo_config`).
+    progress : callable, optional
+        ``progress(stage, done, total)``, called as each of the four stages advances
+        (``stage`` is a short label such as ``"1/4 synthesise forest_winter"``).
 
-def run_demo(output=None, *, quick: bool = False) -> int:
-    from tqdm import tqdm
-
+    Returns
+    -------
+    dict
+        ``output`` (the folder), ``report`` (the markdown of ``report.md``), ``total_s``.
+    """
     import scenes
+    from emulator.errors import OutputExistsError
+    from emulator.io.borealhdr import load_sequence
     from emulator.metrics.bench import bench_features, bench_vo
     from emulator.metrics.vo import VOParameters
     from emulator.playback import run_to_folder
     from scenes.synthesize import synthesize
 
+    def say(stage: str, done: int, total: int) -> None:
+        if progress is not None:
+            progress(stage, done, total)
+
     cfg = demo_config(quick)
     out = Path(output) if output is not None else new_output_dir()
     if out.exists() and any(out.iterdir()):
-        from emulator.errors import OutputExistsError
-
         raise OutputExistsError(f"{out}: exists and is not empty; choose another --output")
     out.mkdir(parents=True, exist_ok=True)
     t_start = time.perf_counter()
@@ -127,47 +144,43 @@ def run_demo(output=None, *, quick: bool = False) -> int:
 
     # 1. synthetic recording -----------------------------------------------------------
     scene = scenes.get_scene(cfg["scene"], seed=0)
-    n_imgs = cfg["n_cycles"] * 6
-    with tqdm(total=n_imgs, desc=f"1/4 synthesise {scene.name}", unit="shot", file=sys.stderr) as bar:
-
-        def progress(done, total):
-            bar.total = total
-            bar.n = done
-            bar.refresh()
-
-        t0 = time.perf_counter()
-        dataset = synthesize(
-            scene, out / "dataset", n_cycles=cfg["n_cycles"], width=cfg["width"], height=cfg["height"],
-            spp=cfg["spp"], gt_exposures_ms=GT_EXPOSURES_MS, gt_captures="noiseless", seed=0, progress=progress,
-        )
-        timings["synthesise_s"] = time.perf_counter() - t0
+    stage = f"1/4 synthesise {scene.name}"
+    say(stage, 0, cfg["n_cycles"] * 6)
+    t0 = time.perf_counter()
+    dataset = synthesize(
+        scene, out / "dataset", n_cycles=cfg["n_cycles"], width=cfg["width"], height=cfg["height"],
+        spp=cfg["spp"], gt_exposures_ms=GT_EXPOSURES_MS, gt_captures="noiseless", seed=0,
+        progress=lambda done, total: say(stage, done, total),
+    )
+    timings["synthesise_s"] = time.perf_counter() - t0
 
     # 2. emulator against exact ground truth ----------------------------------------------
-    _say("2/4 emulation against ground truth")
+    say("2/4 emulation against ground truth", 0, 1)
     t0 = time.perf_counter()
     emu = emulation_check(dataset)
     timings["emulation_check_s"] = time.perf_counter() - t0
+    say("2/4 emulation against ground truth", 1, 1)
 
     # 3. closed loop ---------------------------------------------------------------------
-    from emulator.dataset import load_sequence
-
     seq = load_sequence(dataset)
     run_dir = out / "run"
-    with tqdm(total=len(seq), desc="3/4 closed loop, 7 methods", unit="cycle", file=sys.stderr) as bar:
-        t0 = time.perf_counter()
-        run_summary = run_to_folder(
-            seq, "all", run_dir, save="png16", progress=lambda d, t: (setattr(bar, "n", d), bar.refresh()),
-            command="exposim demo",
-        )
-        timings["closed_loop_s"] = time.perf_counter() - t0
+    stage = "3/4 closed loop, 7 methods"
+    say(stage, 0, len(seq))
+    t0 = time.perf_counter()
+    run_summary = run_to_folder(
+        seq, "all", run_dir, save="png16", progress=lambda done, total: say(stage, done, total),
+        command="exposim demo",
+    )
+    timings["closed_loop_s"] = time.perf_counter() - t0
 
     # 4. features and VO -------------------------------------------------------------------
-    _say("4/4 features and stereo VO")
+    say("4/4 features and stereo VO", 0, 1)
     t0 = time.perf_counter()
     feats = bench_features(run_dir, out / "features", command="exposim demo")
     vo = bench_vo(run_dir, out / "vo", max_frames=cfg["vo_frames"], rpe_on_failure=True, command="exposim demo",
                   parameters=VOParameters(ratio=cfg["vo_ratio"]))
     timings["benchmarks_s"] = time.perf_counter() - t0
+    say("4/4 features and stereo VO", 1, 1)
     timings["total_s"] = time.perf_counter() - t_start
 
     results = {
@@ -179,26 +192,14 @@ def run_demo(output=None, *, quick: bool = False) -> int:
         "vo": vo,
         "timings": timings,
     }
-    (out / "results.json").write_text(json.dumps(results, indent=1, default=_jsonable))
+    write_results(out / RESULTS_FILE, results)
     report = _report(out, cfg, emu, run_dir, feats, vo, timings)
-    (out / "report.md").write_text(report)
-    print(report)
-    print(f"\nexposim demo: wrote {out} in {timings['total_s']:.0f} s (report.md, results.json, figures)")
-    return 0
-
-
-def _jsonable(o):
-    if isinstance(o, (np.floating, np.integer)):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, Path):
-        return str(o)
-    return str(o)
+    write_text(out / REPORT_FILE, report)
+    return {"output": out, "report": report, "total_s": timings["total_s"]}
 
 
 def _method_rows(feats: dict, vo: dict, run_summary_path: Path) -> list[str]:
-    run_results = json.loads(run_summary_path.read_text()) if run_summary_path.is_file() else {}
+    run_results = read_results(run_summary_path) if run_summary_path.is_file() else {}
     methods = run_results.get("methods", {})
     fm = feats.get("methods", {})
     vm = vo.get("methods", {})

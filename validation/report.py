@@ -1,7 +1,7 @@
 """Writing the validation experiments: results.json, arrays.npz, PNG figures and report.md.
 
 The only module of :mod:`validation` that plots (matplotlib, Agg backend, imported lazily)
-and assembles an output folder (through :func:`validation.common.write_json`); the
+and assembles an output folder (through :mod:`emulator.io.files`); the
 experiment modules return dicts and arrays.  :func:`run_experiment` is what
 ``exposim validate`` calls.
 """
@@ -12,14 +12,16 @@ from pathlib import Path
 
 import numpy as np
 
-from validation.common import (
-    PAPER_MAX_RMSE_PERCENT,
-    PAPER_MEDIAN_RMSE_PERCENT,
-    ValidationError,
+from emulator.io.files import (
+    REPORT_FILE,
+    RESULTS_FILE,
     prepare_output,
-    provenance,
-    write_json,
+    save_figure,
+    write_arrays,
+    write_results,
+    write_text,
 )
+from validation.common import PAPER_MAX_RMSE_PERCENT, PAPER_MEDIAN_RMSE_PERCENT, ValidationError, provenance
 
 __all__ = ["EXPERIMENTS", "make_config", "run_experiment"]
 
@@ -105,9 +107,9 @@ def run_experiment(name: str, output, *, config=None, quick: bool = False, force
     results["provenance"] = provenance(name, config.as_dict())
     results["provenance"]["command"] = command
     results["figures"] = figures
-    np.savez_compressed(folder / "arrays.npz", **{k: np.asarray(v) for k, v in out["arrays"].items()})
-    write_json(folder / "results.json", results)
-    (folder / "report.md").write_text(md)
+    write_arrays(folder / "arrays.npz", out["arrays"])
+    write_results(folder / RESULTS_FILE, results, float_digits=12)
+    write_text(folder / REPORT_FILE, md)
     return results
 
 
@@ -148,7 +150,7 @@ def _emulation_figures(out: dict, folder: Path) -> list[str]:
         axes[0].legend(fontsize=7, loc="upper left")
         fig.tight_layout()
         name = f"rmse_vs_exposure_{scene}.png"
-        fig.savefig(folder / name, dpi=110)
+        save_figure(fig, folder / name, dpi=110)
         plt.close(fig)
         names.append(name)
 
@@ -183,7 +185,7 @@ def _emulation_figures(out: dict, folder: Path) -> list[str]:
                      fontsize=9)
         fig.tight_layout()
         name = f"distributions_{scene}.png"
-        fig.savefig(folder / name, dpi=100)
+        save_figure(fig, folder / name, dpi=100)
         plt.close(fig)
         names.append(name)
 
@@ -204,7 +206,7 @@ def _emulation_figures(out: dict, folder: Path) -> list[str]:
         ax.set_title(f"{r['selector']}, {main}, {region} pixels, noise subtracted")
         ax.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(folder / "summary_per_scene.png", dpi=110)
+    save_figure(fig, folder / "summary_per_scene.png", dpi=110)
     plt.close(fig)
     names.append("summary_per_scene.png")
 
@@ -220,7 +222,7 @@ def _emulation_figures(out: dict, folder: Path) -> list[str]:
     ax.set_title(f"{r['selector']} over all scenes, per camera response / vignetting (valid pixels)")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(folder / "summary_per_camera.png", dpi=110)
+    save_figure(fig, folder / "summary_per_camera.png", dpi=110)
     plt.close(fig)
     names.append("summary_per_camera.png")
     return names
@@ -323,7 +325,7 @@ def _selectors_figures(out: dict, folder: Path) -> list[str]:
     axes[0].set_ylabel("RMSE - oracle RMSE (% of DN range)")
     axes[0].legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(folder / "excess_vs_exposure.png", dpi=110)
+    save_figure(fig, folder / "excess_vs_exposure.png", dpi=110)
     plt.close(fig)
     names.append("excess_vs_exposure.png")
 
@@ -336,7 +338,7 @@ def _selectors_figures(out: dict, folder: Path) -> list[str]:
     ax.set_ylabel("mean excess over oracle (% of DN range)")
     ax.legend()
     fig.tight_layout()
-    fig.savefig(folder / "selector_summary.png", dpi=110)
+    save_figure(fig, folder / "selector_summary.png", dpi=110)
     plt.close(fig)
     names.append("selector_summary.png")
     return names
@@ -407,7 +409,7 @@ def _motion_figures(out: dict, folder: Path) -> list[str]:
     ax.legend(fontsize=7)
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(folder / "motion_error.png", dpi=110)
+    save_figure(fig, folder / "motion_error.png", dpi=110)
     plt.close(fig)
     return ["motion_error.png"]
 
@@ -468,7 +470,7 @@ def _speed_figures(out: dict, folder: Path) -> list[str]:
     ax.set_ylabel("median RMSE (% of DN range)")
     ax.grid(alpha=0.3, which="both")
     fig.tight_layout()
-    fig.savefig(folder / "speed_vs_error.png", dpi=110)
+    save_figure(fig, folder / "speed_vs_error.png", dpi=110)
     plt.close(fig)
     return ["speed_vs_error.png"]
 

@@ -30,7 +30,7 @@ import inspect
 from collections.abc import Callable
 
 from emulator.autoexposure._base import (
-    DEFAULT_PAPER_RANGE_MS,
+    DEFAULT_RANGE_MS,
     MODES,
     AutoExposure,
     AutoExposureError,
@@ -56,7 +56,7 @@ __all__ = [
     "METHODS",
     "METHOD_NAMES",
     "MODES",
-    "DEFAULT_PAPER_RANGE_MS",
+    "DEFAULT_RANGE_MS",
     "make_method",
     "accepts_option",
     "to_gray",

@@ -16,7 +16,8 @@ Guards that only replace a REF crash, NaN or non-finite result are on in both mo
 a computed exposure that is not finite or not positive is replaced by the input
 exposure, counted in :attr:`AutoExposureMethod.guard_count` and logged (``logging``,
 never printed).  The optional clamp ``range_ms`` is off by default in borealhdr mode
-(REF has none) and ``DEFAULT_PAPER_RANGE_MS`` in paper mode.
+(REF has none) and :data:`DEFAULT_RANGE_MS` in paper mode, the same clamp the closed loop
+(:mod:`emulator.playback`) applies to every proposal.
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ __all__ = [
     "AutoExposureMethod",
     "AutoExposureError",
     "MODES",
-    "DEFAULT_PAPER_RANGE_MS",
+    "DEFAULT_RANGE_MS",
     "REF_BAYER_CODE",
     "RGGB_BAYER_CODE",
     "FULL_SCALE_DN",
@@ -50,8 +51,12 @@ logger = logging.getLogger("emulator.autoexposure")
 
 #: The two behaviours every method offers (spec, "Project decision").
 MODES = ("paper", "borealhdr")
-#: Default clamp of paper mode, in ms (the spec's example; REF mode has no clamp).
-DEFAULT_PAPER_RANGE_MS = (0.02, 100.0)
+#: The one default clamp of an exposure proposal, ms: of paper-mode methods (REF mode has
+#: none) and of the closed loop (``exposim run --range-ms``).  The upper end is 50 ms because
+#: BorealHDR's recorder shoots every ~46 ms (22 frames/s), so a longer integration is not
+#: physical for the camera being emulated; 50 ms is what ``exposim run`` has always used.
+#: The lower end, 0.02 ms, is the spec's exposure floor (Zhang's).
+DEFAULT_RANGE_MS = (0.02, 50.0)
 #: OpenCV code REF uses; OpenCV's "RG" names the BGGR layout (spec section 0).
 REF_BAYER_CODE = cv2.COLOR_BayerRG2GRAY
 #: OpenCV code that gives the standard luma weights on a true RGGB mosaic.
@@ -171,7 +176,7 @@ class AutoExposureMethod:
     def __init__(self, *, mode: str = "paper", range_ms="default") -> None:
         self.mode = check_mode(mode)
         if isinstance(range_ms, str) and range_ms == "default":
-            range_ms = DEFAULT_PAPER_RANGE_MS if self.mode == "paper" else None
+            range_ms = DEFAULT_RANGE_MS if self.mode == "paper" else None
         self.range_ms = check_range(range_ms)
         self.gray_code = REF_BAYER_CODE if self.mode == "borealhdr" else RGGB_BAYER_CODE
         self.guard_count = 0

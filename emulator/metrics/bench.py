@@ -2,7 +2,7 @@
 
 :func:`bench_features` and :func:`bench_vo` are what ``exposim bench features|vo`` call.
 Each writes into its output folder ``results.json`` (every number, and the arrays
-behind the figures), PNG figures drawn by :mod:`emulator.metrics.report`, and
+behind the figures), PNG figures drawn by :mod:`emulator.report.bench`, and
 ``report.md``.  They refuse an output folder that already holds ``results.json``
 unless ``force`` is given, and check every input (run folders, calibration, image size,
 reference overlap) before the long computation starts.
@@ -11,15 +11,16 @@ reference overlap) before the long computation starts.
 from __future__ import annotations
 
 import copy
-import json
 from collections.abc import Sequence
 from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 
-from emulator.errors import OutputExistsError
-from emulator.metrics.errors import MetricsError, RunFolderError, TrajectoryError
+from emulator.errors import MetricsError, RunFolderError, TrajectoryError
+from emulator.io.files import REPORT_FILE, RESULTS_FILE, prepare_output, write_results, write_text
+from emulator.io.runfolder import MethodRun, RunFolder, read_run_folder
+from emulator.io.tum import write_tum
 from emulator.metrics.features import (
     DEFAULT_TAUS,
     GRID_CELLS,
@@ -28,8 +29,7 @@ from emulator.metrics.features import (
     load_gray8,
     success_curve,
 )
-from emulator.metrics.runfolder import MethodRun, RunFolder, read_run_folder
-from emulator.metrics.rpe import associate, read_tum, rpe_by_length, trajectory_from_poses, write_tum
+from emulator.metrics.rpe import associate, read_trajectory, rpe_by_length, trajectory_from_poses
 from emulator.metrics.vo import (
     VOParameters,
     estimate_stereo_extrinsics,
@@ -42,7 +42,6 @@ from emulator.metrics.vo import (
 __all__ = [
     "bench_features",
     "bench_vo",
-    "prepare_output",
     "CONVERSION",
     "FAILURE_POLICY",
     "DEFAULT_DELTA_FRACTIONS",
@@ -53,7 +52,8 @@ __all__ = [
 #: The 12-bit to 8-bit conversion, as stated in the results.
 CONVERSION = (
     "gray8 = clip(round((cv2.cvtColor(raw, COLOR_BayerRG2GRAY) - black_level) * 255 / "
-    "(white_level - black_level)), 0, 255) for png16 Bayer images; png8 images are used as saved"
+    "(white_level - black_level)), 0, 255) for png16 Bayer images (emulator.gray.bayer_to_gray8); png8 images, "
+    "converted by exposim run with the same function, are used as saved"
 )
 #: What happens when the VO loses track, as stated in the results.
 FAILURE_POLICY = (
@@ -70,22 +70,6 @@ DEFAULT_DELTA_FRACTIONS = (0.1, 0.2, 0.3, 0.4, 0.5)
 REFERENCE_MAX_DIFF_S = 0.06
 #: Reference that synthetic sequences write, used when no reference is given.
 SYNTHETIC_REFERENCE = Path("ground_truth") / "poses_left.txt"
-
-
-def prepare_output(out_dir: str | Path, force: bool = False) -> Path:
-    """Create ``out_dir``; refuse one holding ``results.json`` unless ``force``.
-
-    Raises
-    ------
-    OutputExistsError
-    """
-    out = Path(out_dir)
-    if out.exists() and not out.is_dir():
-        raise OutputExistsError(f"{out}: exists and is not a folder")
-    if (out / "results.json").exists() and not force:
-        raise OutputExistsError(f"{out / 'results.json'} exists; pass --force to overwrite")
-    out.mkdir(parents=True, exist_ok=True)
-    return out
 
 
 def _version() -> str:
@@ -107,10 +91,6 @@ def _frames(method: MethodRun, max_frames: int | None):
             raise MetricsError(f"max_frames must be at least 2, got {max_frames}")
         frames = frames[:max_frames]
     return frames
-
-
-def _write_json(path: Path, data: dict) -> None:
-    path.write_text(json.dumps(data, indent=2, allow_nan=False) + "\n")
 
 
 # --------------------------------------------------------------------------- features
@@ -168,7 +148,7 @@ def bench_features(
         run_dirs = [run_dirs]
     if not run_dirs:
         raise MetricsError("bench_features: no run folder given")
-    out = prepare_output(out_dir, force)
+    out = prepare_output(out_dir, force=force)
     runs: list[RunFolder] = [read_run_folder(d, list(methods) if methods else None) for d in run_dirs]
     parameters = {
         "grid": [int(grid[0]), int(grid[1])],
@@ -235,11 +215,11 @@ def bench_features(
         "figures": {"fig4": "fig4_features.png"},
         "report": "report.md",
     }
-    from emulator.metrics import report
+    from emulator.report import bench as report
 
     report.plot_features(results, out / "fig4_features.png")
-    (out / "report.md").write_text(report.features_report(results, "fig4_features.png"))
-    _write_json(out / "results.json", results)
+    write_text(out / REPORT_FILE, report.features_report(results, "fig4_features.png"))
+    write_results(out / RESULTS_FILE, results)
     return results
 
 
@@ -338,7 +318,7 @@ def bench_vo(
     dict
         The content of ``results.json``.
     """
-    out = prepare_output(out_dir, force)
+    out = prepare_output(out_dir, force=force)
     run = read_run_folder(run_dir, list(methods) if methods else None, require_right=True)
     calib_dir = find_calibration(run.sequence, calibration)
     calib = load_stereo_calibration(calib_dir, baseline_m=baseline_m)
@@ -352,7 +332,7 @@ def bench_vo(
     ref_traj = None
     deltas = None
     if ref_path is not None:
-        ref_traj = read_tum(ref_path)
+        ref_traj = read_trajectory(ref_path)
         for name, frames in selected.items():  # fail now, not after the VO: overlap check
             stamps = [f.timestamp_ns for f in frames]
             dummy = trajectory_from_poses(stamps, np.tile(np.eye(4), (len(stamps), 1, 1)))
@@ -392,7 +372,6 @@ def bench_vo(
             for f in _progress(frames, progress, f"VO {name}", len(frames))
         )
         vo = run_stereo_vo(stream, rect, parameters)
-        (out / name).mkdir(exist_ok=True)
         write_tum(out / name / "trajectory.txt", vo.timestamps_ns, vo.poses)
         entry = {
             "status": "success" if vo.succeeded else "failed",
@@ -477,13 +456,12 @@ def bench_vo(
         "figures": {"fig6": "fig6_rpe.png", "trajectories": "trajectories.png"},
         "report": "report.md",
     }
-    from emulator.metrics import report
+    from emulator.report import bench as report
 
     report.plot_rpe(results, out / "fig6_rpe.png")
     report.plot_trajectories(aligned_xyz, ref_xyz if ref_traj is not None else None, out / "trajectories.png")
-    (out / "report.md").write_text(
-        report.vo_report(results, {"RPE against trajectory length (Fig. 6)": "fig6_rpe.png",
-                                   "trajectories": "trajectories.png"})
-    )
-    _write_json(out / "results.json", results)
+    write_text(out / REPORT_FILE,
+               report.vo_report(results, {"RPE against trajectory length (Fig. 6)": "fig6_rpe.png",
+                                          "trajectories": "trajectories.png"}))
+    write_results(out / RESULTS_FILE, results)
     return results

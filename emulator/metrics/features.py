@@ -11,11 +11,10 @@ Three measurements on the emulated left images of a run:
   (:func:`success_curve`).
 
 Images reach SIFT as 8-bit grey.  A 12-bit RGGB Bayer mosaic is converted by
-:func:`bayer_to_gray8`: OpenCV's ``COLOR_BayerRG2GRAY`` demosaicing to grey (kept in DN,
-``uint16``), then a *fixed linear* scale of the DN range to 0..255,
-``gray8 = clip(round((gray - black_level) * 255 / (white_level - black_level)), 0, 255)``.
-The scale is the same for every image; a per-image normalisation would hide exactly the
-exposure effects the benchmark measures.
+:func:`emulator.gray.bayer_to_gray8` (the conversion ``--save png8`` uses too): OpenCV's
+``COLOR_BayerRG2GRAY`` demosaicing to grey, then a *fixed linear* scale of the camera's DN
+range to 0..255.  The scale is the same for every image; a per-image normalisation would
+hide exactly the exposure effects the benchmark measures.
 
 SIFT is OpenCV's (``cv2.SIFT_create``) with its default parameters (all keypoints, 3
 octave layers, contrast threshold 0.04, edge threshold 10, sigma 1.6) unless stated.
@@ -30,10 +29,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from emulator.metrics.errors import MetricsError, RunFolderError
+from emulator.errors import DatasetError, MetricsError, RunFolderError
+from emulator.gray import bayer_to_gray8
+from emulator.io.png import read_image
 
 __all__ = [
-    "bayer_to_gray8",
     "to_gray8",
     "load_gray8",
     "SiftFeatures",
@@ -64,44 +64,7 @@ DEFAULT_TAUS = np.arange(5, 505, 5)
 MATCHERS = ("flann", "bf")
 
 
-def bayer_to_gray8(raw: np.ndarray, *, white_level: int = 4095, black_level: int = 0) -> np.ndarray:
-    """Convert a 12-bit RGGB Bayer mosaic to 8-bit grey by a fixed linear scale.
-
-    Parameters
-    ----------
-    raw : numpy.ndarray
-        (H, W) ``uint16`` RGGB Bayer mosaic in digital numbers (DN).
-    white_level, black_level : int
-        Sensor clip levels in DN; ``black_level`` maps to 0 and ``white_level`` to 255.
-
-    Returns
-    -------
-    numpy.ndarray
-        (H, W) ``uint8`` grey image,
-        ``clip(round((g - black_level) * 255 / (white_level - black_level)), 0, 255)``
-        where ``g = cv2.cvtColor(raw, cv2.COLOR_BayerRG2GRAY)`` (grey in DN).
-
-    Examples
-    --------
-    >>> raw = np.full((4, 4), 4095, np.uint16)
-    >>> int(bayer_to_gray8(raw)[0, 0])
-    255
-    >>> int(bayer_to_gray8(np.full((4, 4), 2048, np.uint16))[0, 0])
-    128
-    """
-    raw = np.asarray(raw)
-    if raw.ndim != 2 or raw.dtype != np.uint16:
-        raise MetricsError(f"bayer_to_gray8: raw must be a 2-D uint16 Bayer mosaic, got {raw.dtype} {raw.shape}")
-    if raw.shape[0] < 2 or raw.shape[1] < 2:
-        raise MetricsError(f"bayer_to_gray8: raw must be at least 2x2, got {raw.shape}")
-    if not 0 <= black_level < white_level:
-        raise MetricsError(f"bayer_to_gray8: need 0 <= black_level < white_level, got {black_level}, {white_level}")
-    gray = cv2.cvtColor(raw, cv2.COLOR_BayerRG2GRAY).astype(np.float64)
-    gray8 = np.rint((gray - black_level) * (255.0 / (white_level - black_level)))
-    return np.clip(gray8, 0, 255).astype(np.uint8)
-
-
-def to_gray8(image: np.ndarray, *, white_level: int = 4095, black_level: int = 0) -> np.ndarray:
+def to_gray8(image: np.ndarray, *, white_level: int, black_level: int) -> np.ndarray:
     """8-bit grey from a saved run image: ``uint16`` Bayer (png16) or ``uint8`` grey (png8).
 
     Parameters
@@ -109,7 +72,8 @@ def to_gray8(image: np.ndarray, *, white_level: int = 4095, black_level: int = 0
     image : numpy.ndarray
         (H, W) ``uint16`` RGGB mosaic in DN, (H, W) ``uint8`` grey, or (H, W, 3) ``uint8`` BGR.
     white_level, black_level : int
-        Clip levels in DN, used for ``uint16`` input only (see :func:`bayer_to_gray8`).
+        The camera's clip levels in DN, used for ``uint16`` input only
+        (:func:`emulator.gray.bayer_to_gray8`).
 
     Returns
     -------
@@ -128,7 +92,7 @@ def to_gray8(image: np.ndarray, *, white_level: int = 4095, black_level: int = 0
     )
 
 
-def load_gray8(path: str | Path, *, white_level: int = 4095, black_level: int = 0) -> np.ndarray:
+def load_gray8(path: str | Path, *, white_level: int, black_level: int) -> np.ndarray:
     """Read a run image (png16 Bayer or png8 grey) as (H, W) ``uint8`` grey.
 
     Raises
@@ -136,9 +100,10 @@ def load_gray8(path: str | Path, *, white_level: int = 4095, black_level: int = 
     RunFolderError
         When the file cannot be decoded or holds an unexpected image type.
     """
-    image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if image is None:
-        raise RunFolderError(f"{path}: cannot read image (missing or not a PNG)")
+    try:
+        image = read_image(path)
+    except (FileNotFoundError, DatasetError):
+        raise RunFolderError(f"{path}: cannot read image (missing or not a PNG)") from None
     try:
         return to_gray8(image, white_level=white_level, black_level=black_level)
     except MetricsError as exc:

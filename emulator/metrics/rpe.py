@@ -1,6 +1,8 @@
 """Relative pose error through evo (paper section V-D-2, Fig. 6).
 
-Trajectories are TUM text files, ``timestamp_s tx ty tz qx qy qz qw``, camera-to-world.
+Trajectories are TUM text files, ``timestamp_s tx ty tz qx qy qz qw``, camera-to-world,
+read and written by :mod:`emulator.io.tum`; :func:`trajectory_from_tum` turns one into
+the evo trajectory ``evo.tools.file_interface.read_tum_trajectory_file`` would give.
 
 Two entry points:
 
@@ -25,11 +27,12 @@ from pathlib import Path
 
 import numpy as np
 
-from emulator.metrics.errors import MetricsError, TrajectoryError
+from emulator.errors import MetricsError, TrajectoryError
+from emulator.io.tum import TumTrajectory, read_tum
 
 __all__ = [
-    "write_tum",
-    "read_tum",
+    "read_trajectory",
+    "trajectory_from_tum",
     "trajectory_from_poses",
     "associate",
     "rpe_files",
@@ -44,63 +47,30 @@ EVO_T_MAX_DIFF_S = 0.01
 DELTA_UNITS = ("m", "f")
 
 
-def _format_stamp(timestamp_ns: int) -> str:
-    ts = int(timestamp_ns)
-    sign = "-" if ts < 0 else ""
-    ts = abs(ts)
-    return f"{sign}{ts // 1_000_000_000}.{ts % 1_000_000_000:09d}"
+def trajectory_from_tum(tum: TumTrajectory):
+    """The evo ``PoseTrajectory3D`` of a TUM file, as ``evo_rpe`` reads it.
 
-
-def write_tum(path: str | Path, timestamps_ns: Sequence[int], poses: np.ndarray) -> None:
-    """Write camera-to-world poses as a TUM trajectory file.
-
-    Parameters
-    ----------
-    path : str or pathlib.Path
-    timestamps_ns : sequence of int
-        Pose times in integer nanoseconds; written as seconds with 9 decimals (exact).
-    poses : numpy.ndarray
-        (N, 4, 4) camera-to-world transforms, metres.
+    Same as ``evo.tools.file_interface.read_tum_trajectory_file``: timestamps, positions
+    and quaternions as written (w moved to the front), the name the file's stem.
     """
-    from scipy.spatial.transform import Rotation
+    from evo.core.trajectory import PoseTrajectory3D
 
-    poses = np.asarray(poses, dtype=np.float64)
-    if poses.ndim != 3 or poses.shape[1:] != (4, 4) or poses.shape[0] != len(timestamps_ns):
-        raise MetricsError(f"write_tum: need (N, 4, 4) poses for N timestamps, got {poses.shape}")
-    quats = Rotation.from_matrix(poses[:, :3, :3]).as_quat()  # x, y, z, w
-    lines = [
-        f"{_format_stamp(ts)} " + " ".join(f"{v:.9f}" for v in (*pose[:3, 3], *q))
-        for ts, pose, q in zip(timestamps_ns, poses, quats)
-    ]
-    Path(path).write_text("\n".join(lines) + "\n")
+    quat_wxyz = np.roll(tum.quaternions_xyzw, 1, axis=1)
+    return PoseTrajectory3D(tum.positions, quat_wxyz, tum.timestamps_s, name=Path(tum.path).stem)
 
 
-def read_tum(path: str | Path):
-    """Read a TUM trajectory file with evo.
-
-    Returns
-    -------
-    evo.core.trajectory.PoseTrajectory3D
+def read_trajectory(path):
+    """The evo trajectory of a TUM file (:func:`emulator.io.tum.read_tum`, then :func:`trajectory_from_tum`).
 
     Raises
     ------
     TrajectoryError
-        When the file is missing, malformed, or its timestamps are not increasing.
+        When the file is missing, malformed, empty, or its timestamps do not increase.
     """
-    from evo.tools import file_interface
-
-    path = Path(path)
-    if not path.is_file():
-        raise TrajectoryError(f"{path}: trajectory file does not exist")
     try:
-        traj = file_interface.read_tum_trajectory_file(str(path))
-    except Exception as exc:  # evo raises FileInterfaceException, numpy ValueError
-        raise TrajectoryError(f"{path}: not a TUM trajectory ('timestamp tx ty tz qx qy qz qw'): {exc}") from None
-    if traj.num_poses == 0:
-        raise TrajectoryError(f"{path}: trajectory is empty")
-    if np.any(np.diff(traj.timestamps) <= 0):
-        raise TrajectoryError(f"{path}: timestamps must be strictly increasing")
-    return traj
+        return trajectory_from_tum(read_tum(path))
+    except FileNotFoundError:
+        raise TrajectoryError(f"{path}: trajectory file does not exist") from None
 
 
 def trajectory_from_poses(timestamps_ns: Sequence[int], poses: np.ndarray, name: str = ""):
@@ -199,8 +169,8 @@ def rpe_files(
         raise MetricsError(f"delta must be positive, got {delta}")
     if delta_unit == "f" and float(delta) != int(delta):
         raise MetricsError(f"delta must be an integer number of frames, got {delta}")
-    ref = read_tum(ref_path)
-    est = read_tum(est_path)
+    ref = read_trajectory(ref_path)
+    est = read_trajectory(est_path)
     # evo_rpe: traj_ref.sync_with(traj_est, nearest_time, max_diff, offset 0), which is
     # sync.associate_trajectories(ref, est, ...), wrapped here for a clear error.
     ref, est = associate(ref, est, max_diff_s=max_diff_s, ref_name=str(ref_path), est_name=str(est_path))

@@ -27,7 +27,7 @@ re-initialises from the failed frame's own stereo points.  A run with any failur
 request, like the paper, which reports RPE for the runs where VO converged.
 
 Calibration: ROS ``camera_info`` YAML files ``left.yaml`` and ``right.yaml``
-(:func:`read_camera_info`).  The rig's relative pose is built from the files'
+(:func:`emulator.io.camera_info.read_camera_info`).  The rig's relative pose is built from the files'
 rectification matrices R_l, R_r and the baseline ``b = -P_r[0, 3] / P_r[0, 0]`` (ROS:
 ``Tx = -fx' b``): ``R = R_r^T R_l``, ``T = -R_r^T [b, 0, 0]`` (left to right camera).
 The images are then rectified by ``cv2.stereoRectify`` from K, D of both cameras and
@@ -49,7 +49,6 @@ option, never applied silently.
 from __future__ import annotations
 
 import math
-import re
 from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -57,12 +56,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from emulator.metrics.errors import CalibrationError, MetricsError
+from emulator.errors import CalibrationError, MetricsError
+from emulator.io.camera_info import CameraInfo, read_camera_info
 from emulator.metrics.features import RATIO_TEST, SiftFeatures, detect_sift, match_descriptors
 
 __all__ = [
-    "CameraInfo",
-    "read_camera_info",
     "StereoCalibration",
     "load_stereo_calibration",
     "find_calibration",
@@ -86,131 +84,8 @@ FAILURE_REASONS = {
     "implausible_jump": "the motion between consecutive frames exceeds max_step_m or max_step_deg",
 }
 
-_SUPPORTED_DISTORTION = {"plumb_bob": (4, 5, 8), "rational_polynomial": (8,), "none": (0,), "": (0,)}
-
 
 # --------------------------------------------------------------------------- calibration
-
-
-@dataclass(frozen=True)
-class CameraInfo:
-    """One camera of a ROS ``camera_info`` file.
-
-    Attributes
-    ----------
-    path : pathlib.Path
-        The YAML file.
-    width, height : int
-        Image size in pixels.
-    K : numpy.ndarray
-        (3, 3) intrinsic matrix, pixels.
-    D : numpy.ndarray
-        Distortion coefficients (OpenCV order k1, k2, p1, p2[, k3, ...]).
-    R : numpy.ndarray
-        (3, 3) rectification rotation.
-    P : numpy.ndarray
-        (3, 4) projection matrix; ``P[0, 3] = -fx' * baseline`` on the right camera.
-    distortion_model : str
-    name : str
-    """
-
-    path: Path
-    width: int
-    height: int
-    K: np.ndarray
-    D: np.ndarray
-    R: np.ndarray
-    P: np.ndarray
-    distortion_model: str = "plumb_bob"
-    name: str = ""
-
-
-def _strip_comments(text: str) -> str:
-    return "\n".join(line.split("#", 1)[0] for line in text.splitlines())
-
-
-def _scalar(text: str, key: str, path: Path, required: bool = True) -> str | None:
-    m = re.search(rf"^{key}\s*:\s*(.*?)\s*$", text, flags=re.MULTILINE)
-    if m is None or m.group(1) == "":
-        if required:
-            raise CalibrationError(f"{path}: missing '{key}'")
-        return None
-    return m.group(1).strip().strip("'\"")
-
-
-def _matrix(text: str, key: str, path: Path, shape: tuple[int, int] | None) -> np.ndarray:
-    m = re.search(
-        rf"^{key}\s*:\s*\n\s*rows\s*:\s*(\d+)\s*\n\s*cols\s*:\s*(\d+)\s*\n\s*data\s*:\s*\[(.*?)\]",
-        text,
-        flags=re.MULTILINE | re.DOTALL,
-    )
-    if m is None:
-        raise CalibrationError(f"{path}: missing or malformed '{key}' (expected rows, cols, data: [...])")
-    rows, cols = int(m.group(1)), int(m.group(2))
-    items = [s.strip() for s in m.group(3).replace("\n", " ").split(",")]
-    try:
-        values = np.array([float(s) for s in items if s], dtype=np.float64)
-    except ValueError:
-        raise CalibrationError(f"{path}: '{key}' data holds a non-number") from None
-    if values.size != rows * cols:
-        raise CalibrationError(f"{path}: '{key}' has {values.size} values for rows={rows} cols={cols}")
-    if shape is not None and (rows, cols) != shape:
-        raise CalibrationError(f"{path}: '{key}' must be {shape[0]}x{shape[1]}, got {rows}x{cols}")
-    if not np.all(np.isfinite(values)):
-        raise CalibrationError(f"{path}: '{key}' holds a non-finite value")
-    return values.reshape(rows, cols)
-
-
-def read_camera_info(path: str | Path) -> CameraInfo:
-    """Read a ROS ``camera_info`` YAML file (as written by ``camera_calibration``).
-
-    A small dedicated parser (no YAML library needed): scalar keys ``image_width``,
-    ``image_height``, ``camera_name``, ``distortion_model`` and the matrices
-    ``camera_matrix``, ``distortion_coefficients``, ``rectification_matrix``,
-    ``projection_matrix`` as ``rows/cols/data: [...]`` blocks (flow lists may span lines
-    and end with a comma; ``#`` comments are ignored).
-
-    Parameters
-    ----------
-    path : str or pathlib.Path
-
-    Returns
-    -------
-    CameraInfo
-
-    Raises
-    ------
-    CalibrationError
-        When the file is missing, a key is missing or a matrix is malformed.
-    """
-    path = Path(path)
-    if not path.is_file():
-        raise CalibrationError(f"{path}: calibration file does not exist")
-    text = _strip_comments(path.read_text())
-    try:
-        width = int(_scalar(text, "image_width", path))
-        height = int(_scalar(text, "image_height", path))
-    except ValueError:
-        raise CalibrationError(f"{path}: image_width and image_height must be integers") from None
-    if width < 1 or height < 1:
-        raise CalibrationError(f"{path}: image size must be positive, got {width}x{height}")
-    K = _matrix(text, "camera_matrix", path, (3, 3))
-    D = _matrix(text, "distortion_coefficients", path, None).ravel()
-    R = _matrix(text, "rectification_matrix", path, (3, 3))
-    P = _matrix(text, "projection_matrix", path, (3, 4))
-    model = (_scalar(text, "distortion_model", path, required=False) or "plumb_bob").lower()
-    if model not in _SUPPORTED_DISTORTION:
-        raise CalibrationError(
-            f"{path}: distortion_model {model!r} is not supported; use one of plumb_bob, rational_polynomial"
-        )
-    if D.size not in _SUPPORTED_DISTORTION[model] and not (D.size == 0 or np.all(D == 0)):
-        raise CalibrationError(f"{path}: {D.size} distortion coefficients do not fit the {model} model")
-    if K[0, 0] <= 0 or K[1, 1] <= 0:
-        raise CalibrationError(f"{path}: camera_matrix must have positive focal lengths")
-    if abs(np.linalg.det(R) - 1.0) > 1e-3:
-        raise CalibrationError(f"{path}: rectification_matrix is not a rotation (det = {np.linalg.det(R):.6f})")
-    name = _scalar(text, "camera_name", path, required=False) or ""
-    return CameraInfo(path, width, height, K, D, R, P, model, name)
 
 
 @dataclass(frozen=True)

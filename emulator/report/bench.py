@@ -1,10 +1,9 @@
-"""Figures and markdown reports of the feature and VO benchmarks.
+"""Figures and markdown reports of the feature and VO benchmarks (:mod:`emulator.metrics.bench`).
 
-The only module of :mod:`emulator.metrics` that plots.  Matplotlib is imported lazily
-and drives an Agg canvas directly (no ``pyplot``, no global backend change), so the
-functions work headless and never open a window.  Every figure is drawn from the
-dictionaries the benchmarks save in ``results.json``, so it can be redrawn without
-recomputing.
+Matplotlib is imported lazily and drives an Agg canvas directly
+(:func:`emulator.report.figures.new_figure`), so the functions work headless and never
+open a window.  Every figure is drawn from the dictionaries the benchmarks save in
+``results.json``, so it can be redrawn without recomputing.
 """
 
 from __future__ import annotations
@@ -12,6 +11,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+
+from emulator.report.figures import new_figure, save
 
 __all__ = [
     "plot_features",
@@ -39,16 +40,6 @@ PAPER_VO = {
 }
 
 
-def _figure(ncols: int, width: float = 5.0, height: float = 4.0):
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(width * ncols, height), layout="constrained")
-    FigureCanvasAgg(fig)
-    axes = fig.subplots(1, ncols, squeeze=False)[0]
-    return fig, axes
-
-
 def _boxplot(ax, data: list, labels: list[str]) -> None:
     present = [(d, name) for d, name in zip(data, labels) if len(d)]
     if not present:
@@ -73,7 +64,7 @@ def plot_features(results: dict, path: str | Path) -> Path:
     uniformity = [[100.0 * u for run in results["runs"] for u in run["methods"].get(m, {}).get("uniformity", [])]
                   for m in methods]
     matches = [[c for run in results["runs"] for c in run["methods"].get(m, {}).get("matches", [])] for m in methods]
-    fig, (a, b, c) = _figure(3)
+    fig, (a, b, c) = new_figure(3)
     _boxplot(a, uniformity, methods)
     a.set_ylabel("grid cells with a keypoint (%)")
     rows, cols = results["parameters"]["grid"]
@@ -91,14 +82,12 @@ def plot_features(results: dict, path: str | Path) -> Path:
     c.set_ylim(-2, 102)
     c.set_title(f"(c) success rate over {results['n_runs']} run folder(s)")
     c.legend(fontsize="small")
-    path = Path(path)
-    fig.savefig(path, dpi=110)
-    return path
+    return save(fig, path)
 
 
 def plot_rpe(results: dict, path: str | Path) -> Path:
     """Paper Fig. 6: median translation (%) and rotation (deg/m) RPE against distance."""
-    fig, (a, b) = _figure(2)
+    fig, (a, b) = new_figure(2)
     drawn = False
     for name, method in results["methods"].items():
         rpe = method.get("rpe")
@@ -122,9 +111,7 @@ def plot_rpe(results: dict, path: str | Path) -> Path:
                     transform=ax.transAxes)
     a.set_title("RPE, translation")
     b.set_title("RPE, rotation")
-    path = Path(path)
-    fig.savefig(path, dpi=110)
-    return path
+    return save(fig, path)
 
 
 def plot_trajectories(trajectories: dict, reference_xyz: np.ndarray | None, path: str | Path) -> Path:
@@ -137,7 +124,7 @@ def plot_trajectories(trajectories: dict, reference_xyz: np.ndarray | None, path
     reference_xyz : numpy.ndarray or None
         (M, 3) reference positions, metres.
     """
-    fig, (ax,) = _figure(1, 6.0, 5.0)
+    fig, (ax,) = new_figure(1, 6.0, 5.0)
     everything = [np.asarray(x).reshape(-1, 3) for x in trajectories.values()]
     if reference_xyz is not None and len(reference_xyz):
         everything.append(np.asarray(reference_xyz).reshape(-1, 3))
@@ -156,9 +143,7 @@ def plot_trajectories(trajectories: dict, reference_xyz: np.ndarray | None, path
     ax.legend(fontsize="small")
     ax.set_title("VO trajectories (Sim(3)-aligned to the reference)" if reference_xyz is not None
                  else "VO trajectories")
-    path = Path(path)
-    fig.savefig(path, dpi=110)
-    return path
+    return save(fig, path)
 
 
 def _fmt(value, spec: str = ".1f") -> str:

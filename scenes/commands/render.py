@@ -1,17 +1,13 @@
 """``exposim render``: render a scene along a trajectory to OpenEXR files.
 
 Thin: parses arguments and calls :mod:`scenes`.  Heavy imports (Mitsuba, tqdm)
-happen inside the command.
-
-``exposim synth`` (a trajectory rendered through the camera model into a
-BorealHDR-layout dataset) is registered by the ``synth`` package, which owns it;
-this module only provides ``render``.
+happen inside the command.  ``parse_size`` and ``parse_params`` are shared with
+``exposim synth`` (:mod:`scenes.commands.synth`).
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 from pathlib import Path
@@ -109,6 +105,7 @@ def register(subparsers) -> None:
 def _timestamps_and_poses(scene, args):
     import numpy as np
 
+    from emulator.io.tum import read_tum
     from scenes import trajectory as tr
 
     mode = args.trajectory
@@ -116,10 +113,10 @@ def _timestamps_and_poses(scene, args):
         path = Path(mode)
         if not path.is_file():
             raise FileNotFoundError(f"--trajectory: no such TUM pose file: {path}")
-        ts, poses = tr.read_tum(path)
-        if ts.size == 0:
+        poses_file = read_tum(path, allow_empty=True)
+        if len(poses_file) == 0:
             raise SceneError(f"--trajectory: {path} holds no pose")
-        return ts, poses
+        return poses_file.timestamps_s, poses_file.poses
     if not (math.isfinite(args.duration) and args.duration >= 0):
         raise SceneError(f"--duration must be >= 0, got {args.duration}")
     if not (math.isfinite(args.rate) and args.rate > 0):
@@ -139,8 +136,11 @@ def run_render(args: argparse.Namespace) -> int:
 
     import scenes
     from emulator.errors import OutputExistsError
+    from emulator.io.exr import write_exr
+    from emulator.io.files import write_metadata
+    from emulator.io.tum import write_tum
     from scenes import trajectory as tr
-    from scenes.cache import library_versions, write_exr
+    from scenes.cache import library_versions
     from scenes.variant import check_variant_name
 
     width, height = parse_size(args.size)
@@ -193,14 +193,14 @@ def run_render(args: argparse.Namespace) -> int:
             seed = frame_seed(args.render_seed, i, 0 if cam == "left" else 1)
             img = scenes.render(scene, pose, width=width, height=height, spp=spp, seed=seed, fov_deg=fov,
                                 cache_dir=cache_dir, variant=variant)
-            write_exr(out / "frames" / cam / f"{stamps_ns[i]}.exr", img)
+            write_exr(out / "frames" / cam / f"{stamps_ns[i]}.exr", img, overwrite=True)
             frames.append({"camera": cam, "timestamp_ns": stamps_ns[i], "seed": seed,
                            "dynamic_range_db": round(scenes.dynamic_range_db(img), 3)})
             bar.update(1)
 
-    tr.write_tum(out / "poses_left.txt", ts, poses)
+    write_tum(out / "poses_left.txt", stamps_ns, poses)
     if args.stereo:
-        tr.write_tum(out / "poses_right.txt", ts, np.stack([tr.stereo_right(p, baseline) for p in poses]))
+        write_tum(out / "poses_right.txt", stamps_ns, np.stack([tr.stereo_right(p, baseline) for p in poses]))
     fx, fy, cx, cy = scenes.intrinsics(width, height, fov)
     drs = [f["dynamic_range_db"] for f in frames]
     info = {
@@ -223,5 +223,8 @@ def run_render(args: argparse.Namespace) -> int:
         "dynamic_range_db": {"min": min(drs), "median": float(np.median(drs)), "max": max(drs)},
         "frames": frames,
     }
-    (out / "scene.json").write_text(json.dumps(info, indent=2, sort_keys=True) + "\n")
+    write_metadata(out / "scene.json", info, overwrite=True)
     return 0
+
+
+register.order = 60  # place in `exposim --help`

@@ -65,6 +65,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         q.set_defaults(func=_run, experiment=name)
 
 
+register.order = 80  # place in `exposim --help`
+
+
 _OPTION_FIELDS = ("cache_dir", "width", "height", "spp", "n_exposures", "repeats", "responses", "scenes",
                   "vignetting", "train_scenes", "test_scenes", "speeds_mps")
 

@@ -45,12 +45,15 @@ def register(subparsers) -> None:
     p.set_defaults(func=_run)
 
 
+register.order = 70  # place in `exposim --help`
+
+
 def _run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     import scenes
     from emulator.errors import ExposimError
-    from scenes.cli import parse_params, parse_size
+    from scenes.commands.render import parse_params, parse_size
     from scenes.synthesize import synthesize
 
     width, height = parse_size(args.size)

@@ -14,7 +14,7 @@ __all__ = ["register", "parse_option"]
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from emulator.autoexposure import METHOD_NAMES
+    from emulator.autoexposure import DEFAULT_RANGE_MS, METHOD_NAMES
 
     p = sub.add_parser(
         "run",
@@ -38,7 +38,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="method behaviour: paper (default, reference defects corrected) or borealhdr (reference code)")
     p.add_argument("--initial-ms", type=float, default=None, help="initial exposure of every method (default 4.0)")
     p.add_argument("--range-ms", type=float, nargs=2, metavar=("LOW", "HIGH"), default=None,
-                   help="clamp of every proposal, ms (default 0.02 50)")
+                   help="clamp of every proposal, ms (default %s %s)" % DEFAULT_RANGE_MS)
     p.add_argument("--selector", choices=("higher-no-sat", "closest", "reference"), default=None,
                    help="bracket selector (default higher-no-sat)")
     p.add_argument("--response", type=Path, default=None, help="pcalib file (default: found beside the recording)")
@@ -50,6 +50,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--json", action="store_true", help="print the results summary as JSON")
     p.set_defaults(func=_run)
+
+
+register.order = 30  # place in `exposim --help`
 
 
 def parse_option(text: str) -> tuple[str, str, object]:
@@ -85,13 +88,9 @@ def _command(args) -> str:
 
 
 def _run(args) -> int:
-    from emulator.playback import (
-        DEFAULT_INITIAL_MS,
-        DEFAULT_RANGE_MS,
-        DEFAULT_SELECTOR,
-        RUN_FILE,
-        run_to_folder,
-    )
+    from emulator.autoexposure import DEFAULT_RANGE_MS
+    from emulator.io.runfolder import RUN_FILE, read_run_json
+    from emulator.playback import DEFAULT_INITIAL_MS, DEFAULT_SELECTOR, run_to_folder
 
     given = {
         "methods": args.methods,
@@ -118,10 +117,9 @@ def _run(args) -> int:
     response_path = args.response
     if args.resume:
         # The recorded configuration wins; arguments given explicitly must agree with it.
-        run_json = args.output / RUN_FILE
-        if not run_json.is_file():
-            raise ExposimError(f"{run_json}: no run to resume (run.json missing)")
-        recorded = json.loads(run_json.read_text())
+        if not (args.output / RUN_FILE).is_file():
+            raise ExposimError(f"{args.output / RUN_FILE}: no run to resume (run.json missing)")
+        recorded = read_run_json(args.output)
         for key, value in given.items():
             if value is None:
                 given[key] = recorded.get(key, defaults[key])

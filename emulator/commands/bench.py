@@ -236,3 +236,6 @@ def register(subparsers) -> None:
                    help="max timestamp difference for association in s (default 0.01, as evo_rpe)")
     r.add_argument("--json", action="store_true", help='print {"rmse": ..., "mean": ..., "median": ...} only')
     r.set_defaults(func=_rpe)
+
+
+register.order = 40  # place in `exposim --help`

@@ -1,4 +1,4 @@
-"""``exposim info``, ``exposim emulate`` and ``exposim demo``."""
+"""``exposim emulate``: one cycle emulated at any exposure time, written as 16-bit PNGs."""
 
 from __future__ import annotations
 
@@ -12,15 +12,6 @@ __all__ = ["register", "emulate_cycle"]
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "info",
-        help="describe a recording: cameras, brackets, cycles, partial cycles and gaps",
-        description="Describe a BorealHDR-layout recording (cycles are grouped by timestamp).",
-    )
-    p.add_argument("sequence", type=Path, help="recording folder holding camera_left/ and camera_right/")
-    p.add_argument("--json", action="store_true", help="print one JSON object (cycles as a list)")
-    p.set_defaults(func=_info)
-
     p = sub.add_parser(
         "emulate",
         help="emulate one cycle at any exposure time and write 16-bit PNGs",
@@ -40,44 +31,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", action="store_true", help="print the result as one JSON object")
     p.set_defaults(func=_emulate)
 
-    p = sub.add_parser(
-        "demo",
-        help="run the main job end to end on the embedded synthetic default",
-        description=(
-            "Synthesise a small scene, emulate it, run the AE methods in closed loop and "
-            "write a short report into a new output folder."
-        ),
-    )
-    p.add_argument("-o", "--output", type=Path, default=None, help="output folder (default: a new exposim-demo-N)")
-    p.add_argument("--quick", action="store_true", help="smallest configuration (for tests)")
-    p.set_defaults(func=_demo)
+
+register.order = 20  # place in `exposim --help`
 
 
-# ---------------------------------------------------------------------------- info
-def _info(args) -> int:
-    from emulator.dataset import load_sequence
-
-    seq = load_sequence(args.sequence)
-    desc = seq.describe()
-    if args.json:
-        print(json.dumps(desc, indent=1))
-        return 0
-    print(f"sequence   {seq.path}")
-    print(f"cameras    {', '.join(seq.cameras)}")
-    print(f"brackets   {', '.join(f'{b:g}' for b in seq.brackets)} ms")
-    print(f"levels     black {seq.black_level}, white {seq.white_level}")
-    print(f"cycles     {len(seq)} ({len(seq) - len(seq.partial_cycles)} complete, partial: {seq.partial_cycles or 'none'})")
-    for c in desc["cycles"]:
-        cams = "  ".join(f"{cam}: {len(c.get(cam, {}))}/{len(seq.brackets)}" for cam in seq.cameras)
-        print(f"  cycle {c['index']:4d}  t0 {c['timestamp_ns']}  {cams}{'  partial' if c['partial'] else ''}")
-    if seq.gaps:
-        print("gaps")
-        for g in seq.gaps:
-            print(f"  {g}")
-    return 0
-
-
-# ---------------------------------------------------------------------------- emulate
 def emulate_cycle(
     sequence,
     cycle_index: int,
@@ -92,8 +49,8 @@ def emulate_cycle(
     The selector sees the brackets present for every requested camera and decides on the
     first camera's saturation (the left one for a stereo pair), once for all cameras.
     """
-    from emulator.dataset import sequence_response
     from emulator.emulate import check_exposure, emulate
+    from emulator.io.borealhdr import sequence_response
     from emulator.select import saturated_fraction, select
 
     exposure_ms = check_exposure(exposure_ms, "--exposure-ms")
@@ -149,8 +106,8 @@ def emulate_cycle(
 
 
 def _emulate(args) -> int:
-    from emulator.dataset import load_sequence, write_png16
-    from emulator.response import CameraResponse
+    from emulator.io.borealhdr import load_sequence, sequence_response
+    from emulator.io.png import write_png16
 
     seq = load_sequence(args.sequence)
     cams = ("left", "right") if args.camera == "both" else (args.camera,)
@@ -158,9 +115,7 @@ def _emulate(args) -> int:
         cams = tuple(c for c in cams if c in seq.cameras) or cams
     response = None
     if args.response is not None:
-        response = CameraResponse.from_pcalib(args.response, white_level=max(4095, seq.white_level)).with_levels(
-            white_level=seq.white_level, black_level=seq.black_level
-        )
+        response = sequence_response(seq, args.response)
     info, images = emulate_cycle(seq, args.cycle, args.exposure_ms, cameras=cams, selector=args.selector, response=response)
     targets = {
         cam: args.output / f"{cam}_cycle{args.cycle:04d}_{args.exposure_ms:g}ms.png" for cam in images
@@ -182,10 +137,3 @@ def _emulate(args) -> int:
         for cam, c in info["cameras"].items():
             print(f"  {cam:5s} {c['source']} (t = {c['timestamp_ns']} ns) -> {c['output']}")
     return 0
-
-
-# ---------------------------------------------------------------------------- demo
-def _demo(args) -> int:
-    from validation.demo import run_demo
-
-    return run_demo(args.output, quick=args.quick)

@@ -41,7 +41,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--smoothness", type=float, default=None, help="weight of the curvature prior (default 0.1)")
     p.add_argument("--margin", type=int, default=8, help="DN at each end treated as clipped (default 8)")
     p.add_argument("--pixels", type=int, default=65536, help="stack: random pixels used (default 65536)")
-    p.add_argument("--white-level", type=int, default=None, help="stack: white level (default exposim.json or 4095)")
+    p.add_argument("--white-level", type=int, default=None,
+                   help="stack: white level (default: the stack's exposim.json, else BorealHDR's 4094)")
     p.add_argument("--black-level", type=int, default=None, help="stack: black level (default exposim.json or 0)")
     p.add_argument("--no-static-check", action="store_true",
                    help="stack: do not refuse a fit whose residual is far above the noise")
@@ -53,6 +54,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", action="store_true", help="print the result as one JSON object")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_calibrate)
+
+
+register.order = 50  # place in `exposim --help`
 
 
 def _progress_bar(enabled: bool):
@@ -83,14 +87,10 @@ def _progress_bar(enabled: bool):
 
 
 def _calibrate(args) -> int:
-    from emulator.calibrate import (
-        calibrate_from_recording,
-        calibrate_stack,
-        cross_bracket_error,
-        plot_calibration,
-        write_response,
-    )
+    from emulator.calibrate import calibrate_from_recording, calibrate_stack, cross_bracket_error
     from emulator.errors import ExposimError, OutputExistsError
+    from emulator.io.pcalib import write_response
+    from emulator.report.calibration import plot_calibration
 
     if (args.stack is None) == (args.from_recording is None):
         raise ExposimError("give either a STACK folder or --from-recording SEQ (not both)")
@@ -111,7 +111,7 @@ def _calibrate(args) -> int:
                 kw["n_knots"] = args.knots
             if args.smoothness is not None:
                 kw["smoothness"] = args.smoothness
-            from emulator.calibrate import read_stack
+            from emulator.io.stack import read_stack
 
             stack = read_stack(args.stack, white_level=args.white_level, black_level=args.black_level)
             result = calibrate_stack(
@@ -119,7 +119,7 @@ def _calibrate(args) -> int:
                 progress=progress, **kw,
             )
         else:
-            from emulator.dataset import find_response, load_sequence, sequence_response
+            from emulator.io.borealhdr import find_response, load_sequence, sequence_response
 
             seq = load_sequence(args.from_recording)
             cams = None if args.camera == "both" else (args.camera,)
@@ -140,7 +140,7 @@ def _calibrate(args) -> int:
     finally:
         close()
 
-    write_response(result, out, overwrite=args.force)
+    write_response(out, result.response, overwrite=args.force)
     plot_calibration(result, plot_path, reference=reference,
                      reference_label=f"existing {reference.name}" if reference is not None else "reference",
                      overwrite=args.force)

@@ -1,0 +1,274 @@
+"""The BorealHDR recording layout: reader and writer.
+
+Layout (BorealHDR, also written by ``synth``)::
+
+    <sequence>/camera_left/<exposure_ms>/<timestamp_ns>.png    16-bit PNG, 12-bit Bayer DN
+    <sequence>/camera_right/<exposure_ms>/<timestamp_ns>.png
+    <sequence>/exposim.json        optional metadata (white/black level, brackets) from synth
+    <sequence>/calibration/response.txt or pcalib*.txt, or <sequence>/../calibration/pcalib*.txt
+                                   the inverse response (pcalib format)
+
+:func:`load_sequence` scans the layout into the in-memory model of :mod:`emulator.dataset`
+(cycles grouped by timestamp); images decode lazily through :func:`read_frame`.  The scan
+reads through a :class:`FileSource`, so another container than a folder (a zip archive)
+can be plugged in without touching the scan; :class:`FolderSource` is the file system.
+
+The camera's levels are properties of the recording: the BorealHDR sample saturates at
+:data:`BOREALHDR_WHITE_LEVEL` = 4094 DN with black level 0.  A recording's own
+``exposim.json`` (written by ``synth``) overrides them; these constants are the only
+fallback anywhere in exposim.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+from pathlib import Path
+from typing import Protocol
+
+import numpy as np
+
+from emulator.dataset import CAMERAS, Frame, Sequence, build_sequence
+from emulator.errors import DatasetError
+from emulator.io.files import parse_json_object, write_metadata
+from emulator.io.png import decode_png16, write_png16
+
+__all__ = [
+    "BOREALHDR_WHITE_LEVEL",
+    "BOREALHDR_BLACK_LEVEL",
+    "CAMERA_FOLDERS",
+    "METADATA_FILE",
+    "FileSource",
+    "FolderSource",
+    "load_sequence",
+    "read_frame",
+    "write_frame",
+    "exposure_folder_name",
+    "parse_exposure_folder",
+    "read_recording_metadata",
+    "write_recording_metadata",
+    "find_response",
+    "sequence_response",
+]
+
+#: The BorealHDR sample saturates at 4094 (DESIGN.md): its white level, DN.
+BOREALHDR_WHITE_LEVEL = 4094
+#: The BorealHDR sample's black level, DN.
+BOREALHDR_BLACK_LEVEL = 0
+#: Camera name -> folder of the layout.
+CAMERA_FOLDERS = {"left": "camera_left", "right": "camera_right"}
+#: Optional metadata file of a recording (written by ``synth``).
+METADATA_FILE = "exposim.json"
+_TIMESTAMP_RE = re.compile(r"^(\d+)\.png$")
+
+
+# ---------------------------------------------------------------------------- file sources
+class FileSource(Protocol):
+    """Where a recording's files are: the scan lists folders and reads bytes through this.
+
+    Paths are full paths under :attr:`root` (for a folder: ordinary paths; an archive
+    source maps them to its members), so messages name files the same way for any source.
+    """
+
+    root: Path
+
+    def is_dir(self, path: Path) -> bool: ...
+
+    def is_file(self, path: Path) -> bool: ...
+
+    def listdir(self, path: Path) -> list[Path]:
+        """Children of a folder, sorted by name."""
+        ...
+
+    def read_bytes(self, path: Path) -> bytes: ...
+
+
+class FolderSource:
+    """A recording in a folder of the file system."""
+
+    def __init__(self, root: str | os.PathLike) -> None:
+        self.root = Path(root)
+
+    def is_dir(self, path: Path) -> bool:
+        return Path(path).is_dir()
+
+    def is_file(self, path: Path) -> bool:
+        return Path(path).is_file()
+
+    def listdir(self, path: Path) -> list[Path]:
+        return sorted(Path(path).iterdir())
+
+    def read_bytes(self, path: Path) -> bytes:
+        path = Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"{path}: image not found")
+        return path.read_bytes()
+
+    def __repr__(self) -> str:
+        return f"FolderSource({str(self.root)!r})"
+
+
+# ---------------------------------------------------------------------------- names
+def exposure_folder_name(exposure_ms: float) -> str:
+    """Folder name for an exposure: ``1.0``, ``32.0`` as BorealHDR; full precision otherwise.
+
+    >>> exposure_folder_name(8), exposure_folder_name(0.125)
+    ('8.0', '0.125')
+    """
+    v = float(exposure_ms)
+    short = f"{v:.1f}"
+    return short if float(short) == v else repr(v)
+
+
+def parse_exposure_folder(folder: Path) -> float:
+    """The exposure (ms) a folder name stands for; :class:`DatasetError` for anything else."""
+    try:
+        v = float(folder.name)
+    except ValueError:
+        raise DatasetError(
+            f"{folder}: unknown folder name {folder.name!r} (expected an exposure in ms, e.g. '8.0')"
+        ) from None
+    if not math.isfinite(v) or v <= 0:
+        raise DatasetError(f"{folder}: exposure folder {folder.name!r} is not a positive finite number of ms")
+    return v
+
+
+# ---------------------------------------------------------------------------- metadata
+def read_recording_metadata(root: str | os.PathLike, source: FileSource | None = None) -> dict:
+    """The recording's ``exposim.json`` (``{}`` when absent); :class:`DatasetError` if malformed."""
+    root = Path(root)
+    source = source or FolderSource(root)
+    path = root / METADATA_FILE
+    if not source.is_file(path):
+        return {}
+    return parse_json_object(source.read_bytes(path), path, DatasetError)
+
+
+def write_recording_metadata(root: str | os.PathLike, metadata: dict, *, overwrite: bool = False) -> Path:
+    """Write a recording's ``exposim.json`` (levels, brackets, camera, provenance)."""
+    return write_metadata(Path(root) / METADATA_FILE, metadata, overwrite=overwrite)
+
+
+# ---------------------------------------------------------------------------- reader
+def _scan_camera(source: FileSource, cam_dir: Path, camera: str, white_level: int) -> list[Frame]:
+    frames: list[Frame] = []
+    for entry in source.listdir(cam_dir):
+        if entry.name.startswith("."):
+            continue
+        if not source.is_dir(entry):
+            raise DatasetError(f"{entry}: unexpected file in {cam_dir.name}/ (expected exposure folders like '8.0/')")
+        exposure_ms = parse_exposure_folder(entry)
+        for f in source.listdir(entry):
+            if f.name.startswith(".") or f.name.endswith(".part"):
+                continue
+            m = _TIMESTAMP_RE.match(f.name)
+            if not m:
+                raise DatasetError(f"{f}: unexpected file name (expected <timestamp_ns>.png)")
+            frames.append(Frame(camera, exposure_ms, int(m.group(1)), f, white_level, source))
+    if not frames:
+        raise DatasetError(f"{cam_dir}: camera folder holds no images")
+    return frames
+
+
+def load_sequence(
+    path: str | os.PathLike,
+    *,
+    white_level: int | None = None,
+    black_level: int | None = None,
+    source: FileSource | None = None,
+) -> Sequence:
+    """Read a recording in the BorealHDR layout into cycles (images decode lazily).
+
+    White and black levels come from the arguments, else from ``exposim.json`` written by
+    ``synth``, else the BorealHDR levels (4094, 0).  Raises :class:`DatasetError` for an
+    unknown folder, an empty camera folder, shots whose left/right exposures disagree at
+    one timestamp, the same shot twice, or a sequence without any camera folder; a missing
+    second camera or missing brackets are reported in ``Sequence.gaps``.  ``source``
+    replaces the file system (default :class:`FolderSource` of ``path``).
+    """
+    root = Path(path)
+    if source is None:
+        if not root.is_dir():
+            raise FileNotFoundError(f"{root}: sequence folder not found")
+        source = FolderSource(root)
+    meta = read_recording_metadata(root, source)
+    white = int(white_level if white_level is not None else meta.get("white_level", BOREALHDR_WHITE_LEVEL))
+    black = int(black_level if black_level is not None else meta.get("black_level", BOREALHDR_BLACK_LEVEL))
+
+    per_camera: dict[str, list[Frame]] = {}
+    gaps: list[str] = []
+    for cam in CAMERAS:
+        folder = CAMERA_FOLDERS[cam]
+        d = root / folder
+        if source.is_dir(d):
+            per_camera[cam] = _scan_camera(source, d, cam, white)
+        else:
+            gaps.append(f"{folder}/ missing: no {cam} camera")
+    if not per_camera:
+        raise DatasetError(f"{root}: no camera_left/ or camera_right/ folder (not a BorealHDR sequence)")
+    return build_sequence(root, per_camera, white_level=white, black_level=black,
+                          brackets_ms=meta.get("brackets_ms", ()), metadata=meta, gaps=gaps)
+
+
+def read_frame(frame: Frame) -> np.ndarray:
+    """Decode one frame's image (uint16 (H, W) DN), checked against its white level."""
+    source = frame.source if frame.source is not None else FolderSource(frame.path.parent)
+    return decode_png16(source.read_bytes(frame.path), frame.path, white_level=frame.white_level)
+
+
+# ---------------------------------------------------------------------------- writer
+def write_frame(
+    sequence_path: str | os.PathLike,
+    camera: str,
+    exposure_ms: float,
+    timestamp_ns: int,
+    raw: np.ndarray,
+    *,
+    overwrite: bool = False,
+) -> Path:
+    """Write one shot in the BorealHDR layout (atomic); returns its path."""
+    if camera not in CAMERA_FOLDERS:
+        raise DatasetError(f"camera must be one of {CAMERAS}, got {camera!r}")
+    if raw.dtype != np.uint16:
+        raise DatasetError(f"raw image must be uint16, got {raw.dtype}")
+    path = Path(sequence_path) / CAMERA_FOLDERS[camera] / exposure_folder_name(exposure_ms) / f"{int(timestamp_ns)}.png"
+    return write_png16(path, raw, overwrite=overwrite)
+
+
+# ---------------------------------------------------------------------------- response
+def find_response(sequence_path: str | os.PathLike) -> Path | None:
+    """Locate the inverse-response file of a recording, or None.
+
+    Looks for ``<seq>/calibration/response.txt`` or ``pcalib*.txt`` (synthetic datasets),
+    then ``<seq>/../calibration/pcalib*.txt`` (the BorealHDR sample layout).
+    """
+    seq = Path(sequence_path)
+    for d in (seq / "calibration", seq.parent / "calibration"):
+        if not d.is_dir():
+            continue
+        if (d / "response.txt").is_file():
+            return d / "response.txt"
+        found = sorted(d.glob("pcalib*.txt"))
+        if found:
+            return found[0]
+    return None
+
+
+def sequence_response(sequence: Sequence, path: str | os.PathLike | None = None):
+    """The camera response of a recording, clipped to the recording's levels.
+
+    ``path`` (a pcalib file) overrides discovery through :func:`find_response`.  The table
+    spans DN 0..4095 (12 bits) as the pcalib format does; the sequence's white level
+    (BorealHDR: 4094) and black level then bound emulation and saturation.
+    """
+    from emulator.io.pcalib import PCALIB_TABLE_TOP, read_response
+
+    resp_path = Path(path) if path is not None else find_response(sequence.path)
+    if resp_path is None:
+        raise DatasetError(
+            f"{sequence.path}: no response file found (looked for calibration/response.txt or "
+            f"pcalib*.txt in the sequence and beside it); pass one explicitly"
+        )
+    response = read_response(resp_path, white_level=max(PCALIB_TABLE_TOP, sequence.white_level))
+    return response.with_levels(white_level=sequence.white_level, black_level=sequence.black_level)

@@ -1,0 +1,123 @@
+"""The pcalib inverse-response format (TUM monoVO / BorealHDR), reader and writer.
+
+A pcalib file holds N whitespace-separated samples of the inverse response g = f^-1,
+placed evenly over DN ``0..table_top`` (``table_top`` = 4095 for 12-bit data: sample k
+sits at DN ``4095 k / (N - 1)``).  TUM files hold N = 256 samples in units where
+g(4095) = 255; ``synth`` writes one sample per DN (N = table_top + 1), which is always
+accepted.  Samples are read exactly as given: no renormalisation and no forcing of the
+end knots (DESIGN.md, "How the table is read matters").
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from emulator.errors import ResponseError
+from emulator.io.files import atomic_write_bytes
+from emulator.response import CameraResponse
+
+__all__ = [
+    "PCALIB_TABLE_TOP",
+    "PCALIB_SAMPLES",
+    "PCALIB_TOP_VALUE",
+    "read_pcalib",
+    "write_pcalib",
+    "read_response",
+    "write_response",
+]
+
+#: A pcalib table spans DN 0..4095 (12 bits).
+PCALIB_TABLE_TOP = 4095
+#: Samples in a TUM pcalib file.
+PCALIB_SAMPLES = 256
+#: g at the table top in TUM pcalib units.
+PCALIB_TOP_VALUE = 255.0
+
+
+def read_pcalib(path: str | os.PathLike) -> np.ndarray:
+    """The samples of g in a pcalib file, float64, unchanged.
+
+    Raises :class:`ResponseError` naming the file for an empty file, unparsable tokens or
+    non-finite values.  Monotonicity and count are checked by :func:`read_response`,
+    which knows the bit depth.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{path}: response file not found") from None
+    except UnicodeDecodeError:
+        raise ResponseError(f"{path}: not a text file (pcalib files hold whitespace-separated numbers)") from None
+    tokens = text.split()
+    if not tokens:
+        raise ResponseError(f"{path}: empty file, expected whitespace-separated samples of the inverse response")
+    values = np.empty(len(tokens), dtype=np.float64)
+    for i, tok in enumerate(tokens):
+        try:
+            values[i] = float(tok)
+        except ValueError:
+            raise ResponseError(f"{path}: sample {i} is {tok!r}, not a number") from None
+    bad = ~np.isfinite(values)
+    if bad.any():
+        first = int(np.flatnonzero(bad)[0])
+        raise ResponseError(
+            f"{path}: {int(bad.sum())} non-finite sample(s), the first at index {first} ({tokens[first]!r})"
+        )
+    return values
+
+
+def write_pcalib(path: str | os.PathLike, samples, *, overwrite: bool = False) -> Path:
+    """Write samples of g as one line, space-separated, at full precision (atomic)."""
+    samples = np.asarray(samples, dtype=np.float64).ravel()
+    if samples.size < 2 or not np.all(np.isfinite(samples)):
+        raise ResponseError(f"{path}: need at least 2 finite samples of g, got {samples.size}")
+    text = " ".join(repr(float(v)) for v in samples) + "\n"
+    return atomic_write_bytes(path, text.encode(), overwrite=overwrite)
+
+
+def read_response(
+    path: str | os.PathLike,
+    white_level: int = PCALIB_TABLE_TOP,
+    *,
+    black_level: int = 0,
+    expected_count: int | None = PCALIB_SAMPLES,
+) -> CameraResponse:
+    """A :class:`CameraResponse` from a pcalib file (N samples of g over DN 0..white_level).
+
+    ``white_level`` is the table top (4095 for the pcalib format; clip to a camera's own
+    level with :meth:`CameraResponse.with_levels`).  ``expected_count`` (256 for the TUM
+    format) is enforced unless None; a table with ``white_level + 1`` samples (one per DN)
+    is always accepted.
+    """
+    samples = read_pcalib(path)
+    n = samples.size
+    if expected_count is not None and n not in (expected_count, int(white_level) + 1):
+        raise ResponseError(
+            f"{path}: expected {expected_count} samples (or {int(white_level) + 1}, one per DN), got {n}"
+        )
+    return CameraResponse.from_samples(samples, white_level, black_level=black_level, name=str(path))
+
+
+def write_response(
+    path: str | os.PathLike,
+    response: CameraResponse,
+    *,
+    n_samples: int = PCALIB_SAMPLES,
+    overwrite: bool = False,
+) -> Path:
+    """Write a response as a pcalib file of ``n_samples`` samples over its table.
+
+    When the response was built from exactly ``n_samples`` knots (a pcalib file, or the
+    256 knots of a stack calibration), the knots are written as they are, so that
+    :func:`read_response` gives back the same response; otherwise g is sampled at evenly
+    spaced DN over ``0..response.white_level``.
+    """
+    n_samples = int(n_samples)
+    if response.knots is not None and response.knots.size == n_samples:
+        samples = response.knots
+    else:
+        samples = response.inverse(np.linspace(0.0, float(response.white_level), n_samples))
+    return write_pcalib(path, samples, overwrite=overwrite)

@@ -1,0 +1,101 @@
+"""PNG images: 16-bit Bayer frames (12-bit DN in ``uint16``) and 8-bit viewable images.
+
+* :func:`read_png16` / :func:`decode_png16` / :func:`write_png16`: single-channel 16-bit
+  PNGs holding raw DN (BorealHDR frames, calibration stacks, ``--save png16`` run images,
+  emulated images).  Reading checks dtype, channels and, when given, the white level.
+* :func:`write_png8`: an 8-bit image for viewers (``--save png8``): grey (H, W) or BGR
+  (H, W, 3) ``uint8``; the conversion from DN is :func:`emulator.gray.bayer_to_gray8`.
+* :func:`read_image`: a run image as saved, ``uint16`` mosaic or ``uint8`` grey.
+
+Encoding uses OpenCV with compression level 1 (fast; the same array gives the same bytes),
+written atomically (:func:`emulator.io.files.atomic_write_bytes`).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from emulator.errors import DatasetError
+from emulator.io.files import atomic_write_bytes
+
+__all__ = ["decode_png16", "read_png16", "write_png16", "write_png8", "read_image", "encode_png"]
+
+
+def _read_bytes(path: Path) -> bytes:
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: image not found")
+    return path.read_bytes()
+
+
+def decode_png16(data: bytes, name: str | os.PathLike, *, white_level: int | None = None) -> np.ndarray:
+    """Decode the bytes of a 16-bit single-channel PNG holding 12-bit DN.
+
+    ``name`` (a path or archive member) is used in the messages; raises
+    :class:`DatasetError` for corrupt data, an 8-bit or colour image, or a DN above
+    ``white_level``.
+    """
+    buf = np.frombuffer(data, dtype=np.uint8)
+    img = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED) if buf.size else None
+    if img is None:
+        raise DatasetError(f"{name}: cannot decode image (corrupt or truncated PNG, {buf.size} bytes)")
+    if img.dtype != np.uint16:
+        raise DatasetError(
+            f"{name}: expected a 16-bit PNG holding 12-bit DN, got {img.dtype} "
+            f"({'8-bit' if img.dtype == np.uint8 else 'other'} image)"
+        )
+    if img.ndim != 2:
+        raise DatasetError(f"{name}: expected a single-channel Bayer mosaic, got shape {img.shape}")
+    if white_level is not None:
+        top = int(img.max())
+        if top > white_level:
+            raise DatasetError(f"{name}: maximum DN {top} exceeds white_level {white_level} (not 12-bit data?)")
+    return img
+
+
+def read_png16(path: str | os.PathLike, *, white_level: int | None = None) -> np.ndarray:
+    """Read a 16-bit single-channel PNG holding 12-bit DN (see :func:`decode_png16`)."""
+    path = Path(path)
+    return decode_png16(_read_bytes(path), path, white_level=white_level)
+
+
+def encode_png(image: np.ndarray, name: str | os.PathLike = "image") -> bytes:
+    """PNG bytes of a ``uint16`` or ``uint8`` image (compression level 1)."""
+    ok, buf = cv2.imencode(".png", np.ascontiguousarray(image), [cv2.IMWRITE_PNG_COMPRESSION, 1])
+    if not ok:  # pragma: no cover - OpenCV failure
+        raise DatasetError(f"{name}: PNG encoding failed")
+    return buf.tobytes()
+
+
+def write_png16(path: str | os.PathLike, image: np.ndarray, *, overwrite: bool = False) -> Path:
+    """Write a 2-D ``uint16`` image (DN) as a 16-bit PNG, atomically."""
+    image = np.asarray(image)
+    if image.dtype != np.uint16 or image.ndim != 2:
+        raise DatasetError(f"{path}: a 16-bit PNG needs a 2-D uint16 image, got {image.dtype} {image.shape}")
+    return atomic_write_bytes(path, encode_png(image, path), overwrite=overwrite)
+
+
+def write_png8(path: str | os.PathLike, image: np.ndarray, *, overwrite: bool = False) -> Path:
+    """Write a viewable 8-bit PNG: (H, W) grey or (H, W, 3) BGR ``uint8``, atomically."""
+    image = np.asarray(image)
+    if image.dtype != np.uint8 or not (image.ndim == 2 or (image.ndim == 3 and image.shape[2] == 3)):
+        raise DatasetError(f"{path}: an 8-bit PNG needs a (H, W) or (H, W, 3) uint8 image, got {image.dtype} "
+                           f"{image.shape}")
+    return atomic_write_bytes(path, encode_png(image, path), overwrite=overwrite)
+
+
+def read_image(path: str | os.PathLike) -> np.ndarray:
+    """A saved image as stored: (H, W) ``uint16`` mosaic, (H, W) ``uint8`` grey or (H, W, 3) BGR.
+
+    Raises FileNotFoundError for a missing file and :class:`DatasetError` for one that is
+    not a decodable image.
+    """
+    path = Path(path)
+    buf = np.frombuffer(_read_bytes(path), dtype=np.uint8)
+    img = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED) if buf.size else None
+    if img is None:
+        raise DatasetError(f"{path}: cannot decode image (corrupt or not a PNG)")
+    return img

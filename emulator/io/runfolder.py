@@ -1,0 +1,622 @@
+"""The run folder of ``exposim run``: its one writer (with resume and a lock) and its reader.
+
+Layout (a contract with the feature / VO benchmark and the report)::
+
+    RUN_DIR/run.json                     configuration, status, cycles done, timing, writer
+    RUN_DIR/run.lock                     present while a process writes the folder
+    RUN_DIR/<method>/exposures.csv       cycle,timestamp_ns,target_ms,bracket_ms,ratio,
+                                         saturated_fraction,valid_fraction, then EXTRA_COLUMNS
+    RUN_DIR/<method>/images/left/<timestamp_ns>.png    (--save png16 | png8)
+    RUN_DIR/<method>/images/right/<timestamp_ns>.png
+    RUN_DIR/<method>/images/times.txt    "<timestamp_ns> <timestamp_s> <exposure_ms>", by time
+    RUN_DIR/exposure.png, RUN_DIR/results.json, RUN_DIR/report.md   (emulator.report.run)
+
+``png16`` images are 12-bit DN in ``uint16`` RGGB Bayer mosaics; ``png8`` images are 8-bit
+grey (:func:`emulator.gray.bayer_to_gray8`).  ``times.txt`` is the TUM monoVO format
+(:mod:`emulator.io.stack`), the image name being its timestamp in ns.
+
+**Writer** (:class:`RunWriter`): creates a new folder (refusing a non-empty one) or
+resumes one, appends CSV rows (a row already recorded is checked against the replay, not
+written twice), writes images and ``run.json`` atomically, and writes ``times.txt`` at the
+end.  While it is open it holds the folder's **lock** (:class:`RunLock`): ``run.lock``
+holds the writer's PID, host and start time, is created atomically (a complete temporary
+file hard-linked into place, which fails when the lock exists) and is held with
+``fcntl.flock`` for the writer's lifetime.  A second writer is refused
+(:class:`RunLockedError`) while the holder lives; a lock left by a killed process (its
+``flock`` released by the kernel and its PID dead) is recognised as stale and taken over,
+so the interrupted run can be resumed.
+
+**Reader**: :func:`read_run_folder` (the saved images per method, for the benchmarks),
+:func:`read_run_json`, :func:`read_tables` (the CSVs as arrays, for the report).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import datetime as _dt
+import errno
+import fcntl
+import io
+import json
+import math
+import os
+import socket
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from emulator.errors import OutputExistsError, RunFolderError, RunLockedError
+from emulator.io.borealhdr import BOREALHDR_BLACK_LEVEL, BOREALHDR_WHITE_LEVEL
+from emulator.io.files import format_timestamp_s, read_metadata, write_metadata
+from emulator.io.png import write_png8, write_png16
+from emulator.io.stack import TIMES_FILE, read_times, write_times
+
+__all__ = [
+    "RUN_FILE",
+    "LOCK_FILE",
+    "CSV_FILE",
+    "IMAGES_DIR",
+    "CSV_COLUMNS",
+    "EXTRA_COLUMNS",
+    "SAVE_MODES",
+    "format_row",
+    "RunLock",
+    "RunWriter",
+    "read_run_json",
+    "read_csv_rows",
+    "read_tables",
+    "RunFrame",
+    "MethodRun",
+    "RunFolder",
+    "read_run_folder",
+]
+
+RUN_FILE = "run.json"
+LOCK_FILE = "run.lock"
+CSV_FILE = "exposures.csv"
+IMAGES_DIR = "images"
+#: Fixed leading columns of ``<method>/exposures.csv`` (the contract).
+CSV_COLUMNS = ("cycle", "timestamp_ns", "target_ms", "bracket_ms", "ratio", "saturated_fraction", "valid_fraction")
+#: Columns appended after the contract's: the proposal, guards, and per-camera figures.
+EXTRA_COLUMNS = (
+    "next_ms",
+    "proposed_ms",
+    "guarded",
+    "clamped",
+    "bracket_saturated_fraction",
+    "saturated_fraction_right",
+    "valid_fraction_right",
+    "missing_left_ms",
+    "missing_right_ms",
+)
+#: What a run saves of its emulated images.
+SAVE_MODES = ("none", "png16", "png8")
+_INT_COLUMNS = frozenset({"cycle", "timestamp_ns", "guarded", "clamped"})
+_LIST_COLUMNS = frozenset({"missing_left_ms", "missing_right_ms"})
+
+
+def _now() -> str:
+    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+
+
+# ============================================================================ CSV rows
+def format_row(step) -> list[str]:
+    """The CSV row of a step: every column of :data:`CSV_COLUMNS` + :data:`EXTRA_COLUMNS`.
+
+    ``step`` has an attribute per column.  Integers and flags as integers, floats at full
+    precision (``repr``), None as an empty cell, exposure lists as ``;``-joined ``%g``.
+    """
+    out = []
+    for col in CSV_COLUMNS + EXTRA_COLUMNS:
+        v = getattr(step, col)
+        if v is None:
+            out.append("")
+        elif col in _INT_COLUMNS:
+            out.append(str(int(v)))
+        elif col in _LIST_COLUMNS:
+            out.append(";".join(f"{x:g}" for x in v))
+        else:
+            out.append(repr(float(v)))
+    return out
+
+
+def read_csv_rows(path: str | os.PathLike, *, repair: bool = False) -> list[list[str]]:
+    """Rows of an ``exposures.csv`` after its header (checked); ``[]`` for a missing file.
+
+    A torn last line (a run killed mid-write) is ignored, and cut off the file when
+    ``repair`` (the writer resuming it).
+    """
+    path = Path(path)
+    if not path.is_file():
+        return []
+    data = path.read_bytes()
+    if data and not data.endswith(b"\n"):
+        cut = data.rfind(b"\n") + 1
+        if repair:
+            with open(path, "r+b") as fh:
+                fh.truncate(cut)
+        data = data[:cut]
+    rows = list(csv.reader(io.StringIO(data.decode())))
+    if not rows:
+        return []
+    header = tuple(rows[0])
+    if header[: len(CSV_COLUMNS)] != CSV_COLUMNS:
+        raise RunFolderError(f"{path}: unexpected header {','.join(header)}")
+    return rows[1:]
+
+
+def read_tables(run_dir: str | os.PathLike, methods: Iterable[str]) -> dict[str, dict[str, np.ndarray]]:
+    """Each method's ``exposures.csv`` as columns: int64 for counters and flags, float64 else.
+
+    Empty cells read as 0 (integers) or NaN (floats); exposure-list columns are left out.
+    """
+    run_dir = Path(run_dir)
+    tables = {}
+    for name in methods:
+        path = run_dir / name / CSV_FILE
+        if not path.is_file():
+            raise RunFolderError(f"{path}: missing; not a complete run folder")
+        with open(path, newline="") as fh:
+            rows = list(csv.DictReader(fh))
+        cols = {}
+        for col in CSV_COLUMNS + EXTRA_COLUMNS:
+            if col in _LIST_COLUMNS:
+                continue
+            vals = [r.get(col) or "" for r in rows]
+            if col in _INT_COLUMNS:
+                cols[col] = np.array([int(v) if v else 0 for v in vals], dtype=np.int64)
+            else:
+                cols[col] = np.array([float(v) if v else math.nan for v in vals], dtype=np.float64)
+        tables[name] = cols
+    return tables
+
+
+def read_run_json(run_dir: str | os.PathLike) -> dict:
+    """The ``run.json`` of a run folder; :class:`RunFolderError` when missing or malformed."""
+    run_dir = Path(run_dir)
+    path = run_dir / RUN_FILE
+    if not path.is_file():
+        raise RunFolderError(f"{run_dir}: not a run folder ({RUN_FILE} missing); expected the output of `exposim run`")
+    return read_metadata(path, RunFolderError)
+
+
+# ============================================================================ the lock
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # exists, owned by someone else
+        return True
+    return True
+
+
+def _describe(owner: dict) -> str:
+    return (f"pid {owner.get('pid', '?')} on {owner.get('host', '?')}"
+            + (f", since {owner['started']}" if owner.get("started") else ""))
+
+
+class RunLock:
+    """Exclusive lock on a run folder (see the module docstring).
+
+    Use :meth:`acquire`; :meth:`release` (or the context manager) removes ``run.lock``.
+    ``stale_owner`` is the owner of a stale lock that was taken over, else None.
+    """
+
+    def __init__(self, path: Path, fd: int, owner: dict, stale_owner: dict | None) -> None:
+        self.path = path
+        self._fd = fd
+        self.owner = owner
+        self.stale_owner = stale_owner
+
+    @classmethod
+    def acquire(cls, run_dir: str | os.PathLike) -> "RunLock":
+        """Take the lock of ``run_dir`` or raise :class:`RunLockedError` naming the live holder."""
+        run_dir = Path(run_dir)
+        path = run_dir / LOCK_FILE
+        owner = {"pid": os.getpid(), "host": socket.gethostname(), "started": _now()}
+        tmp = run_dir / f".{LOCK_FILE}.{os.getpid()}.tmp"
+        tmp.write_text(json.dumps(owner) + "\n")
+        stale = None
+        try:
+            for _ in range(5):
+                try:
+                    os.link(tmp, path)  # atomic: fails if a lock exists; the content is complete
+                except FileExistsError:
+                    pass
+                fd = cls._open(path)
+                if fd is None:
+                    continue  # removed meanwhile: try again
+                try:
+                    fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                except OSError as exc:
+                    held = cls._read_owner(fd)
+                    os.close(fd)
+                    if exc.errno in (errno.EAGAIN, errno.EACCES, errno.EWOULDBLOCK):
+                        raise RunLockedError(
+                            f"{run_dir}: the run folder is being written by another process ({_describe(held)}); "
+                            "wait for it to finish or stop it, then --resume"
+                        ) from None
+                    raise
+                if not cls._same_file(fd, path):  # replaced or removed between open and flock
+                    os.close(fd)
+                    continue
+                held = cls._read_owner(fd)
+                if held == owner:
+                    return cls(path, fd, owner, stale)
+                # A lock file whose flock is free: its writer is gone, unless a live process on
+                # this host owns it (it has just created it and not yet locked it).
+                same_host = held.get("host") == owner["host"]
+                pid = held.get("pid")
+                if same_host and isinstance(pid, int) and pid != os.getpid() and _pid_alive(pid):
+                    os.close(fd)
+                    raise RunLockedError(
+                        f"{run_dir}: the run folder is being written by another process ({_describe(held)}); "
+                        "wait for it to finish or stop it, then --resume"
+                    )
+                stale = held
+                os.replace(tmp, path)  # take over: our owner record, atomically
+                tmp.write_text(json.dumps(owner) + "\n")
+                os.close(fd)
+            raise RunLockedError(f"{path}: could not take the lock (it keeps changing); try again")
+        finally:
+            tmp.unlink(missing_ok=True)
+
+    @staticmethod
+    def _open(path: Path) -> int | None:
+        try:
+            return os.open(path, os.O_RDWR)
+        except FileNotFoundError:
+            return None
+
+    @staticmethod
+    def _same_file(fd: int, path: Path) -> bool:
+        try:
+            a, b = os.fstat(fd), os.stat(path)
+        except FileNotFoundError:
+            return False
+        return (a.st_dev, a.st_ino) == (b.st_dev, b.st_ino)
+
+    @staticmethod
+    def _read_owner(fd: int) -> dict:
+        try:
+            data = os.pread(fd, 4096, 0)
+            owner = json.loads(data.decode() or "{}")
+        except (OSError, ValueError):
+            return {}
+        return owner if isinstance(owner, dict) else {}
+
+    def release(self) -> None:
+        """Remove ``run.lock`` (if it is still ours) and drop the lock."""
+        if self._fd is None:
+            return
+        with contextlib.suppress(OSError):
+            if self._same_file(self._fd, self.path):
+                self.path.unlink()
+        os.close(self._fd)
+        self._fd = None
+
+    def __enter__(self) -> "RunLock":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.release()
+
+
+# ============================================================================ the writer
+class RunWriter:
+    """The one writer of a run folder.
+
+    Parameters
+    ----------
+    out_dir : path
+        The run folder.
+    resume : bool
+        Continue the run in ``out_dir`` (its ``run.json`` must exist) instead of creating one
+        (``out_dir`` must be absent or empty, else :class:`OutputExistsError`).
+
+    Opening (``with RunWriter(...) as w`` or :meth:`open`) takes the lock and, when
+    resuming, reads ``run.json`` into :attr:`run_json`; :meth:`start` then records the
+    configuration and opens the CSVs, reading the rows already there (:meth:`recorded`).
+    """
+
+    def __init__(self, out_dir: str | os.PathLike, *, resume: bool = False) -> None:
+        self.path = Path(out_dir)
+        self.resume = bool(resume)
+        self.run_json: dict = {}
+        self.lock: RunLock | None = None
+        self.save = "none"
+        self._recorded: dict[str, dict[int, list[str]]] = {}
+        self._csv: dict[str, tuple] = {}
+
+    # ------------------------------------------------------------------ lifetime
+    def open(self) -> "RunWriter":
+        out = self.path
+        if self.resume:
+            if not (out / RUN_FILE).is_file():
+                raise RunFolderError(f"{out / RUN_FILE}: no run to resume (run.json missing)")
+            self.lock = RunLock.acquire(out)
+            try:
+                self.run_json = read_run_json(out)
+            except BaseException:
+                self.lock.release()
+                raise
+        else:
+            if out.exists() and (not out.is_dir() or any(out.iterdir())):
+                raise OutputExistsError(f"{out}: run folder exists and is not empty; refusing to overwrite (use "
+                                        "--resume to continue an interrupted run, or choose another folder)")
+            out.mkdir(parents=True, exist_ok=True)
+            self.lock = RunLock.acquire(out)
+        return self
+
+    def __enter__(self) -> "RunWriter":
+        return self.open()
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Close the CSVs and release the lock (idempotent)."""
+        for fh, _ in self._csv.values():
+            fh.close()
+        self._csv = {}
+        if self.lock is not None:
+            self.lock.release()
+            self.lock = None
+
+    # ------------------------------------------------------------------ content
+    def start(self, run_json: dict, methods: Sequence[str], cameras: Sequence[str], save: str) -> None:
+        """Record ``run_json`` with status "running" and this writer; open every method's CSV."""
+        if save not in SAVE_MODES:
+            raise RunFolderError(f"save must be one of {', '.join(SAVE_MODES)}, got {save!r}")
+        self.save = save
+        self.run_json = run_json
+        self.update(status="running", writer=self.lock.owner if self.lock else None)
+        for name in methods:
+            mdir = self.path / name
+            if save != "none":
+                for cam in cameras:
+                    (mdir / IMAGES_DIR / cam).mkdir(parents=True, exist_ok=True)
+            path = mdir / CSV_FILE
+            rows = read_csv_rows(path, repair=True) if self.resume else []
+            self._recorded[name] = {int(r[0]): r for r in rows}
+            mdir.mkdir(parents=True, exist_ok=True)
+            new = not path.exists() or path.stat().st_size == 0
+            fh = open(path, "a", newline="")
+            writer = csv.writer(fh, lineterminator="\n")
+            if new:
+                writer.writerow(CSV_COLUMNS + EXTRA_COLUMNS)
+                fh.flush()
+            self._csv[name] = (fh, writer)
+
+    def update(self, **fields) -> None:
+        """Set fields of ``run.json`` (and the time of the update) and write it atomically."""
+        self.run_json.update(fields, updated=_now())
+        write_metadata(self.path / RUN_FILE, self.run_json, overwrite=True)
+
+    def recorded(self, method: str, cycle: int) -> list[str] | None:
+        """The CSV row of ``cycle`` found when resuming, or None."""
+        return self._recorded.get(method, {}).get(int(cycle))
+
+    def append_row(self, method: str, row: list[str]) -> None:
+        """Append one CSV row (flushed: a killed run keeps every finished row)."""
+        fh, writer = self._csv[method]
+        writer.writerow(row)
+        fh.flush()
+
+    def image_path(self, method: str, camera: str, timestamp_ns: int) -> Path:
+        return self.path / method / IMAGES_DIR / camera / f"{int(timestamp_ns)}.png"
+
+    def write_image(self, method: str, camera: str, timestamp_ns: int, image: np.ndarray) -> Path:
+        """Write one emulated image as the run saves them (``uint16`` for png16, ``uint8`` grey for png8)."""
+        path = self.image_path(method, camera, timestamp_ns)
+        if self.save == "png16":
+            return write_png16(path, image, overwrite=True)
+        if self.save == "png8":
+            return write_png8(path, image, overwrite=True)
+        raise RunFolderError(f"{self.path}: this run saves no images (save = {self.save!r})")
+
+    def write_times(self, methods: Iterable[str]) -> None:
+        """Write each method's ``images/times.txt`` from its CSV (sorted by time)."""
+        for name in methods:
+            rows = read_csv_rows(self.path / name / CSV_FILE)
+            lines = sorted((int(r[1]), float(r[2])) for r in rows)
+            write_times(self.path / name / IMAGES_DIR / TIMES_FILE, [str(ns) for ns, _ in lines],
+                        [format_timestamp_s(ns) for ns, _ in lines], [ms for _, ms in lines], overwrite=True)
+
+
+# ============================================================================ the reader
+@dataclass(frozen=True)
+class RunFrame:
+    """One saved stereo frame of a method's run.
+
+    Attributes
+    ----------
+    timestamp_ns : int
+        Capture time of the frame, integer nanoseconds (file name of the PNG).
+    exposure_ms : float or None
+        Exposure time the frame was emulated at, in milliseconds (from ``times.txt``).
+    left, right : pathlib.Path or None
+        The left and right PNGs; ``right`` is None when the right image was not saved.
+    """
+
+    timestamp_ns: int
+    exposure_ms: float | None
+    left: Path
+    right: Path | None
+
+
+@dataclass(frozen=True)
+class MethodRun:
+    """The saved images of one AE method in a run folder, sorted by time."""
+
+    name: str
+    directory: Path
+    frames: tuple[RunFrame, ...]
+
+    @property
+    def timestamps_ns(self) -> list[int]:
+        """Frame timestamps in integer nanoseconds."""
+        return [f.timestamp_ns for f in self.frames]
+
+
+@dataclass(frozen=True)
+class RunFolder:
+    """A run folder: its metadata and the images of each method.
+
+    Attributes
+    ----------
+    path : pathlib.Path
+        The run folder.
+    meta : dict
+        The parsed ``run.json``.
+    methods : dict of str to MethodRun
+        Methods in the order of ``run.json``'s ``"methods"`` (or folder order).
+    sequence : pathlib.Path or None
+        The recording the run played back (``run.json`` ``"sequence"``), resolved against
+        the run folder then the working directory; None when absent or not found.
+    white_level, black_level : int
+        The recording's clip levels in DN (``run.json``; the BorealHDR levels if absent).
+    """
+
+    path: Path
+    meta: dict
+    methods: dict[str, MethodRun] = field(default_factory=dict)
+    sequence: Path | None = None
+    white_level: int = BOREALHDR_WHITE_LEVEL
+    black_level: int = BOREALHDR_BLACK_LEVEL
+
+
+def _level(meta: dict, key: str, default: int, run_json: Path) -> int:
+    value = meta.get(key)
+    if value is None and isinstance(meta.get("camera"), dict):
+        value = meta["camera"].get(key)
+    if value is None:
+        return default
+    try:
+        return int(value)
+    except (TypeError, ValueError):
+        raise RunFolderError(f"{run_json}: {key} must be an integer DN, got {value!r}") from None
+
+
+def _resolve_sequence(value, run_dir: Path) -> Path | None:
+    if not value:
+        return None
+    p = Path(value)
+    if p.is_absolute():
+        return p if p.exists() else None
+    for base in (run_dir, Path.cwd()):
+        if (base / p).exists():
+            return (base / p).resolve()
+    return None
+
+
+def _png_timestamps(folder: Path) -> dict[int, Path]:
+    out: dict[int, Path] = {}
+    if not folder.is_dir():
+        return out
+    for p in folder.glob("*.png"):
+        try:
+            out[int(p.stem)] = p
+        except ValueError:
+            raise RunFolderError(f"{p}: image name is not an integer timestamp in ns") from None
+    return out
+
+
+def _read_method(run_dir: Path, name: str, require_right: bool) -> MethodRun:
+    mdir = run_dir / name
+    if not mdir.is_dir():
+        raise RunFolderError(f"{run_dir}: method {name!r} is listed in run.json but {mdir} does not exist")
+    images = mdir / IMAGES_DIR
+    lefts = _png_timestamps(images / "left")
+    if not lefts:
+        raise RunFolderError(
+            f"{images / 'left'}: no images for method {name!r}; run `exposim run` with --save png16 (or png8)"
+        )
+    rights = _png_timestamps(images / "right")
+    times_path = images / TIMES_FILE
+    if times_path.is_file():
+        times = {}
+        for e in read_times(times_path, RunFolderError):
+            try:
+                times[int(e.name)] = e.exposure_ms
+            except ValueError:
+                raise RunFolderError(f"{times_path}: image name {e.name!r} is not an integer timestamp in ns") from None
+        missing = sorted(set(times) - set(lefts))
+        if missing:
+            raise RunFolderError(
+                f"{times_path}: {len(missing)} timestamp(s) have no left image, first {missing[0]} "
+                f"(expected {images / 'left' / (str(missing[0]) + '.png')})"
+            )
+        stamps = sorted(times)
+    else:
+        times = {}
+        stamps = sorted(lefts)
+    frames = []
+    for ts in stamps:
+        right = rights.get(ts)
+        if require_right and right is None:
+            raise RunFolderError(
+                f"{images / 'right'}: no right image for timestamp {ts} of method {name!r}; stereo VO needs both"
+            )
+        frames.append(RunFrame(timestamp_ns=ts, exposure_ms=times.get(ts), left=lefts[ts], right=right))
+    return MethodRun(name=name, directory=mdir, frames=tuple(frames))
+
+
+def read_run_folder(
+    run_dir: str | os.PathLike, methods: list[str] | None = None, *, require_right: bool = False
+) -> RunFolder:
+    """Read the saved images of a run folder written by ``exposim run``.
+
+    Parameters
+    ----------
+    run_dir : str or pathlib.Path
+        The run folder (holds ``run.json``).
+    methods : list of str, optional
+        Restrict to these methods (default: all of ``run.json``'s ``"methods"``).
+    require_right : bool
+        Refuse frames without a right image (stereo VO).
+
+    Raises
+    ------
+    RunFolderError
+        When the folder or ``run.json`` is missing, the run saved no images
+        (``"save": "none"``), a method has no left images, or a listed image is missing.
+    """
+    run_dir = Path(run_dir)
+    if not run_dir.is_dir():
+        raise RunFolderError(f"{run_dir}: run folder does not exist")
+    meta = read_run_json(run_dir)
+    run_json = run_dir / RUN_FILE
+    if meta.get("save") == "none":
+        raise RunFolderError(
+            f"{run_json}: the run saved no images (save = 'none'); rerun `exposim run` with --save png16"
+        )
+    listed = meta.get("methods")
+    if listed is None:
+        listed = sorted(p.name for p in run_dir.iterdir() if (p / IMAGES_DIR).is_dir())
+    if isinstance(listed, dict):
+        listed = list(listed)
+    if not listed:
+        raise RunFolderError(f"{run_dir}: no methods in run.json and no <method>/images folders")
+    listed = [str(m) for m in listed]
+    if methods:
+        unknown = [m for m in methods if m not in listed]
+        if unknown:
+            raise RunFolderError(f"{run_dir}: method(s) {unknown} not in this run; it has {listed}")
+        listed = [m for m in listed if m in methods]
+    white = _level(meta, "white_level", BOREALHDR_WHITE_LEVEL, run_json)
+    black = _level(meta, "black_level", BOREALHDR_BLACK_LEVEL, run_json)
+    if not 0 <= black < white <= 65535:
+        raise RunFolderError(f"{run_json}: need 0 <= black_level < white_level <= 65535, got {black}, {white}")
+    return RunFolder(
+        path=run_dir,
+        meta=meta,
+        methods={m: _read_method(run_dir, m, require_right) for m in listed},
+        sequence=_resolve_sequence(meta.get("sequence"), run_dir),
+        white_level=white,
+        black_level=black,
+    )

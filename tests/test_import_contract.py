@@ -1,0 +1,132 @@
+"""The import contract of DESIGN.md: ``validation -> scenes -> synth -> emulator``.
+
+Every module of the four packages is parsed (not imported) and every import is read,
+including imports inside functions, relative imports and ``importlib.import_module("...")``
+/ ``__import__("...")`` with a literal name.  A package may import only itself and the
+packages below it, so ``emulator`` (what real-data users install and run) never reaches
+``synth``, ``scenes`` or ``validation``, not even lazily; and Mitsuba / Dr.Jit are
+imported only inside ``scenes/``.
+
+The checker is tested on small synthetic trees too, so that this test can fail.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+#: Lowest first: a package may import the ones before it in this tuple, never those after.
+LAYERS = ("emulator", "synth", "scenes", "validation")
+#: Third-party top-level modules allowed only inside one package.
+CONFINED = {"mitsuba": "scenes", "drjit": "scenes"}
+
+
+def module_name(path: Path, root: Path) -> tuple[str, bool]:
+    """Dotted name of a source file under ``root`` and whether it is a package ``__init__``."""
+    parts = list(path.relative_to(root).with_suffix("").parts)
+    is_package = parts[-1] == "__init__"
+    if is_package:
+        parts = parts[:-1]
+    return ".".join(parts), is_package
+
+
+def imports_of(source: str, name: str, is_package: bool) -> list[tuple[int, str]]:
+    """(line, absolute module name) of every import in ``source``, wherever it sits."""
+    package = name if is_package else name.rpartition(".")[0]
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import):
+            found += [(node.lineno, alias.name) for alias in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")
+                base = base[: len(base) - (node.level - 1)] if node.level > 1 else base
+                target = ".".join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module or ""
+            found.append((node.lineno, target))
+            # "from pkg import module" names a module too
+            found += [(node.lineno, f"{target}.{alias.name}" if target else alias.name)
+                      for alias in node.names if alias.name != "*"]
+        elif isinstance(node, ast.Call) and node.args and isinstance(node.args[0], ast.Constant) \
+                and isinstance(node.args[0].value, str):
+            func = node.func
+            called = func.attr if isinstance(func, ast.Attribute) else getattr(func, "id", None)
+            if called in ("import_module", "__import__"):
+                found.append((node.lineno, node.args[0].value))
+    return found
+
+
+def violations(root: Path, layers=LAYERS, confined=CONFINED) -> list[str]:
+    """Every import that breaks the contract, as ``path:line: A imports B``."""
+    rank = {pkg: i for i, pkg in enumerate(layers)}
+    bad = []
+    for pkg in layers:
+        for path in sorted((root / pkg).rglob("*.py")):
+            name, is_package = module_name(path, root)
+            for line, target in imports_of(path.read_text(encoding="utf-8"), name, is_package):
+                top = target.split(".")[0]
+                where = f"{path.relative_to(root)}:{line}"
+                if top in rank and rank[top] > rank[pkg]:
+                    bad.append(f"{where}: {pkg} imports {target} (allowed: {', '.join(layers[: rank[pkg] + 1])})")
+                if top in confined and confined[top] != pkg:
+                    bad.append(f"{where}: {pkg} imports {target} ({top} only inside {confined[top]}/)")
+    return bad
+
+
+def test_the_packages_keep_the_dependency_direction():
+    assert violations(ROOT) == []
+
+
+def test_every_package_is_checked():
+    for pkg in LAYERS:
+        assert (ROOT / pkg / "__init__.py").is_file()
+        assert len(list((ROOT / pkg).rglob("*.py"))) > 3, pkg
+
+
+# ------------------------------------------------------------------- the checker itself
+def _tree(tmp_path: Path, files: dict[str, str]) -> Path:
+    for pkg in LAYERS:
+        (tmp_path / pkg).mkdir(exist_ok=True)
+        (tmp_path / pkg / "__init__.py").write_text("")
+    for rel, text in files.items():
+        (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / rel).write_text(text)
+    return tmp_path
+
+
+def test_checker_accepts_downward_and_internal_imports(tmp_path):
+    root = _tree(tmp_path, {
+        "validation/a.py": "import scenes\nfrom synth import camera\nfrom emulator.io import png\n",
+        "scenes/r.py": "def f():\n    import mitsuba as mi\n    from . import base\n    from .base import x\n",
+        "synth/s.py": "from emulator.response import CameraResponse\nimport numpy\n",
+        "emulator/io/p.py": "from ..errors import DatasetError\nfrom . import files\n",
+    })
+    assert violations(root) == []
+
+
+@pytest.mark.parametrize("rel, text, expected", [
+    ("emulator/cli.py", "def main():\n    from validation.commands import validate\n",
+     "emulator/cli.py:2: emulator imports validation.commands"),
+    ("emulator/x.py", "import scenes.render as r\n", "emulator/x.py:1: emulator imports scenes.render"),
+    ("emulator/x.py", "import importlib\nm = importlib.import_module('synth.camera')\n",
+     "emulator/x.py:2: emulator imports synth.camera"),
+    ("synth/y.py", "class C:\n    def f(self):\n        from scenes import cache\n",
+     "synth/y.py:3: synth imports scenes"),
+    ("scenes/z.py", "if True:\n    from validation import common\n", "scenes/z.py:2: scenes imports validation"),
+    ("synth/m.py", "def f():\n    import mitsuba\n", "synth/m.py:2: synth imports mitsuba (mitsuba only inside scenes/)"),
+    ("validation/d.py", "from drjit import llvm\n", "validation/d.py:1: validation imports drjit (drjit only"),
+    ("emulator/sub/__init__.py", "from ... import scenes\n", "emulator/sub/__init__.py:1: emulator imports scenes"),
+])
+def test_checker_finds_an_upward_or_confined_import(tmp_path, rel, text, expected):
+    found = violations(_tree(tmp_path, {rel: text}))
+    assert found and found[0].startswith(expected), found
+
+
+def test_relative_imports_resolve_against_the_package():
+    assert imports_of("from ..errors import E\n", "emulator.io.png", False)[0] == (1, "emulator.errors")
+    assert imports_of("from . import png\n", "emulator.io", True) == [(1, "emulator.io"), (1, "emulator.io.png")]
+    assert imports_of("from .x import y\n", "scenes.commands.render", False)[0] == (1, "scenes.commands.x")
