@@ -75,7 +75,7 @@ import numpy as np
 from emulator.errors import CalibrationError
 from emulator.io.pcalib import PCALIB_SAMPLES, PCALIB_TOP_VALUE
 from emulator.io.stack import Stack, read_stack
-from emulator.response import CameraResponse
+from emulator.response import BOREALHDR_BLACK_LEVEL, BOREALHDR_WHITE_LEVEL, CameraResponse
 
 __all__ = [
     "CalibrationResult",
@@ -236,7 +236,13 @@ def bayer_subsample(raw: np.ndarray, stride: int = 1) -> list[np.ndarray]:
     return [raw[i::2, j::2][::stride, ::stride] for i in (0, 1) for j in (0, 1)]
 
 
-def estimate_noise_dn(raw: np.ndarray, *, black_level: int = 0, white_level: int = 4095, margin: int = 8) -> float:
+def estimate_noise_dn(
+    raw: np.ndarray,
+    *,
+    black_level: int = BOREALHDR_BLACK_LEVEL,
+    white_level: int = BOREALHDR_WHITE_LEVEL,
+    margin: int = 8,
+) -> float:
     """Temporal noise in DN estimated from one image (Immerkaer 1996, robust variant).
 
     The Laplacian-like kernel [[1,-2,1],[-2,4,-2],[1,-2,1]] is applied to each Bayer plane
@@ -505,8 +511,8 @@ def fit_inverse_response(
     dn: np.ndarray,
     exposures_ms: SequenceType[float],
     *,
-    white_level: int = 4095,
-    black_level: int = 0,
+    white_level: int = BOREALHDR_WHITE_LEVEL,
+    black_level: int = BOREALHDR_BLACK_LEVEL,
     margin_dn: int = 8,
     n_knots: int = PCALIB_SAMPLES,
     smoothness: float = 0.1,
@@ -877,8 +883,8 @@ def _comparametric_irls(a_mat, b_mat, d_lo, ratio, knots, presence, smoothness, 
 def fit_comparametric(
     pairs: list[dict],
     *,
-    white_level: int = 4095,
-    black_level: int = 0,
+    white_level: int = BOREALHDR_WHITE_LEVEL,
+    black_level: int = BOREALHDR_BLACK_LEVEL,
     n_knots: int = 128,
     smoothness: float = 0.1,
     huber_k: float = 2.0,

@@ -26,7 +26,16 @@ import numpy as np
 
 from emulator.errors import ResponseError
 
-__all__ = ["CameraResponse"]
+__all__ = ["CameraResponse", "BOREALHDR_WHITE_LEVEL", "BOREALHDR_BLACK_LEVEL"]
+
+#: The one default white level, DN: the BorealHDR sample saturates at 4094, one below the
+#: 12-bit maximum 4095 (DESIGN.md).  Everything that needs a white level and is not given
+#: one falls back to this: the response constructors here, the readers of recordings,
+#: stacks and run folders (:mod:`emulator.io`), calibration and the synthetic camera.  A
+#: camera's own level (``exposim.json``, ``run.json``, an argument) always wins.
+BOREALHDR_WHITE_LEVEL = 4094
+#: The one default black level, DN (the BorealHDR sample's: 0).
+BOREALHDR_BLACK_LEVEL = 0
 
 #: How many per-ratio emulation tables a response keeps (each is 8 KiB for 12 bits).
 LUT_CACHE_SIZE = 512
@@ -51,9 +60,9 @@ class CameraResponse:
     ----------
     g : ndarray, shape (white_level + 1,), float64
         Linear exposure (arbitrary units) at each integer DN.
-    white_level : int
+    white_level : int, optional
         Highest DN the sensor produces; emulated images are clipped to it and pixels at
-        or above it count as saturated.
+        or above it count as saturated.  Default: the top of the table, ``len(g) - 1``.
     black_level : int
         Lowest DN; pixels at or below it count as clipped dark.
     name : str
@@ -63,8 +72,8 @@ class CameraResponse:
     """
 
     g: np.ndarray
-    white_level: int = 4095
-    black_level: int = 0
+    white_level: int | None = None
+    black_level: int = BOREALHDR_BLACK_LEVEL
     name: str = "custom"
     knots: np.ndarray | None = None
     _luts: OrderedDict = field(default_factory=OrderedDict, init=False, repr=False)
@@ -72,7 +81,7 @@ class CameraResponse:
 
     def __post_init__(self) -> None:
         g = np.asarray(self.g, dtype=np.float64)
-        self.white_level = int(self.white_level)
+        self.white_level = int(g.size - 1 if self.white_level is None else self.white_level)
         self.black_level = int(self.black_level)
         if g.ndim != 1 or g.size != self.white_level + 1:
             raise ResponseError(
@@ -96,9 +105,9 @@ class CameraResponse:
     def from_samples(
         cls,
         samples: np.ndarray,
-        white_level: int = 4095,
+        white_level: int,
         *,
-        black_level: int = 0,
+        black_level: int = BOREALHDR_BLACK_LEVEL,
         name: str = "samples",
     ) -> "CameraResponse":
         """Build from N samples of g placed evenly over DN ``0..white_level``.
@@ -118,7 +127,7 @@ class CameraResponse:
         return cls(g, white_level, black_level, name, samples)
 
     @classmethod
-    def linear(cls, white_level: int = 4095, *, black_level: int = 0) -> "CameraResponse":
+    def linear(cls, white_level: int = BOREALHDR_WHITE_LEVEL, *, black_level: int = BOREALHDR_BLACK_LEVEL) -> "CameraResponse":
         """g(d) = (d - black) / (white - black): a linear sensor with its black offset.
 
         DN below the black level map to negative exposure (they only arise from noise).
@@ -127,7 +136,9 @@ class CameraResponse:
         return cls((dn - black_level) / (white_level - black_level), white_level, black_level, "linear")
 
     @classmethod
-    def gamma(cls, gamma: float, white_level: int = 4095, *, black_level: int = 0) -> "CameraResponse":
+    def gamma(
+        cls, gamma: float, white_level: int = BOREALHDR_WHITE_LEVEL, *, black_level: int = BOREALHDR_BLACK_LEVEL
+    ) -> "CameraResponse":
         """g(d) = x ** gamma with x = (d - black) / (white - black), i.e. f(h) = black + (white - black) h ** (1/gamma).
 
         Below the black level the curve is continued odd-symmetrically (-|x| ** gamma) so it
@@ -142,7 +153,12 @@ class CameraResponse:
 
     @classmethod
     def from_function(
-        cls, g_of_dn, white_level: int = 4095, *, black_level: int = 0, name: str = "function"
+        cls,
+        g_of_dn,
+        white_level: int = BOREALHDR_WHITE_LEVEL,
+        *,
+        black_level: int = BOREALHDR_BLACK_LEVEL,
+        name: str = "function",
     ) -> "CameraResponse":
         """Tabulate a vectorised callable g(dn) at every integer DN."""
         dn = np.arange(int(white_level) + 1, dtype=np.float64)

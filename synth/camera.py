@@ -60,8 +60,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from emulator.io.borealhdr import BOREALHDR_WHITE_LEVEL
-from emulator.response import CameraResponse
+from emulator.response import BOREALHDR_WHITE_LEVEL, CameraResponse
 from synth.errors import CameraError, RadianceError, SynthError
 from synth.response_fit import FIT_TABLE_TOP, inverse_response_curve
 
@@ -206,7 +205,7 @@ class Camera:
     width: int = 1920
     height: int = 1200
     response: CameraResponse | None = None
-    white_level: int = 4095
+    white_level: int = BOREALHDR_WHITE_LEVEL
     black_level: int = 0
     full_well_e: float = 10500.0
     read_noise_e: float = 2.4
@@ -312,7 +311,7 @@ class Camera:
         except (KeyError, TypeError):
             raise CameraError(f"unknown camera preset {name!r}; choose from {', '.join(PRESETS)}") from None
         fields = dict(_PRESET_SENSOR)
-        fields["white_level"] = BOREALHDR_WHITE_LEVEL if name == "borealhdr" else 4095
+        fields["white_level"] = BOREALHDR_WHITE_LEVEL if name == "borealhdr" else PCALIB_TABLE_TOP
         fields.update(overrides)
         if "response" not in overrides:
             fields["response"] = _preset_response(

@@ -10,7 +10,6 @@ import pytest
 from emulator.autoexposure import Zhang2017
 from emulator.autoexposure.zhang import REF_PIXELS, ref_icrf_derivative, sine_weights
 from emulator.io.pcalib import read_response
-from emulator.response import CameraResponse
 
 FULL = (1200, 1920)
 

@@ -123,18 +123,18 @@ def test_read_stack_errors(tmp_path):
 @pytest.mark.parametrize(
     "response, dn_from, max_dn, max_pct",
     [
-        (CameraResponse.linear(), 16, 1.0, 0.03),
+        (CameraResponse.linear(4095), 16, 1.0, 0.03),
         # d^2.2 is near flat in the toe, where 16-DN linear segments cannot follow it to 1 DN
-        (CameraResponse.gamma(2.2), 64, 1.0, 0.05),
+        (CameraResponse.gamma(2.2, 4095), 64, 1.0, 0.05),
         # d^0.45 is near flat at the top: one DN there is 0.01 % of the range, so only the
         # error in % of the range is a fair yardstick
-        (CameraResponse.gamma(1 / 2.2), 16, None, 0.1),
+        (CameraResponse.gamma(1 / 2.2, 4095), 16, None, 0.1),
     ],
     ids=["linear", "gamma2.2", "gamma0.45"],
 )
 def test_noiseless_recovery_up_to_quantisation(response, dn_from, max_dn, max_pct):
     imgs, t = stack_arrays(response, n=12)
-    res = fit_inverse_response(imgs.reshape(len(t), -1), t)
+    res = fit_inverse_response(imgs.reshape(len(t), -1), t, white_level=response.white_level)
     lo, hi = res.observed_dn
     err = response_error(res.response, response, dn_range=(max(lo, dn_from), min(hi, 4079)))
     if max_dn is not None:  # every DN maps back to itself through the true f within one DN

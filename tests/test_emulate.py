@@ -6,6 +6,9 @@ import pytest
 from emulator import CameraResponse, EmulationError, emulate
 from emulator.io.pcalib import read_response
 
+#: These tests use synthetic responses over the full 12-bit range (the BorealHDR default is 4094).
+FULL_12BIT = 4095
+
 RATIOS = [(1, 2), (1, 32), (2, 32), (8, 16), (1, 3.7), (4, 4.01), (2, 9.5)]
 DOWN = [(2, 1), (32, 1), (32, 5.3), (16, 8), (8, 0.02), (4, 3.99)]
 
@@ -23,7 +26,7 @@ def _capture(response, t_ms, E):
 
 @pytest.mark.parametrize("source_ms,target_ms", RATIOS + DOWN)
 def test_linear_response_within_quantisation_bound(source_ms, target_ms):
-    r = CameraResponse.linear()
+    r = CameraResponse.linear(FULL_12BIT)
     E = _radiance() / 32.0  # h = t*E in units where g(4095) = 1
     src = _capture(r, source_ms, E)
     truth = _capture(r, target_ms, E)
@@ -84,7 +87,7 @@ def test_real_borealhdr_response_within_bound(pcalib_path, source_ms, target_ms)
 
 @pytest.mark.parametrize("which", ["linear", "pcalib"])
 def test_identity_and_round_trip_below_saturation(pcalib_path, which):
-    r = CameraResponse.linear() if which == "linear" else read_response(pcalib_path)
+    r = CameraResponse.linear(FULL_12BIT) if which == "linear" else read_response(pcalib_path)
     raw = np.arange(4096, dtype=np.uint16).reshape(64, 64)
     np.testing.assert_array_equal(emulate(raw, 8.0, 8.0, r), raw)
     # t1 -> t2 -> t1 with t2 > t1 returns within 1 DN where t2 does not saturate (and,
@@ -96,7 +99,7 @@ def test_identity_and_round_trip_below_saturation(pcalib_path, which):
 
 
 def test_clipping_and_mask():
-    r = CameraResponse.linear(black_level=64)
+    r = CameraResponse.linear(FULL_12BIT, black_level=64)
     raw = np.array([[0, 64, 65, 2000], [3000, 4094, 4095, 100]], dtype=np.uint16)
     up, m_up = emulate(raw, 1.0, 2.0, r, return_mask=True)
     assert up.min() >= 64 and up.max() <= 4095
@@ -113,7 +116,7 @@ def test_clipping_and_mask():
 
 
 def test_lut_is_cached_per_ratio():
-    r = CameraResponse.gamma(2.2)
+    r = CameraResponse.gamma(2.2, FULL_12BIT)
     a = r.lut(2.5)
     b = r.lut(2.5)
     assert a[0] is b[0]
@@ -134,7 +137,7 @@ def test_large_image_threaded_path_matches_small(pcalib_path):
 @pytest.mark.parametrize("bad", [0.0, -1.0, float("nan"), float("inf"), "x", None])
 def test_bad_exposures(bad):
     raw = np.zeros((4, 4), np.uint16)
-    r = CameraResponse.linear()
+    r = CameraResponse.linear(FULL_12BIT)
     with pytest.raises(EmulationError, match="source_ms"):
         emulate(raw, bad, 1.0, r)
     with pytest.raises(EmulationError, match="target_ms"):
@@ -142,7 +145,7 @@ def test_bad_exposures(bad):
 
 
 def test_bad_images():
-    r = CameraResponse.linear()
+    r = CameraResponse.linear(FULL_12BIT)
     with pytest.raises(EmulationError, match="uint16"):
         emulate(np.zeros((4, 4), np.float32), 1, 2, r)
     with pytest.raises(EmulationError, match="uint16"):
@@ -172,7 +175,7 @@ def test_extreme_ratios_stay_finite_and_clipped(pcalib_path):
 def test_mask_by_comparison_equals_mask_table(ratio):
     from emulator.emulate import validity_mask
 
-    r = CameraResponse.gamma(2.2, black_level=10).with_levels(white_level=4094)
+    r = CameraResponse.gamma(2.2, FULL_12BIT, black_level=10).with_levels(white_level=4094)
     raw = np.arange(4095, dtype=np.uint16).reshape(63, 65)
     np.testing.assert_array_equal(validity_mask(raw, ratio, r), r.lut(ratio)[1][raw])
 
@@ -183,12 +186,12 @@ def test_lut_cache_is_thread_safe_under_eviction(monkeypatch):
     import emulator.response as resp
 
     monkeypatch.setattr(resp, "LUT_CACHE_SIZE", 4)
-    r = CameraResponse.gamma(2.2)
+    r = CameraResponse.gamma(2.2, FULL_12BIT)
     ratios = [1 + (i % 23) / 7 for i in range(400)]
     with ThreadPoolExecutor(4) as pool:
         tables = list(pool.map(lambda k: r.lut(k)[0], ratios))
     for k, t in zip(ratios[:30], tables[:30]):
-        np.testing.assert_array_equal(t, CameraResponse.gamma(2.2).lut(k)[0])
+        np.testing.assert_array_equal(t, CameraResponse.gamma(2.2, FULL_12BIT).lut(k)[0])
     assert len(r._luts) <= 4
 
 
@@ -199,7 +202,7 @@ def test_both_gather_paths_agree(monkeypatch):
 
     rng = np.random.default_rng(9)
     raw = rng.integers(0, 4096, (1200, 1920), dtype=np.uint16)
-    table = CameraResponse.gamma(2.2).lut(1.7)[0]
+    table = CameraResponse.gamma(2.2, FULL_12BIT).lut(1.7)[0]
     fast = em.apply_lut(table, raw)
     monkeypatch.setattr(em, "_CV_LUT_U16", False)  # the OpenCV 4 fallback: blocked np.take
     slow = em.apply_lut(table, raw)

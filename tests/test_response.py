@@ -4,6 +4,9 @@ import pytest
 from emulator import CameraResponse, ResponseError
 from emulator.io.pcalib import read_pcalib, read_response, write_response
 
+#: Synthetic responses here span the full 12-bit range (the BorealHDR default is 4094).
+FULL_12BIT = 4095
+
 
 def test_pcalib_read_as_given(pcalib_path):
     r = read_response(pcalib_path)
@@ -21,9 +24,9 @@ def test_pcalib_read_as_given(pcalib_path):
     "make",
     [
         lambda p: read_response(p),
-        lambda p: CameraResponse.linear(),
-        lambda p: CameraResponse.gamma(2.2),
-        lambda p: CameraResponse.gamma(0.45),
+        lambda p: CameraResponse.linear(FULL_12BIT),
+        lambda p: CameraResponse.gamma(2.2, FULL_12BIT),
+        lambda p: CameraResponse.gamma(0.45, FULL_12BIT),
         lambda p: CameraResponse.linear(255),
     ],
 )
@@ -35,7 +38,7 @@ def test_forward_inverse_round_trip_every_integer(make, pcalib_path):
 
 
 def test_forward_is_monotone_and_clamped():
-    r = CameraResponse.gamma(2.2)
+    r = CameraResponse.gamma(2.2, FULL_12BIT)
     h = np.linspace(-1, 2, 10001)
     f = r.forward(h)
     assert np.all(np.diff(f) >= 0)
@@ -43,7 +46,7 @@ def test_forward_is_monotone_and_clamped():
 
 
 def test_scalar_and_nd_inputs_agree():
-    r = CameraResponse.gamma(2.2)
+    r = CameraResponse.gamma(2.2, FULL_12BIT)
     d = np.array([[0, 100], [2000, 4095]])
     out = r.inverse(d)
     assert out.shape == (2, 2)
@@ -80,7 +83,7 @@ def test_bad_tables_name_file_and_defect(tmp_path):
 
 
 def test_per_dn_table_and_pcalib_round_trip(tmp_path):
-    r = CameraResponse.gamma(2.2)
+    r = CameraResponse.gamma(2.2, FULL_12BIT)
     p = tmp_path / "resp.txt"
     write_response(p, r, n_samples=4096)
     back = read_response(p)

@@ -80,7 +80,7 @@ def test_predicted_error_selector():
     from emulator import CameraResponse
     from emulator.select import NoiseModel, predicted_error, predicted_mse_table
 
-    r = CameraResponse.linear()
+    r = CameraResponse.linear(4095)  # full 12-bit range, as the images below
     quiet = NoiseModel(shot=0.0, floor=0.0)
     mid = np.full((50, 50), 1500, np.uint16)
     # noiseless linear camera: darkening (k < 1) has less quantisation error than brightening

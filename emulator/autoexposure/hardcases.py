@@ -9,13 +9,15 @@ from __future__ import annotations
 
 import numpy as np
 
+from emulator.autoexposure._base import MAX_DN
+
 __all__ = ["hard_cases", "FLAT_LEVELS"]
 
 #: DN levels of the flat frames (black and white included).
-FLAT_LEVELS = (0, 1, 100, 1120, 2048, 3040, 4000, 4094, 4095)
+FLAT_LEVELS = (0, 1, 100, 1120, 2048, 3040, 4000, MAX_DN - 1, MAX_DN)
 
 
-def hard_cases(shape: tuple[int, int] = (48, 64), *, white_level: int = 4095, seed: int = 0) -> dict[str, np.ndarray]:
+def hard_cases(shape: tuple[int, int] = (48, 64), *, white_level: int = MAX_DN, seed: int = 0) -> dict[str, np.ndarray]:
     """name -> uint16 mosaic of the hard-case set (deterministic for a seed)."""
     h, w = shape
     rng = np.random.default_rng(seed)

@@ -33,10 +33,9 @@ from emulator.dataset import CAMERAS, Frame, Sequence, build_sequence
 from emulator.errors import DatasetError
 from emulator.io.files import parse_json_object, write_metadata
 from emulator.io.png import decode_png16, write_png16
+from emulator.response import BOREALHDR_BLACK_LEVEL, BOREALHDR_WHITE_LEVEL
 
 __all__ = [
-    "BOREALHDR_WHITE_LEVEL",
-    "BOREALHDR_BLACK_LEVEL",
     "CAMERA_FOLDERS",
     "METADATA_FILE",
     "FileSource",
@@ -52,10 +51,6 @@ __all__ = [
     "sequence_response",
 ]
 
-#: The BorealHDR sample saturates at 4094 (DESIGN.md): its white level, DN.
-BOREALHDR_WHITE_LEVEL = 4094
-#: The BorealHDR sample's black level, DN.
-BOREALHDR_BLACK_LEVEL = 0
 #: Camera name -> folder of the layout.
 CAMERA_FOLDERS = {"left": "camera_left", "right": "camera_right"}
 #: Optional metadata file of a recording (written by ``synth``).

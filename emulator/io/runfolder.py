@@ -49,10 +49,10 @@ from pathlib import Path
 import numpy as np
 
 from emulator.errors import OutputExistsError, RunFolderError, RunLockedError
-from emulator.io.borealhdr import BOREALHDR_BLACK_LEVEL, BOREALHDR_WHITE_LEVEL
 from emulator.io.files import format_timestamp_s, read_metadata, write_metadata
 from emulator.io.png import write_png8, write_png16
 from emulator.io.stack import TIMES_FILE, read_times, write_times
+from emulator.response import BOREALHDR_BLACK_LEVEL, BOREALHDR_WHITE_LEVEL
 
 __all__ = [
     "RUN_FILE",

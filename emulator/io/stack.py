@@ -31,9 +31,9 @@ from pathlib import Path
 import numpy as np
 
 from emulator.errors import CalibrationError
-from emulator.io.borealhdr import BOREALHDR_BLACK_LEVEL, BOREALHDR_WHITE_LEVEL
 from emulator.io.files import atomic_write_bytes, read_metadata, write_metadata
 from emulator.io.png import read_png16, write_png16
+from emulator.response import BOREALHDR_BLACK_LEVEL, BOREALHDR_WHITE_LEVEL
 
 __all__ = [
     "TIMES_FILE",
