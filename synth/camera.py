@@ -60,9 +60,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from emulator.io.pcalib import PCALIB_TABLE_TOP
 from emulator.response import BOREALHDR_WHITE_LEVEL, CameraResponse
 from synth.errors import CameraError, RadianceError, SynthError
-from synth.response_fit import FIT_TABLE_TOP, inverse_response_curve
+from synth.response_fit import inverse_response_curve
 
 __all__ = [
     "Camera",
@@ -77,7 +78,6 @@ __all__ = [
     "NORMAL_LEVELS",
     "REFERENCE_RADIANCE",
     "BOREALHDR_FOV_X_DEG",
-    "PCALIB_TABLE_TOP",
 ]
 
 #: Shot + read noise is drawn from the Gaussian approximation where its skewness
@@ -91,8 +91,6 @@ REFERENCE_RADIANCE = 1000.0 / math.pi
 #: Horizontal field of view of the BorealHDR left camera: 2 atan(960 / 1180.805) (fx from
 #: ``calibration/september_2023/left.yaml``), degrees.
 BOREALHDR_FOV_X_DEG = math.degrees(2.0 * math.atan(960.0 / 1180.80514))
-#: The pcalib format (and ``emulator.io.borealhdr.sequence_response``) spans DN 0..4095.
-PCALIB_TABLE_TOP = FIT_TABLE_TOP
 
 BAYER_PATTERNS = ("RGGB", "BGGR", "GRBG", "GBRG")
 VIGNETTING_MODELS = ("cos4", "poly")

@@ -39,10 +39,11 @@ from pathlib import Path
 
 import numpy as np
 
+from emulator.io.pcalib import PCALIB_TABLE_TOP
+
 __all__ = [
     "BOREALHDR_FIT",
     "PARAMETER_NAMES",
-    "FIT_TABLE_TOP",
     "inverse_response_curve",
     "fit_inverse_response",
     "fit_errors",
@@ -51,9 +52,6 @@ __all__ = [
 
 #: Parameter order of :func:`inverse_response_curve`.
 PARAMETER_NAMES = ("a", "b", "tau", "c", "p", "k", "s", "x_knee", "q")
-
-#: DN that maps to x = 1 (the pcalib table spans DN 0..4095).
-FIT_TABLE_TOP = 4095
 
 #: The fitted parameters (7 significant digits), from ``python -m synth.response_fit``
 #: on ``data/borealhdr_sample/calibration/pcalib_inside1.txt``.
@@ -70,9 +68,9 @@ BOREALHDR_FIT: dict[str, float] = {
 }
 
 # Bounds of the fit; they also make every term increasing (b, c, s >= 0, p, q >= 1, tau > 0).
-_LOWER = (0.0, 0.0, 2.0 / FIT_TABLE_TOP, 0.0, 1.0, -5.0, 0.0, 0.5, 1.0)
+_LOWER = (0.0, 0.0, 2.0 / PCALIB_TABLE_TOP, 0.0, 1.0, -5.0, 0.0, 0.5, 1.0)
 _UPPER = (1.0, 1.0, 0.05, 500.0, 5.0, 5.0, 5000.0, 0.99, 3.0)
-_START = (0.17, 0.12, 4.0 / FIT_TABLE_TOP, 98.4, 1.84, 0.53, 700.0, 0.855, 1.1)
+_START = (0.17, 0.12, 4.0 / PCALIB_TABLE_TOP, 98.4, 1.84, 0.53, 700.0, 0.855, 1.1)
 #: The mixed error is (g_fit - g) / (g + _MIXED_OFFSET): absolute below ~1 unit, relative above.
 _MIXED_OFFSET = 1.0
 
@@ -119,7 +117,7 @@ def fit_errors(samples, params: dict[str, float] | None = None) -> dict:
         "n_samples": int(g.size),
         "max_abs": float(np.abs(err).max()),
         "max_abs_sample": i,
-        "max_abs_dn": float(x[i] * FIT_TABLE_TOP),
+        "max_abs_dn": float(x[i] * PCALIB_TABLE_TOP),
         "max_abs_percent_of_top": float(100.0 * np.abs(err).max() / g[-1]),
         "rms": float(np.sqrt(np.mean(err * err))),
         "max_mixed": float(np.max(np.abs(err) / (g + _MIXED_OFFSET))),

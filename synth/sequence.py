@@ -51,11 +51,11 @@ from emulator.io.borealhdr import (
 )
 from emulator.io.camera_info import CameraInfo, write_camera_info
 from emulator.io.exr import write_exr
-from emulator.io.pcalib import read_response, write_pcalib
+from emulator.io.pcalib import PCALIB_TABLE_TOP, read_response, write_pcalib
 from emulator.io.png import write_png16
 from emulator.io.tum import write_tum
 from emulator.response import CameraResponse
-from synth.camera import PCALIB_TABLE_TOP, Camera, _extend_table, capture, check_exposure_ms
+from synth.camera import Camera, _extend_table, capture, check_exposure_ms
 from synth.errors import RadianceError, SourceError, SynthError
 
 __all__ = [

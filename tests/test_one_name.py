@@ -85,6 +85,7 @@ OWNED = {
     "read_pcalib": "emulator.io.pcalib",
     "write_pcalib": "emulator.io.pcalib",
     "read_response": "emulator.io.pcalib",
+    "PCALIB_TABLE_TOP": "emulator.io.pcalib",
     "write_response": "emulator.io.pcalib",
     "read_exr": "emulator.io.exr",
     "write_exr": "emulator.io.exr",

@@ -54,7 +54,7 @@ from emulator.calibrate import (  # noqa: E402
     response_error,
 )
 from emulator.io.files import save_figure  # noqa: E402
-from emulator.io.pcalib import read_response  # noqa: E402
+from emulator.io.pcalib import PCALIB_TABLE_TOP, read_response  # noqa: E402
 from emulator.io.stack import write_stack  # noqa: E402
 from emulator.response import CameraResponse  # noqa: E402
 
@@ -142,7 +142,7 @@ def opencv_curves(images: np.ndarray, exposures_ms: np.ndarray) -> dict[str, np.
     return out
 
 
-def codes_to_dn_curve(values: np.ndarray, table_top: int = 4095) -> np.ndarray:
+def codes_to_dn_curve(values: np.ndarray, table_top: int = PCALIB_TABLE_TOP) -> np.ndarray:
     """A 256-code curve at the DN centres 16 v + 7.5 of codes 1..254, interpolated over 0..table_top (plots)."""
     v = np.arange(1, 255)
     return np.interp(np.arange(table_top + 1, dtype=np.float64), 16.0 * v + 7.5, np.asarray(values, float)[v])
@@ -370,7 +370,7 @@ def real_sample_part(progress) -> tuple[dict, dict]:
         return {"skipped": f"{seq_path} not found"}, {}
     seq = load_sequence(seq_path)
     pcalib = sequence_response(seq)
-    linear = CameraResponse.linear(4095)
+    linear = CameraResponse.linear(seq.white_level, black_level=seq.black_level)
     fits = {}
     for name, cams in (("both", None), ("left", ("left",)), ("right", ("right",))):
         t0 = time.perf_counter()

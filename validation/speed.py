@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from emulator.emulate import emulate, validity_mask
+from emulator.io.pcalib import PCALIB_TABLE_TOP
 from emulator.response import CameraResponse
 from emulator.select import higher_no_sat, saturated_fraction
 from validation.common import (
@@ -66,7 +67,7 @@ def reference_knots(response: CameraResponse, n: int = 256) -> tuple[np.ndarray,
     ``n`` samples of g evenly over DN 0..4095 (the pcalib samples themselves when the response
     came from a pcalib file), scaled by 16, the first set to 0 and the last to 4095.
     """
-    top = 4095.0
+    top = float(PCALIB_TABLE_TOP)
     dn = np.linspace(0.0, top, n)
     if response.knots is not None and response.knots.size == n:
         g = np.asarray(response.knots, dtype=np.float64)
@@ -83,7 +84,7 @@ def emulate_reference(raw: np.ndarray, source_ms: float, target_ms: float, knots
     dn, irr = knots
     k = np.float32(target_ms / source_ms)
     rad = np.interp(raw.astype(np.float32), dn, irr).astype(np.float32)
-    rad = np.clip(rad * k, 0.0, np.float32(4095.0))
+    rad = np.clip(rad * k, 0.0, np.float32(PCALIB_TABLE_TOP))
     return np.interp(rad, irr, dn).astype(np.float32)
 
 
