@@ -1,7 +1,8 @@
-"""Shared fixtures: paths to ../shared (never copied into the repository)."""
+"""Shared fixtures: paths to ../shared (never copied into the repository), a temporary render cache."""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
@@ -11,6 +12,27 @@ SHARED = REPO.parent / "shared"
 SAMPLE = SHARED / "data" / "borealhdr_sample"
 SAMPLE_SEQ = SAMPLE / "backpack_2023-09-25-15-05-03"
 PCALIB = SAMPLE / "calibration" / "pcalib_inside1.txt"
+#: The render cache's environment variable (scenes.cache.ENV_CACHE_DIR; not imported here so
+#: that collecting the tests does not import scenes).
+ENV_CACHE_DIR = "EXPOSIM_CACHE"
+
+
+@pytest.fixture(scope="session", autouse=True)
+def render_cache(tmp_path_factory) -> Path:
+    """Every test renders into one temporary cache for the session, never into ``~/.cache``.
+
+    Set in ``os.environ`` so that ``exposim`` sub-processes the tests start inherit it; the
+    caller's value is restored at the end.
+    """
+    cache = tmp_path_factory.getbasetemp() / "render-cache"
+    cache.mkdir(exist_ok=True)
+    previous = os.environ.get(ENV_CACHE_DIR)
+    os.environ[ENV_CACHE_DIR] = str(cache)
+    yield cache
+    if previous is None:
+        os.environ.pop(ENV_CACHE_DIR, None)
+    else:
+        os.environ[ENV_CACHE_DIR] = previous
 
 
 @pytest.fixture(scope="session")

@@ -12,6 +12,7 @@ import math
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -31,10 +32,16 @@ SCENE_NAMES = ("forest_winter", "forest_summer", "sun_glare", "forest_edge", "st
 
 
 @pytest.fixture(autouse=True)
-def _private_cache(tmp_path_factory, monkeypatch):
-    """Every test renders into a private cache folder, never ~/.cache."""
-    monkeypatch.setenv("EXPOSIM_CACHE", str(tmp_path_factory.getbasetemp() / "render-cache"))
+def _default_variant(monkeypatch):
+    """Every test starts from the automatic Mitsuba variant (the render cache is conftest's)."""
     monkeypatch.delenv("EXPOSIM_MITSUBA_VARIANT", raising=False)
+
+
+def test_the_suite_renders_into_a_temporary_cache(render_cache, tmp_path_factory):
+    cache = scenes.default_cache_dir()
+    assert cache == render_cache and cache.is_dir()
+    assert tmp_path_factory.getbasetemp() in cache.parents
+    assert Path.home() / ".cache" not in cache.parents
 
 
 @pytest.fixture(scope="module")

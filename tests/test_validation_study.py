@@ -20,12 +20,6 @@ if not hasattr(synth, "capture"):  # pragma: no cover - synth not written yet
     pytest.skip("synth.capture not available", allow_module_level=True)
 
 
-@pytest.fixture(autouse=True)
-def _private_cache(tmp_path_factory, monkeypatch):
-    """Renders go to a private cache folder shared by this session, never ~/.cache."""
-    monkeypatch.setenv("EXPOSIM_CACHE", str(tmp_path_factory.getbasetemp() / "render-cache"))
-
-
 TINY = dict(width=48, height=30, spp=8)
 
 

@@ -316,8 +316,8 @@ def success_curve(runs_match_counts: Sequence[Sequence[int]], taus: Sequence[int
 
     Examples
     --------
-    >>> success_curve([[10, 50], [30, 40]], [5, 20, 35])
-    array([1. , 0.5, 0. ])
+    >>> success_curve([[10, 50], [30, 40]], [5, 20, 35]).tolist()
+    [1.0, 0.5, 0.0]
     """
     if len(runs_match_counts) == 0:
         raise MetricsError("success_curve: no runs")
