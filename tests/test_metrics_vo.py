@@ -21,7 +21,9 @@ from emulator.metrics import vo as vo_mod
 from emulator.metrics.errors import CalibrationError, MetricsError, TrajectoryError
 from emulator.metrics.rpe import associate, read_tum, rpe_by_length, trajectory_from_poses, write_tum
 
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "borealhdr_sample" / "calibration"
+from conftest import SHARED as _SHARED  # noqa: E402
+
+SHARED = _SHARED / "data" / "borealhdr_sample" / "calibration"
 
 # --------------------------------------------------------------------------- synthetic scene
 
