@@ -14,6 +14,7 @@ frames of one capture share a timestamp and are paired by it.  Images decode laz
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -26,6 +27,7 @@ import cv2
 import numpy as np
 
 from emulator.errors import DatasetError, OutputExistsError
+from emulator.framecache import cached_frame_path, read_cached_frame, resolve_frame_cache
 
 __all__ = [
     "CAMERAS",
@@ -153,8 +155,14 @@ class Frame:
     timestamp_ns: int
     path: Path
     white_level: int = BOREALHDR_WHITE_LEVEL
+    #: Decoded-frame cache entry (emulator.framecache), read instead of the PNG when present.
+    cache_path: Path | None = field(default=None, compare=False, repr=False)
 
     def load(self) -> np.ndarray:
+        if self.cache_path is not None:
+            img = read_cached_frame(self.cache_path, png_path=self.path, white_level=self.white_level)
+            if img is not None:
+                return img
         return read_png16(self.path, white_level=self.white_level)
 
     @property
@@ -315,14 +323,17 @@ def _group_cycles(shots: list[tuple[int, float]], n_brackets: int) -> list[list[
     return groups
 
 
-def load_sequence(path: str | os.PathLike, *, white_level: int | None = None, black_level: int | None = None) -> Sequence:
+def load_sequence(path: str | os.PathLike, *, white_level: int | None = None, black_level: int | None = None,
+                  frame_cache=None) -> Sequence:
     """Read a recording in the BorealHDR layout into cycles (images decode lazily).
 
     White and black levels come from the arguments, else from ``exposim.json`` written by
     ``synth``, else the BorealHDR defaults (4094, 0).  Raises :class:`DatasetError` for an
     unknown folder, an empty camera folder, shots whose left/right exposures disagree at
     one timestamp, or a sequence without any camera folder; a missing second camera or
-    missing brackets are reported in ``Sequence.gaps``.
+    missing brackets are reported in ``Sequence.gaps``.  ``frame_cache``: a decoded-frame
+    cache folder (:mod:`emulator.framecache`), ``False`` for none, or None to use
+    ``<sequence>/.exposim-frames`` when it exists.
     """
     root = Path(path)
     if not root.is_dir():
@@ -331,12 +342,16 @@ def load_sequence(path: str | os.PathLike, *, white_level: int | None = None, bl
     white = int(white_level if white_level is not None else meta.get("white_level", BOREALHDR_WHITE_LEVEL))
     black = int(black_level if black_level is not None else meta.get("black_level", BOREALHDR_BLACK_LEVEL))
 
+    cache_dir = resolve_frame_cache(root, frame_cache)
     per_camera: dict[str, list[Frame]] = {}
     gaps: list[str] = []
     for cam, folder in CAMERA_FOLDERS.items():
         d = root / folder
         if d.is_dir():
             per_camera[cam] = _scan_camera(d, cam, white)
+            if cache_dir is not None:
+                per_camera[cam] = [dataclasses.replace(f, cache_path=cached_frame_path(cache_dir, root, f.path))
+                                   for f in per_camera[cam]]
         else:
             gaps.append(f"{folder}/ missing: no {cam} camera")
     if not per_camera:
