@@ -88,7 +88,7 @@ DN_PER_8BIT = 16.0
 DERIVATIVE_SMOOTHING_DN = 16
 
 #: Rows per block of the cache-friendly derivative passes.
-BLOCK_ROWS = 16
+BLOCK_ROWS = 48
 
 # Convolution kernels of REF (scipy.signal.convolve2d, mode='same', boundary='symm').
 SCHARR_X = np.array([[3, 0, -3], [10, 0, -10], [3, 0, -3]], dtype=np.float64)
