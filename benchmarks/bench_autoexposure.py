@@ -27,9 +27,9 @@ import numpy as np
 
 from emulator.autoexposure import METHOD_NAMES, METHODS
 from emulator.io.borealhdr import load_sequence, sequence_response
-from _timing import median_ms
+from _timing import SAMPLE_SEQ, median_ms
 
-DEFAULT_SEQ = Path(__file__).resolve().parents[2] / "shared/data/borealhdr_sample/backpack_2023-09-25-15-05-03"
+DEFAULT_SEQ = SAMPLE_SEQ
 
 
 # ============================================================================ REF-style

@@ -18,9 +18,9 @@ import numpy as np
 from emulator import emulate
 from emulator.io.borealhdr import load_sequence, sequence_response
 from emulator.io.png import read_png16
-from _timing import median_ms
+from _timing import SAMPLE_SEQ, median_ms
 
-DEFAULT_SEQ = Path(__file__).resolve().parents[2] / "shared/data/borealhdr_sample/backpack_2023-09-25-15-05-03"
+DEFAULT_SEQ = SAMPLE_SEQ
 
 
 

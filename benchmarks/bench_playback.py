@@ -37,9 +37,9 @@ from emulator.io.png import read_png16  # noqa: E402
 from emulator.emulate import apply_lut  # noqa: E402
 from emulator.playback import RunStats, iter_run  # noqa: E402
 from emulator.select import higher_no_sat, saturated_fraction  # noqa: E402
-from _timing import median_ms  # noqa: E402
+from _timing import SAMPLE_SEQ, median_ms  # noqa: E402
 
-DEFAULT_SEQ = Path(__file__).resolve().parents[2] / "shared/data/borealhdr_sample/backpack_2023-09-25-15-05-03"
+DEFAULT_SEQ = SAMPLE_SEQ
 RECORDER_CYCLES_PER_S = 3.66
 INITIAL_MS, RANGE_MS = 4.0, (0.02, 50.0)
 

@@ -52,6 +52,8 @@ class Frame:
     path: Path
     white_level: int
     source: object = field(default=None, compare=False, repr=False)
+    #: Decoded-frame cache entry (:mod:`emulator.io.framecache`), read instead of the PNG when present.
+    cache_path: Path | None = field(default=None, compare=False, repr=False)
 
     def load(self) -> np.ndarray:
         """The raw image: (H, W) ``uint16`` Bayer mosaic in DN."""

@@ -28,7 +28,7 @@ from emulator.io.pcalib import read_response, write_response
 from emulator.io.stack import read_stack, write_stack
 from emulator.response import CameraResponse
 
-SHARED = Path(__file__).resolve().parents[2] / "shared"
+from conftest import SHARED  # noqa: E402  (../shared, found from a worktree too)
 SAMPLE_SEQ = SHARED / "data" / "borealhdr_sample" / "backpack_2023-09-25-15-05-03"
 PCALIB = SHARED / "data" / "borealhdr_sample" / "calibration" / "pcalib_inside1.txt"
 

@@ -22,7 +22,9 @@ from emulator.errors import CalibrationError, MetricsError, TrajectoryError
 from emulator.io.tum import write_tum
 from emulator.metrics.rpe import associate, read_trajectory, rpe_by_length, trajectory_from_poses
 
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "borealhdr_sample" / "calibration"
+from conftest import SHARED as _SHARED  # noqa: E402
+
+SHARED = _SHARED / "data" / "borealhdr_sample" / "calibration"
 
 # --------------------------------------------------------------------------- synthetic scene
 

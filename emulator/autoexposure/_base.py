@@ -29,6 +29,7 @@ from typing import Protocol, runtime_checkable
 import cv2
 import numpy as np
 
+from emulator.autoexposure._frame import FRAME_MEMO
 from emulator.errors import ExposimError
 
 __all__ = [
@@ -201,8 +202,18 @@ class AutoExposureMethod:
         return self._finish(proposed, t)
 
     def gray(self, raw: np.ndarray) -> np.ndarray:
-        """The mode's gray conversion of a mosaic (uint16)."""
-        return to_gray(raw, self.gray_code)
+        """The mode's gray conversion of a mosaic (uint16).
+
+        For a read-only frame the result is computed once and shared, read-only, by every
+        method reading the same frame (:data:`emulator.autoexposure._frame.FRAME_MEMO`).
+        """
+        code = self.gray_code
+        return FRAME_MEMO.get(raw, ("gray", code), lambda: to_gray(raw, code))
+
+    def gray_mean(self, raw: np.ndarray) -> float:
+        """Mean of :meth:`gray` (float64 accumulation; exact: a sum of integers below 2**53)."""
+        code = self.gray_code
+        return FRAME_MEMO.get(raw, ("gray_mean", code), lambda: float(self.gray(raw).mean(dtype=np.float64)))
 
     def config(self) -> dict:
         """JSON-ready options that reproduce this instance (name, mode, range, method options)."""

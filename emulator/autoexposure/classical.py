@@ -93,7 +93,7 @@ class Classical(AutoExposureMethod):
         return max(step, self.floor_ms)
 
     def _step(self, raw: np.ndarray, t: float) -> float:
-        mean = float(self.gray(raw).mean(dtype=np.float64))
+        mean = self.gray_mean(raw)
         self.last["mean_dn"] = mean
         return self.update(mean, t)
 
@@ -131,7 +131,7 @@ class Fixed(AutoExposureMethod):
     def _step(self, raw: np.ndarray, t: float) -> float:
         if self.count < self.n_adjustments:
             self.count += 1
-            mean = float(self.gray(raw).mean(dtype=np.float64))
+            mean = self.gray_mean(raw)
             self.last["mean_dn"] = mean
             return self._inner.update(mean, t)
         self.last["frozen"] = True

@@ -23,8 +23,20 @@ Guards (both modes): a non-finite metric (REF on a flat image: sigma_H = 0 or ma
 REF raises ``ValueError: Input y contains NaN``) is not inserted and t is returned; a failed
 GP fit removes the newest point and returns t.  In paper mode the metric takes its limits
 instead (equal weights; a flat image has no gradient, so E = 0), so a black or white frame
-is an observation of a poor exposure and the GP moves away from it.  The optimizer's restarts are seeded
-(``seed``, default 0): REF was unseeded and its runs diverged by the third frame.
+is an observation of a poor exposure and the GP moves away from it.
+
+Optimizer restarts (``seed``, default 0).  Every fit runs L-BFGS-B from the kernel's initial
+hyperparameters and from ``GP_RESTARTS`` points drawn uniformly in log space.  REF draws them
+from NumPy's *global* random state, which advances from fit to fit, so it is not deterministic;
+borealhdr mode draws them from one ``RandomState(seed)`` per instance that advances the same way
+(``restart_seeding="stream"``), so a run equals REF run after ``np.random.seed(seed)``, draw for
+draw.  Paper mode restarts every fit from ``RandomState(seed)`` (``"per-fit"``): a fit then
+depends only on its window.  Why it matters: on real windows the start at the initial
+hyperparameters often converges to a degenerate optimum (length scale at its 1e-5 bound, worse
+log marginal likelihood), whose posterior mean vanishes off the data; its fine-grid argmax is
+then index 0, a jump to 0.5 ms.  Only a restart that lands in the basin of the better optimum
+avoids it; with "per-fit" the same ten points are reused for every window, so a window their
+points all miss gives the jump every time, where REF, with fresh draws, usually avoids it.
 """
 
 from __future__ import annotations
@@ -55,6 +67,7 @@ __all__ = [
     "GP_BOUNDS",
     "GP_AMPLITUDE_BOUNDS_PAPER",
     "PAPER_SCALE",
+    "RESTART_SEEDINGS",
     "metric_ref",
     "metric_paper",
     "softmax_weights",
@@ -101,6 +114,10 @@ PAPER_SCALE = 0.25
 BIT_SHIFT = 4
 #: Side of the local-entropy neighbourhood (paper mode).
 LOCAL_ENTROPY_SIZE = 3
+#: How the optimizer's restart points are drawn: "stream" (one RandomState(seed) per instance,
+#: advanced by every fit, as REF's global state; borealhdr default) or "per-fit" (every fit
+#: draws from a fresh RandomState(seed); paper default).
+RESTART_SEEDINGS = ("stream", "per-fit")
 
 
 def softmax_weights(q: np.ndarray, counts: np.ndarray | None = None) -> np.ndarray:
@@ -302,6 +319,11 @@ class Kim2018(AutoExposureMethod):
     gp_backend : {"fast", "sklearn"}
         "fast" (default): sklearn's regressor with a specialised log marginal likelihood
         (the same floating-point operations, so the same fits); "sklearn": the stock class.
+    restart_seeding : {"stream", "per-fit"} or None
+        Where the optimizer's restart points come from (module docstring): "stream" (default in
+        borealhdr mode: one ``RandomState(seed)`` advanced by every fit, REF's behaviour) or
+        "per-fit" (default in paper mode: every fit draws from a fresh ``RandomState(seed)``).
+        :meth:`reset` restarts the stream.
     """
 
     name = "kim"
@@ -320,6 +342,7 @@ class Kim2018(AutoExposureMethod):
         gp_restarts: int = GP_RESTARTS,
         grid_ms: tuple[float, float] = GRID_MS,
         gp_backend: str = "fast",
+        restart_seeding: str | None = None,
     ) -> None:
         super().__init__(mode=mode, range_ms=range_ms)
         if int(window) < 1:
@@ -330,6 +353,11 @@ class Kim2018(AutoExposureMethod):
         if gp_backend not in ("fast", "sklearn"):
             raise AutoExposureError(f"gp_backend must be 'fast' or 'sklearn', got {gp_backend!r}")
         self.gp_backend = gp_backend
+        if restart_seeding is None:
+            restart_seeding = "stream" if self.mode == "borealhdr" else "per-fit"
+        if restart_seeding not in RESTART_SEEDINGS:
+            raise AutoExposureError(f"restart_seeding must be one of {', '.join(RESTART_SEEDINGS)}, got {restart_seeding!r}")
+        self.restart_seeding = restart_seeding
         self.seed = int(seed)
         self.window = int(window)
         self.gamma_mi = float(gamma_mi if gamma_mi is not None else (GAMMA_MI_REF if self.mode == "borealhdr" else GAMMA_MI_PAPER))
@@ -346,6 +374,8 @@ class Kim2018(AutoExposureMethod):
         self.window_t: list[float] = []  # newest first
         self.window_e: list[float] = []
         self.eta = self.eta0
+        # REF's global random state, seeded: advanced by every fit's restart draws.
+        self._rng = np.random.RandomState(self.seed) if self.restart_seeding == "stream" else None
 
     def metric(self, y: np.ndarray) -> float:
         """The mode's metric E of a gray image (uint16); NaN for a degenerate image."""
@@ -364,7 +394,7 @@ class Kim2018(AutoExposureMethod):
             alpha=np.full(len(self.window_t), self.gp_noise, dtype=np.float64),
             n_restarts_optimizer=self.gp_restarts,
             normalize_y=False,
-            random_state=self.seed,
+            random_state=self._rng if self._rng is not None else self.seed,
         )
         x = np.asarray(self.window_t, dtype=np.float64).reshape(-1, 1)
         yv = np.asarray(self.window_e, dtype=np.float64)
@@ -418,4 +448,5 @@ class Kim2018(AutoExposureMethod):
     def _options(self) -> dict:
         return {"seed": self.seed, "window": self.window, "gamma_mi": self.gamma_mi, "eta0": self.eta0,
                 "sigma_stop": self.sigma_stop, "gp_noise": self.gp_noise, "gp_restarts": self.gp_restarts,
-                "grid_ms": list(self.grid_ms), "gp_backend": self.gp_backend}
+                "grid_ms": list(self.grid_ms), "gp_backend": self.gp_backend,
+                "restart_seeding": self.restart_seeding}

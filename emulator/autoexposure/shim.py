@@ -108,24 +108,49 @@ def _row_blocks(height: int, rows: int):
 BLOCK_ROWS = 48
 
 
+def _gamma_tables(values: np.ndarray, gammas, size: int = 1 << 16) -> list[np.ndarray]:
+    """Per gamma, ``np.power(values, g)`` as a lookup table over every uint16 DN.
+
+    ``values`` holds the normalised image value of each DN (the same arithmetic the image
+    would get), so gathering from the table gives the same floating-point numbers as raising
+    the whole image to the power (checked on real frames in the tests), at the cost of one
+    gather instead of a ``pow`` per pixel.  DN past ``values`` repeat its last entry.
+    """
+    tables = []
+    for g in gammas:
+        t = np.empty(size, dtype=values.dtype)
+        t[: values.size] = np.power(values, values.dtype.type(g))
+        t[values.size :] = t[values.size - 1]
+        tables.append(t)
+    return tables
+
+
 def gamma_metrics_ref(y: np.ndarray, gammas=GAMMAS, *, delta=DELTA, lam=LAMBDA, n_norm=N_NORM):
     """REF's metrics M_j for a gray image (uint16), and whether each gamma's gradient was flat.
 
     Returns (M as float64 array, flat as bool array).  Requires max(y) > min(y).
+    Per row block and gamma: one ``cv2.LUT`` (the normalised image to the power g), two
+    Sobel passes to uint8, and one 25-bin histogram of the code ``5 Gx + Gy``.
     """
     lo, hi = int(y.min()), int(y.max())
-    counts = np.zeros((len(gammas), 5, 5), dtype=np.float64)
+    # (DN - lo) / (hi - lo) in float64 as REF computes it per pixel; DN below lo never occur.
+    values = np.arange(hi + 1, dtype=np.float64)
+    values -= lo
+    values /= float(hi - lo)
+    values[:lo] = 0.0
+    tables = _gamma_tables(values, gammas)
+    counts = np.zeros((len(gammas), 25), dtype=np.float64)
     for a0, a1, s0, s1 in _row_blocks(y.shape[0], BLOCK_ROWS):
-        base = y[a0:a1].astype(np.float64)
-        base -= lo
-        base /= float(hi - lo)
-        for j, g in enumerate(gammas):
-            img = np.power(base, g)
+        block = y[a0:a1]
+        for j, table in enumerate(tables):
+            img = cv2.LUT(block, table)
             # CV_8U equals REF's CV_16U here: |Sobel| <= 4 on [0, 1], both round half to even
             # and saturate negatives to 0 (checked in the tests).
             gx = cv2.Sobel(img, cv2.CV_8U, 1, 0, ksize=3)
             gy = cv2.Sobel(img, cv2.CV_8U, 0, 1, ksize=3)
-            counts[j] += cv2.calcHist([gx[s0:s1], gy[s0:s1]], [0, 1], None, [5, 5], [0, 5, 0, 5])
+            code = cv2.scaleAdd(gx[s0:s1], 5.0, gy[s0:s1])  # 5 Gx + Gy, exact on 0..4
+            counts[j] += cv2.calcHist([code], [0], None, [25], [0, 25]).ravel()
+    counts = counts.reshape(len(gammas), 5, 5)
     metrics = np.zeros(len(gammas))
     flat = np.zeros(len(gammas), dtype=bool)
     for j in range(len(gammas)):
@@ -149,18 +174,27 @@ def gamma_metrics_paper(y: np.ndarray, gammas=GAMMAS, *, delta=DELTA, lam=LAMBDA
     """Paper-mode metrics: Y / 4095, float Sobel, m = min(G / (4 sqrt 2), 1).
 
     Returns (M, flat) like :func:`gamma_metrics_ref`; ``flat`` is all False (no division by
-    the gradient's spread, so a flat gradient is an ordinary zero metric).
+    the gradient's spread, so a flat gradient is an ordinary zero metric).  The power is a
+    lookup table per gamma; the gradient magnitude is ``sqrt(Gx^2 + Gy^2)`` by correctly
+    rounded float32 operations (``cv2.magnitude`` rounds some pixels differently depending
+    on the memory alignment of its inputs, so the metric was not a function of the image).
     """
     metrics = np.zeros(len(gammas))
     scale = np.float32(lam / (SOBEL_MAX * math.sqrt(2.0)))
+    # min(DN, full) / full in float32, as the image would be normalised.
+    values = np.minimum(np.arange(int(full_dn) + 1), full_dn).astype(np.float32)
+    values *= np.float32(1.0 / full_dn)
+    tables = _gamma_tables(values, gammas)
     for a0, a1, s0, s1 in _row_blocks(y.shape[0], BLOCK_ROWS):
-        base = np.minimum(y[a0:a1], full_dn).astype(np.float32)
-        base *= np.float32(1.0 / full_dn)
-        for j, g in enumerate(gammas):
-            img = np.power(base, np.float32(g))
-            gx = cv2.Sobel(img, cv2.CV_32F, 1, 0, ksize=3)
-            gy = cv2.Sobel(img, cv2.CV_32F, 0, 1, ksize=3)
-            u = cv2.magnitude(gx[s0:s1], gy[s0:s1])
+        block = y[a0:a1]
+        for j, table in enumerate(tables):
+            img = cv2.LUT(block, table)
+            gx = cv2.Sobel(img, cv2.CV_32F, 1, 0, ksize=3)[s0:s1]
+            gy = cv2.Sobel(img, cv2.CV_32F, 0, 1, ksize=3)[s0:s1]
+            np.multiply(gx, gx, out=gx)
+            np.multiply(gy, gy, out=gy)
+            u = np.add(gx, gy, out=gx)
+            np.sqrt(u, out=u)
             # lambda (min(m, 1) - delta) + 1, and log10 of max(., 1) is 0 exactly where m < delta.
             u *= scale
             np.minimum(u, np.float32(lam), out=u)

@@ -38,6 +38,7 @@ import numpy as np
 
 from emulator.autoexposure._base import MAX_DN, AutoExposureError, AutoExposureMethod
 from emulator.autoexposure.classical import Classical
+from emulator.autoexposure.shim import _row_blocks
 
 __all__ = [
     "Zhang2017",
@@ -86,20 +87,12 @@ DN_PER_8BIT = 16.0
 #: Paper mode: half-width (DN) of the moving average that smooths f^-1' across pcalib knots.
 DERIVATIVE_SMOOTHING_DN = 16
 
+#: Rows per block of the cache-friendly derivative passes.
+BLOCK_ROWS = 48
+
 # Convolution kernels of REF (scipy.signal.convolve2d, mode='same', boundary='symm').
 SCHARR_X = np.array([[3, 0, -3], [10, 0, -10], [3, 0, -3]], dtype=np.float64)
 SCHARR_Y = np.array([[3, 10, 3], [0, 0, 0], [-3, -10, -3]], dtype=np.float64)
-
-
-def _scharr(img: np.ndarray, kernel: np.ndarray) -> np.ndarray:
-    """True 2-D convolution with ``kernel`` (SCHARR_X or SCHARR_Y) and symmetric borders.
-
-    Equals ``scipy.signal.convolve2d(img, kernel, mode='same', boundary='symm')`` (exactly on
-    integer images, to rounding on float ones): OpenCV's separable Scharr correlates with
-    the flipped kernel, and BORDER_REFLECT is scipy's 'symm'.
-    """
-    dx, dy = (1, 0) if kernel is SCHARR_X else (0, 1)
-    return cv2.Scharr(img, cv2.CV_64F, dx, dy, borderType=cv2.BORDER_REFLECT)
 
 
 @functools.lru_cache(maxsize=8)
@@ -271,48 +264,61 @@ class Zhang2017(AutoExposureMethod):
             dt = math.inf
         return t + min(max(dt, -MAX_RELATIVE_STEP * t), MAX_RELATIVE_STEP * t)
 
+    def _products(self, y: np.ndarray, table: np.ndarray, *, with_g2: bool):
+        """d = 2 (Ix Dx + Iy Dy) per pixel (flat float64), and Ix^2 + Iy^2 if ``with_g2``.
+
+        ``D = table[Y]`` (the table clipped at its last entry, as ``np.minimum`` did).  Worked
+        in row blocks with a one-row halo, so each block's Scharr passes and products stay in
+        the CPU cache; on a block's own rows a 3x3 filter equals the whole-image result
+        (BORDER_REFLECT applies at the image's top and bottom as before), and Scharr of the
+        integer image is exact in float64 whether it reads uint16 or float64.  OpenCV's
+        separable Scharr correlates with the flipped kernel and BORDER_REFLECT is scipy's
+        'symm', so this is REF's ``convolve2d(img, SCHARR_X, mode='same', boundary='symm')``
+        (exactly on the integer image, to rounding on D).
+        """
+        h, w = y.shape
+        if int(y.max()) >= table.size:
+            y = np.minimum(y, table.size - 1)
+        lut = np.empty(1 << 16, dtype=np.float64)
+        lut[: table.size] = table
+        lut[table.size :] = table[-1]
+        d = np.empty((h, w), dtype=np.float64)
+        g2 = np.empty((h, w), dtype=np.float64) if with_g2 else None
+        for a0, a1, s0, s1 in _row_blocks(h, BLOCK_ROWS):
+            block = y[a0:a1]
+            ix = cv2.Scharr(block, cv2.CV_64F, 1, 0, borderType=cv2.BORDER_REFLECT)[s0:s1]
+            iy = cv2.Scharr(block, cv2.CV_64F, 0, 1, borderType=cv2.BORDER_REFLECT)[s0:s1]
+            dmap = cv2.LUT(block, lut)
+            dx = cv2.Scharr(dmap, cv2.CV_64F, 1, 0, borderType=cv2.BORDER_REFLECT)[s0:s1]
+            dy = cv2.Scharr(dmap, cv2.CV_64F, 0, 1, borderType=cv2.BORDER_REFLECT)[s0:s1]
+            rows = slice(a0 + s0, a0 + s1)
+            if g2 is not None:
+                gb = np.multiply(ix, ix, out=g2[rows])
+                gb += iy * iy
+            out = np.multiply(ix, dx, out=d[rows])
+            iy *= dy
+            out += iy
+            out *= 2.0
+        return d.ravel(), (g2.ravel() if g2 is not None else None)
+
     def _ref_derivative(self, y: np.ndarray, t: float) -> float:
         """m = sum_i w_i d_(i), d sorted ascending (REF)."""
-        yi = np.minimum(y, MAX_DN)
-        y64 = yi.astype(np.float64)
-        ix = _scharr(y64, SCHARR_X)
-        iy = _scharr(y64, SCHARR_Y)
-        d_table = 1.0 / (self._h * t)
-        dmap = np.take(d_table, yi)
-        dx = _scharr(dmap, SCHARR_X)
-        dy = _scharr(dmap, SCHARR_Y)
-        d = ix
-        d *= dx
-        iy *= dy
-        d += iy
-        d *= 2.0
-        d = d.ravel()
-        bad = ~np.isfinite(d)
-        if bad.any():
-            d[bad] = 0.0
+        d, _ = self._products(y, 1.0 / (self._h * t), with_g2=False)
         d.sort()
+        # NaN sorts last and +-inf at the ends: d is all finite iff both ends are (else REF's
+        # zeros replace the non-finite values, and they are sorted again).
+        if not (math.isfinite(d[0]) and math.isfinite(d[-1])):
+            d[~np.isfinite(d)] = 0.0
+            d.sort()
         w = sine_weights(d.size, self.percentile, self.order, "l2")
         return float(np.dot(w, d))
 
     def _paper_derivative(self, y: np.ndarray, t: float) -> tuple[float, float]:
         """(dM/dt, M) with pixels ranked by gradient magnitude, tie bins sharing weights."""
-        yi = np.minimum(y, self._dlogt.size - 1)
-        y64 = yi.astype(np.float64)
-        ix = _scharr(y64, SCHARR_X)
-        iy = _scharr(y64, SCHARR_Y)
-        dmap = np.take(self._dlogt / t, yi)
-        dx = _scharr(dmap, SCHARR_X)
-        dy = _scharr(dmap, SCHARR_Y)
-        g2 = ix * ix
-        g2 += iy * iy
-        d = ix
-        d *= dx
-        iy *= dy
-        d += iy
-        d *= 2.0
-        d = d.ravel()
-        d[~np.isfinite(d)] = 0.0
-        g2 = g2.ravel()
+        d, g2 = self._products(y, self._dlogt / t, with_g2=True)
+        bad = ~np.isfinite(d)
+        if bad.any():
+            d[bad] = 0.0
         bins = np.sqrt(g2).astype(np.intp)  # one Scharr unit per bin
         counts = np.bincount(bins)
         cum_w = _cumulative_weights(d.size, self.percentile, self.order)
@@ -327,7 +333,7 @@ class Zhang2017(AutoExposureMethod):
     # ------------------------------------------------------------------ step
     def _step(self, raw: np.ndarray, t: float) -> float:
         y = self.gray(raw)
-        mean = float(y.mean(dtype=np.float64))
+        mean = self.gray_mean(raw)
         self.last["mean_dn"] = mean
         if mean <= LOW_BOUND_DN or mean >= HIGH_BOUND_DN:
             t_new = self._fallback_step(y, mean, t)

@@ -21,6 +21,7 @@ fallback anywhere in exposim.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import re
@@ -32,6 +33,7 @@ import numpy as np
 from emulator.dataset import CAMERAS, Frame, Sequence, build_sequence
 from emulator.errors import DatasetError
 from emulator.io.files import parse_json_object, write_metadata
+from emulator.io.framecache import cached_frame_path, read_cached_frame, resolve_frame_cache
 from emulator.io.png import decode_png16, write_png16
 from emulator.response import BOREALHDR_BLACK_LEVEL, BOREALHDR_WHITE_LEVEL
 
@@ -172,6 +174,7 @@ def load_sequence(
     white_level: int | None = None,
     black_level: int | None = None,
     source: FileSource | None = None,
+    frame_cache=None,
 ) -> Sequence:
     """Read a recording in the BorealHDR layout into cycles (images decode lazily).
 
@@ -180,7 +183,9 @@ def load_sequence(
     unknown folder, an empty camera folder, shots whose left/right exposures disagree at
     one timestamp, the same shot twice, or a sequence without any camera folder; a missing
     second camera or missing brackets are reported in ``Sequence.gaps``.  ``source``
-    replaces the file system (default :class:`FolderSource` of ``path``).
+    replaces the file system (default :class:`FolderSource` of ``path``).  ``frame_cache``:
+    a decoded-frame cache folder (:mod:`emulator.io.framecache`), ``False`` for none, or
+    None to use ``<sequence>/.exposim-frames`` when it exists (folders only).
     """
     root = Path(path)
     if source is None:
@@ -191,6 +196,7 @@ def load_sequence(
     white = int(white_level if white_level is not None else meta.get("white_level", BOREALHDR_WHITE_LEVEL))
     black = int(black_level if black_level is not None else meta.get("black_level", BOREALHDR_BLACK_LEVEL))
 
+    cache_dir = resolve_frame_cache(root, frame_cache) if isinstance(source, FolderSource) else None
     per_camera: dict[str, list[Frame]] = {}
     gaps: list[str] = []
     for cam in CAMERAS:
@@ -198,6 +204,9 @@ def load_sequence(
         d = root / folder
         if source.is_dir(d):
             per_camera[cam] = _scan_camera(source, d, cam, white)
+            if cache_dir is not None:
+                per_camera[cam] = [dataclasses.replace(f, cache_path=cached_frame_path(cache_dir, root, f.path))
+                                   for f in per_camera[cam]]
         else:
             gaps.append(f"{folder}/ missing: no {cam} camera")
     if not per_camera:
@@ -207,7 +216,14 @@ def load_sequence(
 
 
 def read_frame(frame: Frame) -> np.ndarray:
-    """Decode one frame's image (uint16 (H, W) DN), checked against its white level."""
+    """Decode one frame's image (uint16 (H, W) DN), checked against its white level.
+
+    A frame with a decoded-frame cache entry reads it instead of the PNG (same bytes).
+    """
+    if frame.cache_path is not None:
+        img = read_cached_frame(frame.cache_path, png_path=frame.path, white_level=frame.white_level)
+        if img is not None:
+            return img
     source = frame.source if frame.source is not None else FolderSource(frame.path.parent)
     return decode_png16(source.read_bytes(frame.path), frame.path, white_level=frame.white_level)
 
