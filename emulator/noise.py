@@ -33,7 +33,10 @@ data.  Tables are then built per phase.
 
 from __future__ import annotations
 
+import hashlib
+import json
 import math
+import os
 import statistics
 import threading
 from collections import OrderedDict
@@ -49,9 +52,15 @@ __all__ = [
     "NoiseModel",
     "NoiseModelError",
     "NoiseTables",
-    "BracketPair",
+    "BracketGroup",
+    "bracket_groups",
     "NoiseEstimate",
     "estimate_noise_model",
+    "write_noise_model",
+    "read_noise_model",
+    "response_fingerprint",
+    "noise_variance_ratio",
+    "VarianceRatio",
     "check_rng",
     "standard_normal",
     "quantise",
@@ -76,6 +85,10 @@ _MULTI = np.uint16(0x8000)
 _BLOCK_PIXELS = 1 << 16
 #: Images with at least this many pixels are split across two threads (as emulator.emulate does).
 _THREAD_MIN_PIXELS = 1 << 20
+
+
+NOISE_MODEL_FORMAT = "exposim.noise_model"
+NOISE_MODEL_VERSION = 1
 
 
 class NoiseModelError(ExposimError):
@@ -371,19 +384,33 @@ class NoiseModel:
 
     @classmethod
     def from_dict(cls, data: dict, response: CameraResponse) -> "NoiseModel":
-        """Rebuild from :meth:`to_dict` output and the response it refers to."""
+        """Rebuild from :meth:`to_dict` output and the response it refers to.
+
+        When ``data`` records the response's levels and fingerprint (:meth:`to_dict` does),
+        a different ``response`` is refused: the gain is in units of that table.
+        """
         if not isinstance(data, dict):
             raise NoiseModelError(f"noise model description must be a mapping, got {type(data).__name__}")
         missing = [k for k in ("gain_e_per_h", "read_noise_e") if k not in data]
         if missing:
             raise NoiseModelError(f"noise model description lacks {', '.join(missing)}")
+        if not isinstance(response, CameraResponse):
+            raise NoiseModelError(f"response must be an emulator CameraResponse, got {type(response).__name__}")
+        for key, have in (("white_level", response.white_level), ("black_level", response.black_level),
+                          ("response_sha256", response_fingerprint(response))):
+            if key in data and data[key] != have:
+                raise NoiseModelError(
+                    f"noise model {data.get('name', '?')!r} refers to response {data.get('response', '?')!r} "
+                    f"({key} {data[key]!r}), not to the response given ({response.name!r}, {key} {have!r})")
         return cls(response, data["gain_e_per_h"], data["read_noise_e"], str(data.get("name", "custom")))
 
     def to_dict(self) -> dict:
-        """JSON-ready description (the response by name) plus derived values."""
+        """JSON-ready description (format tag, the response by name and fingerprint) plus derived values."""
         def plain(v):
             return [list(r) for r in v] if isinstance(v, tuple) else v
         return {
+            "format": NOISE_MODEL_FORMAT,
+            "version": NOISE_MODEL_VERSION,
             "name": self.name,
             "gain_e_per_h": plain(self.gain_e_per_h),
             "read_noise_e": plain(self.read_noise_e),
@@ -391,7 +418,32 @@ class NoiseModel:
             "white_level": self.white_level,
             "black_level": self.black_level,
             "full_well_e": plain(self.full_well_e),
+            "response_sha256": response_fingerprint(self.response),
         }
+
+    def to_json(self, **extra) -> str:
+        """JSON text of :meth:`to_dict` (plus ``extra`` top-level entries, e.g. an estimate's summary)."""
+        data = self.to_dict()
+        data.update(extra)
+        return json.dumps(data, indent=2, sort_keys=False, allow_nan=False) + "\n"
+
+    @classmethod
+    def from_json(cls, text: str, response: CameraResponse, *, source: str = "noise model") -> "NoiseModel":
+        """Parse :meth:`to_json` text; ``source`` (e.g. the file name) prefixes every error."""
+        try:
+            data = json.loads(text)
+        except (TypeError, json.JSONDecodeError) as exc:
+            raise NoiseModelError(f"{source}: malformed JSON ({exc})") from None
+        if not isinstance(data, dict) or data.get("format") != NOISE_MODEL_FORMAT:
+            raise NoiseModelError(f"{source}: not an exposim noise model (expected \"format\": "
+                                  f"\"{NOISE_MODEL_FORMAT}\")")
+        if data.get("version") != NOISE_MODEL_VERSION:
+            raise NoiseModelError(f"{source}: unsupported noise model version {data.get('version')!r} "
+                                  f"(this exposim reads {NOISE_MODEL_VERSION})")
+        try:
+            return cls.from_dict(data, response)
+        except NoiseModelError as exc:
+            raise NoiseModelError(f"{source}: {exc}") from None
 
     # ------------------------------------------------------------------ derived values
     @property
@@ -476,6 +528,60 @@ class NoiseModel:
     def __repr__(self) -> str:
         return (f"NoiseModel({self.name!r}, gain_e_per_h={self.gain_e_per_h!r}, "
                 f"read_noise_e={self.read_noise_e!r}, response={self.response.name!r})")
+
+
+def response_fingerprint(response: CameraResponse) -> str:
+    """SHA-256 of a response's table (float64, little-endian) and levels: what a noise model refers to."""
+    h = hashlib.sha256(np.ascontiguousarray(response.g, dtype="<f8").tobytes())
+    h.update(f"{response.black_level}:{response.white_level}".encode())
+    return h.hexdigest()
+
+
+def _json_safe(value):
+    """Non-finite floats (an undetermined standard error) as None, recursively."""
+    if isinstance(value, dict):
+        return {k: _json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_safe(v) for v in value]
+    if isinstance(value, (float, np.floating)):
+        return float(value) if math.isfinite(value) else None
+    if isinstance(value, np.integer):
+        return int(value)
+    return value
+
+
+def write_noise_model(path: str | os.PathLike, model: "NoiseModel | NoiseEstimate", *,
+                      overwrite: bool = False):
+    """Write a noise model (or an estimate: its model plus its summary under ``"estimate"``) as JSON.
+
+    Atomic; refuses to replace an existing file unless ``overwrite``
+    (:class:`~emulator.errors.OutputExistsError`).  Returns the path.
+    """
+    from emulator.dataset import atomic_write_bytes
+
+    if isinstance(model, NoiseEstimate):
+        summary = model.to_dict()
+        summary.pop("model")
+        text = model.model.to_json(estimate=_json_safe(summary))
+    elif isinstance(model, NoiseModel):
+        text = model.to_json()
+    else:
+        raise NoiseModelError(f"expected a NoiseModel or NoiseEstimate, got {type(model).__name__}")
+    return atomic_write_bytes(path, text.encode(), overwrite=overwrite)
+
+
+def read_noise_model(path: str | os.PathLike, response: CameraResponse) -> "NoiseModel":
+    """Read :func:`write_noise_model` output; errors name the file (missing, malformed, other response)."""
+    from pathlib import Path
+
+    path = Path(path)
+    if not path.is_file():
+        raise NoiseModelError(f"{path}: noise model file not found")
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise NoiseModelError(f"{path}: cannot read ({exc})") from None
+    return NoiseModel.from_json(text, response, source=str(path))
 
 
 def _slope(response: CameraResponse) -> np.ndarray:
@@ -588,25 +694,119 @@ def excess_map(raw: np.ndarray, ratio: float, model: NoiseModel, *, consistent: 
 
 
 # ---------------------------------------------------------------------------- in-situ estimation
+#: The high-pass applied to difference images (separable second difference, [1, -2, 1] in
+#: rows and in columns, on one Bayer plane): it removes anything locally linear in x or in
+#: y, such as the residue of a sub-pixel motion between the shots over smooth texture.
+_HP = np.outer([1.0, -2.0, 1.0], [1.0, -2.0, 1.0])
+#: Its squared coefficients: the variance of the output at a pixel is this kernel applied
+#: to the per-pixel variances of the input (independent noise); they sum to 36.
+_HP_SQ = _HP * _HP
+
+
 @dataclass(frozen=True)
-class BracketPair:
-    """Two brackets of one sweep, shot close in time (e.g. t and 2t, ~46 ms apart).
+class BracketGroup:
+    """Two or three consecutive brackets of one sweep of one camera.
 
     Attributes
     ----------
-    raw_a, raw_b : ndarray, uint16 (H, W)
-        Bayer mosaics in DN (one camera, one sweep).
-    exposure_a_ms, exposure_b_ms : float
-        Their exposure times, ms (different).
+    raws : tuple of ndarray, uint16 (H, W)
+        Bayer mosaics in DN, in capture order.
+    exposures_ms : tuple of float
+        Their exposure times, ms.
+    times_s : tuple of float or None
+        Their capture instants, seconds (any origin), increasing; None means equally spaced.
     label : str
-        Names the pair in results (e.g. ``left c1 2->4``).
+        Names the group in results (e.g. ``left c1 2-4-8``).
+
+    Notes
+    -----
+    :meth:`weights` are the coefficients of the exposure-normalised images in the difference
+    :func:`estimate_noise_model` measures: ``(-1, 1)`` for a pair; for a triple
+    ``(-(tau_c - tau_b), tau_c - tau_a, -(tau_b - tau_a)) / (tau_c - tau_a)``, i.e. the middle
+    shot minus the linear interpolation of the outer two to its instant, which cancels any
+    motion (or illumination change) linear in time.
     """
 
-    raw_a: np.ndarray
-    exposure_a_ms: float
-    raw_b: np.ndarray
-    exposure_b_ms: float
+    raws: tuple
+    exposures_ms: tuple
+    times_s: tuple | None = None
     label: str = ""
+
+    @classmethod
+    def pair(cls, raw_a, exposure_a_ms, raw_b, exposure_b_ms, label: str = "") -> "BracketGroup":
+        return cls((raw_a, raw_b), (exposure_a_ms, exposure_b_ms), None, label)
+
+    def weights(self) -> tuple[float, ...]:
+        if len(self.raws) == 2:
+            return (-1.0, 1.0)
+        ta, tb, tc = (0.0, 1.0, 2.0) if self.times_s is None else (float(t) for t in self.times_s)
+        span = tc - ta
+        return (-(tc - tb) / span, 1.0, -(tb - ta) / span)
+
+
+def bracket_groups(sequence, *, size: int = 3, cameras=None, cycles=None, max_groups: int | None = None,
+                   max_gap: float = 1.5) -> list[BracketGroup]:
+    """Groups of ``size`` (2 or 3) consecutive shots of every sweep of a recording, images loaded.
+
+    Parameters
+    ----------
+    sequence : emulator.dataset.Sequence
+        The recording (:func:`emulator.dataset.load_sequence`).
+    size : int
+        3 (default): triples, whose time-interpolated difference cancels motion linear in
+        time; 2: pairs of neighbouring brackets.
+    cameras : sequence of str or None
+        Cameras to use (default: all of the sequence's).
+    cycles : iterable of int or None
+        Cycle indices to use (default: all).
+    max_groups : int or None
+        At most this many groups, spread evenly over the candidates (deterministic).
+    max_gap : float
+        Shots of a group must follow each other within ``max_gap`` shot periods (the median
+        interval between shots): a missing bracket breaks a group.
+
+    Returns
+    -------
+    list of BracketGroup
+        Capture order within a group; ``times_s`` from the file timestamps.
+    """
+    from emulator.dataset import Sequence
+
+    if not isinstance(sequence, Sequence):
+        raise NoiseModelError(f"sequence must be an emulator.dataset.Sequence, got {type(sequence).__name__}")
+    if size not in (2, 3):
+        raise NoiseModelError(f"size must be 2 (pairs) or 3 (triples), got {size!r}")
+    cams = tuple(sequence.cameras if cameras is None else cameras)
+    unknown = [c for c in cams if c not in sequence.cameras]
+    if unknown:
+        raise NoiseModelError(f"{sequence.path}: no camera {', '.join(map(repr, unknown))} "
+                              f"(has {', '.join(sequence.cameras)})")
+    wanted = None if cycles is None else {int(c) for c in cycles}
+    stamps = sorted({f.timestamp_ns for c in sequence for cam in cams for f in c.frames.get(cam, {}).values()})
+    period = float(np.median(np.diff(stamps))) if len(stamps) > 1 else 0.0
+    candidates = []
+    for cycle in sequence:
+        if wanted is not None and cycle.index not in wanted:
+            continue
+        for cam in cams:
+            shots = sorted(cycle.frames.get(cam, {}).values(), key=lambda f: f.timestamp_ns)
+            for k in range(len(shots) - size + 1):
+                win = shots[k: k + size]
+                gaps = np.diff([f.timestamp_ns for f in win])
+                if period > 0 and np.any(gaps > max_gap * period):
+                    continue
+                candidates.append((cam, cycle.index, win))
+    if max_groups is not None and len(candidates) > max_groups:
+        pick = np.unique(np.round(np.linspace(0, len(candidates) - 1, int(max_groups))).astype(int))
+        candidates = [candidates[i] for i in pick]
+    groups = []
+    for cam, index, win in candidates:
+        t0 = win[0].timestamp_ns
+        groups.append(BracketGroup(
+            tuple(f.load() for f in win), tuple(float(f.exposure_ms) for f in win),
+            tuple((f.timestamp_ns - t0) * 1e-9 for f in win),
+            f"{cam} c{index} " + "-".join(f"{f.exposure_ms:g}" for f in win)))
+    return groups
 
 
 @dataclass
@@ -618,21 +818,21 @@ class NoiseEstimate:
     model : NoiseModel
         Pooled over Bayer phases (or per phase with ``per_phase=True``).
     gain_e_per_h, read_noise_e : float
-        Pooled estimates (all phases and pairs in one fit).
+        Pooled estimates (all phases and groups in one fit).
     gain_std, read_noise_std : float
         Their formal standard errors (weighted least squares, scaled by the fit's residual
         dispersion when that exceeds 1).
     per_channel : dict
         Phase name -> {"gain_e_per_h", "read_noise_e", "gain_std", "read_noise_std", "n_bins"}.
-    per_pair : list of dict
-        One fit per bracket pair (all phases): label, exposures, the integer shift applied
-        (sub-lattice pixels), pixels used, gain and read noise.
+    per_group : list of dict
+        One fit per bracket group (all phases): label, exposures, the integer shift applied
+        to each shot (full-resolution pixels), pixels used, gain and read noise.
     spread : dict
-        Over the per-pair fits: median, 16th/84th percentiles, min, max and the relative
+        Over the per-group fits: median, 16th/84th percentiles, min, max and the relative
         half-width ``(p84 - p16) / 2 / median`` of gain and read noise.
     bins : dict of ndarray
-        The photon-transfer points behind the fit, one per (pair, phase, intensity bin):
-        ``pair``, ``phase``, ``signal`` (mean h per ms), ``x_shot``, ``x_read``,
+        The photon-transfer points behind the fit, one per (group, phase, intensity bin):
+        ``group``, ``phase``, ``signal`` (mean h per ms), ``x_shot``, ``x_read``,
         ``variance`` (of the difference), ``quantisation``, ``n``, ``weight`` (final).
     warnings : list of str
     """
@@ -643,7 +843,7 @@ class NoiseEstimate:
     gain_std: float
     read_noise_std: float
     per_channel: dict
-    per_pair: list
+    per_group: list
     spread: dict
     bins: dict
     warnings: list
@@ -662,7 +862,7 @@ class NoiseEstimate:
             "read_noise_std": self.read_noise_std,
             "full_well_e": self.full_well_e,
             "per_channel": self.per_channel,
-            "per_pair": self.per_pair,
+            "per_group": self.per_group,
             "spread": self.spread,
             "n_bins": int(self.bins["n"].size),
             "warnings": list(self.warnings),
@@ -728,45 +928,78 @@ def _align_shift(ha: np.ndarray, hb: np.ndarray, max_shift: int) -> tuple[int, i
     return dy, dx
 
 
-def _overlap(a: np.ndarray, b: np.ndarray, dy: int, dx: int) -> tuple[np.ndarray, np.ndarray]:
-    """Views of a and b where ``b[y + dy, x + dx]`` pairs with ``a[y, x]``."""
-    h, w = a.shape
-    ya, yb = (slice(0, h - dy), slice(dy, h)) if dy >= 0 else (slice(-dy, h), slice(0, h + dy))
-    xa, xb = (slice(0, w - dx), slice(dx, w)) if dx >= 0 else (slice(-dx, w), slice(0, w + dx))
-    return a[ya, xa], b[yb, xb]
+def _common_crop(planes: list, shifts: list) -> list:
+    """Views of every plane on the region where ``plane_i[y + dy_i, x + dx_i]`` pairs with ``ref[y, x]``."""
+    h, w = planes[0].shape
+    y0 = max(max(0, -dy) for dy, _ in shifts)
+    y1 = min(min(h, h - dy) for dy, _ in shifts)
+    x0 = max(max(0, -dx) for _, dx in shifts)
+    x1 = min(min(w, w - dx) for _, dx in shifts)
+    return [p[y0 + dy: y1 + dy, x0 + dx: x1 + dx] for p, (dy, dx) in zip(planes, shifts)]
 
 
-def _pair_points(pair: BracketPair, response: CameraResponse, slope: np.ndarray, *, limits, n_bins: int,
-                 flat_fraction: float, min_pixels: int, align: bool, clip: float):
-    """Photon-transfer points of one pair: per phase and intensity bin (see estimate_noise_model)."""
-    ta, tb = float(pair.exposure_a_ms), float(pair.exposure_b_ms)
+def _texture(signal: np.ndarray) -> np.ndarray:
+    """Local texture energy of a Bayer plane: 3x3 mean of the squared central-difference gradient.
+
+    What a sub-pixel motion between the shots leaves in their difference is about the shift
+    times this gradient, so the flattest pixels by this measure carry the least of it.  It
+    is computed from the signal S alone, whose noise is independent of the combination's
+    (see :func:`estimate_noise_model`), so selecting on it does not bias the variance.
+    """
+    s = signal.astype(np.float32)
+    gx = cv2.Sobel(s, cv2.CV_32F, 1, 0, ksize=1, scale=0.5)
+    gy = cv2.Sobel(s, cv2.CV_32F, 0, 1, ksize=1, scale=0.5)
+    return cv2.boxFilter(gx * gx + gy * gy, cv2.CV_32F, (3, 3))
+
+
+def _group_points(group: BracketGroup, response: CameraResponse, slope: np.ndarray, *, limits, n_bins: int,
+                  flat_fraction: float, min_pixels: int, align: bool, highpass: bool, clip: float):
+    """Photon-transfer points of one group: per phase and intensity bin (see estimate_noise_model)."""
+    ts = [float(t) for t in group.exposures_ms]
+    w = group.weights()
     g = response.g
-    planes_a = [np.ascontiguousarray(pair.raw_a[i::2, j::2]) for i, j in PHASES]
-    planes_b = [np.ascontiguousarray(pair.raw_b[i::2, j::2]) for i, j in PHASES]
-    shift = (0, 0)
+    black, white = response.black_level, response.white_level
+    n = len(group.raws)
+    ref = (n - 1) // 2
+    planes = [[np.ascontiguousarray(raw[i::2, j::2]) for i, j in PHASES] for raw in group.raws]
+    shifts = [(0, 0)] * n
     if align:
-        # one shift for all phases, from the 2x2-binned exposure-normalised images
-        ha = sum(g[p] for p in planes_a) / ta
-        hb = sum(g[p] for p in planes_b) / tb
-        # both clipped to what neither saturates, so saturation does not pull the match
-        top = min(ha.max(), hb.max())
-        shift = _align_shift(np.minimum(ha, top), np.minimum(hb, top), max_shift=min(ha.shape) // 4)
+        # one shift per shot for all phases, from the 2x2-binned exposure-normalised images,
+        # clipped to what no shot saturates, so that saturation does not pull the match
+        hs = [sum(g[p] for p in pl) / t for pl, t in zip(planes, ts)]
+        top = min(float(h.max()) for h in hs)
+        hs = [np.minimum(h, top) for h in hs]
+        max_shift = min(hs[0].shape) // 4
+        shifts = [(0, 0) if k == ref else _align_shift(hs[ref], hs[k], max_shift) for k in range(n)]
+    c_shot = sum(wi * wi / t for wi, t in zip(w, ts))
+    c_read = sum(wi * wi / (t * t) for wi, t in zip(w, ts))
+    if highpass:
+        c_read *= float(_HP_SQ.sum())
+    t_lo, t_hi = min(ts), max(ts)
     points = []
-    for p, (a, b) in enumerate(zip(planes_a, planes_b)):
-        a, b = _overlap(a, b, *shift)
-        ua, ub = g[a], g[b]
-        signal = (ua + ub) / (ta + tb)  # total signal / total time: uncorrelated with diff (shot noise)
-        diff = ub / tb - ua / ta
-        lo, hi = limits(signal, ta, tb, p)
+    for p in range(len(PHASES)):
+        dns = _common_crop([pl[p] for pl in planes], shifts)
+        us = [g[d] for d in dns]
+        signal = sum(us) / sum(ts)  # total signal / total time: uncorrelated with diff (shot noise)
+        diff = sum(wi * u / t for wi, u, t in zip(w, us, ts))
+        qterm = sum(wi * wi * slope[d] ** 2 / (t * t) for wi, d, t in zip(w, dns, ts)) / 12.0
+        lo, hi = limits(t_lo, t_hi)
         usable = (signal >= lo) & (signal <= hi)
+        for d in dns:
+            usable &= (d > black) & (d < white)
+        if highpass:
+            diff = cv2.filter2D(diff, cv2.CV_64F, _HP, borderType=cv2.BORDER_REFLECT)
+            x_shot = cv2.filter2D(signal, cv2.CV_64F, _HP_SQ, borderType=cv2.BORDER_REFLECT) * c_shot
+            qterm = cv2.filter2D(qterm, cv2.CV_64F, _HP_SQ, borderType=cv2.BORDER_REFLECT)
+            # every input pixel of the 3x3 support usable; the image border is not
+            usable = cv2.erode(usable.astype(np.uint8), np.ones((3, 3), np.uint8), borderType=cv2.BORDER_CONSTANT,
+                               borderValue=0).astype(bool)
+        else:
+            x_shot = signal * c_shot
         if np.count_nonzero(usable) < min_pixels:
             continue
-        blur = cv2.GaussianBlur(signal.astype(np.float32), (0, 0), 1.0)
-        gx = cv2.Sobel(blur, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
-        gy = cv2.Sobel(blur, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
-        grad = np.sqrt(gx * gx + gy * gy) / np.maximum(blur, 1e-12)
-        qterm = (slope[a] ** 2 / ta**2 + slope[b] ** 2 / tb**2) / 12.0
-        s, d, gr, qt = signal[usable], diff[usable], grad[usable], qterm[usable]
+        grad = _texture(signal)
+        s, d, xs, gr, qt = signal[usable], diff[usable], x_shot[usable], grad[usable], qterm[usable]
         edges = np.geomspace(float(s.min()), float(s.max()) * (1 + 1e-9), n_bins + 1)
         which = np.searchsorted(edges, s, side="right") - 1
         order = np.argsort(which, kind="stable")
@@ -779,23 +1012,22 @@ def _pair_points(pair: BracketPair, response: CameraResponse, slope: np.ndarray,
                 keep = max(min_pixels, int(round(flat_fraction * idx.size)))
                 if keep < idx.size:
                     idx = idx[np.argpartition(gr[idx], keep - 1)[:keep]]
-            var, n = robust_variance(d[idx], clip)
-            if not math.isfinite(var) or n < min_pixels:
+            var, m = robust_variance(d[idx], clip)
+            if not math.isfinite(var) or m < min_pixels:
                 continue
-            mean_s = float(s[idx].mean())
-            points.append((p, mean_s, mean_s * (1 / ta + 1 / tb), 1 / ta**2 + 1 / tb**2, var,
-                           float(qt[idx].mean()), n))
-    return points, shift
+            points.append((p, float(s[idx].mean()), float(xs[idx].mean()), c_read, var, float(qt[idx].mean()), m,
+                           float(np.mean(s[idx] ** 2))))
+    return points, shifts
 
 
-def _fit(x_shot, x_read, y, q, n, *, huber: float = 3.0, iterations: int = 8):
-    """Weighted least squares ``y - q = alpha x_shot + beta x_read``; variance weights, Huber.
+def _fit(x_shot, x_read, y, q, n, *, extra=None, huber: float = 3.0, iterations: int = 8):
+    """Weighted least squares ``y - q = alpha x_shot + beta x_read (+ extra @ gamma)``; variance weights, Huber.
 
     Weights ``(n - 1) / (2 pred^2)`` (the variance of a variance estimate from n normal
     values), iterated with the prediction, times Huber weights on the standardised
-    residuals.  Returns (alpha, beta, covariance, final weights).
+    residuals.  Returns (alpha, beta, covariance of (alpha, beta), final weights).
     """
-    X = np.column_stack([x_shot, x_read])
+    X = np.column_stack([x_shot, x_read] + ([] if extra is None else [extra]))
     scale = np.abs(X).max(axis=0)
     scale[scale == 0] = 1.0
     Xs = X / scale
@@ -803,23 +1035,24 @@ def _fit(x_shot, x_read, y, q, n, *, huber: float = 3.0, iterations: int = 8):
     w = np.ones_like(y)
     coef = np.linalg.lstsq(Xs, target, rcond=None)[0]
     hub = np.ones_like(y)
+    floor = 0.25 * np.maximum(y, np.max(y) * 1e-12)  # keeps weights bounded when a fit goes astray
     for _ in range(iterations):
-        pred = np.maximum(Xs @ coef + q, 1e-300)
+        pred = np.maximum(Xs @ coef + q, floor)
         w = (n - 1) / (2 * pred**2)
         res = (target - Xs @ coef) * np.sqrt(w)
         hub = np.minimum(1.0, huber / np.maximum(np.abs(res), 1e-300))
         ww = w * hub
         A = Xs.T @ (Xs * ww[:, None])
-        coef = np.linalg.solve(A, Xs.T @ (ww * target))
+        coef = np.linalg.lstsq(A, Xs.T @ (ww * target), rcond=None)[0]
     ww = w * hub
     A = Xs.T @ (Xs * ww[:, None])
     res = (target - Xs @ coef) * np.sqrt(ww)
-    dof = max(len(y) - 2, 1)
+    dof = max(len(y) - X.shape[1], 1)
     dispersion = max(1.0, float(res @ res) / dof)
-    cov = np.linalg.inv(A) * dispersion
+    cov = np.linalg.pinv(A) * dispersion
     coef = coef / scale
     cov = cov / np.outer(scale, scale)
-    return float(coef[0]), float(coef[1]), cov, ww
+    return float(coef[0]), float(coef[1]), cov[:2, :2], ww
 
 
 def _gain_read(alpha: float, beta: float, cov: np.ndarray) -> tuple[float, float, float, float]:
@@ -845,42 +1078,64 @@ def _percentiles(values) -> dict:
             "max": float(v.max()), "relative_half_width": (p84 - p16) / 2 / med if med else float("nan")}
 
 
+def _fit_bins(cols: dict, mask=None, *, motion_term: bool):
+    """:func:`_fit` on the photon-transfer points ``cols`` (a boolean ``mask`` selects some),
+    with one ``S^2`` column per bracket group when ``motion_term``."""
+    m = np.ones(cols["n"].size, dtype=bool) if mask is None else mask
+    extra = None
+    if motion_term:
+        grp = cols["group"][m]
+        extra = np.column_stack([(grp == k) * cols["signal2"][m] for k in np.unique(grp)])
+    return _fit(cols["x_shot"][m], cols["x_read"][m], cols["variance"][m], cols["quantisation"][m], cols["n"][m],
+                extra=extra)
+
+
 def estimate_noise_model(
-    pairs,
+    groups,
     response: CameraResponse,
     *,
-    n_bins: int = 32,
+    n_bins: int = 24,
     flat_fraction: float = 0.5,
     align: bool = True,
+    highpass: bool = True,
+    motion_term: bool = True,
     clip_sigmas: float = 5.0,
-    min_pixels: int = 200,
+    min_pixels: int = 100,
     per_phase: bool = False,
     bayer_pattern: str | None = "RGGB",
     name: str = "in-situ",
 ) -> NoiseEstimate:
-    """Estimate conversion gain and read noise from a recording's own bracket pairs.
+    """Estimate conversion gain and read noise from a recording's own brackets (photon transfer).
 
-    Photon transfer from cross-bracket differences: for two brackets a, b of one sweep
-    (exposures t_a, t_b, shot ~46 ms apart) the exposure-normalised images
-    ``g(d_a) / t_a`` and ``g(d_b) / t_b`` agree up to noise, motion and response error
-    (vignetting cancels: same pixel).
+    For brackets of one sweep (exposures t_i, shots ~46 ms apart) the exposure-normalised
+    images ``g(d_i) / t_i`` agree up to noise, motion and response error (vignetting and
+    pixel sensitivity cancel: same pixel).  A zero-sum combination of them (a pair's
+    difference, or a triple's middle shot minus the time interpolation of the outer two,
+    :class:`BracketGroup`) keeps the noise, whose variance grows with the signal as
+    ``1/G`` (shot) over a floor ``r^2/G^2`` (read).
 
     Parameters
     ----------
-    pairs : sequence of BracketPair
-        Pairs of brackets (any exposures, different); more pairs, better estimate.
+    groups : sequence of BracketGroup
+        Pairs or triples of brackets (:func:`bracket_groups` makes them from a recording);
+        more groups, better estimate.  Triples are the robust choice on moving cameras.
     response : CameraResponse
         The recording's response (g, levels); the gain comes out in electrons per its unit.
     n_bins : int
-        Intensity bins per pair and Bayer phase (log-spaced in signal).
+        Intensity bins per group and Bayer phase (log-spaced in signal).
     flat_fraction : float
         In each bin, keep this fraction of pixels with the smallest relative gradient of
-        the (2x2-phase) signal image: motion between the shots moves edges, not flat areas.
+        the (blurred) signal image: motion between the shots moves edges, not flat areas.
     align : bool
-        Apply the integer shift (on the Bayer sub-lattice) found by phase correlation of the
-        two images before differencing; an integer shift moves no noise between pixels.
+        Apply the integer shift (on the Bayer sub-lattice) found by phase correlation of each
+        shot with the group's reference (the middle shot, or the first of a pair) before
+        combining; an integer shift moves no noise between pixels.
+    highpass : bool
+        Measure the variance of the combination after the separable second difference
+        ``[1, -2, 1] x [1, -2, 1]`` on each Bayer plane (its exact noise gain enters the
+        model, Notes): it removes the residue of sub-pixel motion over smooth texture.
     clip_sigmas : float
-        Pixels are used only where both brackets' expected signal lies this many noise
+        Pixels are used only where every shot's expected signal lies this many noise
         standard deviations inside the clip levels (second pass, with the first-pass model).
     min_pixels : int
         Smallest pixel count of a bin.
@@ -898,54 +1153,69 @@ def estimate_noise_model(
     Raises
     ------
     NoiseModelError
-        No pairs, a pair with equal or invalid exposures or mismatched shapes, or too few
-        usable pixels to fit.
+        No groups, a group with other than 2 or 3 shots, invalid exposures or times,
+        mismatched shapes, or too few usable pixels to fit.
 
     Notes
     -----
-    Per pixel, with ``u = g(d)`` (units of h), the signal ``S = (u_a + u_b) / (t_a + t_b)``
-    (h per ms) and the difference ``D = u_b / t_b - u_a / t_a``:
+    Per pixel, with ``u_i = g(d_i)`` (units of h), weights ``w_i`` (sum 0), the signal
+    ``S = sum u_i / sum t_i`` (h per ms) and the combination ``D = sum w_i u_i / t_i``:
+    ``var(u_i) = (e_i + r^2) / G^2 + g'(d_i)^2 / 12`` with ``e_i = G S t_i``, so
 
-    ``var(u) = (e + r^2) / G^2 + g'(d)^2 / 12`` with ``e = G S t``, so
+    ``var(D) = (1/G) S sum(w_i^2 / t_i) + (r^2/G^2) sum(w_i^2 / t_i^2) + Q``,
+    ``Q = sum(w_i^2 g'(d_i)^2 / t_i^2) / 12``.
 
-    ``var(D) = (1/G) S (1/t_a + 1/t_b) + (r^2/G^2) (1/t_a^2 + 1/t_b^2) + Q``,
-    ``Q = (g'(d_a)^2 / t_a^2 + g'(d_b)^2 / t_b^2) / 12``.
-
-    S and D are uncorrelated for shot noise (``t_b var(u_b/t_b) - t_a var(u_a/t_a)`` has
-    no shot term), so binning by S does not bias var(D).  In each bin (per pair and
-    phase): the mean S, mean Q and a robust variance of D (sigma clipping at 4 sigma around
-    the bin's own mean, which also removes a response error common to the bin).  Then
-    ``var - Q = alpha x_shot + beta x_read`` (``x_shot = S (1/t_a + 1/t_b)``,
-    ``x_read = 1/t_a^2 + 1/t_b^2``) by weighted least squares with Huber weights gives
-    ``G = 1/alpha`` and ``r = sqrt(beta) / alpha``.  Pairs with different exposures
-    separate the two terms; one pair alone also does (slope and intercept).
+    S and D are uncorrelated for shot noise (``cov = (S/G) sum w_i = 0``), so binning by S
+    does not bias var(D).  With the high-pass K (noise independent between pixels),
+    ``var(K * D) = (K^2 * var(D))``: the shot and quantisation terms are filtered with the
+    squared kernel and the read term is multiplied by ``sum K^2 = 36``, so the model stays
+    exact.  In each bin (per group and phase): the mean shot and quantisation terms and a
+    robust variance of D (sigma clipping at 4 sigma).  Then
+    ``var - Q = alpha x_shot + beta x_read`` by weighted least squares with Huber weights
+    gives ``G = 1/alpha`` and ``r = sqrt(beta) / alpha``.  Different exposures separate the
+    two terms.  The full well is not fitted: it is ``G g(white_level)``, the electrons at
+    which the response reaches the white level (:attr:`NoiseEstimate.full_well_e`); the
+    fit uses only signals below 90 % of the range, away from any roll-off of the
+    variance near saturation.
 
     Usable pixels: a first pass keeps signals between 2 % and 90 % of the response range
-    in both brackets; the second keeps those whose expected electrons lie ``clip_sigmas``
-    standard deviations inside the electrons of the first and last decision levels.
-    A response whose g(black) is above zero (BorealHDR: 0.17 of 255) clips the darkest
-    electrons to black, so the read-noise regime (e < r^2) may be out of reach and r is
-    then identified only by extrapolation: its uncertainty says so.
+    in every shot, no shot at the black or white level; the second keeps those whose
+    expected electrons lie ``clip_sigmas`` standard deviations inside the electrons of the
+    first and last decision levels.  A response whose g(black) is above zero (BorealHDR:
+    0.17 of 255) clips the darkest electrons to black, so the read-noise regime (e < r^2)
+    may be out of reach and r is then identified only by extrapolation: its uncertainty
+    says so.
     """
-    pairs = list(pairs)
-    if not pairs:
-        raise NoiseModelError("no bracket pairs given")
+    groups = list(groups)
+    if not groups:
+        raise NoiseModelError("no bracket groups given")
     if not isinstance(response, CameraResponse):
         raise NoiseModelError(f"response must be an emulator CameraResponse, got {type(response).__name__}")
-    for i, pr in enumerate(pairs):
-        where = f"pair {i} ({pr.label or 'unnamed'})"
-        for raw in (pr.raw_a, pr.raw_b):
+    for i, gr in enumerate(groups):
+        where = f"group {i} ({getattr(gr, 'label', '') or 'unnamed'})"
+        if not isinstance(gr, BracketGroup):
+            raise NoiseModelError(f"{where}: expected a BracketGroup, got {type(gr).__name__}")
+        if len(gr.raws) not in (2, 3) or len(gr.exposures_ms) != len(gr.raws):
+            raise NoiseModelError(f"{where}: need 2 or 3 images with one exposure each, got {len(gr.raws)} images "
+                                  f"and {len(gr.exposures_ms)} exposures")
+        for raw in gr.raws:
             if not isinstance(raw, np.ndarray) or raw.dtype != np.uint16 or raw.ndim != 2:
                 raise NoiseModelError(f"{where}: images must be 2-D uint16 Bayer mosaics")
-        if pr.raw_a.shape != pr.raw_b.shape:
-            raise NoiseModelError(f"{where}: shapes differ ({pr.raw_a.shape} vs {pr.raw_b.shape})")
-        if min(pr.raw_a.shape) < 16:
-            raise NoiseModelError(f"{where}: images too small ({pr.raw_a.shape})")
-        for t in (pr.exposure_a_ms, pr.exposure_b_ms):
+            if raw.shape != gr.raws[0].shape:
+                raise NoiseModelError(f"{where}: shapes differ ({raw.shape} vs {gr.raws[0].shape})")
+            if int(raw.max()) > response.white_level:
+                raise NoiseModelError(f"{where}: DN {int(raw.max())} above the response's white level "
+                                      f"{response.white_level}")
+        if min(gr.raws[0].shape) < 16:
+            raise NoiseModelError(f"{where}: images too small ({gr.raws[0].shape})")
+        for t in gr.exposures_ms:
             if not (isinstance(t, (int, float, np.floating, np.integer)) and math.isfinite(t) and t > 0):
                 raise NoiseModelError(f"{where}: exposure {t!r} must be finite and > 0 ms")
-        if pr.exposure_a_ms == pr.exposure_b_ms:
-            raise NoiseModelError(f"{where}: both brackets have {pr.exposure_a_ms} ms; need different exposures")
+        if gr.times_s is not None:
+            times = np.asarray(gr.times_s, dtype=np.float64)
+            if times.shape != (len(gr.raws),) or not np.all(np.isfinite(times)) or np.any(np.diff(times) <= 0):
+                raise NoiseModelError(f"{where}: times_s must be one finite, increasing instant per image, "
+                                      f"got {gr.times_s!r}")
     if not 0 < flat_fraction <= 1:
         raise NoiseModelError(f"flat_fraction must be in (0, 1], got {flat_fraction!r}")
     names = _phase_names(bayer_pattern)
@@ -957,31 +1227,31 @@ def estimate_noise_model(
     span = theta_hi - max(theta_lo, 0.0)
     warnings: list[str] = []
 
-    def pass_one(signal, ta, tb, p):
-        lo = (max(theta_lo, 0.0) + 0.02 * span) / min(ta, tb)
-        hi = (max(theta_lo, 0.0) + 0.90 * span) / max(ta, tb)
+    def pass_one(t_lo, t_hi):
+        lo = (max(theta_lo, 0.0) + 0.02 * span) / t_lo
+        hi = (max(theta_lo, 0.0) + 0.90 * span) / t_hi
         return lo, hi
 
     def run(limits):
         pts, shifts = [], []
-        for i, pr in enumerate(pairs):
-            p_pts, shift = _pair_points(pr, response, slope, limits=limits, n_bins=n_bins,
-                                        flat_fraction=flat_fraction, min_pixels=min_pixels, align=align,
-                                        clip=4.0)
-            pts += [(i,) + t for t in p_pts]
+        for i, gr in enumerate(groups):
+            g_pts, shift = _group_points(gr, response, slope, limits=limits, n_bins=n_bins,
+                                         flat_fraction=flat_fraction, min_pixels=min_pixels, align=align,
+                                         highpass=highpass, clip=4.0)
+            pts += [(i,) + t for t in g_pts]
             shifts.append(shift)
         if len(pts) < 3:
             raise NoiseModelError(
-                f"only {len(pts)} usable intensity bin(s) in {len(pairs)} pair(s): too few unclipped, flat pixels "
-                f"(min_pixels={min_pixels})"
+                f"only {len(pts)} usable intensity bin(s) in {len(groups)} bracket group(s): too few unclipped, "
+                f"flat pixels (min_pixels={min_pixels})"
             )
         arr = np.array(pts, dtype=np.float64)
-        cols = dict(pair=arr[:, 0].astype(int), phase=arr[:, 1].astype(int), signal=arr[:, 2], x_shot=arr[:, 3],
-                    x_read=arr[:, 4], variance=arr[:, 5], quantisation=arr[:, 6], n=arr[:, 7])
+        cols = dict(group=arr[:, 0].astype(int), phase=arr[:, 1].astype(int), signal=arr[:, 2], x_shot=arr[:, 3],
+                    x_read=arr[:, 4], variance=arr[:, 5], quantisation=arr[:, 6], n=arr[:, 7], signal2=arr[:, 8])
         return cols, shifts
 
     cols, _ = run(pass_one)
-    alpha, beta, _, _ = _fit(cols["x_shot"], cols["x_read"], cols["variance"], cols["quantisation"], cols["n"])
+    alpha, beta, _, _ = _fit_bins(cols, motion_term=motion_term)
     if not alpha > 0:
         raise NoiseModelError(f"first pass found no positive shot-noise slope (alpha = {alpha:.3g}): "
                               "the differences do not grow with the signal")
@@ -989,9 +1259,9 @@ def estimate_noise_model(
     read1 = math.sqrt(beta) / alpha if beta > 0 else 0.0
     e_lo, e_hi = gain1 * theta_lo, gain1 * theta_hi
 
-    def pass_two(signal, ta, tb, p):
-        # smallest signal s with G s t - c sqrt(G s t + r^2) >= e_lo for the shorter bracket,
-        # largest with G s t + c sqrt(G s t + r^2) <= e_hi for the longer (solved on a grid)
+    def pass_two(t_lo, t_hi):
+        # smallest signal s with G s t - c sqrt(G s t + r^2) >= e_lo for the shortest shot,
+        # largest with G s t + c sqrt(G s t + r^2) <= e_hi for the longest (solved on a grid)
         c = clip_sigmas
         e = np.geomspace(max(e_lo, 1e-3) + 1e-3, max(e_hi, 1.0), 4096)
         sd = np.sqrt(e + read1**2)
@@ -1001,11 +1271,10 @@ def estimate_noise_model(
             return np.inf, -np.inf
         lo_e = e[np.argmax(ok_lo)]
         hi_e = e[len(e) - 1 - np.argmax(ok_hi[::-1])]
-        return lo_e / (gain1 * min(ta, tb)), hi_e / (gain1 * max(ta, tb))
+        return lo_e / (gain1 * t_lo), hi_e / (gain1 * t_hi)
 
     cols, shifts = run(pass_two)
-    alpha, beta, cov, weights = _fit(cols["x_shot"], cols["x_read"], cols["variance"], cols["quantisation"],
-                                     cols["n"])
+    alpha, beta, cov, weights = _fit_bins(cols, motion_term=motion_term)
     gain, read, sg, sr = _gain_read(alpha, beta, cov)
     if not math.isfinite(gain):
         raise NoiseModelError(f"no positive shot-noise slope (alpha = {alpha:.3g})")
@@ -1023,32 +1292,172 @@ def estimate_noise_model(
             phase_gain.append(gain)
             phase_read.append(read)
             continue
-        a_p, b_p, c_p, _ = _fit(cols["x_shot"][m], cols["x_read"][m], cols["variance"][m], cols["quantisation"][m],
-                                cols["n"][m])
+        a_p, b_p, c_p, _ = _fit_bins(cols, m, motion_term=motion_term)
         gp, rp, sgp, srp = _gain_read(a_p, b_p, c_p)
         per_channel[nm] = {"gain_e_per_h": gp, "read_noise_e": rp, "gain_std": sgp, "read_noise_std": srp,
                            "n_bins": int(np.count_nonzero(m))}
         phase_gain.append(gp if math.isfinite(gp) else gain)
         phase_read.append(rp if math.isfinite(rp) else read)
 
-    per_pair = []
-    for i, pr in enumerate(pairs):
-        m = cols["pair"] == i
-        entry = {"label": pr.label, "exposure_a_ms": float(pr.exposure_a_ms), "exposure_b_ms": float(pr.exposure_b_ms),
-                 "shift_px": [2 * s for s in shifts[i]], "n_bins": int(np.count_nonzero(m)),
+    per_group = []
+    for i, gr in enumerate(groups):
+        m = cols["group"] == i
+        entry = {"label": gr.label, "exposures_ms": [float(t) for t in gr.exposures_ms],
+                 "shift_px": [[2 * a, 2 * b_] for a, b_ in shifts[i]], "n_bins": int(np.count_nonzero(m)),
                  "n_pixels": int(cols["n"][m].sum())}
         if np.count_nonzero(m) >= 3:
-            a_i, b_i, c_i, _ = _fit(cols["x_shot"][m], cols["x_read"][m], cols["variance"][m],
-                                    cols["quantisation"][m], cols["n"][m])
+            a_i, b_i, c_i, _ = _fit_bins(cols, m, motion_term=motion_term)
             gi, ri, sgi, sri = _gain_read(a_i, b_i, c_i)
             entry.update(gain_e_per_h=gi, read_noise_e=ri, gain_std=sgi, read_noise_std=sri)
-        per_pair.append(entry)
-    spread = {"gain_e_per_h": _percentiles(e.get("gain_e_per_h", float("nan")) for e in per_pair),
-              "read_noise_e": _percentiles(e.get("read_noise_e", float("nan")) for e in per_pair)}
+        per_group.append(entry)
+    spread = {"gain_e_per_h": _percentiles(e.get("gain_e_per_h", float("nan")) for e in per_group),
+              "read_noise_e": _percentiles(e.get("read_noise_e", float("nan")) for e in per_group)}
 
     if per_phase:
         tile = lambda v: ((v[0], v[1]), (v[2], v[3]))  # noqa: E731
         model = NoiseModel(response, tile(phase_gain), tile(phase_read), name)
     else:
         model = NoiseModel(response, gain, read, name)
-    return NoiseEstimate(model, gain, read, sg, sr, per_channel, per_pair, spread, cols, warnings)
+    return NoiseEstimate(model, gain, read, sg, sr, per_channel, per_group, spread, cols, warnings)
+
+
+# ---------------------------------------------------------------------------- measured variance ratio
+@dataclass(frozen=True)
+class VarianceRatio:
+    """The result of :func:`noise_variance_ratio`.
+
+    Attributes
+    ----------
+    median : float
+        Median over intensity bins of emulated / live noise variance.
+    bins : list of dict
+        Per bin: ``dn_lo``, ``dn_hi`` (bin edges of the level image, DN), ``pixels``,
+        ``dof`` (degrees of freedom of each variance), ``emulated_var_dn2``,
+        ``live_var_dn2``, ``ratio``.
+    mode : str
+        ``"temporal"`` (stacks of repeats) or ``"spatial"`` (single flat-field images).
+    """
+
+    median: float
+    bins: list
+    mode: str
+
+    @property
+    def max_abs_deviation(self) -> float:
+        """Largest ``|ratio - 1|`` over the bins."""
+        return float(max(abs(b["ratio"] - 1.0) for b in self.bins))
+
+    def to_dict(self) -> dict:
+        return {"median": self.median, "max_abs_deviation": self.max_abs_deviation, "mode": self.mode,
+                "bins": list(self.bins)}
+
+
+def _pooled_variance(images: np.ndarray, key: np.ndarray, members: np.ndarray, temporal: bool):
+    """(sum of squared deviations, degrees of freedom) over the groups of ``members`` pixels."""
+    if temporal:
+        x = images[:, members].astype(np.float64)
+        ss = float(np.sum((x - x.mean(axis=0)) ** 2))
+        return ss, members.size * (images.shape[0] - 1)
+    x = images.reshape(-1)[members].astype(np.float64)
+    labels, inv = np.unique(key.reshape(-1)[members], return_inverse=True)
+    count = np.bincount(inv, minlength=labels.size)
+    mean = np.bincount(inv, weights=x, minlength=labels.size) / count
+    ss = float(np.sum((x - mean[inv]) ** 2))
+    return ss, members.size - labels.size
+
+
+def noise_variance_ratio(emulated, live, response: CameraResponse, *, levels=None, valid=None, n_bins: int = 16,
+                         range_fraction=(0.01, 0.90), min_dof: int = 50) -> VarianceRatio:
+    """Median over intensity bins of emulated noise variance / live-capture noise variance (measured).
+
+    Parameters
+    ----------
+    emulated, live : ndarray, integer (R, H, W) or (H, W)
+        Stacks of R >= 2 repeats of a static scene (independent noise each: emulations of
+        independent source captures, and live captures at the target exposure), or single
+        images of a flat field.  The two may have different R.
+    response : CameraResponse
+        Gives the black and white levels that bound the bins.
+    levels : ndarray (H, W) or None
+        The value that bins each pixel, DN: best the noiseless target image (synthetic data);
+        None: the mean of the live stack, or for single images one flat field (all equal).
+        For single images pixels with equal ``levels`` are one group (a flat patch); the
+        variance of a bin pools the deviations from each group's own mean.
+    valid : ndarray of bool (H, W) or None
+        Pixels to use (e.g. the emulator's validity mask, or sources not clipped).
+    n_bins : int
+        Log-spaced bins of ``levels`` between ``range_fraction`` of the DN range.
+    range_fraction : (float, float)
+        The binned span, as fractions of ``white - black`` above black (default 1 % to
+        90 %: away from the clipping that shrinks the variance of both).
+    min_dof : int
+        Bins with fewer degrees of freedom are skipped.
+
+    Returns
+    -------
+    VarianceRatio
+        ``median`` is the figure results.json reports for one emulation mode.
+
+    Raises
+    ------
+    NoiseModelError
+        Shapes that do not match, fewer than 2 repeats, or no bin with enough data.
+
+    Notes
+    -----
+    Per pixel the temporal variance over the repeats (ddof 1), pooled over the pixels of
+    a bin (sum of squares / degrees of freedom), for each of the two stacks; the ratio of
+    the pooled variances per bin, then the median over the bins.  Single flat-field images
+    pool deviations from each patch's mean instead (a flat field: one patch per level).
+    """
+    emu = np.asarray(emulated)
+    liv = np.asarray(live)
+    if emu.ndim != liv.ndim or emu.ndim not in (2, 3) or emu.shape[-2:] != liv.shape[-2:]:
+        raise NoiseModelError(f"emulated {emu.shape} and live {liv.shape} must both be (R, H, W) stacks or (H, W) "
+                              "images of one size")
+    temporal = emu.ndim == 3
+    if temporal and min(emu.shape[0], liv.shape[0]) < 2:
+        raise NoiseModelError(f"stacks need at least 2 repeats, got {emu.shape[0]} and {liv.shape[0]}")
+    shape = emu.shape[-2:]
+    if levels is None:
+        levels = liv.astype(np.float64).mean(axis=0) if temporal else np.zeros(shape)
+        if not temporal:
+            valid_all = np.ones(shape, dtype=bool) if valid is None else np.asarray(valid, dtype=bool)
+            level = float(np.median(liv[valid_all]))
+            levels = np.full(shape, level)
+    levels = np.asarray(levels, dtype=np.float64)
+    if levels.shape != shape:
+        raise NoiseModelError(f"levels has shape {levels.shape}, images {shape}")
+    ok = np.isfinite(levels)
+    if valid is not None:
+        valid = np.asarray(valid, dtype=bool)
+        if valid.shape != shape:
+            raise NoiseModelError(f"valid has shape {valid.shape}, images {shape}")
+        ok &= valid
+    black, white = response.black_level, response.white_level
+    lo = black + range_fraction[0] * (white - black)
+    hi = black + range_fraction[1] * (white - black)
+    edges = np.geomspace(max(lo, 1.0), hi, n_bins + 1)
+    which = np.digitize(levels, edges) - 1
+    rows = []
+    flat_idx = np.flatnonzero(ok & (which >= 0) & (which < n_bins))
+    for b in range(n_bins):
+        members = flat_idx[which.reshape(-1)[flat_idx] == b]
+        if members.size == 0:
+            continue
+        if temporal:
+            emu_ss, emu_dof = _pooled_variance(emu.reshape(emu.shape[0], -1), None, members, True)
+            liv_ss, liv_dof = _pooled_variance(liv.reshape(liv.shape[0], -1), None, members, True)
+        else:
+            emu_ss, emu_dof = _pooled_variance(emu, levels, members, False)
+            liv_ss, liv_dof = _pooled_variance(liv, levels, members, False)
+        if min(emu_dof, liv_dof) < min_dof or liv_ss <= 0:
+            continue
+        v_emu, v_liv = emu_ss / emu_dof, liv_ss / liv_dof
+        rows.append({"dn_lo": float(edges[b]), "dn_hi": float(edges[b + 1]), "pixels": int(members.size),
+                     "dof": int(min(emu_dof, liv_dof)), "emulated_var_dn2": v_emu, "live_var_dn2": v_liv,
+                     "ratio": v_emu / v_liv})
+    if not rows:
+        raise NoiseModelError(f"noise_variance_ratio: no intensity bin with {min_dof} or more degrees of freedom "
+                              f"between DN {lo:.0f} and {hi:.0f}")
+    return VarianceRatio(float(np.median([r["ratio"] for r in rows])), rows, "temporal" if temporal else "spatial")

@@ -7,7 +7,18 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
-SHARED = REPO.parent / "shared"
+
+
+def _find_shared() -> Path:
+    """``../shared`` beside the repository; from a git worktree (``/work/wt/NAME``) the first
+    ``shared/`` folder found further up, so the sample tests run there too instead of skipping."""
+    for parent in REPO.parents:
+        if (parent / "shared" / "data").is_dir():
+            return parent / "shared"
+    return REPO.parent / "shared"
+
+
+SHARED = _find_shared()
 SAMPLE = SHARED / "data" / "borealhdr_sample"
 SAMPLE_SEQ = SAMPLE / "backpack_2023-09-25-15-05-03"
 PCALIB = SAMPLE / "calibration" / "pcalib_inside1.txt"
