@@ -273,3 +273,81 @@ def test_errors_name_the_problem():
     # a bad exposure is still refused before anything else
     with pytest.raises(EmulationError, match="target_ms"):
         emulate(raw, 2.0, float("nan"), resp, noise="consistent", noise_model=model, rng=0)
+
+
+# ---------------------------------------------------------------------------- measured variance ratio
+#: Electrons per site at the target exposure: inside 1-90 % of the range at the target, sources
+#: (up to 4x more) unclipped.
+BANDS_E = (120.0, 220.0, 400.0, 750.0, 1300.0, 2200.0)
+
+
+def _banded_flat(cam: Camera, target_ms: float) -> np.ndarray:
+    """Six flat horizontal bands (per-site radiance) giving BANDS_E electrons at ``target_ms``."""
+    rows = np.array_split(np.arange(cam.height), len(BANDS_E))
+    rad = np.empty((cam.height, cam.width), dtype=np.float32)
+    for r, e in zip(rows, BANDS_E):
+        rad[r] = e / target_ms / cam.radiance_scale
+    return rad
+
+
+@pytest.mark.parametrize("preset,source_ms,target_ms", [("linear", 8.0, 2.0), ("borealhdr", 16.0, 5.3)])
+def test_noise_variance_ratio_on_a_flat_field(preset, source_ms, target_ms):
+    """Plain emulation from a longer bracket is too clean by the analytic ratio; consistent is within 10 % of 1."""
+    from emulator.noise import noise_variance_ratio
+
+    cam = Camera.preset(preset, width=SIZE, height=6 * 64, vignetting_strength=0.0)
+    model = noise_model_of(cam)
+    rad = _banded_flat(cam, target_ms)
+    src = capture(rad, source_ms, cam, seed=np.random.SeedSequence([21, 0]))
+    live = capture(rad, target_ms, cam, seed=np.random.SeedSequence([21, 1]))
+    levels = capture(rad, target_ms, cam, seed=None, noise=False)  # noiseless target DN: one value per band
+    plain = emulate(src, source_ms, target_ms, cam.response)
+    cons = emulate(src, source_ms, target_ms, cam.response, noise="consistent", noise_model=model, rng=7)
+    r_plain = noise_variance_ratio(plain, live, cam.response, levels=levels)
+    r_cons = noise_variance_ratio(cons, live, cam.response, levels=levels)
+    assert r_plain.mode == "spatial" and len(r_plain.bins) == len(BANDS_E)  # one bin per band here
+    n = SIZE * 64
+    for band, e, bp, bc in zip(range(len(BANDS_E)), BANDS_E, r_plain.bins, r_cons.bins):
+        (_, v_live, q_live), (_, v_emu, q_emu), (_, v_pl, q_pl) = _theory(cam, e, source_ms, target_ms)
+        assert bp["dn_lo"] <= levels[band * 64, 0] < bp["dn_hi"]
+        # measured ratio against the exact one: sampling error of both variances (Z sigma)
+        for got, v_e, q_e in ((bp, v_pl, q_pl), (bc, v_emu, q_emu)):
+            ratio = v_e / v_live
+            sd = ratio * np.hypot(_sample_var_sd(v_e, q_e, n) / v_e, _sample_var_sd(v_live, q_live, n) / v_live)
+            assert abs(got["ratio"] - ratio) <= Z * sd, (band, got["ratio"], ratio)
+        assert v_pl / v_live < 1.0
+        assert abs(bc["ratio"] - 1.0) < 0.10
+    k = target_ms / source_ms
+    theory_plain = np.median([_theory(cam, e, source_ms, target_ms)[2][1] / _theory(cam, e, source_ms, target_ms)[0][1]
+                              for e in BANDS_E])
+    assert r_plain.median < 1.0 and abs(r_plain.median - theory_plain) < 0.05
+    assert k - 0.05 < theory_plain < 1.0  # shot-noise dominated: about k (read noise pushes it up a little)
+    assert abs(r_cons.median - 1.0) < 0.10 and r_cons.max_abs_deviation < 0.10
+
+
+def test_noise_variance_ratio_temporal_stacks_and_errors():
+    """Stacks of repeats give the per-pixel temporal variance; bad shapes are refused by name."""
+    from emulator.noise import NoiseModelError, noise_variance_ratio
+
+    cam = Camera.preset("linear", width=64, height=6 * 8, vignetting_strength=0.0)
+    model = noise_model_of(cam)
+    rad = _banded_flat(cam, 2.0)
+    ss = lambda *k: np.random.SeedSequence([31, *k])  # noqa: E731
+    src = [capture(rad, 8.0, cam, seed=ss(0, r)) for r in range(24)]
+    live = np.stack([capture(rad, 2.0, cam, seed=ss(1, r)) for r in range(24)])
+    plain = np.stack([emulate(s, 8.0, 2.0, cam.response) for s in src])
+    cons = np.stack([emulate(s, 8.0, 2.0, cam.response, noise="consistent", noise_model=model, rng=ss(2, r))
+                     for r, s in enumerate(src)])
+    levels = capture(rad, 2.0, cam, seed=None, noise=False)
+    rp = noise_variance_ratio(plain, live, cam.response, levels=levels)
+    rc = noise_variance_ratio(cons, live, cam.response, levels=levels)
+    assert rp.mode == "temporal" and rp.bins[0]["dof"] == 64 * 8 * 23
+    # dof 11776 per bin: sampling sd of a ratio ~2 %; the theory says 0.25-0.33 and 1
+    assert 0.2 < rp.median < 0.4 and abs(rc.median - 1.0) < 0.10
+    assert rc.to_dict()["median"] == rc.median
+    with pytest.raises(NoiseModelError, match="must both be"):
+        noise_variance_ratio(plain, live[0], cam.response)
+    with pytest.raises(NoiseModelError, match="at least 2 repeats"):
+        noise_variance_ratio(plain[:1], live, cam.response)
+    with pytest.raises(NoiseModelError, match="no intensity bin"):
+        noise_variance_ratio(plain, live, cam.response, levels=np.zeros(levels.shape))
