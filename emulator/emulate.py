@@ -184,7 +184,8 @@ def emulate(
         much (Notes).
     noise_model : emulator.noise.NoiseModel or None
         Conversion gain and read noise of the camera (from ``synth.noise_model.noise_model_of``
-        or :func:`emulator.noise.estimate_noise_model`); its response must be ``response``.
+        or :func:`emulator.noise.estimate_noise_model`, or :func:`emulator.noise.read_noise_model`);
+        its response must be ``response``.
         Required for ``noise="consistent"`` and for ``return_excess``.
     rng : numpy.random.Generator, numpy.random.SeedSequence or int
         Source of the added noise (required for ``noise="consistent"``; not used otherwise).
@@ -288,7 +289,7 @@ def _check_noise_model(noise_model, response: CameraResponse, noise: str, return
     if noise_model is None:
         raise EmulationError(
             f"{why} needs a noise_model (emulator.noise.NoiseModel: from synth.noise_model.noise_model_of(camera) "
-            "or emulator.noise.estimate_noise_model on the recording's bracket pairs)"
+            "or emulator.noise.estimate_noise_model on the recording's bracket groups)"
         )
     if not isinstance(noise_model, NoiseModel):
         raise EmulationError(f"noise_model must be an emulator.noise.NoiseModel, got {type(noise_model).__name__}")

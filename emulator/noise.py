@@ -2,9 +2,13 @@
 
 An emulated image carries its source bracket's noise scaled by the exposure ratio, not the
 noise a capture at the target exposure would have (issue 14).  This module holds what the
-emulator needs to correct that (:func:`emulator.emulate` with ``noise="consistent"``), and
-an estimator of the noise figures from a recording's own bracket pairs.  numpy and OpenCV
-only; no file access (arrays and dataclasses in, arrays and dataclasses out).
+emulator needs to correct that (:func:`emulator.emulate` with ``noise="consistent"``), an
+estimator of the noise figures from a recording's own brackets (:func:`bracket_groups`,
+:func:`estimate_noise_model`), the measured variance ratio of emulated against live images
+(:func:`noise_variance_ratio`), and the model's JSON form (:meth:`NoiseModel.to_json`,
+:meth:`NoiseModel.from_json`; :func:`write_noise_model` / :func:`read_noise_model` are the
+only file access here, a reader/writer pair meant to move into ``emulator/io``).
+numpy and OpenCV only.
 
 Sensor model (the one :mod:`synth.camera` implements), per Bayer site:
 
