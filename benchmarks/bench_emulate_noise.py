@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from emulator import emulate
-from emulator.dataset import load_sequence, sequence_response
+from emulator.io.borealhdr import load_sequence, sequence_response
 from emulator.noise import NoiseModel
 from _timing import median_ms
 

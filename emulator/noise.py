@@ -60,8 +60,6 @@ __all__ = [
     "bracket_groups",
     "NoiseEstimate",
     "estimate_noise_model",
-    "write_noise_model",
-    "read_noise_model",
     "response_fingerprint",
     "noise_variance_ratio",
     "VarianceRatio",
@@ -541,51 +539,17 @@ def response_fingerprint(response: CameraResponse) -> str:
     return h.hexdigest()
 
 
-def _json_safe(value):
+def json_safe(value):
     """Non-finite floats (an undetermined standard error) as None, recursively."""
     if isinstance(value, dict):
-        return {k: _json_safe(v) for k, v in value.items()}
+        return {k: json_safe(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_json_safe(v) for v in value]
+        return [json_safe(v) for v in value]
     if isinstance(value, (float, np.floating)):
         return float(value) if math.isfinite(value) else None
     if isinstance(value, np.integer):
         return int(value)
     return value
-
-
-def write_noise_model(path: str | os.PathLike, model: "NoiseModel | NoiseEstimate", *,
-                      overwrite: bool = False):
-    """Write a noise model (or an estimate: its model plus its summary under ``"estimate"``) as JSON.
-
-    Atomic; refuses to replace an existing file unless ``overwrite``
-    (:class:`~emulator.errors.OutputExistsError`).  Returns the path.
-    """
-    from emulator.dataset import atomic_write_bytes
-
-    if isinstance(model, NoiseEstimate):
-        summary = model.to_dict()
-        summary.pop("model")
-        text = model.model.to_json(estimate=_json_safe(summary))
-    elif isinstance(model, NoiseModel):
-        text = model.to_json()
-    else:
-        raise NoiseModelError(f"expected a NoiseModel or NoiseEstimate, got {type(model).__name__}")
-    return atomic_write_bytes(path, text.encode(), overwrite=overwrite)
-
-
-def read_noise_model(path: str | os.PathLike, response: CameraResponse) -> "NoiseModel":
-    """Read :func:`write_noise_model` output; errors name the file (missing, malformed, other response)."""
-    from pathlib import Path
-
-    path = Path(path)
-    if not path.is_file():
-        raise NoiseModelError(f"{path}: noise model file not found")
-    try:
-        text = path.read_text()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise NoiseModelError(f"{path}: cannot read ({exc})") from None
-    return NoiseModel.from_json(text, response, source=str(path))
 
 
 def _slope(response: CameraResponse) -> np.ndarray:

@@ -19,7 +19,7 @@ import pytest
 from scipy.special import ndtr
 
 from emulator import CameraResponse, EmulationError, ExposimError, emulate
-from emulator.dataset import load_sequence, sequence_response
+from emulator.io.borealhdr import load_sequence, sequence_response
 from emulator.noise import NoiseModel, NoiseModelError
 from synth import Camera, capture
 from synth.noise_model import noise_model_of
@@ -357,7 +357,8 @@ def test_noise_variance_ratio_temporal_stacks_and_errors():
 def test_same_seed_same_bytes_synthetic_and_estimate(tmp_path):
     """Same seed, same bytes: consistent emulation (pooled and per-phase models), and the in-situ
     estimate and its JSON, which draw nothing (deterministic in their inputs)."""
-    from emulator.noise import bracket_groups, estimate_noise_model, write_noise_model
+    from emulator.io.noisemodel import write_noise_model
+    from emulator.noise import bracket_groups, estimate_noise_model
     from synth import capture_sequence
     from synth.procedural import TranslatingChart
 

@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 from emulator import CameraResponse
-from emulator.dataset import load_sequence, sequence_response
+from emulator.io.borealhdr import load_sequence, sequence_response
 from emulator.errors import OutputExistsError
 from emulator.noise import (
     BracketGroup,
@@ -29,9 +29,8 @@ from emulator.noise import (
     NoiseModelError,
     bracket_groups,
     estimate_noise_model,
-    read_noise_model,
-    write_noise_model,
 )
+from emulator.io.noisemodel import read_noise_model, write_noise_model
 from synth import Camera, capture_sequence
 from synth.noise_model import noise_model_of
 from synth.procedural import TranslatingChart
@@ -141,7 +140,7 @@ def test_noise_model_json_errors_name_the_file(tmp_path):
     with pytest.raises(NoiseModelError, match=r"m\.json: .*not to the response given.*response_sha256"):
         read_noise_model(path, CameraResponse.gamma(2.2).with_levels(white_level=4094, black_level=0))
     with pytest.raises(NoiseModelError, match=r"white_level"):
-        read_noise_model(path, CameraResponse.linear())
+        read_noise_model(path, CameraResponse.linear().with_levels(white_level=4000, black_level=0))
     with pytest.raises(NoiseModelError, match="missing.json: noise model file not found"):
         read_noise_model(tmp_path / "missing.json", resp)
     bad = tmp_path / "bad.json"
