@@ -86,6 +86,7 @@ __all__ = [
     "kendall_tau",
     "noise_variance_ratio",
     "run_live_experiment",
+    "redraw",
     "numbered_output",
     "main",
 ]
@@ -754,19 +755,65 @@ def run_live_experiment(out, config: LiveConfig = CONFIGS["full"], *, progress: 
             findings[r] = ae_study.evaluate_findings(summaries[r], cfg.taus)
             timings[f"metrics_{r}_s"] = time.perf_counter() - t0
 
-    results = assemble(cfg, per_scene, summaries, findings, nvr, names)
     timings["total_s"] = time.perf_counter() - t_start
     from emulator import __version__
 
+    raw = {"config": cfg.to_dict(), "command": command, "exposim_version": __version__,
+           "render_variant": scenes.choose_variant(), "timings": timings, "per_scene": _jsonable(per_scene),
+           "summaries": summaries, "findings": findings, "noise_variance_ratio": nvr}
+    (out / RAW_FILE).write_text(json.dumps(raw, allow_nan=False) + "\n")
+    return finish(out, raw)
+
+
+#: What :func:`redraw` recomputes the verdicts from (per-cycle comparisons, benchmark summaries).
+RAW_FILE = "raw.json"
+
+
+def _jsonable(obj):
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, np.generic):
+        return obj.item()
+    return obj
+
+
+def _config_from_dict(d: dict) -> LiveConfig:
+    from dataclasses import fields
+
+    kw = {f.name: d[f.name] for f in fields(LiveConfig) if f.name in d}
+    for k in ("scenes", "methods", "taus"):
+        if k in kw:
+            kw[k] = tuple(kw[k])
+    return LiveConfig(**kw)
+
+
+def finish(out, raw: dict) -> dict:
+    """Verdicts, figures, ``report.md`` and ``results.json`` from the raw record (see :func:`redraw`)."""
+    from validation.common import write_json
+
+    out = Path(out)
+    cfg = _config_from_dict(raw["config"])
+    per_scene = raw["per_scene"]
+    for sc in per_scene.values():
+        for comp in sc["comparison"].values():
+            for m, d in comp.items():
+                for k in list(d):
+                    d[k] = np.asarray(d[k], dtype=np.float64)
+    results = assemble(cfg, per_scene, raw["summaries"], raw["findings"], raw["noise_variance_ratio"],
+                       list(cfg.methods))
     results.update({
         "experiment": "live versus emulated (issue 14)",
-        "exposim_version": __version__,
-        "command": command,
+        "exposim_version": raw.get("exposim_version"),
+        "command": raw.get("command"),
         "config": cfg.to_dict(),
-        "render_variant": scenes.choose_variant(),
-        "timings": timings,
+        "render_variant": raw.get("render_variant"),
+        "timings": raw.get("timings", {}),
         "files": {"report": "report.md", "metrics_figure": "metrics.png" if cfg.metrics else None,
-                  "exposure_figures": {s: f"exposure_{s}.png" for s in cfg.scenes},
+                  "exposure_figures": {s: f"exposure_{s}.png" for s in cfg.scenes}, "raw": RAW_FILE,
                   "runs": "runs/<scene>/<run>", "features": "features/<run>", "vo": "vo/<scene>/<run>"},
     })
     for s in cfg.scenes:
@@ -774,10 +821,17 @@ def run_live_experiment(out, config: LiveConfig = CONFIGS["full"], *, progress: 
     if cfg.metrics:
         plot_metrics(results, out / "metrics.png")
     (out / "report.md").write_text(report_markdown(results))
-    from validation.common import write_json
-
     write_json(out / "results.json", results)
     return results
+
+
+def redraw(out) -> dict:
+    """Recompute the verdicts and rewrite ``results.json``, ``report.md`` and the figures of an
+    experiment folder from its ``raw.json`` (nothing is rendered, played back or measured again)."""
+    path = Path(out) / RAW_FILE
+    if not path.is_file():
+        raise LiveError(f"{path}: not found; not a finished live experiment folder")
+    return finish(out, json.loads(path.read_text()))
 
 
 # ============================================================================ verdicts
@@ -889,58 +943,98 @@ def assemble(cfg: LiveConfig, per_scene: dict, summaries: dict, findings: dict, 
                      for r, fl in findings.items()},
         "noise_variance_ratio_detail": nvr,
     }
-    results["flip_causes"] = flip_causes(results, names) if taus else []
+    results["live_spread"] = live_spread(values) if values else {}
+    rows = flip_causes(results, names) if taus else []
+    results["flip_causes"] = rows
+    results["flip_cause_counts"] = flip_cause_counts(rows)
+    for key, per_metric in taus.items():
+        for metric, res in per_metric.items():
+            res["discordant_beyond_live_spread"] = sum(
+                1 for r in rows if f"{r['noise']}/{r['variant']}" == key and r["metric"] == metric
+                and r["cause"] != FLIP_CAUSES[0])
     return results
+
+
+def live_spread(values: dict) -> dict:
+    """Per metric, the largest |same-instant - re-seeded control| over the methods: how far two live
+    runs of the same walk that differ only in capture noise put one method (None without control)."""
+    a, b = values.get("live-same-instant"), values.get(f"live-{CONTROL}")
+    if a is None or b is None:
+        return {}
+    out = {}
+    for metric in a:
+        d = [abs(a[metric][m] - b[metric][m]) for m in a[metric]
+             if a[metric][m] is not None and b[metric].get(m) is not None]
+        out[metric] = max(d) if d else None
+    return out
+
+
+#: Causes of a ranking flip, in the order they are tested (:func:`flip_causes`).
+FLIP_CAUSES = ("within live spread", "motion", "noise level", "exposure divergence (closed loop, selector)",
+               "image difference at equal exposures (noise realisation, quantisation)")
 
 
 def flip_causes(results: dict, names) -> list[dict]:
     """Why each discordant pair of methods (per metric) flips, with the numbers.
 
-    A pair discordant for one noise option / variant is attributed to
+    Per noise option, timing variant and metric, a pair ordered oppositely live and
+    emulated is attributed to the first that applies:
 
-    * ``live spread``: it is also discordant between two live runs that differ only in
-      their capture-noise seeds (the metric cannot separate the two methods);
-    * ``motion``: discordant in ``fixed-instant`` only (not in ``same-instant``, same noise);
-    * ``noise``: discordant with plain emulation, not with consistent (same variant);
-    * ``closed loop`` (selector and quantisation): otherwise, with the two methods'
-      median exposure log2 errors and image RMSE in the same-instant variant as numbers.
+    1. ``within live spread``: both differences (live a - b, emulated a - b) are at most
+       the metric's live spread (:func:`live_spread`): two live runs differing only in
+       capture noise disagree by as much, so the metric cannot order the pair;
+    2. ``motion``: the pair flips in ``fixed-instant`` but not in ``same-instant``;
+    3. ``noise level``: it flips with plain emulation but not with consistent;
+    4. ``exposure divergence``: one of the two methods' exposure trajectories differ by a
+       median |log2| above the goal (0.05): the closed loops went apart (the selector's
+       bracket, the method's sensitivity to small image differences);
+    5. ``image difference at equal exposures``: otherwise (the loops chose the same
+       exposures; the images differ by the source's noise realisation and quantisation).
     """
     detail = results["rank_kendall_tau_detail"]
-    control = detail.get("live/control", {})
     values = results["metric_values"]
+    spread = results.get("live_spread") or {}
     rows = []
     for key, per_metric in detail.items():
         opt, variant = key.split("/")
         if variant not in VARIANTS:
             continue
+        live_key = f"live-{variant}"
+        other_opt = "consistent" if opt == "plain" else "plain"
+        exp = results["exposure"][key]["methods"]
         for metric, res in per_metric.items():
             for a, b in res["discordant"]:
                 pair = [a, b]
-                in_control = pair in control.get(metric, {}).get("discordant", [])
-                same_key = f"{opt}/same-instant"
-                other_opt = "consistent" if opt == "plain" else "plain"
-                in_same = pair in detail[same_key][metric]["discordant"]
-                in_other_noise = pair in detail[f"{other_opt}/{variant}"][metric]["discordant"]
-                if in_control:
-                    cause = "live spread"
-                elif variant == "fixed-instant" and not in_same:
-                    cause = "motion"
-                elif opt == "plain" and not in_other_noise:
-                    cause = "noise"
+                lv = {m: values[live_key][metric][m] for m in pair}
+                ev = {m: values[f"emulated-{opt}"][metric][m] for m in pair}
+                d_live, d_emu = abs(lv[a] - lv[b]), abs(ev[a] - ev[b])
+                sp = spread.get(metric)
+                if sp is not None and max(d_live, d_emu) <= sp:
+                    cause = FLIP_CAUSES[0]
+                elif variant == "fixed-instant" and pair not in detail[f"{opt}/same-instant"][metric]["discordant"]:
+                    cause = FLIP_CAUSES[1]
+                elif opt == "plain" and pair not in detail[f"{other_opt}/{variant}"][metric]["discordant"]:
+                    cause = FLIP_CAUSES[2]
+                elif max((exp[m]["median"] or 0.0) for m in pair) > GOAL_EXPOSURE_LOG2_MEDIAN:
+                    cause = FLIP_CAUSES[3]
                 else:
-                    cause = "closed loop (selector, quantisation)"
-                exp = results["exposure"][f"{opt}/same-instant"]["methods"]
-                img = results["images"][f"{opt}/same-instant"]["methods"]
-                live_key = "live-" + ("same-instant" if variant == "same-instant" else variant)
+                    cause = FLIP_CAUSES[4]
                 rows.append({
                     "noise": opt, "variant": variant, "metric": metric, "pair": pair, "cause": cause,
-                    "live": {m: values[live_key][metric][m] for m in pair},
-                    "emulated": {m: values[f"emulated-{opt}"][metric][m] for m in pair},
-                    "control": {m: values.get(f"live-{CONTROL}", {}).get(metric, {}).get(m) for m in pair},
-                    "same_instant_exposure_log2_error_median": {m: exp[m]["median"] for m in pair},
-                    "same_instant_image_rmse_percent_median": {m: img[m]["image_rmse_percent"]["median"] for m in pair},
+                    "live": lv, "emulated": ev, "live_difference": d_live, "emulated_difference": d_emu,
+                    "live_spread": sp,
+                    "exposure_log2_error_median": {m: exp[m]["median"] for m in pair},
                 })
     return rows
+
+
+def flip_cause_counts(rows: list[dict]) -> dict:
+    """Counts of :func:`flip_causes` rows per ``noise/variant`` and cause."""
+    out: dict = {}
+    for r in rows:
+        d = out.setdefault(f"{r['noise']}/{r['variant']}", {c: 0 for c in FLIP_CAUSES})
+        d[r["cause"]] += 1
+    return out
 
 
 # ============================================================================ figures, report
@@ -1064,7 +1158,13 @@ def report_markdown(results: dict) -> str:
             cells = []
             for key, d in results["rank_kendall_tau_detail"].items():
                 r = d[metric]
-                cells.append(_f(r["tau"], ".2f") + (f" ({len(r['discordant'])} disc.)" if r["discordant"] else ""))
+                extra = ""
+                if r["discordant"]:
+                    extra = f" ({len(r['discordant'])} disc."
+                    if "discordant_beyond_live_spread" in r and key != "live/control":
+                        extra += f", {r['discordant_beyond_live_spread']} beyond spread"
+                    extra += ")"
+                cells.append(_f(r["tau"], ".2f") + extra)
             lines.append(f"| {metric} | " + " | ".join(cells) + " |")
         lines += ["", "`live/control`: two live same-instant runs with different capture-noise seeds.", ""]
         lines += ["## Metric values", "", "| metric | method | " + " | ".join(results["metric_values"]) + " |",
@@ -1094,17 +1194,32 @@ def report_markdown(results: dict) -> str:
             lines.append(f"- {key}: {txt}")
         lines.append("")
     if results["flip_causes"]:
+        sp = results.get("live_spread") or {}
         lines += ["## Why rankings flip", "",
-                  "| noise / variant | metric | pair | cause | live | emulated | live control | exp. log2 err (same-inst.) |",
-                  "| --- | --- | --- | --- | --- | --- | --- | --- |"]
-        for r in results["flip_causes"]:
-            a, b = r["pair"]
-            lines.append(
-                f"| {r['noise']}/{r['variant']} | {r['metric']} | {a} vs {b} | {r['cause']} | "
-                f"{_f(r['live'][a])} vs {_f(r['live'][b])} | {_f(r['emulated'][a])} vs {_f(r['emulated'][b])} | "
-                f"{_f(r['control'][a])} vs {_f(r['control'][b])} | "
-                f"{_f(r['same_instant_exposure_log2_error_median'][a])}, "
-                f"{_f(r['same_instant_exposure_log2_error_median'][b])} |")
+                  "Each pair of methods ordered oppositely live and emulated, attributed to the first cause that "
+                  "applies (`flip_causes` in validation/live.py): within the live spread (both differences at most "
+                  "the largest |live - live re-seeded| of the metric over the methods: "
+                  + ", ".join(f"{m} {_f(v)}" for m, v in sp.items()) + "), motion (fixed-instant only), noise level "
+                  "(plain only), exposure divergence (median |log2| > 0.05), else image difference at equal exposures.",
+                  "", "| noise / variant | " + " | ".join(FLIP_CAUSES) + " |",
+                  "| --- | " + " | ".join("---:" for _ in FLIP_CAUSES) + " |"]
+        for key, counts in results["flip_cause_counts"].items():
+            lines.append(f"| {key} | " + " | ".join(str(counts[c]) for c in FLIP_CAUSES) + " |")
+        beyond = [r for r in results["flip_causes"] if r["noise"] == best and r["cause"] != FLIP_CAUSES[0]]
+        lines += ["", f"Flips beyond the live spread ({best} emulation):", ""]
+        if beyond:
+            lines += ["| variant | metric | pair | cause | live | emulated | live spread | exposure log2 err median |",
+                      "| --- | --- | --- | --- | --- | --- | ---: | --- |"]
+            for r in beyond[:60]:
+                a, b = r["pair"]
+                lines.append(
+                    f"| {r['variant']} | {r['metric']} | {a} vs {b} | {r['cause']} | {_f(r['live'][a])} vs "
+                    f"{_f(r['live'][b])} | {_f(r['emulated'][a])} vs {_f(r['emulated'][b])} | {_f(r['live_spread'])} | "
+                    f"{_f(r['exposure_log2_error_median'][a])}, {_f(r['exposure_log2_error_median'][b])} |")
+            if len(beyond) > 60:
+                lines.append(f"| ... {len(beyond) - 60} more in results.json | | | | | | | |")
+        else:
+            lines.append("none.")
         lines.append("")
     nd = results["noise_variance_ratio_detail"]
     lines += ["## Noise variance ratio (measured)", "",
@@ -1141,6 +1256,9 @@ def build_parser(prog: str = "python -m validation.live") -> argparse.ArgumentPa
     p.add_argument("--keep-radiance", action="store_true", help="keep the datasets' radiance EXRs")
     p.add_argument("--cache-dir", help="render cache (default $EXPOSIM_CACHE or ~/.cache/exposim/renders)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.add_argument("--redraw", action="store_true",
+                   help="only recompute the verdicts and rewrite results.json, report.md and the figures of the "
+                        "existing folder OUT from its raw.json")
     return p
 
 
@@ -1171,7 +1289,13 @@ def main(argv=None) -> int:
     def log(msg: str) -> None:
         print(msg, file=sys.stderr)
 
+    if args.redraw:
+        out = args.output
     try:
+        if args.redraw:
+            results = redraw(out)
+            print(_headline(results))
+            return 0
         cfg = replace(cfg, **changes)
         if out != args.output:
             log(f"live: {args.output} exists and is not empty; writing to {out}")
@@ -1180,15 +1304,19 @@ def main(argv=None) -> int:
     except ExposimError as exc:
         print(f"live: {exc}", file=sys.stderr)
         return 1
+    print(_headline(results))
+    print(f"wrote {out / 'results.json'}, {out / 'report.md'} in {results['timings']['total_s'] / 60:.1f} min")
+    return 0
+
+
+def _headline(results: dict) -> str:
     g = results["goals"]
-    print(f"rank_kendall_tau_min {_f(results['rank_kendall_tau_min'], '.3f')} ({results['headline_noise']}; goal "
+    return (f"rank_kendall_tau_min {_f(results['rank_kendall_tau_min'], '.3f')} ({results['headline_noise']}; goal "
           f">= {GOAL_TAU_MIN}: {_f(g['rank_kendall_tau_min_ge_0.9'])}), exposure_log2_error_median "
           f"{_f(results['exposure_log2_error_median'], '.4f')} (goal <= {GOAL_EXPOSURE_LOG2_MEDIAN}: "
           f"{_f(g['exposure_log2_error_median_le_0.05_same_instant'])}), noise_variance_ratio plain "
           f"{_f(results['noise_variance_ratio']['plain'], '.3f')} consistent "
           f"{_f(results['noise_variance_ratio']['consistent'], '.3f')}")
-    print(f"wrote {out / 'results.json'}, {out / 'report.md'} in {results['timings']['total_s'] / 60:.1f} min")
-    return 0
 
 
 if __name__ == "__main__":
