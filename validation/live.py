@@ -499,7 +499,8 @@ def kendall_tau(live: Mapping[str, float], emulated: Mapping[str, float]) -> dic
     Methods missing on either side are left out.  When every method ties on both sides
     the rankings agree (tau 1); when one side ties every method and the other does not,
     tau-b is undefined (None) and ``note`` says so.  ``discordant`` lists the method pairs
-    ordered oppositely.
+    ordered oppositely; ``tied_on_one_side_only`` counts the pairs tied on one side only (they
+    lower tau-b without being discordant).
     """
     from scipy.stats import kendalltau
 
@@ -508,7 +509,10 @@ def kendall_tau(live: Mapping[str, float], emulated: Mapping[str, float]) -> dic
     y = np.array([float(emulated[m]) for m in names])
     disc = [(a, b) for i, a in enumerate(names) for b in names[i + 1:]
             if (x[names.index(a)] - x[names.index(b)]) * (y[names.index(a)] - y[names.index(b)]) < 0]
-    res = {"n": len(names), "discordant": [list(p) for p in disc], "tau": None, "note": None}
+    ties = sum(1 for i in range(len(names)) for j in range(i + 1, len(names))
+               if (x[i] == x[j]) != (y[i] == y[j]))
+    res = {"n": len(names), "discordant": [list(p) for p in disc], "tied_on_one_side_only": ties, "tau": None,
+           "note": None}
     if len(names) < 2:
         res["note"] = "fewer than two methods with a value"
     elif np.ptp(x) == 0 and np.ptp(y) == 0:
@@ -1142,6 +1146,18 @@ def report_markdown(results: dict) -> str:
         f"Same-instant exposure trajectories differ by a median |log2| of {_f(results['exposure_log2_error_median'])} "
         f"(max {_f(results['exposure_log2_error_max'])}); goal <= {GOAL_EXPOSURE_LOG2_MEDIAN}: "
         f"{'met' if goals['exposure_log2_error_median_le_0.05_same_instant'] else 'NOT met'}.")
+    detail = results["rank_kendall_tau_detail"]
+    if "live/control" in detail:
+        ctl = {m: detail["live/control"][m]["tau"] for m in METRICS}
+        for v in VARIANTS:
+            emu = {m: detail[f"{best}/{v}"][m]["tau"] for m in METRICS}
+            ok = [m for m in METRICS if emu[m] is not None and ctl[m] is not None and emu[m] >= ctl[m] - 1e-12]
+            below = [f"{m} ({_f(emu[m], '.3f')} vs {_f(ctl[m], '.3f')})" for m in METRICS
+                     if emu[m] is not None and ctl[m] is not None and emu[m] < ctl[m] - 1e-12]
+            verdict.append(
+                f"{v.capitalize()}: emulated vs live agrees at least as well as two live runs that differ only in "
+                f"capture noise (tau of the control) on {len(ok)} of {len(METRICS)} metrics"
+                + (f"; below the control on {', '.join(below)}." if below else "."))
     ctrl = results.get("exposure_live_control")
     if ctrl:
         verdict.append(f"Two live runs that differ only in their capture-noise seeds differ by a median |log2| of "
@@ -1164,6 +1180,8 @@ def report_markdown(results: dict) -> str:
                     if "discordant_beyond_live_spread" in r and key != "live/control":
                         extra += f", {r['discordant_beyond_live_spread']} beyond spread"
                     extra += ")"
+                if r.get("tied_on_one_side_only"):
+                    extra += f" [{r['tied_on_one_side_only']} tied one side]"
                 cells.append(_f(r["tau"], ".2f") + extra)
             lines.append(f"| {metric} | " + " | ".join(cells) + " |")
         lines += ["", "`live/control`: two live same-instant runs with different capture-noise seeds.", ""]
