@@ -101,6 +101,8 @@ VARIANTS = ("same-instant", "fixed-instant")
 CONTROL = "same-instant-reseeded"
 #: Emulation noise options: name in results -> ``emulate(noise=...)``.
 NOISE_OPTIONS = {"plain": "none", "consistent": "consistent"}
+#: (source, target) ms pairs of the brightening noise variance ratio (the source is the noisier one).
+BRIGHTENING_PAIRS = ((1.0, 1.5), (2.0, 3.0), (4.0, 6.0), (8.0, 12.0))
 #: Bracket (index in the sweep) whose timestamp is the fixed instant of a cycle: the first shot.
 FIXED_INSTANT_BRACKET_INDEX = 0
 #: Ranked metrics: name -> (key path in ``ae_study.summarise(...)["overall"][method]``, higher is better).
@@ -528,8 +530,9 @@ def noise_variance_ratio(radiance: np.ndarray, camera, response, noise_model, *,
                          pairs=((32.0, 22.0), (16.0, 11.0), (8.0, 5.5), (4.0, 2.75)), n_bins: int = 16) -> dict:
     """Emulated noise variance over live capture noise variance, per intensity bin (measured).
 
-    For every (source, target) pair with target < source (the source is the cleaner one,
-    where consistent emulation can match the noise): ``repeats`` noisy captures at the
+    For every (source, target) pair (default: target < source, darkening, where the source is
+    the cleaner one and consistent emulation can match the noise; brightening pairs measure
+    the excess noise it cannot remove, :data:`BRIGHTENING_PAIRS`): ``repeats`` noisy captures at the
     source, each emulated to the target plainly and noise-consistently, against
     ``repeats`` live captures at the target.  Per pixel the temporal variance over the
     repeats (ddof 1); pixels are binned by their noiseless target DN (log-spaced bins
@@ -545,8 +548,8 @@ def noise_variance_ratio(radiance: np.ndarray, camera, response, noise_model, *,
     white, black = camera.white_level, camera.black_level
     rows = []
     for p, (src_ms, tgt_ms) in enumerate(pairs):
-        if not tgt_ms < src_ms:
-            raise LiveError(f"noise_variance_ratio: target {tgt_ms} must be below source {src_ms}")
+        if not (tgt_ms > 0 and src_ms > 0 and tgt_ms != src_ms):
+            raise LiveError(f"noise_variance_ratio: need positive, different exposures, got {src_ms}, {tgt_ms}")
         ss = lambda *k: np.random.SeedSequence([int(seed), _RATIO_TAG, p, *k])  # noqa: E731
         src = [synth.capture(radiance, src_ms, camera, seed=ss(0, r)) for r in range(repeats)]
         live = np.stack([synth.capture(radiance, tgt_ms, camera, seed=ss(1, r)) for r in range(repeats)])
@@ -735,6 +738,9 @@ def run_live_experiment(out, config: LiveConfig = CONFIGS["full"], *, progress: 
 
     t0 = time.perf_counter()
     nvr = noise_variance_ratio(*ratio_input, repeats=cfg.noise_repeats, seed=cfg.seed)
+    nvr["input"] = f"first left radiance of {cfg.scenes[0]}"
+    nvr_up = noise_variance_ratio(*ratio_input, repeats=cfg.noise_repeats, seed=cfg.seed, pairs=BRIGHTENING_PAIRS)
+    nvr_up["input"] = nvr["input"]
     timings["noise_ratio_s"] = time.perf_counter() - t0
 
     summaries, findings = {}, {}
@@ -764,13 +770,52 @@ def run_live_experiment(out, config: LiveConfig = CONFIGS["full"], *, progress: 
 
     raw = {"config": cfg.to_dict(), "command": command, "exposim_version": __version__,
            "render_variant": scenes.choose_variant(), "timings": timings, "per_scene": _jsonable(per_scene),
-           "summaries": summaries, "findings": findings, "noise_variance_ratio": nvr}
+           "summaries": summaries, "findings": findings, "noise_variance_ratio": nvr,
+           "noise_variance_ratio_brightening": nvr_up}
     (out / RAW_FILE).write_text(json.dumps(raw, allow_nan=False) + "\n")
     return finish(out, raw)
 
 
 #: What :func:`redraw` recomputes the verdicts from (per-cycle comparisons, benchmark summaries).
 RAW_FILE = "raw.json"
+
+
+def _brightening_on_chart(dataset: Path, cfg: LiveConfig) -> dict:
+    """The brightening noise variance ratio on an HDR chart through the recording's camera."""
+    from emulator.dataset import load_sequence, sequence_response
+    from emulator.noise import NoiseModel
+    from synth.noise_model import noise_model_of
+    from synth.procedural import hdr_chart
+    from synth.sequence import load_camera
+
+    camera = load_camera(dataset)
+    response = sequence_response(load_sequence(dataset))
+    m = noise_model_of(camera)
+    model = NoiseModel(response, m.gain_e_per_h, m.read_noise_e, m.name)
+    chart = hdr_chart(camera.width, camera.height, seed=cfg.seed, dynamic_range_db=60.0,
+                      max_radiance=float(camera.full_well_e / camera.radiance_scale / 2.0))
+    res = noise_variance_ratio(chart, camera, response, model, repeats=cfg.noise_repeats, seed=cfg.seed,
+                               pairs=BRIGHTENING_PAIRS)
+    res["input"] = "hdr_chart (60 dB) through the recording's camera"
+    return res
+
+
+def ratio_use(per_scene: dict, names) -> dict:
+    """Per emulated run and method: the fraction of cycles whose emulation darkened (k < 1),
+    copied (k = 1) or brightened (k > 1) the bracket (HigherNoSat brightens when the higher
+    bracket saturates)."""
+    out = {}
+    for opt in NOISE_OPTIONS:
+        run = f"emulated-{opt}"
+        out[opt] = {}
+        for m in names:
+            k = np.concatenate([np.asarray(per_scene[s]["trajectories"][run][m]["target_ms"], dtype=np.float64)
+                                / np.asarray(per_scene[s]["trajectories"][run][m]["bracket_ms"], dtype=np.float64)
+                                for s in per_scene])
+            n = max(k.size, 1)
+            out[opt][m] = {"darkening": float(np.sum(k < 1) / n), "identity": float(np.sum(k == 1) / n),
+                           "brightening": float(np.sum(k > 1) / n)}
+    return out
 
 
 def _jsonable(obj):
@@ -807,8 +852,14 @@ def finish(out, raw: dict) -> dict:
             for m, d in comp.items():
                 for k in list(d):
                     d[k] = np.asarray(d[k], dtype=np.float64)
+    nvr_up = raw.get("noise_variance_ratio_brightening")
+    if nvr_up is None:  # a record from before this measurement: measure it on a chart with the run's camera
+        nvr_up = _brightening_on_chart(out / "datasets" / cfg.scenes[0], cfg)
     results = assemble(cfg, per_scene, raw["summaries"], raw["findings"], raw["noise_variance_ratio"],
                        list(cfg.methods))
+    results["noise_variance_ratio_brightening"] = {"plain": nvr_up["plain"], "consistent": nvr_up["consistent"]}
+    results["noise_variance_ratio_brightening_detail"] = nvr_up
+    results["emulation_ratio_use"] = ratio_use(per_scene, list(cfg.methods))
     results.update({
         "experiment": "live versus emulated (issue 14)",
         "exposim_version": raw.get("exposim_version"),
@@ -1165,6 +1216,15 @@ def report_markdown(results: dict) -> str:
     nvr = results["noise_variance_ratio"]
     verdict.append(f"Noise variance emulated / live (darkening pairs, median over intensity bins): plain "
                    f"{_f(nvr['plain'])}, consistent {_f(nvr['consistent'])}.")
+    use, up = results.get("emulation_ratio_use"), results.get("noise_variance_ratio_brightening")
+    if use and up:
+        dark = float(np.mean([d["darkening"] for d in use[best].values()]))
+        bright = float(np.mean([d["brightening"] for d in use[best].values()]))
+        verdict.append(
+            f"But the loops darken a bracket (the only case consistent emulation can correct) in "
+            f"{_f(100 * dark, '.0f')} % of the cycles (mean over methods) and brighten one in {_f(100 * bright, '.0f')} %, "
+            f"because HigherNoSat's higher bracket is saturated above 1 %; brightened images carry "
+            f"{_f(up['plain'], '.2f')} times the live noise variance, with either option.")
     lines += [" ".join(verdict), ""]
     if results["rank_kendall_tau_detail"]:
         lines += ["## Ranking agreement (Kendall tau-b, live vs emulated)", "",
@@ -1245,6 +1305,20 @@ def report_markdown(results: dict) -> str:
               f"{nd['pairs_ms']}; per intensity bin emulated / live variance. Plain {_f(nd['plain'])} (theory "
               f"{_f(nd['theory_plain'])}), consistent {_f(nd['consistent'])} (largest deviation from 1 in a bin: "
               f"{_f(nd['consistent_max_abs_deviation'])}).", ""]
+    up = results.get("noise_variance_ratio_brightening_detail")
+    if up:
+        lines += [f"Brightening pairs {up['pairs_ms']} (the source is the noisier one; {up['input']}): plain "
+                  f"{_f(up['plain'])}, consistent {_f(up['consistent'])} (theory {_f(up['theory_plain'])}): the "
+                  "excess noise that no emulation can remove.", ""]
+    use = results.get("emulation_ratio_use")
+    if use:
+        lines += ["How often the emulated loop darkened (k < 1, where consistent emulation adds noise), copied "
+                  "(k = 1) or brightened (k > 1, excess noise) its bracket:", "",
+                  "| method | darkening | identity | brightening |", "| --- | ---: | ---: | ---: |"]
+        for m, d in use[best].items():
+            lines.append(f"| {m} | {_f(d['darkening'], '.2f')} | {_f(d['identity'], '.2f')} | "
+                         f"{_f(d['brightening'], '.2f')} |")
+        lines.append("")
     t = results.get("timings", {})
     lines += [f"Total time {_f(t.get('total_s', 0) / 60, '.1f')} min."]
     return "\n".join(lines) + "\n"
