@@ -616,13 +616,6 @@ def _runs_summary(cycles, names) -> dict:
     return {"methods": out}
 
 
-def _strip_images(cycles) -> list:
-    for cs in cycles:
-        for st in cs.steps.values():
-            st.left = st.right = None
-    return cycles
-
-
 def _value(overall: dict, method: str, path: tuple):
     v = overall.get(method)
     for k in path:
