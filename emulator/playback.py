@@ -229,11 +229,12 @@ def build_methods(spec, *, mode: str = "paper", response=None, options: Mapping 
 class _CycleImages:
     """Decoded brackets of one cycle, each decoded at most once (thread-safe), with histograms."""
 
-    def __init__(self, cycle, white_level: int, black_level: int, stats: RunStats) -> None:
+    def __init__(self, cycle, white_level: int, black_level: int, stats: RunStats, noise=None) -> None:
         self.cycle = cycle
         self.white = white_level
         self.black = black_level
         self.stats = stats
+        self.noise = noise  # None, or (NoiseModel, seed) for noise-consistent emulation
         self._lock = threading.Lock()
         self._locks: dict = {}
         self._data: dict = {}
@@ -274,10 +275,23 @@ class _CycleImages:
             else:
                 t0 = time.perf_counter()
                 out = apply_lut(table, raw)
+                if self.noise is not None:
+                    out = self._add_noise(camera, exposure_ms, ratio, raw, out)
                 stats.add("emulate_s", time.perf_counter() - t0)
                 out.setflags(write=False)
             self._data[key] = out
             return out
+
+    def _add_noise(self, camera: str, exposure_ms: float, ratio: float, raw: np.ndarray, plain: np.ndarray):
+        """Noise-consistent emulation (``emulator.emulate``, ``noise="consistent"``), seeded by
+        (seed, cycle, camera, bracket, ratio): independent of threads and of which method asks."""
+        from emulator.noise import consistent_noise
+
+        model, seed = self.noise
+        words = np.array([exposure_ms, ratio], dtype=np.float64).view(np.uint32).tolist()
+        rng = np.random.default_rng(np.random.SeedSequence([int(seed), int(self.cycle.index),
+                                                            CAMERAS.index(camera), *words]))
+        return consistent_noise(raw, plain, ratio, model, rng)
 
     def saturated(self, camera: str, exposure_ms: float) -> float:
         _, hist = self.get(camera, exposure_ms)
@@ -327,6 +341,9 @@ def iter_run(
     keep_images: bool = False,
     on_step: Callable[[MethodStep], None] | None = None,
     stats: RunStats | None = None,
+    noise: str = "none",
+    noise_model=None,
+    noise_seed: int = 0,
 ) -> Iterator[CycleStep]:
     """Run the closed loop cycle by cycle, yielding a :class:`CycleStep` per cycle.
 
@@ -353,6 +370,11 @@ def iter_run(
         (used to write them in parallel).
     stats : RunStats or None
         Filled with counters and timings.
+    noise, noise_model, noise_seed : str, NoiseModel, int
+        ``noise="consistent"`` emulates with the noise a capture at the target would have
+        (:func:`emulator.emulate.emulate`; needs ``noise_model``), each emulated image seeded
+        by (``noise_seed``, cycle, camera, bracket, ratio).  The saturated and valid
+        fractions still describe the plain emulation.  Default ``"none"``: exact eq. 2.
     """
     seq = _resolve_sequence(sequence)
     initial_ms = check_exposure(initial_ms, "initial_ms")
@@ -368,6 +390,7 @@ def iter_run(
         response = response.with_levels(white_level=white, black_level=black)
     built = build_methods(methods, mode=mode, response=response, options=options)
     stats = stats if stats is not None else RunStats()
+    noise_spec = _noise_spec(noise, noise_model, noise_seed, response)
     cams = tuple(c for c in CAMERAS if c in seq.cameras)
     method_cam = METHOD_CAMERA if METHOD_CAMERA in cams else cams[0]
     other_cam = next((c for c in cams if c != method_cam), None)
@@ -448,7 +471,7 @@ def iter_run(
                 stats.cycles += 1
                 yield CycleStep(cycle.index, {}, missing, skipped="no bracket present for every camera")
                 continue
-            images = _CycleImages(cycle, white, black, stats)
+            images = _CycleImages(cycle, white, black, stats, noise_spec)
             brackets = {e: (lambda e=e: images.saturated(method_cam, e)) for e in avail}
             args = [(name, m, images, brackets, missing, cycle) for name, m in built.items()]
             if pool is None:
@@ -464,6 +487,19 @@ def iter_run(
         stats.wall_s = time.perf_counter() - start
         if pool is not None:
             pool.shutdown(wait=True)
+
+
+def _noise_spec(noise: str, noise_model, noise_seed, response):
+    """None for ``noise="none"``, else (model, seed), checked as :func:`emulator.emulate.emulate` does."""
+    from emulator.emulate import NOISE_MODES, _check_noise_model
+
+    if noise not in NOISE_MODES:
+        raise PlaybackError(f"noise must be one of {', '.join(NOISE_MODES)}, got {noise!r}")
+    if noise == "none":
+        return None
+    if isinstance(noise_seed, bool) or not isinstance(noise_seed, (int, np.integer)) or noise_seed < 0:
+        raise PlaybackError(f"noise_seed must be a non-negative integer, got {noise_seed!r}")
+    return _check_noise_model(noise_model, response, noise, False), int(noise_seed)
 
 
 def run(
