@@ -10,7 +10,7 @@ import pytest
 
 import synth
 from emulator.autoexposure import make_method
-from emulator.dataset import load_sequence, sequence_response
+from emulator.io.borealhdr import load_sequence, sequence_response
 from emulator.errors import EmulationError
 from emulator.noise import NoiseModel
 from emulator.playback import iter_run

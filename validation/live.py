@@ -247,7 +247,7 @@ class DatasetRadiance:
     """
 
     def __init__(self, dataset, keep: int = 24) -> None:
-        from emulator.dataset import CAMERA_FOLDERS
+        from emulator.io.borealhdr import CAMERA_FOLDERS
 
         self.root = Path(dataset) / "ground_truth" / "radiance"
         if not self.root.is_dir():
@@ -257,7 +257,7 @@ class DatasetRadiance:
         self._memo: dict = {}
 
     def __call__(self, timestamp_ns: int, camera: str) -> np.ndarray:
-        from synth.sequence import read_exr
+        from emulator.io.exr import read_exr
 
         key = (int(timestamp_ns), camera)
         hit = self._memo.get(key)
@@ -326,7 +326,8 @@ def iter_live(
         ``ratio`` 1, ``valid_fraction`` 1.
     """
     import synth
-    from emulator.dataset import CAMERAS, load_sequence, sequence_response
+    from emulator.dataset import CAMERAS
+    from emulator.io.borealhdr import load_sequence, sequence_response
     from emulator.playback import DEFAULT_RANGE_MS, CycleStep, MethodStep, build_methods
     from emulator.select import saturated_fraction, select
 
@@ -424,9 +425,9 @@ def write_run_folder(folder, sequence_path, cycles, names, *, white_level: int, 
     ``run.json``, ``<method>/exposures.csv``, ``<method>/images/{left,right}/<ts>.png``,
     ``<method>/images/times.txt``.  Refuses an existing non-empty folder.
     """
-    from emulator.dataset import write_png16
+    from emulator.io.png import write_png16
     from emulator.errors import OutputExistsError
-    from emulator.playback import CSV_COLUMNS, EXTRA_COLUMNS
+    from emulator.io.runfolder import CSV_COLUMNS, EXTRA_COLUMNS, format_row
 
     folder = Path(folder)
     if folder.exists() and any(folder.iterdir()):
@@ -439,7 +440,7 @@ def write_run_folder(folder, sequence_path, cycles, names, *, white_level: int, 
             st = cs.steps.get(name)
             if st is None:
                 continue
-            rows.append(st.row())
+            rows.append(format_row(st))
             times.append((st.timestamp_ns, st.target_ms))
             for cam, img in (("left", st.left), ("right", st.right)):
                 if img is not None:
@@ -637,7 +638,7 @@ def run_live_experiment(out, config: LiveConfig = CONFIGS["full"], *, progress: 
     Returns the content of ``results.json``.
     """
     import scenes
-    from emulator.dataset import load_sequence, sequence_response
+    from emulator.io.borealhdr import load_sequence, sequence_response
     from emulator.errors import OutputExistsError
     from emulator.noise import NoiseModel
     from scenes.synthesize import synthesize
@@ -775,7 +776,7 @@ RAW_FILE = "raw.json"
 
 def _brightening_on_chart(dataset: Path, cfg: LiveConfig) -> dict:
     """The brightening noise variance ratio on an HDR chart through the recording's camera."""
-    from emulator.dataset import load_sequence, sequence_response
+    from emulator.io.borealhdr import load_sequence, sequence_response
     from emulator.noise import NoiseModel
     from synth.noise_model import noise_model_of
     from synth.procedural import hdr_chart
@@ -835,7 +836,7 @@ def _config_from_dict(d: dict) -> LiveConfig:
 
 def finish(out, raw: dict) -> dict:
     """Verdicts, figures, ``report.md`` and ``results.json`` from the raw record (see :func:`redraw`)."""
-    from validation.common import write_json
+    from emulator.io.files import write_results
 
     out = Path(out)
     cfg = _config_from_dict(raw["config"])
@@ -869,7 +870,7 @@ def finish(out, raw: dict) -> dict:
     if cfg.metrics:
         plot_metrics(results, out / "metrics.png")
     (out / "report.md").write_text(report_markdown(results))
-    write_json(out / "results.json", results)
+    write_results(out / "results.json", results)
     return results
 
 
