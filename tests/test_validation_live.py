@@ -26,7 +26,7 @@ from validation.live import (
     iter_live,
     kendall_tau,
     main,
-    noise_variance_ratio,
+    measure_noise_variance_ratio,
     numbered_output,
     run_live_experiment,
 )
@@ -128,7 +128,7 @@ def test_noise_variance_ratio_flat_field():
     cam = synth.Camera.preset("borealhdr", width=64, height=64, vignetting_strength=0.0)
     flat = np.full((64, 64, 3), synth.camera.REFERENCE_RADIANCE / 16.0, dtype=np.float32)
     model = noise_model_of(cam)
-    res = noise_variance_ratio(flat, cam, cam.response, model, repeats=16, seed=1, pairs=((8.0, 5.5), (16.0, 11.0)))
+    res = measure_noise_variance_ratio(flat, cam, cam.response, model, repeats=16, seed=1, pairs=((8.0, 5.5), (16.0, 11.0)))
     assert len(res["bins"]) >= 2
     # plain emulation from a longer bracket is measurably too clean; theory says by how much
     assert res["plain"] < 0.85
@@ -183,15 +183,26 @@ def test_numbered_output_and_cli_errors(tmp_path, capsys):
     assert CONFIGS["quick"].n_cycles == 3
 
 
+#: The tiny configuration of the end-to-end tests (one scene, 3 cycles, 64x40 px, two methods).
+TINY = LiveConfig(scenes=("forest_winter",), n_cycles=3, width=64, height=40, spp=2, methods=("fixed", "classical-50"),
+                  noise_repeats=4)
+REQUIRED_KEYS = ("exposure_log2_error_median", "exposure_log2_error_max", "image_rmse_percent_median",
+                 "rank_kendall_tau", "rank_kendall_tau_min", "noise_variance_ratio")
+
+
+@pytest.fixture(scope="module")
+def render_cache(tmp_path_factory):
+    """One render cache for the end-to-end tests: the second renders nothing."""
+    return tmp_path_factory.mktemp("live_cache")
+
+
 @pytest.mark.render
 @pytest.mark.slow
-def test_tiny_experiment_end_to_end(tmp_path):
-    cfg = LiveConfig(scenes=("forest_winter",), n_cycles=3, width=64, height=40, spp=2,
-                     methods=("fixed", "classical-50"), noise_repeats=4)
-    res = run_live_experiment(tmp_path / "out", cfg, progress=False, cache_dir=tmp_path / "cache")
+def test_tiny_experiment_end_to_end(tmp_path, render_cache):
+    cfg = TINY
+    res = run_live_experiment(tmp_path / "out", cfg, progress=False, cache_dir=render_cache)
     on_disk = json.loads((tmp_path / "out" / "results.json").read_text())
-    for key in ("exposure_log2_error_median", "exposure_log2_error_max", "image_rmse_percent_median",
-                "rank_kendall_tau", "rank_kendall_tau_min", "noise_variance_ratio"):
+    for key in REQUIRED_KEYS:
         assert key in on_disk
     assert set(on_disk["noise_variance_ratio"]) == {"plain", "consistent"}
     assert set(on_disk["rank_kendall_tau"]) >= {"median_matches", "median_uniformity", "vo_failed_frames"}
@@ -203,4 +214,52 @@ def test_tiny_experiment_end_to_end(tmp_path):
     assert not (tmp_path / "out" / "datasets" / "forest_winter" / "ground_truth" / "radiance").exists()
     assert res["headline_noise"] in ("plain", "consistent")
     with pytest.raises(Exception, match="refusing to overwrite"):
-        run_live_experiment(tmp_path / "out", cfg, progress=False, cache_dir=tmp_path / "cache")
+        run_live_experiment(tmp_path / "out", cfg, progress=False, cache_dir=render_cache)
+
+
+@pytest.mark.render
+@pytest.mark.slow
+def test_exposim_validate_live_cli(tmp_path, render_cache, capsys):
+    from emulator.cli import main as exposim
+
+    with pytest.raises(SystemExit) as exc:
+        exposim(["validate", "live", "--help"])
+    assert exc.value.code == 0
+    text = " ".join(capsys.readouterr().out.split())
+    for opt in ("--output", "--quick", "--scenes", "--cycles", "--size", "--spp", "--seed", "--methods",
+                "--noise-repeats", "--no-control", "--keep-radiance", "--cache-dir", "--no-progress", "--redraw"):
+        assert opt in text, opt
+    # the defaults are shown, and they are the configuration's
+    full, quick = CONFIGS["full"], CONFIGS["quick"]
+    assert f"(default {full.n_cycles}; --quick {quick.n_cycles})" in text
+    assert f"(default {full.width}x{full.height})" in text and f"(default {full.spp})" in text
+
+    out = tmp_path / "live"
+    assert exposim(["validate", "live", "-o", str(out), "--cycles", "2", "--no-progress"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "cycles must be >= 3" in err[0] and not out.exists()
+
+    # --quick with the tiny configuration of the end-to-end test
+    args = ["validate", "live", "-o", str(out), "--quick", "--scenes", ",".join(TINY.scenes),
+            "--size", f"{TINY.width}x{TINY.height}", "--spp", str(TINY.spp), "--methods", ",".join(TINY.methods),
+            "--noise-repeats", str(TINY.noise_repeats), "--cache-dir", str(render_cache), "--no-progress"]
+    assert exposim(args) == 0
+    assert "rank_kendall_tau_min" in capsys.readouterr().out
+    res = json.loads((out / "results.json").read_text())
+    assert all(key in res for key in REQUIRED_KEYS)
+    assert set(res["noise_variance_ratio"]) == {"plain", "consistent"}
+    assert all(np.isfinite(v) and v > 0 for v in res["noise_variance_ratio"].values())
+    assert res["config"] == {**TINY.to_dict(), "n_cycles": CONFIGS["quick"].n_cycles}
+    assert res["command"].startswith(f"exposim validate live -o {out} --quick --scenes forest_winter")
+    # the run folders are the ones `exposim run` writes: one writer, its lock released
+    run = out / "runs" / "forest_winter" / "live-fixed-instant"
+    meta = json.loads((run / "run.json").read_text())
+    assert meta["status"] == "complete" and meta["save"] == "png16" and not (run / "run.lock").exists()
+    csv_rows = (run / "classical-50" / "exposures.csv").read_text().splitlines()
+    times = (run / "classical-50" / "images" / "times.txt").read_text().splitlines()
+    assert len(csv_rows) == TINY.n_cycles + 1 and len(times) == TINY.n_cycles
+    # --redraw: the verdicts again from raw.json alone, the same numbers
+    (out / "results.json").unlink()
+    assert exposim(["validate", "live", "-o", str(out), "--redraw"]) == 0
+    again = json.loads((out / "results.json").read_text())
+    assert all(again[key] == res[key] for key in REQUIRED_KEYS)

@@ -3,6 +3,7 @@
 
 Default sizes are the full study; ``--quick`` is the reduced configuration of the tests.
 A folder that already holds a results.json is refused unless ``--force``.
+``exposim validate live`` (live versus emulated closed loop) is :mod:`validation.live.cli`.
 """
 
 from __future__ import annotations
@@ -63,6 +64,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         if name == "motion":
             q.add_argument("--speeds", type=_floats, dest="speeds_mps", help="walking speeds, m/s")
         q.set_defaults(func=_run, experiment=name)
+    from validation.live.cli import register as register_live  # issue 14: its own options and runner
+
+    register_live(vsub)
 
 
 register.order = 80  # place in `exposim --help`

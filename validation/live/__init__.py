@@ -1,0 +1,101 @@
+"""Live versus emulated closed loop (issue 14): does the offline benchmark judge AE methods as a live camera would?
+
+Run::
+
+    exposim validate live -o OUT [--quick] [--scenes a,b] [--cycles N] [--size WxH] [--seed S]
+    python -m validation.live -o OUT ...          (the same)
+
+For every scene (default ``forest_winter``, ``sun_glare``, ``forest_edge``, ``forest_summer``):
+
+1. **Recording**: a stereo bracketed walk (:func:`scenes.synthesize.synthesize`, 1..32 ms
+   sweeps at 22 frames/s, the BorealHDR-fitted camera with noise), with every shot's
+   radiance kept as OpenEXR (``save_radiance``): the radiance the camera saw at that instant.
+2. **Emulated loops**: the normal closed loop (:func:`emulator.playback.iter_run`) of the
+   seven AE methods on the recording, with emulation noise ``"none"`` (exact eq. 2, *plain*)
+   and ``"consistent"`` (the noise of a capture at the target, from synth's camera through
+   :func:`synth.noise_model.noise_model_of`).
+3. **Live loops** (:func:`~validation.live.loops.iter_live`): every cycle the camera
+   captures at the method's own exposure from the radiance at that instant
+   (:func:`synth.capture`, with noise, seeded), and the method reads that capture.  Two timing variants:
+
+   * ``same-instant``: the capture happens at the timestamp of the bracket the emulator
+     would use for the live loop's target (the selector run on the recorded brackets), so
+     the pose is the one the emulated image comes from: isolates the photometric error;
+   * ``fixed-instant``: the capture happens at one fixed instant per cycle, the cycle's
+     **first shot** (the 1 ms bracket's timestamp, so no extra render), whatever bracket
+     the emulator would use: adds the motion between brackets that real data has (up to
+     5 shots, 227 ms).
+
+   A control, ``same-instant-reseeded``, repeats the same-instant live loop with other
+   capture-noise seeds: how far two live runs of the same walk disagree.
+4. **Comparison** per method, noise option and timing variant: exposure trajectories
+   (|log2(emulated_ms / live_ms)| per cycle, cycle 0 excluded since both start at
+   ``initial_ms``), left images (RMSE in % of the DN range over the emulation's valid
+   pixels, and the valid fraction), then the benchmark metrics of each run
+   (:func:`emulator.metrics.bench.bench_features`, :func:`~emulator.metrics.bench.bench_vo`,
+   summarised as :func:`validation.ae_study.summarise` does) and the ranking of the methods
+   per metric, live vs emulated (Kendall tau-b, :func:`scipy.stats.kendalltau`); the
+   paper's findings (:func:`validation.ae_study.evaluate_findings`) evaluated on either side.
+5. **Noise variance ratio**: emulated over live capture noise variance, measured from
+   repeated captures of one rendered frame, per intensity bin, for plain and consistent
+   emulation (:func:`~validation.live.compare.measure_noise_variance_ratio`, binned by
+   :func:`emulator.noise.noise_variance_ratio`).
+
+Writes ``OUT/results.json``, ``OUT/report.md``, ``OUT/exposure_<scene>.png`` (trajectories),
+``OUT/metrics.png`` (metric bars), and the runs, datasets and benchmark folders beside
+them.  An existing ``OUT`` that is not empty is never overwritten: the next free
+``OUT-2``, ``OUT-3`` ... is used and named in the output.
+
+Modules: :mod:`~validation.live.config` (the configuration), :mod:`~validation.live.loops`
+(live and emulated loops, run folders), :mod:`~validation.live.compare` (per-cycle
+comparisons, Kendall tau, noise variance ratio), :mod:`~validation.live.verdicts` (the
+numbers of results.json, flip causes), :mod:`~validation.live.report` (figures, report.md),
+:mod:`~validation.live.experiment` (the run, :func:`redraw`), :mod:`~validation.live.cli`.
+"""
+
+from validation.live.compare import exposure_log2_errors, image_errors, kendall_tau, measure_noise_variance_ratio
+from validation.live.config import (
+    CONFIGS,
+    CONTROL,
+    METHODS,
+    METRICS,
+    NOISE_OPTIONS,
+    SCENES,
+    VARIANTS,
+    LiveConfig,
+    LiveError,
+)
+from validation.live.experiment import finish, numbered_output, redraw, run_live_experiment
+from validation.live.loops import DatasetRadiance, iter_emulated, iter_live, write_run_folder
+
+__all__ = [
+    "LiveConfig",
+    "CONFIGS",
+    "SCENES",
+    "METHODS",
+    "VARIANTS",
+    "CONTROL",
+    "NOISE_OPTIONS",
+    "METRICS",
+    "LiveError",
+    "DatasetRadiance",
+    "iter_live",
+    "iter_emulated",
+    "write_run_folder",
+    "exposure_log2_errors",
+    "image_errors",
+    "kendall_tau",
+    "measure_noise_variance_ratio",
+    "run_live_experiment",
+    "finish",
+    "redraw",
+    "numbered_output",
+    "main",
+]
+
+
+def main(argv=None) -> int:
+    """``python -m validation.live`` (:func:`validation.live.cli.main`)."""
+    from validation.live.cli import main as _main
+
+    return _main(argv)

@@ -1,0 +1,152 @@
+"""The command line of the experiment: ``exposim validate live`` and ``python -m validation.live``.
+
+Both parse the same options (:func:`add_arguments`); a non-empty output folder is never
+overwritten (the next free ``OUT-2``, ``OUT-3`` ... is used and named), ``--redraw``
+rewrites the verdicts of a finished folder from its ``raw.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+from emulator.errors import ExposimError
+from validation.live.config import CONFIGS, SCENES, LiveConfig
+
+__all__ = ["HELP", "DESCRIPTION", "add_arguments", "register", "build_parser", "config_from_args", "command_line",
+           "run", "main"]
+
+HELP = "live versus emulated closed loop: does the emulated benchmark rank the AE methods as a live camera would?"
+DESCRIPTION = (
+    "Issue 14. On synthetic stereo walks, every AE method runs twice: emulated (the normal closed loop on the "
+    "bracketed recording, plain and noise-consistent emulation) and live (each cycle the camera captures at the "
+    "method's own exposure from the rendered radiance, at the emulator's bracket instant or at the cycle's first "
+    "shot). Compares exposure trajectories, images, features/VO metrics and the methods' rankings (Kendall tau), "
+    "and measures the noise variance ratio. Writes results.json, report.md, exposure_<scene>.png, metrics.png.")
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WxH, e.g. 256x160, got {text!r}") from None
+    return w, h
+
+
+def _names(text: str) -> tuple[str, ...]:
+    return tuple(s.strip() for s in text.split(",") if s.strip())
+
+
+def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """The experiment's options, their defaults (the ``full`` configuration) in the help."""
+    full, quick = CONFIGS["full"], CONFIGS["quick"]
+    p.add_argument("-o", "--output", type=Path, required=True,
+                   help="output folder (a non-empty one is never overwritten: OUT-2, OUT-3 ... is used)")
+    p.add_argument("--quick", action="store_true",
+                   help=f"reduced configuration: {quick.n_cycles} cycles per scene, {quick.noise_repeats} noise "
+                        "repeats (a pipeline check in minutes); other options still apply")
+    p.add_argument("--scenes", type=_names, help=f"comma-separated scenes (default {','.join(SCENES)})")
+    p.add_argument("--cycles", type=int,
+                   help=f"bracket cycles per scene (default {full.n_cycles}; --quick {quick.n_cycles})")
+    p.add_argument("--size", type=_size, help=f"image size WxH (default {full.width}x{full.height})")
+    p.add_argument("--spp", type=int, help=f"render samples per pixel (default {full.spp})")
+    p.add_argument("--seed", type=int, help=f"scene, render, camera and live-capture seed (default {full.seed})")
+    p.add_argument("--methods", type=_names, help=f"comma-separated AE methods (default all {len(full.methods)}: {', '.join(full.methods)})")
+    p.add_argument("--noise-repeats", type=int,
+                   help=f"captures per exposure for the noise variance ratio (default {full.noise_repeats}; "
+                        f"--quick {quick.noise_repeats})")
+    p.add_argument("--no-control", action="store_true", help="skip the re-seeded live control run")
+    p.add_argument("--keep-radiance", action="store_true", help="keep the datasets' radiance EXRs (large)")
+    p.add_argument("--cache-dir", help="render cache (default $EXPOSIM_CACHE or ~/.cache/exposim/renders)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.add_argument("--redraw", action="store_true",
+                   help="only recompute the verdicts and rewrite results.json, report.md and the figures of the "
+                        "existing folder OUT from its raw.json")
+    return p
+
+
+def register(vsub) -> argparse.ArgumentParser:
+    """Add ``live`` to the sub-parsers of ``exposim validate``."""
+    q = vsub.add_parser("live", help=HELP, description=DESCRIPTION)
+    add_arguments(q)
+    q.set_defaults(func=lambda args: run(args, "exposim validate live"), experiment="live")
+    return q
+
+
+def build_parser(prog: str = "python -m validation.live") -> argparse.ArgumentParser:
+    return add_arguments(argparse.ArgumentParser(prog=prog, description=DESCRIPTION))
+
+
+def config_from_args(args) -> LiveConfig:
+    """The configuration the options ask for (:class:`~validation.live.config.LiveError` if invalid)."""
+    changes = {}
+    if args.cycles is not None:
+        changes["n_cycles"] = args.cycles
+    if args.size is not None:
+        changes["width"], changes["height"] = args.size
+    for key in ("spp", "seed", "scenes", "methods", "noise_repeats"):
+        if getattr(args, key) is not None:
+            changes[key] = getattr(args, key)
+    if args.no_control:
+        changes["control"] = False
+    if args.keep_radiance:
+        changes["keep_radiance"] = True
+    return replace(CONFIGS["quick" if args.quick else "full"], **changes)
+
+
+def command_line(args, prog: str) -> str:
+    """The command line that reproduces this run (output-only options left out)."""
+    words = shlex.split(prog) + ["-o", str(args.output)]
+    if args.quick:
+        words.append("--quick")
+    for key in ("scenes", "cycles", "size", "spp", "seed", "methods", "noise_repeats"):
+        value = getattr(args, key)
+        if value is None:
+            continue
+        if key == "size":
+            value = f"{value[0]}x{value[1]}"
+        elif isinstance(value, tuple):
+            value = ",".join(value)
+        words += ["--" + key.replace("_", "-"), str(value)]
+    words += [flag for flag, on in (("--no-control", args.no_control), ("--keep-radiance", args.keep_radiance)) if on]
+    return shlex.join(words)
+
+
+def run(args, prog: str = "exposim validate live") -> int:
+    """Run (or ``--redraw``) the experiment the options ask for; print the headline.
+
+    Raises :class:`~emulator.errors.ExposimError` for bad options or input (the caller
+    prints it as one line).
+    """
+    from validation.live.experiment import numbered_output, redraw, run_live_experiment
+    from validation.live.report import headline
+
+    def log(msg: str) -> None:
+        print(msg, file=sys.stderr)
+
+    if args.redraw:
+        results = redraw(args.output)
+        print(headline(results))
+        return 0
+    cfg = config_from_args(args)
+    out = numbered_output(args.output)
+    if out != args.output:
+        log(f"live: {args.output} exists and is not empty; writing to {out}")
+    results = run_live_experiment(out, cfg, progress=not args.no_progress, command=command_line(args, prog),
+                                  cache_dir=args.cache_dir, log=None if args.no_progress else log)
+    print(headline(results))
+    print(f"wrote {out / 'results.json'}, {out / 'report.md'} in {results['timings']['total_s'] / 60:.1f} min")
+    return 0
+
+
+def main(argv=None) -> int:
+    """``python -m validation.live``: errors as one line on stderr and exit code 1."""
+    args = build_parser().parse_args(argv)
+    try:
+        return run(args, "python -m validation.live")
+    except ExposimError as exc:
+        print(f"live: {exc}", file=sys.stderr)
+        return 1

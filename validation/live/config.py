@@ -1,0 +1,179 @@
+"""The experiment's configuration: scenes, methods, variants, metrics, goals and :class:`LiveConfig`."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, fields
+
+from emulator.errors import ExposimError
+
+__all__ = [
+    "SCENES",
+    "METHODS",
+    "VARIANTS",
+    "CONTROL",
+    "NOISE_OPTIONS",
+    "BRIGHTENING_PAIRS",
+    "DARKENING_PAIRS",
+    "FIXED_INSTANT_BRACKET_INDEX",
+    "METRICS",
+    "GOAL_TAU_MIN",
+    "GOAL_EXPOSURE_LOG2_MEDIAN",
+    "LiveError",
+    "LiveConfig",
+    "CONFIGS",
+    "config_from_dict",
+]
+
+#: Scenes of the experiment (issue 14: three named ones and one more).
+SCENES = ("forest_winter", "sun_glare", "forest_edge", "forest_summer")
+#: The seven AE methods (order of ``emulator.playback.parse_methods``).
+METHODS = ("fixed", "classical-30", "classical-50", "classical-70", "shim", "zhang", "kim")
+#: Timing variants of the live loop.
+VARIANTS = ("same-instant", "fixed-instant")
+#: The live control run: same-instant with other capture-noise seeds.
+CONTROL = "same-instant-reseeded"
+#: Emulation noise options: name in results -> ``emulate(noise=...)``.
+NOISE_OPTIONS = {"plain": "none", "consistent": "consistent"}
+#: (source, target) ms pairs of the darkening noise variance ratio (the source is the cleaner one).
+DARKENING_PAIRS = ((32.0, 22.0), (16.0, 11.0), (8.0, 5.5), (4.0, 2.75))
+#: (source, target) ms pairs of the brightening noise variance ratio (the source is the noisier one).
+BRIGHTENING_PAIRS = ((1.0, 1.5), (2.0, 3.0), (4.0, 6.0), (8.0, 12.0))
+#: Bracket (index in the sweep) whose timestamp is the fixed instant of a cycle: the first shot.
+FIXED_INSTANT_BRACKET_INDEX = 0
+#: Ranked metrics: name -> (key path in ``ae_study.summarise(...)["overall"][method]``, higher is better).
+METRICS = {
+    "median_uniformity": (("median_uniformity",), True),
+    "median_matches": (("median_matches",), True),
+    "success_rate_tau100": (("sequence_success_rate", "100"), True),
+    "segment_success_rate_tau100": (("segment_success", "100", "rate"), True),
+    "vo_failed_frames": (("vo_failed_frames",), False),
+    "rpe_trans_pct": (("rpe_trans_pct_mean_over_scenes",), False),
+}
+#: Goals of issue 14.
+GOAL_TAU_MIN = 0.9
+GOAL_EXPOSURE_LOG2_MEDIAN = 0.05
+
+
+class LiveError(ExposimError):
+    """An invalid configuration of the live-versus-emulated experiment, or missing ground truth."""
+
+
+@dataclass(frozen=True)
+class LiveConfig:
+    """Everything that sets the experiment's numbers (recorded in ``results.json``).
+
+    Attributes
+    ----------
+    scenes : tuple of str
+    n_cycles : int
+        Bracket sweeps per walk (273 ms each).
+    width, height, spp : int
+        Render size and samples per pixel.
+    seed : int
+        Scene, render and camera (recording) seed; the live captures, the control run and
+        the consistent emulation derive their seeds from it.
+    methods : tuple of str
+    initial_ms : float
+        Starting exposure of every method and loop, ms.
+    selector : str
+        Bracket selector of the emulator (and of the same-instant live timing).
+    vo_ratio : float
+        Lowe ratio of the stereo VO (the AE study's 0.9 at 256x160).
+    segment_pairs, taus
+        Segment length and match thresholds of the success rates.
+    noise_repeats : int
+        Captures per exposure for the noise variance ratio.
+    capture_noise : bool
+        Sensor noise in the recording and the live captures (False: exact, for tests).
+    control : bool
+        Also run the re-seeded live control.
+    metrics : bool
+        Run the feature and VO benchmarks (False: exposure and image comparison only).
+    keep_radiance : bool
+        Keep the datasets' radiance EXRs (large) after the live loops.
+    """
+
+    scenes: tuple[str, ...] = SCENES
+    n_cycles: int = 40
+    width: int = 256
+    height: int = 160
+    spp: int = 8
+    seed: int = 0
+    methods: tuple[str, ...] = METHODS
+    initial_ms: float = 4.0
+    selector: str = "higher-no-sat"
+    vo_ratio: float = 0.9
+    segment_pairs: int = 10
+    taus: tuple[int, ...] = (5, 100)
+    noise_repeats: int = 16
+    capture_noise: bool = True
+    control: bool = True
+    metrics: bool = True
+    keep_radiance: bool = False
+
+    def __post_init__(self) -> None:
+        import scenes
+
+        from emulator.playback import parse_methods
+        from emulator.select import SELECTORS
+
+        if not self.scenes:
+            raise LiveError("scenes: at least one scene is needed")
+        unknown = [s for s in self.scenes if s not in scenes.SCENES]
+        if unknown:
+            raise LiveError(f"scenes: unknown {unknown}; valid: {', '.join(sorted(scenes.SCENES))}")
+        if len(set(self.scenes)) != len(self.scenes):
+            raise LiveError(f"scenes: each scene once, got {list(self.scenes)}")
+        if self.n_cycles < 3:
+            raise LiveError(f"cycles must be >= 3 (matches and VO need pairs), got {self.n_cycles}")
+        if self.width < 32 or self.height < 20:
+            raise LiveError(f"size must be at least 32x20, got {self.width}x{self.height}")
+        if self.spp < 1:
+            raise LiveError(f"spp must be >= 1, got {self.spp}")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
+            raise LiveError(f"seed must be a non-negative integer, got {self.seed!r}")
+        try:
+            parse_methods(list(self.methods))
+        except ExposimError as exc:
+            raise LiveError(f"methods: {exc}") from None
+        if self.selector not in SELECTORS:
+            raise LiveError(f"unknown selector {self.selector!r}; choose one of {', '.join(SELECTORS)}")
+        if self.noise_repeats < 3:
+            raise LiveError(f"noise_repeats must be >= 3, got {self.noise_repeats}")
+
+    @property
+    def duration_s(self) -> float:
+        return self.n_cycles * 6 / 22.0
+
+    def scene_parameters(self, scene: str) -> dict:
+        """forest_edge: the exit at half the walked path (as the AE study places it)."""
+        if scene == "forest_edge":
+            from scenes.trajectory import WALKING_SPEED_MPS
+
+            return {"exit_x_m": max(1.0, round(WALKING_SPEED_MPS * self.duration_s * 0.5, 2))}
+        return {}
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["scenes"], d["methods"], d["taus"] = list(self.scenes), list(self.methods), [int(t) for t in self.taus]
+        d["scene_parameters"] = {s: self.scene_parameters(s) for s in self.scenes}
+        d["renders"] = self.n_cycles * 12 * len(self.scenes)
+        d["fixed_instant"] = "timestamp of the cycle's first shot (bracket index 0, the 1 ms bracket)"
+        return d
+
+
+#: ``full``: 40 cycles (11 s, ~6 m of walk) per scene at the AE study's 256x160, 8 spp;
+#: ``quick``: 3 cycles per scene (a pipeline check in a few minutes on 2 cores).
+CONFIGS = {
+    "full": LiveConfig(),
+    "quick": LiveConfig(n_cycles=3, noise_repeats=8),
+}
+
+
+def config_from_dict(d: dict) -> LiveConfig:
+    """The :class:`LiveConfig` recorded by :meth:`LiveConfig.to_dict` (extra keys ignored)."""
+    kw = {f.name: d[f.name] for f in fields(LiveConfig) if f.name in d}
+    for k in ("scenes", "methods", "taus"):
+        if k in kw:
+            kw[k] = tuple(kw[k])
+    return LiveConfig(**kw)
