@@ -128,7 +128,8 @@ def test_noise_variance_ratio_flat_field():
     cam = synth.Camera.preset("borealhdr", width=64, height=64, vignetting_strength=0.0)
     flat = np.full((64, 64, 3), synth.camera.REFERENCE_RADIANCE / 16.0, dtype=np.float32)
     model = noise_model_of(cam)
-    res = measure_noise_variance_ratio(flat, cam, cam.response, model, repeats=16, seed=1, pairs=((8.0, 5.5), (16.0, 11.0)))
+    res = measure_noise_variance_ratio(flat, cam, cam.response, model, repeats=16, seed=1,
+                                       pairs=((8.0, 5.5), (16.0, 11.0)))
     assert len(res["bins"]) >= 2
     # plain emulation from a longer bracket is measurably too clean; theory says by how much
     assert res["plain"] < 0.85

@@ -54,7 +54,8 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument("--size", type=_size, help=f"image size WxH (default {full.width}x{full.height})")
     p.add_argument("--spp", type=int, help=f"render samples per pixel (default {full.spp})")
     p.add_argument("--seed", type=int, help=f"scene, render, camera and live-capture seed (default {full.seed})")
-    p.add_argument("--methods", type=_names, help=f"comma-separated AE methods (default all {len(full.methods)}: {', '.join(full.methods)})")
+    p.add_argument("--methods", type=_names,
+                   help=f"comma-separated AE methods (default all {len(full.methods)}: {', '.join(full.methods)})")
     p.add_argument("--noise-repeats", type=int,
                    help=f"captures per exposure for the noise variance ratio (default {full.noise_repeats}; "
                         f"--quick {quick.noise_repeats})")
@@ -143,10 +144,10 @@ def run(args, prog: str = "exposim validate live") -> int:
 
 
 def main(argv=None) -> int:
-    """``python -m validation.live``: errors as one line on stderr and exit code 1."""
+    """``python -m validation.live``: errors (bad input, unreadable or unwritable paths) as one line, exit code 1."""
     args = build_parser().parse_args(argv)
     try:
         return run(args, "python -m validation.live")
-    except ExposimError as exc:
+    except (ExposimError, OSError) as exc:  # bad input, or a path that cannot be read or written: one line
         print(f"live: {exc}", file=sys.stderr)
         return 1

@@ -172,7 +172,8 @@ def run_live_experiment(out, config: LiveConfig = CONFIGS["full"], *, progress: 
     t0 = time.perf_counter()
     nvr = measure_noise_variance_ratio(*ratio_input, repeats=cfg.noise_repeats, seed=cfg.seed)
     nvr["input"] = f"first left radiance of {cfg.scenes[0]}"
-    nvr_up = measure_noise_variance_ratio(*ratio_input, repeats=cfg.noise_repeats, seed=cfg.seed, pairs=BRIGHTENING_PAIRS)
+    nvr_up = measure_noise_variance_ratio(*ratio_input, repeats=cfg.noise_repeats, seed=cfg.seed,
+                                          pairs=BRIGHTENING_PAIRS)
     nvr_up["input"] = nvr["input"]
     timings["noise_ratio_s"] = time.perf_counter() - t0
 

@@ -105,10 +105,10 @@ def report_markdown(results: dict) -> str:
     verdict = []
     if tau_min is not None:
         verdict.append(
-            f"The emulated benchmark ranks the methods as the live camera does with Kendall tau >= {fmt(tau_min, '.2f')} "
-            f"on every metric (worst timing variant, {best} emulation; plain {fmt(tmb.get('plain'), '.2f')}, consistent "
-            f"{fmt(tmb.get('consistent'), '.2f')}). Goal tau_min >= {GOAL_TAU_MIN}: "
-            f"{'met' if goals['rank_kendall_tau_min_ge_0.9'] else 'NOT met'}.")
+            f"The emulated benchmark ranks the methods as the live camera does with Kendall tau >= "
+            f"{fmt(tau_min, '.2f')} on every metric (worst timing variant, {best} emulation; plain "
+            f"{fmt(tmb.get('plain'), '.2f')}, consistent {fmt(tmb.get('consistent'), '.2f')}). Goal tau_min >= "
+            f"{GOAL_TAU_MIN}: {'met' if goals['rank_kendall_tau_min_ge_0.9'] else 'NOT met'}.")
     verdict.append(
         f"Same-instant exposure trajectories differ by a median |log2| of {fmt(results['exposure_log2_error_median'])} "
         f"(max {fmt(results['exposure_log2_error_max'])}); goal <= {GOAL_EXPOSURE_LOG2_MEDIAN}: "
@@ -138,7 +138,8 @@ def report_markdown(results: dict) -> str:
         bright = float(np.mean([d["brightening"] for d in use[best].values()]))
         verdict.append(
             f"But the loops darken a bracket (the only case consistent emulation can correct) in "
-            f"{fmt(100 * dark, '.0f')} % of the cycles (mean over methods) and brighten one in {fmt(100 * bright, '.0f')} %, "
+            f"{fmt(100 * dark, '.0f')} % of the cycles (mean over methods) and brighten one in "
+            f"{fmt(100 * bright, '.0f')} %, "
             f"because HigherNoSat's higher bracket is saturated above 1 %; brightened images carry "
             f"{fmt(up['plain'], '.2f')} times the live noise variance, with either option.")
     lines += [" ".join(verdict), ""]
@@ -191,8 +192,8 @@ def report_markdown(results: dict) -> str:
         sp = results.get("live_spread") or {}
         lines += ["## Why rankings flip", "",
                   "Each pair of methods ordered oppositely live and emulated, attributed to the first cause that "
-                  "applies (`flip_causes` in validation/live/verdicts.py): within the live spread (both differences at most "
-                  "the largest |live - live re-seeded| of the metric over the methods: "
+                  "applies (`flip_causes` in validation/live/verdicts.py): within the live spread (both differences "
+                  "at most the largest |live - live re-seeded| of the metric over the methods: "
                   + ", ".join(f"{m} {fmt(v)}" for m, v in sp.items()) + "), motion (fixed-instant only), noise level "
                   "(plain only), exposure divergence (median |log2| > 0.05), else image difference at equal exposures.",
                   "", "| noise / variant | " + " | ".join(FLIP_CAUSES) + " |",
@@ -208,7 +209,8 @@ def report_markdown(results: dict) -> str:
                 a, b = r["pair"]
                 lines.append(
                     f"| {r['variant']} | {r['metric']} | {a} vs {b} | {r['cause']} | {fmt(r['live'][a])} vs "
-                    f"{fmt(r['live'][b])} | {fmt(r['emulated'][a])} vs {fmt(r['emulated'][b])} | {fmt(r['live_spread'])} | "
+                    f"{fmt(r['live'][b])} | {fmt(r['emulated'][a])} vs {fmt(r['emulated'][b])} | "
+                    f"{fmt(r['live_spread'])} | "
                     f"{fmt(r['exposure_log2_error_median'][a])}, {fmt(r['exposure_log2_error_median'][b])} |")
             if len(beyond) > 60:
                 lines.append(f"| ... {len(beyond) - 60} more in results.json | | | | | | | |")

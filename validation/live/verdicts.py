@@ -73,8 +73,8 @@ def assemble(cfg: LiveConfig, per_scene: dict, summaries: dict, findings: dict, 
                          for metric, (path, _) in METRICS.items()}
         for opt in NOISE_OPTIONS:
             for v in variants:
-                taus[f"{opt}/{v}"] = {metric: kendall_tau(values[f"live-{v}"][metric], values[f"emulated-{opt}"][metric])
-                                      for metric in METRICS}
+                taus[f"{opt}/{v}"] = {metric: kendall_tau(values[f"live-{v}"][metric],
+                                                          values[f"emulated-{opt}"][metric]) for metric in METRICS}
         if cfg.control:
             taus["live/control"] = {metric: kendall_tau(values["live-same-instant"][metric],
                                                         values[f"live-{CONTROL}"][metric]) for metric in METRICS}
