@@ -53,20 +53,18 @@ numbers of results.json, flip causes), :mod:`~validation.live.report` (figures, 
 :mod:`~validation.live.experiment` (the run, :func:`redraw`), :mod:`~validation.live.cli`.
 """
 
-from validation.live.compare import exposure_log2_errors, image_errors, kendall_tau, measure_noise_variance_ratio
-from validation.live.config import (
-    CONFIGS,
-    CONTROL,
-    METHODS,
-    METRICS,
-    NOISE_OPTIONS,
-    SCENES,
-    VARIANTS,
-    LiveConfig,
-    LiveError,
-)
-from validation.live.experiment import finish, numbered_output, redraw, run_live_experiment
-from validation.live.loops import DatasetRadiance, iter_emulated, iter_live, write_run_folder
+import importlib
+
+#: Public name -> the module that defines it (imported on first use: ``exposim`` registers
+#: ``validate live`` through :mod:`validation.live.cli` without loading the experiment).
+_HOMES = {
+    **dict.fromkeys(("exposure_log2_errors", "image_errors", "kendall_tau", "measure_noise_variance_ratio"),
+                    "validation.live.compare"),
+    **dict.fromkeys(("CONFIGS", "CONTROL", "METHODS", "METRICS", "NOISE_OPTIONS", "SCENES", "VARIANTS", "LiveConfig",
+                     "LiveError"), "validation.live.config"),
+    **dict.fromkeys(("finish", "numbered_output", "redraw", "run_live_experiment"), "validation.live.experiment"),
+    **dict.fromkeys(("DatasetRadiance", "iter_emulated", "iter_live", "write_run_folder"), "validation.live.loops"),
+}
 
 __all__ = [
     "LiveConfig",
@@ -99,3 +97,14 @@ def main(argv=None) -> int:
     from validation.live.cli import main as _main
 
     return _main(argv)
+
+
+def __getattr__(name: str):
+    home = _HOMES.get(name)
+    if home is None:
+        raise AttributeError(f"module 'validation.live' has no attribute {name!r}")
+    return getattr(importlib.import_module(home), name)
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_HOMES))

@@ -14,7 +14,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from emulator.errors import ExposimError
-from validation.live.config import CONFIGS, SCENES, LiveConfig
+from validation.live.config import CONFIG_CHANGES, CONFIGS, DEFAULTS, LiveConfig
 
 __all__ = ["HELP", "DESCRIPTION", "add_arguments", "register", "build_parser", "config_from_args", "command_line",
            "run", "main"]
@@ -42,13 +42,14 @@ def _names(text: str) -> tuple[str, ...]:
 
 def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     """The experiment's options, their defaults (the ``full`` configuration) in the help."""
-    full, quick = CONFIGS["full"], CONFIGS["quick"]
+    full = argparse.Namespace(**{**DEFAULTS, **CONFIG_CHANGES["full"]})  # no LiveConfig built: registering stays light
+    quick = argparse.Namespace(**{**DEFAULTS, **CONFIG_CHANGES["quick"]})
     p.add_argument("-o", "--output", type=Path, required=True,
                    help="output folder (a non-empty one is never overwritten: OUT-2, OUT-3 ... is used)")
     p.add_argument("--quick", action="store_true",
                    help=f"reduced configuration: {quick.n_cycles} cycles per scene, {quick.noise_repeats} noise "
                         "repeats (a pipeline check in minutes); other options still apply")
-    p.add_argument("--scenes", type=_names, help=f"comma-separated scenes (default {','.join(SCENES)})")
+    p.add_argument("--scenes", type=_names, help=f"comma-separated scenes (default {','.join(full.scenes)})")
     p.add_argument("--cycles", type=int,
                    help=f"bracket cycles per scene (default {full.n_cycles}; --quick {quick.n_cycles})")
     p.add_argument("--size", type=_size, help=f"image size WxH (default {full.width}x{full.height})")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, fields
 
 from emulator.errors import ExposimError
@@ -20,6 +21,8 @@ __all__ = [
     "GOAL_EXPOSURE_LOG2_MEDIAN",
     "LiveError",
     "LiveConfig",
+    "CONFIG_CHANGES",
+    "DEFAULTS",
     "CONFIGS",
     "config_from_dict",
 ]
@@ -162,12 +165,35 @@ class LiveConfig:
         return d
 
 
-#: ``full``: 40 cycles (11 s, ~6 m of walk) per scene at the AE study's 256x160, 8 spp;
-#: ``quick``: 3 cycles per scene (a pipeline check in a few minutes on 2 cores).
-CONFIGS = {
-    "full": LiveConfig(),
-    "quick": LiveConfig(n_cycles=3, noise_repeats=8),
-}
+#: The changes of each named configuration to the defaults: ``full``: 40 cycles (11 s, ~6 m
+#: of walk) per scene at the AE study's 256x160, 8 spp; ``quick``: 3 cycles per scene (a
+#: pipeline check in a few minutes on 2 cores).
+CONFIG_CHANGES = {"full": {}, "quick": {"n_cycles": 3, "noise_repeats": 8}}
+#: The defaults of :class:`LiveConfig` (read without building one: ``exposim --help`` stays light).
+DEFAULTS = {f.name: f.default for f in fields(LiveConfig)}
+
+
+class _Configs(Mapping):
+    """The named configurations, built (and validated, which imports scenes and the AE
+    methods) on first use rather than when ``exposim`` registers its commands."""
+
+    def __init__(self) -> None:
+        self._built: dict[str, LiveConfig] = {}
+
+    def __getitem__(self, name: str) -> LiveConfig:
+        if name not in self._built:
+            self._built[name] = LiveConfig(**CONFIG_CHANGES[name])
+        return self._built[name]
+
+    def __iter__(self):
+        return iter(CONFIG_CHANGES)
+
+    def __len__(self) -> int:
+        return len(CONFIG_CHANGES)
+
+
+#: ``full`` and ``quick`` (:data:`CONFIG_CHANGES`) as :class:`LiveConfig`.
+CONFIGS = _Configs()
 
 
 def config_from_dict(d: dict) -> LiveConfig:

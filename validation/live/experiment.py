@@ -70,11 +70,11 @@ def _runs_summary(cycles, names) -> dict:
 
 
 
-def run_live_experiment(out, config: LiveConfig = CONFIGS["full"], *, progress: bool = True, command: str | None = None,
+def run_live_experiment(out, config: LiveConfig | None = None, *, progress: bool = True, command: str | None = None,
                         cache_dir=None, log: Callable[[str], None] | None = None) -> dict:
     """Run the experiment into ``out`` (a new or empty folder; see :func:`numbered_output`).
 
-    Returns the content of ``results.json``.
+    ``config`` defaults to ``CONFIGS["full"]``.  Returns the content of ``results.json``.
     """
     import scenes
     from emulator.io.borealhdr import load_sequence, sequence_response
@@ -85,7 +85,7 @@ def run_live_experiment(out, config: LiveConfig = CONFIGS["full"], *, progress: 
     from synth.sequence import load_camera
     from validation import ae_study
 
-    cfg = config
+    cfg = CONFIGS["full"] if config is None else config
     out = Path(out)
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise OutputExistsError(f"{out}: exists and is not empty; refusing to overwrite (choose another folder)")
