@@ -52,7 +52,6 @@ def numbered_output(out) -> Path:
         k += 1
 
 
-
 def _bar(total: int, desc: str, enabled: bool):
     from tqdm import tqdm
 
@@ -67,7 +66,6 @@ def _runs_summary(cycles, names) -> dict:
         out[name] = {"median_exposure_ms": float(np.median(t)) if t else None,
                      "mean_saturated_fraction": float(np.mean(s)) if s else None}
     return {"methods": out}
-
 
 
 def run_live_experiment(out, config: LiveConfig | None = None, *, progress: bool = True, command: str | None = None,
@@ -210,7 +208,6 @@ def run_live_experiment(out, config: LiveConfig | None = None, *, progress: bool
     return finish(out, raw)
 
 
-
 def _brightening_on_chart(dataset: Path, cfg: LiveConfig) -> dict:
     """The brightening noise variance ratio on an HDR chart through the recording's camera."""
     from emulator.io.borealhdr import load_sequence, sequence_response
@@ -229,7 +226,6 @@ def _brightening_on_chart(dataset: Path, cfg: LiveConfig) -> dict:
                                pairs=BRIGHTENING_PAIRS)
     res["input"] = "hdr_chart (60 dB) through the recording's camera"
     return res
-
 
 
 def finish(out, raw: dict) -> dict:
