@@ -12,8 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from emulator.calibrate import (
-    CalibrationError,
+from emulator.calibration import (
     calibrate_from_recording,
     calibrate_stack,
     comparagram_pairs,
@@ -23,6 +22,7 @@ from emulator.calibrate import (
     response_error,
 )
 from emulator.cli import main
+from emulator.errors import CalibrationError
 from emulator.io.borealhdr import load_sequence, write_frame
 from emulator.io.pcalib import read_response, write_response
 from emulator.io.stack import read_stack, write_stack

@@ -87,7 +87,7 @@ def _progress_bar(enabled: bool):
 
 
 def _calibrate(args) -> int:
-    from emulator.calibrate import calibrate_from_recording, calibrate_stack, cross_bracket_error
+    from emulator.calibration import calibrate_from_recording, calibrate_stack, cross_bracket_error
     from emulator.errors import ExposimError, OutputExistsError
     from emulator.io.pcalib import write_response
     from emulator.report.calibration import plot_calibration
