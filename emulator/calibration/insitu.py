@@ -21,7 +21,14 @@ from typing import Sequence as SequenceType
 
 import numpy as np
 
-from emulator.calibration.result import CalibrationResult, Progress, _report, bayer_subsample, table_top_for
+from emulator.calibration.result import (
+    CalibrationResult,
+    Progress,
+    _report,
+    bayer_subsample,
+    origin_warnings,
+    table_top_for,
+)
 from emulator.calibration.solver import _blas_single_thread, _comparametric_irls, _finish, _Knots, _robust_scale
 from emulator.errors import CalibrationError
 from emulator.response import BOREALHDR_BLACK_LEVEL, BOREALHDR_WHITE_LEVEL
@@ -173,6 +180,7 @@ def fit_comparametric(
     rms = float(np.sqrt(np.mean(r * r)))
     observed = (int(math.floor(min(d_lo.min(), d_hi.min()))), int(math.ceil(max(d_lo.max(), d_hi.max()))))
     info = {
+        "warnings": origin_warnings(resp, black, source),
         "n_pairs": len(pairs),
         "n_cycles": len({p["cycle"] for p in pairs}),
         "cameras": sorted({p["camera"] for p in pairs}),

@@ -12,9 +12,11 @@ from typing import Callable
 
 import numpy as np
 
+from emulator.errors import ResponseError
+from emulator.io.pcalib import check_origin
 from emulator.response import CameraResponse
 
-__all__ = ["CalibrationResult", "Progress", "bayer_subsample", "table_top_for"]
+__all__ = ["CalibrationResult", "Progress", "bayer_subsample", "table_top_for", "origin_warnings"]
 
 Progress = Callable[[int, int, str], None] | None
 
@@ -27,6 +29,15 @@ def _report(progress: Progress, done: int, total: int, label: str) -> None:
 def table_top_for(white_level: int) -> int:
     """Top DN of a response table for this white level: 2**bits - 1 (4095 for 12-bit data)."""
     return (1 << int(white_level).bit_length()) - 1
+
+
+def origin_warnings(response: CameraResponse, black_level: int, source: str) -> list[str]:
+    """A warning when a recovered g is not ~ 0 at the black level (the pcalib reader would refuse it)."""
+    try:
+        check_origin(response.g, min(int(black_level), response.white_level), source)
+    except ResponseError as exc:
+        return [f"{exc}; the data do not pin the dark end: extend the exposure range or check the black level"]
+    return []
 
 
 def bayer_subsample(raw: np.ndarray, stride: int = 1) -> list[np.ndarray]:

@@ -48,7 +48,14 @@ from typing import Sequence as SequenceType
 
 import numpy as np
 
-from emulator.calibration.result import CalibrationResult, Progress, _report, bayer_subsample, table_top_for
+from emulator.calibration.result import (
+    CalibrationResult,
+    Progress,
+    _report,
+    bayer_subsample,
+    origin_warnings,
+    table_top_for,
+)
 from emulator.calibration.solver import _blas_single_thread, _finish, _Knots, _robust_scale, _solve_als, _solve_varpro
 from emulator.errors import CalibrationError
 from emulator.io.pcalib import PCALIB_SAMPLES
@@ -56,6 +63,10 @@ from emulator.io.stack import Stack, read_stack
 from emulator.response import BOREALHDR_BLACK_LEVEL, BOREALHDR_WHITE_LEVEL
 
 __all__ = ["estimate_noise_dn", "fit_inverse_response", "calibrate_stack"]
+
+#: The exposure check of each image uses samples with U(I) at least this fraction of
+#: U(table_top): the dark end, where U is least determined, is left out.
+OUTLIER_MIN_G = 0.001
 
 
 def estimate_noise_dn(
@@ -113,6 +124,76 @@ def _stack_warnings(t: np.ndarray, observed: tuple[int, int], lo: int, hi: int) 
     return out
 
 
+def _exposure_scales(table: np.ndarray, d_flat, pix_idx, img_idx, t_flat, w, n_img: int, n_pix: int, *,
+                     min_g: float, min_samples: int = 50) -> np.ndarray:
+    """Per image, the factor its exposure time is off by: ``exp(median log(U(I) / (t B)))``.
+
+    B of each sample's pixel is estimated from the *other* images only (its own sample
+    removed from the closed-form ratio), so a wrong image does not pull it.  Samples with
+    U(I) below ``min_g`` (the dark end, where U is least determined) are left out; NaN for
+    an image with fewer than ``min_samples`` usable samples.
+    """
+    u = table[d_flat]
+    num = np.bincount(pix_idx, w * t_flat * u, n_pix)
+    den = np.bincount(pix_idx, w * t_flat * t_flat, n_pix)
+    num_o = num[pix_idx] - w * t_flat * u
+    den_o = den[pix_idx] - w * t_flat * t_flat
+    ok = (den_o > 1e-12 * den[pix_idx]) & (u >= min_g)
+    b = np.where(ok, num_o / np.where(ok, den_o, 1.0), 0.0)
+    ok &= b > 0
+    log_s = np.full(d_flat.size, np.nan)
+    log_s[ok] = np.log(u[ok] / (t_flat[ok] * b[ok]))
+    out = np.full(n_img, np.nan)
+    order = np.argsort(img_idx, kind="stable")
+    starts = np.searchsorted(img_idx[order], np.arange(n_img + 1))
+    for i in range(n_img):
+        v = log_s[order[starts[i]: starts[i + 1]]]
+        v = v[np.isfinite(v)]
+        if v.size >= min_samples:
+            out[i] = math.exp(float(np.median(v)))
+    return out
+
+
+def _outlier_image(solve, finish, d_flat, pix_idx, img_idx, t_flat, n_img: int, n_pix: int, scales, rms: float, *,
+                   tol: float, min_g: float, max_candidates: int = 3) -> tuple[int, float] | None:
+    """The image whose exposure time does not fit the others, or None.
+
+    Candidates: the (at most ``max_candidates``) images whose scale deviates from the
+    median by more than ``tol`` (log).  The fit is repeated without each; a candidate
+    qualifies when that fit's residual is below 0.8 of ``rms`` (the full fit's) and,
+    against it, the candidate's own scale is off by more than ``tol`` while every other
+    image's is within half of that.  Of those, the one whose removal leaves the smallest
+    residual.  Returns (image index, factor its exposure time is off by).
+    """
+    log_s = np.log(scales)
+    dev = np.abs(log_s - np.nanmedian(log_s))
+    dev[~np.isfinite(dev)] = -1.0
+    best = None
+    for k in np.argsort(-dev)[:max_candidates]:
+        if dev[k] <= tol:
+            break
+        keep = img_idx != k
+        c, w, _, _, _ = solve(d_flat[keep], pix_idx[keep], t_flat[keep])
+        resp = finish(c)
+        u = resp.g[d_flat[keep]]
+        b = np.bincount(pix_idx[keep], w * t_flat[keep] * u, n_pix) / np.maximum(
+            np.bincount(pix_idx[keep], w * t_flat[keep] ** 2, n_pix), 1e-300)
+        r = d_flat[keep] - resp.forward(t_flat[keep] * b[pix_idx[keep]])
+        rms_k = float(np.sqrt(np.mean(r * r)))
+        if not rms_k < 0.8 * rms:
+            continue
+        w_all = np.zeros(d_flat.size)  # B from the refit's images only, for the candidate too
+        w_all[keep] = w
+        refit = _exposure_scales(resp.g, d_flat, pix_idx, img_idx, t_flat, w_all, n_img, n_pix, min_g=min_g)
+        own = abs(math.log(refit[k])) if math.isfinite(refit[k]) else 0.0
+        others = np.abs(np.log(np.delete(refit, k)))
+        others = others[np.isfinite(others)]
+        if own > tol and (others.size == 0 or float(others.max()) <= 0.5 * own):
+            if best is None or rms_k < best[2]:
+                best = (int(k), float(refit[k]), rms_k)
+    return None if best is None else best[:2]
+
+
 def fit_inverse_response(
     dn: np.ndarray,
     exposures_ms: SequenceType[float],
@@ -131,6 +212,8 @@ def fit_inverse_response(
     rng: np.random.Generator | int | None = 0,
     progress: Progress = None,
     source: str = "stack",
+    image_names: SequenceType[str] | None = None,
+    outlier_tol: float = 0.05,
 ) -> CalibrationResult:
     """Alternating least squares for U and B (Engel et al. 2016) on sampled pixels.
 
@@ -169,6 +252,17 @@ def fit_inverse_response(
         Called once per iteration.
     source : str
         Named in error messages.
+    image_names : sequence of str, optional
+        One name per image (file names), used in the outlier warnings; default
+        ``image <i> (<t> ms)``.
+    outlier_tol : float
+        After the fit, the exposure factor each image's pixels fit is measured against
+        the other images (median of ``log(U(I) / (t B))``, B from the others).  When one
+        deviates by more than ``outlier_tol`` (log; 0.05 is about 5 %), the fit is repeated
+        without it; if it still deviates by more than ``outlier_tol`` while the others
+        agree, its exposure time is wrong (a mislabelled line in times.txt): it is named
+        in ``info["warnings"]`` and ``info["outlier_images"]`` with the exposure time its
+        pixels fit.  ``None`` skips the check.
 
     Returns
     -------
@@ -247,6 +341,45 @@ def fit_inverse_response(
     pick = gen.choice(d_flat.size, size=min(n_plot_samples, d_flat.size), replace=False)
     observed = (int(d_flat.min()), int(d_flat.max()))
     warnings = _stack_warnings(t, observed, lo, hi)
+    count = np.bincount(img_idx, minlength=n_img)
+    per_image_rms = np.sqrt(np.bincount(img_idx, r * r, n_img) / np.maximum(count, 1))
+    per_image_rms[count == 0] = np.nan
+    scales = _exposure_scales(table, d_flat, pix_idx, img_idx, t_flat, w, n_img, n_pix,
+                              min_g=OUTLIER_MIN_G * float(table[-1]))
+    outliers = []
+    if outlier_tol is not None:
+        def solve(d_sub, pix_sub, t_sub):
+            with _blas_single_thread():
+                return (_solve_varpro if solver == "varpro" else _solve_als)(
+                    knots, d_sub, pix_sub, t_sub, n_pix, smoothness=smoothness, huber_k=huber_k,
+                    max_iter=max_iter, tol=tol, progress=None, c0=init,
+                )
+
+        def finish(c_sub):
+            return _finish(c_sub, knots, np.ones(knots.n), "refit", black)[0]
+
+        found = _outlier_image(solve, finish, d_flat, pix_idx, img_idx, t_flat, n_img, n_pix, scales, rms,
+                               tol=float(outlier_tol), min_g=OUTLIER_MIN_G * float(table[-1]))
+        if found is not None:
+            k, factor = found
+            name = image_names[k] if image_names is not None else f"image {k}"
+            fitted = float(t[k] * factor)
+            outliers.append({
+                "index": k,
+                "name": str(name),
+                "exposure_ms": float(t[k]),
+                "fitted_exposure_ms": fitted,
+                "residual_rms_dn": float(per_image_rms[k]),
+                "median_residual_rms_dn": float(np.nanmedian(per_image_rms)),
+                "warning": (
+                    f"{name}: its exposure time {t[k]:g} ms does not fit the other images: its pixels fit "
+                    f"{fitted:.4g} ms ({100 * (factor - 1):+.0f} %; residual {per_image_rms[k]:.3g} DN RMS against a "
+                    f"median of {np.nanmedian(per_image_rms):.3g} DN over the images). Check its exposure line "
+                    f"(times.txt) or remove the image, then calibrate again"
+                ),
+            })
+    warnings.extend(o["warning"] for o in outliers)
+    warnings.extend(origin_warnings(resp, black, source))
     info = {
         "warnings": warnings,
         "n_images": int(n_img),
@@ -263,6 +396,9 @@ def fit_inverse_response(
         "smoothness": float(smoothness),
         "huber_k": float(huber_k),
         "unclipped_samples_per_image": [int(v) for v in n_valid_img],
+        "residual_rms_dn_per_image": [None if not math.isfinite(v) else float(v) for v in per_image_rms],
+        "exposure_scale_per_image": [None if not math.isfinite(v) else float(v) for v in scales],
+        "outlier_images": outliers,
         "vignetting": "not recovered (a static stack has no views that separate V(x) from E(x))",
     }
     return CalibrationResult(
@@ -343,6 +479,7 @@ def calibrate_stack(
         rng=gen,
         progress=progress,
         source=src,
+        image_names=[str(st.image_path(i)) for i in range(total)],
         **fit_kwargs,
     )
     noise_arr = np.asarray(noise)
@@ -363,5 +500,6 @@ def calibrate_stack(
             f"{src}: scene is not static: fit residual {result.residual_rms_dn:.1f} DN RMS is far above the "
             f"noise ({noise_dn:.1f} DN estimated from the images; limit {limit:.1f} DN = max({static_factor:g} x "
             f"noise, {static_floor_pct:g} % of range)); did the camera or the scene move?"
+            + "".join(f"; {o['warning']}" for o in result.info["outlier_images"])
         )
     return result
