@@ -43,18 +43,22 @@ def test_negative_or_shifted_table_is_refused(tmp_path, pcalib_path):
     with pytest.raises(ResponseError, match=r"down\.txt: inverse response is negative at DN 0 \(g = -39\.8"):
         read_response(down)
 
+    # a little below 0 is refused too (-0.33 % of the top): negative exposure is meaningless
+    with pytest.raises(ResponseError, match=r"low\.txt: inverse response is negative at DN 0"):
+        read_response(write_pcalib(tmp_path / "low.txt", knots - 1.0))
+
     # entirely negative
     neg = write_pcalib(tmp_path / "neg.txt", knots - 300.0)
     with pytest.raises(ResponseError, match=r"neg\.txt: inverse response is not positive anywhere"):
         read_response(neg)
 
-    # shifted up by 10 % of the top: refused (2 % allowed), named with the percentage
+    # shifted up by 9 % of the top: refused (5 % allowed), named with the percentage
     up = write_pcalib(tmp_path / "up.txt", knots + 25.5)
     with pytest.raises(ResponseError, match=r"up\.txt: inverse response is shifted up: g = 25\.67.* is 9\.15 %"):
         read_response(up)
     # just inside the tolerance: accepted, values exactly as written
-    ok = write_pcalib(tmp_path / "ok.txt", knots + 4.0)
-    np.testing.assert_array_equal(read_response(ok).knots, knots + 4.0)
+    ok = write_pcalib(tmp_path / "ok.txt", knots + 12.0)
+    np.testing.assert_array_equal(read_response(ok).knots, knots + 12.0)
 
 
 def test_pedestal_table_reads_with_its_black_level(tmp_path):
