@@ -65,13 +65,13 @@ class BracketGroup:
 
 
 def bracket_groups(sequence, *, size: int = 3, cameras=None, cycles=None, max_groups: int | None = None,
-                   max_gap: float = 1.5) -> list[BracketGroup]:
+                   max_gap: float = 1.5, progress=None) -> list[BracketGroup]:
     """Groups of ``size`` (2 or 3) consecutive shots of every sweep of a recording, images loaded.
 
     Parameters
     ----------
     sequence : emulator.dataset.Sequence
-        The recording (:func:`emulator.dataset.load_sequence`).
+        The recording (:func:`emulator.io.borealhdr.load_sequence`).
     size : int
         3 (default): triples, whose time-interpolated difference cancels motion linear in
         time; 2: pairs of neighbouring brackets.
@@ -84,6 +84,8 @@ def bracket_groups(sequence, *, size: int = 3, cameras=None, cycles=None, max_gr
     max_gap : float
         Shots of a group must follow each other within ``max_gap`` shot periods (the median
         interval between shots): a missing bracket breaks a group.
+    progress : callable(done, total, label), optional
+        Called after each group's images are loaded.
 
     Returns
     -------
@@ -126,6 +128,8 @@ def bracket_groups(sequence, *, size: int = 3, cameras=None, cycles=None, max_gr
             tuple(f.load() for f in win), tuple(float(f.exposure_ms) for f in win),
             tuple((f.timestamp_ns - t0) * 1e-9 for f in win),
             f"{cam} c{index} " + "-".join(f"{f.exposure_ms:g}" for f in win)))
+        if progress is not None:
+            progress(len(groups), len(candidates), f"loading {groups[-1].label}")
     return groups
 
 
@@ -216,6 +220,7 @@ def estimate_noise_model(
     per_phase: bool = False,
     bayer_pattern: str | None = "RGGB",
     name: str = "in-situ",
+    progress=None,
 ) -> NoiseEstimate:
     """Estimate conversion gain and read noise from a recording's own brackets (photon transfer).
 
@@ -257,6 +262,8 @@ def estimate_noise_model(
         Names the phases in ``per_channel`` ("RGGB" -> R, G1, G2, B).
     name : str
         Model name.
+    progress : callable(done, total, label), optional
+        Called after each group of each of the two passes.
 
     Returns
     -------
@@ -344,6 +351,8 @@ def estimate_noise_model(
         hi = (max(theta_lo, 0.0) + 0.90 * span) / t_hi
         return lo, hi
 
+    done = [0]
+
     def run(limits):
         pts, shifts = [], []
         for i, gr in enumerate(groups):
@@ -352,6 +361,9 @@ def estimate_noise_model(
                                          highpass=highpass, clip=4.0)
             pts += [(i,) + t for t in g_pts]
             shifts.append(shift)
+            done[0] += 1
+            if progress is not None:
+                progress(done[0], 2 * len(groups), f"noise: pass {1 + (done[0] - 1) // len(groups)} {gr.label}")
         if len(pts) < 3:
             raise NoiseModelError(
                 f"only {len(pts)} usable intensity bin(s) in {len(groups)} bracket group(s): too few unclipped, "
