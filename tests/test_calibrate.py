@@ -320,7 +320,7 @@ def test_cli_calibrate_errors(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.startswith("exposim calibrate: error: ") and "two distinct exposure times" in err
     assert main(["calibrate", "-o", str(tmp_path / "r.txt")]) == 1
-    assert "either a STACK" in capsys.readouterr().err
+    assert "give one of a STACK folder, --from-recording SEQ or --noise SEQ" in capsys.readouterr().err
 
 
 def test_cli_calibrate_from_recording(tmp_path, capsys):

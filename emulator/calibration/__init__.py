@@ -4,10 +4,10 @@ Two estimators of g = f^-1 (DN -> linear exposure), both written as a pcalib tab
 (256 samples over DN ``0..table_top``, g(table_top) = 255) that
 :meth:`CameraResponse.from_pcalib` reads, and a score of a response on a recording:
 
-* :mod:`~emulator.calibration.stack`: a static stack at several exposure times
+* :mod:`~emulator.calibration.stack_engel2016`: a static stack at several exposure times
   (:func:`calibrate_stack`, :func:`fit_inverse_response`; Engel, Usenko and Cremers 2016),
   with a check that flags an image whose exposure time does not fit the others;
-* :mod:`~emulator.calibration.insitu`: a recording's own bracket sweeps
+* :mod:`~emulator.calibration.insitu_grossberg2003`: a recording's own bracket sweeps
   (:func:`calibrate_from_recording`, :func:`comparagram_pairs`, :func:`fit_comparametric`;
   Grossberg and Nayar 2003);
 * :mod:`~emulator.calibration.solver`: the shared numerics (knot basis, monotone
@@ -21,10 +21,10 @@ Errors are :class:`emulator.errors.CalibrationError`.  Library code never prints
 loops take a ``progress(done, total, label)`` callable.
 """
 
-from emulator.calibration.insitu import calibrate_from_recording, comparagram_pairs, fit_comparametric
+from emulator.calibration.insitu_grossberg2003 import calibrate_from_recording, comparagram_pairs, fit_comparametric
 from emulator.calibration.result import CalibrationResult, bayer_subsample, table_top_for
 from emulator.calibration.scoring import DEFAULT_QUANTILES, CrossBracketError, cross_bracket_error, response_error
-from emulator.calibration.stack import calibrate_stack, estimate_noise_dn, fit_inverse_response
+from emulator.calibration.stack_engel2016 import calibrate_stack, estimate_noise_dn, fit_inverse_response
 
 __all__ = [
     "CalibrationResult",

@@ -16,7 +16,7 @@ from emulator.errors import ResponseError
 from emulator.io.pcalib import check_origin
 from emulator.response import CameraResponse
 
-__all__ = ["CalibrationResult", "Progress", "bayer_subsample", "table_top_for", "origin_warnings"]
+__all__ = ["CalibrationResult", "Progress", "bayer_subsample", "table_top_for", "origin_warnings", "planes_of"]
 
 Progress = Callable[[int, int, str], None] | None
 
@@ -29,6 +29,11 @@ def _report(progress: Progress, done: int, total: int, label: str) -> None:
 def table_top_for(white_level: int) -> int:
     """Top DN of a response table for this white level: 2**bits - 1 (4095 for 12-bit data)."""
     return (1 << int(white_level).bit_length()) - 1
+
+
+def planes_of(raw: np.ndarray, stride: int) -> list[np.ndarray]:
+    """The four Bayer planes of a mosaic, subsampled by ``stride``, flattened."""
+    return [p.reshape(-1) for p in bayer_subsample(raw, stride)]
 
 
 def origin_warnings(response: CameraResponse, black_level: int, source: str) -> list[str]:

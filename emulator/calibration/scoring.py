@@ -14,8 +14,7 @@ from typing import Sequence as SequenceType
 
 import numpy as np
 
-from emulator.calibration.insitu import _planes_of
-from emulator.calibration.result import Progress, _report
+from emulator.calibration.result import Progress, _report, planes_of
 from emulator.errors import CalibrationError
 from emulator.io.pcalib import PCALIB_TOP_VALUE
 from emulator.response import CameraResponse
@@ -96,7 +95,7 @@ def cross_bracket_error(
             key = (cyc.index, cam, e)
             if key not in cache:
                 raw = cyc.frames[cam][e].load()
-                cache[key] = np.concatenate(_planes_of(raw, stride)).reshape(1, -1)
+                cache[key] = np.concatenate(planes_of(raw, stride)).reshape(1, -1)
         for key in [key for key in cache if key[0] != cyc.index]:
             del cache[key]
         for src, tgt in ((a, b), (b, a)):

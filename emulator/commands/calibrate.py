@@ -224,7 +224,8 @@ def _calibrate_noise(args) -> int:
     full_well_std = estimate.gain_std * top
     if args.json:
         d = json_safe(estimate.to_dict())
-        d.update(output=str(out), sequence=str(seq.path), response=response.name, full_well_std=json_safe(full_well_std))
+        d.update(output=str(out), sequence=str(seq.path), response=response.name,
+                 full_well_std=json_safe(full_well_std))
         print(json.dumps(d))
         return 0
 

@@ -14,7 +14,8 @@ the dark end makes darker targets brighter), so :func:`read_response` refuses on
 g(black_level) is below ``-PCALIB_NEGATIVE_TOLERANCE`` or above
 ``PCALIB_ORIGIN_TOLERANCE`` times g(table_top) (:func:`check_origin`).  The upper bound is
 loose (5 %) because a recovered table is extrapolated below the lowest observed DN: a
-d^0.45 curve, vertical at 0, comes back from a stack with g(0) at 3.9 %.  The real BorealHDR table has g(0) = 0.173 of 255 (0.07 %).
+d^0.45 curve, vertical at 0, comes back from a stack with g(0) at 3.9 %.  The real
+BorealHDR table has g(0) = 0.173 of 255 (0.07 %).
 Tables of a camera with a black-level pedestal (``synth`` with ``black_level > 0``)
 continue below the black level with negative values; pass that ``black_level``.
 """

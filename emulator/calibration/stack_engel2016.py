@@ -38,6 +38,15 @@ over samples that are not clipped (``black + margin < I < white - margin``).  De
   does not provide.  B absorbs V(x) * E(x); emulation does not need V.
 * A fit whose RMS residual is far above the noise estimated from the images (Immerkaer's
   method per Bayer plane) means the scene moved: :class:`CalibrationError`.
+* One image whose exposure time is wrong (a mislabelled line of times.txt) bends the
+  whole fit.  Each image's exposure factor is measured against the others (median of
+  ``log(U(I) / (t B))``, B from the other images); an image off by more than 5 % is
+  confirmed by a fit without it and named in the warnings, with the exposure time its
+  pixels fit.  Measured on 12-image synthetic stacks with one exposure off by 0.5x to 2x
+  (4 responses x 5 mislabels): 15 of 20 found, each with its true exposure within 1 %,
+  never a wrong image; missed: large errors that bend a gamma-2.2 fit beyond repair, and
+  10 % errors within the noise.  No false alarm on 108 clean stacks (6-20 images, 4
+  responses, 3 noise levels).
 """
 
 from __future__ import annotations

@@ -25,7 +25,7 @@ from emulator.calibration.result import (
     CalibrationResult,
     Progress,
     _report,
-    bayer_subsample,
+    planes_of,
     origin_warnings,
     table_top_for,
 )
@@ -34,10 +34,6 @@ from emulator.errors import CalibrationError
 from emulator.response import BOREALHDR_BLACK_LEVEL, BOREALHDR_WHITE_LEVEL
 
 __all__ = ["comparagram_pairs", "fit_comparametric", "calibrate_from_recording"]
-
-
-def _planes_of(raw: np.ndarray, stride: int) -> list[np.ndarray]:
-    return [p.reshape(-1) for p in bayer_subsample(raw, stride)]
 
 
 def _dithered_sorted(x: np.ndarray, gen: np.random.Generator) -> np.ndarray:
@@ -86,7 +82,7 @@ def comparagram_pairs(
             key = (cyc.index, cam, e)
             if key not in cache:
                 raw = cyc.frames[cam][e].load()
-                cache[key] = [_dithered_sorted(p, gen) for p in _planes_of(raw, stride)]
+                cache[key] = [_dithered_sorted(p, gen) for p in planes_of(raw, stride)]
         for key in [key for key in cache if key[0] != cyc.index]:  # only this sweep is needed
             del cache[key]
         da_all, db_all = [], []
