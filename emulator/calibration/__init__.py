@@ -6,7 +6,8 @@ Two estimators of g = f^-1 (DN -> linear exposure), both written as a pcalib tab
 
 * :mod:`~emulator.calibration.stack_engel2016`: a static stack at several exposure times
   (:func:`calibrate_stack`, :func:`fit_inverse_response`; Engel, Usenko and Cremers 2016),
-  with a check that flags an image whose exposure time does not fit the others;
+  with :mod:`~emulator.calibration.exposure_check`, which names an image whose exposure
+  time does not fit the others;
 * :mod:`~emulator.calibration.insitu_grossberg2003`: a recording's own bracket sweeps
   (:func:`calibrate_from_recording`, :func:`comparagram_pairs`, :func:`fit_comparametric`;
   Grossberg and Nayar 2003);
