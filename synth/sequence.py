@@ -214,7 +214,8 @@ def load_camera(sequence_path: str | os.PathLike) -> Camera:
     if not isinstance(desc, dict) or "white_level" not in desc:
         raise SynthError(f"{meta_path}: no readable camera description ('camera' with a 'white_level')")
     top = max(PCALIB_TABLE_TOP, int(desc["white_level"]))
-    table = read_response(root / "calibration" / "response.txt", white_level=top)
+    table = read_response(root / "calibration" / "response.txt", white_level=top,
+                          black_level=int(desc.get("black_level", 0)))
     response = CameraResponse(table.g, top, 0, str(desc.get("response", table.name)))
     return Camera.from_dict(desc, response)
 

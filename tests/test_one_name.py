@@ -290,7 +290,7 @@ def test_one_white_level_default(tmp_path):
     # the synthetic camera and the calibration numerics
     from synth import Camera
 
-    from emulator.calibrate import estimate_noise_dn, fit_comparametric, fit_inverse_response
+    from emulator.calibration import estimate_noise_dn, fit_comparametric, fit_inverse_response
 
     assert Camera().white_level == BOREALHDR_WHITE_LEVEL
     for fn in (estimate_noise_dn, fit_inverse_response, fit_comparametric):

@@ -45,7 +45,7 @@ import numpy as np
 if __package__ in (None, ""):  # run as a script: make the repository importable
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from emulator.calibrate import (  # noqa: E402
+from emulator.calibration import (  # noqa: E402
     CalibrationResult,
     calibrate_from_recording,
     calibrate_stack,

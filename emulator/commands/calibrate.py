@@ -1,12 +1,17 @@
-"""``exposim calibrate``: recover the inverse camera response (pcalib file + plot).
+"""``exposim calibrate``: recover the inverse camera response (pcalib file + plot), or the noise model.
 
-Two sources::
+::
 
     exposim calibrate STACK -o response.txt                 # static stack, TUM layout (ALS)
     exposim calibrate --from-recording SEQ -o response.txt  # a recording's own sweeps
+    exposim calibrate --noise SEQ -o noise.json             # noise model from the sweeps
 
-The plot goes beside the output as ``<output stem>.png``.  Existing outputs are kept
-unless ``--force``.
+The response plot goes beside the output as ``<output stem>.png``.  ``--noise`` estimates
+the conversion gain, read noise and full well in situ (photon transfer from triples of
+consecutive brackets, :func:`emulator.noise.estimate_noise_model`) through the
+recording's response (:func:`emulator.io.borealhdr.sequence_response`) and writes the
+JSON of :mod:`emulator.io.noisemodel` that ``exposim run --noise consistent`` reads.
+Existing outputs are kept unless ``--force``.
 """
 
 from __future__ import annotations
@@ -21,20 +26,25 @@ __all__ = ["register"]
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "calibrate",
-        help="recover the inverse camera response f^-1 from a static stack or a recording",
+        help="recover the inverse camera response f^-1 (stack or recording), or the noise model (--noise)",
         description=(
             "Recover the inverse camera response f^-1 and write it as a pcalib file (256 samples "
             "over DN 0..4095, g(4095) = 255) plus a plot <output stem>.png. From a static-scene "
             "stack in the TUM layout (STACK/images/*.png, STACK/times.txt: '<name> <timestamp_s> "
             "<exposure_ms>') by alternating least squares (Engel et al. 2016), or with "
             "--from-recording from a bracketed recording's own sweeps by histogram matching "
-            "(comparametric, Grossberg and Nayar 2003)."
+            "(comparametric, Grossberg and Nayar 2003). With --noise SEQ, estimate the noise model "
+            "(conversion gain, read noise, full well, with standard errors) in situ from the recording's "
+            "bracket triples and write it as JSON (for noise-consistent emulation)."
         ),
     )
     p.add_argument("stack", nargs="?", type=Path, help="stack folder (TUM layout: images/ and times.txt)")
     p.add_argument("--from-recording", type=Path, metavar="SEQ",
                    help="a BorealHDR-layout recording instead of a stack")
-    p.add_argument("-o", "--output", type=Path, required=True, help="pcalib file to write (e.g. response.txt)")
+    p.add_argument("--noise", type=Path, metavar="SEQ",
+                   help="estimate the noise model of a BorealHDR-layout recording (writes JSON)")
+    p.add_argument("-o", "--output", type=Path, required=True,
+                   help="file to write: pcalib (e.g. response.txt), or with --noise a JSON noise model")
     p.add_argument("--force", action="store_true", help="overwrite the output and its plot")
     p.add_argument("--knots", type=int, default=None,
                    help="knots of the piecewise-linear response (stack: 256, recording: 128)")
@@ -46,7 +56,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--black-level", type=int, default=None, help="stack: black level (default exposim.json or 0)")
     p.add_argument("--no-static-check", action="store_true",
                    help="stack: do not refuse a fit whose residual is far above the noise")
-    p.add_argument("--camera", choices=("left", "right", "both"), default="both", help="recording: cameras to use")
+    p.add_argument("--camera", choices=("left", "right", "both"), default="both",
+                   help="recording / --noise: cameras to use")
+    p.add_argument("--max-groups", type=int, default=None,
+                   help="--noise: at most this many bracket triples, spread over the recording (default all)")
     p.add_argument("--stride", type=int, default=4,
                    help="recording: read every n-th pixel of each Bayer plane (default 4)")
     p.add_argument("--no-score", action="store_true", help="recording: skip the cross-bracket score")
@@ -87,13 +100,15 @@ def _progress_bar(enabled: bool):
 
 
 def _calibrate(args) -> int:
-    from emulator.calibrate import calibrate_from_recording, calibrate_stack, cross_bracket_error
+    from emulator.calibration import calibrate_from_recording, calibrate_stack, cross_bracket_error
     from emulator.errors import ExposimError, OutputExistsError
     from emulator.io.pcalib import write_response
     from emulator.report.calibration import plot_calibration
 
-    if (args.stack is None) == (args.from_recording is None):
-        raise ExposimError("give either a STACK folder or --from-recording SEQ (not both)")
+    if sum(x is not None for x in (args.stack, args.from_recording, args.noise)) != 1:
+        raise ExposimError("give one of a STACK folder, --from-recording SEQ or --noise SEQ")
+    if args.noise is not None:
+        return _calibrate_noise(args)
     out = args.output
     plot_path = out.with_name(out.stem + ".png")
     if not args.force:
@@ -179,4 +194,56 @@ def _calibrate(args) -> int:
             print(f"cross-bracket error ({k}: {v.response_name}): median {v.median_pct:.3f} %, "
                   f"mean {v.mean_pct:.3f} % over {len(v.pairs)} emulations")
     print(f"wrote       {out} and {plot_path}")
+    return 0
+
+
+def _calibrate_noise(args) -> int:
+    """``--noise SEQ``: in-situ noise model of a recording, written as JSON."""
+    from emulator.errors import ExposimError, OutputExistsError
+    from emulator.io.borealhdr import load_sequence, sequence_response
+    from emulator.io.noisemodel import write_noise_model
+    from emulator.noise import bracket_groups, estimate_noise_model, json_safe
+
+    out = args.output
+    if out.exists() and not args.force:
+        raise OutputExistsError(f"{out}: exists; refusing to overwrite (use --force)")
+    if args.max_groups is not None and args.max_groups < 1:
+        raise ExposimError(f"--max-groups must be >= 1, got {args.max_groups}")
+    seq = load_sequence(args.noise)
+    response = sequence_response(seq)
+    cams = None if args.camera == "both" else (args.camera,)
+    progress, close = _progress_bar(not args.no_progress and not args.json)
+    try:
+        groups = bracket_groups(seq, cameras=cams, max_groups=args.max_groups, progress=progress)
+        estimate = estimate_noise_model(groups, response, name=f"in-situ:{seq.path}", progress=progress)
+    finally:
+        close()
+    write_noise_model(out, estimate, overwrite=args.force)
+
+    top = float(response.g[response.white_level])
+    full_well_std = estimate.gain_std * top
+    if args.json:
+        d = json_safe(estimate.to_dict())
+        d.update(output=str(out), sequence=str(seq.path), response=response.name,
+                 full_well_std=json_safe(full_well_std))
+        print(json.dumps(d))
+        return 0
+
+    def pm(value: float, std: float, fmt: str, unit: str) -> str:
+        if std == std:
+            return f"{value:{fmt}} +- {std:{fmt}} {unit}"
+        return f"{value:{fmt}} {unit} (standard error undetermined)"
+
+    spread = estimate.spread.get("gain_e_per_h", {})
+    print(f"method      in-situ photon transfer: {len(groups)} bracket group(s) of {seq.path}")
+    print(f"response    {response.name} (g({response.white_level}) = {top:.6g}; electrons = gain x g(DN))")
+    print(f"gain        {pm(estimate.gain_e_per_h, estimate.gain_std, '.4g', 'e- per unit of g')}")
+    print(f"read noise  {pm(estimate.read_noise_e, estimate.read_noise_std, '.3g', 'e- rms')}")
+    print(f"full well   {pm(estimate.full_well_e, full_well_std, '.4g', 'e-')} at DN {response.white_level}")
+    if spread.get("n"):
+        print(f"spread      per-group gain {spread['p16']:.4g}..{spread['p84']:.4g} (16th..84th percentile of "
+              f"{spread['n']} groups)")
+    for w in estimate.warnings:
+        print(f"warning     {w}")
+    print(f"wrote       {out}")
     return 0

@@ -281,5 +281,6 @@ def sequence_response(sequence: Sequence, path: str | os.PathLike | None = None)
             f"{sequence.path}: no response file found (looked for calibration/response.txt or "
             f"pcalib*.txt in the sequence and beside it); pass one explicitly"
         )
-    response = read_response(resp_path, white_level=max(PCALIB_TABLE_TOP, sequence.white_level))
+    response = read_response(resp_path, white_level=max(PCALIB_TABLE_TOP, sequence.white_level),
+                             black_level=sequence.black_level)
     return response.with_levels(white_level=sequence.white_level, black_level=sequence.black_level)

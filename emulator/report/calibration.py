@@ -25,7 +25,7 @@ def plot_calibration(
 
     Parameters
     ----------
-    result : emulator.calibrate.CalibrationResult
+    result : emulator.calibration.CalibrationResult
     path : path
         PNG to write (refused when it exists unless ``overwrite``).
     reference : CameraResponse, optional
