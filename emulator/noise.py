@@ -10,7 +10,7 @@ estimator of the noise figures from a recording's own brackets (:func:`bracket_g
 only file access here, a reader/writer pair meant to move into ``emulator/io``).
 numpy and OpenCV only.
 
-Sensor model (the one :mod:`synth.camera` implements), per Bayer site:
+Sensor model (the one :mod:`synth.imaging` implements), per Bayer site:
 
 * electrons ``e = G * g(DN)`` where g is the inverse response (:class:`CameraResponse`,
   linear exposure h in table units) and ``G`` the *conversion gain* in electrons per unit
