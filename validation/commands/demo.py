@@ -31,11 +31,13 @@ def _demo(args) -> int:
 
     from tqdm import tqdm
 
+    from scenes.commands.synth import stop_between_images
     from validation.demo import run_demo
 
     bars: dict[str, tqdm] = {}
 
     def progress(stage: str, done: int, total: int) -> None:
+        check()  # Ctrl-C: stop cleanly between images (rc 130)
         bar = bars.get(stage)
         if bar is None:
             for old in bars.values():
@@ -46,7 +48,8 @@ def _demo(args) -> int:
         bar.refresh()
 
     try:
-        result = run_demo(args.output, quick=args.quick, progress=progress)
+        with stop_between_images("exposim demo") as check:
+            result = run_demo(args.output, quick=args.quick, progress=progress)
     finally:
         for bar in bars.values():
             bar.close()
