@@ -38,6 +38,7 @@ __all__ = [
     "load_camera",
     "recording_metadata",
     "foreign_files",
+    "missing_files",
     "check_target",
     "new_staging",
     "write_manifest",
@@ -173,6 +174,17 @@ def foreign_files(out_dir: str | os.PathLike) -> list[str]:
         elif listed.get(rel) != size:
             out.append(rel if rel not in listed else f"{rel} (changed since synth wrote it)")
     return sorted(out)
+
+
+def missing_files(out_dir: str | os.PathLike) -> list[str]:
+    """Files :data:`MANIFEST_FILE` lists that are gone from the dataset (sorted); all if it has none."""
+    root = Path(out_dir)
+    if not (root / MANIFEST_FILE).is_file():
+        return [MANIFEST_FILE]
+    listed = read_metadata(root / MANIFEST_FILE).get("files")
+    if not isinstance(listed, dict):
+        return [MANIFEST_FILE]
+    return sorted(rel for rel in listed if not (root / rel).is_file())
 
 
 def check_target(out_dir: Path, overwrite: bool) -> None:

@@ -14,7 +14,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="run the main job end to end on the embedded synthetic default",
         description=(
             "Synthesise a small scene, emulate it, run the AE methods in closed loop and "
-            "write a short report into a new output folder."
+            "write a short report into a new output folder. The synthetic recording is kept in "
+            "the render cache ($EXPOSIM_CACHE, default ~/.cache/exposim/renders, under datasets/) "
+            "and reused by the next demo with the same configuration; the output folder holds "
+            "the run results only."
         ),
     )
     p.add_argument("-o", "--output", type=Path, default=None, help="output folder (default: a new exposim-demo-N)")
@@ -54,5 +57,7 @@ def _demo(args) -> int:
         for bar in bars.values():
             bar.close()
     print(result["report"])
-    print(f"\nexposim demo: wrote {result['output']} in {result['total_s']:.0f} s (report.md, results.json, figures)")
+    how = "reused from an earlier demo" if result["dataset_reused"] else "synthesised now, kept for the next demo"
+    print(f"\nexposim demo: recording {result['dataset']} ({how})")
+    print(f"exposim demo: wrote {result['output']} in {result['total_s']:.0f} s (report.md, results.json, figures)")
     return 0
