@@ -39,6 +39,14 @@ def test_synth_writes_a_loadable_dataset_with_ground_truth(tmp_path, capsys):
     # never overwrites
     assert main(args) == 1
     assert "exists" in capsys.readouterr().err
+    # --force keeps a file the user added: one line naming it, rc 1, the old dataset intact
+    (out / "ground_truth" / "notes.md").write_text("field notes")
+    assert main(args + ["--force"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("exposim synth: error:") and "ground_truth/notes.md" in err and len(err.splitlines()) == 1
+    assert (out / "ground_truth" / "notes.md").read_text() == "field notes" and (out / "exposim.json").is_file()
+    (out / "ground_truth" / "notes.md").unlink()
+    assert main(args + ["--force"]) == 0
 
 
 def test_synth_rejects_bad_arguments(tmp_path, capsys):
