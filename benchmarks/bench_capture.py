@@ -30,7 +30,7 @@ import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
 import synth  # noqa: E402
-from synth.camera import mean_electrons  # noqa: E402
+from synth.imaging import mean_electrons  # noqa: E402
 from synth.procedural import hdr_chart  # noqa: E402
 
 cv2.setNumThreads(1)

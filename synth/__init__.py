@@ -2,7 +2,9 @@
 
 * :class:`Camera` + :func:`capture` turn HDR radiance into raw Bayer DN the way a
   machine-vision camera does (response, shot and read noise, vignetting, mosaic,
-  quantisation, clipping), with an exact noiseless mode (:mod:`synth.camera`).
+  quantisation, clipping), with an exact noiseless mode: the camera's parameters in
+  :mod:`synth.camera`, the model in :mod:`synth.imaging`, its noise and quantiser in
+  :mod:`synth.sensor`, the presets in :mod:`synth.presets`.
 * :func:`capture_sequence` turns a radiance source into a BorealHDR-layout recording plus
   its ground truth (:mod:`synth.sequence`).
 * :mod:`synth.procedural` makes HDR radiance without Mitsuba (a textured chart, and a
@@ -12,7 +14,10 @@ Imports only :mod:`emulator` from this project.
 """
 
 from synth import procedural
-from synth.camera import PRESETS, Camera, capture, noise_model_g
+from synth.camera import Camera
+from synth.imaging import capture
+from synth.presets import PRESETS
+from synth.sensor import noise_model_g
 from synth.sequence import (
     BASELINE_M,
     BRACKETS_MS,

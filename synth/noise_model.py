@@ -6,7 +6,7 @@
 camera's electrons are ``h / h_per_electron`` with ``h = g(DN)``, so the conversion gain is
 ``1 / h_per_electron = full_well_e / g(white_level)`` electrons per unit of h, exactly; the
 read noise is the camera's.  Shot noise, read noise, quantisation and clipping are then the
-same model on both sides (:mod:`synth.camera`, step 2-4).
+same model on both sides (:mod:`synth.imaging`, steps 2-4).
 """
 
 from __future__ import annotations

@@ -19,7 +19,7 @@ import math
 import cv2
 import numpy as np
 
-from synth.camera import BOREALHDR_FOV_X_DEG, REFERENCE_RADIANCE
+from synth.presets import BOREALHDR_FOV_X_DEG, REFERENCE_RADIANCE
 from synth.errors import SourceError, SynthError
 
 __all__ = ["hdr_chart", "TranslatingChart", "WALK_SPEED_M_S"]

@@ -25,8 +25,9 @@ ignores the rest; every file goes through :mod:`emulator.io`)::
 Poses are 4x4 camera-to-world in the camera frame x right, y down, z forward.  The whole
 recording is written into a hidden staging folder beside ``out_dir`` and renamed into place
 at the end, so an interrupted run leaves no dataset (and no file) under a final name; an
-existing non-empty ``out_dir`` is replaced only with ``overwrite=True``, and only if it is an
-exposim dataset.
+existing non-empty ``out_dir`` is replaced only with ``overwrite=True``, only if it is an
+exposim dataset, and never when it holds files synth did not write (:mod:`synth.dataset`,
+which also writes the description files and lists every file in ``exposim-files.json``).
 """
 
 from __future__ import annotations
@@ -34,29 +35,30 @@ from __future__ import annotations
 import math
 import os
 import shutil
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from emulator.errors import OutputExistsError
-from emulator.io.borealhdr import (
-    CAMERA_FOLDERS,
-    METADATA_FILE,
-    exposure_folder_name,
-    read_recording_metadata,
-    write_frame,
-    write_recording_metadata,
-)
-from emulator.io.camera_info import CameraInfo, write_camera_info
+from emulator.io.borealhdr import CAMERA_FOLDERS, exposure_folder_name, write_frame, write_recording_metadata
+from emulator.io.camera_info import write_camera_info
 from emulator.io.exr import write_exr
-from emulator.io.pcalib import PCALIB_TABLE_TOP, read_response, write_pcalib
+from emulator.io.pcalib import write_pcalib
 from emulator.io.png import write_png16
 from emulator.io.tum import write_tum
-from emulator.response import CameraResponse
-from synth.camera import Camera, _extend_table, capture, check_exposure_ms
+from synth.camera import Camera, check_exposure_ms
+from synth.dataset import (
+    camera_info,
+    check_target,
+    load_camera,
+    new_staging,
+    publish,
+    recording_metadata,
+    write_manifest,
+)
 from synth.errors import RadianceError, SourceError, SynthError
+from synth.imaging import capture
+from synth.presets import response_table
 
 __all__ = [
     "BRACKETS_MS",
@@ -169,57 +171,6 @@ def shot_schedule(
     return shots
 
 
-# ---------------------------------------------------------------------------- calibration files
-def camera_info(camera: Camera, side: str, baseline_m: float) -> CameraInfo:
-    """ROS camera_info of a synthetic camera: no distortion, identity rectification.
-
-    The projection matrix carries the stereo baseline as ``P[0, 3] = -fx * baseline_m`` for
-    the right camera (0 for the left one), as in the BorealHDR calibration files.
-    """
-    k = camera.intrinsics()
-    fx, fy, cx, cy = k[0, 0], k[1, 1], k[0, 2], k[1, 2]
-    tx = -fx * baseline_m if side == "right" else 0.0
-    return CameraInfo(
-        width=camera.width,
-        height=camera.height,
-        K=np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1]], dtype=np.float64),
-        D=np.zeros(5),
-        R=np.eye(3),
-        P=np.array([[fx, 0, cx, tx], [0, fy, cy, 0], [0, 0, 1, 0]], dtype=np.float64),
-        distortion_model="plumb_bob",
-        name=f"exposim_synth/{side}",
-    )
-
-
-def _response_table(camera: Camera) -> np.ndarray:
-    """g over DN 0..max(4095, white): what ``emulator.io.borealhdr.sequence_response`` reads back.
-
-    Above the white level the table continues the last step; those DN never occur (the
-    camera and the emulator clip at white), so they change no output.
-    """
-    return _extend_table(np.asarray(camera.response.g), max(PCALIB_TABLE_TOP, camera.white_level))
-
-
-def load_camera(sequence_path: str | os.PathLike) -> Camera:
-    """The :class:`Camera` of a dataset written by :func:`capture_sequence`.
-
-    Reads ``exposim.json`` and the exact response in ``calibration/response.txt``.
-    """
-    root = Path(sequence_path)
-    meta_path = root / METADATA_FILE
-    if not meta_path.is_file():
-        raise FileNotFoundError(f"{meta_path}: not found (not a synthetic dataset?)")
-    meta = read_recording_metadata(root)
-    desc = meta.get("camera")
-    if not isinstance(desc, dict) or "white_level" not in desc:
-        raise SynthError(f"{meta_path}: no readable camera description ('camera' with a 'white_level')")
-    top = max(PCALIB_TABLE_TOP, int(desc["white_level"]))
-    table = read_response(root / "calibration" / "response.txt", white_level=top,
-                          black_level=int(desc.get("black_level", 0)))
-    response = CameraResponse(table.g, top, 0, str(desc.get("response", table.name)))
-    return Camera.from_dict(desc, response)
-
-
 # ---------------------------------------------------------------------------- sources
 def _check_pose(pose, where: str) -> np.ndarray:
     m = np.asarray(pose, dtype=np.float64) if isinstance(pose, (np.ndarray, list, tuple)) else None
@@ -272,30 +223,6 @@ def _describe(source, description) -> object:
 
 
 # ---------------------------------------------------------------------------- writer
-def _prepare_target(out_dir: Path, overwrite: bool) -> None:
-    if out_dir.exists() or out_dir.is_symlink():
-        if not out_dir.is_dir():
-            raise OutputExistsError(f"{out_dir}: exists and is not a folder; refusing to replace it")
-        if not overwrite and any(out_dir.iterdir()):
-            raise OutputExistsError(f"{out_dir}: exists; refusing to overwrite (use overwrite=True)")
-        if any(out_dir.iterdir()) and not (out_dir / METADATA_FILE).is_file():
-            raise OutputExistsError(
-                f"{out_dir}: exists and is not an exposim dataset (no {METADATA_FILE}); refusing to replace it"
-            )
-
-
-def _publish(staging: Path, out_dir: Path, overwrite: bool) -> None:
-    """Rename the finished staging folder to ``out_dir`` (replacing an old dataset if asked)."""
-    _prepare_target(out_dir, overwrite)
-    old = None
-    if out_dir.exists():
-        old = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.old-", dir=out_dir.parent))
-        os.replace(out_dir, old / out_dir.name)
-    os.replace(staging, out_dir)
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)
-
-
 def capture_sequence(
     source,
     out_dir: str | os.PathLike,
@@ -363,8 +290,9 @@ def capture_sequence(
     save_radiance : bool
         Also write each shot's radiance as OpenEXR.
     overwrite : bool
-        Replace an existing ``out_dir`` that holds an exposim dataset (an empty folder is
-        always used).
+        Replace an existing ``out_dir`` that holds an exposim dataset and nothing else
+        (an empty folder is always used); a file synth did not write (or one changed since)
+        is never deleted: :func:`synth.dataset.check_target` refuses, naming it.
     progress : callable or None
         Called as ``progress(shots_done, shots_total)`` after every shot.
     source_description : JSON-ready object or None
@@ -379,14 +307,15 @@ def capture_sequence(
     ------
     OutputExistsError
         ``out_dir`` exists, is not empty and ``overwrite`` is False, or is not an exposim
-        dataset (checked before any work and again before the final rename).
+        dataset, or holds files synth did not write (checked before any work and again
+        before the final rename).
     SourceError, RadianceError, SynthError
         A bad source frame (named by shot, camera and timestamp) or bad arguments.
     """
     if not isinstance(camera, Camera):
         raise SynthError(f"camera must be a synth.Camera, got {type(camera).__name__}")
     out_dir = Path(out_dir)
-    _prepare_target(out_dir, overwrite)
+    check_target(out_dir, overwrite)
     sides = ("left", "right") if stereo else ("left",)
     if stereo:
         try:
@@ -416,8 +345,7 @@ def capture_sequence(
     shots = shot_schedule(n_shots, brackets_ms=brackets, fps=fps, start_bracket_index=start_bracket_index,
                           start_time_ns=start_time_ns)
 
-    out_dir.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.partial-", dir=out_dir.parent))
+    staging = new_staging(out_dir)
     try:
         poses = {side: [] for side in sides}
         for shot in shots:
@@ -460,16 +388,18 @@ def capture_sequence(
             write_tum(gt_dir / f"poses_{side}.txt", [s.timestamp_ns for s in shots], np.stack(poses[side]),
                       overwrite=False)
         calib = staging / "calibration"
-        write_pcalib(calib / "response.txt", _response_table(camera))
+        write_pcalib(calib / "response.txt", response_table(camera.response, camera.white_level))
         for side in sides:
             write_camera_info(calib / f"{side}.yaml", camera_info(camera, side, baseline_m if stereo else 0.0))
-        meta = _metadata(camera, shots, brackets, fps=fps, stereo=stereo, baseline_m=baseline_m, seed=seed,
-                         noise=noise, gt_exposures=gt_exposures, gt_captures=gt_captures,
-                         save_radiance=save_radiance, start_time_ns=start_time_ns,
-                         start_bracket_index=start_bracket_index,
-                         source=_describe(source, source_description))
+        meta = recording_metadata(camera, shots, brackets, generator=GENERATOR,
+                                  gt_captures_kinds=GT_CAPTURES[gt_captures], fps=fps, stereo=stereo,
+                                  baseline_m=baseline_m, seed=seed, noise=noise, gt_exposures=gt_exposures,
+                                  save_radiance=save_radiance, start_time_ns=start_time_ns,
+                                  start_bracket_index=start_bracket_index,
+                                  source=_describe(source, source_description))
         write_recording_metadata(staging, meta)
-        _publish(staging, out_dir, overwrite)
+        write_manifest(staging)
+        publish(staging, out_dir, overwrite)
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
         raise
@@ -486,35 +416,3 @@ def _check_rig(left: np.ndarray, right: np.ndarray, baseline_m: float, where: st
             f"{baseline_m:g} m along its x axis (expected position {expected.tolist()}, got "
             f"{right[:3, 3].tolist()})"
         )
-
-
-def _metadata(camera: Camera, shots: list[Shot], brackets, *, fps, stereo, baseline_m, seed, noise,
-              gt_exposures, gt_captures, save_radiance, start_time_ns, start_bracket_index, source) -> dict:
-    from emulator import __version__
-
-    return {
-        "generator": {"name": GENERATOR, "version": __version__},
-        "white_level": camera.white_level,
-        "black_level": camera.black_level,
-        "brackets_ms": list(brackets),
-        "fps": float(fps),
-        "cameras": ["left", "right"] if stereo else ["left"],
-        "baseline_m": baseline_m if stereo else None,
-        "n_shots": len(shots),
-        "n_cycles": shots[-1].cycle + 1,
-        "start_bracket_index": int(start_bracket_index),
-        "start_time_ns": int(start_time_ns),
-        "timestamps": "trigger instant of each shot; the scene is sampled there (no motion blur)",
-        "seed": int(seed),
-        "seeds": "bracket: SeedSequence([seed, camera (0 left, 1 right), shot]); noisy ground truth at "
-                 "gt_exposures_ms[j]: SeedSequence([seed, camera, shot, 1 + j])",
-        "noise": bool(noise),
-        "gt_exposures_ms": list(gt_exposures),
-        "gt_captures": list(GT_CAPTURES[gt_captures]) if gt_exposures else [],
-        "save_radiance": bool(save_radiance),
-        "radiance_units": "W m^-2 sr^-1 (float32, linear)",
-        "poses": "ground_truth/poses_<camera>.txt, TUM (timestamp_s tx ty tz qx qy qz qw), camera-to-world, "
-                 "camera frame x right, y down, z forward",
-        "camera": camera.to_dict(),
-        "source": source,
-    }

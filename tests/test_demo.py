@@ -1,23 +1,36 @@
 """``exposim demo --quick`` runs the whole chain: synth -> emulation check -> 7 AE methods -> features/VO."""
 
 import json
+from pathlib import Path
 
 import pytest
 
 from emulator.cli import main
 from emulator.errors import OutputExistsError
-from validation.demo import new_output_dir, run_demo
+from validation.demo import demo_config, demo_dataset, demo_dataset_key, new_output_dir, run_demo
 
 pytestmark = [pytest.mark.render, pytest.mark.slow]
 
 
-def test_quick_demo_end_to_end(tmp_path, capsys):
+def _tree(root: Path) -> dict[str, tuple[int, int]]:
+    return {str(p.relative_to(root)): (p.stat().st_size, p.stat().st_mtime_ns) for p in root.rglob("*") if p.is_file()}
+
+
+def test_quick_demo_end_to_end(tmp_path, capsys, monkeypatch):
+    cache = tmp_path / "cache"
+    monkeypatch.setenv("EXPOSIM_CACHE", str(cache))
     out = tmp_path / "demo"
     assert main(["demo", "--quick", "-q", "-o", str(out)]) == 0
     printed = capsys.readouterr().out
-    assert "# exposim demo" in printed and f"wrote {out}" in printed
+    assert "# exposim demo" in printed and f"wrote {out}" in printed and "synthesised now" in printed
     assert (out / "report.md").read_text() in printed
     results = json.loads((out / "results.json").read_text())
+    # the recording lives in the render cache, keyed by its configuration; the demo folder
+    # holds the run results only (issue 11: every demo left another full copy)
+    dataset = Path(results["dataset"])
+    assert dataset == cache / "datasets" / f"demo-{demo_dataset_key(demo_config(quick=True))}"
+    assert results["dataset_reused"] is False and (dataset / "exposim.json").is_file()
+    assert not (out / "dataset").exists() and not any(p.name == "exposim.json" for p in out.rglob("*"))
     assert (out / "report.md").is_file() and (out / "run" / "exposure.png").is_file()
     assert set(results["run"]["methods"]) == {
         "fixed", "classical-30", "classical-50", "classical-70", "shim", "zhang", "kim"
@@ -30,6 +43,34 @@ def test_quick_demo_end_to_end(tmp_path, capsys):
     assert (out / "features" / "results.json").is_file() and (out / "vo" / "results.json").is_file()
     with pytest.raises(OutputExistsError):
         run_demo(out, quick=True)
+    # a second demo reads the same recording (not a byte of it rewritten) into a new folder
+    before = _tree(dataset)
+    again = tmp_path / "demo-again"
+    assert main(["demo", "--quick", "-q", "-o", str(again)]) == 0
+    assert f"recording {dataset} (reused from an earlier demo)" in capsys.readouterr().out
+    second = json.loads((again / "results.json").read_text())
+    assert second["dataset"] == str(dataset) and second["dataset_reused"] is True
+    assert second["emulation"] == emu  # same recording, same figures
+    assert _tree(dataset) == before and (out / "results.json").read_text() == json.dumps(results, indent=1) + "\n"
+    dataset_bytes = sum(size for size, _ in before.values())
+    assert sum(size for size, _ in _tree(again).values()) < dataset_bytes
+
+
+def test_damaged_cached_recording_is_written_again_and_user_files_are_kept(tmp_path, monkeypatch):
+    monkeypatch.setenv("EXPOSIM_CACHE", str(tmp_path / "cache"))
+    cfg = dict(demo_config(quick=True), n_cycles=1)
+    dataset, reused = demo_dataset(cfg)
+    assert not reused
+    assert demo_dataset(cfg) == (dataset, True)
+    png = sorted((dataset / "camera_left").rglob("*.png"))[0]
+    good = png.read_bytes()
+    png.unlink()  # damaged: written again, not reused
+    assert demo_dataset(cfg) == (dataset, False) and png.read_bytes() == good
+    (dataset / "notes.txt").write_text("mine")
+    png.unlink()
+    with pytest.raises(OutputExistsError, match="notes.txt"):
+        demo_dataset(cfg)
+    assert (dataset / "notes.txt").read_text() == "mine"
 
 
 def test_default_output_never_overwrites(tmp_path):

@@ -17,7 +17,7 @@ from emulator.errors import ExposimError
 from emulator.io.pcalib import read_pcalib
 from emulator.response import CameraResponse
 from synth import Camera, capture
-from synth.camera import check_radiance, mean_electrons
+from synth.imaging import check_radiance, mean_electrons
 from synth.errors import CameraError, RadianceError, SynthError
 from synth.response_fit import BOREALHDR_FIT, inverse_response_curve
 

@@ -39,6 +39,14 @@ def test_synth_writes_a_loadable_dataset_with_ground_truth(tmp_path, capsys):
     # never overwrites
     assert main(args) == 1
     assert "exists" in capsys.readouterr().err
+    # --force keeps a file the user added: one line naming it, rc 1, the old dataset intact
+    (out / "ground_truth" / "notes.md").write_text("field notes")
+    assert main(args + ["--force"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("exposim synth: error:") and "ground_truth/notes.md" in err and len(err.splitlines()) == 1
+    assert (out / "ground_truth" / "notes.md").read_text() == "field notes" and (out / "exposim.json").is_file()
+    (out / "ground_truth" / "notes.md").unlink()
+    assert main(args + ["--force"]) == 0
 
 
 def test_synth_rejects_bad_arguments(tmp_path, capsys):
@@ -46,3 +54,44 @@ def test_synth_rejects_bad_arguments(tmp_path, capsys):
     assert "n_cycles must be >= 1" in capsys.readouterr().err
     assert main(["synth", "forest_winter", "-o", str(tmp_path / "y"), "--gt-exposures", "3,a", "--quiet"]) == 1
     assert "--gt-exposures" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_ctrl_c_during_rendering_stops_cleanly_with_130(tmp_path):
+    """issue 11: SIGINT during rendering gave a Dr.Jit traceback and rc 1.
+
+    A real ``exposim synth`` sub-process (empty render cache, so every image is rendered) gets
+    SIGINT once its first bracket PNG is in the staging folder, i.e. while it renders: at
+    256 spp the render kernel takes most of the time between images, which is where the
+    interrupt used to surface inside Dr.Jit (without the fix this test fails most times).
+    """
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "walk"
+    env = dict(os.environ, EXPOSIM_CACHE=str(tmp_path / "cache"))
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "emulator.cli", "synth", "forest_winter", "-o", str(out), "--size", "64x40",
+         "--spp", "256", "--cycles", "200", "--quiet"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env,
+    )
+    try:
+        deadline = time.monotonic() + 120
+        while not list(tmp_path.glob(".walk.partial-*/camera_left/*/*.png")):
+            if proc.poll() is not None or time.monotonic() > deadline:
+                pytest.skip(f"exposim synth did not start rendering in time (rc {proc.returncode})")
+            time.sleep(0.02)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    err = err.decode()
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and "drjit" not in err.lower()
+    assert err.strip().splitlines()[-1] == "exposim synth: interrupted"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cache"]  # no dataset, no staging folder

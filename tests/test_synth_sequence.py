@@ -5,6 +5,8 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import os
+import stat
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +21,9 @@ from emulator.io.borealhdr import exposure_folder_name, load_sequence, sequence_
 from emulator.io.png import read_png16
 from emulator.errors import OutputExistsError
 from emulator.io.exr import read_exr
+from emulator.io.files import atomic_write_bytes, make_staging_dir
 from synth import Camera, capture_sequence, shot_schedule
+from synth.dataset import MANIFEST_FILE, foreign_files
 from synth.errors import RadianceError, SourceError, SynthError
 from synth.procedural import TranslatingChart
 
@@ -182,7 +186,8 @@ def test_same_seed_gives_identical_files(tmp_path, camera, chart):
     kw = dict(n_shots=7, gt_exposures_ms=(5.0,), gt_captures="noisy", save_radiance=True, seed=9)
     a = _hashes(capture_sequence(chart, tmp_path / "a", camera, **kw))
     b = _hashes(capture_sequence(chart, tmp_path / "b", camera, **kw))
-    assert a == b and len(a) == 7 * 2 * 3 + 6
+    # 7 shots x 2 cameras x (bracket, ground truth, radiance), 6 description files, the manifest
+    assert a == b and len(a) == 7 * 2 * 3 + 6 + 1
     c = _hashes(capture_sequence(chart, tmp_path / "c", camera, **{**kw, "seed": 10}))
     differs = [k for k in a if k.startswith("camera_") and a[k] != c[k]]
     assert len(differs) == 14
@@ -207,6 +212,69 @@ def test_existing_dataset_is_not_overwritten_unless_asked(tmp_path, camera, char
     empty.mkdir()
     capture_sequence(chart, empty, camera, n_shots=1, stereo=False)  # an empty folder is used as is
     assert (empty / "exposim.json").is_file()
+
+
+def test_force_never_deletes_files_synth_did_not_write(tmp_path, camera, chart):
+    """issue 11: ``synth --force`` deleted files a user had added inside the old dataset."""
+    out = capture_sequence(chart, tmp_path / "seq", camera, n_shots=2, stereo=False)
+    manifest = json.loads((out / MANIFEST_FILE).read_text())["files"]
+    assert set(manifest) == set(_hashes(out)) - {MANIFEST_FILE}  # every file synth wrote, no other
+    (out / "notes.txt").write_text("my notes")
+    (out / "camera_left" / "labels").mkdir()
+    (out / "camera_left" / "labels" / "0.json").write_text("{}")
+    before = _hashes(out)
+    with pytest.raises(OutputExistsError) as err:
+        capture_sequence(chart, out, camera, n_shots=3, stereo=False, overwrite=True)
+    message = str(err.value)
+    assert "2 file(s) that exposim synth did not write" in message
+    assert "camera_left/labels/0.json" in message and "notes.txt" in message and "nothing was changed" in message
+    assert _hashes(out) == before  # old dataset and the user's files untouched
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["seq"]  # no staging folder left behind
+    # a file synth wrote but the user changed since counts as the user's
+    (out / "notes.txt").unlink()
+    (out / "camera_left" / "labels" / "0.json").unlink()
+    png = next((out / "camera_left").rglob("*.png"))
+    png.write_bytes(png.read_bytes() + b"edited")
+    with pytest.raises(OutputExistsError, match="changed since synth wrote it"):
+        capture_sequence(chart, out, camera, n_shots=3, stereo=False, overwrite=True)
+    assert png.read_bytes().endswith(b"edited")
+    png.unlink()
+    # only synth's own files left (one missing): replaced, and the empty user folder goes with it
+    capture_sequence(chart, out, camera, n_shots=3, stereo=False, overwrite=True)
+    assert len(list((out / "camera_left").rglob("*.png"))) == 3 and not (out / "camera_left" / "labels").exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["seq"]
+
+
+def test_force_on_a_dataset_without_manifest_judges_by_the_layout(tmp_path, camera, chart):
+    out = capture_sequence(chart, tmp_path / "seq", camera, n_shots=2, gt_exposures_ms=(5.0,),
+                           gt_captures="both", save_radiance=True)
+    (out / MANIFEST_FILE).unlink()  # as written before the manifest existed
+    (out / "ground_truth" / "my_poses.txt").write_text("0 0 0 0 0 0 0 1\n")
+    with pytest.raises(OutputExistsError, match=r"1 file\(s\).*ground_truth/my_poses.txt"):
+        capture_sequence(chart, out, camera, n_shots=2, overwrite=True)
+    assert (out / "ground_truth" / "my_poses.txt").is_file()
+    assert foreign_files(out) == ["ground_truth/my_poses.txt"]  # every file synth wrote matches its layout
+    (out / "ground_truth" / "my_poses.txt").unlink()
+    capture_sequence(chart, out, camera, n_shots=1, overwrite=True)
+    assert len(list((out / "camera_left").rglob("*.png"))) == 1 and (out / MANIFEST_FILE).is_file()
+
+
+@pytest.mark.parametrize("umask, folder_mode, file_mode", [(0o022, 0o755, 0o644), (0o077, 0o700, 0o600)])
+def test_dataset_permissions_follow_the_umask(tmp_path, camera, chart, umask, folder_mode, file_mode):
+    """issue 11: datasets came out 0700 and PNGs 0600 under umask 0022 (tempfile's modes)."""
+    old = os.umask(umask)
+    try:
+        out = capture_sequence(chart, tmp_path / "seq", camera, n_shots=2, gt_exposures_ms=(5.0,),
+                               save_radiance=True)
+        staging = make_staging_dir(tmp_path, ".x-")
+        written = atomic_write_bytes(tmp_path / "plain.bin", b"x")
+    finally:
+        os.umask(old)
+    folders = [out, *(p for p in out.rglob("*") if p.is_dir())]
+    files = [p for p in out.rglob("*") if p.is_file()]
+    assert len(folders) == 17 and len(files) == 2 * 2 * 3 + 7  # every folder and file of the layout
+    assert {stat.S_IMODE(p.stat().st_mode) for p in folders + [staging]} == {folder_mode}
+    assert {stat.S_IMODE(p.stat().st_mode) for p in files + [written]} == {file_mode}
 
 
 @pytest.mark.parametrize("failure", [RuntimeError, KeyboardInterrupt])

@@ -96,7 +96,7 @@ def study_radiance(width: int, height: int, spp: int, source: str, cache_dir=Non
 
 def electrons_per_ms(radiance: np.ndarray, camera) -> np.ndarray:
     """Mean electrons per site at 1 ms (vignetting and sensitivities included)."""
-    from synth.camera import mean_electrons
+    from synth.imaging import mean_electrons
 
     return mean_electrons(radiance, 1.0, camera)
 
@@ -116,9 +116,8 @@ def stack_exposures(e1: np.ndarray, camera, n: int, *, low_dn: int = 8, jitter: 
 
 
 def _capture(radiance, exposure_ms, camera, *, seed, noise=True) -> np.ndarray:
-    """synth's forward model (imported from synth.camera: the package attribute ``synth.capture``
-    is shadowed by the submodule of the same name)."""
-    from synth.camera import capture
+    """synth's forward model (:func:`synth.imaging.capture`)."""
+    from synth.imaging import capture
 
     return capture(radiance, float(exposure_ms), camera, seed=seed, noise=noise)
 

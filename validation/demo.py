@@ -2,15 +2,21 @@
 
 1. Synthesise a short stereo walk through ``forest_winter`` (Mitsuba render -> synthetic
    BorealHDR camera with noise), with noiseless ground-truth captures at a few target
-   exposures at every shot instant.
+   exposures at every shot instant.  The recording goes into the dataset cache
+   (``<render cache>/datasets/demo-<key>``, :func:`demo_dataset`), keyed by everything that
+   decides its bytes, so a second demo with the same configuration reads it instead of
+   writing another full copy (62 of the 74 MB of a default demo folder).
 2. Check the emulator against that exact ground truth (HigherNoSat, per target exposure).
 3. Run all seven AE methods in closed loop on the recording (``emulator.playback``).
 4. Reduced feature (SIFT uniformity, matches) and stereo-VO benchmarks on the run.
-5. Write ``report.md`` (tables + figures) and ``results.json`` in a new output folder.
+5. Write ``report.md`` (tables + figures) and ``results.json`` in a new output folder; it
+   holds the run results only, and names the recording it used.
 """
 
 from __future__ import annotations
 
+import hashlib
+import inspect
 import time
 from pathlib import Path
 
@@ -18,9 +24,17 @@ import numpy as np
 
 from emulator.io.files import REPORT_FILE, RESULTS_FILE, read_results, write_results, write_text
 
-__all__ = ["run_demo", "demo_config", "emulation_check", "new_output_dir"]
+__all__ = ["run_demo", "demo_config", "emulation_check", "new_output_dir", "demo_dataset", "demo_dataset_key"]
 
 GT_EXPOSURES_MS = (0.5, 3.0, 6.0, 12.0, 24.0, 45.0)
+#: Sub-folder of the render cache that holds the demo's synthetic recordings.
+DATASETS_FOLDER = "datasets"
+#: Bump when the meaning of the key changes.
+_DATASET_KEY_VERSION = 1
+#: Modules whose source decides the bytes of the recording besides the renders (the render
+#: cache key already covers the scene code): the walk, the camera model and the writer.
+_DATASET_MODULES = ("scenes.synthesize", "scenes.trajectory", "synth.camera", "synth.imaging", "synth.sensor",
+                    "synth.presets", "synth.response_fit", "synth.sequence", "synth.dataset")
 
 
 def demo_config(quick: bool = False) -> dict:
@@ -43,6 +57,77 @@ def new_output_dir(base: str | Path = "exposim-demo") -> Path:
         if not cand.exists():
             return cand
         i += 1
+
+
+def _synth_kwargs(cfg: dict) -> dict:
+    """The :func:`scenes.synthesize.synthesize` arguments of the demo's recording."""
+    return dict(n_cycles=cfg["n_cycles"], width=cfg["width"], height=cfg["height"], spp=cfg["spp"],
+                gt_exposures_ms=GT_EXPOSURES_MS, gt_captures="noiseless", seed=0)
+
+
+def demo_dataset_key(cfg: dict) -> str:
+    """Key (16 hex) of the demo's recording: the scene, the synthesis arguments, the source of
+    the modules that write it (:data:`_DATASET_MODULES`), exposim, Mitsuba and Dr.Jit versions."""
+    import importlib
+
+    import scenes
+    from emulator import __version__
+    from scenes.cache import canonical_json, library_versions
+
+    scene = scenes.get_scene(cfg["scene"], seed=0)
+    code = hashlib.sha256()
+    for name in _DATASET_MODULES:
+        code.update(name.encode())
+        code.update(inspect.getsource(importlib.import_module(name)).encode())
+    material = {"v": _DATASET_KEY_VERSION, "scene": scene.key_material(), "synthesize": _synth_kwargs(cfg),
+                "code": code.hexdigest(), "exposim": __version__, "versions": library_versions()}
+    return hashlib.sha256(canonical_json(material).encode()).hexdigest()[:16]
+
+
+def demo_dataset(cfg: dict, cache_dir=None, progress=None) -> tuple[Path, bool]:
+    """The demo's synthetic recording, from the dataset cache or synthesised into it.
+
+    Parameters
+    ----------
+    cfg : dict
+        :func:`demo_config`.
+    cache_dir : path, optional
+        The render cache (default ``$EXPOSIM_CACHE`` or ``~/.cache/exposim/renders``); the
+        recording lives in ``cache_dir/datasets/demo-<key>`` (:func:`demo_dataset_key`).
+    progress : callable, optional
+        ``progress(done, total)`` while synthesising.
+
+    Returns
+    -------
+    (Path, bool)
+        The recording and whether it was reused.  A cached recording is reused only when
+        every file its manifest lists is present and unchanged; otherwise it is written
+        again (a file someone added to it is never deleted: that is refused, naming it).
+    """
+    import scenes
+    from emulator.errors import ExposimError, OutputExistsError
+    from scenes.cache import resolve_cache_dir
+    from scenes.synthesize import synthesize
+    from synth.dataset import foreign_files, missing_files
+
+    root = resolve_cache_dir(cache_dir)
+    if root is None:
+        raise ExposimError("the demo keeps its recording in the render cache; cache_dir=False is not supported")
+    path = root / DATASETS_FOLDER / f"demo-{demo_dataset_key(cfg)}"
+
+    def intact() -> bool:
+        return path.is_dir() and not missing_files(path) and not foreign_files(path)
+
+    if intact():
+        return path, True
+    scene = scenes.get_scene(cfg["scene"], seed=0)
+    try:
+        synthesize(scene, path, **_synth_kwargs(cfg), overwrite=path.exists(), progress=progress)
+    except OutputExistsError:
+        if not intact():  # not another demo that finished the same recording meanwhile
+            raise
+        return path, True
+    return path, False
 
 
 def emulation_check(dataset: Path, selector: str = "higher-no-sat") -> dict:
@@ -103,7 +188,7 @@ def emulation_check(dataset: Path, selector: str = "higher-no-sat") -> dict:
     }
 
 
-def run_demo(output=None, *, quick: bool = False, progress=None) -> dict:
+def run_demo(output=None, *, quick: bool = False, progress=None, cache_dir=None) -> dict:
     """Run the demo into ``output`` (default: a new ``exposim-demo-N``); nothing is printed.
 
     Parameters
@@ -116,19 +201,21 @@ def run_demo(output=None, *, quick: bool = False, progress=None) -> dict:
     progress : callable, optional
         ``progress(stage, done, total)``, called as each of the four stages advances
         (``stage`` is a short label such as ``"1/4 synthesise forest_winter"``).
+    cache_dir : path, optional
+        Render cache, which also holds the synthetic recording (:func:`demo_dataset`).
 
     Returns
     -------
     dict
-        ``output`` (the folder), ``report`` (the markdown of ``report.md``), ``total_s``.
+        ``output`` (the folder), ``report`` (the markdown of ``report.md``), ``total_s``,
+        ``dataset`` (the recording used) and ``dataset_reused`` (True when an earlier demo
+        had synthesised it).
     """
-    import scenes
     from emulator.errors import OutputExistsError
     from emulator.io.borealhdr import load_sequence
     from emulator.metrics.bench import bench_features, bench_vo
     from emulator.metrics.vo import VOParameters
     from emulator.playback import run_to_folder
-    from scenes.synthesize import synthesize
 
     def say(stage: str, done: int, total: int) -> None:
         if progress is not None:
@@ -142,16 +229,12 @@ def run_demo(output=None, *, quick: bool = False, progress=None) -> dict:
     t_start = time.perf_counter()
     timings = {}
 
-    # 1. synthetic recording -----------------------------------------------------------
-    scene = scenes.get_scene(cfg["scene"], seed=0)
-    stage = f"1/4 synthesise {scene.name}"
+    # 1. synthetic recording (from the dataset cache when an earlier demo made it) ------
+    stage = f"1/4 synthesise {cfg['scene']}"
     say(stage, 0, cfg["n_cycles"] * 6)
     t0 = time.perf_counter()
-    dataset = synthesize(
-        scene, out / "dataset", n_cycles=cfg["n_cycles"], width=cfg["width"], height=cfg["height"],
-        spp=cfg["spp"], gt_exposures_ms=GT_EXPOSURES_MS, gt_captures="noiseless", seed=0,
-        progress=lambda done, total: say(stage, done, total),
-    )
+    dataset, reused = demo_dataset(cfg, cache_dir, progress=lambda done, total: say(stage, done, total))
+    say(stage, cfg["n_cycles"] * 6, cfg["n_cycles"] * 6)
     timings["synthesise_s"] = time.perf_counter() - t0
 
     # 2. emulator against exact ground truth ----------------------------------------------
@@ -186,6 +269,7 @@ def run_demo(output=None, *, quick: bool = False, progress=None) -> dict:
     results = {
         "config": cfg,
         "dataset": str(dataset),
+        "dataset_reused": reused,
         "emulation": {k: v for k, v in emu.items() if k != "rows"},
         "run": run_summary,
         "features": feats,
@@ -193,9 +277,10 @@ def run_demo(output=None, *, quick: bool = False, progress=None) -> dict:
         "timings": timings,
     }
     write_results(out / RESULTS_FILE, results)
-    report = _report(out, cfg, emu, run_dir, feats, vo, timings)
+    report = _report(out, cfg, emu, run_dir, feats, vo, timings, dataset, reused)
     write_text(out / REPORT_FILE, report)
-    return {"output": out, "report": report, "total_s": timings["total_s"]}
+    return {"output": out, "report": report, "total_s": timings["total_s"], "dataset": dataset,
+            "dataset_reused": reused}
 
 
 def _method_rows(feats: dict, vo: dict, run_summary_path: Path) -> list[str]:
@@ -238,13 +323,18 @@ def _fmt(v) -> str:
         return str(v)
 
 
-def _report(out: Path, cfg: dict, emu: dict, run_dir: Path, feats: dict, vo: dict, timings: dict) -> str:
+def _report(out: Path, cfg: dict, emu: dict, run_dir: Path, feats: dict, vo: dict, timings: dict,
+            dataset: Path, reused: bool) -> str:
     lines = [
         "# exposim demo",
         "",
         f"Scene `{cfg['scene']}`, {cfg['n_cycles']} bracket cycles (1..32 ms, 22 frames/s), "
         f"{cfg['width']}x{cfg['height']} px, {cfg['spp']} spp, synthetic BorealHDR camera (noise on), stereo; "
         f"VO ratio test {cfg['vo_ratio']}.",
+        "",
+        f"Synthetic recording: `{dataset}` ("
+        + ("reused: an earlier demo with the same configuration synthesised it" if reused else "synthesised now")
+        + "; it lives in the render cache and is shared by every demo of this configuration).",
         "",
         "## Emulation against exact ground truth (HigherNoSat)",
         "",

@@ -25,7 +25,7 @@ import io
 import json
 import math
 import os
-import tempfile
+import secrets
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -37,6 +37,7 @@ __all__ = [
     "RESULTS_FILE",
     "REPORT_FILE",
     "atomic_write_bytes",
+    "make_staging_dir",
     "write_text",
     "read_text",
     "to_jsonable",
@@ -70,11 +71,10 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes, *, overwrite: bool 
     if not overwrite and (path.exists() or path.is_symlink()):
         raise OutputExistsError(f"{path}: exists; refusing to overwrite (use --force / overwrite=True)")
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
+    fd, tmp = _unique(path.parent, f".{path.name}.", ".part", lambda p: os.open(p, _NEW_FILE_FLAGS, 0o666))
     try:
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)
-        os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes 0600; give the mode open() would
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
@@ -82,21 +82,35 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes, *, overwrite: bool 
     return path
 
 
-def _process_umask() -> int:
-    """The process umask, read without changing it where /proc allows (threads may be writing)."""
-    try:
-        with open("/proc/self/status", encoding="ascii") as fh:
-            for line in fh:
-                if line.startswith("Umask:"):
-                    return int(line.split()[1], 8)
-    except (OSError, ValueError):
-        pass
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
+#: Flags of a new temporary file: created, never an existing one, never through a symlink.
+_NEW_FILE_FLAGS = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
 
 
-_UMASK = _process_umask()
+def _unique(folder: Path, prefix: str, suffix: str, create):
+    """``(create(path), path)`` for a new random name ``prefix + 8 hex + suffix`` in ``folder``.
+
+    ``create`` must fail with :class:`FileExistsError` on an existing name (``O_EXCL``,
+    :func:`os.mkdir`).  Unlike :mod:`tempfile` (mode 0600 / 0700), the mode given to ``create``
+    goes through the process umask, as for any file the user creates.
+    """
+    for _ in range(100):
+        candidate = folder / f"{prefix}{secrets.token_hex(4)}{suffix}"
+        try:
+            return create(candidate), candidate
+        except FileExistsError:
+            continue
+    raise FileExistsError(f"{folder}: no free temporary name {prefix}*{suffix} after 100 tries")
+
+
+def make_staging_dir(parent: str | os.PathLike, prefix: str) -> Path:
+    """A new, empty folder ``parent/prefix<random>`` (mode 0777 less the umask: 0755 under 0022).
+
+    For writers that fill a folder and rename it into place when complete (the synthetic
+    datasets), so that the published folder has the permissions :func:`os.mkdir` gives.
+    """
+    parent = Path(parent)
+    parent.mkdir(parents=True, exist_ok=True)
+    return _unique(parent, prefix, "", lambda p: os.mkdir(p, 0o777))[1]
 
 
 def write_text(path: str | os.PathLike, text: str, *, overwrite: bool = True) -> Path:

@@ -1,6 +1,6 @@
 """The noise model of a camera (:class:`NoiseModel`): conversion gain, read noise, full well, JSON form.
 
-Sensor model (the one :mod:`synth.camera` implements), per Bayer site:
+Sensor model (the one :mod:`synth.imaging` implements), per Bayer site:
 
 * electrons ``e = G * g(DN)`` where g is the inverse response (:class:`CameraResponse`,
   linear exposure h in table units) and ``G`` the *conversion gain* in electrons per unit

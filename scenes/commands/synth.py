@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
+import signal
 import sys
+import threading
 from pathlib import Path
 
-__all__ = ["register"]
+__all__ = ["register", "stop_between_images"]
 
 
 def register(subparsers) -> None:
@@ -40,7 +43,8 @@ def register(subparsers) -> None:
     p.add_argument("--gt-exposures", default="", help="comma-separated target exposures (ms) to capture as ground truth")
     p.add_argument("--save-radiance", action="store_true", help="also write the radiance of every shot (OpenEXR)")
     p.add_argument("--cache", type=Path, default=None, help="render cache folder")
-    p.add_argument("--force", action="store_true", help="replace an existing exposim dataset")
+    p.add_argument("--force", action="store_true",
+                   help="replace an existing exposim dataset (refused, naming them, if it holds files synth did not write)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_run)
 
@@ -63,9 +67,10 @@ def _run(args: argparse.Namespace) -> int:
         raise ExposimError(f"--gt-exposures must be comma-separated numbers, got {args.gt_exposures!r}") from None
     scene = scenes.get_scene(args.scene, seed=args.seed, **parse_params(args.param))
     with tqdm(total=args.cycles * 6 * (1 if args.mono else 2), desc=f"synth {scene.name}", unit="img",
-              disable=args.quiet, file=sys.stderr) as bar:
+              disable=args.quiet, file=sys.stderr) as bar, stop_between_images("exposim synth") as check:
 
         def progress(done, total):
+            check()
             bar.total = total * (1 if args.mono else 2)
             bar.n = done * (1 if args.mono else 2)
             bar.refresh()
@@ -78,3 +83,42 @@ def _run(args: argparse.Namespace) -> int:
         )
     print(f"wrote {path} ({args.cycles} cycles, {width}x{height}, {scene.name}); inspect with: exposim info {path}")
     return 0
+
+
+@contextlib.contextmanager
+def stop_between_images(command: str):
+    """Turn Ctrl-C during rendering into a clean stop after the current image.
+
+    Mitsuba renders inside Dr.Jit, which turns a KeyboardInterrupt raised during a render
+    into a RuntimeError (a traceback and exit code 1).  Inside this block the first SIGINT
+    only sets a flag; calling the yielded ``check()`` (from a progress callback, between
+    images) then raises KeyboardInterrupt in Python code, where the writer removes its
+    staging folder and the CLI exits with 130.  A second SIGINT raises at once, and a
+    Dr.Jit error caused by it is turned back into KeyboardInterrupt.  Outside the main
+    thread, or when SIGINT is ignored, nothing is changed.
+    """
+    hits = []
+    previous = signal.getsignal(signal.SIGINT)
+    if threading.current_thread() is not threading.main_thread() or previous is signal.SIG_IGN:
+        yield lambda: None
+        return
+
+    def handler(signum, frame):
+        hits.append(signum)
+        if len(hits) > 1:
+            raise KeyboardInterrupt
+        sys.stderr.write(f"\n{command}: interrupted; stopping after the current image (Ctrl-C again: at once)\n")
+
+    def check():
+        if hits:
+            raise KeyboardInterrupt
+
+    signal.signal(signal.SIGINT, handler)
+    try:
+        yield check  # a SIGINT after the last image changes nothing: the dataset is complete
+    except RuntimeError as exc:
+        if hits or isinstance(exc.__cause__, KeyboardInterrupt):
+            raise KeyboardInterrupt from None
+        raise
+    finally:
+        signal.signal(signal.SIGINT, previous)

@@ -14,7 +14,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="run the main job end to end on the embedded synthetic default",
         description=(
             "Synthesise a small scene, emulate it, run the AE methods in closed loop and "
-            "write a short report into a new output folder."
+            "write a short report into a new output folder. The synthetic recording is kept in "
+            "the render cache ($EXPOSIM_CACHE, default ~/.cache/exposim/renders, under datasets/) "
+            "and reused by the next demo with the same configuration; the output folder holds "
+            "the run results only."
         ),
     )
     p.add_argument("-o", "--output", type=Path, default=None, help="output folder (default: a new exposim-demo-N)")
@@ -31,11 +34,13 @@ def _demo(args) -> int:
 
     from tqdm import tqdm
 
+    from scenes.commands.synth import stop_between_images
     from validation.demo import run_demo
 
     bars: dict[str, tqdm] = {}
 
     def progress(stage: str, done: int, total: int) -> None:
+        check()  # Ctrl-C: stop cleanly between images (rc 130)
         bar = bars.get(stage)
         if bar is None:
             for old in bars.values():
@@ -46,10 +51,13 @@ def _demo(args) -> int:
         bar.refresh()
 
     try:
-        result = run_demo(args.output, quick=args.quick, progress=progress)
+        with stop_between_images("exposim demo") as check:
+            result = run_demo(args.output, quick=args.quick, progress=progress)
     finally:
         for bar in bars.values():
             bar.close()
     print(result["report"])
-    print(f"\nexposim demo: wrote {result['output']} in {result['total_s']:.0f} s (report.md, results.json, figures)")
+    how = "reused from an earlier demo" if result["dataset_reused"] else "synthesised now, kept for the next demo"
+    print(f"\nexposim demo: recording {result['dataset']} ({how})")
+    print(f"exposim demo: wrote {result['output']} in {result['total_s']:.0f} s (report.md, results.json, figures)")
     return 0
