@@ -7,6 +7,7 @@ import json
 import math
 import time
 
+import numpy as np
 import pytest
 
 from emulator.errors import OutputExistsError
@@ -50,12 +51,18 @@ def test_tiny_study_writes_results(tiny_study):
         assert (out / f).is_file(), f
     rows = on_disk["summary"]["per_scene"]["forest_winter"]
     assert list(rows) == list(METHODS)
+    frun = json.loads((out / "features" / "results.json").read_text())["runs"][0]["methods"]
     for name, e in rows.items():
         assert _finite(e["median_exposure_ms"]) and e["median_exposure_ms"] > 0
         assert 0.0 <= e["median_uniformity"] <= 1.0
-        assert _finite(e["median_matches"]) and e["median_matches"] >= 0
-        assert set(e["sequence_success"]) == {"5", "100"}
-        assert all(isinstance(v, bool) for v in e["sequence_success"].values())
+        # the summary's match figures are the feature benchmark's pair counts (3 images: 2 pairs), and a
+        # pair never has more matches than the query image has keypoints (one match per query keypoint)
+        f = frun[name]
+        assert len(f["matches"]) == 2 and len(f["n_keypoints"]) == 3
+        assert e["median_matches"] == float(np.median(f["matches"]))
+        assert e["min_matches"] == min(f["matches"])
+        assert all(m <= max(a, b) for m, a, b in zip(f["matches"], f["n_keypoints"], f["n_keypoints"][1:]))
+        assert e["sequence_success"] == {t: min(f["matches"]) >= int(t) for t in ("5", "100")}
         assert e["segment_success"]["5"]["segments"] == 1  # 2 pairs, shorter than one segment
         vo = e["vo"]
         assert vo["status"] in ("success", "failed") and vo["n_frames"] == 3
