@@ -8,10 +8,19 @@ from pathlib import Path
 import numpy as np
 
 from emulator.io.files import save_figure
+from emulator.metrics.features import GRID_CELLS
+from emulator.report.verdicts import (
+    dash_note,
+    matches_verdict,
+    rpe_verdict,
+    success_verdict,
+    uniformity_verdict,
+    vo_failure_verdict,
+)
 from validation.ae_study.config import PAPER, PAPER_NAMES, VO_CONFIGURATION_NOTE
 from validation.ae_study.findings import _fmt
 
-__all__ = ["report_markdown", "plot_summary"]
+__all__ = ["report_markdown", "plot_summary", "study_verdicts"]
 
 
 def _paper_cell(key: str, method: str, spec: str = "") -> str:
@@ -43,7 +52,8 @@ def report_markdown(results: dict) -> str:
     ]
     head = ("| method | median exposure (ms) | median uniformity (%) | median matches | "
             f"success tau={lo} | success tau={hi} | segments ok tau={lo} | segments ok tau={hi} | "
-            "VO failed frames | RPE trans. (%) | RPE rot. (deg/m) |")
+            "VO failed frames | RPE trans. (% of delta; minimal median @ its pair length delta) | "
+            "RPE rot. (deg/m; minimal median @ its pair length delta) |")
     sep = "|" + " --- |" * 11
     for scene, rows in summary["per_scene"].items():
         lines += [f"## {scene}", "", head, sep]
@@ -59,14 +69,15 @@ def report_markdown(results: dict) -> str:
                 f"{_fmt(e['sequence_success'][hi])} | {seg[lo]['succeeded']}/{seg[lo]['segments']} | "
                 f"{seg[hi]['succeeded']}/{seg[hi]['segments']} | "
                 f"{v.get('n_failed_frames', 'n/a')} of {max(0, v.get('n_frames', 1) - 1)} | "
-                f"{_fmt(v.get('rpe_trans_pct'), '.2f')}{dagger} | {_fmt(v.get('rpe_rot_deg_per_m'), '.3f')}{dagger} |")
+                f"{_at(v.get('rpe_trans_pct'), v.get('rpe_trans_delta_m'), '.2f')}{dagger} | "
+                f"{_at(v.get('rpe_rot_deg_per_m'), v.get('rpe_rot_delta_m'), '.3f')}{dagger} |")
         vos = [e["vo"] for e in rows.values() if e["vo"] is not None]
         reasons = Counter()
         for v in vos:
             reasons.update(v["failure_reasons"])
         stereo = [v["median_stereo_points"] for v in vos if v["median_stereo_points"] is not None]
         missing = sorted({v["rpe_missing_reason"] for v in vos if v.get("rpe_missing_reason")})
-        lines.append("")
+        lines += ["", dash_note("n/a") + " † = RPE of a run whose VO failed on some frames.", ""]
         if reasons:
             lines.append("VO failures by reason, all methods: " + ", ".join(f"{k} {n}" for k, n in reasons.most_common())
                          + (f"; median stereo points per frame {_fmt(min(stereo), '.0f')}..{_fmt(max(stereo), '.0f')} "
@@ -76,11 +87,16 @@ def report_markdown(results: dict) -> str:
             lines.append(f"RPE n/a: {reason}.")
         lines += ["", f"![exposure per cycle](runs/{scene}/exposure.png) ![VO RPE](vo/{scene}/fig6_rpe.png) "
                       f"![trajectories](vo/{scene}/trajectories.png)", ""]
+    deltas = [v[k] for rows in summary["per_scene"].values() for e in rows.values() if (v := e["vo"])
+              for k in ("rpe_trans_delta_m", "rpe_rot_delta_m") if v.get(k) is not None]
+    delta_range = (f"{min(deltas):.2g}..{max(deltas):.2g} m" if deltas and min(deltas) != max(deltas)
+                   else f"{deltas[0]:.2g} m" if deltas else "n/a")
     lines += ["## All scenes together", "",
               f"| method | median uniformity (%) | median matches | success rate tau={lo} (sequences) | "
               f"success rate tau={hi} (sequences) | success rate tau={lo} (segments) | success rate tau={hi} "
-              "(segments) | VO failed runs | VO failed frames | RPE trans. (%), mean over scenes | "
-              "RPE rot. (deg/m), mean over scenes |", "|" + " --- |" * 11]
+              f"(segments) | VO failed runs | VO failed frames | RPE trans. (% of delta), mean over scenes of the "
+              f"minimal medians (delta {delta_range}) | RPE rot. (deg/m), mean over scenes of the minimal medians "
+              f"(delta {delta_range}) |", "|" + " --- |" * 11]
     for name, o in summary["overall"].items():
         sr, sg = o["sequence_success_rate"], o["segment_success"]
         lines.append(
@@ -94,7 +110,10 @@ def report_markdown(results: dict) -> str:
             f"{o['vo_failed_runs']} of {o['n_sequences']} | {o['vo_failed_frames']} | "
             f"{_fmt(o['rpe_trans_pct_mean_over_scenes'], '.2f')}{_paper_cell('rpe_trans_pct', name)} | "
             f"{_fmt(o['rpe_rot_deg_per_m_mean_over_scenes'], '.3f')}{_paper_cell('rpe_rot_deg_per_m', name)} |")
-    lines += ["", f"Paper: VO failed on {PAPER['vo_failed_runs']}.", "", _tau_note(summary, int(hi)), "",
+    lines += ["", dash_note("n/a"), "", f"Paper: VO failed on {PAPER['vo_failed_runs']}.", "",
+              _tau_note(summary, int(hi)), "", "## Verdicts beside the paper's numbers", ""]
+    lines += [f"- {v}" for v in study_verdicts(results)]
+    lines += ["",
               "## Which of the paper's qualitative findings hold", "", results["findings_paragraph"], "",
               "| finding | paper | holds | measured |", "| --- | --- | --- | --- |"]
     for f in results["findings"]:
@@ -112,6 +131,44 @@ def report_markdown(results: dict) -> str:
                                  VO_CONFIGURATION_NOTE["study_100_cycles_failed_frames_ratio_0.8_then_0.9"].items()),
               "", f"Command: `{results.get('command') or ''}`", ""]
     return "\n".join(lines)
+
+
+def _at(value, delta_m, spec: str) -> str:
+    """``value @ delta m`` (the pair length the minimal median was found at), or n/a."""
+    if value is None:
+        return "n/a"
+    return f"{_fmt(value, spec)} @ {delta_m:.2g} m" if delta_m is not None else _fmt(value, spec)
+
+
+def study_verdicts(results: dict) -> list[str]:
+    """One sentence per result beside the paper's numbers (uniformity, matches, success at the largest tau,
+    VO failures, RPE), from the pooled figures and the image size (:mod:`emulator.report.verdicts`)."""
+    cfg, summary = results["config"], results["summary"]
+    overall = summary["overall"]
+    wh = (cfg["width"], cfg["height"])
+    hi = str(max(int(t) for t in cfg["taus"]))
+    uni = {k: None if o["median_uniformity"] is None else 100 * o["median_uniformity"] for k, o in overall.items()}
+    keypoints = [o.get("median_keypoints") for o in overall.values() if o.get("median_keypoints") is not None]
+    med = {k: o["median_matches"] for k, o in overall.items() if o["median_matches"] is not None}
+    name = "fixed" if "fixed" in med else (max(med, key=med.get) if med else "fixed")
+    maxima = [o["max_matches"] for o in overall.values() if o.get("max_matches") is not None]
+    minima = [o["min_matches"] for o in overall.values() if o.get("min_matches") is not None]
+    rates = {k: None if o["sequence_success_rate"].get(hi) is None else 100 * o["sequence_success_rate"][hi]
+             for k, o in overall.items()}
+    vos = [e["vo"] for rows in summary["per_scene"].values() for e in rows.values() if e["vo"] is not None]
+    reasons: Counter = Counter()
+    for v in vos:
+        reasons.update(v["failure_reasons"])
+    trans = {k: o["rpe_trans_pct_mean_over_scenes"] for k, o in overall.items()}
+    rot = {k: o["rpe_rot_deg_per_m_mean_over_scenes"] for k, o in overall.items()}
+    deltas = [v["rpe_trans_delta_m"] for v in vos if v.get("rpe_trans_delta_m") is not None]
+    return [
+        uniformity_verdict(uni, float(np.median(keypoints)) if keypoints else None, GRID_CELLS),
+        matches_verdict(med.get(name), wh, PAPER_NAMES.get(name, name)),
+        success_verdict(int(hi), rates, max(maxima) if maxima else None, min(minima) if minima else None, wh),
+        vo_failure_verdict(sum(1 for v in vos if v["status"] != "success"), len(vos), reasons),
+        rpe_verdict(trans, rot, deltas, sum(1 for v in vos if v.get("rpe_on_failed_run"))),
+    ]
 
 
 def _tau_note(summary: dict, tau: int) -> str:

@@ -96,6 +96,8 @@ def summarise(config: StudyConfig, features: dict, vo: dict[str, dict], runs: di
                 "median_uniformity": f["median_uniformity"],
                 "median_matches": f["median_matches"],
                 "min_matches": f["min_matches"],
+                "max_matches": max(matches) if matches else None,
+                "median_keypoints": float(np.median(f["n_keypoints"])) if f.get("n_keypoints") else None,
                 "sequence_success": {str(t): (bool(min(matches) >= t) if matches else None) for t in taus},
                 "segment_success": {k: {"succeeded": a, "segments": b, "rate": (a / b if b else None)}
                                     for k, (a, b) in seg.items()},
@@ -153,6 +155,9 @@ def summarise(config: StudyConfig, features: dict, vo: dict[str, dict], runs: di
             "median_uniformity": f.get("median_uniformity"),
             "median_matches": f.get("median_matches"),
             "quartiles_matches": f.get("quartiles_matches"),
+            "min_matches": min((e["min_matches"] for e in entries if e["min_matches"] is not None), default=None),
+            "max_matches": max((e["max_matches"] for e in entries if e["max_matches"] is not None), default=None),
+            "median_keypoints": _median(e["median_keypoints"] for e in entries),
             "sequence_success_rate": seq_rate,
             "segment_success": seg,
             "vo_failed_frames": sum(x["n_failed_frames"] for x in vos),
