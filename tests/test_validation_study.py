@@ -207,3 +207,21 @@ def test_cli_writes_folder_and_refuses_overwrite(tmp_path, capsys):
     # same inputs, same results.json (no timestamps, seeded draws)
     again = json.loads((out / "results.json").read_text())
     assert again == r
+
+
+def test_emulation_report_gives_a_verdict_beside_the_paper(emulation_run):
+    from validation.common import PAPER_MAX_RMSE_PERCENT, PAPER_MEDIAN_RMSE_PERCENT
+    from validation.report import _emulation_md, emulation_verdict
+
+    _, out = emulation_run
+    r = out["results"]
+    md = _emulation_md(r, [])
+    assert "| figure | this study (% of the DN range) | paper (%) | verdict |" in md
+    for which, paper in (("median", PAPER_MEDIAN_RMSE_PERCENT), ("max", PAPER_MAX_RMSE_PERCENT)):
+        verdict = emulation_verdict(r, which)
+        ratio = r[f"{which}_rmse_percent"] / paper
+        assert verdict.startswith(f"at or below the paper's ({ratio:.2g}x), as expected" if ratio <= 1
+                                  else f"above the paper's ({ratio:.2g}x), not expected")
+        assert verdict in md
+    assert ("as expected: the emulator adds no error beyond quantisation" in md) is r["noiseless_within_analytic_bound"]
+    assert '"-": the paper gives no such figure' in md
