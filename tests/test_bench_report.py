@@ -157,3 +157,22 @@ def test_trajectory_limits_follow_the_data(lateral_m):
     to_scale = bool(data_z / data_x <= report.MAX_EQUAL_ASPECT)
     assert (ax.get_aspect() == 1.0) is to_scale
     assert ("not to scale" in ax.get_title()) is (not to_scale)
+
+
+# ----------------------------------------------------------------------------- run report
+
+
+@pytest.mark.parametrize("mode, adjusted", [("paper", 3), ("borealhdr", 4)])
+def test_run_report_units_dashes_and_fixed(mode, adjusted):
+    from emulator.report.run import run_markdown
+
+    method = {"mode": mode, "cycles": 5, "mean_exposure_ms": 2.0, "median_exposure_ms": 2.0, "min_exposure_ms": 1.0,
+              "max_exposure_ms": 3.0, "mean_saturated_fraction": 0.0125, "mean_valid_fraction": 0.98,
+              "non_finite_proposals": 0, "method_ms_per_frame": None}
+    info = {"sequence": "seq", "method_options": {"fixed": {"name": "fixed", "mode": mode, "n_auto_frames": 3}}}
+    md = run_markdown(info, {"methods": {"fixed": method, "shim": dict(method, mode=mode)}})
+    table, after = _table_and_after(md, "| method |")
+    assert "| mean saturated (%) | mean valid (%) |" in table[0]
+    assert "| 1.25 | 98.00 | 0 | - |" in table[2]  # fractions shown in percent, no timing: "-"
+    assert '"-": no cycle of that method (or no timing recorded)' in after[1]
+    assert f"`fixed` (M_fixed) runs classical-50 for its first {adjusted} frames and then freezes" in md
