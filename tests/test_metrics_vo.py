@@ -22,7 +22,8 @@ from emulator.metrics import vo as vo_mod
 from emulator.errors import CalibrationError, MetricsError, TrajectoryError
 from emulator.io.camera_info import read_camera_info
 from emulator.io.tum import write_tum
-from emulator.metrics.rpe import associate, read_trajectory, rpe_by_length, trajectory_from_poses
+from emulator.metrics.rpe import rpe_by_length
+from emulator.metrics.trajectory import associate, read_trajectory, trajectory_from_poses
 
 from conftest import SHARED as _SHARED  # noqa: E402
 

@@ -29,17 +29,15 @@ from emulator.metrics.features import (
     load_gray8,
     success_curve,
 )
-from emulator.metrics.rpe import associate, read_trajectory, rpe_by_length, trajectory_from_poses
+from emulator.metrics.rpe import rpe_by_length
 from emulator.metrics.stereo import (
     estimate_stereo_extrinsics,
     find_calibration,
     load_stereo_calibration,
     stereo_rectification,
 )
-from emulator.metrics.vo import (
-    VOParameters,
-    run_stereo_vo,
-)
+from emulator.metrics.trajectory import associate, read_trajectory, trajectory_from_poses
+from emulator.metrics.vo import VOParameters, run_stereo_vo
 
 __all__ = [
     "bench_features",
