@@ -1,10 +1,18 @@
 """Synthetic AE study (issue 7): the paper's section V-D benchmarks on synthetic stereo walks.
 
-Run from the repository root::
+Run::
 
-    python -m validation.ae_study OUT [--quick] [--cycles N] [--size WxH] [--spp S]
-                                      [--scenes a,b,c] [--force]
-    python -m validation.ae_study OUT --redraw      # findings, report, figure from results.json
+    exposim validate ae-study -o OUT [--quick] [--cycles N] [--size WxH] [--spp S]
+                                     [--scenes a,b,c] [--force]
+    exposim validate ae-study -o OUT --redraw   # findings, report, figure from results.json
+    python -m validation.ae_study OUT ...       # the same, OUT positional
+
+The package: :mod:`~validation.ae_study.config` (scenes, methods, the paper's numbers,
+:class:`StudyConfig`), :mod:`~validation.ae_study.summary` (per scene and pooled figures),
+:mod:`~validation.ae_study.findings` (the paper's qualitative findings tested),
+:mod:`~validation.ae_study.report` (``report.md`` with a verdict per result, the summary
+figure), :mod:`~validation.ae_study.study` (running and redrawing),
+:mod:`~validation.ae_study.cli` (the command line).
 
 For each scene (default ``forest_winter``, ``forest_edge``, ``sun_glare``):
 

@@ -88,8 +88,7 @@ def main(argv=None) -> int:
     """``python -m validation.ae_study``: rc 0, or 1 with one line on stderr for a known error."""
     from validation import ae_study
 
-    p = argparse.ArgumentParser(prog="python -m validation.ae_study", description=ae_study.__doc__.split("\n\n")[0],
-                                formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    p = argparse.ArgumentParser(prog="python -m validation.ae_study", description=ae_study.__doc__.split("\n\n")[0])
     add_arguments(p)
     args = p.parse_args(argv)
     command = "python -m validation.ae_study " + " ".join(shlex.quote(a) for a in (sys.argv[1:] if argv is None else argv))
