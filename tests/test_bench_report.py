@@ -56,7 +56,7 @@ def test_success_below_the_paper_names_the_weakest_pair():
     text = success_verdict(100, {"fixed": 0.0, "kim": 10.0}, 180, 42, (640, 400))
     assert text.startswith("Success at tau = 100 is 0..10 % (paper at tau = 100: 20-44 %).")
     assert "Lower than the paper" in text and "42 matches against at most 180" in text
-    assert "Within the paper's range" in success_verdict(100, {"fixed": 44.0, "kim": 20.0}, 900, 50, (1920, 1200))
+    assert "Overlaps the paper's range" in success_verdict(100, {"fixed": 44.0, "kim": 20.0}, 900, 50, (1920, 1200))
 
 
 def test_matches_verdict_scales_the_papers_median_by_image_area():
@@ -70,7 +70,11 @@ def test_matches_verdict_scales_the_papers_median_by_image_area():
 def test_uniformity_verdict_caps_the_fraction_by_the_keypoint_count():
     # 50 keypoints can occupy at most 50 of 400 cells: 12.5 %
     text = uniformity_verdict({"fixed": 10.0, "kim": 12.0}, 50, (20, 20))
-    assert "10.0..12.0 %" in text and "at most 50 of the 400 cells (12.5 %)" in text
+    assert "10.0..12.0 %" in text and "at most 50 of the 400 cells (12.5 %) can hold one." in text
+    # 237 keypoints could fill 59.2 % of the cells; 24.8..31.9 % is below that cap: clustering as well
+    text = uniformity_verdict({"fixed": 24.8, "kim": 31.9}, 237, (20, 20))
+    assert "(59.2 %) can hold one, and the measurement is below that cap too" in text
+    assert "although the images have enough keypoints" in uniformity_verdict({"kim": 30.0}, 900, (20, 20))
     assert "Comparable with the paper" in uniformity_verdict({"kim": 66.0}, 800, (20, 20))
 
 

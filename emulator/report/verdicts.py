@@ -106,7 +106,7 @@ def success_verdict(tau: int, rates_pct: Mapping[str, float | None], max_matches
                        f"1/{area:.0f} of the paper's pixels).")
     if lo > PAPER_SUCCESS_TAU100_PCT[1]:
         return text + "Higher than the paper: these runs have no pair as weak as the paper's hardest trajectories."
-    return text + "Within the paper's range, as expected."
+    return text + "Overlaps the paper's range."
 
 
 def matches_verdict(median_matches: float | None, image_wh, method: str = "M_fixed") -> str:
@@ -153,13 +153,15 @@ def uniformity_verdict(median_uniformity_pct: Mapping[str, float | None], median
     paper = f"{PAPER_UNIFORMITY_PCT[0]:.1f}-{PAPER_UNIFORMITY_PCT[1]:.1f} %"
     text = f"Median uniformity {_span(lo, hi, '.1f')} % of the {grid[0]}x{grid[1]} cells (paper: {paper} for the lowest methods). "
     if hi < PAPER_UNIFORMITY_PCT[0] - 5:
-        if median_keypoints is not None and median_keypoints < cells:
-            cap = 100.0 * median_keypoints / cells
-            return text + (f"Lower, as expected: with a median of {median_keypoints:.0f} keypoints per image at most "
-                           f"{median_keypoints:.0f} of the {cells} cells ({cap:.1f} %) can hold one.")
-        return text + (f"Lower than the paper although the images have enough keypoints "
-                       f"({'n/a' if median_keypoints is None else f'{median_keypoints:.0f}'} for {cells} cells): the "
-                       "keypoints cluster (e.g. on the textured parts of the scene).")
+        k = "n/a" if median_keypoints is None else f"{median_keypoints:.0f}"
+        cap = None if median_keypoints is None else 100.0 * min(median_keypoints, cells) / cells
+        if cap is not None and cap < PAPER_UNIFORMITY_PCT[0]:
+            return text + (f"Lower, as expected: with a median of {k} keypoints per image at most {k} of the "
+                           f"{cells} cells ({cap:.1f} %) can hold one"
+                           + (", and the measurement is below that cap too: the keypoints also cluster."
+                              if hi < cap - 5 else "."))
+        return text + (f"Lower than the paper although the images have enough keypoints to reach it ({k} for "
+                       f"{cells} cells): the keypoints cluster (e.g. on the textured parts of the scene).")
     if lo > PAPER_UNIFORMITY_PCT[1] + 5:
         return text + "Higher than the paper's lowest methods."
     return text + "Comparable with the paper."
