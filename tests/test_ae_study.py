@@ -7,6 +7,7 @@ import json
 import math
 import time
 
+import numpy as np
 import pytest
 
 from emulator.errors import OutputExistsError
@@ -50,12 +51,18 @@ def test_tiny_study_writes_results(tiny_study):
         assert (out / f).is_file(), f
     rows = on_disk["summary"]["per_scene"]["forest_winter"]
     assert list(rows) == list(METHODS)
+    frun = json.loads((out / "features" / "results.json").read_text())["runs"][0]["methods"]
     for name, e in rows.items():
         assert _finite(e["median_exposure_ms"]) and e["median_exposure_ms"] > 0
         assert 0.0 <= e["median_uniformity"] <= 1.0
-        assert _finite(e["median_matches"]) and e["median_matches"] >= 0
-        assert set(e["sequence_success"]) == {"5", "100"}
-        assert all(isinstance(v, bool) for v in e["sequence_success"].values())
+        # the summary's match figures are the feature benchmark's pair counts (3 images: 2 pairs), and a
+        # pair never has more matches than the query image has keypoints (one match per query keypoint)
+        f = frun[name]
+        assert len(f["matches"]) == 2 and len(f["n_keypoints"]) == 3
+        assert e["median_matches"] == float(np.median(f["matches"]))
+        assert e["min_matches"] == min(f["matches"])
+        assert all(m <= max(a, b) for m, a, b in zip(f["matches"], f["n_keypoints"], f["n_keypoints"][1:]))
+        assert e["sequence_success"] == {t: min(f["matches"]) >= int(t) for t in ("5", "100")}
         assert e["segment_success"]["5"]["segments"] == 1  # 2 pairs, shorter than one segment
         vo = e["vo"]
         assert vo["status"] in ("success", "failed") and vo["n_frames"] == 3
@@ -205,3 +212,62 @@ def test_config_is_checked():
     exit_x = cfg.scene_parameters("forest_edge")["exit_x_m"]
     walked = 80 * 6 / 22 * 2 / 3.6
     assert 0.4 * walked < exit_x < 0.6 * walked  # the exit is on the walk
+
+
+@pytest.mark.render
+@pytest.mark.slow
+def test_tiny_study_report_gives_a_verdict_per_result(tiny_study):
+    out, results, _ = tiny_study
+    report = (out / "report.md").read_text()
+    overall = results["summary"]["overall"]
+    max_matches = max(o["max_matches"] for o in overall.values())
+    keypoints = max(o["median_keypoints"] for o in overall.values())
+    # 64x40 images: a few dozen keypoints, so no pair can reach tau = 100
+    assert max_matches <= 2 * keypoints and max_matches < 100
+    verdicts = report.split("## Verdicts beside the paper's numbers")[1].split("\n## ")[0]
+    assert ("Success at tau = 100 is 0 % for every method, as expected: no consecutive pair of these 64x40 images "
+            f"reached 100 matches (at most {max_matches}), while the paper's 1920x1200 images (900x the pixels)") in verdicts
+    assert verdicts.count("\n- ") == 5  # uniformity, matches, success, VO failures, RPE
+    # uniformity in percent, with the unit in the header; "n/a" explained under each table
+    row = next(line for line in report.splitlines() if line.startswith("| M_Shim |"))
+    assert f"| {100 * results['summary']['per_scene']['forest_winter']['shim']['median_uniformity']:.1f} |" in row
+    assert report.count('A "n/a" cell means') == 2
+    assert "RPE trans. (% of delta; minimal median @ its pair length delta)" in report
+
+
+@pytest.mark.render
+@pytest.mark.slow
+def test_exposim_validate_ae_study_refuses_an_existing_study(tiny_study, capsys):
+    from emulator.cli import main as exposim
+
+    out, _, _ = tiny_study
+    before = (out / "results.json").read_bytes()
+    assert exposim(["validate", "ae-study", "-o", str(out), "--scenes", "forest_winter", "--cycles", "3",
+                    "--size", "64x40", "--spp", "2", "--no-progress"]) == 1
+    err = capsys.readouterr().err
+    assert "exists" in err and len(err.strip().splitlines()) == 1
+    assert (out / "results.json").read_bytes() == before
+
+
+def _help(capsys, monkeypatch, *argv) -> str:
+    from emulator.cli import main as exposim
+
+    monkeypatch.setenv("COLUMNS", "250")  # one line per option
+    with pytest.raises(SystemExit) as exc:
+        exposim([*argv, "--help"])
+    assert exc.value.code == 0
+    return capsys.readouterr().out
+
+
+def test_validate_help_shows_the_defaults(capsys, monkeypatch):
+    from validation.emulation import EmulationConfig
+
+    assert "ae-study" in _help(capsys, monkeypatch, "validate")
+    text = _help(capsys, monkeypatch, "validate", "ae-study")
+    full, quick = CONFIGS["full"], CONFIGS["quick"]
+    assert f"(default: {full.n_cycles}; {quick.n_cycles} with --quick)" in text
+    assert f"(default: {full.width}x{full.height})" in text and f"(default: {full.spp})" in text
+    text = _help(capsys, monkeypatch, "validate", "emulation")
+    full, quick = EmulationConfig(), EmulationConfig.quick()
+    assert f"render width (pixels) (default: {full.width}; with --quick: {quick.width})" in text
+    assert f"(default: {full.n_exposures}; with --quick: {quick.n_exposures})" in text

@@ -141,6 +141,16 @@ def test_bench_features_cli(tmp_path, capsys):
     rate = np.array(results["success_curve"]["rate"]["fixed"])
     np.testing.assert_array_equal(rate, (taus <= fixed["min_matches"]).astype(float))
     assert "Fig. 4" in (out / "report.md").read_text()
+    # a verdict per result (uniformity, matches, success at tau = 100), in the report and on stderr
+    from emulator.report.bench import features_verdicts
+
+    verdicts = features_verdicts(results)
+    assert [v.split(" ")[0] for v in verdicts] == ["Median", "Median", "Success"]
+    assert all(f"- {v}" in (out / "report.md").read_text() for v in verdicts)
+    biggest = max(max(m["matches"]) for m in results["runs"][0]["methods"].values())
+    assert (f"at most {biggest})" in verdicts[2]) is (biggest < 100)
+    code, _, err = run_cli(capsys, "bench", "features", str(run), "-o", str(tmp_path / "out2"), "--matcher", "bf")
+    assert code == 0 and all(f"verdict: {v}" in err for v in verdicts)
     # never overwrite silently
     code, _, err = run_cli(capsys, "bench", "features", str(run), "-o", str(out), "-q")
     assert code == 1 and "results.json: exists; refusing to overwrite" in err and err.count("\n") == 1

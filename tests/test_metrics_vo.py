@@ -1,4 +1,4 @@
-"""Stereo VO, calibration and RPE (emulator.metrics.vo, emulator.metrics.rpe).
+"""Stereo VO, calibration and RPE (emulator.metrics.vo, emulator.metrics.stereo, emulator.metrics.rpe).
 
 The VO is checked on a short synthetic stereo sequence rendered here by ray casting a
 textured box room (five planes with band-limited noise textures) from exact poses: a
@@ -17,10 +17,13 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from emulator.metrics import stereo as stereo_mod
 from emulator.metrics import vo as vo_mod
 from emulator.errors import CalibrationError, MetricsError, TrajectoryError
+from emulator.io.camera_info import read_camera_info
 from emulator.io.tum import write_tum
-from emulator.metrics.rpe import associate, read_trajectory, rpe_by_length, trajectory_from_poses
+from emulator.metrics.rpe import rpe_by_length
+from emulator.metrics.trajectory import associate, read_trajectory, trajectory_from_poses
 
 from conftest import SHARED as _SHARED  # noqa: E402
 
@@ -183,17 +186,17 @@ def _frames(run: Path, method: str = "fixed"):
 def test_read_real_borealhdr_calibration():
     if not SHARED.is_dir():
         pytest.skip("shared BorealHDR sample not available")
-    left = vo_mod.read_camera_info(SHARED / "september_2023" / "left.yaml")
+    left = read_camera_info(SHARED / "september_2023" / "left.yaml")
     assert (left.width, left.height) == (1920, 1200)
     assert left.K[0, 0] == pytest.approx(1180.80514)
     assert left.D[0] == pytest.approx(-0.219776)
     assert left.P[1, 2] == pytest.approx(580.01843)  # multi-line flow list with a trailing comma
-    calib = vo_mod.load_stereo_calibration(SHARED / "september_2023")
+    calib = stereo_mod.load_stereo_calibration(SHARED / "september_2023")
     assert calib.baseline_m == pytest.approx(180.0 / 1009.76978)
     np.testing.assert_allclose(calib.T, [-calib.baseline_m, 0, 0])
-    april = vo_mod.load_stereo_calibration(SHARED / "april_2023")  # comments, non-identity R
+    april = stereo_mod.load_stereo_calibration(SHARED / "april_2023")  # comments, non-identity R
     assert abs(np.linalg.det(april.R) - 1) < 1e-6
-    rect = vo_mod.stereo_rectification(calib)
+    rect = stereo_mod.stereo_rectification(calib)
     assert rect.baseline_m == pytest.approx(calib.baseline_m)
     assert rect.K[0, 0] == rect.K[1, 1]
     with pytest.raises(CalibrationError, match="1920x1200"):
@@ -205,23 +208,23 @@ def test_calibration_errors(tmp_path):
     write_camera_info(tmp_path / "left.yaml", K, np.c_[K, np.zeros(3)])
     write_camera_info(tmp_path / "right.yaml", K, np.c_[K, np.zeros(3)])  # Tx = 0: no baseline
     with pytest.raises(CalibrationError, match="right.yaml.*Tx"):
-        vo_mod.load_stereo_calibration(tmp_path)
+        stereo_mod.load_stereo_calibration(tmp_path)
     text = (tmp_path / "left.yaml").read_text().replace("camera_matrix", "camera_matrx")
     (tmp_path / "left.yaml").write_text(text)
     with pytest.raises(CalibrationError, match="left.yaml: missing or malformed 'camera_matrix'"):
-        vo_mod.read_camera_info(tmp_path / "left.yaml")
+        read_camera_info(tmp_path / "left.yaml")
     with pytest.raises(CalibrationError, match="does not exist"):
-        vo_mod.read_camera_info(tmp_path / "nope.yaml")
+        read_camera_info(tmp_path / "nope.yaml")
     with pytest.raises(CalibrationError, match="pass --calibration"):
-        vo_mod.find_calibration(tmp_path / "no_sequence")
+        stereo_mod.find_calibration(tmp_path / "no_sequence")
 
 
 # --------------------------------------------------------------------------- VO
 
 
 def test_vo_recovers_synthetic_motion(synthetic):
-    calib = vo_mod.load_stereo_calibration(synthetic["sequence"] / "calibration")
-    rect = vo_mod.stereo_rectification(calib)
+    calib = stereo_mod.load_stereo_calibration(synthetic["sequence"] / "calibration")
+    rect = stereo_mod.stereo_rectification(calib)
     result = vo_mod.run_stereo_vo(_frames(synthetic["run"]), rect)
     assert result.succeeded, result.failures
     assert result.tracked.all()
@@ -257,7 +260,7 @@ def test_vo_failures_are_reported_with_constant_velocity(synthetic, tmp_path):
     import itertools
 
     data = blank_frames(synthetic, tmp_path, (2,))
-    rect = vo_mod.stereo_rectification(vo_mod.load_stereo_calibration(data["sequence"] / "calibration"))
+    rect = stereo_mod.stereo_rectification(stereo_mod.load_stereo_calibration(data["sequence"] / "calibration"))
     result = vo_mod.run_stereo_vo(itertools.islice(_frames(data["run"]), 5), rect)
     assert not result.succeeded
     reasons = [(f.index, f.reason) for f in result.failures]
@@ -279,18 +282,18 @@ def test_uncalibrated_rig_rotation_is_detected_and_refined(tmp_path):
     import itertools
 
     data = make_synthetic_run(tmp_path, n_frames=2, right_pitch_deg=0.8)
-    calib = vo_mod.load_stereo_calibration(data["sequence"] / "calibration")
-    plain = vo_mod.run_stereo_vo(_frames(data["run"]), vo_mod.stereo_rectification(calib))
+    calib = stereo_mod.load_stereo_calibration(data["sequence"] / "calibration")
+    plain = vo_mod.run_stereo_vo(_frames(data["run"]), stereo_mod.stereo_rectification(calib))
     assert [f.reason for f in plain.failures] == ["too_few_stereo_points"]
     assert "row offset" in plain.failures[0].detail  # about f * tan(0.8 deg) = 2.7 px
     assert abs(plain.row_offset_px[0]) > 2.0
     pairs = [(left, right) for _, left, right in itertools.islice(_frames(data["run"]), 2)]
-    est = vo_mod.estimate_stereo_extrinsics(calib, pairs)
+    est = stereo_mod.estimate_stereo_extrinsics(calib, pairs)
     # X_r = R X_l + T with the right camera pitched by +0.8 deg about x: R = Rx(-0.8 deg)
     assert est.rotation_deg[0] == pytest.approx(-0.8, abs=0.05)
     assert abs(est.rotation_deg[1]) < 0.1 and abs(est.rotation_deg[2]) < 0.1  # 0.1 deg = 0.3 px here
     np.testing.assert_allclose(est.T / BASELINE_M, [-1, 0, 0], atol=0.03)
-    refined = vo_mod.run_stereo_vo(_frames(data["run"]), vo_mod.stereo_rectification(calib.with_extrinsics(est.R, est.T)))
+    refined = vo_mod.run_stereo_vo(_frames(data["run"]), stereo_mod.stereo_rectification(calib.with_extrinsics(est.R, est.T)))
     assert refined.succeeded and abs(refined.row_offset_px).max() < 0.5
 
 

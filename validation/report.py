@@ -118,6 +118,23 @@ def _fmt(v, digits: int = 3) -> str:
 
 
 # ------------------------------------------------------------------------------------------ emulation
+def emulation_verdict(r: dict, which: str) -> str:
+    """Whether the emulation's noise-subtracted ``which`` ("median" or "max") RMSE is expected beside the
+    paper's, and why: static synthetic scenes with the camera's exact response leave quantisation and
+    noise, so the figure is expected at or below the paper's (real recordings, calibrated response,
+    motion between the bracket and the target)."""
+    ours = r[f"{which}_rmse_percent"]
+    paper = PAPER_MEDIAN_RMSE_PERCENT if which == "median" else PAPER_MAX_RMSE_PERCENT
+    if ours is None:
+        return "cannot be judged: no valid pixel"
+    why = (f"static synthetic scenes and the exact camera response leave quantisation and noise only "
+           f"(noiseless max {_fmt(r['noiseless_max_rmse_percent'])} %)")
+    if ours <= paper:
+        return f"at or below the paper's ({ours / paper:.2g}x), as expected: {why}"
+    return (f"above the paper's ({ours / paper:.2g}x), not expected: {why}; the per-scene and hard-case tables "
+            "show where the error comes from")
+
+
 def _emulation_figures(out: dict, folder: Path) -> list[str]:
     plt = _plt()
     r, a = out["results"], out["arrays"]
@@ -232,15 +249,18 @@ def _emulation_md(r: dict, figures: list[str]) -> str:
     cfg = r.get("provenance", {}).get("config", {})
     main = r["main_camera"]
     L = ["# Emulation accuracy on synthetic ground truth (paper section V-B, Fig. 3)", ""]
-    L += ["| figure | this study | paper |", "| --- | --- | --- |",
-          f"| median RMSE, {r['selector']}, noise subtracted, valid pixels | {_fmt(r['median_rmse_percent'])} % | "
-          f"{PAPER_MEDIAN_RMSE_PERCENT} % |",
-          f"| max RMSE, same | {_fmt(r['max_rmse_percent'])} % | {PAPER_MAX_RMSE_PERCENT} % |",
-          f"| median / max, all pixels | {_fmt(r['median_rmse_percent_all_pixels'])} % / "
-          f"{_fmt(r['max_rmse_percent_all_pixels'])} % | |",
-          f"| noiseless mode: median / max (valid pixels) | {_fmt(r['noiseless_median_rmse_percent'])} % / "
-          f"{_fmt(r['noiseless_max_rmse_percent'])} % | |",
-          f"| noiseless per-pixel error within the analytic bound | {r['noiseless_within_analytic_bound']} | |", ""]
+    L += ["| figure | this study (% of the DN range) | paper (%) | verdict |", "| --- | --- | --- | --- |",
+          f"| median RMSE, {r['selector']}, noise subtracted, valid pixels | {_fmt(r['median_rmse_percent'])} | "
+          f"{PAPER_MEDIAN_RMSE_PERCENT} | {emulation_verdict(r, 'median')} |",
+          f"| max RMSE, same | {_fmt(r['max_rmse_percent'])} | {PAPER_MAX_RMSE_PERCENT} | "
+          f"{emulation_verdict(r, 'max')} |",
+          f"| median / max, all pixels | {_fmt(r['median_rmse_percent_all_pixels'])} / "
+          f"{_fmt(r['max_rmse_percent_all_pixels'])} | - | includes the invalid (clipped) pixels the paper leaves out |",
+          f"| noiseless mode: median / max (valid pixels) | {_fmt(r['noiseless_median_rmse_percent'])} / "
+          f"{_fmt(r['noiseless_max_rmse_percent'])} | - | quantisation and clipping alone |",
+          f"| noiseless per-pixel error within the analytic bound | {r['noiseless_within_analytic_bound']} | - | "
+          f"{'as expected: the emulator adds no error beyond quantisation' if r['noiseless_within_analytic_bound'] else 'NOT expected: an emulation error beyond quantisation (see bound ok per scene)'} |",
+          "", "\"-\": the paper gives no such figure; \"n/a\" in the tables below: no valid pixel in that region.", ""]
     p = r["pooled"]
     L += [f"Main camera `{main}`, all scenes and ground-truth exposures pooled ({p['sub_valid']['n']} exposures, "
           "valid pixels). The headline removes the ground truth's own noise (sigma, one capture) in quadrature, "

@@ -71,6 +71,10 @@ def _features(args: argparse.Namespace) -> int:
                 f"median matches {m['median_matches']}, min matches {m['min_matches']}",
                 file=sys.stderr,
             )
+        from emulator.report.bench import features_verdicts
+
+        for verdict in features_verdicts(results):
+            print(f"verdict: {verdict}", file=sys.stderr)
         print(f"wrote {args.output}/results.json, fig4_features.png, report.md", file=sys.stderr)
     return 0
 
@@ -118,6 +122,10 @@ def _vo(args: argparse.Namespace) -> int:
                         f"{first['rot_deg_per_m']['median']:.3f} deg/m"
                     )
             print(line, file=sys.stderr)
+        from emulator.report.bench import vo_verdicts
+
+        for verdict in vo_verdicts(results):
+            print(f"verdict: {verdict}", file=sys.stderr)
         print(f"wrote {args.output}/results.json, fig6_rpe.png, trajectories.png, report.md", file=sys.stderr)
     return 0
 

@@ -1,7 +1,9 @@
 """Benchmarks of what AE does to a VSLAM pipeline (paper section V-D).
 
 * :mod:`~emulator.metrics.features`: SIFT uniformity, consecutive matches, success rate.
-* :mod:`~emulator.metrics.vo`: stereo calibration, rectification, a minimal stereo VO.
+* :mod:`~emulator.metrics.stereo`: stereo calibration, rectification, extrinsics refinement.
+* :mod:`~emulator.metrics.vo`: a minimal stereo VO (tracking, failure policy).
+* :mod:`~emulator.metrics.trajectory`: evo trajectories from TUM files or poses, time association.
 * :mod:`~emulator.metrics.rpe`: the relative pose error through evo.
 * :mod:`~emulator.metrics.bench`: the benchmarks over run folders (results, figures).
 
@@ -22,14 +24,10 @@ from emulator.metrics.features import (
     success_curve,
     to_gray8,
 )
-from emulator.metrics.rpe import associate, read_trajectory, rpe_by_length, rpe_files, trajectory_from_poses
-from emulator.metrics.vo import (
-    VOParameters,
-    VOResult,
-    load_stereo_calibration,
-    run_stereo_vo,
-    stereo_rectification,
-)
+from emulator.metrics.rpe import rpe_by_length, rpe_files
+from emulator.metrics.trajectory import associate, read_trajectory, trajectory_from_poses
+from emulator.metrics.stereo import load_stereo_calibration, stereo_rectification
+from emulator.metrics.vo import VOParameters, VOResult, run_stereo_vo
 
 __all__ = [
     "bench_features",

@@ -29,15 +29,15 @@ from emulator.metrics.features import (
     load_gray8,
     success_curve,
 )
-from emulator.metrics.rpe import associate, read_trajectory, rpe_by_length, trajectory_from_poses
-from emulator.metrics.vo import (
-    VOParameters,
+from emulator.metrics.rpe import rpe_by_length
+from emulator.metrics.stereo import (
     estimate_stereo_extrinsics,
     find_calibration,
     load_stereo_calibration,
-    run_stereo_vo,
     stereo_rectification,
 )
+from emulator.metrics.trajectory import associate, read_trajectory, trajectory_from_poses
+from emulator.metrics.vo import VOParameters, run_stereo_vo
 
 __all__ = [
     "bench_features",
@@ -293,7 +293,7 @@ def bench_vo(
     refine_extrinsics : int
         When > 0, re-estimate the rig's relative rotation (and baseline direction) from
         left-right matches of this many stereo pairs, spread over the first method's
-        frames (:func:`emulator.metrics.vo.estimate_stereo_extrinsics`), and rectify with
+        frames (:func:`emulator.metrics.stereo.estimate_stereo_extrinsics`), and rectify with
         it.  Needed for the BorealHDR September 2023 files (identity rotation, while the
         rig is pitched by about 0.8 deg).  0 (default) uses the calibration as given.
     deltas_m : sequence of float, optional

@@ -13,13 +13,27 @@ from pathlib import Path
 import numpy as np
 
 from emulator.report.figures import new_figure, save
+from emulator.report.verdicts import (
+    DASH_NOTE,
+    matches_verdict,
+    rpe_verdict,
+    success_verdict,
+    uniformity_verdict,
+    vo_failure_verdict,
+)
 
 __all__ = [
     "plot_features",
     "plot_rpe",
+    "rpe_figure",
     "plot_trajectories",
+    "trajectories_figure",
+    "FAILED_STYLE",
+    "MAX_EQUAL_ASPECT",
     "features_report",
+    "features_verdicts",
     "vo_report",
+    "vo_verdicts",
     "PAPER_FEATURES",
     "PAPER_VO",
 ]
@@ -85,8 +99,16 @@ def plot_features(results: dict, path: str | Path) -> Path:
     return save(fig, path)
 
 
-def plot_rpe(results: dict, path: str | Path) -> Path:
-    """Paper Fig. 6: median translation (%) and rotation (deg/m) RPE against distance."""
+#: Line style of a method whose VO failed on some frames (its RPE is drawn, dotted, and named so in the legend).
+FAILED_STYLE = ":"
+
+
+def rpe_figure(results: dict):
+    """The figure of :func:`plot_rpe` (a matplotlib Figure; two axes, translation and rotation).
+
+    A method whose VO converged is a solid line; one whose VO failed on some frames (RPE
+    computed anyway, ``rpe_on_failure``) is dotted and labelled "(VO failed on N frames)".
+    """
     fig, (a, b) = new_figure(2)
     drawn = False
     for name, method in results["methods"].items():
@@ -96,39 +118,55 @@ def plot_rpe(results: dict, path: str | Path) -> Path:
         d = [e["delta_m"] for e in rpe["deltas"] if e["trans_pct"]]
         if not d:
             continue
-        style = "-" if method["status"] == "success" else ":"
-        a.plot(d, [e["trans_pct"]["median"] for e in rpe["deltas"] if e["trans_pct"]], style, marker="o", label=name)
+        failed = method["status"] != "success"
+        style = FAILED_STYLE if failed else "-"
+        label = f"{name} (VO failed on {len(method.get('failures', []))} frames)" if failed else name
+        a.plot(d, [e["trans_pct"]["median"] for e in rpe["deltas"] if e["trans_pct"]], style, marker="o", label=label)
         b.plot(d, [e["rot_deg_per_m"]["median"] for e in rpe["deltas"] if e["rot_deg_per_m"]], style, marker="o",
-               label=name)
+               label=label)
         drawn = True
-    for ax, label in ((a, "median translation error (%)"), (b, "median rotation error (deg/m)")):
-        ax.set_xlabel("trajectory length (m)")
+    for ax, label in ((a, "median translation error (% of the pair length)"), (b, "median rotation error (deg/m)")):
+        ax.set_xlabel("pair length delta (m)")
         ax.set_ylabel(label)
         if drawn:
-            ax.legend(fontsize="small")
+            ax.legend(fontsize="small", title="dotted: VO failed (RPE shown anyway)"
+                      if any(m["status"] != "success" and m.get("rpe") for m in results["methods"].values())
+                      else None, title_fontsize="small")
         else:
             ax.text(0.5, 0.5, "no RPE (no reference or every run failed)", ha="center", va="center",
                     transform=ax.transAxes)
     a.set_title("RPE, translation")
     b.set_title("RPE, rotation")
-    return save(fig, path)
+    return fig
 
 
-def plot_trajectories(trajectories: dict, reference_xyz: np.ndarray | None, path: str | Path) -> Path:
-    """Top view of VO trajectories (the two axes of largest extent).
+def plot_rpe(results: dict, path: str | Path) -> Path:
+    """Paper Fig. 6: median translation (%) and rotation (deg/m) RPE against the pair length."""
+    return save(rpe_figure(results), path)
 
-    Parameters
-    ----------
-    trajectories : dict of str to numpy.ndarray
-        (N, 3) positions per method, metres (aligned to the reference when one exists).
-    reference_xyz : numpy.ndarray or None
-        (M, 3) reference positions, metres.
-    """
+
+#: Largest ratio of the two axis extents drawn to scale (equal aspect); a thinner path gets
+#: its own tight limits on each axis, and the title says "not to scale".
+MAX_EQUAL_ASPECT = 4.0
+#: Margin around the data, as a fraction of each axis' extent.
+MARGIN = 0.05
+
+
+def _tight(ax, lo, hi, axis: str, other_span: float) -> None:
+    span = float(hi - lo)
+    pad = MARGIN * span if span > 0 else max(0.5 * MARGIN * other_span, 0.05)
+    (ax.set_xlim if axis == "x" else ax.set_ylim)(lo - pad, hi + pad)
+
+
+def trajectories_figure(trajectories: dict, reference_xyz: np.ndarray | None):
+    """The figure of :func:`plot_trajectories`: axis limits from the data (5 % margin), equal
+    aspect when the two extents are within :data:`MAX_EQUAL_ASPECT` of each other."""
     fig, (ax,) = new_figure(1, 6.0, 5.0)
     everything = [np.asarray(x).reshape(-1, 3) for x in trajectories.values()]
     if reference_xyz is not None and len(reference_xyz):
         everything.append(np.asarray(reference_xyz).reshape(-1, 3))
     stacked = np.concatenate(everything) if everything else np.zeros((1, 3))
+    stacked = stacked[np.all(np.isfinite(stacked), axis=1)] if np.isfinite(stacked).any() else np.zeros((1, 3))
     # Top view: the two axes along which the trajectories extend most (x-z for camera
     # frames with y down, x-y for a z-up lidar map).
     a, b = sorted(np.argsort(np.ptp(stacked, axis=0))[-2:])
@@ -139,15 +177,88 @@ def plot_trajectories(trajectories: dict, reference_xyz: np.ndarray | None, path
         ax.plot(xyz[:, a], xyz[:, b], marker=".", label=name)
     ax.set_xlabel(f"{'xyz'[a]} (m)")
     ax.set_ylabel(f"{'xyz'[b]} (m)")
-    ax.set_aspect("equal", adjustable="datalim")
+    lo, hi = stacked[:, [a, b]].min(axis=0), stacked[:, [a, b]].max(axis=0)
+    span_x, span_y = float(hi[0] - lo[0]), float(hi[1] - lo[1])
+    _tight(ax, lo[0], hi[0], "x", span_y)
+    _tight(ax, lo[1], hi[1], "y", span_x)
+    to_scale = min(span_x, span_y) > 0 and max(span_x, span_y) / min(span_x, span_y) <= MAX_EQUAL_ASPECT
+    if to_scale:
+        ax.set_aspect("equal", adjustable="box")
     ax.legend(fontsize="small")
-    ax.set_title("VO trajectories (Sim(3)-aligned to the reference)" if reference_xyz is not None
-                 else "VO trajectories")
-    return save(fig, path)
+    title = ("VO trajectories (Sim(3)-aligned to the reference)" if reference_xyz is not None
+             else "VO trajectories")
+    ax.set_title(title + ("" if to_scale else "\naxes not to scale"))
+    return fig
+
+
+def plot_trajectories(trajectories: dict, reference_xyz: np.ndarray | None, path: str | Path) -> Path:
+    """Top view of VO trajectories (the two axes of largest extent), limits from the data.
+
+    Parameters
+    ----------
+    trajectories : dict of str to numpy.ndarray
+        (N, 3) positions per method, metres (aligned to the reference when one exists).
+    reference_xyz : numpy.ndarray or None
+        (M, 3) reference positions, metres.
+    """
+    return save(trajectories_figure(trajectories, reference_xyz), path)
 
 
 def _fmt(value, spec: str = ".1f") -> str:
     return "-" if value is None else format(value, spec)
+
+
+def _feature_facts(results: dict) -> dict:
+    """Image size, largest and smallest pair match count, median keypoints per image, over all runs and methods."""
+    seqs = [s for run in results["runs"] for s in run["methods"].values()]
+    matches = [c for s in seqs for c in s.get("matches", [])]
+    keypoints = [k for s in seqs for k in s.get("n_keypoints", [])]
+    shapes = [tuple(s["image_shape"]) for s in seqs if s.get("image_shape") and s["image_shape"][0]]
+    h, w = max(set(shapes), key=shapes.count) if shapes else (0, 0)
+    return {"image_wh": (w, h), "max_matches": max(matches) if matches else None,
+            "min_matches": min(matches) if matches else None,
+            "median_keypoints": float(np.median(keypoints)) if keypoints else None}
+
+
+def features_verdicts(results: dict) -> list[str]:
+    """One sentence per result of the feature benchmark: expected or not beside the paper, and why."""
+    facts = _feature_facts(results)
+    methods = results["methods"]
+    if not facts["image_wh"][0]:
+        return ["No image was analysed: nothing to compare with the paper."]
+    uni = {k: None if m["median_uniformity"] is None else 100 * m["median_uniformity"] for k, m in methods.items()}
+    med = {k: m["median_matches"] for k, m in methods.items() if m["median_matches"] is not None}
+    name = "fixed" if "fixed" in med else (max(med, key=med.get) if med else "fixed")
+    rates = {k: None if m["success_at_100"] is None else 100 * m["success_at_100"] for k, m in methods.items()}
+    return [
+        uniformity_verdict(uni, facts["median_keypoints"], results["parameters"]["grid"]),
+        matches_verdict(med.get(name), facts["image_wh"], "M_fixed" if name == "fixed" else name),
+        success_verdict(100, rates, facts["max_matches"], facts["min_matches"], facts["image_wh"]),
+    ]
+
+
+def vo_verdicts(results: dict) -> list[str]:
+    """One sentence per result of the VO benchmark (failures, RPE): expected or not beside the paper, and why."""
+    methods = results["methods"]
+    reasons: dict[str, int] = {}
+    for m in methods.values():
+        for f in m["failures"]:
+            reasons[f["reason"]] = reasons.get(f["reason"], 0) + 1
+    n_failed = sum(1 for m in methods.values() if m["status"] != "success")
+    trans, rot, deltas, on_failed = {}, {}, [], 0
+    for name, m in methods.items():
+        rpe = m.get("rpe")
+        if not rpe:
+            continue
+        t = [e["trans_pct"]["median"] for e in rpe["deltas"] if e.get("trans_pct")]
+        r = [e["rot_deg_per_m"]["median"] for e in rpe["deltas"] if e.get("rot_deg_per_m")]
+        deltas += [e["delta_m"] for e in rpe["deltas"] if e.get("trans_pct")]
+        if t:
+            trans[name] = min(t)
+            on_failed += m["status"] != "success"
+        if r:
+            rot[name] = min(r)
+    return [vo_failure_verdict(n_failed, len(methods), reasons), rpe_verdict(trans, rot, deltas, on_failed)]
 
 
 def features_report(results: dict, figure: str) -> str:
@@ -166,7 +277,7 @@ def features_report(results: dict, figure: str) -> str:
         "",
         f"![Fig. 4]({figure})",
         "",
-        "| method | runs | images | median uniformity (%) | median matches | min matches | success at tau=100 |",
+        "| method | runs | images | median uniformity (%) | median matches | min matches | success at tau=100 (%) |",
         "| --- | --- | --- | --- | --- | --- | --- |",
     ]
     for name, m in results["methods"].items():
@@ -174,10 +285,11 @@ def features_report(results: dict, figure: str) -> str:
         lines.append(
             f"| {name} | {m['n_runs']} | {m['n_images']} | {_fmt(None if u is None else 100 * u)} | "
             f"{_fmt(m['median_matches'], '.0f')} | {_fmt(m['min_matches'], 'd')} | "
-            f"{_fmt(None if m['success_at_100'] is None else 100 * m['success_at_100'], '.0f')} % |"
+            f"{_fmt(None if m['success_at_100'] is None else 100 * m['success_at_100'], '.0f')} |"
         )
-    lines += ["", "Paper (55 trajectories):", ""]
+    lines += ["", DASH_NOTE, "", "Paper (55 trajectories, 1920x1200 images):", ""]
     lines += [f"- {k}: {v}" for k, v in PAPER_FEATURES.items()]
+    lines += ["", "## Verdicts", ""] + [f"- {v}" for v in features_verdicts(results)]
     lines += ["", f"Command: `{results.get('command') or '(library call)'}`", ""]
     return "\n".join(lines)
 
@@ -204,7 +316,8 @@ def vo_report(results: dict, figures: dict[str, str]) -> str:
         "",
         f"VO failed on {n_failed} of {len(results['methods'])} method run(s).",
         "",
-        "| method | status | frames | tracked | failures | scale | RPE trans. (%) per delta | RPE rot. (deg/m) per delta |",
+        "| method | status | frames | tracked | failures | scale | median RPE trans. (% of delta), per pair length "
+        "delta (m) | median RPE rot. (deg/m), per pair length delta (m) |",
         "| --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for name, m in results["methods"].items():
@@ -226,10 +339,12 @@ def vo_report(results: dict, figures: dict[str, str]) -> str:
             f"| {name} | {m['status']} | {m['n_frames']} | {m['n_tracked']} | "
             f"{len(m['failures'])}{' (' + ', '.join(reasons) + ')' if reasons else ''} | {scale} | {trans} | {rot} |"
         )
-    lines += [""]
+    lines += ["", DASH_NOTE + " In fig6_rpe.png a dotted line is a method whose VO failed on some frames "
+              "(RPE computed anyway); its legend entry says so.", ""]
     for title, fig in figures.items():
         lines += [f"![{title}]({fig})", ""]
-    lines += ["Paper (55 trajectories, lidar reference):", ""]
+    lines += ["Paper (55 trajectories, lidar reference, 1920x1200 images):", ""]
     lines += [f"- {k}: {v}" for k, v in PAPER_VO.items()]
+    lines += ["", "## Verdicts", ""] + [f"- {v}" for v in vo_verdicts(results)]
     lines += ["", f"Command: `{results.get('command') or '(library call)'}`", ""]
     return "\n".join(lines)

@@ -1,5 +1,6 @@
 """``exposim validate emulation|selectors|motion|speed``: thin argument parsing around
-:func:`validation.report.run_experiment`.
+:func:`validation.report.run_experiment`; ``exposim validate ae-study`` around
+:func:`validation.ae_study.run_study`.
 
 Default sizes are the full study; ``--quick`` is the reduced configuration of the tests.
 A folder that already holds a results.json is refused unless ``--force``.
@@ -31,16 +32,51 @@ def _floats(text: str) -> tuple:
     return tuple(float(s) for s in _csv(text))
 
 
+class _DefaultsFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Every option's default in ``--help``: the argparse default, or, for an option left at
+    None, the experiment configuration's value (full and ``--quick``), looked up only when
+    the help is shown (``action.config_default``)."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        if "%(default)" in text or "(default" in text:
+            return text
+        lazy = getattr(action, "config_default", None)
+        if lazy is not None:
+            full, quick = (_show(v) for v in lazy())
+            shown = full if full == quick else f"{full}; with --quick: {quick}"
+            return f"{text} (default: {shown.replace('%', '%%')})"
+        if action.default is None or action.default is False or action.default is argparse.SUPPRESS:
+            return text
+        return text + " (default: %(default)s)"
+
+
+def _show(value) -> str:
+    if isinstance(value, (tuple, list)):
+        return ",".join(f"{v:g}" if isinstance(v, float) else str(v) for v in value)
+    return "none" if value is None else str(value)
+
+
+def _config_default(name: str, field: str):
+    def lookup():
+        from validation.report import make_config
+
+        return getattr(make_config(name), field), getattr(make_config(name, quick=True), field)
+
+    return lookup
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "validate",
         help="render-and-validate experiments on synthetic ground truth (writes results.json, PNGs, report.md)",
         description="Validate the emulator, the bracket selectors, motion between brackets and speed on "
                     "synthetic scenes with exact ground truth.",
+        formatter_class=_DefaultsFormatter,
     )
     vsub = p.add_subparsers(dest="experiment", metavar="EXPERIMENT", required=True)
     for name, help_ in _HELP.items():
-        q = vsub.add_parser(name, help=help_, description=help_)
+        q = vsub.add_parser(name, help=help_, description=help_, formatter_class=_DefaultsFormatter)
         q.add_argument("-o", "--output", type=Path, required=True, help="output folder")
         q.add_argument("--quick", action="store_true", help="reduced configuration (seconds, for tests)")
         q.add_argument("--force", action="store_true", help="overwrite an existing results.json")
@@ -64,6 +100,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         if name == "motion":
             q.add_argument("--speeds", type=_floats, dest="speeds_mps", help="walking speeds, m/s")
         q.set_defaults(func=_run, experiment=name)
+        for action in q._actions:
+            if action.dest in _OPTION_FIELDS and action.dest != "cache_dir":
+                action.config_default = _config_default(name, action.dest)
+    _register_ae_study(vsub)
     from validation.live.cli import register as register_live  # issue 14: its own options and runner
 
     register_live(vsub)
@@ -74,6 +114,34 @@ register.order = 80  # place in `exposim --help`
 
 _OPTION_FIELDS = ("cache_dir", "width", "height", "spp", "n_exposures", "repeats", "responses", "scenes",
                   "vignetting", "train_scenes", "test_scenes", "speeds_mps")
+
+
+def _register_ae_study(vsub) -> None:
+    """``exposim validate ae-study``: the synthetic AE study (paper section V-D)."""
+    from validation.ae_study.cli import add_arguments
+
+    help_ = ("the paper's section V-D benchmarks (features, stereo VO, RPE) for the seven AE methods on synthetic "
+             "stereo walks, with a verdict on each of the paper's findings")
+    q = vsub.add_parser("ae-study", help=help_, description=help_, formatter_class=_DefaultsFormatter)
+    add_arguments(q, output_option=True)
+    q.set_defaults(func=_run_ae_study, experiment="ae-study")
+
+
+def _run_ae_study(args) -> int:
+    from validation.ae_study.cli import run_from_args, summary_lines
+
+    words = ["exposim", "validate", "ae-study", "-o", str(args.output)]
+    words += [w for flag, on in (("--quick", args.quick), ("--redraw", args.redraw)) if on for w in [flag]]
+    for flag, value in (("--cycles", args.cycles), ("--spp", args.spp)):
+        if value is not None:
+            words += [flag, str(value)]
+    if args.size is not None:
+        words += ["--size", f"{args.size[0]}x{args.size[1]}"]
+    if args.scenes:
+        words += ["--scenes", ",".join(args.scenes)]
+    results = run_from_args(args, shlex.join(words))
+    print("\n".join(summary_lines(args, results)))
+    return 0
 
 
 def _run(args) -> int:

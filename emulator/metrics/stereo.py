@@ -1,0 +1,382 @@
+"""Stereo calibration and rectification for the stereo VO (paper section V-D-2).
+
+Calibration: ROS ``camera_info`` YAML files ``left.yaml`` and ``right.yaml``
+(:func:`emulator.io.camera_info.read_camera_info`).  The rig's relative pose is built from the files'
+rectification matrices R_l, R_r and the baseline ``b = -P_r[0, 3] / P_r[0, 0]`` (ROS:
+``Tx = -fx' b``): ``R = R_r^T R_l``, ``T = -R_r^T [b, 0, 0]`` (left to right camera).
+The images are then rectified by ``cv2.stereoRectify`` from K, D of both cameras and
+(R, T), with ``alpha = 0`` (only valid pixels) and zero disparity at infinity.  The
+files' own projection matrices are *not* used for rectification: in the BorealHDR
+September 2023 files they are not a rectified pair (the two P differ in fy and cy), and
+their rectification matrices are identity, so ``R = I`` and ``T = [-b, 0, 0]`` with
+``b = 180 / 1009.77 = 0.178 m``.
+
+That identity rotation is not the real rig's: on the shared sample, matches are 16 px
+apart vertically after rectification (a relative pitch of about 0.8 deg), so no stereo
+match survives the row check and the VO reports ``too_few_stereo_points`` with the
+measured row offset.  :func:`estimate_stereo_extrinsics` re-estimates R (and the
+direction of T, scaled to the calibrated baseline) from left-right matches of a few
+frames; with it the row offset on the sample drops to 0.1-0.2 px.  It is an explicit
+option, never applied silently.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from emulator.errors import CalibrationError, MetricsError
+from emulator.io.camera_info import CameraInfo, read_camera_info
+from emulator.metrics.features import detect_sift, match_descriptors
+
+__all__ = [
+    "StereoCalibration",
+    "load_stereo_calibration",
+    "find_calibration",
+    "ExtrinsicsEstimate",
+    "estimate_stereo_extrinsics",
+    "StereoRectification",
+    "stereo_rectification",
+    "rotation_angle_deg",
+]
+
+
+def rotation_angle_deg(R: np.ndarray) -> float:
+    """Rotation angle of a 3x3 rotation matrix, degrees (``acos((tr R - 1) / 2)``, clipped)."""
+    c = (np.trace(R) - 1.0) / 2.0
+    return math.degrees(math.acos(max(-1.0, min(1.0, c))))
+
+
+# --------------------------------------------------------------------------- calibration
+
+
+@dataclass(frozen=True)
+class StereoCalibration:
+    """A calibrated stereo rig.
+
+    Attributes
+    ----------
+    left, right : CameraInfo
+    baseline_m : float
+        Distance between the optical centres, metres (``-P_r[0, 3] / P_r[0, 0]``).
+    R : numpy.ndarray
+        (3, 3) rotation from the left to the right camera frame, ``R_r^T R_l``.
+    T : numpy.ndarray
+        (3,) translation from the left to the right camera frame, metres,
+        ``-R_r^T [b, 0, 0]`` (``X_r = R X_l + T``, OpenCV's ``stereoRectify`` convention).
+    """
+
+    left: CameraInfo
+    right: CameraInfo
+    baseline_m: float
+    R: np.ndarray
+    T: np.ndarray
+
+    @property
+    def image_size(self) -> tuple[int, int]:
+        """(width, height) in pixels."""
+        return (self.left.width, self.left.height)
+
+    def with_extrinsics(self, R: np.ndarray, T: np.ndarray) -> "StereoCalibration":
+        """The same cameras with another relative pose (left to right, ``X_r = R X_l + T``)."""
+        R = np.asarray(R, dtype=np.float64).reshape(3, 3)
+        T = np.asarray(T, dtype=np.float64).reshape(3)
+        return StereoCalibration(self.left, self.right, float(np.linalg.norm(T)), R, T)
+
+    def check_image_shape(self, shape: tuple[int, ...], image: str | Path = "image") -> None:
+        """Raise :class:`CalibrationError` unless ``shape`` (H, W) matches the calibration."""
+        if tuple(shape[:2]) != (self.left.height, self.left.width):
+            raise CalibrationError(
+                f"{image}: image is {shape[1]}x{shape[0]} but the calibration {self.left.path} is for "
+                f"{self.left.width}x{self.left.height} images; use the calibration of this rig (--calibration DIR)"
+            )
+
+
+def load_stereo_calibration(directory: str | Path, *, baseline_m: float | None = None) -> StereoCalibration:
+    """Load ``left.yaml`` and ``right.yaml`` from a calibration folder.
+
+    Parameters
+    ----------
+    directory : str or pathlib.Path
+        Folder with ``left.yaml`` and ``right.yaml`` (ROS ``camera_info``).
+    baseline_m : float, optional
+        Override the baseline, metres (default: ``-P_r[0, 3] / P_r[0, 0]`` from the
+        right file).  The BorealHDR April 2023 files give 180 / 1171.9 = 0.154 m this
+        way, while the rig's baseline is 0.18 m (their commented-out rectified P gives
+        207.3 / 1148.1 = 0.181 m).
+
+    Returns
+    -------
+    StereoCalibration
+
+    Raises
+    ------
+    CalibrationError
+        When a file is missing or malformed, the two image sizes differ, or the right
+        projection matrix does not give a positive baseline.
+    """
+    directory = Path(directory)
+    if not directory.is_dir():
+        raise CalibrationError(f"{directory}: calibration folder does not exist")
+    left = read_camera_info(directory / "left.yaml")
+    right = read_camera_info(directory / "right.yaml")
+    if (left.width, left.height) != (right.width, right.height):
+        raise CalibrationError(
+            f"{directory}: left is {left.width}x{left.height} but right is {right.width}x{right.height}"
+        )
+    if baseline_m is not None:
+        if not (math.isfinite(baseline_m) and baseline_m > 0):
+            raise CalibrationError(f"baseline_m must be a positive number of metres, got {baseline_m}")
+        baseline = float(baseline_m)
+    else:
+        fx_r, tx = right.P[0, 0], right.P[0, 3]
+        if fx_r <= 0 or not tx < 0:
+            raise CalibrationError(
+                f"{right.path}: projection_matrix must hold Tx = P[0,3] = -fx * baseline < 0 "
+                f"(the right camera to the right of the left one), got P[0,3] = {tx}"
+            )
+        baseline = float(-tx / fx_r)
+    R = right.R.T @ left.R
+    T = -right.R.T @ np.array([baseline, 0.0, 0.0])
+    return StereoCalibration(left, right, baseline, R, T)
+
+
+def find_calibration(sequence: str | Path | None, override: str | Path | None = None) -> Path:
+    """The calibration folder: ``override`` if given, else ``<sequence>/calibration``.
+
+    Raises
+    ------
+    CalibrationError
+        When neither holds ``left.yaml`` and ``right.yaml``.
+    """
+    if override is not None:
+        folder = Path(override)
+        if not ((folder / "left.yaml").is_file() and (folder / "right.yaml").is_file()):
+            raise CalibrationError(f"{folder}: no left.yaml and right.yaml (ROS camera_info) in this folder")
+        return folder
+    if sequence is None:
+        raise CalibrationError(
+            "no stereo calibration: the run's sequence is unknown or missing; pass --calibration DIR "
+            "(a folder with left.yaml and right.yaml)"
+        )
+    folder = Path(sequence) / "calibration"
+    if not ((folder / "left.yaml").is_file() and (folder / "right.yaml").is_file()):
+        raise CalibrationError(
+            f"{folder}: no left.yaml and right.yaml; pass --calibration DIR (real BorealHDR: "
+            f"calibration/september_2023 or april_2023)"
+        )
+    return folder
+
+
+@dataclass(frozen=True)
+class ExtrinsicsEstimate:
+    """The rig's relative pose estimated from left-right matches.
+
+    Attributes
+    ----------
+    R : numpy.ndarray
+        (3, 3) rotation left to right camera.
+    T : numpy.ndarray
+        (3,) translation left to right, metres: the estimated direction scaled to the
+        calibration's baseline.
+    rotation_deg : list of float
+        ``R`` as a rotation vector in degrees (x: pitch, y: yaw, z: roll offsets).
+    rotation_change_deg : float
+        Angle between the estimated and the calibrated rotation, degrees.
+    n_matches, n_inliers : int
+        Left-right matches used, and RANSAC inliers of the essential matrix.
+    """
+
+    R: np.ndarray
+    T: np.ndarray
+    rotation_deg: list[float]
+    rotation_change_deg: float
+    n_matches: int
+    n_inliers: int
+
+    def to_dict(self) -> dict:
+        """JSON-ready dictionary."""
+        return {
+            "R": self.R.tolist(),
+            "T_m": self.T.tolist(),
+            "rotation_deg": [float(v) for v in self.rotation_deg],
+            "rotation_change_deg": float(self.rotation_change_deg),
+            "n_matches": self.n_matches,
+            "n_inliers": self.n_inliers,
+        }
+
+
+def estimate_stereo_extrinsics(
+    calibration: StereoCalibration,
+    pairs: Iterable[tuple[np.ndarray, np.ndarray]],
+    *,
+    ratio: float = 0.7,
+    threshold_px: float = 1.0,
+    max_translation_deviation_deg: float = 15.0,
+    seed: int = 0,
+) -> ExtrinsicsEstimate:
+    """Estimate the rig's relative rotation from left-right SIFT matches (self-calibration).
+
+    For rigs whose files carry intrinsics and a baseline but no measured relative
+    rotation (the BorealHDR September 2023 files hold identity rectification matrices,
+    yet their images are 16 px apart vertically after rectification: a relative pitch
+    of about 0.8 deg).  The matches of all given pairs, undistorted with each camera's
+    K and D, give an essential matrix by RANSAC (``cv2.findEssentialMat``); its pose
+    (``cv2.recoverPose``) gives R and the direction of T, scaled to the calibration's
+    baseline.
+
+    Parameters
+    ----------
+    calibration : StereoCalibration
+    pairs : iterable of (left8, right8)
+        Unrectified (H, W) ``uint8`` stereo pairs of the calibration's size.
+    ratio : float
+        Ratio test threshold (stricter than for tracking).
+    threshold_px : float
+        RANSAC threshold on the epipolar distance, pixels of the left focal length.
+    max_translation_deviation_deg : float
+        Largest accepted angle between the estimated baseline direction and the
+        calibrated one, degrees.
+    seed : int
+        ``cv2.setRNGSeed`` before RANSAC.
+
+    Returns
+    -------
+    ExtrinsicsEstimate
+
+    Raises
+    ------
+    CalibrationError
+        When there are too few matches or the estimate contradicts the calibration (a
+        baseline direction off by more than ``max_translation_deviation_deg``).
+    """
+    nl, nr = [], []
+    for left8, right8 in pairs:
+        calibration.check_image_shape(left8.shape, "left image")
+        fl, fr = detect_sift(left8), detect_sift(right8)
+        m = match_descriptors(fl.descriptors, fr.descriptors, ratio=ratio, seed=seed)
+        if m.shape[0] == 0:
+            continue
+        nl.append(cv2.undistortPoints(fl.points[m[:, 0]].reshape(-1, 1, 2).astype(np.float64),
+                                      calibration.left.K, calibration.left.D).reshape(-1, 2))
+        nr.append(cv2.undistortPoints(fr.points[m[:, 1]].reshape(-1, 1, 2).astype(np.float64),
+                                      calibration.right.K, calibration.right.D).reshape(-1, 2))
+    n_matches = int(sum(len(a) for a in nl))
+    if n_matches < 50:
+        raise CalibrationError(f"estimate_stereo_extrinsics: only {n_matches} left-right matches (need 50)")
+    nl_all, nr_all = np.concatenate(nl), np.concatenate(nr)
+    cv2.setRNGSeed(int(seed))
+    E, mask = cv2.findEssentialMat(nl_all, nr_all, np.eye(3), method=cv2.RANSAC, prob=0.9999,
+                                   threshold=threshold_px / calibration.left.K[0, 0])
+    if E is None or E.shape != (3, 3):
+        raise CalibrationError("estimate_stereo_extrinsics: no essential matrix found")
+    n_inliers, R, t, _ = cv2.recoverPose(E, nl_all, nr_all, np.eye(3), mask=mask)
+    t = t.ravel() / np.linalg.norm(t)
+    expected = calibration.T / np.linalg.norm(calibration.T)
+    deviation = math.degrees(math.acos(max(-1.0, min(1.0, float(t @ expected)))))
+    if deviation > max_translation_deviation_deg:
+        raise CalibrationError(
+            f"estimate_stereo_extrinsics: estimated baseline direction {np.round(t, 3).tolist()} is "
+            f"{deviation:.1f} deg from the calibrated {np.round(expected, 3).tolist()}; estimate rejected"
+        )
+    from scipy.spatial.transform import Rotation
+
+    return ExtrinsicsEstimate(
+        R=R,
+        T=t * calibration.baseline_m,
+        rotation_deg=list(np.degrees(Rotation.from_matrix(R).as_rotvec())),
+        rotation_change_deg=rotation_angle_deg(R @ calibration.R.T),
+        n_matches=n_matches,
+        n_inliers=int(n_inliers),
+    )
+
+
+@dataclass(frozen=True)
+class StereoRectification:
+    """Rectification maps and the rectified camera of a stereo rig.
+
+    Attributes
+    ----------
+    K : numpy.ndarray
+        (3, 3) intrinsic matrix of both rectified images, pixels.
+    baseline_m : float
+        Rectified baseline, metres.
+    R1 : numpy.ndarray
+        (3, 3) rotation from the left camera frame to the rectified left frame.
+    size : tuple of int
+        (width, height) of the rectified images, pixels.
+    input_size : tuple of int
+        (width, height) of the images to rectify (the calibration's), pixels.
+    """
+
+    K: np.ndarray
+    baseline_m: float
+    R1: np.ndarray
+    size: tuple[int, int]
+    input_size: tuple[int, int]
+    _maps: tuple = field(repr=False, default=())
+
+    def rectify(self, left8: np.ndarray, right8: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Rectify a left/right pair of (H, W) ``uint8`` images (bilinear)."""
+        (l1, l2), (r1, r2) = self._maps
+        if self.size != self.input_size:
+            sigma = 0.5 * self.input_size[0] / self.size[0]
+            left8 = cv2.GaussianBlur(left8, (0, 0), sigma)
+            right8 = cv2.GaussianBlur(right8, (0, 0), sigma)
+        return (
+            cv2.remap(left8, l1, l2, cv2.INTER_LINEAR),
+            cv2.remap(right8, r1, r2, cv2.INTER_LINEAR),
+        )
+
+
+def stereo_rectification(
+    calibration: StereoCalibration, *, alpha: float = 0.0, scale: float = 1.0
+) -> StereoRectification:
+    """Rectification of a stereo rig by ``cv2.stereoRectify`` (zero disparity at infinity).
+
+    Parameters
+    ----------
+    calibration : StereoCalibration
+    alpha : float
+        OpenCV's free scaling: 0 keeps only valid pixels (no black borders, which would
+        add spurious SIFT keypoints), 1 keeps all source pixels.
+    scale : float
+        Size of the rectified images relative to the calibration's, in (0, 1]; below 1
+        the rectification also downsamples (bilinear, after a Gaussian pre-filter of
+        ``sigma = 0.5 / scale`` pixels against aliasing), for quick runs.
+
+    Returns
+    -------
+    StereoRectification
+    """
+    if not 0.0 < scale <= 1.0:
+        raise MetricsError(f"scale must lie in (0, 1], got {scale}")
+    size = calibration.image_size
+    out_size = (max(1, round(size[0] * scale)), max(1, round(size[1] * scale)))
+    R1, R2, P1, P2, *_ = cv2.stereoRectify(
+        calibration.left.K,
+        calibration.left.D,
+        calibration.right.K,
+        calibration.right.D,
+        size,
+        calibration.R,
+        calibration.T.reshape(3, 1),
+        flags=cv2.CALIB_ZERO_DISPARITY,
+        alpha=alpha,
+        newImageSize=out_size,
+    )
+    maps = (
+        cv2.initUndistortRectifyMap(calibration.left.K, calibration.left.D, R1, P1, out_size, cv2.CV_16SC2),
+        cv2.initUndistortRectifyMap(calibration.right.K, calibration.right.D, R2, P2, out_size, cv2.CV_16SC2),
+    )
+    baseline = float(-P2[0, 3] / P2[0, 0])
+    if not baseline > 0:
+        raise CalibrationError(f"{calibration.right.path}: rectification gives a non-positive baseline {baseline}")
+    return StereoRectification(
+        K=P1[:3, :3].copy(), baseline_m=baseline, R1=R1.copy(), size=out_size, input_size=size, _maps=maps
+    )

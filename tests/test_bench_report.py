@@ -1,0 +1,182 @@
+"""Reports say in words whether each result is expected beside the paper, units are in the headers,
+"-" cells are explained, and the figures carry no unexplained styles or empty ranges (issue 11)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from emulator.report import bench as report
+from emulator.report.verdicts import (
+    DASH_NOTE,
+    PAPER_IMAGE_WH,
+    matches_verdict,
+    success_verdict,
+    uniformity_verdict,
+)
+
+
+def _features_results(matches: dict, keypoints: int = 50, shape=(160, 256), uniformity=0.25) -> dict:
+    """A feature-benchmark results.json with one run; ``matches``: method -> pair match counts."""
+    methods, runs = {}, {}
+    for name, m in matches.items():
+        runs[name] = {"n_images": len(m) + 1, "image_shape": list(shape), "matches": list(m),
+                      "n_keypoints": [keypoints] * (len(m) + 1), "uniformity": [uniformity] * (len(m) + 1)}
+        methods[name] = {"n_runs": 1, "n_images": len(m) + 1, "median_uniformity": uniformity if m else None,
+                         "median_matches": float(np.median(m)) if m else None,
+                         "min_matches": int(min(m)) if m else None,
+                         "success_at_100": float(min(m) >= 100) if m else None}
+    return {"parameters": {"grid": [20, 20], "ratio": 0.8, "n_features": 0, "matcher": "flann", "scale": 1.0,
+                           "conversion": "x"},
+            "runs": [{"run_dir": "run", "methods": runs}], "methods": methods, "command": "test"}
+
+
+def _table_and_after(md: str, header_start: str) -> tuple[list[str], list[str]]:
+    lines = md.splitlines()
+    i = next(k for k, line in enumerate(lines) if line.startswith(header_start))
+    j = i
+    while j < len(lines) and lines[j].startswith("|"):
+        j += 1
+    return lines[i:j], lines[j:]
+
+
+# ----------------------------------------------------------------------------- verdicts
+
+
+def test_success_at_100_is_explained_by_the_largest_match_count():
+    md = report.features_report(_features_results({"fixed": [61, 40, 55], "kim": [30, 12]}), "fig4.png")
+    # the largest count of any pair (61) is below tau: 0 % is expected, with the image sizes named
+    assert "Success at tau = 100 is 0 % for every method, as expected" in md
+    assert "at most 61" in md and "256x160" in md and f"{PAPER_IMAGE_WH[0]}x{PAPER_IMAGE_WH[1]}" in md
+    # 1920x1200 has 2304000 / 40960 = 56.25 times the pixels of 256x160
+    assert "(56x the pixels)" in md
+
+
+def test_success_below_the_paper_names_the_weakest_pair():
+    text = success_verdict(100, {"fixed": 0.0, "kim": 10.0}, 180, 42, (640, 400))
+    assert text.startswith("Success at tau = 100 is 0..10 % (paper at tau = 100: 20-44 %).")
+    assert "Lower than the paper" in text and "42 matches against at most 180" in text
+    assert "Overlaps the paper's range" in success_verdict(100, {"fixed": 44.0, "kim": 20.0}, 900, 50, (1920, 1200))
+
+
+def test_matches_verdict_scales_the_papers_median_by_image_area():
+    # 674 * (256 * 160) / (1920 * 1200) = 11.98: 12 matches is in line with the size
+    text = matches_verdict(12.0, (256, 160))
+    assert "the paper's figure is 12;" in text and "1.0x that" in text and "in line with it" in text
+    assert "below even that" in matches_verdict(3.0, (256, 160))  # 0.25x
+    assert "above it" in matches_verdict(571.0, (160, 120))
+
+
+def test_uniformity_verdict_caps_the_fraction_by_the_keypoint_count():
+    # 50 keypoints can occupy at most 50 of 400 cells: 12.5 %
+    text = uniformity_verdict({"fixed": 10.0, "kim": 12.0}, 50, (20, 20))
+    assert "10.0..12.0 %" in text and "at most 50 of the 400 cells (12.5 %) can hold one." in text
+    # 237 keypoints could fill 59.2 % of the cells; 24.8..31.9 % is below that cap: clustering as well
+    text = uniformity_verdict({"fixed": 24.8, "kim": 31.9}, 237, (20, 20))
+    assert "(59.2 %) can hold one, and the measurement is below that cap too" in text
+    assert "although the images have enough keypoints" in uniformity_verdict({"kim": 30.0}, 900, (20, 20))
+    assert "Comparable with the paper" in uniformity_verdict({"kim": 66.0}, 800, (20, 20))
+
+
+def test_features_report_units_and_dash_note():
+    md = report.features_report(_features_results({"fixed": [61, 40], "shim": []}), "fig4.png")
+    table, after = _table_and_after(md, "| method |")
+    assert table[0].endswith("| median uniformity (%) | median matches | min matches | success at tau=100 (%) |")
+    fixed = next(row for row in table if row.startswith("| fixed"))
+    assert "| 25.0 |" in fixed  # uniformity 0.25 shown in percent
+    shim = next(row for row in table if row.startswith("| shim"))
+    assert shim.count("| - ") >= 3  # no pair: no figure
+    assert after[1] == DASH_NOTE  # the note directly under the table
+    assert "## Verdicts" in md
+
+
+# ----------------------------------------------------------------------------- VO report and figures
+
+
+def _vo_results() -> dict:
+    def rpe(scale):
+        return {"scale": 1.0, "deltas": [
+            {"delta_m": 0.5, "n_pairs": 4, "trans_pct": {"median": 2.0 * scale}, "rot_deg_per_m": {"median": 0.2 * scale}},
+            {"delta_m": 1.0, "n_pairs": 2, "trans_pct": {"median": 1.0 * scale}, "rot_deg_per_m": {"median": 0.1 * scale}},
+        ]}
+
+    return {
+        "run_dir": "run", "reference": "ref.txt", "failure_policy": "constant velocity", "command": "test",
+        "calibration": {"folder": "cal", "baseline_m": 0.18, "rectified_fx_px": 150.0},
+        "parameters": {"scale": 1.0, "vo": {"pnp_reprojection_px": 2.0}, "align_scale": True, "rel_delta_tol": 0.1},
+        "methods": {
+            "fixed": {"status": "success", "n_frames": 5, "n_tracked": 5, "failures": [], "rpe": rpe(1.0)},
+            "kim": {"status": "failed", "n_frames": 5, "n_tracked": 3, "rpe": rpe(2.0),
+                    "failures": [{"reason": "too_few_matches"}, {"reason": "too_few_matches"}]},
+            "shim": {"status": "failed", "n_frames": 5, "n_tracked": 4, "rpe": None, "rpe_skipped": None,
+                     "failures": [{"reason": "pnp_failed"}]},
+        },
+    }
+
+
+def test_vo_report_gives_the_delta_explains_dashes_and_judges():
+    md = report.vo_report(_vo_results(), {"fig6": "fig6_rpe.png"})
+    table, after = _table_and_after(md, "| method |")
+    assert "median RPE trans. (% of delta), per pair length delta (m)" in table[0]
+    assert "0.50 m: 2.00, 1.00 m: 1.00" in table[2]  # each value with its delta
+    shim = next(row for row in table if row.startswith("| shim"))
+    assert shim.endswith("| - | - | - |")
+    assert after[1].startswith(DASH_NOTE) and "dotted line" in after[1]
+    assert "VO failed on 2 of 3 runs (67 %; paper: 11 of 55, 20 %)" in md
+    assert "too_few_matches 2, pnp_failed 1" in md
+    # minimal medians 1.00 (fixed) and 2.00 (kim): below the paper's 4.21 %
+    assert "Minimal median RPE 1.00..2.00 % in translation, 0.100..0.200 deg/m" in md
+    assert "Below the paper's translation range" in md and "0.5..1 m long" in md
+    assert "1 of the RPEs come from runs whose VO failed" in md
+
+
+def test_rpe_figure_names_the_dotted_line():
+    fig = report.rpe_figure(_vo_results())
+    for ax in fig.axes:
+        lines = {line.get_label(): line.get_linestyle() for line in ax.get_lines()}
+        assert lines == {"fixed": "-", "kim (VO failed on 2 frames)": report.FAILED_STYLE}
+        legend = ax.get_legend()
+        assert {t.get_text() for t in legend.get_texts()} == set(lines)
+        assert "dotted" in legend.get_title().get_text()
+
+
+def _span(lim) -> float:
+    return float(lim[1] - lim[0])
+
+
+@pytest.mark.parametrize("lateral_m", [0.4, 4.0])
+def test_trajectory_limits_follow_the_data(lateral_m):
+    """A 12 m walk with ``lateral_m`` of sideways drift: each axis spans at most 1.2x its data."""
+    t = np.linspace(0.0, 1.0, 40)
+    xyz = np.column_stack([lateral_m * np.sin(3 * t), 0.01 * t, 12.0 * t])  # camera axes: x right, y down, z forward
+    ref = np.column_stack([np.zeros_like(t), np.zeros_like(t), 12.0 * t])
+    fig = report.trajectories_figure({"fixed": xyz}, ref)
+    fig.canvas.draw()  # apply the aspect
+    (ax,) = fig.axes
+    data_x = np.ptp(np.concatenate([xyz[:, 0], ref[:, 0]]))
+    data_z = np.ptp(np.concatenate([xyz[:, 2], ref[:, 2]]))
+    assert ax.get_xlabel() == "x (m)" and ax.get_ylabel() == "z (m)"
+    assert data_x < _span(ax.get_xlim()) <= 1.2 * data_x
+    assert data_z < _span(ax.get_ylim()) <= 1.2 * data_z
+    to_scale = bool(data_z / data_x <= report.MAX_EQUAL_ASPECT)
+    assert (ax.get_aspect() == 1.0) is to_scale
+    assert ("not to scale" in ax.get_title()) is (not to_scale)
+
+
+# ----------------------------------------------------------------------------- run report
+
+
+@pytest.mark.parametrize("mode, adjusted", [("paper", 3), ("borealhdr", 4)])
+def test_run_report_units_dashes_and_fixed(mode, adjusted):
+    from emulator.report.run import run_markdown
+
+    method = {"mode": mode, "cycles": 5, "mean_exposure_ms": 2.0, "median_exposure_ms": 2.0, "min_exposure_ms": 1.0,
+              "max_exposure_ms": 3.0, "mean_saturated_fraction": 0.0125, "mean_valid_fraction": 0.98,
+              "non_finite_proposals": 0, "method_ms_per_frame": None}
+    info = {"sequence": "seq", "method_options": {"fixed": {"name": "fixed", "mode": mode, "n_auto_frames": 3}}}
+    md = run_markdown(info, {"methods": {"fixed": method, "shim": dict(method, mode=mode)}})
+    table, after = _table_and_after(md, "| method |")
+    assert "| mean saturated (%) | mean valid (%) |" in table[0]
+    assert "| 1.25 | 98.00 | 0 | - |" in table[2]  # fractions shown in percent, no timing: "-"
+    assert '"-": no cycle of that method (or no timing recorded)' in after[1]
+    assert f"`fixed` (M_fixed) runs classical-50 for its first {adjusted} frames and then freezes" in md

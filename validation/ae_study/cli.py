@@ -1,0 +1,101 @@
+"""Command line of the AE study: ``python -m validation.ae_study OUT`` and ``exposim validate ae-study -o OUT``."""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+from emulator.errors import ExposimError
+from validation.ae_study.config import CONFIGS
+from validation.ae_study.study import redraw, run_study
+
+__all__ = ["add_arguments", "run_from_args", "main"]
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WxH, e.g. 256x160, got {text!r}") from None
+    return w, h
+
+
+def _scenes(text: str) -> tuple[str, ...]:
+    return tuple(s.strip() for s in text.split(",") if s.strip())
+
+
+def add_arguments(p: argparse.ArgumentParser, *, output_option: bool = False) -> None:
+    """The study's options on parser ``p`` (``output_option``: ``-o/--output`` instead of a positional).
+
+    Options left out keep the configuration's value; the help gives the ``full`` and the
+    ``--quick`` values (from :data:`~validation.ae_study.config.CONFIGS`).
+    """
+    full, quick = CONFIGS["full"], CONFIGS["quick"]
+    out_help = "output folder (results.json, report.md, figures, runs)"
+    if output_option:
+        p.add_argument("-o", "--output", type=Path, required=True, help=out_help)
+    else:
+        p.add_argument("output", type=Path, help=out_help)
+    p.add_argument("--quick", action="store_true",
+                   help=f"{quick.n_cycles} cycles per scene instead of {full.n_cycles} (a pipeline check, a few minutes)")
+    p.add_argument("--cycles", type=int,
+                   help=f"bracket cycles per scene (default: {full.n_cycles}; {quick.n_cycles} with --quick)")
+    p.add_argument("--size", type=_size, help=f"image size WxH (default: {full.width}x{full.height})")
+    p.add_argument("--spp", type=int, help=f"render samples per pixel (default: {full.spp})")
+    p.add_argument("--scenes", type=_scenes, help=f"comma-separated scenes (default: {','.join(full.scenes)})")
+    p.add_argument("--force", action="store_true", help="overwrite an existing results.json")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.add_argument("--redraw", action="store_true",
+                   help="only re-evaluate the findings and rewrite report.md and the figure from OUT/results.json")
+
+
+def run_from_args(args: argparse.Namespace, command: str) -> dict:
+    """Run (or ``--redraw``) the study from parsed :func:`add_arguments` options; returns results.json's content.
+
+    Raises
+    ------
+    emulator.errors.ExposimError
+        A bad configuration, an existing study without ``--force``, nothing to redraw.
+    """
+    if args.redraw:
+        return redraw(args.output)
+    changes = {}
+    if args.cycles is not None:
+        changes["n_cycles"] = args.cycles
+    if args.size is not None:
+        changes["width"], changes["height"] = args.size
+    if args.spp is not None:
+        changes["spp"] = args.spp
+    if args.scenes:
+        changes["scenes"] = args.scenes
+    cfg = replace(CONFIGS["quick" if args.quick else "full"], **changes)
+    return run_study(args.output, cfg, force=args.force, progress=not args.no_progress, command=command)
+
+
+def summary_lines(args: argparse.Namespace, results: dict) -> list[str]:
+    """What the command prints when done."""
+    lines = [results["findings_paragraph"]]
+    if not args.redraw:
+        lines.append(f"wrote {args.output / 'results.json'}, {args.output / 'report.md'} "
+                     f"in {results['timings']['total_s'] / 60:.1f} min")
+    return lines
+
+
+def main(argv=None) -> int:
+    """``python -m validation.ae_study``: rc 0, or 1 with one line on stderr for a known error."""
+    from validation import ae_study
+
+    p = argparse.ArgumentParser(prog="python -m validation.ae_study", description=ae_study.__doc__.split("\n\n")[0])
+    add_arguments(p)
+    args = p.parse_args(argv)
+    command = "python -m validation.ae_study " + " ".join(shlex.quote(a) for a in (sys.argv[1:] if argv is None else argv))
+    try:
+        results = run_from_args(args, command)
+    except ExposimError as exc:
+        print(f"ae_study: {exc}", file=sys.stderr)
+        return 1
+    print("\n".join(summary_lines(args, results)))
+    return 0

@@ -1,0 +1,172 @@
+"""Running the AE study: synthesise, play back, benchmark, summarise, report; and redrawing it."""
+
+from __future__ import annotations
+
+import shutil
+import sys
+import time
+from dataclasses import asdict
+from pathlib import Path
+
+from emulator.io.files import REPORT_FILE, RESULTS_FILE, prepare_output, read_results, write_results, write_text
+from validation.ae_study.config import CONFIGS, PAPER, VO_CONFIGURATION_NOTE, StudyConfig, StudyError, config_from_dict
+from validation.ae_study.findings import evaluate_findings, findings_paragraph
+from validation.ae_study.report import plot_summary, report_markdown
+from validation.ae_study.summary import summarise
+
+__all__ = ["run_study", "redraw"]
+
+
+def _bar(total: int, desc: str, unit: str, enabled: bool):
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=desc, unit=unit, disable=not enabled, file=sys.stderr, leave=False)
+
+
+def _callback(bar):
+    def cb(done, total):
+        bar.total = total
+        bar.n = done
+        bar.refresh()
+
+    return cb
+
+
+def run_study(out, config: StudyConfig = CONFIGS["full"], *, force: bool = False, progress: bool = True,
+              command: str | None = None, cache_dir=None) -> dict:
+    """Run the study into folder ``out`` (layout in the module docstring); returns results.json's content.
+
+    Parameters
+    ----------
+    out : path
+        Output folder.  A folder holding ``results.json`` is refused unless ``force``.  A
+        folder without it (an interrupted study) is reused: the sub-folders the study writes
+        (``datasets/<scene>``, ``runs/<scene>``, ``features``, ``vo/<scene>``) are recomputed;
+        renders come from the render cache.
+    config : StudyConfig
+    force : bool
+        Overwrite an existing study.
+    progress : bool
+        tqdm progress bars on stderr.
+    command : str, optional
+        The command line, recorded.
+    cache_dir : None, path or False
+        Render cache (see :func:`scenes.render`).
+
+    Raises
+    ------
+    emulator.errors.OutputExistsError
+        ``out/results.json`` exists and ``force`` is not given.
+    """
+    import scenes
+    from emulator.io.borealhdr import load_sequence
+    from emulator.metrics.bench import bench_features, bench_vo
+    from emulator.metrics.features import DEFAULT_TAUS
+    from emulator.metrics.vo import VOParameters
+    from emulator.playback import run_to_folder
+    from scenes.synthesize import synthesize
+
+    out = prepare_output(out, force=force)
+    cfg = config
+    timings: dict[str, float] = {}
+    t_start = time.perf_counter()
+    run_dirs, runs = {}, {}
+    for k, scene_name in enumerate(cfg.scenes):
+        scene = scenes.get_scene(scene_name, seed=cfg.scene_seed, **cfg.scene_parameters(scene_name))
+        ds = out / "datasets" / scene_name
+        run_dir = out / "runs" / scene_name
+        for folder in (ds, run_dir):
+            if folder.exists():
+                shutil.rmtree(folder)
+        t0 = time.perf_counter()
+        with _bar(cfg.n_cycles * 6, f"[{k + 1}/{len(cfg.scenes)}] synthesise {scene_name}", "shot", progress) as bar:
+            synthesize(scene, ds, n_cycles=cfg.n_cycles, width=cfg.width, height=cfg.height, spp=cfg.spp,
+                       stereo=True, seed=cfg.camera_seed, render_seed=cfg.render_seed, cache_dir=cache_dir,
+                       progress=_callback(bar))
+        timings[f"synthesise_{scene_name}_s"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        seq = load_sequence(ds)
+        with _bar(len(seq), f"[{k + 1}/{len(cfg.scenes)}] closed loop {scene_name}, 7 methods", "cycle",
+                  progress) as bar:
+            runs[scene_name] = run_to_folder(seq, "all", run_dir, save="png16", initial_ms=cfg.initial_ms,
+                                             progress=_callback(bar), command=command)
+        timings[f"closed_loop_{scene_name}_s"] = time.perf_counter() - t0
+        run_dirs[scene_name] = run_dir
+
+    t0 = time.perf_counter()
+    taus = sorted(set(int(t) for t in DEFAULT_TAUS) | set(int(t) for t in cfg.taus))
+    features = bench_features([run_dirs[s] for s in cfg.scenes], out / "features", taus=taus,
+                              seed=cfg.features_seed, force=True, progress=progress, command=command)
+    timings["features_s"] = time.perf_counter() - t0
+    vo = {}
+    params = VOParameters(ratio=cfg.vo_ratio, seed=cfg.vo_seed)
+    for scene_name in cfg.scenes:
+        t0 = time.perf_counter()
+        vo[scene_name] = bench_vo(run_dirs[scene_name], out / "vo" / scene_name, parameters=params,
+                                  rpe_on_failure=True, force=True, progress=progress, command=command)
+        timings[f"vo_{scene_name}_s"] = time.perf_counter() - t0
+    summary = summarise(cfg, features, vo, runs)
+    findings = evaluate_findings(summary, cfg.taus)
+    timings["total_s"] = time.perf_counter() - t_start
+    from emulator import __version__
+
+    results = {
+        "study": "ae_study (issue 7)",
+        "exposim_version": __version__,
+        "command": command,
+        "config": cfg.to_dict(),
+        "render_variant": scenes.choose_variant(),
+        "vo_parameters": asdict(params),
+        "vo_configuration_note": VO_CONFIGURATION_NOTE,
+        "paper": PAPER,
+        "summary": summary,
+        "findings": findings,
+        "findings_paragraph": findings_paragraph(findings),
+        "timings": timings,
+        "files": {
+            "report": "report.md",
+            "summary_figure": "ae_study_summary.png",
+            "features": "features/results.json",
+            "vo": {s: f"vo/{s}/results.json" for s in cfg.scenes},
+            "runs": {s: f"runs/{s}" for s in cfg.scenes},
+            "datasets": {s: f"datasets/{s}" for s in cfg.scenes},
+        },
+    }
+    plot_summary(results, out / "ae_study_summary.png")
+    write_text(out / REPORT_FILE, report_markdown(results))
+    write_results(out / RESULTS_FILE, results)
+    return results
+
+
+def redraw(out) -> dict:
+    """Re-summarise, re-evaluate the findings and rewrite ``report.md``, the summary figure
+    and ``results.json`` from the benchmarks' stored results (``features/``, ``vo/<scene>/``,
+    ``runs/<scene>/results.json``); nothing is rendered, played back or measured again.
+
+    Raises
+    ------
+    StudyError
+        When ``out/results.json`` or a benchmark's results do not exist.
+    """
+    out = Path(out)
+    path = out / "results.json"
+    if not path.is_file():
+        raise StudyError(f"{path}: no study to redraw")
+    results = read_results(path)
+    cfg = config_from_dict(results["config"])
+    try:
+        features = read_results(out / "features")
+        vo = {s: read_results(out / "vo" / s) for s in cfg.scenes}
+        runs = {s: read_results(out / "runs" / s) for s in cfg.scenes}
+    except FileNotFoundError as exc:
+        raise StudyError(f"{out}: cannot redraw: {exc}") from None
+    results["config"] = cfg.to_dict()
+    results["vo_configuration_note"] = VO_CONFIGURATION_NOTE
+    results["summary"] = summarise(cfg, features, vo, runs)
+    results["findings"] = evaluate_findings(results["summary"], results["config"]["taus"])
+    results["findings_paragraph"] = findings_paragraph(results["findings"])
+    results["redrawn"] = results.get("redrawn", 0) + 1
+    plot_summary(results, out / "ae_study_summary.png")
+    write_text(out / REPORT_FILE, report_markdown(results))
+    write_results(path, results)
+    return results
