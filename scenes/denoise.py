@@ -67,6 +67,7 @@ __all__ = [
     "DenoiseSettings",
     "DenoiserUnavailableWarning",
     "resolve_denoise",
+    "effective_denoise",
     "oidn_status",
     "oidn_version",
     "denoise_oidn",
@@ -158,6 +159,30 @@ def resolve_denoise(denoise) -> DenoiseSettings:
             raise RenderError(f"unknown denoiser {denoise!r}; valid: {', '.join(DENOISERS)}")
         return DenoiseSettings() if denoise == "oidn" else DenoiseSettings(name="off")
     raise RenderError(f"denoise must be one of {', '.join(DENOISERS)} or a DenoiseSettings, got {denoise!r}")
+
+
+def effective_denoise(denoise) -> tuple[DenoiseSettings, str | None]:
+    """The settings a render will actually use, and why OIDN is not used when it was asked for.
+
+    Resolves ``denoise`` like :func:`resolve_denoise`; when it names OIDN and OIDN cannot
+    run here (missing ``pyoidn``, a library that does not load, an unsupported CPU),
+    warns once (:class:`DenoiserUnavailableWarning`) and returns ``(off settings, reason)``.
+    Never raises for an unavailable denoiser.
+
+    Returns
+    -------
+    settings : DenoiseSettings
+    fallback : str or None
+        The reason for the fallback, None when none happened.
+    """
+    settings = resolve_denoise(denoise)
+    if not settings.enabled:
+        return settings, None
+    ok, reason = oidn_status()
+    if ok:
+        return settings, None
+    warn_unavailable(reason)
+    return DenoiseSettings(name="off"), reason
 
 
 def oidn_version() -> dict:

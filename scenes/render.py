@@ -24,7 +24,7 @@ import numpy as np
 from scenes.base import Scene, get_scene
 from scenes.cache import cache_path, canonical_json, read_exr, render_key, resolve_cache_dir, write_exr
 from scenes.camera import DEFAULT_FOV_DEG, _check_fov, _check_size, check_pose
-from scenes.denoise import DenoiseSettings, denoise_oidn, oidn_status, resolve_denoise, warn_unavailable
+from scenes.denoise import DenoiseSettings, denoise_oidn, effective_denoise, resolve_denoise, warn_unavailable
 from scenes.errors import RenderError
 from scenes.variant import check_variant_name, choose_variant, ensure_variant
 
@@ -233,18 +233,15 @@ def render_with_info(
     seed = _check_int("seed", seed, 0, 2**32 - 1)
     fov = _check_fov(fov_deg)
     m = check_pose(pose)
-    settings = resolve_denoise(denoise)
+    settings = resolve_denoise(denoise)  # bad names raise before anything else happens
     # The variant only names the cache entry here; it is probed (for JIT variants, in a
     # child process) before this process loads it, i.e. on a cache miss.
     variant = check_variant_name(variant) if variant is not None else choose_variant()
     info = {"denoise": settings.name, "fallback": None, "cache_hit": False, "spp": spp, "aux_spp": 0,
             "render_s": 0.0, "aux_s": 0.0, "denoise_s": 0.0}
-    if settings.enabled:
-        ok, reason = oidn_status()
-        if not ok:
-            warn_unavailable(reason)
-            settings = DenoiseSettings(name="off")
-            info.update(denoise="off", fallback=reason)
+    settings, fallback = effective_denoise(settings)
+    if fallback is not None:
+        info.update(denoise="off", fallback=fallback)
 
     folder = resolve_cache_dir(cache_dir)
     common = dict(width=width, height=height, spp=spp, seed=seed, fov_deg=fov, variant=variant)
