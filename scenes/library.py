@@ -52,24 +52,39 @@ _TEXTURES, _TREES, _ROCKS, _CANOPY, _DETAIL = 1, 2, 3, 4, 5
 _GROUND_TILE_M, _DETAIL_TILE_M = 12.0, 3.0
 
 
+#: Texture settings of forest_winter's detail layers (see :mod:`scenes.textures`), chosen so
+#: that denoised 8 ms frames match the real BorealHDR frames' SIFT keypoint density and median
+#: gradient (``python -m validation.render_study``).
+SNOW_DETAIL = {"grain_contrast": 0.8, "grain_beta": 1.6, "grain_min_mm": 12.0, "needles_per_m2": 6000.0,
+               "twigs_per_m2": 120.0, "debris_per_m2": 2000.0, "blobs_per_m2": 600.0}
+SNOW_DETAIL_RANGE = (0.1, 1.05)
+SNOW_RELIEF = {"beta": 3.0, "size": 512, "amplitude_m": 0.03}
+BARK_DETAIL_RANGE = (0.3, 1.4)
+NEEDLE_DETAIL = {"clump_cm": 3.0, "gap_fraction": 0.45}
+NEEDLE_DETAIL_RANGE = (0.03, 4.0)
+#: Luminance albedo range of the spruce foliage (before the needle-clump detail).
+NEEDLE_ALBEDO = (0.03, 0.13)
+
 def _snow_material(albedo: np.ndarray, rng: np.random.Generator, detail_px: int) -> Material:
-    """Snow: metre-scale albedo, centimetre-scale litter and grain, bump-mapped crust (3 cm relief)."""
+    """Snow: metre-scale albedo, centimetre-scale litter and grain, bump-mapped crust."""
     if detail_px < 64 or detail_px > 4096:
         raise SceneError(f"detail_px must be in [64, 4096], got {detail_px}")
-    return Material("diffuse", albedo, detail=tx.snow_detail(rng, detail_px, tile_m=_DETAIL_TILE_M),
-                    detail_repeat=_GROUND_TILE_M / _DETAIL_TILE_M, detail_range=(0.1, 1.05),
-                    bump=tx.relief(rng, 512), bump_repeat=_GROUND_TILE_M / _DETAIL_TILE_M, bump_amplitude=0.03)
+    relief = tx.relief(rng, int(SNOW_RELIEF["size"]), beta=float(SNOW_RELIEF["beta"]))
+    return Material("diffuse", albedo, detail=tx.snow_detail(rng, detail_px, tile_m=_DETAIL_TILE_M, **SNOW_DETAIL),
+                    detail_repeat=_GROUND_TILE_M / _DETAIL_TILE_M, detail_range=SNOW_DETAIL_RANGE,
+                    bump=relief, bump_repeat=_GROUND_TILE_M / _DETAIL_TILE_M,
+                    bump_amplitude=float(SNOW_RELIEF["amplitude_m"]))
 
 
 def _bark_material(albedo: np.ndarray, rng: np.random.Generator) -> Material:
     """Bark (1 m texture repeats): plates and cracks."""
-    return Material("diffuse", albedo, detail=tx.bark_detail(rng), detail_repeat=2.0, detail_range=(0.3, 1.4))
+    return Material("diffuse", albedo, detail=tx.bark_detail(rng), detail_repeat=2.0, detail_range=BARK_DETAIL_RANGE)
 
 
 def _needle_material(albedo: np.ndarray, rng: np.random.Generator) -> Material:
     """Spruce foliage (1 m texture repeats): needle clumps over 2 m tiles, dark gaps."""
-    return Material("diffuse", albedo, detail=tx.needle_clumps(rng, 512, tile_m=2.0), detail_repeat=0.5,
-                    detail_range=(0.12, 2.2))
+    return Material("diffuse", albedo, detail=tx.needle_clumps(rng, 512, tile_m=2.0, **NEEDLE_DETAIL),
+                    detail_repeat=0.5, detail_range=NEEDLE_DETAIL_RANGE)
 
 
 def _rng(seed: int, purpose: int) -> np.random.Generator:
@@ -193,7 +208,7 @@ def _describe_forest_winter(seed: int, p: dict) -> SceneDescription:
     materials = {
         "snow": _snow_material(tx.snow_texture(rt, px), rd, p["detail_px"]),
         "bark": _bark_material(tx.bark_texture(rt), rd),
-        "needles": _needle_material(tx.foliage_texture(rt), rd),
+        "needles": _needle_material(tx.foliage_texture(rt, low=NEEDLE_ALBEDO[0], high=NEEDLE_ALBEDO[1]), rd),
         "rock": Material("diffuse", tx.rock_texture(rt)),
     }
     trunks, crowns, _ = _conifer_stand(_rng(seed, _TREES), density_per_ha=p["tree_density_per_ha"],

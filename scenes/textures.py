@@ -338,7 +338,9 @@ def specks(
 
 def snow_detail(seed: int | np.random.Generator, size: int = 2048, *, tile_m: float = 3.0,
                 needles_per_m2: float = 3000.0, twigs_per_m2: float = 120.0, debris_per_m2: float = 800.0,
-                grain_contrast: float = 0.35, grain_beta: float = 2.0) -> np.ndarray:
+                grain_contrast: float = 0.35, grain_beta: float = 2.0, grain_min_mm: float = 3.0,
+                blobs_per_m2: float = 0.0, blob_mm: tuple[float, float] = (8.0, 64.0),
+                blob_depth: float = 0.5) -> np.ndarray:
     """Centimetre-scale snow surface: grain and crust, and the litter a spruce stand drops on it.
 
     Spring snow under spruces carries hundreds of needles per square metre
@@ -356,6 +358,20 @@ def snow_detail(seed: int | np.random.Generator, size: int = 2048, *, tile_m: fl
         Litter densities (mean over the tile; clustered by a coarse noise).
     grain_contrast : float
         Peak-to-peak depth of the crust grain, as a fraction of the weight.
+    grain_beta : float
+        Spectral exponent of the grain (:func:`fractal_noise`).
+    grain_min_mm : float
+        Shortest wavelength of the grain, millimetres: structure much finer than a
+        pixel's footprint averages out in the image, so the grain's contrast is put
+        where the camera resolves it.
+    blobs_per_m2 : float
+        Density of 1 cm dimples, clumps and flakes; they come in octaves of size from
+        ``blob_mm[0]`` to ``blob_mm[1]`` (each twice the last) with a density falling as
+        the inverse square of the size, so every octave covers the same fraction of the
+        surface: a self-similar pattern that gives blob-like features (what SIFT finds)
+        at every image resolution, as natural ground cover does.
+    blob_depth : float
+        How much a blob darkens the weight (0..1).
 
     Returns
     -------
@@ -367,7 +383,7 @@ def snow_detail(seed: int | np.random.Generator, size: int = 2048, *, tile_m: fl
     area = tile_m * tile_m
     cluster = fractal_noise((size // 8, size // 8), rng, beta=2.2) ** 3
     cluster = np.kron(cluster, np.ones((8, 8), np.float32))
-    grain = fractal_noise((size, size), rng, beta=grain_beta)
+    grain = fractal_noise((size, size), rng, beta=grain_beta, min_wavelength_px=max(2.0, grain_min_mm / mm))
     needles = specks((size, size), rng, count=int(needles_per_m2 * area), length_px=(10 / mm, 20 / mm),
                      width_px=(1.2 / mm, 2.0 / mm), density=0.15 + cluster)
     twigs = specks((size, size), rng, count=int(twigs_per_m2 * area), length_px=(25 / mm, 45 / mm),
@@ -375,7 +391,16 @@ def snow_detail(seed: int | np.random.Generator, size: int = 2048, *, tile_m: fl
     debris = specks((size, size), rng, count=int(debris_per_m2 * area), length_px=(4 / mm, 9 / mm),
                     width_px=(3 / mm, 7 / mm), density=0.1 + cluster)
     litter = np.maximum(np.maximum(needles, twigs), 0.8 * debris)
-    w = (1.0 - grain_contrast * grain) * (1.0 - 0.92 * litter)
+    blobs = np.zeros((size, size), np.float32)
+    octave_mm = float(blob_mm[0])
+    while blobs_per_m2 > 0 and octave_mm <= blob_mm[1] * (1 + 1e-9):
+        count = int(round(blobs_per_m2 * area * (10.0 / octave_mm) ** 2))
+        depth = rng.uniform(0.3, 1.0, 1)[0]
+        layer = specks((size, size), rng, count=count, length_px=(octave_mm / mm, 2.0 * octave_mm / mm),
+                       width_px=(0.5 * octave_mm / mm, octave_mm / mm), density=0.3 + cluster)
+        blobs = np.maximum(blobs, depth * layer)
+        octave_mm *= 2.0
+    w = (1.0 - grain_contrast * grain) * (1.0 - 0.92 * litter) * (1.0 - blob_depth * blobs)
     return np.clip(w, 0.0, 1.0).astype(np.float32)
 
 

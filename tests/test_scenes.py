@@ -351,7 +351,10 @@ DR_LOWER_BOUND_DB = {"forest_winter": 60.0, "forest_summer": 48.0, "sun_glare": 
 @pytest.mark.parametrize("name", SCENE_NAMES)
 def test_scene_render_is_valid_and_has_its_dynamic_range(built, name):
     scene = built[name]
-    img = scenes.render(scene, _start_pose(scene), width=64, height=40, spp=100, seed=0, cache_dir=False)
+    # the scene's own range: the unbiased raw estimate (at 64x40 the 0.1st percentile is 2-3 pixels,
+    # which the denoiser lifts towards their neighbours: forest_winter 64 dB raw, 58 dB denoised)
+    img = scenes.render(scene, _start_pose(scene), width=64, height=40, spp=100, seed=0, cache_dir=False,
+                        denoise="off")
     assert img.dtype == np.float32 and img.shape == (40, 64, 3)
     assert np.all(np.isfinite(img)) and img.min() >= 0.0
     y = scenes.luminance(img)
