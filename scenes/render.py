@@ -28,7 +28,7 @@ from scenes.denoise import DenoiseSettings, denoise_oidn, effective_denoise, res
 from scenes.errors import RenderError
 from scenes.variant import check_variant_name, choose_variant, ensure_variant
 
-__all__ = ["render", "render_with_info", "effective_spp", "MAX_SPP"]
+__all__ = ["render", "render_with_info", "render_depth", "effective_spp", "MAX_SPP"]
 
 #: Largest spp a single render accepts.
 MAX_SPP = 1 << 16
@@ -289,3 +289,39 @@ def render_with_info(
     _check_image(image, scene, variant, "denoised render")
     _write_cached(final_path, image, final_material)
     return image, info
+
+
+def render_depth(scene: Scene | str, pose, *, width: int, height: int, fov_deg: float = DEFAULT_FOV_DEG,
+                 spp: int = 4, seed: int = 0, variant: str | None = None) -> np.ndarray:
+    """Distance from the camera centre to the first hit along each pixel's ray (uncached).
+
+    Mitsuba's ``aov`` integrator (``depth``), averaged over ``spp`` samples per pixel (mixed
+    at silhouettes).  Pixels that see no surface (sky) are 0.
+
+    Returns
+    -------
+    numpy.ndarray
+        float32 (height, width), metres.
+    """
+    import mitsuba as mi
+
+    from scenes._mitsuba import sensor_dict
+
+    if isinstance(scene, str):
+        scene = get_scene(scene)
+    _check_size(width, height)
+    spp = effective_spp(_check_int("spp", spp, 1, MAX_SPP))
+    seed = _check_int("seed", seed, 0, 2**32 - 1)
+    fov = _check_fov(fov_deg)
+    m = check_pose(pose)
+    variant = check_variant_name(variant) if variant is not None else choose_variant()
+    ensure_variant(variant)
+    with _lock:
+        if mi.variant() != variant:
+            mi.set_variant(variant)
+        mi_scene = _loaded_scene(scene, variant)
+        sensor = mi.load_dict(sensor_dict(m, width=width, height=height, fov_deg=fov, spp=spp))
+        integrator = mi.load_dict({"type": "aov", "aovs": "dd:depth"})
+        image = mi.render(mi_scene, sensor=sensor, integrator=integrator, spp=spp, seed=seed)
+        d = np.array(image, dtype=np.float32).reshape(height, width, -1)[..., 0].copy()
+    return np.where(np.isfinite(d), d, 0.0).astype(np.float32)
