@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from emulator.errors import ExposimError
+from scenes.denoise import effective_denoise
 
 __all__ = ["synthesize", "DEFAULT_SATURATE_MS"]
 
@@ -45,6 +46,7 @@ def synthesize(
     speed_mps: float | None = None,
     cache_dir=None,
     variant: str | None = None,
+    denoise="oidn",
     overwrite: bool = False,
     progress=None,
 ) -> Path:
@@ -67,6 +69,11 @@ def synthesize(
         reference radiance (white surface facing the sun) saturates at ``saturate_ms``.
     speed_mps : float, optional
         Walking speed (default: the trajectory's 2 km/h).
+    denoise : str or scenes.denoise.DenoiseSettings
+        ``"oidn"`` (default): low-spp render denoised by Open Image Denoise; ``"off"``:
+        the raw path-traced estimate (see :func:`scenes.render`).  When OIDN cannot run
+        here, a :class:`scenes.denoise.DenoiserUnavailableWarning` says why, every frame
+        is the raw estimate and the dataset's description records the reason.
     Other parameters go to :func:`synth.capture_sequence` (noise, ground-truth captures,
     radiance EXRs) and :func:`scenes.render` (cache, variant).
 
@@ -93,6 +100,7 @@ def synthesize(
     walk_kwargs = {} if speed_mps is None else {"speed_mps": float(speed_mps)}
     traj = scene.trajectory(duration_s, **walk_kwargs)
     render_variant = variant or scenes.choose_variant()
+    settings, fallback = effective_denoise(denoise)
     shot_index: dict[float, int] = {}
 
     def source(timestamp_s: float, camera_name: str):
@@ -111,6 +119,7 @@ def synthesize(
             fov_deg=cam.fov_x_deg,
             cache_dir=cache_dir,
             variant=render_variant,
+            denoise=settings,
         )
         return radiance, np.asarray(pose, dtype=np.float64)
 
@@ -119,7 +128,8 @@ def synthesize(
         "scene": scene.key_material(),
         "scene_description": scene.description,
         "render": {"width": width, "height": height, "spp": spp, "render_seed": render_seed,
-                   "variant": render_variant, "fov_deg": cam.fov_x_deg},
+                   "variant": render_variant, "fov_deg": cam.fov_x_deg,
+                   "denoise": settings.key_material(), "denoise_fallback": fallback},
         "saturate_ms": saturate_ms,
         "trajectory": {"static": scene.is_static, "speed_mps": speed_mps},
     }

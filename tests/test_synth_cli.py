@@ -46,3 +46,24 @@ def test_synth_rejects_bad_arguments(tmp_path, capsys):
     assert "n_cycles must be >= 1" in capsys.readouterr().err
     assert main(["synth", "forest_winter", "-o", str(tmp_path / "y"), "--gt-exposures", "3,a", "--quiet"]) == 1
     assert "--gt-exposures" in capsys.readouterr().err
+
+
+def test_synth_records_the_denoiser(tmp_path):
+    args = ["synth", "static_lab", "--cycles", "1", "--size", "24x16", "--spp", "1", "--mono", "--quiet",
+            "--noiseless"]
+    assert main(args + ["--denoise", "off", "-o", str(tmp_path / "off")]) == 0
+    meta = json.loads((tmp_path / "off" / "exposim.json").read_text())
+    assert meta["source"]["render"]["denoise"] == {"name": "off"}
+    assert meta["source"]["render"]["denoise_fallback"] is None
+    assert main(args + ["-o", str(tmp_path / "on")]) == 0
+    render = json.loads((tmp_path / "on" / "exposim.json").read_text())["source"]["render"]
+    from scenes.denoise import oidn_status
+
+    if oidn_status()[0]:
+        assert render["denoise"]["name"] == "oidn" and render["denoise_fallback"] is None
+    else:  # pragma: no cover - depends on the machine
+        assert render["denoise"] == {"name": "off"} and render["denoise_fallback"]
+    # a denoised dataset differs from the raw one (same seeds, same poses)
+    off = load_sequence(tmp_path / "off")[0].frames["left"][32.0].load()
+    on = load_sequence(tmp_path / "on")[0].frames["left"][32.0].load()
+    assert on.shape == off.shape and (not oidn_status()[0] or not np.array_equal(on, off))

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from scenes.errors import RenderError, SceneError
 
-__all__ = ["register", "parse_size", "parse_params", "frame_seed"]
+__all__ = ["register", "parse_size", "parse_params", "frame_seed", "add_denoise_option"]
 
 #: Files the render command writes in its output folder (besides frames/).
 OUTPUT_FILES = ("scene.json", "poses_left.txt", "poses_right.txt")
@@ -55,6 +55,16 @@ def parse_params(items: list[str] | None) -> dict:
     return out
 
 
+def add_denoise_option(parser) -> None:
+    """``--denoise oidn|off`` (shared by ``exposim render`` and ``exposim synth``)."""
+    from scenes.denoise import DEFAULT_DENOISER, DENOISERS
+
+    parser.add_argument("--denoise", choices=DENOISERS, default=DEFAULT_DENOISER,
+                        help="'oidn' (default): denoise each render with Intel Open Image Denoise fed Mitsuba's "
+                             "albedo and normal; 'off': the raw path-traced estimate. Without a usable OIDN "
+                             "(pyoidn missing, unsupported CPU) a warning says why and renders are raw")
+
+
 def frame_seed(base_seed: int, index: int, camera: int) -> int:
     """Sampler seed of frame ``index`` of camera 0 (left) or 1 (right): independent noise per image."""
     return (int(base_seed) * 1_000_003 + 2 * int(index) + int(camera)) % (1 << 32)
@@ -71,7 +81,8 @@ def register(subparsers) -> None:
             "Render a procedural Mitsuba scene along a camera trajectory. Writes one float32 OpenEXR "
             "per frame (frames/left/<timestamp_ns>.exr, and frames/right/ with --stereo), the poses in "
             "TUM format (poses_left.txt, poses_right.txt) and scene.json with the scene parameters, "
-            "intrinsics, spp and the dynamic range of every frame. Renders are cached on disk."
+            "intrinsics, spp, the denoiser and the dynamic range of every frame. Each frame is a low-spp "
+            "render denoised by Open Image Denoise unless --denoise off. Renders are cached on disk."
         ),
     )
     p.add_argument("scene", choices=sorted(SCENES), metavar="SCENE", help=f"one of: {', '.join(sorted(SCENES))}")
@@ -93,6 +104,7 @@ def register(subparsers) -> None:
     p.add_argument("--stereo", action="store_true", help="also render the right camera (baseline 0.18 m)")
     p.add_argument("--baseline", type=float, default=None, help="stereo baseline, m (default 0.18)")
     p.add_argument("--variant", default=None, help="Mitsuba variant (default: probed llvm_ad_rgb, else scalar_rgb)")
+    add_denoise_option(p)
     cache = p.add_mutually_exclusive_group()
     cache.add_argument("--cache", type=Path, default=None, help="render cache folder (default $EXPOSIM_CACHE "
                        "or ~/.cache/exposim/renders)")
@@ -141,6 +153,7 @@ def run_render(args: argparse.Namespace) -> int:
     from emulator.io.tum import write_tum
     from scenes import trajectory as tr
     from scenes.cache import library_versions
+    from scenes.denoise import effective_denoise
     from scenes.variant import check_variant_name
 
     width, height = parse_size(args.size)
@@ -164,6 +177,7 @@ def run_render(args: argparse.Namespace) -> int:
                                 f"use --force to overwrite")
 
     cache_dir = False if args.no_cache else args.cache
+    denoise, denoise_fallback = effective_denoise(args.denoise)
     variant = check_variant_name(args.variant) if args.variant else scenes.choose_variant()
     if str(args.spp).lower() == "auto":
         # measured on the first pose, at no more than 160 px wide to keep it affordable
@@ -192,7 +206,7 @@ def run_render(args: argparse.Namespace) -> int:
             pose = poses[i] if cam == "left" else tr.stereo_right(poses[i], baseline)
             seed = frame_seed(args.render_seed, i, 0 if cam == "left" else 1)
             img = scenes.render(scene, pose, width=width, height=height, spp=spp, seed=seed, fov_deg=fov,
-                                cache_dir=cache_dir, variant=variant)
+                                cache_dir=cache_dir, variant=variant, denoise=denoise)
             write_exr(out / "frames" / cam / f"{stamps_ns[i]}.exr", img, overwrite=True)
             frames.append({"camera": cam, "timestamp_ns": stamps_ns[i], "seed": seed,
                            "dynamic_range_db": round(scenes.dynamic_range_db(img), 3)})
@@ -215,6 +229,8 @@ def run_render(args: argparse.Namespace) -> int:
         "intrinsics": {"fx": fx, "fy": fy, "cx": cx, "cy": cy},
         "spp": spp,
         "spp_selection": spp_info,
+        "denoise": denoise.key_material(),
+        "denoise_fallback": denoise_fallback,
         "variant": variant,
         "versions": library_versions(),
         "baseline_m": baseline if args.stereo else None,

@@ -11,6 +11,7 @@ __all__ = ["register"]
 
 def register(subparsers) -> None:
     from scenes.base import SCENES
+    from scenes.commands.render import add_denoise_option
     from scenes.synthesize import DEFAULT_SATURATE_MS
 
     p = subparsers.add_parser(
@@ -39,6 +40,7 @@ def register(subparsers) -> None:
     p.add_argument("--noiseless", action="store_true", help="exact noiseless captures")
     p.add_argument("--gt-exposures", default="", help="comma-separated target exposures (ms) to capture as ground truth")
     p.add_argument("--save-radiance", action="store_true", help="also write the radiance of every shot (OpenEXR)")
+    add_denoise_option(p)
     p.add_argument("--cache", type=Path, default=None, help="render cache folder")
     p.add_argument("--force", action="store_true", help="replace an existing exposim dataset")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -74,7 +76,7 @@ def _run(args: argparse.Namespace) -> int:
             scene, args.output, n_cycles=args.cycles, width=width, height=height, spp=args.spp,
             camera=args.camera, saturate_ms=args.saturate_ms, speed_mps=args.speed, seed=args.noise_seed,
             stereo=not args.mono, noise=not args.noiseless, gt_exposures_ms=gt, save_radiance=args.save_radiance,
-            cache_dir=args.cache, overwrite=args.force, progress=progress,
+            cache_dir=args.cache, denoise=args.denoise, overwrite=args.force, progress=progress,
         )
     print(f"wrote {path} ({args.cycles} cycles, {width}x{height}, {scene.name}); inspect with: exposim info {path}")
     return 0
