@@ -141,3 +141,45 @@ def test_cli_turns_bad_input_into_one_line(tmp_path, capsys):
     assert rs.main([str(tmp_path / "x"), "--scenes", "nowhere", "--no-progress"]) == 1
     err = capsys.readouterr().err
     assert err.startswith("render_study: unknown study scene") and err.count("\n") == 1
+
+
+def test_exposim_validate_render_help_shows_the_defaults(capsys):
+    from emulator.cli import main
+
+    with pytest.raises(SystemExit) as exc:
+        main(["validate", "render", "--help"])
+    assert exc.value.code == 0
+    out = " ".join(capsys.readouterr().out.split())
+    full, quick = rs.CONFIGS["full"], rs.CONFIGS["quick"]
+    assert "-o OUTPUT, --output OUTPUT" in out
+    assert f"(default {full.width}x{full.height}; --quick {quick.width}x{quick.height})" in out
+    assert f"(default {','.join(map(str, full.spp_levels))}; --quick {','.join(map(str, quick.spp_levels))})" in out
+    assert f"(default {full.reference_spp}; --quick {quick.reference_spp})" in out
+
+
+def test_exposim_validate_render_bad_scene_is_one_line(tmp_path, capsys):
+    from emulator.cli import main
+
+    assert main(["validate", "render", "-o", str(tmp_path / "x"), "--scenes", "nowhere", "--no-progress"]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("exposim validate: error: unknown study scene") and err.count("\n") == 1
+    assert not (tmp_path / "x").exists()
+
+
+@pytest.mark.render
+def test_exposim_validate_render_runs_the_study(tmp_path, capsys):
+    from emulator.cli import main
+
+    args = ["validate", "render", "-o", str(tmp_path / "out"), "--scenes", "static_lab", "--size", "24x16",
+            "--spp", "1,2", "--reference-spp", "8", "--texture-scenes", "", "--real", str(tmp_path / "none"),
+            "--cache", "off", "--no-progress"]
+    assert main(args) == 0
+    res = json.loads((tmp_path / "out" / "results.json").read_text())
+    assert res["provenance"]["experiment"] == (
+        f"exposim validate render -o {tmp_path / 'out'} --scenes static_lab --size 24x16 --spp 1,2 "
+        f"--reference-spp 8 --texture-scenes '' --real {tmp_path / 'none'}")
+    assert [(r["spp"], r["denoise"]) for r in res["rows"]] == [(1, "off"), (1, "oidn"), (2, "off"), (2, "oidn")]
+    assert res["texture"] == [] and res["real"] == {"24x16": None}
+    assert "wrote " + str(tmp_path / "out" / "results.json") in capsys.readouterr().out
+    assert main(args) == 1  # an earlier results.json is never overwritten without --force
+    assert "refusing to overwrite" in capsys.readouterr().err

@@ -72,11 +72,21 @@ from emulator.io.files import prepare_output, write_results, write_text
 from validation.common import SHOT_INTERVAL_MS, ValidationError, provenance, study_scene, to_percent
 
 __all__ = ["RenderStudyConfig", "CONFIGS", "run_render_study", "render_study_table", "speedups", "main",
+           "add_arguments", "config_from_args", "run_from_args", "print_summary",
            "DEFAULT_REAL_SEQUENCE", "TARGET_TOLERANCE", "TARGET_REPEATABILITY"]
 
+
+def _shared_folder() -> Path:
+    """``../shared`` beside the repository; from a git worktree the first ``shared/data`` further up."""
+    repo = Path(__file__).resolve().parents[1]
+    for parent in repo.parents:
+        if (parent / "shared" / "data").is_dir():
+            return parent / "shared"
+    return repo.parent / "shared"
+
+
 #: The shared BorealHDR sample (beside the repository, never copied into it).
-DEFAULT_REAL_SEQUENCE = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "borealhdr_sample" / \
-    "backpack_2023-09-25-15-05-03"
+DEFAULT_REAL_SEQUENCE = _shared_folder() / "data" / "borealhdr_sample" / "backpack_2023-09-25-15-05-03"
 #: Texture statistics must be within this fraction of the real frames' (issue 13).
 TARGET_TOLERANCE = 0.25
 #: Keypoint repeatability target between two renders of one pose (issue 13).
@@ -517,26 +527,52 @@ def _ints(text: str) -> tuple:
         raise argparse.ArgumentTypeError(f"expected comma-separated integers, got {text!r}") from None
 
 
-def main(argv=None) -> int:
-    """``python -m validation.render_study`` (the lead registers it as ``exposim validate render``)."""
-    p = argparse.ArgumentParser(prog="python -m validation.render_study",
-                                description=__doc__.split("\n\n")[0])
-    p.add_argument("output", type=Path, help="output folder (results.json, report.md, time_vs_error.png)")
-    p.add_argument("--quick", action="store_true", help="pipeline check: forest_winter at 120x75, spp 1,4,16, "
-                                                          "256-spp reference (a few minutes)")
-    p.add_argument("--scenes", help="comma-separated study scenes")
-    p.add_argument("--size", type=_size, help="study size WxH")
-    p.add_argument("--spp", type=_ints, help="comma-separated spp levels")
-    p.add_argument("--reference-spp", type=int, help="spp of the raw reference")
-    p.add_argument("--texture-scenes", help="comma-separated scenes for the texture targets ('' for none)")
-    p.add_argument("--texture-sizes", help="comma-separated WxH sizes for the texture targets")
-    p.add_argument("--texture-spp", type=int, help="spp of the denoised texture renders")
-    p.add_argument("--texture-poses", type=int, help="walk poses per texture size")
+def _sizes_text(sizes) -> str:
+    return ",".join(f"{w}x{h}" for w, h in sizes)
+
+
+def add_arguments(p: argparse.ArgumentParser, *, output_option: bool = False) -> None:
+    """The study's options on ``p`` (``python -m validation.render_study`` and ``exposim validate render``).
+
+    Every help text names the full study's default and the ``--quick`` value; ``output_option``:
+    ``-o/--output DIR`` instead of a positional folder.
+    """
+    full, quick = CONFIGS["full"], CONFIGS["quick"]
+
+    def both(fmt, attr):
+        a, b = getattr(full, attr), getattr(quick, attr)
+        return f"(default {fmt(a)}; --quick {fmt(b)})"
+
+    csv = lambda v: ",".join(str(x) for x in v)  # noqa: E731
+    out_help = "output folder (results.json, report.md, time_vs_error.png)"
+    if output_option:
+        p.add_argument("-o", "--output", type=Path, required=True, help=out_help)
+    else:
+        p.add_argument("output", type=Path, help=out_help)
+    p.add_argument("--quick", action="store_true",
+                   help=f"pipeline check: {csv(quick.scenes)} at {quick.width}x{quick.height}, spp "
+                        f"{csv(quick.spp_levels)}, {quick.reference_spp}-spp reference (a few minutes)")
+    p.add_argument("--scenes", help="comma-separated study scenes " + both(csv, "scenes"))
+    p.add_argument("--size", type=_size, help=f"study size WxH (default {full.width}x{full.height}; "
+                                              f"--quick {quick.width}x{quick.height})")
+    p.add_argument("--spp", type=_ints, help="comma-separated spp levels " + both(csv, "spp_levels"))
+    p.add_argument("--reference-spp", type=int, help="spp of the raw reference " + both(str, "reference_spp"))
+    p.add_argument("--texture-scenes", help="comma-separated scenes for the texture targets, '' for none " +
+                                            both(csv, "texture_scenes"))
+    p.add_argument("--texture-sizes", help="comma-separated WxH sizes for the texture targets " +
+                                           both(_sizes_text, "texture_sizes"))
+    p.add_argument("--texture-spp", type=int, help="spp of the denoised texture renders " +
+                                                   both(str, "texture_spp"))
+    p.add_argument("--texture-poses", type=int, help="walk poses per texture size " + both(str, "texture_poses"))
     p.add_argument("--real", type=Path, help=f"real BorealHDR sequence (default {DEFAULT_REAL_SEQUENCE})")
-    p.add_argument("--cache", help="render cache for the reference ('off': none; default $EXPOSIM_CACHE)")
+    p.add_argument("--cache", help="render cache for the reference ('off': none; default $EXPOSIM_CACHE "
+                                   "or ~/.cache/exposim/renders)")
     p.add_argument("--force", action="store_true", help="overwrite an existing results.json")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    args = p.parse_args(argv)
+
+
+def config_from_args(args: argparse.Namespace) -> RenderStudyConfig:
+    """The :class:`RenderStudyConfig` of parsed :func:`add_arguments` options (raises ValidationError)."""
     changes: dict = {}
     if args.scenes:
         changes["scenes"] = tuple(s.strip() for s in args.scenes.split(",") if s.strip())
@@ -549,7 +585,10 @@ def main(argv=None) -> int:
     if args.texture_scenes is not None:
         changes["texture_scenes"] = tuple(s.strip() for s in args.texture_scenes.split(",") if s.strip())
     if args.texture_sizes:
-        changes["texture_sizes"] = tuple(_size(s) for s in args.texture_sizes.split(",") if s.strip())
+        try:
+            changes["texture_sizes"] = tuple(_size(s) for s in args.texture_sizes.split(",") if s.strip())
+        except argparse.ArgumentTypeError as exc:
+            raise ValidationError(f"--texture-sizes: {exc}") from None
     if args.texture_spp is not None:
         changes["texture_spp"] = args.texture_spp
     if args.texture_poses is not None:
@@ -558,20 +597,39 @@ def main(argv=None) -> int:
         changes["real_sequence"] = str(args.real)
     if args.cache is not None:
         changes["cache_dir"] = args.cache
+    return replace(CONFIGS["quick" if args.quick else "full"], **changes)
+
+
+def run_from_args(args: argparse.Namespace, command: str) -> dict:
+    """Run the study of parsed :func:`add_arguments` options with a progress bar; return the results."""
+    config = config_from_args(args)
+    from tqdm import tqdm
+
+    with tqdm(total=total_steps(config), desc="render study", unit="step", disable=args.no_progress,
+              file=sys.stderr) as bar:
+        return run_render_study(args.output, config, force=args.force, progress=bar.update, command=command)
+
+
+def print_summary(results: dict, output: Path) -> None:
+    """The table and the written files, on stdout (command lines only)."""
+    print(render_study_table(results))
+    print(f"wrote {output / 'results.json'}, {output / 'report.md'}, {output / 'time_vs_error.png'}")
+
+
+def main(argv=None) -> int:
+    """``python -m validation.render_study`` (also ``exposim validate render -o OUT``)."""
+    p = argparse.ArgumentParser(prog="python -m validation.render_study",
+                                description=__doc__.split("\n\n")[0])
+    add_arguments(p)
+    args = p.parse_args(argv)
     argv_list = sys.argv[1:] if argv is None else list(argv)
     command = "python -m validation.render_study " + " ".join(shlex.quote(a) for a in argv_list)
     try:
-        config = replace(CONFIGS["quick" if args.quick else "full"], **changes)
-        from tqdm import tqdm
-
-        with tqdm(total=total_steps(config), desc="render study", unit="step", disable=args.no_progress,
-                  file=sys.stderr) as bar:
-            results = run_render_study(args.output, config, force=args.force, progress=bar.update, command=command)
+        results = run_from_args(args, command)
     except (ExposimError, FileNotFoundError, NotADirectoryError) as exc:
         print(f"render_study: {exc}", file=sys.stderr)
         return 1
-    print(render_study_table(results))
-    print(f"wrote {args.output / 'results.json'}, {args.output / 'report.md'}, {args.output / 'time_vs_error.png'}")
+    print_summary(results, args.output)
     return 0
 
 
