@@ -51,6 +51,7 @@ References
 from __future__ import annotations
 
 import math
+import os
 import threading
 import warnings
 from dataclasses import asdict, dataclass, replace
@@ -63,6 +64,8 @@ from scenes.errors import RenderError
 __all__ = [
     "DENOISERS",
     "DEFAULT_DENOISER",
+    "ENV_DENOISE",
+    "default_denoiser",
     "PASSTHROUGH_RADIANCE",
     "DenoiseSettings",
     "DenoiserUnavailableWarning",
@@ -75,8 +78,10 @@ __all__ = [
 
 #: Valid values of ``denoise=`` (besides a :class:`DenoiseSettings`).
 DENOISERS = ("oidn", "off")
-#: What every render uses unless told otherwise.
+#: What every render uses unless told otherwise (or ``$EXPOSIM_DENOISE`` says otherwise).
 DEFAULT_DENOISER = "oidn"
+#: Environment variable naming the denoiser of renders that do not name one (``oidn`` or ``off``).
+ENV_DENOISE = "EXPOSIM_DENOISE"
 #: Raw radiance above this many times the scene's reference radiance bypasses the denoiser.
 PASSTHROUGH_RADIANCE = 8.0
 #: OIDN's HDR input is encoded up to this value (times hdrScale).
@@ -142,8 +147,28 @@ class DenoiseSettings:
         return {"name": self.name, "version": oidn_version(), "settings": asdict(self)}
 
 
+def default_denoiser() -> str:
+    """The denoiser of renders that do not name one: ``$EXPOSIM_DENOISE`` if set, else :data:`DEFAULT_DENOISER`.
+
+    Like ``$EXPOSIM_MITSUBA_VARIANT`` for the variant: a way to run whole studies (or
+    tests that are not about rendering) on raw renders without a parameter on every
+    study.  The choice enters the render cache key like an explicit ``denoise=``.
+
+    Raises
+    ------
+    RenderError
+        The variable names an unknown denoiser.
+    """
+    name = os.environ.get(ENV_DENOISE, "").strip()
+    if not name:
+        return DEFAULT_DENOISER
+    if name not in DENOISERS:
+        raise RenderError(f"${ENV_DENOISE}={name!r} is not a denoiser; valid: {', '.join(DENOISERS)}")
+    return name
+
+
 def resolve_denoise(denoise) -> DenoiseSettings:
-    """``"oidn"`` / ``"off"`` / a :class:`DenoiseSettings` (or None: the default) -> settings.
+    """``"oidn"`` / ``"off"`` / a :class:`DenoiseSettings` (or None: :func:`default_denoiser`) -> settings.
 
     Raises
     ------
@@ -151,7 +176,7 @@ def resolve_denoise(denoise) -> DenoiseSettings:
         Unknown name (the message lists the valid ones) or wrong type.
     """
     if denoise is None:
-        return DenoiseSettings()
+        denoise = default_denoiser()
     if isinstance(denoise, DenoiseSettings):
         return denoise
     if isinstance(denoise, str):

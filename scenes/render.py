@@ -138,7 +138,7 @@ def render(
     fov_deg: float = DEFAULT_FOV_DEG,
     cache_dir=None,
     variant: str | None = None,
-    denoise: str | DenoiseSettings = "oidn",
+    denoise: str | DenoiseSettings | None = None,
 ) -> np.ndarray:
     """Render the HDR radiance a pinhole camera sees.
 
@@ -169,10 +169,12 @@ def render(
         when a child process proves it works, else ``scalar_rgb``).  An explicit
         (or ``EXPOSIM_MITSUBA_VARIANT``) variant is probed only when something
         must be rendered, so a cache hit costs only the file read.
-    denoise : str or scenes.denoise.DenoiseSettings
-        ``"oidn"`` (default): denoise the estimate with Open Image Denoise, fed
+    denoise : str or scenes.denoise.DenoiseSettings, optional
+        ``"oidn"``: denoise the estimate with Open Image Denoise, fed
         albedo and normal from Mitsuba's ``aov`` integrator (see
-        :mod:`scenes.denoise`); ``"off"``: the raw path-traced estimate.  When OIDN
+        :mod:`scenes.denoise`); ``"off"``: the raw path-traced estimate.  Default
+        (None): ``"oidn"``, or ``$EXPOSIM_DENOISE`` when set
+        (:func:`scenes.denoise.default_denoiser`).  When OIDN
         cannot run here, a :class:`scenes.denoise.DenoiserUnavailableWarning` says
         why and the raw estimate is returned.
 
@@ -206,7 +208,7 @@ def render_with_info(
     fov_deg: float = DEFAULT_FOV_DEG,
     cache_dir=None,
     variant: str | None = None,
-    denoise: str | DenoiseSettings = "oidn",
+    denoise: str | DenoiseSettings | None = None,
 ) -> tuple[np.ndarray, dict]:
     """:func:`render`, also returning what happened.
 

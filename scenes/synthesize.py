@@ -46,7 +46,7 @@ def synthesize(
     speed_mps: float | None = None,
     cache_dir=None,
     variant: str | None = None,
-    denoise="oidn",
+    denoise=None,
     overwrite: bool = False,
     progress=None,
 ) -> Path:
@@ -69,9 +69,10 @@ def synthesize(
         reference radiance (white surface facing the sun) saturates at ``saturate_ms``.
     speed_mps : float, optional
         Walking speed (default: the trajectory's 2 km/h).
-    denoise : str or scenes.denoise.DenoiseSettings
-        ``"oidn"`` (default): low-spp render denoised by Open Image Denoise; ``"off"``:
-        the raw path-traced estimate (see :func:`scenes.render`).  When OIDN cannot run
+    denoise : str or scenes.denoise.DenoiseSettings, optional
+        ``"oidn"``: low-spp render denoised by Open Image Denoise; ``"off"``: the raw
+        path-traced estimate (see :func:`scenes.render`).  Default (None): ``"oidn"``, or
+        ``$EXPOSIM_DENOISE`` when set.  When OIDN cannot run
         here, a :class:`scenes.denoise.DenoiserUnavailableWarning` says why, every frame
         is the raw estimate and the dataset's description records the reason.
     Other parameters go to :func:`synth.capture_sequence` (noise, ground-truth captures,

@@ -11,7 +11,8 @@ from validation.demo import new_output_dir, run_demo
 pytestmark = [pytest.mark.render, pytest.mark.slow]
 
 
-def test_quick_demo_end_to_end(tmp_path, capsys):
+def test_quick_demo_end_to_end(tmp_path, capsys, monkeypatch):
+    monkeypatch.setenv("EXPOSIM_DENOISE", "off")  # not a rendering test: raw renders keep it fast
     out = tmp_path / "demo"
     assert main(["demo", "--quick", "-q", "-o", str(out)]) == 0
     printed = capsys.readouterr().out

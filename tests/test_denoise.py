@@ -20,6 +20,7 @@ from scenes.errors import RenderError
 def _private_cache(tmp_path_factory, monkeypatch):
     monkeypatch.setenv("EXPOSIM_CACHE", str(tmp_path_factory.getbasetemp() / "render-cache"))
     monkeypatch.delenv("EXPOSIM_MITSUBA_VARIANT", raising=False)
+    monkeypatch.delenv("EXPOSIM_DENOISE", raising=False)
 
 
 @pytest.fixture
@@ -54,6 +55,22 @@ def test_settings_validate_and_resolve():
             dn.DenoiseSettings(**bad)
     km = dn.DenoiseSettings().key_material()
     assert km["name"] == "oidn" and set(km["version"]) == {"oidn", "pyoidn"} and km["settings"]["quality"] == "high"
+
+
+def test_environment_names_the_default_denoiser(monkeypatch, tmp_path):
+    assert dn.default_denoiser() == "oidn"
+    monkeypatch.setenv("EXPOSIM_DENOISE", "off")
+    assert dn.default_denoiser() == "off" and dn.resolve_denoise(None) == dn.DenoiseSettings(name="off")
+    assert dn.resolve_denoise("oidn") == dn.DenoiseSettings()  # an explicit choice wins
+    scene = scenes.get_scene("static_lab")
+    kw = dict(width=16, height=10, spp=1, seed=0, cache_dir=tmp_path)
+    img, info = scenes.render_with_info(scene, scene.default_pose(), **kw)
+    assert info["denoise"] == "off" and info["aux_spp"] == 0
+    assert img.tobytes() == scenes.render(scene, scene.default_pose(), denoise="off", **kw).tobytes()
+    assert len(list(tmp_path.rglob("*.exr"))) == 1  # one entry: the raw key
+    monkeypatch.setenv("EXPOSIM_DENOISE", "median")
+    with pytest.raises(RenderError, match=r"\$EXPOSIM_DENOISE='median' is not a denoiser; valid: oidn, off"):
+        scenes.render(scene, scene.default_pose(), **kw)
 
 
 def test_missing_pyoidn_falls_back_to_the_raw_estimate(no_pyoidn, tmp_path):

@@ -20,6 +20,7 @@ from validation.common import ValidationError
 def _private_cache(tmp_path_factory, monkeypatch):
     monkeypatch.setenv("EXPOSIM_CACHE", str(tmp_path_factory.getbasetemp() / "render-cache"))
     monkeypatch.delenv("EXPOSIM_MITSUBA_VARIANT", raising=False)
+    monkeypatch.delenv("EXPOSIM_DENOISE", raising=False)
 
 
 TINY = rs.RenderStudyConfig(scenes=("static_lab",), width=24, height=16, spp_levels=(1, 2), reference_spp=8,

@@ -416,6 +416,8 @@ def test_cache_hit_is_byte_identical_and_skips_rendering(built, tmp_path, monkey
 def test_denoised_render_is_cached_beside_its_raw_estimate(built, tmp_path, monkeypatch):
     import importlib
 
+    monkeypatch.delenv("EXPOSIM_DENOISE", raising=False)
+
     from scenes.denoise import oidn_status
 
     if not oidn_status()[0]:
@@ -557,6 +559,7 @@ def test_variant_override_and_validation(monkeypatch, _restore_variant_state, tm
     img = np.arange(24, dtype=np.float32).reshape(2, 4, 3)
     store_entry(tmp_path / key[:2] / f"{key}.exr", img)
     monkeypatch.setenv("EXPOSIM_MITSUBA_VARIANT", "llvm_ad_rgb")
+    monkeypatch.delenv("EXPOSIM_DENOISE", raising=False)
     hit = scenes.render(scene, np.eye(4), width=4, height=2, spp=1, seed=0, cache_dir=tmp_path)  # denoised key
     assert hit.tobytes() == img.tobytes() and "llvm_ad_rgb" not in var._probed
     monkeypatch.setenv("EXPOSIM_MITSUBA_VARIANT", "vulkan_rgb")

@@ -16,7 +16,7 @@ pytestmark = pytest.mark.render
 def test_synth_writes_a_loadable_dataset_with_ground_truth(tmp_path, capsys):
     out = tmp_path / "lab"
     args = ["synth", "static_lab", "-o", str(out), "--cycles", "1", "--size", "48x30", "--spp", "4",
-            "--gt-exposures", "3,5", "--quiet", "--noiseless"]
+            "--gt-exposures", "3,5", "--quiet", "--noiseless", "--denoise", "off"]
     assert main(args) == 0
     assert "wrote" in capsys.readouterr().out
     seq = load_sequence(out)
@@ -48,7 +48,8 @@ def test_synth_rejects_bad_arguments(tmp_path, capsys):
     assert "--gt-exposures" in capsys.readouterr().err
 
 
-def test_synth_records_the_denoiser(tmp_path):
+def test_synth_records_the_denoiser(tmp_path, monkeypatch):
+    monkeypatch.delenv("EXPOSIM_DENOISE", raising=False)
     args = ["synth", "static_lab", "--cycles", "1", "--size", "24x16", "--spp", "1", "--mono", "--quiet",
             "--noiseless"]
     assert main(args + ["--denoise", "off", "-o", str(tmp_path / "off")]) == 0

@@ -185,7 +185,8 @@ def test_numbered_output_and_cli_errors(tmp_path, capsys):
 
 @pytest.mark.render
 @pytest.mark.slow
-def test_tiny_experiment_end_to_end(tmp_path):
+def test_tiny_experiment_end_to_end(tmp_path, monkeypatch):
+    monkeypatch.setenv("EXPOSIM_DENOISE", "off")  # not a rendering test: raw renders keep it fast
     cfg = LiveConfig(scenes=("forest_winter",), n_cycles=3, width=64, height=40, spp=2,
                      methods=("fixed", "classical-50"), noise_repeats=4)
     res = run_live_experiment(tmp_path / "out", cfg, progress=False, cache_dir=tmp_path / "cache")

@@ -284,7 +284,8 @@ def _scene_rows(key: str, config: RenderStudyConfig, tmp_cache: Path, tick, real
         for pose, seed in frames:
             raw, info = scenes.render_with_info(scene, pose, spp=int(spp), seed=int(seed), denoise="off",
                                                 cache_dir=tmp_cache, **kw)
-            den, dinfo = scenes.render_with_info(scene, pose, spp=int(spp), seed=int(seed), cache_dir=tmp_cache, **kw)
+            den, dinfo = scenes.render_with_info(scene, pose, spp=int(spp), seed=int(seed), denoise="oidn",
+                                                 cache_dir=tmp_cache, **kw)
             fallback = fallback or dinfo["fallback"]
             times["off"].append(info["render_s"])
             times["oidn"].append(info["render_s"] + dinfo["aux_s"] + dinfo["denoise_s"])
@@ -342,9 +343,9 @@ def _texture(key: str, config: RenderStudyConfig, size, tmp_cache: Path, tick, r
     for ts in times:
         pose = traj.pose(ts)
         a, info = scenes.render_with_info(scene, pose, width=w, height=h, spp=config.texture_spp,
-                                          seed=config.seeds[0], cache_dir=tmp_cache)
+                                          seed=config.seeds[0], denoise="oidn", cache_dir=tmp_cache)
         b = scenes.render(scene, pose, width=w, height=h, spp=config.texture_spp, seed=config.seeds[1],
-                          cache_dir=tmp_cache)
+                          denoise="oidn", cache_dir=tmp_cache)
         ga = synthetic_gray8(a, scene, exposure_ms=config.exposure_ms, seed=0)
         gb = synthetic_gray8(b, scene, exposure_ms=config.exposure_ms, seed=0)
         st = image_stats(ga)
