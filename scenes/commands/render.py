@@ -66,6 +66,13 @@ def add_denoise_option(parser) -> None:
                              "(pyoidn missing, unsupported CPU) a warning says why and renders are raw")
 
 
+def _add_scheduler_option(parser) -> None:
+    from scenes.parallel import SCHEDULER_HELP
+
+    parser.add_argument("--scheduler", default=None, metavar="local|tcp://HOST:PORT",
+                        help=SCHEDULER_HELP + " (default: serial, in this process)")
+
+
 def frame_seed(base_seed: int, index: int, camera: int) -> int:
     """Sampler seed of frame ``index`` of camera 0 (left) or 1 (right): independent noise per image."""
     return (int(base_seed) * 1_000_003 + 2 * int(index) + int(camera)) % (1 << 32)
@@ -106,6 +113,7 @@ def register(subparsers) -> None:
     p.add_argument("--baseline", type=float, default=None, help="stereo baseline, m (default 0.18)")
     p.add_argument("--variant", default=None, help="Mitsuba variant (default: probed llvm_ad_rgb, else scalar_rgb)")
     add_denoise_option(p)
+    _add_scheduler_option(p)
     cache = p.add_mutually_exclusive_group()
     cache.add_argument("--cache", type=Path, default=None, help="render cache folder (default $EXPOSIM_CACHE "
                        "or ~/.cache/exposim/renders)")
@@ -153,7 +161,7 @@ def run_render(args: argparse.Namespace) -> int:
     from emulator.io.files import write_metadata
     from emulator.io.tum import write_tum
     from scenes import trajectory as tr
-    from scenes.cache import library_versions
+    from scenes.cache import library_versions, resolve_cache_dir
     from scenes.denoise import effective_denoise
     from scenes.variant import check_variant_name
 
@@ -177,6 +185,9 @@ def run_render(args: argparse.Namespace) -> int:
         raise OutputExistsError(f"{existing[0]} exists ({len(existing)} output file(s) in {out}); "
                                 f"use --force to overwrite")
 
+    from scenes.parallel import check_scheduler, render_many
+
+    scheduler = check_scheduler(getattr(args, "scheduler", None))
     cache_dir = False if args.no_cache else args.cache
     denoise, denoise_fallback = effective_denoise(args.denoise)
     variant = check_variant_name(args.variant) if args.variant else scenes.choose_variant()
@@ -201,17 +212,19 @@ def run_render(args: argparse.Namespace) -> int:
     jobs = [(i, cam) for i in range(len(ts)) for cam in cameras]
     from tqdm import tqdm
 
+    # every job complete (explicit cache folder, variant, denoiser): a Dask worker decides nothing
+    folder = resolve_cache_dir(cache_dir)
+    seeds = [frame_seed(args.render_seed, i, 0 if cam == "left" else 1) for i, cam in jobs]
+    tasks = [dict(scene=scene, pose=poses[i] if cam == "left" else tr.stereo_right(poses[i], baseline),
+                  width=width, height=height, spp=spp, seed=seed, fov_deg=fov,
+                  cache_dir=False if folder is None else folder, variant=variant, denoise=denoise)
+             for (i, cam), seed in zip(jobs, seeds)]
     with tqdm(total=len(jobs), desc=f"render {scene.name}", unit="img", disable=args.quiet,
               file=sys.stderr) as bar:
-        for i, cam in jobs:
-            pose = poses[i] if cam == "left" else tr.stereo_right(poses[i], baseline)
-            seed = frame_seed(args.render_seed, i, 0 if cam == "left" else 1)
-            img = scenes.render(scene, pose, width=width, height=height, spp=spp, seed=seed, fov_deg=fov,
-                                cache_dir=cache_dir, variant=variant, denoise=denoise)
+        for (i, cam), seed, img in zip(jobs, seeds, render_many(tasks, scheduler=scheduler, progress=bar.update)):
             write_exr(out / "frames" / cam / f"{stamps_ns[i]}.exr", img, overwrite=True)
             frames.append({"camera": cam, "timestamp_ns": stamps_ns[i], "seed": seed,
                            "dynamic_range_db": round(scenes.dynamic_range_db(img), 3)})
-            bar.update(1)
 
     write_tum(out / "poses_left.txt", stamps_ns, poses)
     if args.stereo:
