@@ -14,7 +14,7 @@ from pathlib import Path
 
 from scenes.errors import RenderError, SceneError
 
-__all__ = ["register", "parse_size", "parse_params", "frame_seed", "add_denoise_option"]
+__all__ = ["register", "parse_size", "parse_params", "frame_seed", "add_denoise_option", "add_scheduler_option"]
 
 #: Files the render command writes in its output folder (besides frames/).
 OUTPUT_FILES = ("scene.json", "poses_left.txt", "poses_right.txt")
@@ -66,7 +66,8 @@ def add_denoise_option(parser) -> None:
                              "(pyoidn missing, unsupported CPU) a warning says why and renders are raw")
 
 
-def _add_scheduler_option(parser) -> None:
+def add_scheduler_option(parser) -> None:
+    """``--scheduler local|tcp://HOST:PORT`` (shared by ``exposim render`` and ``exposim synth``)."""
     from scenes.parallel import SCHEDULER_HELP
 
     parser.add_argument("--scheduler", default=None, metavar="local|tcp://HOST:PORT",
@@ -113,7 +114,7 @@ def register(subparsers) -> None:
     p.add_argument("--baseline", type=float, default=None, help="stereo baseline, m (default 0.18)")
     p.add_argument("--variant", default=None, help="Mitsuba variant (default: probed llvm_ad_rgb, else scalar_rgb)")
     add_denoise_option(p)
-    _add_scheduler_option(p)
+    add_scheduler_option(p)
     cache = p.add_mutually_exclusive_group()
     cache.add_argument("--cache", type=Path, default=None, help="render cache folder (default $EXPOSIM_CACHE "
                        "or ~/.cache/exposim/renders)")
