@@ -25,7 +25,7 @@ from scenes.camera import DEFAULT_FOV_DEG, intrinsics, intrinsics_matrix, pose_t
 from scenes.dynamic_range import dynamic_range_db, luminance
 from scenes.errors import RenderError, SceneError
 from scenes.library import forest_edge, forest_summer, forest_winter, static_lab, sun_glare
-from scenes.render import effective_spp, render
+from scenes.render import effective_spp, render, render_depth, render_with_info
 from scenes.spp import SensorNoise, SppSelection, measure_render_noise, select_spp
 from scenes.trajectory import BASELINE_M, WALKING_SPEED_MPS, Trajectory, look_pose, static, stereo_right, walk
 from scenes.variant import choose_variant
@@ -40,6 +40,8 @@ __all__ = [
     "forest_edge",
     "static_lab",
     "render",
+    "render_with_info",
+    "render_depth",
     "effective_spp",
     "choose_variant",
     "intrinsics",

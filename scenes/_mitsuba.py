@@ -15,7 +15,7 @@ from scenes.camera import pose_to_mitsuba
 from scenes.description import Material, SceneDescription
 from scenes.lighting import ENVMAP_TO_WORLD
 
-__all__ = ["scene_dict", "sensor_dict", "sampler_spp", "INTEGRATOR", "SAMPLER"]
+__all__ = ["scene_dict", "sensor_dict", "sampler_spp", "aov_integrator_dict", "INTEGRATOR", "SAMPLER", "AOVS"]
 
 #: Path tracer; Russian roulette starts beyond max_depth, so noise is deterministic per seed.
 INTEGRATOR = "path"
@@ -23,6 +23,17 @@ INTEGRATOR = "path"
 #: faster than 1/sqrt(spp) (measured on forest_winter at 120x75: about spp**-0.6,
 #: 40 % less noise than the independent sampler at 256 spp).
 SAMPLER = "multijitter"
+#: Auxiliary images of the denoiser: first-hit diffuse reflectance and shading normal.
+AOVS = "albedo:albedo,nn:sh_normal"
+
+
+def aov_integrator_dict() -> dict:
+    """Mitsuba ``aov`` integrator returning only the albedo (3) and normal (3) channels.
+
+    No nested integrator: the pass traces primary rays only; the radiance comes
+    from its own path-traced render.
+    """
+    return {"type": "aov", "aovs": AOVS}
 
 
 def sampler_spp(spp: int) -> int:
@@ -43,20 +54,32 @@ def _transform(m: np.ndarray):
     return mi.ScalarTransform4f(np.asarray(m, dtype=np.float64).tolist())
 
 
-def _texture(albedo):
+def _texture(albedo, repeat: float = 1.0):
     import mitsuba as mi
 
     a = np.asarray(albedo)
     if a.ndim == 1:
         return {"type": "rgb", "value": [float(v) for v in a]}
-    return {"type": "bitmap", "bitmap": mi.Bitmap(np.ascontiguousarray(a, dtype=np.float32)), "raw": True,
-            "filter_type": "bilinear", "wrap_mode": "repeat"}
+    if a.ndim == 2:
+        a = a[..., None]
+    d = {"type": "bitmap", "bitmap": mi.Bitmap(np.ascontiguousarray(a, dtype=np.float32)), "raw": True,
+         "filter_type": "bilinear", "wrap_mode": "repeat"}
+    if repeat != 1.0:
+        d["to_uv"] = mi.ScalarTransform4f().scale([float(repeat), float(repeat), 1.0])
+    return d
 
 
 def _bsdf(mat: Material):
     import mitsuba as mi
 
-    if mat.kind == "diffuse":
+    if mat.kind == "diffuse" and mat.detail is not None:
+        # albedo * (lo + w (hi - lo)) exactly: diffuse reflection is linear in the albedo
+        lo, hi = (float(v) for v in mat.detail_range)
+        base = np.asarray(mat.albedo, dtype=np.float32)
+        d = {"type": "blendbsdf", "weight": _texture(mat.detail, mat.detail_repeat),
+             "bsdf_0": {"type": "diffuse", "reflectance": _texture(np.clip(base * lo, 0.0, 1.0))},
+             "bsdf_1": {"type": "diffuse", "reflectance": _texture(np.clip(base * hi, 0.0, 1.0))}}
+    elif mat.kind == "diffuse":
         d = {"type": "diffuse", "reflectance": _texture(mat.albedo)}
     else:  # roughplastic
         d = {"type": "roughplastic", "distribution": "ggx", "alpha": float(mat.roughness),
@@ -64,6 +87,9 @@ def _bsdf(mat: Material):
              "nonlinear": False}
     if mat.two_sided:
         d = {"type": "twosided", "bsdf": d}
+    if mat.bump is not None and mat.bump_amplitude > 0:
+        d = {"type": "bumpmap", "arbitrary": _texture(mat.bump, mat.bump_repeat),
+             "scale": float(mat.bump_amplitude), "bsdf": d}
     return mi.load_dict(d)
 
 

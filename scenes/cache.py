@@ -3,7 +3,9 @@
 The key hashes everything that affects the pixels: the scene (name, every
 parameter, seed, and a fingerprint of the scene-building source code), the
 pose, the image size, the field of view, spp, the sampler seed, the Mitsuba
-variant and the Mitsuba and Dr.Jit versions.  A hit is read back exactly (EXR
+variant, the Mitsuba and Dr.Jit versions, and the denoiser (its name, the
+version of the library and binding, and every setting; ``{"name": "off"}`` for
+the raw estimate).  A hit is read back exactly (EXR
 float32 with lossless ZIP compression) and costs only the read.  Files are
 written to a temporary name and moved into place with :func:`os.replace`, so a
 reader never sees a partial file.  The EXR bytes are deterministic: the same
@@ -29,8 +31,8 @@ __all__ = ["ENV_CACHE_DIR", "default_cache_dir", "resolve_cache_dir", "canonical
 #: Environment variable overriding the default cache folder.
 ENV_CACHE_DIR = "EXPOSIM_CACHE"
 
-#: Bump when the key layout changes.
-KEY_VERSION = 1
+#: Bump when the key layout changes (2: the denoiser joined the key).
+KEY_VERSION = 2
 
 
 def default_cache_dir() -> Path:
@@ -84,8 +86,12 @@ def library_versions() -> dict:
 
 
 def render_key(scene, pose, *, width: int, height: int, spp: int, seed: int, fov_deg: float,
-               variant: str) -> tuple[str, dict]:
-    """(hex SHA-256 key, the JSON-ready material it hashes) of one render."""
+               variant: str, denoise: dict | None = None) -> tuple[str, dict]:
+    """(hex SHA-256 key, the JSON-ready material it hashes) of one render.
+
+    ``denoise`` is :meth:`scenes.denoise.DenoiseSettings.key_material` (None: the raw
+    estimate, ``{"name": "off"}``).
+    """
     material = {
         "v": KEY_VERSION,
         "scene": scene.key_material(),
@@ -97,6 +103,7 @@ def render_key(scene, pose, *, width: int, height: int, spp: int, seed: int, fov
         "fov_deg": round(float(fov_deg), 12),
         "variant": str(variant),
         "versions": library_versions(),
+        "denoise": {"name": "off"} if denoise is None else dict(denoise),
     }
     return hashlib.sha256(canonical_json(material).encode()).hexdigest(), material
 

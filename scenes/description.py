@@ -38,6 +38,26 @@ class Material:
         GGX alpha of the coat (``roughplastic`` only).
     ior : float
         Refractive index of the coat (``roughplastic`` only; ice 1.31).
+    detail : numpy.ndarray or None
+        Fine-scale albedo modulation (``diffuse`` only): float32 (h, w) in [0, 1],
+        tiled ``detail_repeat`` times per repeat of ``albedo``.  The albedo becomes
+        ``albedo * (lo + detail * (hi - lo))`` with ``(lo, hi) = detail_range``
+        (rendered exactly, as a blend of two diffuse layers), so a texture of a few
+        centimetres' period can ride on one of many metres without a huge bitmap.
+    detail_repeat : float
+        Detail tiles per albedo tile (> 0).
+    detail_range : tuple of float
+        Albedo factors at detail 0 and 1 (0 <= lo <= hi; ``albedo * hi`` is clipped to 1).
+    bump : numpy.ndarray or None
+        Micro-relief: float32 (h, w) height field in [0, 1], tiled ``bump_repeat``
+        times per albedo tile, rendered as a bump map (shading normals only).
+    bump_repeat : float
+        Bump tiles per albedo tile (> 0).
+    bump_amplitude : float
+        Relief of the bump field, metres: heights are ``bump_amplitude * bump``
+        (Mitsuba's ``bumpmap`` scale; the mesh texture coordinates are in metres
+        over the mesh's ``texture_scale_m``, which Mitsuba's surface derivatives
+        account for); 0 disables it.
     """
 
     kind: str
@@ -45,6 +65,12 @@ class Material:
     two_sided: bool = True
     roughness: float = 0.1
     ior: float = 1.31
+    detail: np.ndarray | None = None
+    detail_repeat: float = 1.0
+    detail_range: tuple = (1.0, 1.0)
+    bump: np.ndarray | None = None
+    bump_repeat: float = 1.0
+    bump_amplitude: float = 0.0
 
     def __post_init__(self) -> None:
         if self.kind not in _MATERIAL_KINDS:
@@ -54,6 +80,25 @@ class Material:
             raise SceneError(f"Material.albedo must be RGB or (H, W, 3), got shape {a.shape}")
         if not np.all(np.isfinite(a)) or a.min() < 0 or a.max() > 1:
             raise SceneError("Material.albedo must be finite and in [0, 1]")
+        for name in ("detail", "bump"):
+            t = getattr(self, name)
+            if t is None:
+                continue
+            t = np.asarray(t)
+            if t.ndim != 2 or min(t.shape) < 2:
+                raise SceneError(f"Material.{name} must be a 2-D (h, w) texture, got shape {t.shape}")
+            if not np.all(np.isfinite(t)) or t.min() < 0 or t.max() > 1:
+                raise SceneError(f"Material.{name} must be finite and in [0, 1]")
+            if not (np.isfinite(getattr(self, f"{name}_repeat")) and getattr(self, f"{name}_repeat") > 0):
+                raise SceneError(f"Material.{name}_repeat must be > 0")
+        if self.detail is not None:
+            if self.kind != "diffuse":
+                raise SceneError("Material.detail is supported on diffuse materials only")
+            lo, hi = (float(v) for v in self.detail_range)
+            if not 0.0 <= lo <= hi:
+                raise SceneError(f"Material.detail_range must satisfy 0 <= lo <= hi, got {self.detail_range!r}")
+        if not (np.isfinite(self.bump_amplitude) and self.bump_amplitude >= 0):
+            raise SceneError(f"Material.bump_amplitude must be >= 0, got {self.bump_amplitude!r}")
 
 
 @dataclass(frozen=True)

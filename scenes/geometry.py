@@ -20,6 +20,7 @@ __all__ = [
     "merge",
     "cone",
     "cones",
+    "whorls",
     "prism",
     "prisms",
     "icosphere",
@@ -136,6 +137,73 @@ def cones(base_centers, radii, heights, *, phases=0.0, segments: int = 12, textu
     top = _rings(c + np.stack([np.zeros(n), np.zeros(n), h], -1), 1e-3 * r, segments, ph)
     slant = np.hypot(r, h)
     return _bands(bottom, top, slant / texture_scale_m, np.maximum(1.0, np.round(2 * np.pi * r / texture_scale_m)))
+
+
+def whorls(base_centers, radii, heights, *, rng: np.random.Generator, branches: tuple[int, int] = (9, 15),
+           notch: tuple[float, float] = (0.35, 0.6), droop: float = 0.25, texture_scale_m: float = 1.0) -> MeshData:
+    """Spruce branch whorls: open cones whose rim is a star of branch tips and notches.
+
+    Each whorl is a cone from a star-shaped rim (``2 n`` vertices: ``n`` branch
+    tips at ``radius * U(0.8, 1.0)``, drooping ``droop * height`` below the base,
+    and ``n`` notches at ``radius * U(notch)``) through a smaller star at mid
+    height to the apex.  The silhouette and the shadows it casts are jagged at
+    the scale of single branches (tens of centimetres), where a smooth cone has
+    one long edge.  Render two-sided.
+
+    Parameters
+    ----------
+    base_centers : array-like
+        (N, 3) centres of the rims, metres.
+    radii, heights : array-like
+        (N,) rim radii and heights (rim to apex), metres (> 0).
+    rng : numpy.random.Generator
+        Branch counts, lengths and angles.
+    branches : tuple of int
+        Range of branches per whorl (inclusive).
+    notch : tuple of float
+        Range of the notch radius as a fraction of the whorl radius.
+    droop : float
+        How far branch tips hang below the rim, as a fraction of the height.
+    texture_scale_m : float
+        Metres per texture repeat along the slant and around.
+    """
+    c = np.atleast_2d(np.asarray(base_centers, dtype=np.float64))
+    n_obj = c.shape[0]
+    r, h = _as_n(radii, n_obj), _as_n(heights, n_obj)
+    if np.any(r <= 0) or np.any(h <= 0):
+        raise SceneError("whorls: radii and heights must be > 0")
+    verts, faces, uvs = [], [], []
+    offset = 0
+    for i in range(n_obj):
+        nb = int(rng.integers(branches[0], branches[1] + 1))
+        m = 2 * nb
+        ang = rng.uniform(0, 2 * np.pi) + 2 * np.pi * (np.arange(m) + rng.uniform(-0.25, 0.25, m)) / m
+        tip = np.arange(m) % 2 == 0
+        frac = np.where(tip, rng.uniform(0.8, 1.0, m), rng.uniform(*notch, m))
+        rim_r = r[i] * frac
+        rim_z = np.where(tip, -droop * h[i] * rng.uniform(0.5, 1.0, m), 0.0)
+        mid_r = 0.5 * rim_r * rng.uniform(0.85, 1.1, m)
+        # rings of m + 1 vertices: the last repeats the first one turn later (texture seam)
+        a1 = np.append(ang, ang[0] + 2 * np.pi)
+        rim_r, rim_z, mid_r = (np.append(x, x[0]) for x in (rim_r, rim_z, mid_r))
+
+        def ring(rr, zz):
+            return np.stack([c[i, 0] + rr * np.cos(a1), c[i, 1] + rr * np.sin(a1), c[i, 2] + zz], -1)
+
+        n1 = m + 1
+        v = np.concatenate([ring(rim_r, rim_z), ring(mid_r, np.full(n1, 0.45 * h[i])),
+                            [[c[i, 0], c[i, 1], c[i, 2] + h[i]]]])
+        k = np.arange(m)
+        f = np.concatenate([np.stack([k, k + 1, n1 + k + 1], -1), np.stack([k, n1 + k + 1, n1 + k], -1),
+                            np.stack([n1 + k, n1 + k + 1, np.full(m, 2 * n1)], -1)])
+        slant = np.hypot(r[i], h[i])
+        u = np.concatenate([a1, a1, [a1[0]]]) * r[i] / texture_scale_m
+        vv = np.concatenate([np.zeros(n1), np.full(n1, 0.5 * slant), [slant]]) / texture_scale_m
+        verts.append(v)
+        faces.append(f + offset)
+        uvs.append(np.stack([u, vv], -1))
+        offset += v.shape[0]
+    return _mesh(np.concatenate(verts), np.concatenate(faces), np.concatenate(uvs))
 
 
 def prisms(bases, radii, heights, *, tapers=1.0, phases=0.0, segments: int = 10,

@@ -38,14 +38,53 @@ from scenes import textures as tx
 from scenes.base import register_scene
 from scenes.description import Material, SceneDescription, Shape, Sun
 from scenes.errors import SceneError
-from scenes.geometry import MeshData, box, cones, icosphere, merge, prisms, quad, scatter_points
+from scenes.geometry import MeshData, box, icosphere, merge, prisms, quad, scatter_points
+from scenes.geometry import whorls as branch_whorls
 from scenes.lighting import SUN_ANGULAR_DIAMETER_DEG, daylight_rgb, sky_envmap, sun_direction
 
 __all__ = ["forest_winter", "forest_summer", "sun_glare", "forest_edge", "static_lab"]
 
 # Purposes of the independent random streams of a scene: changing the tree
 # density must not change the snow texture, and so on.
-_TEXTURES, _TREES, _ROCKS, _CANOPY = 1, 2, 3, 4
+_TEXTURES, _TREES, _ROCKS, _CANOPY, _DETAIL = 1, 2, 3, 4, 5
+
+#: Ground textures cover this many metres per repeat; their detail layers 3 m.
+_GROUND_TILE_M, _DETAIL_TILE_M = 12.0, 3.0
+
+
+#: Texture settings of forest_winter's detail layers (see :mod:`scenes.textures`), chosen so
+#: that denoised 8 ms frames match the real BorealHDR frames' SIFT keypoint density and median
+#: gradient (``python -m validation.render_study``).
+SNOW_DETAIL = {"grain_contrast": 0.8, "grain_beta": 1.6, "grain_min_mm": 12.0, "needles_per_m2": 6000.0,
+               "twigs_per_m2": 120.0, "debris_per_m2": 2000.0, "blobs_per_m2": 600.0}
+SNOW_DETAIL_RANGE = (0.1, 1.05)
+SNOW_RELIEF = {"beta": 3.0, "size": 512, "amplitude_m": 0.03}
+BARK_DETAIL_RANGE = (0.3, 1.4)
+NEEDLE_DETAIL = {"clump_cm": 3.0, "gap_fraction": 0.45}
+NEEDLE_DETAIL_RANGE = (0.03, 4.0)
+#: Luminance albedo range of the spruce foliage (before the needle-clump detail).
+NEEDLE_ALBEDO = (0.03, 0.13)
+
+def _snow_material(albedo: np.ndarray, rng: np.random.Generator, detail_px: int) -> Material:
+    """Snow: metre-scale albedo, centimetre-scale litter and grain, bump-mapped crust."""
+    if detail_px < 64 or detail_px > 4096:
+        raise SceneError(f"detail_px must be in [64, 4096], got {detail_px}")
+    relief = tx.relief(rng, int(SNOW_RELIEF["size"]), beta=float(SNOW_RELIEF["beta"]))
+    return Material("diffuse", albedo, detail=tx.snow_detail(rng, detail_px, tile_m=_DETAIL_TILE_M, **SNOW_DETAIL),
+                    detail_repeat=_GROUND_TILE_M / _DETAIL_TILE_M, detail_range=SNOW_DETAIL_RANGE,
+                    bump=relief, bump_repeat=_GROUND_TILE_M / _DETAIL_TILE_M,
+                    bump_amplitude=float(SNOW_RELIEF["amplitude_m"]))
+
+
+def _bark_material(albedo: np.ndarray, rng: np.random.Generator) -> Material:
+    """Bark (1 m texture repeats): plates and cracks."""
+    return Material("diffuse", albedo, detail=tx.bark_detail(rng), detail_repeat=2.0, detail_range=BARK_DETAIL_RANGE)
+
+
+def _needle_material(albedo: np.ndarray, rng: np.random.Generator) -> Material:
+    """Spruce foliage (1 m texture repeats): needle clumps over 2 m tiles, dark gaps."""
+    return Material("diffuse", albedo, detail=tx.needle_clumps(rng, 512, tile_m=2.0, **NEEDLE_DETAIL),
+                    detail_repeat=0.5, detail_range=NEEDLE_DETAIL_RANGE)
 
 
 def _rng(seed: int, purpose: int) -> np.random.Generator:
@@ -93,8 +132,10 @@ def _conifer_stand(rng: np.random.Generator, *, density_per_ha: float, x_range: 
                    ) -> tuple[MeshData | None, MeshData | None, np.ndarray]:
     """Spruces scattered around a trail along the x axis; crowns never reach into the trail.
 
-    A spruce is a tapered trunk and a crown of ``whorls`` stacked open cones
-    (wide at the bottom, narrowing to the top, overlapping like branch tiers).
+    A spruce is a tapered trunk and a crown of ``whorls`` stacked branch whorls
+    (open cones with a star-shaped rim of branch tips, wide at the bottom,
+    narrowing to the top, overlapping like branch tiers; see
+    :func:`scenes.geometry.whorls`).
     Returns (trunks mesh, crowns mesh, trunk positions).
     """
     def default_keep(xy):
@@ -119,8 +160,7 @@ def _conifer_stand(rng: np.random.Generator, *, density_per_ha: float, x_range: 
     top_z = np.minimum(height[:, None], base_z + 1.9 * span / whorls)
     top_z[:, -1] = height
     centers = np.stack([np.repeat(pts[:, 0], whorls), np.repeat(pts[:, 1], whorls), base_z.ravel()], -1)
-    crowns = cones(centers, radius.ravel(), (top_z - base_z).ravel(), phases=rng.uniform(0, 2 * np.pi, n * whorls),
-                   segments=12, texture_scale_m=1.0)
+    crowns = branch_whorls(centers, radius.ravel(), (top_z - base_z).ravel(), rng=rng, texture_scale_m=1.0)
     return trunks, crowns, pts
 
 
@@ -164,10 +204,11 @@ def _describe_forest_winter(seed: int, p: dict) -> SceneDescription:
     if px < 64 or px > 4096:
         raise SceneError(f"{name}: parameter texture_px must be in [64, 4096], got {px}")
     rt = _rng(seed, _TEXTURES)
+    rd = _rng(seed, _DETAIL)
     materials = {
-        "snow": Material("diffuse", tx.snow_texture(rt, px)),
-        "bark": Material("diffuse", tx.bark_texture(rt)),
-        "needles": Material("diffuse", tx.foliage_texture(rt)),
+        "snow": _snow_material(tx.snow_texture(rt, px), rd, p["detail_px"]),
+        "bark": _bark_material(tx.bark_texture(rt), rd),
+        "needles": _needle_material(tx.foliage_texture(rt, low=NEEDLE_ALBEDO[0], high=NEEDLE_ALBEDO[1]), rd),
         "rock": Material("diffuse", tx.rock_texture(rt)),
     }
     trunks, crowns, _ = _conifer_stand(_rng(seed, _TREES), density_per_ha=p["tree_density_per_ha"],
@@ -192,6 +233,7 @@ def forest_winter(
     tree_density_per_ha: float = 450.0,
     trail_half_width_m: float = 1.5,
     texture_px: int = 1024,
+    detail_px: int = 2048,
     max_depth: int = 3,
 ):
     """Sunlit snow under a spruce stand: bright textured snow, dark trunks and crowns, crisp shadows.
@@ -219,6 +261,8 @@ def forest_winter(
         Half-width of the tree-free trail along +x, metres.
     texture_px : int
         Side of the snow texture (covers 12 m, repeated).
+    detail_px : int
+        Side of the snow's detail layer (litter, grain; covers 3 m, repeated).
     max_depth : int
         Path length limit of the path tracer.
     """

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from emulator.errors import ExposimError
+from scenes.denoise import effective_denoise
 
 __all__ = ["synthesize", "DEFAULT_SATURATE_MS"]
 
@@ -45,8 +46,11 @@ def synthesize(
     speed_mps: float | None = None,
     cache_dir=None,
     variant: str | None = None,
+    denoise=None,
     overwrite: bool = False,
     progress=None,
+    scheduler: str | None = None,
+    render_progress=None,
 ) -> Path:
     """Synthesise a bracketed recording of ``scene`` with exact ground truth.
 
@@ -67,6 +71,19 @@ def synthesize(
         reference radiance (white surface facing the sun) saturates at ``saturate_ms``.
     speed_mps : float, optional
         Walking speed (default: the trajectory's 2 km/h).
+    denoise : str or scenes.denoise.DenoiseSettings, optional
+        ``"oidn"``: low-spp render denoised by Open Image Denoise; ``"off"``: the raw
+        path-traced estimate (see :func:`scenes.render`).  Default (None): ``"oidn"``, or
+        ``$EXPOSIM_DENOISE`` when set.  When OIDN cannot run
+        here, a :class:`scenes.denoise.DenoiserUnavailableWarning` says why, every frame
+        is the raw estimate and the dataset's description records the reason.
+    scheduler : str, optional
+        ``"local"`` or ``"tcp://HOST:PORT"``: render every shot first as a Dask task
+        (:mod:`scenes.parallel`), then capture; the renders land in the same cache
+        entries and the dataset has the same bytes as without a scheduler (None: render
+        shot by shot while capturing).
+    render_progress : callable, optional
+        With a scheduler: called with 1 after each rendered shot.
     Other parameters go to :func:`synth.capture_sequence` (noise, ground-truth captures,
     radiance EXRs) and :func:`scenes.render` (cache, variant).
 
@@ -93,33 +110,53 @@ def synthesize(
     walk_kwargs = {} if speed_mps is None else {"speed_mps": float(speed_mps)}
     traj = scene.trajectory(duration_s, **walk_kwargs)
     render_variant = variant or scenes.choose_variant()
+    settings, fallback = effective_denoise(denoise)
     shot_index: dict[float, int] = {}
 
-    def source(timestamp_s: float, camera_name: str):
+    def render_job(timestamp_s: float, camera_name: str, idx: int) -> dict:
+        """The :func:`scenes.render` arguments of one shot (serial and Dask paths alike)."""
         pose = traj.pose(timestamp_s)
         if camera_name == "right":
             pose = tr.stereo_right(pose, baseline)
-        idx = shot_index.setdefault(round(timestamp_s, 9), len(shot_index))
         frame_seed = (int(render_seed) * 1_000_003 + 2 * idx + (camera_name == "right")) % (1 << 32)
-        radiance = scenes.render(
-            scene,
-            pose,
-            width=width,
-            height=height,
-            spp=spp,
-            seed=frame_seed,
-            fov_deg=cam.fov_x_deg,
-            cache_dir=cache_dir,
-            variant=render_variant,
-        )
-        return radiance, np.asarray(pose, dtype=np.float64)
+        return dict(scene=scene, pose=pose, width=width, height=height, spp=spp, seed=frame_seed,
+                    fov_deg=cam.fov_x_deg, cache_dir=cache_dir, variant=render_variant, denoise=settings)
+
+    prefetched: dict = {}
+    if scheduler is not None:
+        from scenes.cache import resolve_cache_dir
+        from scenes.parallel import check_scheduler, render_many
+        from synth.sequence import shot_schedule
+
+        check_scheduler(scheduler)
+        folder = resolve_cache_dir(cache_dir)
+        shots = shot_schedule(n_shots, brackets_ms=brackets_ms, fps=fps, start_time_ns=start_time_ns)
+        keys = [(s.time_s, side, s.index) for s in shots for side in (("left", "right") if stereo
+                                                                                 else ("left",))]
+        jobs = []
+        for t, side, idx in keys:
+            job = render_job(t, side, idx)
+            job["cache_dir"] = False if folder is None else folder  # explicit: a worker decides nothing
+            jobs.append(job)
+        for (t, side, _), image in zip(keys, render_many(jobs, scheduler=scheduler, progress=render_progress)):
+            if folder is None:  # no cache to read them back from: keep them for the capture
+                prefetched[(round(t, 9), side)] = image
+
+    def source(timestamp_s: float, camera_name: str):
+        idx = shot_index.setdefault(round(timestamp_s, 9), len(shot_index))
+        job = render_job(timestamp_s, camera_name, idx)
+        radiance = prefetched.pop((round(timestamp_s, 9), camera_name), None)
+        if radiance is None:
+            radiance = scenes.render(**job)
+        return radiance, np.asarray(job["pose"], dtype=np.float64)
 
     description = {
         "generator": "scenes.synthesize",
         "scene": scene.key_material(),
         "scene_description": scene.description,
         "render": {"width": width, "height": height, "spp": spp, "render_seed": render_seed,
-                   "variant": render_variant, "fov_deg": cam.fov_x_deg},
+                   "variant": render_variant, "fov_deg": cam.fov_x_deg,
+                   "denoise": settings.key_material(), "denoise_fallback": fallback},
         "saturate_ms": saturate_ms,
         "trajectory": {"static": scene.is_static, "speed_mps": speed_mps},
     }

@@ -33,7 +33,10 @@ def tiny_study(tmp_path_factory):
     """1 scene, 3 cycles, 64x40, 2 spp, through a private render cache (nothing cached)."""
     root = tmp_path_factory.mktemp("ae_study")
     t0 = time.perf_counter()
-    results = run_study(root / "out", CONFIGS["tiny"], progress=False, command="pytest", cache_dir=root / "cache")
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("EXPOSIM_DENOISE", "off")  # not a rendering test: raw renders keep it fast
+        results = run_study(root / "out", CONFIGS["tiny"], progress=False, command="pytest",
+                            cache_dir=root / "cache")
     return root / "out", results, time.perf_counter() - t0
 
 

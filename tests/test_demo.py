@@ -17,6 +17,7 @@ def _tree(root: Path) -> dict[str, tuple[int, int]]:
 
 
 def test_quick_demo_end_to_end(tmp_path, capsys, monkeypatch):
+    monkeypatch.setenv("EXPOSIM_DENOISE", "off")  # not a rendering test: raw renders keep it fast
     cache = tmp_path / "cache"
     monkeypatch.setenv("EXPOSIM_CACHE", str(cache))
     out = tmp_path / "demo"

@@ -16,7 +16,7 @@ pytestmark = pytest.mark.render
 def test_synth_writes_a_loadable_dataset_with_ground_truth(tmp_path, capsys):
     out = tmp_path / "lab"
     args = ["synth", "static_lab", "-o", str(out), "--cycles", "1", "--size", "48x30", "--spp", "4",
-            "--gt-exposures", "3,5", "--quiet", "--noiseless"]
+            "--gt-exposures", "3,5", "--quiet", "--noiseless", "--denoise", "off"]
     assert main(args) == 0
     assert "wrote" in capsys.readouterr().out
     seq = load_sequence(out)
@@ -95,3 +95,25 @@ def test_ctrl_c_during_rendering_stops_cleanly_with_130(tmp_path):
     assert "Traceback" not in err and "drjit" not in err.lower()
     assert err.strip().splitlines()[-1] == "exposim synth: interrupted"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["cache"]  # no dataset, no staging folder
+
+
+def test_synth_records_the_denoiser(tmp_path, monkeypatch):
+    monkeypatch.delenv("EXPOSIM_DENOISE", raising=False)
+    args = ["synth", "static_lab", "--cycles", "1", "--size", "24x16", "--spp", "1", "--mono", "--quiet",
+            "--noiseless"]
+    assert main(args + ["--denoise", "off", "-o", str(tmp_path / "off")]) == 0
+    meta = json.loads((tmp_path / "off" / "exposim.json").read_text())
+    assert meta["source"]["render"]["denoise"] == {"name": "off"}
+    assert meta["source"]["render"]["denoise_fallback"] is None
+    assert main(args + ["-o", str(tmp_path / "on")]) == 0
+    render = json.loads((tmp_path / "on" / "exposim.json").read_text())["source"]["render"]
+    from scenes.denoise import oidn_status
+
+    if oidn_status()[0]:
+        assert render["denoise"]["name"] == "oidn" and render["denoise_fallback"] is None
+    else:  # pragma: no cover - depends on the machine
+        assert render["denoise"] == {"name": "off"} and render["denoise_fallback"]
+    # a denoised dataset differs from the raw one (same seeds, same poses)
+    off = load_sequence(tmp_path / "off")[0].frames["left"][32.0].load()
+    on = load_sequence(tmp_path / "on")[0].frames["left"][32.0].load()
+    assert on.shape == off.shape and (not oidn_status()[0] or not np.array_equal(on, off))

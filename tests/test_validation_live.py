@@ -199,7 +199,8 @@ def render_cache(tmp_path_factory):
 
 @pytest.mark.render
 @pytest.mark.slow
-def test_tiny_experiment_end_to_end(tmp_path, render_cache):
+def test_tiny_experiment_end_to_end(tmp_path, render_cache, monkeypatch):
+    monkeypatch.setenv("EXPOSIM_DENOISE", "off")  # not a rendering test: raw renders keep it fast
     cfg = TINY
     res = run_live_experiment(tmp_path / "out", cfg, progress=False, cache_dir=render_cache)
     on_disk = json.loads((tmp_path / "out" / "results.json").read_text())
@@ -220,7 +221,8 @@ def test_tiny_experiment_end_to_end(tmp_path, render_cache):
 
 @pytest.mark.render
 @pytest.mark.slow
-def test_exposim_validate_live_cli(tmp_path, render_cache, capsys):
+def test_exposim_validate_live_cli(tmp_path, render_cache, capsys, monkeypatch):
+    monkeypatch.setenv("EXPOSIM_DENOISE", "off")  # the same raw renders as the end-to-end test
     from emulator.cli import main as exposim
 
     with pytest.raises(SystemExit) as exc:

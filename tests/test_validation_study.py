@@ -33,6 +33,14 @@ def _finite_tree(obj) -> bool:
     return True
 
 
+@pytest.fixture(scope="module", autouse=True)
+def _raw_renders():
+    """Not rendering tests: raw renders (``EXPOSIM_DENOISE=off``) keep them fast."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("EXPOSIM_DENOISE", "off")
+        yield
+
+
 @pytest.fixture(scope="module")
 def emulation_run():
     from validation.emulation import EmulationConfig, run_emulation

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from scenes.errors import RenderError, SceneError
 
-__all__ = ["register", "parse_size", "parse_params", "frame_seed"]
+__all__ = ["register", "parse_size", "parse_params", "frame_seed", "add_denoise_option", "add_scheduler_option"]
 
 #: Files the render command writes in its output folder (besides frames/).
 OUTPUT_FILES = ("scene.json", "poses_left.txt", "poses_right.txt")
@@ -55,6 +55,25 @@ def parse_params(items: list[str] | None) -> dict:
     return out
 
 
+def add_denoise_option(parser) -> None:
+    """``--denoise oidn|off`` (shared by ``exposim render`` and ``exposim synth``)."""
+    from scenes.denoise import DEFAULT_DENOISER, DENOISERS, ENV_DENOISE
+
+    parser.add_argument("--denoise", choices=DENOISERS, default=None,
+                        help=f"'oidn': denoise each render with Intel Open Image Denoise fed Mitsuba's "
+                             f"albedo and normal; 'off': the raw path-traced estimate (default {DEFAULT_DENOISER}, "
+                             f"or ${ENV_DENOISE} when set). Without a usable OIDN "
+                             "(pyoidn missing, unsupported CPU) a warning says why and renders are raw")
+
+
+def add_scheduler_option(parser) -> None:
+    """``--scheduler local|tcp://HOST:PORT`` (shared by ``exposim render`` and ``exposim synth``)."""
+    from scenes.parallel import SCHEDULER_HELP
+
+    parser.add_argument("--scheduler", default=None, metavar="local|tcp://HOST:PORT",
+                        help=SCHEDULER_HELP + " (default: serial, in this process)")
+
+
 def frame_seed(base_seed: int, index: int, camera: int) -> int:
     """Sampler seed of frame ``index`` of camera 0 (left) or 1 (right): independent noise per image."""
     return (int(base_seed) * 1_000_003 + 2 * int(index) + int(camera)) % (1 << 32)
@@ -71,7 +90,8 @@ def register(subparsers) -> None:
             "Render a procedural Mitsuba scene along a camera trajectory. Writes one float32 OpenEXR "
             "per frame (frames/left/<timestamp_ns>.exr, and frames/right/ with --stereo), the poses in "
             "TUM format (poses_left.txt, poses_right.txt) and scene.json with the scene parameters, "
-            "intrinsics, spp and the dynamic range of every frame. Renders are cached on disk."
+            "intrinsics, spp, the denoiser and the dynamic range of every frame. Each frame is a low-spp "
+            "render denoised by Open Image Denoise unless --denoise off. Renders are cached on disk."
         ),
     )
     p.add_argument("scene", choices=sorted(SCENES), metavar="SCENE", help=f"one of: {', '.join(sorted(SCENES))}")
@@ -93,6 +113,8 @@ def register(subparsers) -> None:
     p.add_argument("--stereo", action="store_true", help="also render the right camera (baseline 0.18 m)")
     p.add_argument("--baseline", type=float, default=None, help="stereo baseline, m (default 0.18)")
     p.add_argument("--variant", default=None, help="Mitsuba variant (default: probed llvm_ad_rgb, else scalar_rgb)")
+    add_denoise_option(p)
+    add_scheduler_option(p)
     cache = p.add_mutually_exclusive_group()
     cache.add_argument("--cache", type=Path, default=None, help="render cache folder (default $EXPOSIM_CACHE "
                        "or ~/.cache/exposim/renders)")
@@ -140,7 +162,8 @@ def run_render(args: argparse.Namespace) -> int:
     from emulator.io.files import write_metadata
     from emulator.io.tum import write_tum
     from scenes import trajectory as tr
-    from scenes.cache import library_versions
+    from scenes.cache import library_versions, resolve_cache_dir
+    from scenes.denoise import effective_denoise
     from scenes.variant import check_variant_name
 
     width, height = parse_size(args.size)
@@ -163,7 +186,11 @@ def run_render(args: argparse.Namespace) -> int:
         raise OutputExistsError(f"{existing[0]} exists ({len(existing)} output file(s) in {out}); "
                                 f"use --force to overwrite")
 
+    from scenes.parallel import check_scheduler, render_many
+
+    scheduler = check_scheduler(getattr(args, "scheduler", None))
     cache_dir = False if args.no_cache else args.cache
+    denoise, denoise_fallback = effective_denoise(args.denoise)
     variant = check_variant_name(args.variant) if args.variant else scenes.choose_variant()
     if str(args.spp).lower() == "auto":
         # measured on the first pose, at no more than 160 px wide to keep it affordable
@@ -186,17 +213,19 @@ def run_render(args: argparse.Namespace) -> int:
     jobs = [(i, cam) for i in range(len(ts)) for cam in cameras]
     from tqdm import tqdm
 
+    # every job complete (explicit cache folder, variant, denoiser): a Dask worker decides nothing
+    folder = resolve_cache_dir(cache_dir)
+    seeds = [frame_seed(args.render_seed, i, 0 if cam == "left" else 1) for i, cam in jobs]
+    tasks = [dict(scene=scene, pose=poses[i] if cam == "left" else tr.stereo_right(poses[i], baseline),
+                  width=width, height=height, spp=spp, seed=seed, fov_deg=fov,
+                  cache_dir=False if folder is None else folder, variant=variant, denoise=denoise)
+             for (i, cam), seed in zip(jobs, seeds)]
     with tqdm(total=len(jobs), desc=f"render {scene.name}", unit="img", disable=args.quiet,
               file=sys.stderr) as bar:
-        for i, cam in jobs:
-            pose = poses[i] if cam == "left" else tr.stereo_right(poses[i], baseline)
-            seed = frame_seed(args.render_seed, i, 0 if cam == "left" else 1)
-            img = scenes.render(scene, pose, width=width, height=height, spp=spp, seed=seed, fov_deg=fov,
-                                cache_dir=cache_dir, variant=variant)
+        for (i, cam), seed, img in zip(jobs, seeds, render_many(tasks, scheduler=scheduler, progress=bar.update)):
             write_exr(out / "frames" / cam / f"{stamps_ns[i]}.exr", img, overwrite=True)
             frames.append({"camera": cam, "timestamp_ns": stamps_ns[i], "seed": seed,
                            "dynamic_range_db": round(scenes.dynamic_range_db(img), 3)})
-            bar.update(1)
 
     write_tum(out / "poses_left.txt", stamps_ns, poses)
     if args.stereo:
@@ -215,6 +244,8 @@ def run_render(args: argparse.Namespace) -> int:
         "intrinsics": {"fx": fx, "fy": fy, "cx": cx, "cy": cy},
         "spp": spp,
         "spp_selection": spp_info,
+        "denoise": denoise.key_material(),
+        "denoise_fallback": denoise_fallback,
         "variant": variant,
         "versions": library_versions(),
         "baseline_m": baseline if args.stereo else None,

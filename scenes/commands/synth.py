@@ -14,6 +14,7 @@ __all__ = ["register", "stop_between_images"]
 
 def register(subparsers) -> None:
     from scenes.base import SCENES
+    from scenes.commands.render import add_scheduler_option, add_denoise_option
     from scenes.synthesize import DEFAULT_SATURATE_MS
 
     p = subparsers.add_parser(
@@ -42,6 +43,8 @@ def register(subparsers) -> None:
     p.add_argument("--noiseless", action="store_true", help="exact noiseless captures")
     p.add_argument("--gt-exposures", default="", help="comma-separated target exposures (ms) to capture as ground truth")
     p.add_argument("--save-radiance", action="store_true", help="also write the radiance of every shot (OpenEXR)")
+    add_denoise_option(p)
+    add_scheduler_option(p)
     p.add_argument("--cache", type=Path, default=None, help="render cache folder")
     p.add_argument("--force", action="store_true",
                    help="replace an existing exposim dataset (refused, naming them, if it holds files synth did not write)")
@@ -58,6 +61,7 @@ def _run(args: argparse.Namespace) -> int:
     import scenes
     from emulator.errors import ExposimError
     from scenes.commands.render import parse_params, parse_size
+    from scenes.parallel import check_scheduler
     from scenes.synthesize import synthesize
 
     width, height = parse_size(args.size)
@@ -66,8 +70,14 @@ def _run(args: argparse.Namespace) -> int:
     except ValueError:
         raise ExposimError(f"--gt-exposures must be comma-separated numbers, got {args.gt_exposures!r}") from None
     scene = scenes.get_scene(args.scene, seed=args.seed, **parse_params(args.param))
-    with tqdm(total=args.cycles * 6 * (1 if args.mono else 2), desc=f"synth {scene.name}", unit="img",
-              disable=args.quiet, file=sys.stderr) as bar, stop_between_images("exposim synth") as check:
+    scheduler = check_scheduler(args.scheduler)
+    render_bar = None
+    if scheduler is not None:
+        render_bar = tqdm(total=args.cycles * 6 * (1 if args.mono else 2), desc=f"render {scene.name} (dask)",
+                          unit="img", disable=args.quiet, file=sys.stderr)
+    with (render_bar if render_bar is not None else contextlib.nullcontext()), tqdm(total=args.cycles * 6 * (1 if args.mono else 2), desc=f"synth {scene.name}", unit="img",
+              disable=args.quiet, file=sys.stderr) as bar, \
+            stop_between_images("exposim synth") as check:
 
         def progress(done, total):
             check()
@@ -79,7 +89,8 @@ def _run(args: argparse.Namespace) -> int:
             scene, args.output, n_cycles=args.cycles, width=width, height=height, spp=args.spp,
             camera=args.camera, saturate_ms=args.saturate_ms, speed_mps=args.speed, seed=args.noise_seed,
             stereo=not args.mono, noise=not args.noiseless, gt_exposures_ms=gt, save_radiance=args.save_radiance,
-            cache_dir=args.cache, overwrite=args.force, progress=progress,
+            cache_dir=args.cache, denoise=args.denoise, overwrite=args.force, progress=progress,
+            scheduler=scheduler, render_progress=None if render_bar is None else render_bar.update,
         )
     print(f"wrote {path} ({args.cycles} cycles, {width}x{height}, {scene.name}); inspect with: exposim info {path}")
     return 0

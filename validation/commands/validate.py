@@ -1,6 +1,7 @@
 """``exposim validate emulation|selectors|motion|speed``: thin argument parsing around
 :func:`validation.report.run_experiment`; ``exposim validate ae-study`` around
-:func:`validation.ae_study.run_study`.
+:func:`validation.ae_study.run_study`; ``exposim validate render``: the render study
+(:mod:`validation.render_study`); ``exposim validate live``: :mod:`validation.live`.
 
 Default sizes are the full study; ``--quick`` is the reduced configuration of the tests.
 A folder that already holds a results.json is refused unless ``--force``.
@@ -107,9 +108,41 @@ def register(sub: argparse._SubParsersAction) -> None:
     from validation.live.cli import register as register_live  # issue 14: its own options and runner
 
     register_live(vsub)
+    _register_render(vsub)
 
 
 register.order = 80  # place in `exposim --help`
+
+_RENDER_HELP = ("render study: time and error of raw vs OIDN-denoised renders per spp against a high-spp "
+                "reference, keypoint repeatability, static-camera flicker, texture statistics vs real frames")
+
+
+def _register_render(vsub) -> None:
+    """``exposim validate render``: :mod:`validation.render_study` (its own options, defaults in --help)."""
+    from validation.render_study import add_arguments
+
+    q = vsub.add_parser("render", help=_RENDER_HELP, description=_RENDER_HELP)
+    add_arguments(q, output_option=True)
+    q.set_defaults(func=_run_render, experiment="render")
+
+
+def _run_render(args) -> int:
+    from validation.render_study import print_summary, run_from_args
+
+    words = ["exposim", "validate", "render", "-o", str(args.output)]
+    for flag in ("quick", "force"):
+        if getattr(args, flag):
+            words.append("--" + flag)
+    for key in ("scenes", "size", "spp", "reference_spp", "texture_scenes", "texture_sizes", "texture_spp",
+                "texture_poses", "real"):
+        value = getattr(args, key)
+        if value is not None:
+            if isinstance(value, tuple):
+                value = "x".join(map(str, value)) if key == "size" else ",".join(map(str, value))
+            words += ["--" + key.replace("_", "-"), str(value)]
+    results = run_from_args(args, shlex.join(words))
+    print_summary(results, args.output)
+    return 0
 
 
 _OPTION_FIELDS = ("cache_dir", "width", "height", "spp", "n_exposures", "repeats", "responses", "scenes",
