@@ -114,7 +114,7 @@ def _check_args(args) -> None:
         raise ExposimError(f"--jobs {args.jobs}: must be >= 1")
     if args.noise_seed is not None and args.noise_seed < 0:
         raise ExposimError(f"--noise-seed {args.noise_seed}: must be >= 0")
-    if args.noise_model is not None and args.noise == "none":
+    if args.noise_model is not None and args.noise != "consistent" and not args.resume:
         raise ExposimError("--noise-model is used only with --noise consistent")
 
 

@@ -117,6 +117,11 @@ def run_markdown(info: dict, summary: dict) -> str:
             f"{_fmt(m['min_exposure_ms'])} | {_fmt(m['max_exposure_ms'])} | {_fmt(m['mean_saturated_fraction'], '.2%')} | "
             f"{_fmt(m['mean_valid_fraction'], '.2%')} | {m['non_finite_proposals']} | {_fmt(m['method_ms_per_frame'], '.1f')} |"
         )
+    fixed = (info.get("method_options") or {}).get("fixed")
+    if isinstance(fixed, dict):
+        n = int(fixed.get("n_auto_frames", 3)) + (1 if fixed.get("mode") == "borealhdr" else 0)
+        lines += ["", f"`fixed` runs classical-50 for its first {n} frames and then freezes the exposure: on a "
+                      f"run of {n} cycles or fewer it is identical to classical-50."]
     skipped = summary.get("skipped_cycles") or []
     lines += ["", f"Skipped cycles: {len(skipped)}"]
     for s in skipped:

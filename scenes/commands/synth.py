@@ -39,7 +39,9 @@ def register(subparsers) -> None:
     p.add_argument("--noiseless", action="store_true", help="exact noiseless captures")
     p.add_argument("--gt-exposures", default="", help="comma-separated target exposures (ms) to capture as ground truth")
     p.add_argument("--save-radiance", action="store_true", help="also write the radiance of every shot (OpenEXR)")
-    p.add_argument("--cache", type=Path, default=None, help="render cache folder")
+    p.add_argument("--cache-dir", dest="cache", metavar="DIR", type=Path, default=None,
+                   help="render cache folder (default $EXPOSIM_CACHE or ~/.cache/exposim/renders)")
+    p.add_argument("--cache", dest="cache", type=Path, default=None, help=argparse.SUPPRESS)  # old spelling
     p.add_argument("--force", action="store_true", help="replace an existing exposim dataset")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_run)
