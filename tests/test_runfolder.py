@@ -13,6 +13,7 @@ import signal
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from emulator.cli import main
@@ -186,3 +187,80 @@ def test_initial_ms_is_clamped_to_the_range(seq, tmp_path, capsys):
     low = tmp_path / "low"
     assert _run(seq, low, "--initial-ms", "0.001") == 0
     assert float(_csv(low).splitlines()[1].split(",")[2]) == 0.02  # the default range's floor
+
+
+def test_ctrl_c_stops_cleanly_with_130_and_the_run_resumes(seq, tmp_path, capsys, monkeypatch):
+    from emulator.io import runfolder
+
+    full = tmp_path / "full"
+    assert _run(seq, full) == 0
+    out = tmp_path / "run"
+    real = runfolder.RunWriter.append_row
+    rows = []
+
+    def interrupted_after_three(self, method, row):
+        if len(rows) == 3:
+            raise KeyboardInterrupt
+        rows.append(row)
+        real(self, method, row)
+
+    monkeypatch.setattr(runfolder.RunWriter, "append_row", interrupted_after_three)
+    capsys.readouterr()
+    assert _run(seq, out) == 130
+    assert _one_error_line(capsys.readouterr().err) == "exposim run: interrupted"
+    info = json.loads((out / "run.json").read_text())
+    assert info["status"] == "interrupted" and info["cycles_done"] == 1
+    assert not (out / LOCK_FILE).exists()
+    monkeypatch.setattr(runfolder.RunWriter, "append_row", real)
+    assert _run(seq, out, "--resume") == 0
+    for m in METHODS.split(","):
+        assert _csv(out, m) == _csv(full, m)
+
+
+def test_os_errors_are_one_line_naming_the_path(seq, tmp_path, capsys, monkeypatch):
+    from emulator.io import borealhdr
+
+    real = borealhdr.FolderSource.read_bytes
+
+    def denied(self, path):  # an unreadable PNG
+        if str(path).endswith(".png"):
+            raise PermissionError(13, "Permission denied", str(path))
+        return real(self, path)
+
+    monkeypatch.setattr(borealhdr.FolderSource, "read_bytes", denied)
+    out = tmp_path / "run"
+    assert _run(seq, out) == 1
+    line = _one_error_line(capsys.readouterr().err)
+    assert line.startswith("exposim run: error: ") and line.endswith(".png: Permission denied") and str(seq) in line
+    monkeypatch.undo()
+    if os.geteuid() != 0:  # root reads and writes anything: a real read-only folder only bites others
+        ro = tmp_path / "ro"
+        ro.mkdir()
+        ro.chmod(0o500)
+        try:
+            assert _run(seq, ro / "run") == 1
+            assert "Permission denied" in _one_error_line(capsys.readouterr().err)
+        finally:
+            ro.chmod(0o700)
+
+
+def test_info_into_a_closed_pipe_is_quiet(tmp_path):
+    exe = os.path.join(os.path.dirname(sys.executable), "exposim")
+    if not os.path.exists(exe):
+        pytest.skip("no exposim script beside the interpreter")
+    # 600 cycles: `info --json` writes > 128 KiB, more than the pipe holds, so the write after
+    # `head` has gone fails with EPIPE
+    from emulator.io.png import encode_png
+
+    root = tmp_path / "long"
+    png = encode_png(np.zeros((2, 2), np.uint16))
+    for i in range(600 * 6):
+        folder = root / "camera_left" / f"{2.0 ** (i % 6):.1f}"
+        folder.mkdir(parents=True, exist_ok=True)
+        (folder / f"{1_000_000_000 + 45_000_000 * i}.png").write_bytes(png)
+    full = subprocess.run([exe, "info", "--json", str(root)], capture_output=True, text=True, timeout=120)
+    assert full.returncode == 0 and len(full.stdout) > 2 * 65536
+    proc = subprocess.run(f"'{exe}' info --json '{root}' | head -c 20; echo \" rc=${{PIPESTATUS[0]}}\"",
+                          shell=True, executable="/bin/bash", capture_output=True, text=True, timeout=120)
+    assert proc.stdout == full.stdout[:20] + " rc=1\n"  # quiet, exit code 1 as for SIGPIPE
+    assert proc.stderr == "", proc.stderr
