@@ -65,6 +65,8 @@ __all__ = [
     "PlaybackError",
     "DEFAULT_INITIAL_MS",
     "DEFAULT_SELECTOR",
+    "saved_image",
+    "resolve_noise_model",
 ]
 
 #: First exposure of every method, ms.
@@ -229,8 +231,10 @@ def build_methods(spec, *, mode: str = "paper", response=None, options: Mapping 
 class _CycleImages:
     """Decoded brackets of one cycle, each decoded at most once (thread-safe), with histograms."""
 
-    def __init__(self, cycle, white_level: int, black_level: int, stats: RunStats, noise=None) -> None:
+    def __init__(self, cycle, white_level: int, black_level: int, stats: RunStats, noise=None,
+                 shapes: dict | None = None) -> None:
         self.cycle = cycle
+        self.shapes = shapes  # the run's image size, shared by every cycle: a frame of another size is refused
         self.white = white_level
         self.black = black_level
         self.stats = stats
@@ -250,6 +254,13 @@ class _CycleImages:
             frame = self.cycle.frames[camera][exposure_ms]
             t0 = time.perf_counter()
             raw = frame.load()
+            if self.shapes is not None:
+                first = self.shapes.setdefault("shape", (raw.shape, frame.path))
+                if raw.shape != first[0]:
+                    raise DatasetError(
+                        f"{frame.path}: image is {raw.shape[1]}x{raw.shape[0]} pixels, but {first[1]} of the same "
+                        f"recording is {first[0][1]}x{first[0][0]}; every image of a recording must have one size"
+                    )
             t1 = time.perf_counter()
             hist = cv2.calcHist([raw], [0], None, [self.white + 1], [0, self.white + 1]).ravel().astype(np.int64)
             t2 = time.perf_counter()
@@ -379,6 +390,7 @@ def iter_run(
     seq = _resolve_sequence(sequence)
     initial_ms = check_exposure(initial_ms, "initial_ms")
     lo_hi = _check_range(range_ms)
+    initial_ms = _clamp(initial_ms, lo_hi)  # the first exposure obeys the clamp as every proposal does
     if selector not in SELECTORS:
         raise PlaybackError(f"unknown selector {selector!r}; choose one of {', '.join(SELECTORS)}")
     if int(jobs) < 1:
@@ -395,6 +407,7 @@ def iter_run(
     method_cam = METHOD_CAMERA if METHOD_CAMERA in cams else cams[0]
     other_cam = next((c for c in cams if c != method_cam), None)
     targets = {name: float(initial_ms) for name in built}
+    shapes: dict = {}
     select_kw = {"white_level": white, "black_level": black}
 
     def step_one(name: str, method, images: _CycleImages, brackets: dict, missing: dict, cycle) -> MethodStep:
@@ -471,7 +484,7 @@ def iter_run(
                 stats.cycles += 1
                 yield CycleStep(cycle.index, {}, missing, skipped="no bracket present for every camera")
                 continue
-            images = _CycleImages(cycle, white, black, stats, noise_spec)
+            images = _CycleImages(cycle, white, black, stats, noise_spec, shapes)
             brackets = {e: (lambda e=e: images.saturated(method_cam, e)) for e in avail}
             args = [(name, m, images, brackets, missing, cycle) for name, m in built.items()]
             if pool is None:
@@ -541,8 +554,51 @@ def _canon(value) -> str:
 
 
 def _config_of(run_json: dict) -> dict:
-    return {k: run_json.get(k) for k in ("sequence", "methods", "selector", "initial_ms", "range_ms", "save", "mode",
-                                         "options", "response")}
+    out = {k: run_json.get(k) for k in ("sequence", "methods", "selector", "initial_ms", "range_ms", "save", "mode",
+                                        "options", "response")}
+    out["noise"] = run_json.get("noise") or {"mode": "none"}  # run folders from before --noise: none
+    return out
+
+
+def _same_file(a, b) -> bool:
+    """Two recorded paths (relative ones to the working directory) name one existing file."""
+    try:
+        return bool(a) and bool(b) and Path(a).is_file() and Path(a).resolve() == Path(b).resolve()
+    except OSError:
+        return False
+
+
+def saved_image(image: np.ndarray, save: str, *, white_level: int, black_level: int) -> np.ndarray:
+    """What ``--save`` writes of an emulated Bayer image: itself (png16), or 8-bit grey with the
+    black level subtracted (png8, :func:`emulator.gray.bayer_to_gray8`). Shared by ``run`` and ``emulate``."""
+    if save == "png16":
+        return image
+    if save == "png8":
+        return bayer_to_gray8(image, white_level=white_level, black_level=black_level)
+    raise PlaybackError(f"save must be png16 or png8 to save an image, got {save!r}")
+
+
+def resolve_noise_model(noise: str, noise_model, seq: Sequence, response):
+    """The noise model of a run: None for ``noise="none"``; a NoiseModel; a path to a noise-model
+    JSON (:func:`emulator.io.noisemodel.read_noise_model`); or, when None, the model the
+    recording's ``exposim.json`` carries (synthetic recordings). Returns (model, source)."""
+    from emulator.io.noisemodel import noise_model_from_metadata, read_noise_model
+    from emulator.noise import NoiseModel
+
+    if noise == "none":
+        return None, None
+    if isinstance(noise_model, NoiseModel):
+        return noise_model, str(noise_model.name)
+    if noise_model is not None:
+        return read_noise_model(noise_model, response), str(Path(noise_model).resolve())
+    meta_path = Path(seq.path) / "exposim.json"
+    model = noise_model_from_metadata(seq.metadata, response, source=str(meta_path))
+    if model is None:
+        raise PlaybackError(
+            f'{seq.path}: noise "{noise}" needs a noise model and the recording carries none (no camera in '
+            f"{meta_path.name}); pass --noise-model FILE.json (written by `exposim calibrate --noise`)"
+        )
+    return model, str(meta_path.resolve())
 
 
 def run_to_folder(
@@ -563,6 +619,9 @@ def run_to_folder(
     progress: Callable[[int, int], None] | None = None,
     command: str | None = None,
     make_report: bool = True,
+    noise: str = "none",
+    noise_model=None,
+    noise_seed: int = 0,
 ) -> dict:
     """Run AE methods on a recording and write a run folder (:mod:`emulator.io.runfolder`).
 
@@ -577,7 +636,11 @@ def run_to_folder(
 
     Returns the summary written to ``results.json`` (per-method figures, skipped cycles,
     timing; :func:`emulator.report.run.write_run_report`).  ``progress(done, total)`` is
-    called after every cycle.
+    called after every cycle.  Every argument is checked before the folder is created.
+    ``initial_ms`` outside ``range_ms`` is clamped (``run.json``: ``initial_ms_clamped``).
+    ``noise``, ``noise_model`` (a NoiseModel, a noise-model JSON path, or None for the one
+    the recording's ``exposim.json`` carries), ``noise_seed``: see :func:`iter_run`; the
+    choice is recorded in ``run.json`` (``"noise"``) and a resume must repeat it.
     """
     if out_dir is None:
         raise PlaybackError("out_dir is required")
@@ -588,6 +651,8 @@ def run_to_folder(
     if response is None:
         response = sequence_response(seq, response_path)
     response_name = str(response_path) if response_path is not None else str(getattr(response, "name", "custom"))
+    if Path(response_name).is_file():  # absolute: a resume from another working directory finds it
+        response_name = str(Path(response_name).resolve())
     built = build_methods(parse_methods(methods) if isinstance(methods, str) else list(methods), mode=mode,
                           response=response, options=options)
     names = list(built)
@@ -605,15 +670,24 @@ def run_to_folder(
     }
     if selector not in SELECTORS:
         raise PlaybackError(f"unknown selector {selector!r}; choose one of {', '.join(SELECTORS)}")
-    if int(jobs) < 1:
-        raise PlaybackError(f"jobs must be >= 1, got {jobs!r}")
+    if isinstance(jobs, bool) or not isinstance(jobs, (int, np.integer)) or int(jobs) < 1:
+        raise PlaybackError(f"jobs must be an integer >= 1, got {jobs!r}")
     white, black = int(seq.white_level), int(seq.black_level)
+    if response.white_level != white or response.black_level != black:
+        response = response.with_levels(white_level=white, black_level=black)
+    model, model_source = resolve_noise_model(noise, noise_model, seq, response)
+    noise_spec = _noise_spec(noise, model, noise_seed, response)
+    config["noise"] = ({"mode": "none"} if noise_spec is None else
+                       {"mode": noise, "seed": int(noise_seed),
+                        "model": {k: v for k, v in model.to_dict().items() if k != "response"}})
+    clamped_initial = _clamp(config["initial_ms"], config["range_ms"])
 
     with RunWriter(out, resume=resume) as writer:
         if resume:
             run_json = writer.run_json
             old = _config_of(run_json)
-            diff = [k for k in config if _canon(old.get(k)) != _canon(config[k])]
+            diff = [k for k in config if _canon(old.get(k)) != _canon(config[k])
+                    and not (k == "response" and _same_file(old.get(k), config[k]))]
             if diff:
                 raise PlaybackError(
                     f"{out / RUN_FILE}: --resume with a different configuration ({', '.join(diff)}): recorded "
@@ -644,6 +718,13 @@ def run_to_folder(
                 "cycles_done": 0,
                 "skipped_cycles": [],
             }
+            if model_source is not None:
+                run_json["noise_model_file"] = model_source
+            if clamped_initial != config["initial_ms"]:
+                run_json["initial_ms_clamped"] = clamped_initial
+                run_json.setdefault("warnings", []).append(
+                    f"initial_ms {config['initial_ms']:g} is outside range_ms {config['range_ms']}; "
+                    f"clamped to {clamped_initial:g} ms")
         run_json["jobs"] = int(jobs)
         writer.start(run_json, names, seq.cameras, save)
 
@@ -656,7 +737,7 @@ def run_to_folder(
                     continue
                 if rec is not None and writer.image_path(st.method, cam, st.timestamp_ns).exists():
                     continue
-                data = img if save == "png16" else bayer_to_gray8(img, white_level=white, black_level=black)
+                data = saved_image(img, save, white_level=white, black_level=black)
                 writer.write_image(st.method, cam, st.timestamp_ns, data)
 
         stats = RunStats()
@@ -666,7 +747,7 @@ def run_to_folder(
         try:
             gen = iter_run(seq, list(built.values()), initial_ms=initial_ms, range_ms=range_ms, selector=selector,
                            response=response, jobs=jobs, emulate_right=save != "none", on_step=write_images,
-                           stats=stats)
+                           stats=stats, noise=noise, noise_model=model, noise_seed=noise_seed)
             for cs in gen:
                 if cs.skipped:
                     skipped.append({"cycle": cs.cycle, "reason": cs.skipped, "missing": cs.missing})

@@ -173,7 +173,7 @@ def test_exposim_validate_render_runs_the_study(tmp_path, capsys):
 
     args = ["validate", "render", "-o", str(tmp_path / "out"), "--scenes", "static_lab", "--size", "24x16",
             "--spp", "1,2", "--reference-spp", "8", "--texture-scenes", "", "--real", str(tmp_path / "none"),
-            "--cache", "off", "--no-progress"]
+            "--cache-dir", "off", "--no-progress"]
     assert main(args) == 0
     res = json.loads((tmp_path / "out" / "results.json").read_text())
     assert res["provenance"]["experiment"] == (

@@ -132,3 +132,232 @@ def test_options_and_jobs(seq, tmp_path):
     assert info["range_ms"] == [0.1, 30.0] and info["initial_ms"] == 2.5
     for name in ("kim", "shim"):
         assert (a / name / "exposures.csv").read_bytes() == (b / name / "exposures.csv").read_bytes()
+
+
+# ---------------------------------------------------------------------------- emulate --save
+def _black_seq(tmp_path):
+    """The static scene with black level 64 (every pixel is >= 100 DN, so none is below black)."""
+    root, _ = write_static_sequence(tmp_path / "black", n_cycles=2, shape=(16, 24))
+    (root / "exposim.json").write_text(json.dumps({"white_level": 4095, "black_level": 64}))
+    return root
+
+
+def test_emulate_png8_is_viewable_gray_with_the_black_level_subtracted(tmp_path, capsys):
+    seq = _black_seq(tmp_path)
+    out = tmp_path / "em"
+    # ratio 1 from the 8 ms bracket: the png16 is the bracket itself, the png8 its grey
+    assert main(["emulate", str(seq), "--exposure-ms", "8", "--cycle", "1", "--selector", "closest",
+                 "-o", str(out), "--save", "png8", "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["save"] == "png8" and info["bracket_ms"] == 8.0
+    for cam in ("left", "right"):
+        g8 = cv2.imread(info["cameras"][cam]["output"], cv2.IMREAD_UNCHANGED)
+        raw = cv2.imread(info["cameras"][cam]["source"], cv2.IMREAD_UNCHANGED)
+        gray = cv2.cvtColor(raw, cv2.COLOR_BayerRG2GRAY).astype(np.float64)
+        want = np.clip(np.rint((gray - 64) * 255 / (4095 - 64)), 0, 255).astype(np.uint8)
+        assert g8.dtype == np.uint8 and np.array_equal(g8, want)
+        assert 60 < g8.mean() < 200  # viewable: a 16-bit mosaic of ~1600 DN reads as ~2 % grey
+    assert main(["emulate", str(seq), "--exposure-ms", "8", "--cycle", "1", "--selector", "closest",
+                 "-o", str(tmp_path / "em16")]) == 0
+    p16 = cv2.imread(str(tmp_path / "em16" / "left_cycle0001_8ms.png"), cv2.IMREAD_UNCHANGED)
+    assert p16.dtype == np.uint16 and np.array_equal(p16, cv2.imread(info["cameras"]["left"]["source"],
+                                                                     cv2.IMREAD_UNCHANGED))
+
+
+def test_emulate_png8_equals_run_png8(tmp_path, capsys):
+    """One code path: `emulate --save png8` and `run --save png8` write the same bytes for one target."""
+    seq = _black_seq(tmp_path)
+    run_dir = tmp_path / "run"
+    assert main(["run", str(seq), "--methods", "classical-50", "--initial-ms", "5.5", "-o", str(run_dir),
+                 "--save", "png8", "--no-progress"]) == 0
+    capsys.readouterr()
+    assert main(["emulate", str(seq), "--exposure-ms", "5.5", "--cycle", "0", "-o", str(tmp_path / "em"),
+                 "--save", "png8", "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    ts = info["cameras"]["left"]["timestamp_ns"]
+    for cam in ("left", "right"):
+        a = cv2.imread(str(run_dir / "classical-50" / "images" / cam / f"{ts}.png"), cv2.IMREAD_UNCHANGED)
+        b = cv2.imread(info["cameras"][cam]["output"], cv2.IMREAD_UNCHANGED)
+        assert a.dtype == b.dtype == np.uint8 and np.array_equal(a, b)
+
+
+def test_every_emulate_argument_is_documented():
+    from emulator.cli import build_parser
+
+    sub = build_parser()._subparsers._group_actions[0].choices  # noqa: SLF001
+    for cmd in ("emulate", "run", "info"):
+        for action in sub[cmd]._actions:
+            if action.dest != "help":
+                assert action.help and action.help.strip(), (cmd, action.option_strings or action.dest)
+    save = next(a for a in sub["emulate"]._actions if "--save" in a.option_strings)
+    assert save.choices == ("png16", "png8") and save.default == "png16"
+
+
+# ---------------------------------------------------------------------------- --help consistency
+def _all_parsers():
+    from emulator.cli import build_parser
+
+    stack = [("exposim", build_parser())]
+    while stack:
+        name, parser = stack.pop()
+        yield name, parser
+        for action in parser._actions:
+            if action.__class__.__name__ == "_SubParsersAction":
+                stack += [(f"{name} {k}", v) for k, v in action.choices.items()]
+
+
+def test_cache_folder_option_is_cache_dir_everywhere(capsys):
+    seen = []
+    for name, parser in _all_parsers():
+        help_text = parser.format_help()
+        for action in parser._actions:
+            for opt in action.option_strings:
+                if "cache" in opt and opt != "--no-cache":
+                    if opt == "--cache":  # the old spelling: kept as a hidden alias only
+                        assert action.help == "==SUPPRESS==" and "--cache " not in help_text, name
+                    else:
+                        assert opt == "--cache-dir", (name, opt)
+                        seen.append(name)
+    assert {"exposim cache", "exposim render", "exposim synth"} <= set(seen)
+    from emulator.cli import build_parser
+
+    sub = build_parser()._subparsers._group_actions[0].choices  # noqa: SLF001
+    for cmd in ("render", "synth"):
+        old = sub[cmd].parse_args(["static_lab", "-o", "x", "--cache", "/tmp/c"])
+        new = sub[cmd].parse_args(["static_lab", "-o", "x", "--cache-dir", "/tmp/c"])
+        assert str(old.cache) == str(new.cache) == "/tmp/c"
+
+
+def test_fixed_is_explained_in_help_readme_and_report(clean_run):
+    from pathlib import Path
+
+    from emulator.autoexposure import make_method
+    from emulator.autoexposure.classical import N_AUTO_FRAMES
+    from emulator.cli import build_parser
+
+    n = N_AUTO_FRAMES
+    # the documented numbers are the method's: it adjusts on n frames (n + 1 in borealhdr mode)
+    for mode, frames in (("paper", n), ("borealhdr", n + 1)):
+        m = make_method("fixed", mode=mode)
+        assert m.n_adjustments == frames
+    sub = build_parser()._subparsers._group_actions[0].choices  # noqa: SLF001
+    methods_help = " ".join(next(a for a in sub["run"]._actions if "--methods" in a.option_strings).help.split())
+    assert f"'fixed' runs classical-50 for its first {n} frames ({n + 1} with --mode borealhdr) and then freezes" \
+        in methods_help
+    readme = " ".join((Path(__file__).resolve().parents[1] / "README.md").read_text().split())
+    assert f"`fixed` (runs `classical-50` for its first {n} frames, {n + 1} with `--mode borealhdr`, then freezes" \
+        in readme
+    report = (clean_run / "report.md").read_text()
+    assert f"`fixed` (M_fixed) runs classical-50 for its first {n} frames and then freezes its exposure" in report
+
+
+# ---------------------------------------------------------------------------- run --noise (issue 14)
+@pytest.fixture(scope="module")
+def noise_model_file(seq, tmp_path_factory):
+    from emulator.io.borealhdr import load_sequence, sequence_response
+    from emulator.io.noisemodel import write_noise_model
+    from emulator.noise import NoiseModel
+
+    response = sequence_response(load_sequence(seq))
+    path = tmp_path_factory.mktemp("nm") / "noise.json"
+    write_noise_model(path, NoiseModel.from_full_well(response, 3000.0, 2.0, name="test-camera"))
+    return path
+
+
+def _noise_run(seq, out, model, seed, *extra):
+    return main(["run", str(seq), "--methods", "classical-50", "-o", str(out), "--save", "png16",
+                 "--no-progress", "--noise", "consistent", "--noise-model", str(model), "--noise-seed", str(seed),
+                 *extra])
+
+
+def test_noise_consistent_is_seeded_and_recorded(seq, noise_model_file, clean_run, tmp_path, capsys):
+    a, b, c, plain = tmp_path / "a", tmp_path / "b", tmp_path / "c", tmp_path / "plain"
+    for out, seed in ((a, 5), (b, 5), (c, 6)):
+        assert _noise_run(seq, out, noise_model_file, seed, "--initial-ms", "5") == 0
+    assert main(["run", str(seq), "--methods", "classical-50", "-o", str(plain), "--save", "png16",
+                 "--no-progress", "--initial-ms", "5"]) == 0
+    fa, fb, fc = _files(a), _files(b), _files(c)
+    assert fa == fb  # same seed: identical CSVs and PNG bytes
+    assert len([k for k in fa if k.endswith(".png")]) == 2 * 6
+    # another seed changes every image emulated at a ratio other than 1
+    rows = [r.split(",") for r in (a / "classical-50" / "exposures.csv").read_text().splitlines()[1:]]
+    emulated = [r[1] for r in rows if float(r[4]) != 1.0]
+    assert emulated and rows[0][1] in emulated
+    for ts in emulated:
+        for cam in ("left", "right"):
+            assert fa[f"classical-50/images/{cam}/{ts}.png"] != fc[f"classical-50/images/{cam}/{ts}.png"]
+    # cycle 0: target 5 ms from the 8 ms bracket in both runs; the consistent image carries added
+    # zero-mean noise (the 8 ms source is cleaner than a 5 ms capture), the plain one is eq. 2 exactly
+    assert rows[0][2:4] == ["5.0", "8.0"]
+    ts = rows[0][1]
+    noisy = cv2.imread(str(a / "classical-50" / "images" / "left" / f"{ts}.png"), cv2.IMREAD_UNCHANGED)
+    exact = cv2.imread(str(plain / "classical-50" / "images" / "left" / f"{ts}.png"), cv2.IMREAD_UNCHANGED)
+    diff = noisy.astype(np.float64) - exact.astype(np.float64)
+    assert np.count_nonzero(diff) > diff.size // 2 and abs(diff.mean()) < 0.02 * exact.mean()
+    info = json.loads((a / "run.json").read_text())
+    assert info["noise"]["mode"] == "consistent" and info["noise"]["seed"] == 5
+    assert info["noise"]["model"]["name"] == "test-camera" and info["noise"]["model"]["gain_e_per_h"] > 0
+    assert info["noise_model_file"] == str(noise_model_file.resolve())
+    assert "--noise consistent" in info["command"] and "--noise-seed 5" in info["command"]
+    assert json.loads((plain / "run.json").read_text())["noise"] == {"mode": "none"}
+
+
+def test_resume_refuses_another_noise_setting(seq, noise_model_file, tmp_path, capsys):
+    out = tmp_path / "run"
+    assert _noise_run(seq, out, noise_model_file, 5) == 0
+    before = _files(out)
+    capsys.readouterr()
+    for extra in (["--noise", "none"], ["--noise", "consistent", "--noise-seed", "6"]):
+        assert main(["run", str(seq), "-o", str(out), "--no-progress", "--resume", *extra]) == 1
+        err = capsys.readouterr().err
+        assert "different configuration (noise)" in err and len(err.strip().splitlines()) == 1
+    assert _files(out) == before
+    # the recorded setting (model file found again from run.json) resumes
+    assert main(["run", str(seq), "-o", str(out), "--no-progress", "--resume"]) == 0
+    assert _files(out) == before
+
+
+def test_noise_without_a_model_is_one_line_error(seq, tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(["run", str(seq), "-o", str(out), "--no-progress", "--noise", "consistent"]) == 1
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "needs a noise model" in err and "--noise-model" in err
+    assert not out.exists()
+    missing = tmp_path / "none.json"
+    assert main(["run", str(seq), "-o", str(out), "--no-progress", "--noise", "consistent",
+                 "--noise-model", str(missing)]) == 1
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and f"{missing}: noise model file not found" in err
+    bad = tmp_path / "bad.json"
+    bad.write_text("{")
+    assert main(["run", str(seq), "-o", str(out), "--no-progress", "--noise", "consistent",
+                 "--noise-model", str(bad)]) == 1
+    assert f"{bad}: malformed JSON" in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_synthetic_recording_carries_its_noise_model(tmp_path):
+    """A synth recording's exposim.json camera gives the model synth.noise_model.noise_model_of would."""
+    from emulator.io.borealhdr import load_sequence, sequence_response
+    from emulator.io.noisemodel import noise_model_from_metadata
+    from synth.camera import Camera
+    from synth.noise_model import noise_model_of
+
+    root, _ = write_static_sequence(tmp_path / "synthlike", n_cycles=2, shape=(16, 24))
+    camera = Camera(name="lab", width=24, height=16, white_level=4095,
+                    full_well_e=3000.0, read_noise_e=2.0)
+    (root / "exposim.json").write_text(json.dumps({"white_level": 4095, "black_level": 0,
+                                                   "camera": camera.to_dict()}, default=list))
+    seq = load_sequence(root)
+    response = sequence_response(seq)
+    model = noise_model_from_metadata(seq.metadata, response)
+    exact = noise_model_of(camera)
+    assert model.gain_e_per_h == pytest.approx(exact.gain_e_per_h, rel=1e-12)
+    assert model.read_noise_e == exact.read_noise_e and model.name == "synth:lab"
+    out = tmp_path / "run"
+    assert main(["run", str(root), "--methods", "classical-50", "-o", str(out), "--no-progress",
+                 "--noise", "consistent"]) == 0
+    info = json.loads((out / "run.json").read_text())
+    assert info["noise_model_file"] == str((root / "exposim.json").resolve())
+    assert info["noise"]["model"]["name"] == "synth:lab"
+    assert main(["run", str(root), "-o", str(out), "--no-progress", "--resume"]) == 0

@@ -566,8 +566,10 @@ def add_arguments(p: argparse.ArgumentParser, *, output_option: bool = False) ->
                                                    both(str, "texture_spp"))
     p.add_argument("--texture-poses", type=int, help="walk poses per texture size " + both(str, "texture_poses"))
     p.add_argument("--real", type=Path, help=f"real BorealHDR sequence (default {DEFAULT_REAL_SEQUENCE})")
-    p.add_argument("--cache", help="render cache for the reference ('off': none; default $EXPOSIM_CACHE "
-                                   "or ~/.cache/exposim/renders)")
+    p.add_argument("--cache-dir", dest="cache", metavar="DIR",
+                   help="render cache for the reference ('off': none; default $EXPOSIM_CACHE "
+                        "or ~/.cache/exposim/renders)")
+    p.add_argument("--cache", dest="cache", help=argparse.SUPPRESS)  # old spelling
     p.add_argument("--force", action="store_true", help="overwrite an existing results.json")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 

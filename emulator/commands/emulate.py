@@ -1,4 +1,4 @@
-"""``exposim emulate``: one cycle emulated at any exposure time, written as 16-bit PNGs."""
+"""``exposim emulate``: one cycle emulated at any exposure time, written as PNGs (16-bit Bayer or 8-bit grey)."""
 
 from __future__ import annotations
 
@@ -14,19 +14,26 @@ __all__ = ["register", "emulate_cycle"]
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "emulate",
-        help="emulate one cycle at any exposure time and write 16-bit PNGs",
+        help="emulate one cycle at any exposure time and write PNGs (16-bit Bayer or viewable 8-bit grey)",
         description=(
             "Emulate the image(s) a camera would have captured at --exposure-ms from the bracket "
-            "the selector picks in cycle --cycle (one choice for both cameras of a stereo pair)."
+            "the selector picks in cycle --cycle (one choice for both cameras of a stereo pair). "
+            "Writes OUTPUT/<camera>_cycle<NNNN>_<T>ms.png: --save png16 (default) keeps the 12-bit "
+            "Bayer mosaic in a 16-bit PNG, which looks black in an image viewer; --save png8 writes "
+            "it demosaiced to 8-bit grey with the black level subtracted, as `exposim run --save png8`."
         ),
     )
-    p.add_argument("sequence", type=Path)
-    p.add_argument("--exposure-ms", type=float, required=True, help="target exposure time in ms")
-    p.add_argument("--cycle", type=int, required=True, help="cycle index (see `exposim info`)")
-    p.add_argument("--camera", choices=("left", "right", "both"), default="both")
-    p.add_argument("--selector", choices=("higher-no-sat", "closest", "reference"), default="higher-no-sat")
+    p.add_argument("sequence", type=Path, help="recording folder (BorealHDR layout, see `exposim info`)")
+    p.add_argument("--exposure-ms", type=float, required=True, help="target exposure time, ms (finite, > 0)")
+    p.add_argument("--cycle", type=int, required=True, help="cycle index, from 0 (see `exposim info`)")
+    p.add_argument("--camera", choices=("left", "right", "both"), default="both",
+                   help="camera(s) to emulate (default both: the ones the recording has)")
+    p.add_argument("--selector", choices=("higher-no-sat", "closest", "reference"), default="higher-no-sat",
+                   help="bracket selector, decided on the first camera's saturation (default higher-no-sat)")
     p.add_argument("--response", type=Path, help="pcalib file (default: found beside the recording)")
-    p.add_argument("-o", "--output", type=Path, required=True, help="output folder for the PNG(s)")
+    p.add_argument("--save", choices=("png16", "png8"), default="png16",
+                   help="png16 (default): 12-bit Bayer DN in a 16-bit PNG; png8: demosaiced 8-bit grey, viewable")
+    p.add_argument("-o", "--output", type=Path, required=True, help="output folder for the PNG(s) (created)")
     p.add_argument("--force", action="store_true", help="overwrite existing output files")
     p.add_argument("--json", action="store_true", help="print the result as one JSON object")
     p.set_defaults(func=_emulate)
@@ -107,7 +114,8 @@ def emulate_cycle(
 
 def _emulate(args) -> int:
     from emulator.io.borealhdr import load_sequence, sequence_response
-    from emulator.io.png import write_png16
+    from emulator.io.png import write_png8, write_png16
+    from emulator.playback import saved_image
 
     seq = load_sequence(args.sequence)
     cams = ("left", "right") if args.camera == "both" else (args.camera,)
@@ -124,9 +132,12 @@ def _emulate(args) -> int:
         for path in targets.values():
             if path.exists():
                 raise ExposimError(f"{path}: exists; refusing to overwrite (use --force)")
+    writer = write_png16 if args.save == "png16" else write_png8
     for cam, path in targets.items():
-        write_png16(path, images[cam], overwrite=args.force)
+        data = saved_image(images[cam], args.save, white_level=seq.white_level, black_level=seq.black_level)
+        writer(path, data, overwrite=args.force)
         info["cameras"][cam]["output"] = str(path)
+    info["save"] = args.save
     if args.json:
         print(json.dumps(info, indent=1))
     else:

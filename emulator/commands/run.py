@@ -15,6 +15,7 @@ __all__ = ["register", "parse_option"]
 
 def register(sub: argparse._SubParsersAction) -> None:
     from emulator.autoexposure import DEFAULT_RANGE_MS, METHOD_NAMES
+    from emulator.autoexposure.classical import N_AUTO_FRAMES
 
     p = sub.add_parser(
         "run",
@@ -29,14 +30,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("sequence", type=Path, help="recording folder (BorealHDR layout)")
     p.add_argument("--methods", default=None,
-                   help=f"'all' (default) or a comma-separated list of: {', '.join(METHOD_NAMES)}")
+                   help=f"'all' (default) or a comma-separated list of: {', '.join(METHOD_NAMES)}. "
+                        f"'fixed' runs classical-50 for its first {N_AUTO_FRAMES} frames ({N_AUTO_FRAMES + 1} with "
+                        "--mode borealhdr) and then freezes the exposure, so on a short run it looks like classical-50")
     p.add_argument("-o", "--output", type=Path, required=True, help="run folder to create (must not exist or be empty)")
     p.add_argument("--save", choices=("none", "png16", "png8"), default=None,
                    help="save emulated images: none (default), png16 (12-bit Bayer DN) or png8 (8-bit gray)")
     p.add_argument("--jobs", type=int, default=1, help="threads across methods (same output for any value)")
     p.add_argument("--mode", choices=("paper", "borealhdr"), default=None,
                    help="method behaviour: paper (default, reference defects corrected) or borealhdr (reference code)")
-    p.add_argument("--initial-ms", type=float, default=None, help="initial exposure of every method (default 4.0)")
+    p.add_argument("--initial-ms", type=float, default=None,
+                   help="initial exposure of every method, ms (default 4.0; clamped to --range-ms, with a warning)")
     p.add_argument("--range-ms", type=float, nargs=2, metavar=("LOW", "HIGH"), default=None,
                    help="clamp of every proposal, ms (default %s %s)" % DEFAULT_RANGE_MS)
     p.add_argument("--selector", choices=("higher-no-sat", "closest", "reference"), default=None,
@@ -45,6 +49,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=None, help="seed of kim's Gaussian-process optimizer (default 0)")
     p.add_argument("--option", action="append", default=[], metavar="METHOD.KEY=VALUE",
                    help="a method option, e.g. zhang.percentile=0.7 or kim.window=8 (VALUE is JSON or text); repeatable")
+    p.add_argument("--noise", choices=("none", "consistent"), default=None,
+                   help="none (default): exact emulation (eq. 2); consistent: add the noise a capture at the "
+                        "target exposure would have where the source bracket is cleaner (needs a noise model)")
+    p.add_argument("--noise-model", type=Path, default=None, metavar="FILE.json",
+                   help="noise model for --noise consistent (`exposim calibrate --noise`); default: the model "
+                        "a synthetic recording's exposim.json carries")
+    p.add_argument("--noise-seed", type=int, default=None,
+                   help="seed of the added noise (default 0); the same seed gives the same bytes")
     p.add_argument("--resume", action="store_true",
                    help="continue an interrupted run in OUTDIR (its run.json gives the configuration)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -73,7 +85,8 @@ def _command(args) -> str:
     parts = ["exposim", "run", str(args.sequence), "-o", str(args.output)]
     for flag, value in (("--methods", args.methods), ("--save", args.save), ("--mode", args.mode),
                         ("--initial-ms", args.initial_ms), ("--selector", args.selector),
-                        ("--response", args.response), ("--seed", args.seed)):
+                        ("--response", args.response), ("--seed", args.seed), ("--noise", args.noise),
+                        ("--noise-model", args.noise_model), ("--noise-seed", args.noise_seed)):
         if value is not None:
             parts += [flag, str(value)]
     if args.range_ms is not None:
@@ -87,11 +100,30 @@ def _command(args) -> str:
     return shlex.join(parts)
 
 
+def _check_args(args) -> None:
+    """Refuse bad values by their flag before anything is read or created."""
+    import math
+
+    if args.initial_ms is not None and not (math.isfinite(args.initial_ms) and args.initial_ms > 0):
+        raise ExposimError(f"--initial-ms {args.initial_ms!r}: must be a finite, positive number of ms")
+    if args.range_ms is not None:
+        lo, hi = args.range_ms
+        if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo <= hi):
+            raise ExposimError(f"--range-ms {lo!r} {hi!r}: need finite 0 < LOW <= HIGH (ms)")
+    if args.jobs < 1:
+        raise ExposimError(f"--jobs {args.jobs}: must be >= 1")
+    if args.noise_seed is not None and args.noise_seed < 0:
+        raise ExposimError(f"--noise-seed {args.noise_seed}: must be >= 0")
+    if args.noise_model is not None and args.noise != "consistent" and not args.resume:
+        raise ExposimError("--noise-model is used only with --noise consistent")
+
+
 def _run(args) -> int:
     from emulator.autoexposure import DEFAULT_RANGE_MS
     from emulator.io.runfolder import RUN_FILE, read_run_json
     from emulator.playback import DEFAULT_INITIAL_MS, DEFAULT_SELECTOR, run_to_folder
 
+    _check_args(args)
     given = {
         "methods": args.methods,
         "save": args.save,
@@ -99,6 +131,8 @@ def _run(args) -> int:
         "initial_ms": args.initial_ms,
         "range_ms": args.range_ms,
         "selector": args.selector,
+        "noise": args.noise,
+        "noise_seed": args.noise_seed,
     }
     options: dict[str, dict] = {}
     for text in args.option:
@@ -113,21 +147,33 @@ def _run(args) -> int:
         "initial_ms": DEFAULT_INITIAL_MS,
         "range_ms": list(DEFAULT_RANGE_MS),
         "selector": DEFAULT_SELECTOR,
+        "noise": "none",
+        "noise_seed": 0,
     }
+    noise_model = args.noise_model
     response_path = args.response
     if args.resume:
         # The recorded configuration wins; arguments given explicitly must agree with it.
         if not (args.output / RUN_FILE).is_file():
             raise ExposimError(f"{args.output / RUN_FILE}: no run to resume (run.json missing)")
         recorded = read_run_json(args.output)
+        rec_noise = recorded.get("noise") or {"mode": "none"}
+        recorded = {**recorded, "noise": rec_noise.get("mode", "none"), "noise_seed": rec_noise.get("seed", 0)}
         for key, value in given.items():
             if value is None:
                 given[key] = recorded.get(key, defaults[key])
+        source = recorded.get("noise_model_file")
+        if noise_model is None and source and Path(source).name != "exposim.json" and Path(source).is_file():
+            noise_model = Path(source)
         if not options:
             options = recorded.get("options") or {}
         if response_path is None and recorded.get("response") and Path(recorded["response"]).is_file():
             response_path = Path(recorded["response"])
     cfg = {k: (defaults[k] if v is None else v) for k, v in given.items()}
+    low, high = cfg["range_ms"]
+    if not low <= cfg["initial_ms"] <= high:
+        print(f"exposim run: warning: --initial-ms {cfg['initial_ms']:g} is outside --range-ms {low:g} {high:g}; "
+              f"clamped to {min(max(cfg['initial_ms'], low), high):g} ms (recorded in run.json)", file=sys.stderr)
 
     progress = None
     bar = None
@@ -158,6 +204,9 @@ def _run(args) -> int:
             resume=args.resume,
             progress=progress,
             command=_command(args),
+            noise=cfg["noise"],
+            noise_model=noise_model,
+            noise_seed=cfg["noise_seed"],
         )
     finally:
         if bar is not None:

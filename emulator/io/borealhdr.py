@@ -51,6 +51,7 @@ __all__ = [
     "write_recording_metadata",
     "find_response",
     "sequence_response",
+    "png_size",
 ]
 
 #: Camera name -> folder of the layout.
@@ -80,6 +81,9 @@ class FileSource(Protocol):
 
     def read_bytes(self, path: Path) -> bytes: ...
 
+    # Optional: ``read_head(path, n) -> bytes``, the first ``n`` bytes (the scan reads PNG
+    # headers through it; a source without it is read whole, see :func:`_read_head`).
+
 
 class FolderSource:
     """A recording in a folder of the file system."""
@@ -101,6 +105,14 @@ class FolderSource:
         if not path.is_file():
             raise FileNotFoundError(f"{path}: image not found")
         return path.read_bytes()
+
+    def read_head(self, path: Path, n: int) -> bytes:
+        """The first ``n`` bytes of a file (a PNG's signature and IHDR chunk)."""
+        fd = os.open(path, os.O_RDONLY)  # unbuffered: ~2x faster than open() for 24 bytes
+        try:
+            return os.read(fd, n)
+        finally:
+            os.close(fd)
 
     def __repr__(self) -> str:
         return f"FolderSource({str(self.root)!r})"
@@ -148,6 +160,53 @@ def write_recording_metadata(root: str | os.PathLike, metadata: dict, *, overwri
 
 
 # ---------------------------------------------------------------------------- reader
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+#: Signature (8) + IHDR length and type (8) + width and height (8).
+_PNG_HEAD = 24
+
+
+def png_size(head: bytes) -> tuple[int, int] | None:
+    r"""(width, height) from the first 24 bytes of a PNG (its IHDR chunk); None if not a PNG.
+
+    >>> png_size(b"\x89PNG\r\n\x1a\n" + b"\x00\x00\x00\rIHDR" + (1920).to_bytes(4, "big") + (1200).to_bytes(4, "big"))
+    (1920, 1200)
+    """
+    if len(head) < _PNG_HEAD or head[:8] != _PNG_SIGNATURE or head[12:16] != b"IHDR":
+        return None
+    return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
+
+
+def _read_head(source: FileSource, path: Path) -> bytes:
+    reader = getattr(source, "read_head", None)
+    return reader(path, _PNG_HEAD) if reader is not None else source.read_bytes(path)[:_PNG_HEAD]
+
+
+def _check_sizes(source: FileSource, per_camera: dict[str, list[Frame]], root: Path) -> None:
+    """Refuse a recording whose PNGs do not all have one size, naming an odd file.
+
+    Reads 24 bytes per file (the IHDR chunk); a file that is not a readable PNG is left to
+    :func:`read_frame`, which names it when it is decoded.
+    """
+    sizes: dict[tuple[int, int], list[Path]] = {}
+    for frames in per_camera.values():
+        for fr in frames:
+            size = png_size(_read_head(source, fr.path))
+            if size is not None:
+                sizes.setdefault(size, []).append(fr.path)
+    if len(sizes) <= 1:
+        return
+    ranked = sorted(sizes.items(), key=lambda kv: (-len(kv[1]), min(kv[1])))
+    (w, h), usual = ranked[0]
+    (ow, oh), odd = ranked[1]
+    odd = sorted(odd)
+    more = sum(len(v) for _, v in ranked[1:]) - 1
+    raise DatasetError(
+        f"{odd[0]}: image is {ow}x{oh} pixels, but {len(usual)} other image(s) of {root} are {w}x{h} "
+        f"(e.g. {min(usual)})" + (f"; {more} more image(s) differ" if more else "")
+        + "; every image of a recording must have one size"
+    )
+
+
 def _scan_camera(source: FileSource, cam_dir: Path, camera: str, white_level: int) -> list[Frame]:
     frames: list[Frame] = []
     for entry in source.listdir(cam_dir):
@@ -211,6 +270,7 @@ def load_sequence(
             gaps.append(f"{folder}/ missing: no {cam} camera")
     if not per_camera:
         raise DatasetError(f"{root}: no camera_left/ or camera_right/ folder (not a BorealHDR sequence)")
+    _check_sizes(source, per_camera, root)
     return build_sequence(root, per_camera, white_level=white, black_level=black,
                           brackets_ms=meta.get("brackets_ms", ()), metadata=meta, gaps=gaps)
 

@@ -116,8 +116,9 @@ def register(subparsers) -> None:
     add_denoise_option(p)
     add_scheduler_option(p)
     cache = p.add_mutually_exclusive_group()
-    cache.add_argument("--cache", type=Path, default=None, help="render cache folder (default $EXPOSIM_CACHE "
-                       "or ~/.cache/exposim/renders)")
+    cache.add_argument("--cache-dir", dest="cache", metavar="DIR", type=Path, default=None, help="render cache folder (default "
+                       "$EXPOSIM_CACHE or ~/.cache/exposim/renders)")
+    cache.add_argument("--cache", dest="cache", type=Path, default=None, help=argparse.SUPPRESS)  # old spelling
     cache.add_argument("--no-cache", action="store_true", help="do not read or write the render cache")
     p.add_argument("--force", action="store_true", help="overwrite existing output files")
     p.add_argument("--quiet", action="store_true", help="no progress bar")

@@ -45,7 +45,9 @@ def register(subparsers) -> None:
     p.add_argument("--save-radiance", action="store_true", help="also write the radiance of every shot (OpenEXR)")
     add_denoise_option(p)
     add_scheduler_option(p)
-    p.add_argument("--cache", type=Path, default=None, help="render cache folder")
+    p.add_argument("--cache-dir", dest="cache", metavar="DIR", type=Path, default=None,
+                   help="render cache folder (default $EXPOSIM_CACHE or ~/.cache/exposim/renders)")
+    p.add_argument("--cache", dest="cache", type=Path, default=None, help=argparse.SUPPRESS)  # old spelling
     p.add_argument("--force", action="store_true",
                    help="replace an existing exposim dataset (refused, naming them, if it holds files synth did not write)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
