@@ -14,7 +14,7 @@ __all__ = ["register", "parse_option"]
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from emulator.autoexposure import DEFAULT_RANGE_MS, METHOD_NAMES
+    from emulator.autoexposure import DEFAULT_RANGE_MS, METHOD_NAMES, installed_methods
 
     p = sub.add_parser(
         "run",
@@ -28,8 +28,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         ),
     )
     p.add_argument("sequence", type=Path, help="recording folder (BorealHDR layout)")
-    p.add_argument("--methods", default=None,
-                   help=f"'all' (default) or a comma-separated list of: {', '.join(METHOD_NAMES)}")
+    plugins = installed_methods()
+    ok = [n for n, pl in plugins.items() if pl.error is None]
+    broken = [f"{n} ({pl.error})" for n, pl in plugins.items() if pl.error is not None]
+    methods_help = (f"'all' (default: the built-ins) or a comma-separated list of: {', '.join(METHOD_NAMES)}"
+                    + (f"; installed plugins: {', '.join(ok)}" if ok else "")
+                    + "; or an import path package.module:ClassOrFactory (e.g. all,my_pkg.my_module:MyAE)"
+                    + (f"; BROKEN plugins: {'; '.join(broken)}" if broken else ""))
+    p.add_argument("--methods", default=None, help=methods_help.replace("%", "%%"))
     p.add_argument("-o", "--output", type=Path, required=True, help="run folder to create (must not exist or be empty)")
     p.add_argument("--save", choices=("none", "png16", "png8"), default=None,
                    help="save emulated images: none (default), png16 (12-bit Bayer DN) or png8 (8-bit gray)")
@@ -44,7 +50,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--response", type=Path, default=None, help="pcalib file (default: found beside the recording)")
     p.add_argument("--seed", type=int, default=None, help="seed of kim's Gaussian-process optimizer (default 0)")
     p.add_argument("--option", action="append", default=[], metavar="METHOD.KEY=VALUE",
-                   help="a method option, e.g. zhang.percentile=0.7 or kim.window=8 (VALUE is JSON or text); repeatable")
+                   help="a method option, e.g. zhang.percentile=0.7 or kim.window=8 (VALUE is JSON or text); repeatable; "
+                   "a plugin's options go by its name, e.g. my-ae.gain=2")
+    p.add_argument("--method-timeout", type=float, default=None, metavar="S",
+                   help="per-call wall-time limit of a method, s: a slower call fails the method (its rows stop, "
+                   "the others go on); default none")
+    p.add_argument("--strict", action="store_true",
+                   help="exit with code 1 when a method failed (default: 0, failures named in the summary)")
     p.add_argument("--resume", action="store_true",
                    help="continue an interrupted run in OUTDIR (its run.json gives the configuration)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -73,7 +85,8 @@ def _command(args) -> str:
     parts = ["exposim", "run", str(args.sequence), "-o", str(args.output)]
     for flag, value in (("--methods", args.methods), ("--save", args.save), ("--mode", args.mode),
                         ("--initial-ms", args.initial_ms), ("--selector", args.selector),
-                        ("--response", args.response), ("--seed", args.seed)):
+                        ("--response", args.response), ("--seed", args.seed),
+                        ("--method-timeout", getattr(args, "method_timeout", None))):
         if value is not None:
             parts += [flag, str(value)]
     if args.range_ms is not None:
@@ -120,6 +133,10 @@ def _run(args) -> int:
         if not (args.output / RUN_FILE).is_file():
             raise ExposimError(f"{args.output / RUN_FILE}: no run to resume (run.json missing)")
         recorded = read_run_json(args.output)
+        if given["methods"] is None and recorded.get("method_specs"):
+            given["methods"] = ",".join(recorded["method_specs"])  # import-path plugins by their path
+        if args.method_timeout is None:
+            args.method_timeout = recorded.get("method_timeout")
         for key, value in given.items():
             if value is None:
                 given[key] = recorded.get(key, defaults[key])
@@ -158,13 +175,16 @@ def _run(args) -> int:
             resume=args.resume,
             progress=progress,
             command=_command(args),
+            method_timeout=args.method_timeout,
         )
     finally:
         if bar is not None:
             bar.close()
+    failed = {n: m["status"] for n, m in summary["methods"].items() if m.get("status", "ok") != "ok"}
+    rc = 1 if failed and args.strict else 0
     if args.json:
         print(json.dumps(summary, indent=1))
-        return 0
+        return rc
     print(f"run folder  {args.output}")
     print(f"cycles      {summary['cycles_done']}/{summary['n_cycles']}"
           + (f" ({len(summary['skipped_cycles'])} skipped)" if summary["skipped_cycles"] else ""))
@@ -175,4 +195,9 @@ def _run(args) -> int:
     timing = summary.get("timing") or {}
     if timing.get("cycles_per_s"):
         print(f"speed       {timing['cycles_per_s']:.2f} cycles/s")
-    return 0
+    if failed:
+        print(f"FAILED      {len(failed)} of {len(summary['methods'])} method(s); the others' results are complete"
+              + (" (--strict: exit code 1)" if args.strict else ""))
+        for name, why in failed.items():
+            print(f"  {name:13s} {why}")
+    return rc
