@@ -332,3 +332,38 @@ def test_bad_method_timeout(seq):
     for bad in (0, -1, math.nan, "x"):
         with pytest.raises(PlaybackError, match="method_timeout"):
             run(root, "fixed", method_timeout=bad)
+
+
+# ------------------------------------------------------------------ exposim new-method
+def test_new_method_writes_the_shipped_example_and_refuses_to_overwrite(tmp_path, capsys):
+    out = tmp_path / "mine"
+    assert main(["new-method", "my-ae", "--class-name", "MyAE", "-o", str(out)]) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["my_ae.py", "test_my_ae.py"]
+    for name in ("my_ae.py", "test_my_ae.py"):
+        assert (out / name).read_bytes() == (ROOT / "examples" / name).read_bytes()
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    (out / "my_ae.py").write_text("# edited\n")
+    capsys.readouterr()
+    assert main(["new-method", "my-ae", "-o", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert "my_ae.py" in err and "never overwrites" in err
+    assert (out / "my_ae.py").read_text() == "# edited\n"
+    assert (out / "test_my_ae.py").read_bytes() == before["test_my_ae.py"]
+    assert main(["new-method", "zhang", "-o", str(tmp_path / "z")]) == 1
+    assert "built-in method 'zhang'" in capsys.readouterr().err and not (tmp_path / "z").exists()
+
+
+def test_new_method_skeleton_passes_its_own_tests_and_runs(seq, tmp_path, monkeypatch):
+    root, bases = seq
+    out = tmp_path / "gen"
+    assert main(["new-method", "fast_ae", "-o", str(out)]) == 0
+    import subprocess
+
+    done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "test_fast_ae.py"],
+                          cwd=out, capture_output=True, text=True)
+    assert done.returncode == 0 and "4 passed" in done.stdout, done.stdout + done.stderr
+    monkeypatch.syspath_prepend(str(out))
+    sys.modules.pop("fast_ae", None)
+    res = run(root, "fast_ae:FastAe")
+    assert res.failed == {} and res.steps["fast_ae"][-1].next_ms == pytest.approx(settled_ms(bases), rel=1e-3)
+    sys.modules.pop("fast_ae", None)
