@@ -113,7 +113,7 @@ def load_import_path(path: str) -> Callable:
         raise AutoExposureError(f"AE method {path!r}: expected an import path package.module:attr")
     try:
         obj = importlib.import_module(module_name)
-    except Exception as exc:  # report the plugin's own error, by name
+    except (Exception, SystemExit) as exc:  # report the plugin's own error, by name
         raise AutoExposureError(f"AE method {path!r}: cannot import {module_name}: {type(exc).__name__}: {exc}") from exc
     for part in attr.split("."):
         try:
@@ -157,7 +157,7 @@ def _load_entry_points(entry_points: Iterable) -> dict[str, MethodPlugin]:
         else:
             try:
                 plugin.factory = ep.load()
-            except Exception as exc:  # a broken plugin: keep it, with its error, never swallow it
+            except (Exception, SystemExit) as exc:  # a broken plugin: keep it, with its error, never swallow it
                 plugin.error = f"cannot load {ep.value}: {type(exc).__name__}: {exc}"
             else:
                 if not callable(plugin.factory):

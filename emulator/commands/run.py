@@ -14,7 +14,7 @@ __all__ = ["register", "parse_option"]
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from emulator.autoexposure import DEFAULT_RANGE_MS, METHOD_NAMES, installed_methods
+    from emulator.autoexposure import DEFAULT_RANGE_MS, METHOD_NAMES
 
     p = sub.add_parser(
         "run",
@@ -28,14 +28,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         ),
     )
     p.add_argument("sequence", type=Path, help="recording folder (BorealHDR layout)")
-    plugins = installed_methods()
-    ok = [n for n, pl in plugins.items() if pl.error is None]
-    broken = [f"{n} ({pl.error})" for n, pl in plugins.items() if pl.error is not None]
-    methods_help = (f"'all' (default: the built-ins) or a comma-separated list of: {', '.join(METHOD_NAMES)}"
-                    + (f"; installed plugins: {', '.join(ok)}" if ok else "")
-                    + "; or an import path package.module:ClassOrFactory (e.g. all,my_pkg.my_module:MyAE)"
-                    + (f"; BROKEN plugins: {'; '.join(broken)}" if broken else ""))
-    p.add_argument("--methods", default=None, help=methods_help.replace("%", "%%"))
+    p.add_argument("--methods", default=None,
+                   help=f"'all' (default) or a comma-separated list of: {', '.join(METHOD_NAMES)}")
     p.add_argument("-o", "--output", type=Path, required=True, help="run folder to create (must not exist or be empty)")
     p.add_argument("--save", choices=("none", "png16", "png8"), default=None,
                    help="save emulated images: none (default), png16 (12-bit Bayer DN) or png8 (8-bit gray)")
@@ -50,21 +44,36 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--response", type=Path, default=None, help="pcalib file (default: found beside the recording)")
     p.add_argument("--seed", type=int, default=None, help="seed of kim's Gaussian-process optimizer (default 0)")
     p.add_argument("--option", action="append", default=[], metavar="METHOD.KEY=VALUE",
-                   help="a method option, e.g. zhang.percentile=0.7 or kim.window=8 (VALUE is JSON or text); repeatable; "
-                   "a plugin's options go by its name, e.g. my-ae.gain=2")
+                   help="a method option, e.g. zhang.percentile=0.7 or kim.window=8 (VALUE is JSON or text); repeatable")
+    p.add_argument("--resume", action="store_true",
+                   help="continue an interrupted run in OUTDIR (its run.json gives the configuration)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--json", action="store_true", help="print the results summary as JSON")
+    _add_plugin_arguments(p)
+    p.set_defaults(func=_run)
+
+
+register.order = 30  # place in `exposim --help`
+
+
+def _add_plugin_arguments(p: argparse.ArgumentParser) -> None:
+    """AE method plugins: the installed ones (and broken ones) in --methods' help; failure options."""
+    from emulator.autoexposure import installed_methods
+
+    plugins = installed_methods()
+    ok = [n for n, pl in plugins.items() if pl.error is None]
+    broken = [f"{n} ({pl.error})" for n, pl in plugins.items() if pl.error is not None]
+    extra = ((f"; installed plugins: {', '.join(ok)}" if ok else "")
+             + "; or an import path package.module:ClassOrFactory (e.g. all,my_pkg.my_module:MyAE), its options "
+             "by its name (--option my-ae.gain=2)"
+             + (f"; BROKEN plugins: {'; '.join(broken)}" if broken else ""))
+    action = p._option_string_actions["--methods"]  # noqa: SLF001 - argparse has no public accessor
+    action.help += extra.replace("%", "%%")
     p.add_argument("--method-timeout", type=float, default=None, metavar="S",
                    help="per-call wall-time limit of a method, s: a slower call fails the method (its rows stop, "
                    "the others go on); default none")
     p.add_argument("--strict", action="store_true",
                    help="exit with code 1 when a method failed (default: 0, failures named in the summary)")
-    p.add_argument("--resume", action="store_true",
-                   help="continue an interrupted run in OUTDIR (its run.json gives the configuration)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.add_argument("--json", action="store_true", help="print the results summary as JSON")
-    p.set_defaults(func=_run)
-
-
-register.order = 30  # place in `exposim --help`
 
 
 def parse_option(text: str) -> tuple[str, str, object]:
@@ -85,8 +94,7 @@ def _command(args) -> str:
     parts = ["exposim", "run", str(args.sequence), "-o", str(args.output)]
     for flag, value in (("--methods", args.methods), ("--save", args.save), ("--mode", args.mode),
                         ("--initial-ms", args.initial_ms), ("--selector", args.selector),
-                        ("--response", args.response), ("--seed", args.seed),
-                        ("--method-timeout", getattr(args, "method_timeout", None))):
+                        ("--response", args.response), ("--seed", args.seed)):
         if value is not None:
             parts += [flag, str(value)]
     if args.range_ms is not None:
@@ -97,6 +105,8 @@ def _command(args) -> str:
         parts += ["--jobs", str(args.jobs)]
     if args.resume:
         parts.append("--resume")
+    if getattr(args, "method_timeout", None) is not None:
+        parts += ["--method-timeout", str(args.method_timeout)]
     return shlex.join(parts)
 
 
