@@ -233,9 +233,11 @@ def test_broken_entry_point_is_named_and_harms_nothing_else(seq, plug, tmp_path,
     help_text = "".join(capsys.readouterr().out.split())  # argparse wraps lines, also at hyphens
     assert "installedplugins:ep-ae;" in help_text and "BROKENplugins:broken-ae(cannotloadno_such_mod_q:X" in help_text
     assert main(["run", str(root), "--methods", "classical-50,ep-ae", "-o", str(tmp_path / "ok"), "--no-progress"]) == 0
+    assert "warning: AE method plugin 'broken-ae' is broken" in capsys.readouterr().err
     assert main(["run", str(root), "--methods", "broken-ae", "-o", str(tmp_path / "no"), "--no-progress"]) == 1
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "'broken-ae'" in err[0] and "ModuleNotFoundError" in err[0]
+    warning, error = capsys.readouterr().err.strip().splitlines()
+    assert warning.startswith("exposim run: warning: AE method plugin 'broken-ae' is broken (cannot load")
+    assert error.startswith("exposim run: error: broken AE method plugin(s): 'broken-ae'") and "ModuleNotFoundError" in error
 
 
 def test_name_collision_with_a_builtin_names_both(plug):
@@ -367,3 +369,32 @@ def test_new_method_skeleton_passes_its_own_tests_and_runs(seq, tmp_path, monkey
     res = run(root, "fast_ae:FastAe")
     assert res.failed == {} and res.steps["fast_ae"][-1].next_ms == pytest.approx(settled_ms(bases), rel=1e-3)
     sys.modules.pop("fast_ae", None)
+
+
+def test_an_installed_distribution_registers_a_method_by_name(seq, tmp_path):
+    """A distribution on the path (its dist-info, as pip would write it) makes ``pkg-ae`` a name."""
+    import subprocess
+
+    root, bases = seq
+    site = tmp_path / "site"
+    (site / "pkg_ae").mkdir(parents=True)
+    (site / "pkg_ae" / "__init__.py").write_text((ROOT / "examples" / "my_ae.py").read_text())
+    info = site / "pkg_ae-0.1.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: pkg-ae\nVersion: 0.1\n")
+    (info / "entry_points.txt").write_text("[exposim.methods]\npkg-ae = pkg_ae:MyAE\nbad-ae = pkg_ae:Nothing\n")
+    exe = Path(sys.executable).with_name("exposim")
+    env = {**__import__("os").environ, "PYTHONPATH": str(site)}
+    out = tmp_path / "run"
+    done = subprocess.run([str(exe), "run", str(root), "--methods", "classical-50,pkg-ae", "--option",
+                           "pkg-ae.target=0.25", "-o", str(out), "--no-progress", "--json"],
+                          capture_output=True, text=True, env=env)
+    assert done.returncode == 0, done.stderr
+    assert "exposim run: warning: AE method plugin 'bad-ae' is broken (cannot load pkg_ae:Nothing" in done.stderr
+    summary = json.loads(done.stdout)
+    assert list(summary["methods"]) == ["classical-50", "pkg-ae"]
+    assert summary["methods"]["pkg-ae"]["final_exposure_ms"] == pytest.approx(settled_ms(bases, 0.25), rel=1e-3)
+    helped = subprocess.run([str(exe), "run", "--help"], capture_output=True, text=True, env=env)
+    text = "".join(helped.stdout.split())
+    assert helped.returncode == 0 and "installedplugins:pkg-ae;" in text
+    assert "BROKENplugins:bad-ae(cannotloadpkg_ae:Nothing:AttributeError" in text

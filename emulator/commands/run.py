@@ -76,6 +76,15 @@ def _add_plugin_arguments(p: argparse.ArgumentParser) -> None:
                    help="exit with code 1 when a method failed (default: 0, failures named in the summary)")
 
 
+def _warn_broken_plugins() -> None:
+    """One stderr line per installed AE method plugin that cannot load (never swallowed)."""
+    from emulator.autoexposure import installed_methods
+
+    for name, plugin in installed_methods().items():
+        if plugin.error is not None:
+            print(f"exposim run: warning: AE method plugin '{name}' is broken ({plugin.error})", file=sys.stderr)
+
+
 def parse_option(text: str) -> tuple[str, str, object]:
     """``METHOD.KEY=VALUE`` -> (method, key, value); VALUE parsed as JSON when it can be."""
     head, sep, value = text.partition("=")
@@ -156,6 +165,7 @@ def _run(args) -> int:
             response_path = Path(recorded["response"])
     cfg = {k: (defaults[k] if v is None else v) for k, v in given.items()}
 
+    _warn_broken_plugins()
     progress = None
     bar = None
     if not args.no_progress:
