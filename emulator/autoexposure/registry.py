@@ -212,7 +212,7 @@ def build_plugin(plugin: MethodPlugin, *, mode: str = "paper", response=None,
                                 f"{', '.join(map(repr, bad))}; it takes: {', '.join(takes) or 'none'}")
     kwargs = {}
     for key, value in (("mode", mode), ("range_ms", None), ("response", response)):
-        if key not in options and takes_option(factory, key) and _names_param(factory, key):
+        if key not in options and _names_param(factory, key):
             kwargs[key] = value
     kwargs.update(options)
     try:
