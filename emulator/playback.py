@@ -43,6 +43,7 @@ import cv2
 import numpy as np
 
 from emulator.autoexposure import DEFAULT_RANGE_MS, METHOD_NAMES, AutoExposureMethod, accepts_option, make_method
+from emulator.autoexposure.registry import MethodFailed, build_plugin, installed_methods, is_import_path, plugin_from_path
 from emulator.dataset import CAMERAS, Sequence
 from emulator.emulate import apply_lut, check_exposure
 from emulator.errors import DatasetError, ExposimError
@@ -114,6 +115,8 @@ class CycleStep:
     steps: dict[str, MethodStep]
     missing: dict[str, list[float]]
     skipped: str | None = None
+    #: Methods that failed in this cycle (no step; dropped from later cycles): name -> reason.
+    failed: dict[str, str] = field(default_factory=dict)
 
 
 @dataclass
@@ -168,6 +171,8 @@ class RunResult:
     skipped: list[tuple[int, str]]
     methods: dict[str, AutoExposureMethod]
     stats: RunStats
+    #: Methods that failed: name -> "failed: <reason> at cycle N" (their steps stop before N).
+    failed: dict[str, str] = field(default_factory=dict)
 
     def column(self, method: str, name: str) -> np.ndarray:
         """One field of every step of ``method`` as an array (e.g. ``"target_ms"``)."""
@@ -175,39 +180,72 @@ class RunResult:
 
 
 # ============================================================================ methods
-def parse_methods(spec) -> list[str]:
-    """``"all"``, ``"m1,m2"`` or an iterable of names -> list of method names (checked, no repeats)."""
+def parse_methods(spec, *, plugins: Mapping | None = None) -> list[str]:
+    """``"all"``, ``"m1,m2"`` or an iterable of names -> list of method names (checked, no repeats).
+
+    An item is a built-in name (``all``: the seven built-ins), the name of an installed plugin
+    (``plugins``: :func:`emulator.autoexposure.registry.installed_methods`, by default the
+    installed ones) or an import path ``package.module:attr`` (loaded by :func:`build_methods`).
+    """
     if isinstance(spec, str):
-        names = list(METHOD_NAMES) if spec.strip() == "all" else [s.strip() for s in spec.split(",") if s.strip()]
+        items = [s.strip() for s in spec.split(",") if s.strip()]
+        names = [n for item in items for n in (METHOD_NAMES if item == "all" else (item,))]
     else:
         names = list(spec)
     if not names:
         raise PlaybackError("no AE method given; use 'all' or a comma-separated list of: " + ", ".join(METHOD_NAMES))
-    bad = [n for n in names if isinstance(n, str) and n not in METHOD_NAMES]
-    if bad:
-        raise PlaybackError(f"unknown AE method(s) {', '.join(map(repr, bad))}; choose from {', '.join(METHOD_NAMES)}")
+    asked = [n for n in names if isinstance(n, str) and n not in METHOD_NAMES and not is_import_path(n)]
+    if asked:
+        plugins = installed_methods() if plugins is None else plugins
+        broken = [f"{n!r} ({plugins[n].error})" for n in asked if n in plugins and plugins[n].error is not None]
+        if broken:
+            raise PlaybackError(f"broken AE method plugin(s): {'; '.join(broken)}")
+        bad = [n for n in asked if n not in plugins]
+        if bad:
+            choices = list(METHOD_NAMES) + [n for n, p in plugins.items() if p.error is None]
+            raise PlaybackError(f"unknown AE method(s) {', '.join(map(repr, bad))}; choose from {', '.join(choices)} "
+                                "or give an import path package.module:attr")
     dup = {n for n in names if isinstance(n, str) and names.count(n) > 1}
     if dup:
         raise PlaybackError(f"AE method(s) given twice: {', '.join(sorted(dup))}")
     return names
 
 
-def build_methods(spec, *, mode: str = "paper", response=None, options: Mapping | None = None) -> dict[str, AutoExposureMethod]:
+def build_methods(spec, *, mode: str = "paper", response=None, options: Mapping | None = None,
+                  plugins: Mapping | None = None) -> dict[str, AutoExposureMethod]:
     """Instantiate methods by name (or pass instances through), keyed by their name.
 
     ``options`` maps a method name to keyword options for its factory; ``mode`` is the
     default mode; ``response`` goes to the factories that accept it (zhang).  Methods built
-    here have no clamp of their own (``range_ms=None``): the loop clamps.
+    here have no clamp of their own (``range_ms=None``): the loop clamps.  Plugin methods
+    (an installed plugin's name from ``plugins``, or an import path ``package.module:attr``;
+    see :func:`parse_methods`) come wrapped in
+    :class:`~emulator.autoexposure.registry.PluginMethod`, under their plugin name.
     """
     options = dict(options or {})
-    unknown = set(options) - set(METHOD_NAMES)
+    if isinstance(spec, str):
+        spec = parse_methods(spec, plugins=plugins)
+    spec = list(spec)
+    resolved: dict[int, object] = {}
+    for i, item in enumerate(spec):
+        if isinstance(item, str) and item not in METHOD_NAMES:
+            if is_import_path(item):
+                resolved[i] = plugin_from_path(item)
+            else:
+                parse_methods([item], plugins=plugins)
+                plugins = installed_methods() if plugins is None else plugins
+                resolved[i] = plugins[item]
+    known = set(METHOD_NAMES) | {p.name for p in resolved.values()}
+    unknown = set(options) - known
     if unknown:
         raise PlaybackError(f"options given for unknown method(s): {', '.join(sorted(unknown))}")
-    if isinstance(spec, str):
-        spec = parse_methods(spec)
     out: dict[str, AutoExposureMethod] = {}
-    for item in spec:
-        if isinstance(item, str):
+    for i, item in enumerate(spec):
+        if i in resolved:
+            plugin = resolved[i]
+            method = build_plugin(plugin, mode=mode, response=response, options=options.get(plugin.name))
+            name = plugin.name
+        elif isinstance(item, str):
             parse_methods([item])
             opts = dict(options.get(item, {}))
             opts.setdefault("mode", mode)
@@ -333,6 +371,18 @@ def _check_range(range_ms) -> tuple[float, float]:
     return lo, hi
 
 
+def _check_timeout(method_timeout) -> float | None:
+    if method_timeout is None:
+        return None
+    try:
+        value = float(method_timeout)
+    except (TypeError, ValueError):
+        raise PlaybackError(f"method_timeout must be a number of seconds or None, got {method_timeout!r}") from None
+    if not (math.isfinite(value) and value > 0):
+        raise PlaybackError(f"method_timeout must be finite and positive (seconds), got {method_timeout!r}")
+    return value
+
+
 def _resolve_sequence(sequence) -> Sequence:
     return sequence if isinstance(sequence, Sequence) else load_sequence(sequence)
 
@@ -355,6 +405,7 @@ def iter_run(
     noise: str = "none",
     noise_model=None,
     noise_seed: int = 0,
+    method_timeout: float | None = None,
 ) -> Iterator[CycleStep]:
     """Run the closed loop cycle by cycle, yielding a :class:`CycleStep` per cycle.
 
@@ -386,6 +437,13 @@ def iter_run(
         (:func:`emulator.emulate.emulate`; needs ``noise_model``), each emulated image seeded
         by (``noise_seed``, cycle, camera, bracket, ratio).  The saturated and valid
         fractions still describe the plain emulation.  Default ``"none"``: exact eq. 2.
+    method_timeout : float or None
+        Per-call wall-time limit of ``next_exposure``, s (default none).  A call over it
+        completes (no thread is killed) but fails its method, as does a plugin method that
+        raises or returns a non-finite or non-positive exposure
+        (:class:`~emulator.autoexposure.registry.MethodFailed`): the method gets no step from
+        that cycle on, the cycle's :attr:`CycleStep.failed` names it with the reason, and the
+        other methods go on unchanged.
     """
     seq = _resolve_sequence(sequence)
     initial_ms = check_exposure(initial_ms, "initial_ms")
@@ -400,6 +458,7 @@ def iter_run(
     white, black = int(seq.white_level), int(seq.black_level)
     if response.white_level != white or response.black_level != black:
         response = response.with_levels(white_level=white, black_level=black)
+    timeout_s = _check_timeout(method_timeout)
     built = build_methods(methods, mode=mode, response=response, options=options)
     stats = stats if stats is not None else RunStats()
     noise_spec = _noise_spec(noise, noise_model, noise_seed, response)
@@ -422,8 +481,11 @@ def iter_run(
         bracket_sat = images.saturated(method_cam, key)
         before = getattr(method, "guard_count", 0)
         t0 = time.perf_counter()
-        proposed = method.next_exposure(left, target)
-        stats.add_method(name, time.perf_counter() - t0)
+        proposed = method.next_exposure(left, target)  # MethodFailed: caught by the cycle loop
+        elapsed = time.perf_counter() - t0
+        stats.add_method(name, elapsed)
+        if timeout_s is not None and elapsed > timeout_s:
+            raise MethodFailed(f"took {elapsed:.3g} s in next_exposure, over the limit of {timeout_s:g} s")
         guarded = getattr(method, "guard_count", 0) > before
         try:
             proposed = float(proposed)
@@ -474,6 +536,14 @@ def iter_run(
             st.left = st.right = None
         return st
 
+    failed: dict[str, str] = {}
+
+    def checked_step(a):
+        try:
+            return step_one(*a)
+        except MethodFailed as exc:
+            return exc
+
     pool = ThreadPoolExecutor(max_workers=int(jobs), thread_name_prefix="exposim-run") if int(jobs) > 1 else None
     start = time.perf_counter()
     try:
@@ -486,16 +556,22 @@ def iter_run(
                 continue
             images = _CycleImages(cycle, white, black, stats, noise_spec, shapes)
             brackets = {e: (lambda e=e: images.saturated(method_cam, e)) for e in avail}
-            args = [(name, m, images, brackets, missing, cycle) for name, m in built.items()]
+            args = [(name, m, images, brackets, missing, cycle) for name, m in built.items() if name not in failed]
             if pool is None:
-                results = [step_one(*a) for a in args]
+                results = [checked_step(a) for a in args]
             else:
-                results = list(pool.map(lambda a: step_one(*a), args))
-            for st in results:
-                targets[st.method] = st.next_ms
+                results = list(pool.map(checked_step, args))
+            now_failed = {}
+            for a, st in zip(args, results):
+                if isinstance(st, MethodFailed):
+                    now_failed[a[0]] = f"failed: {st} at cycle {cycle.index}"
+                else:
+                    targets[st.method] = st.next_ms
+            failed.update(now_failed)
+            results = [st for st in results if not isinstance(st, MethodFailed)]
             stats.cycles += 1
             stats.wall_s = time.perf_counter() - start
-            yield CycleStep(cycle.index, {st.method: st for st in results}, missing)
+            yield CycleStep(cycle.index, {st.method: st for st in results}, missing, failed=now_failed)
     finally:
         stats.wall_s = time.perf_counter() - start
         if pool is not None:
@@ -527,6 +603,7 @@ def run(
     options: Mapping | None = None,
     jobs: int = 1,
     progress: Callable[[int, int], None] | None = None,
+    method_timeout: float | None = None,
 ) -> RunResult:
     """Run the closed loop over a whole sequence in memory (no images kept); see :func:`iter_run`."""
     seq = _resolve_sequence(sequence)
@@ -536,16 +613,18 @@ def run(
     stats = RunStats()
     steps: dict[str, list[MethodStep]] = {name: [] for name in built}
     skipped: list[tuple[int, str]] = []
+    failed: dict[str, str] = {}
     gen = iter_run(seq, list(built.values()), initial_ms=initial_ms, range_ms=range_ms, selector=selector,
-                   response=response, jobs=jobs, stats=stats)
+                   response=response, jobs=jobs, stats=stats, method_timeout=method_timeout)
     for i, cs in enumerate(gen, 1):
+        failed.update(cs.failed)
         if cs.skipped:
             skipped.append((cs.cycle, cs.skipped))
         for name, st in cs.steps.items():
             steps[name].append(st)
         if progress is not None:
             progress(i, len(seq.cycles))
-    return RunResult(steps, skipped, built, stats)
+    return RunResult(steps, skipped, built, stats, failed)
 
 
 # ============================================================================ run folder
@@ -555,7 +634,7 @@ def _canon(value) -> str:
 
 def _config_of(run_json: dict) -> dict:
     out = {k: run_json.get(k) for k in ("sequence", "methods", "selector", "initial_ms", "range_ms", "save", "mode",
-                                        "options", "response")}
+                                        "options", "response", "method_timeout")}
     out["noise"] = run_json.get("noise") or {"mode": "none"}  # run folders from before --noise: none
     return out
 
@@ -622,6 +701,7 @@ def run_to_folder(
     noise: str = "none",
     noise_model=None,
     noise_seed: int = 0,
+    method_timeout: float | None = None,
 ) -> dict:
     """Run AE methods on a recording and write a run folder (:mod:`emulator.io.runfolder`).
 
@@ -641,6 +721,9 @@ def run_to_folder(
     ``noise``, ``noise_model`` (a NoiseModel, a noise-model JSON path, or None for the one
     the recording's ``exposim.json`` carries), ``noise_seed``: see :func:`iter_run`; the
     choice is recorded in ``run.json`` (``"noise"``) and a resume must repeat it.
+    called after every cycle.  A method that fails (``method_timeout``, a plugin's error or
+    bad result; see :func:`iter_run`) keeps the rows before its failure; ``run.json`` and the
+    summary record ``method_status`` (name -> ``"ok"`` or ``"failed: <reason> at cycle N"``).
     """
     if out_dir is None:
         raise PlaybackError("out_dir is required")
@@ -653,9 +736,10 @@ def run_to_folder(
     response_name = str(response_path) if response_path is not None else str(getattr(response, "name", "custom"))
     if Path(response_name).is_file():  # absolute: a resume from another working directory finds it
         response_name = str(Path(response_name).resolve())
-    built = build_methods(parse_methods(methods) if isinstance(methods, str) else list(methods), mode=mode,
-                          response=response, options=options)
+    method_specs = parse_methods(methods) if isinstance(methods, str) else list(methods)
+    built = build_methods(method_specs, mode=mode, response=response, options=options)
     names = list(built)
+    timeout_s = _check_timeout(method_timeout)
     user_options = {k: {kk: vv for kk, vv in v.items()} for k, v in dict(options or {}).items()}
     config = {
         "sequence": str(Path(seq.path).resolve()),
@@ -667,6 +751,7 @@ def run_to_folder(
         "mode": mode,
         "options": user_options,
         "response": response_name,
+        "method_timeout": timeout_s,
     }
     if selector not in SELECTORS:
         raise PlaybackError(f"unknown selector {selector!r}; choose one of {', '.join(SELECTORS)}")
@@ -709,6 +794,7 @@ def run_to_folder(
                 "method_camera": METHOD_CAMERA,
                 "selector_camera": METHOD_CAMERA,
                 "method_options": {n: m.config() if hasattr(m, "config") else {} for n, m in built.items()},
+                "method_specs": [s if isinstance(s, str) else n for s, n in zip(method_specs, names)],
                 "command": command,
                 "version": __version__,
                 "jobs": int(jobs),
@@ -742,13 +828,16 @@ def run_to_folder(
 
         stats = RunStats()
         skipped: list[dict] = []
+        method_status = {name: "ok" for name in names}
         done = 0
         status = "failed"
         try:
             gen = iter_run(seq, list(built.values()), initial_ms=initial_ms, range_ms=range_ms, selector=selector,
                            response=response, jobs=jobs, emulate_right=save != "none", on_step=write_images,
-                           stats=stats, noise=noise, noise_model=model, noise_seed=noise_seed)
+                           stats=stats, noise=noise, noise_model=model, noise_seed=noise_seed,
+                           method_timeout=timeout_s)
             for cs in gen:
+                method_status.update(cs.failed)
                 if cs.skipped:
                     skipped.append({"cycle": cs.cycle, "reason": cs.skipped, "missing": cs.missing})
                 for name in names:
@@ -768,7 +857,7 @@ def run_to_folder(
                     else:
                         writer.append_row(name, row)
                 done += 1
-                writer.update(cycles_done=done, skipped_cycles=skipped)
+                writer.update(cycles_done=done, skipped_cycles=skipped, method_status=method_status)
                 if progress is not None:
                     progress(done, len(seq.cycles))
             status = "complete"
@@ -781,7 +870,8 @@ def run_to_folder(
         finally:
             if status == "complete":
                 run_json.pop("error", None)
-            writer.update(status=status, cycles_done=done, skipped_cycles=skipped, timing=stats.as_dict())
+            writer.update(status=status, cycles_done=done, skipped_cycles=skipped, timing=stats.as_dict(),
+                          method_status=method_status)
         if save != "none":
             writer.write_times(names)
     if make_report:

@@ -21,6 +21,10 @@ name               class                        spec (``specs/ae_methods.md``)
 Every factory takes ``mode="paper"`` (default: the method's intent, the reference code's
 defects of spec section 7 corrected) or ``mode="borealhdr"`` (the published reference code,
 quirks included), and ``range_ms`` (output clamp; off by default in borealhdr mode).
+
+More methods come as plugins (:mod:`emulator.autoexposure.registry`): an import path
+``package.module:attr`` or an installed package's entry point in the group
+``exposim.methods``; :func:`method_names` lists built-ins and installed plugins.
 """
 
 from __future__ import annotations
@@ -62,6 +66,11 @@ __all__ = [
     "to_gray",
     "bayer_to_gray_reference",
     "hard_cases",
+    "ENTRY_POINT_GROUP",
+    "MethodFailed",
+    "PluginMethod",
+    "installed_methods",
+    "method_names",
 ]
 
 
@@ -101,3 +110,17 @@ def make_method(name: str, **options) -> AutoExposureMethod:
         return factory(**options)
     except TypeError as exc:
         raise AutoExposureError(f"{name}: bad option ({exc})") from None
+
+
+from emulator.autoexposure.registry import (  # noqa: E402 - the registry reads METHODS lazily
+    ENTRY_POINT_GROUP,
+    MethodFailed,
+    PluginMethod,
+    installed_methods,
+)
+
+
+def method_names(entry_points=None) -> tuple[str, ...]:
+    """Built-in method names, then the installed plugins' that load (see :func:`installed_methods`)."""
+    plugins = installed_methods(entry_points)
+    return METHOD_NAMES + tuple(n for n, p in plugins.items() if p.error is None)

@@ -61,10 +61,40 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="continue an interrupted run in OUTDIR (its run.json gives the configuration)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--json", action="store_true", help="print the results summary as JSON")
+    _add_plugin_arguments(p)
     p.set_defaults(func=_run)
 
 
 register.order = 30  # place in `exposim --help`
+
+
+def _add_plugin_arguments(p: argparse.ArgumentParser) -> None:
+    """AE method plugins: the installed ones (and broken ones) in --methods' help; failure options."""
+    from emulator.autoexposure import installed_methods
+
+    plugins = installed_methods()
+    ok = [n for n, pl in plugins.items() if pl.error is None]
+    broken = [f"{n} ({pl.error})" for n, pl in plugins.items() if pl.error is not None]
+    extra = ((f"; installed plugins: {', '.join(ok)}" if ok else "")
+             + "; or an import path package.module:ClassOrFactory (e.g. all,my_pkg.my_module:MyAE), its options "
+             "by its name (--option my-ae.gain=2)"
+             + (f"; BROKEN plugins: {'; '.join(broken)}" if broken else ""))
+    action = p._option_string_actions["--methods"]  # noqa: SLF001 - argparse has no public accessor
+    action.help += extra.replace("%", "%%")
+    p.add_argument("--method-timeout", type=float, default=None, metavar="S",
+                   help="per-call wall-time limit of a method, s: a slower call fails the method (its rows stop, "
+                   "the others go on); default none")
+    p.add_argument("--strict", action="store_true",
+                   help="exit with code 1 when a method failed (default: 0, failures named in the summary)")
+
+
+def _warn_broken_plugins() -> None:
+    """One stderr line per installed AE method plugin that cannot load (never swallowed)."""
+    from emulator.autoexposure import installed_methods
+
+    for name, plugin in installed_methods().items():
+        if plugin.error is not None:
+            print(f"exposim run: warning: AE method plugin '{name}' is broken ({plugin.error})", file=sys.stderr)
 
 
 def parse_option(text: str) -> tuple[str, str, object]:
@@ -97,6 +127,8 @@ def _command(args) -> str:
         parts += ["--jobs", str(args.jobs)]
     if args.resume:
         parts.append("--resume")
+    if getattr(args, "method_timeout", None) is not None:
+        parts += ["--method-timeout", str(args.method_timeout)]
     return shlex.join(parts)
 
 
@@ -159,6 +191,10 @@ def _run(args) -> int:
         recorded = read_run_json(args.output)
         rec_noise = recorded.get("noise") or {"mode": "none"}
         recorded = {**recorded, "noise": rec_noise.get("mode", "none"), "noise_seed": rec_noise.get("seed", 0)}
+        if given["methods"] is None and recorded.get("method_specs"):
+            given["methods"] = ",".join(recorded["method_specs"])  # import-path plugins by their path
+        if args.method_timeout is None:
+            args.method_timeout = recorded.get("method_timeout")
         for key, value in given.items():
             if value is None:
                 given[key] = recorded.get(key, defaults[key])
@@ -175,6 +211,7 @@ def _run(args) -> int:
         print(f"exposim run: warning: --initial-ms {cfg['initial_ms']:g} is outside --range-ms {low:g} {high:g}; "
               f"clamped to {min(max(cfg['initial_ms'], low), high):g} ms (recorded in run.json)", file=sys.stderr)
 
+    _warn_broken_plugins()
     progress = None
     bar = None
     if not args.no_progress:
@@ -207,13 +244,16 @@ def _run(args) -> int:
             noise=cfg["noise"],
             noise_model=noise_model,
             noise_seed=cfg["noise_seed"],
+            method_timeout=args.method_timeout,
         )
     finally:
         if bar is not None:
             bar.close()
+    failed = {n: m["status"] for n, m in summary["methods"].items() if m.get("status", "ok") != "ok"}
+    rc = 1 if failed and args.strict else 0
     if args.json:
         print(json.dumps(summary, indent=1))
-        return 0
+        return rc
     print(f"run folder  {args.output}")
     print(f"cycles      {summary['cycles_done']}/{summary['n_cycles']}"
           + (f" ({len(summary['skipped_cycles'])} skipped)" if summary["skipped_cycles"] else ""))
@@ -224,4 +264,9 @@ def _run(args) -> int:
     timing = summary.get("timing") or {}
     if timing.get("cycles_per_s"):
         print(f"speed       {timing['cycles_per_s']:.2f} cycles/s")
-    return 0
+    if failed:
+        print(f"FAILED      {len(failed)} of {len(summary['methods'])} method(s); the others' results are complete"
+              + (" (--strict: exit code 1)" if args.strict else ""))
+        for name, why in failed.items():
+            print(f"  {name:13s} {why}")
+    return rc

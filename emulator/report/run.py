@@ -51,6 +51,7 @@ def summarise_run(run_dir: str | os.PathLike, info: dict | None = None, tables: 
             "clamped": int(t["clamped"].sum()),
             "bracket_use": {f"{b:g}": int(c) for b, c in zip(brackets, counts)},
             "method_ms_per_frame": (info.get("timing") or {}).get("method_ms_per_frame", {}).get(name),
+            "status": (info.get("method_status") or {}).get(name, "ok"),
         }
     return {
         "run": str(run_dir),
@@ -128,6 +129,10 @@ def run_markdown(info: dict, summary: dict) -> str:
             n += 1  # the reference code's counter test adjusts on N + 1 calls
         lines += ["", f"`fixed` (M_fixed) runs classical-50 for its first {n if n is not None else 'few'} frames and "
                   "then freezes its exposure: on a run that short it is identical to classical-50."]
+    failed = {n: m["status"] for n, m in summary["methods"].items() if m.get("status", "ok") != "ok"}
+    if failed:
+        lines += ["", f"Failed methods: {len(failed)} (their rows stop before the cycle named)"]
+        lines += [f"- {n}: {why}" for n, why in failed.items()]
     skipped = summary.get("skipped_cycles") or []
     lines += ["", f"Skipped cycles: {len(skipped)}"]
     for s in skipped:
