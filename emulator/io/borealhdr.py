@@ -294,7 +294,7 @@ def load_sequence(
         if root.is_file():
             source = ZipSource(root)
         elif not root.is_dir():
-            raise FileNotFoundError(f"{root}: sequence folder or zip not found")
+            raise FileNotFoundError(f"{root}: sequence folder not found (nor a trajectory .zip)")
         else:
             source = FolderSource(root)
     meta = read_recording_metadata(root, source)
