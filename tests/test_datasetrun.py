@@ -42,7 +42,7 @@ def dataset(tmp_path_factory):
 def serial_run(dataset, tmp_path_factory):
     out = tmp_path_factory.mktemp("serial") / "out"
     assert main(["run", str(dataset), "--sequences", "all", "--methods", METHODS, "-o", str(out),
-                 "--scheduler", "serial", "--no-progress"]) == 0
+                 "--scheduler", "serial", "--group-size", "1", "--no-progress"]) == 0
     return out
 
 
@@ -108,6 +108,11 @@ def test_grouping_does_not_change_the_csvs(serial_run, dataset, tmp_path):
                  "--scheduler", "serial", "--group-size", "2", "--no-progress"]) == 0
     assert sorted(p.name for p in (out / "seqA").iterdir()) == ["classical-50+zhang", "fixed"]
     assert csv_bytes(out) == csv_bytes(serial_run) and len(csv_bytes(out)) == 6
+    whole = tmp_path / "whole"  # default: one unit per sequence
+    assert main(["run", str(dataset), "--sequences", "seqB", "--methods", METHODS, "-o", str(whole),
+                 "--scheduler", "serial", "--no-progress"]) == 0
+    assert [p.name for p in (whole / "seqB").iterdir()] == ["classical-50+zhang+fixed"]
+    assert csv_bytes(whole) == {k: v for k, v in csv_bytes(serial_run).items() if k.startswith("seqB/")}
 
 
 def test_resume_keeps_finished_units(serial_run, tmp_path, capsys):

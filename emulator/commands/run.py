@@ -56,8 +56,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "address of a running Dask scheduler; single sequences always run serially")
     p.add_argument("--workers", type=int, default=None, help="dataset runs on --scheduler local: worker processes")
     p.add_argument("--group-size", type=int, default=None,
-                   help="dataset runs: methods per unit of work (default 1: one (sequence, method) per unit; "
-                        "larger groups share decoded images)")
+                   help="dataset runs: methods per unit of work (default: all, one unit per sequence, the methods "
+                        "sharing decoded images; 1: one (sequence, method) per unit, the finest parallelism)")
     p.add_argument("--retries", type=int, default=2, help="dataset runs on Dask: retries of a failed unit (default 2)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--json", action="store_true", help="print the results summary as JSON")
@@ -220,7 +220,7 @@ def _run_dataset(args) -> int:
     if options:
         run_options["options"] = options
     methods = args.methods or ",".join(recorded.get("methods", [])) or "all"
-    group_size = args.group_size or recorded.get("group_size") or 1
+    group_size = args.group_size or recorded.get("group_size")
     scheduler = args.scheduler or "local"
 
     bar = None
