@@ -27,6 +27,7 @@ Dask (:mod:`emulator.distributed`) and writes the summary.  Nothing here prints.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import time
@@ -165,6 +166,7 @@ def _unit_record(unit: Unit, folder: Path, reused: bool, wall_s: float | None = 
         "n_cycles": info.get("n_cycles"),
         "cycles_done": info.get("cycles_done"),
         "n_images": info.get("n_images"),
+        "n_brackets": info.get("n_brackets"),
         "loop_s": timing.get("wall_s"),
         "unit_s": wall_s,
         "results": results.get("methods", {}),
@@ -221,7 +223,8 @@ def run_unit(unit: Unit, out_dir: str | os.PathLike, options: Mapping, *, fault_
             run_to_folder(seq, list(unit.methods), staging, progress=progress, make_report=False,
                           command=f"exposim run (dataset unit {unit.key})", **dict(options))
         write_metadata(staging / RUN_FILE, {**read_run_json(staging), "n_images": count_images(seq),
-                                            "dataset_unit": unit.key}, overwrite=True)
+                                            "n_brackets": len(seq.brackets), "dataset_unit": unit.key},
+                       overwrite=True)
         try:
             os.rename(staging, final)
         except OSError:
@@ -322,8 +325,12 @@ def throughput(records: list[dict], wall_s: float, n_groups: int, workers: list[
                          for name, s in per_seq.items()},
         "projection": [],
     }
-    if cycles and images and loop_s > 0:
-        out["projection"] = [project_throughput(loop_s / cycles, images / cycles, n, n_units_per_trajectory=n_groups)
+    # images per full cycle: the brackets of a sweep (partial cycles of a short sample would
+    # otherwise inflate the dataset's cycle count); the measured ratio when unknown
+    per_cycle = max((r.get("n_brackets") or 0 for r in records), default=0) or (images / cycles if cycles else 0)
+    out["images_per_cycle"] = per_cycle
+    if cycles and per_cycle and loop_s > 0:
+        out["projection"] = [project_throughput(loop_s / cycles, per_cycle, n, n_units_per_trajectory=n_groups)
                              for n in workers]
     return out
 
@@ -387,31 +394,38 @@ def run_dataset(
         diff = [k for k in config if old.get(k) != to_plain(config[k])]
         if diff:
             raise DatasetRunError(f"{cfg_path}: --resume with a different configuration ({', '.join(diff)})")
-        remove_stale_staging(out)
     else:
         if out.exists() and any(out.iterdir()):
             raise OutputExistsError(f"{out}: exists and is not empty; refusing to overwrite")
         if resume:
             raise DatasetRunError(f"{cfg_path}: no dataset run to resume")
-        write_metadata(cfg_path, config)
 
-    if progress is not None:
-        progress(0, len(units))
-    t0 = time.perf_counter()
     if scheduler == "serial":
-        records, errors = [], []
-        for i, unit in enumerate(units, 1):
-            try:
-                records.append(run_unit(unit, out, options, fault_marker=fault_marker))
-            except ExposimError as exc:  # a bad sequence: name it, keep the others
-                errors.append({"unit": unit.key, "error": f"{type(exc).__name__}: {exc}"})
-            if progress is not None:
-                progress(i, len(units))
+        ctx = contextlib.nullcontext()
     else:
-        from emulator.distributed import run_units
+        from emulator.distributed import open_client, run_units
 
-        records, errors = run_units(units, out, options, scheduler=scheduler, n_workers=n_workers,
-                                    retries=retries, progress=progress, fault_marker=fault_marker)
+        ctx = open_client(scheduler, n_workers=n_workers, retries=retries)
+    with ctx as client:  # a scheduler that cannot be reached fails before anything is written
+        if cfg_path.is_file():
+            remove_stale_staging(out)
+        else:
+            write_metadata(cfg_path, config)
+        if progress is not None:
+            progress(0, len(units))
+        t0 = time.perf_counter()
+        if client is None:
+            records, errors = [], []
+            for i, unit in enumerate(units, 1):
+                try:
+                    records.append(run_unit(unit, out, options, fault_marker=fault_marker))
+                except ExposimError as exc:  # a bad sequence: name it, keep the others
+                    errors.append({"unit": unit.key, "error": f"{type(exc).__name__}: {exc}"})
+                if progress is not None:
+                    progress(i, len(units))
+        else:
+            records, errors = run_units(client, units, out, options, retries=retries, progress=progress,
+                                        fault_marker=fault_marker)
     wall_s = time.perf_counter() - t0
     remove_stale_staging(out)  # attempts of units that were killed and ran again
     order = {u.key: i for i, u in enumerate(units)}

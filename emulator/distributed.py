@@ -18,6 +18,7 @@ attempt leaves no rows behind and a repeated one writes nothing twice.  Nothing 
 
 from __future__ import annotations
 
+import logging
 import os
 from collections.abc import Callable, Mapping
 from contextlib import contextmanager
@@ -25,7 +26,7 @@ from pathlib import Path
 
 from emulator.errors import ExposimError
 
-__all__ = ["SchedulerError", "default_workers", "local_client", "connect", "run_units"]
+__all__ = ["SchedulerError", "default_workers", "local_client", "connect", "open_client", "run_units"]
 
 
 class SchedulerError(ExposimError):
@@ -52,7 +53,7 @@ def local_client(n_workers: int | None = None, *, allowed_failures: int = 3):
     with dask.config.set({"distributed.scheduler.allowed-failures": int(allowed_failures),
                           "distributed.worker.daemon": False}):
         cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                               dashboard_address=None)
+                               dashboard_address=None, silence_logs=logging.ERROR)
         try:
             with Client(cluster) as client:
                 yield client
@@ -61,7 +62,7 @@ def local_client(n_workers: int | None = None, *, allowed_failures: int = 3):
 
 
 @contextmanager
-def connect(address: str, *, timeout_s: float = 20.0):
+def connect(address: str, *, timeout_s: float = 10.0):
     """A client of an existing scheduler at ``tcp://HOST:PORT``; :class:`SchedulerError` if unreachable."""
     from dask.distributed import Client
 
@@ -79,43 +80,44 @@ def connect(address: str, *, timeout_s: float = 20.0):
         client.close()
 
 
+def open_client(scheduler: str, *, n_workers: int | None = None, retries: int = 2):
+    """A client context for ``local`` (a fresh LocalCluster) or ``tcp://HOST:PORT`` (an existing scheduler)."""
+    if scheduler == "local":
+        return local_client(n_workers, allowed_failures=max(int(retries), 0) + 1)
+    if str(scheduler).startswith("tcp://"):
+        return connect(scheduler)
+    raise SchedulerError(f"unknown scheduler {scheduler!r}; use serial, local or tcp://HOST:PORT")
+
+
 def run_units(
+    client,
     units: list,
     out_dir: str | os.PathLike,
     options: Mapping,
     *,
-    scheduler: str = "local",
-    n_workers: int | None = None,
     retries: int = 2,
     progress: Callable[[int, int], None] | None = None,
     fault_marker: str | None = None,
 ) -> tuple[list[dict], list[dict]]:
-    """Run units on Dask; returns (records of the units that finished, errors of those that failed)."""
+    """Run units as tasks of ``client``; returns (records of the units that finished, errors of those that failed)."""
     from dask.distributed import as_completed
 
     from emulator.datasetrun import run_unit
 
-    if scheduler == "local":
-        ctx = local_client(n_workers, allowed_failures=max(int(retries), 0) + 1)
-    elif scheduler.startswith("tcp://"):
-        ctx = connect(scheduler)
-    else:
-        raise SchedulerError(f"unknown scheduler {scheduler!r}; use serial, local or tcp://HOST:PORT")
     out = str(Path(out_dir).resolve())
     records: list[dict] = []
     errors: list[dict] = []
-    with ctx as client:
-        futures = {}
-        for unit in units:
-            fut = client.submit(run_unit, unit, out, dict(options), fault_marker=fault_marker, retries=int(retries),
-                                pure=False, key=f"exposim-unit-{unit.key}-{os.urandom(4).hex()}")
-            futures[fut] = unit
-        for i, fut in enumerate(as_completed(list(futures)), 1):
-            unit = futures[fut]
-            try:
-                records.append(fut.result())
-            except Exception as exc:  # KilledWorker, a crash in a method: named in the unit's row
-                errors.append({"unit": unit.key, "error": f"{type(exc).__name__}: {exc}"})
-            if progress is not None:
-                progress(i, len(units))
+    futures = {}
+    for unit in units:
+        fut = client.submit(run_unit, unit, out, dict(options), fault_marker=fault_marker, retries=int(retries),
+                            pure=False, key=f"exposim-unit-{unit.key}-{os.urandom(4).hex()}")
+        futures[fut] = unit
+    for i, fut in enumerate(as_completed(list(futures)), 1):
+        unit = futures[fut]
+        try:
+            records.append(fut.result())
+        except Exception as exc:  # an ExposimError of a bad sequence, KilledWorker, a crash: in the unit's row
+            errors.append({"unit": unit.key, "error": f"{type(exc).__name__}: {exc}"})
+        if progress is not None:
+            progress(i, len(units))
     return records, errors

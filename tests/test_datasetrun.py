@@ -173,10 +173,10 @@ def test_projection_arithmetic():
 
 def test_throughput_from_unit_records():
     recs = [
-        {"sequence": "a", "n_cycles": 10, "n_images": 60, "loop_s": 2.0, "reused": False},
-        {"sequence": "a", "n_cycles": 10, "n_images": 60, "loop_s": 3.0, "reused": True},
-        {"sequence": "b", "n_cycles": 5, "n_images": 30, "loop_s": 1.0, "reused": False},
-        {"sequence": "b", "n_cycles": 5, "n_images": 30, "loop_s": 1.5, "reused": False},
+        {"sequence": "a", "n_cycles": 10, "n_images": 60, "loop_s": 2.0, "reused": False, "n_brackets": 6},
+        {"sequence": "a", "n_cycles": 10, "n_images": 60, "loop_s": 3.0, "reused": True, "n_brackets": 6},
+        {"sequence": "b", "n_cycles": 5, "n_images": 30, "loop_s": 1.0, "reused": False, "n_brackets": 6},
+        {"sequence": "b", "n_cycles": 5, "n_images": 30, "loop_s": 1.5, "reused": False, "n_brackets": 6},
     ]
     t = throughput(recs, wall_s=2.0, n_groups=2, workers=[4])
     assert (t["cycles"], t["images"], t["worker_s"]) == (15, 90, 7.5)
@@ -184,4 +184,9 @@ def test_throughput_from_unit_records():
     assert t["per_sequence"]["a"]["cycles_per_s"] == 2.0 and t["per_sequence"]["b"]["images_per_s"] == 12.0
     # computed now: 3 units = 1.5 sequence-sweeps of (10 + 5 + 5) / 2 = 10 cycles in 2 s
     assert t["cycles_per_s_wall"] == 5.0 and t["units_computed"] == 3
+    assert t["images_per_cycle"] == 6
     assert t["projection"][0]["wall_hours"] == pytest.approx(393_238 / 6 * 0.5 / 4 / 3600, rel=1e-15)
+    # without the bracket count: the measured images per cycle (here 6 as well)
+    t2 = throughput([{k: v for k, v in r.items() if k != "n_brackets"} for r in recs], wall_s=2.0, n_groups=2,
+                    workers=[4])
+    assert t2["images_per_cycle"] == 6.0 and t2["projection"] == t["projection"]

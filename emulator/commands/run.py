@@ -27,7 +27,8 @@ def register(sub: argparse._SubParsersAction) -> None:
             "images, exposure.png, results.json and report.md."
         ),
     )
-    p.add_argument("sequence", type=Path, help="recording folder (BorealHDR layout)")
+    p.add_argument("sequence", type=Path,
+                   help="recording folder (BorealHDR layout) or trajectory .zip; with --sequences: a dataset root")
     p.add_argument("--methods", default=None,
                    help=f"'all' (default) or a comma-separated list of: {', '.join(METHOD_NAMES)}")
     p.add_argument("-o", "--output", type=Path, required=True, help="run folder to create (must not exist or be empty)")

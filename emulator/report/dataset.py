@@ -109,8 +109,9 @@ def dataset_markdown(summary: dict) -> str:
         "",
     ]
     if t["projection"]:
-        lines += ["Projection to the full BorealHDR dataset (55 trajectories, 393 238 images, 5 h) from the measured "
-                  "cost per cycle (units taken as equal):", "",
+        lines += ["Projection to the full BorealHDR dataset (55 trajectories, 393 238 images, 5 h; "
+                  f"{_fmt(t['images_per_cycle'])} images per cycle) from the measured cost per cycle "
+                  "(units taken as equal):", "",
                   "| workers | busy | wall hours | cycles/s | images/s | x real time |",
                   "| ---: | ---: | ---: | ---: | ---: | ---: |"]
         for p in t["projection"]:
