@@ -150,10 +150,13 @@ def count_images(sequence) -> int:
 
 
 def _unit_record(unit: Unit, folder: Path, reused: bool, wall_s: float | None = None) -> dict:
-    from emulator.io.files import read_results
+    from emulator.io.files import RESULTS_FILE, read_results
     from emulator.io.runfolder import read_run_json
+    from emulator.report.run import write_run_report
 
     info = read_run_json(folder)
+    if not (folder / RESULTS_FILE).is_file():  # killed between the rename and the report
+        write_run_report(folder)
     results = read_results(folder)
     timing = info.get("timing") or {}
     return {

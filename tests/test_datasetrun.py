@@ -122,6 +122,7 @@ def test_resume_keeps_finished_units(serial_run, tmp_path, capsys):
     shutil.rmtree(out / "seqA" / "zhang")
     (out / "seqA" / ".zhang.staging-0123456789ab" / "zhang").mkdir(parents=True)  # left by a killed unit
     del kept[out / "seqA" / "zhang" / "run.json"]
+    (out / "seqB" / "fixed" / "results.json").unlink()  # killed between its rename and its report
     root = json.loads((out / "dataset.json").read_text())["root"]
     assert main(["run", root, "--sequences", "all", "-o", str(out), "--no-progress"]) == 1
     assert "holds a dataset run; use --resume" in capsys.readouterr().err
@@ -129,6 +130,7 @@ def test_resume_keeps_finished_units(serial_run, tmp_path, capsys):
     assert main(["run", root, "-o", str(out), "--sequences", "all", "--resume", "--scheduler", "serial",
                  "--no-progress"]) == 0
     assert {p: p.read_bytes() for p in kept} == kept  # not recomputed: run.json (timing, creation time) as it was
+    assert json.loads((out / "seqB" / "fixed" / "results.json").read_text())["methods"]["fixed"]["cycles"] == 3
     assert csv_bytes(out) == csv_bytes(serial_run)
     assert not list(out.glob("*/.*staging*"))
     res = json.loads((out / "results.json").read_text())
