@@ -53,7 +53,7 @@ def local_client(n_workers: int | None = None, *, allowed_failures: int = 3):
     with dask.config.set({"distributed.scheduler.allowed-failures": int(allowed_failures),
                           "distributed.worker.daemon": False}):
         cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                               dashboard_address=None, silence_logs=logging.ERROR)
+                               dashboard_address=None, silence_logs=logging.CRITICAL)  # task errors come back through the futures
         try:
             with Client(cluster) as client:
                 yield client
