@@ -15,7 +15,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="describe a recording: cameras, brackets, cycles, partial cycles and gaps",
         description="Describe a BorealHDR-layout recording (cycles are grouped by timestamp).",
     )
-    p.add_argument("sequence", type=Path, help="recording folder holding camera_left/ and camera_right/")
+    p.add_argument("sequence", type=Path, help="recording folder holding camera_left/ and camera_right/, or a trajectory .zip")
     p.add_argument("--json", action="store_true", help="print one JSON object (cycles as a list)")
     p.set_defaults(func=_info)
 

@@ -28,7 +28,8 @@ def register(sub: argparse._SubParsersAction) -> None:
             "images, exposure.png, results.json and report.md."
         ),
     )
-    p.add_argument("sequence", type=Path, help="recording folder (BorealHDR layout)")
+    p.add_argument("sequence", type=Path,
+                   help="recording folder (BorealHDR layout) or trajectory .zip; with --sequences: a dataset root")
     p.add_argument("--methods", default=None,
                    help=f"'all' (default) or a comma-separated list of: {', '.join(METHOD_NAMES)}. "
                         f"'fixed' runs classical-50 for its first {N_AUTO_FRAMES} frames ({N_AUTO_FRAMES + 1} with "
@@ -59,6 +60,18 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="seed of the added noise (default 0); the same seed gives the same bytes")
     p.add_argument("--resume", action="store_true",
                    help="continue an interrupted run in OUTDIR (its run.json gives the configuration)")
+    p.add_argument("--sequences", default=None, metavar="all|NAME,...",
+                   help="dataset run: SEQUENCE is a dataset root; run every sequence under it ('all') or the named "
+                        "ones (folders or trajectory .zip files, a zip named by its stem); OUTDIR gets one folder per "
+                        "sequence and a dataset summary (results.json, report.md, methods.png)")
+    p.add_argument("--scheduler", default=None, metavar="serial|local|tcp://HOST:PORT",
+                   help="dataset runs: serial, local (a Dask LocalCluster sized to the machine; default) or the "
+                        "address of a running Dask scheduler; single sequences always run serially")
+    p.add_argument("--workers", type=int, default=None, help="dataset runs on --scheduler local: worker processes")
+    p.add_argument("--group-size", type=int, default=None,
+                   help="dataset runs: methods per unit of work (default: all, one unit per sequence, the methods "
+                        "sharing decoded images; 1: one (sequence, method) per unit, the finest parallelism)")
+    p.add_argument("--retries", type=int, default=2, help="dataset runs on Dask: retries of a failed unit (default 2)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--json", action="store_true", help="print the results summary as JSON")
     _add_plugin_arguments(p)
@@ -151,11 +164,19 @@ def _check_args(args) -> None:
 
 
 def _run(args) -> int:
+    _check_args(args)
+    if args.sequences is not None:
+        if args.noise not in (None, "none") or args.method_timeout is not None or args.strict:
+            raise ExposimError("--noise, --method-timeout and --strict apply to single-sequence runs; "
+                               "dataset runs (--sequences) do not take them yet")
+        return _run_dataset(args)
+    if args.scheduler not in (None, "serial"):
+        raise ExposimError(f"--scheduler {args.scheduler}: a single sequence runs serially; "
+                           "pass --sequences all for a dataset run")
     from emulator.autoexposure import DEFAULT_RANGE_MS
     from emulator.io.runfolder import RUN_FILE, read_run_json
     from emulator.playback import DEFAULT_INITIAL_MS, DEFAULT_SELECTOR, run_to_folder
 
-    _check_args(args)
     given = {
         "methods": args.methods,
         "save": args.save,
@@ -270,3 +291,71 @@ def _run(args) -> int:
         for name, why in failed.items():
             print(f"  {name:13s} {why}")
     return rc
+
+
+def _run_dataset(args) -> int:
+    """``exposim run ROOT --sequences ...``: every (sequence, method group) unit, then the dataset summary."""
+    from emulator.datasetrun import DATASET_FILE, run_dataset
+    from emulator.io.files import read_metadata
+
+    recorded = read_metadata(args.output / DATASET_FILE) if args.resume else {}
+    rec_opts = recorded.get("options", {})
+    options: dict = dict(rec_opts.get("options") or {})
+    for text in args.option:
+        method, key, value = parse_option(text)
+        options.setdefault(method, {})[key] = value
+    if args.seed is not None:
+        options.setdefault("kim", {})["seed"] = args.seed
+    run_options = {}
+    for key, value in (("mode", args.mode), ("selector", args.selector), ("initial_ms", args.initial_ms),
+                       ("range_ms", args.range_ms), ("save", args.save), ("response_path", args.response)):
+        if value is not None:
+            run_options[key] = str(value) if key == "response_path" else value
+        elif key in rec_opts:
+            run_options[key] = rec_opts[key]
+    if args.jobs != 1 or "jobs" in rec_opts:
+        run_options["jobs"] = args.jobs if args.jobs != 1 else rec_opts["jobs"]
+    if options:
+        run_options["options"] = options
+    methods = args.methods or ",".join(recorded.get("methods", [])) or "all"
+    group_size = args.group_size or recorded.get("group_size")
+    scheduler = args.scheduler or "local"
+
+    bar = None
+    progress = None
+    if not args.no_progress:
+        from tqdm import tqdm
+
+        def progress(done: int, total: int) -> None:
+            nonlocal bar
+            if bar is None:  # made at the first report, after the run's checks passed
+                bar = tqdm(total=total, unit="unit", desc="exposim run (sequence, methods)", file=sys.stderr,
+                           dynamic_ncols=True)
+            bar.n = done
+            bar.refresh()
+
+    try:
+        summary = run_dataset(args.sequence, args.output, sequences=args.sequences, methods=methods,
+                              group_size=group_size, options=run_options, scheduler=scheduler,
+                              n_workers=args.workers, retries=args.retries, resume=args.resume, progress=progress)
+    finally:
+        if bar is not None:
+            bar.close()
+    if args.json:
+        print(json.dumps(summary, indent=1))
+    else:
+        t = summary["throughput"]
+        print(f"dataset run {args.output}  ({len(summary['sequences'])} sequences, {len(summary['units'])} units, "
+              f"scheduler {scheduler})")
+        for name, m in summary["per_method"].items():
+            mean = m["mean_exposure_ms"]
+            print(f"  {name:13s} {m['cycles']:6d} cycles  mean {mean:8.3f} ms" if mean is not None
+                  else f"  {name:13s} no cycle")
+        if t["cycles_per_s_one_worker"]:
+            print(f"speed       {t['cycles_per_s_one_worker']:.2f} cycles/s, {t['images_per_s_one_worker']:.1f} images/s "
+                  "per worker (all methods)")
+    if summary["errors"]:
+        first = summary["errors"][0]
+        raise ExposimError(f"{len(summary['errors'])} unit(s) failed (see {args.output / 'report.md'}); "
+                           f"first: {first['unit']}: {first['error']}")
+    return 0

@@ -10,8 +10,9 @@ Layout (BorealHDR, also written by ``synth``)::
 
 :func:`load_sequence` scans the layout into the in-memory model of :mod:`emulator.dataset`
 (cycles grouped by timestamp); images decode lazily through :func:`read_frame`.  The scan
-reads through a :class:`FileSource`, so another container than a folder (a zip archive)
-can be plugged in without touching the scan; :class:`FolderSource` is the file system.
+reads through a :class:`FileSource`, so another container than a folder can be plugged in
+without touching the scan; :class:`FolderSource` is the file system, :class:`ZipSource` a
+BorealHDR trajectory zip read in place (members are read into memory, nothing is unpacked).
 
 The camera's levels are properties of the recording: the BorealHDR sample saturates at
 :data:`BOREALHDR_WHITE_LEVEL` = 4094 DN with black level 0.  A recording's own
@@ -25,7 +26,10 @@ import dataclasses
 import math
 import os
 import re
-from pathlib import Path
+import threading
+import zipfile
+import zlib
+from pathlib import Path, PurePosixPath
 from typing import Protocol
 
 import numpy as np
@@ -42,6 +46,8 @@ __all__ = [
     "METADATA_FILE",
     "FileSource",
     "FolderSource",
+    "ZipSource",
+    "is_recording",
     "load_sequence",
     "read_frame",
     "write_frame",
@@ -116,6 +122,113 @@ class FolderSource:
 
     def __repr__(self) -> str:
         return f"FolderSource({str(self.root)!r})"
+
+
+class ZipSource:
+    """A recording inside a zip archive (a BorealHDR trajectory zip), read without unpacking.
+
+    The recording is the one folder of the archive that holds ``camera_left/`` and/or
+    ``camera_right/``, under whatever folder prefix (``backpack_.../camera_left/...`` or
+    ``camera_left/...`` at the top); everything else the archive carries (lidar, IMU, ...)
+    is ignored, as are ``__MACOSX/`` and hidden members.  Paths are ``<zip>/<relative
+    path>`` (:attr:`root` is the zip file), so messages name a member as
+    ``/data/backpack.zip/camera_left/8.0/123.png``.  Raises :class:`DatasetError` naming the
+    zip for an unreadable (corrupt) archive, an archive without a recording, or one with
+    more than one recording.
+    """
+
+    def __init__(self, path: str | os.PathLike) -> None:
+        self.root = Path(path)
+        try:
+            self._zip = zipfile.ZipFile(self.root)
+            names = self._zip.namelist()
+        except (zipfile.BadZipFile, zipfile.LargeZipFile, OSError, EOFError, ValueError) as exc:
+            raise DatasetError(f"{self.root}: not a readable zip archive ({exc})") from None
+        self._lock = threading.Lock()
+        prefixes: set[tuple[str, ...]] = set()
+        for name in names:
+            parts = tuple(p for p in PurePosixPath(name).parts if p not in ("", "/"))
+            if not parts or parts[0] == "__MACOSX" or any(p.startswith(".") for p in parts):
+                continue
+            for i, part in enumerate(parts[:-1]):
+                if part in CAMERA_FOLDERS.values():
+                    prefixes.add(parts[:i])
+                    break
+        if not prefixes:
+            raise DatasetError(f"{self.root}: the zip holds no camera_left/ or camera_right/ folder "
+                               "(not a BorealHDR trajectory zip)")
+        if len(prefixes) > 1:
+            shown = ", ".join(sorted("/".join(p) + "/" if p else "(top level)" for p in prefixes))
+            raise DatasetError(f"{self.root}: the zip holds {len(prefixes)} recordings ({shown}); expected one "
+                               "recording per zip")
+        (self.prefix,) = prefixes
+        n = len(self.prefix)
+        self._members: dict[tuple[str, ...], str] = {}
+        self._children: dict[tuple[str, ...], set[str]] = {(): set()}
+        for name in names:
+            parts = tuple(p for p in PurePosixPath(name).parts if p not in ("", "/"))
+            if len(parts) <= n or parts[:n] != self.prefix or parts[0] == "__MACOSX":
+                continue
+            rel = parts[n:]
+            for k in range(len(rel)):
+                self._children.setdefault(rel[:k], set()).add(rel[k])
+                if k < len(rel) - 1 or name.endswith("/"):
+                    self._children.setdefault(rel[:k + 1], set())
+            if not name.endswith("/"):
+                self._members[rel] = name
+
+    def _rel(self, path) -> tuple[str, ...] | None:
+        try:
+            return Path(path).relative_to(self.root).parts
+        except ValueError:
+            return None
+
+    def is_dir(self, path: Path) -> bool:
+        rel = self._rel(path)
+        return rel is not None and rel in self._children and rel not in self._members
+
+    def is_file(self, path: Path) -> bool:
+        return self._rel(path) in self._members
+
+    def listdir(self, path: Path) -> list[Path]:
+        rel = self._rel(path)
+        return [Path(path) / c for c in sorted(self._children.get(rel, ()))]
+
+    def read_bytes(self, path: Path) -> bytes:
+        rel = self._rel(path)
+        if rel not in self._members:
+            raise FileNotFoundError(f"{path}: not found in {self.root.name}")
+        try:
+            with self._lock:
+                return self._zip.read(self._members[rel])
+        except (zipfile.BadZipFile, zlib.error, EOFError, OSError) as exc:
+            raise DatasetError(f"{path}: corrupt member of zip {self.root} ({exc})") from None
+
+    def read_head(self, path: Path, n: int) -> bytes:
+        """The first ``n`` bytes of a member, or ``b""`` for a damaged one (the size check then
+        skips it, and :meth:`read_bytes` names it when the frame is decoded)."""
+        rel = self._rel(path)
+        if rel not in self._members:
+            raise FileNotFoundError(f"{path}: not found in {self.root.name}")
+        try:
+            with self._lock, self._zip.open(self._members[rel]) as fh:
+                return fh.read(n)
+        except (zipfile.BadZipFile, zlib.error, EOFError, OSError):
+            return b""
+
+    def close(self) -> None:
+        self._zip.close()
+
+    def __repr__(self) -> str:
+        return f"ZipSource({str(self.root)!r})"
+
+
+def is_recording(path: str | os.PathLike) -> bool:
+    """Whether ``path`` looks like one recording: a folder with ``camera_left/`` or ``camera_right/``, or a ``.zip``."""
+    path = Path(path)
+    if path.is_file():
+        return path.suffix.lower() == ".zip"
+    return path.is_dir() and any((path / d).is_dir() for d in CAMERA_FOLDERS.values())
 
 
 # ---------------------------------------------------------------------------- names
@@ -242,15 +355,19 @@ def load_sequence(
     unknown folder, an empty camera folder, shots whose left/right exposures disagree at
     one timestamp, the same shot twice, or a sequence without any camera folder; a missing
     second camera or missing brackets are reported in ``Sequence.gaps``.  ``source``
-    replaces the file system (default :class:`FolderSource` of ``path``).  ``frame_cache``:
+    replaces the file system (default: :class:`ZipSource` when ``path`` is a file (a
+    trajectory zip), else :class:`FolderSource` of ``path``).  ``frame_cache``:
     a decoded-frame cache folder (:mod:`emulator.io.framecache`), ``False`` for none, or
     None to use ``<sequence>/.exposim-frames`` when it exists (folders only).
     """
     root = Path(path)
     if source is None:
-        if not root.is_dir():
-            raise FileNotFoundError(f"{root}: sequence folder not found")
-        source = FolderSource(root)
+        if root.is_file():
+            source = ZipSource(root)
+        elif not root.is_dir():
+            raise FileNotFoundError(f"{root}: sequence folder not found (nor a trajectory .zip)")
+        else:
+            source = FolderSource(root)
     meta = read_recording_metadata(root, source)
     white = int(white_level if white_level is not None else meta.get("white_level", BOREALHDR_WHITE_LEVEL))
     black = int(black_level if black_level is not None else meta.get("black_level", BOREALHDR_BLACK_LEVEL))

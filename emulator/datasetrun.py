@@ -1,0 +1,458 @@
+"""Whole-dataset runs: every sequence under a BorealHDR root, in units of (sequence, method group).
+
+Layout of a dataset run folder ``OUT``::
+
+    OUT/dataset.json                 the configuration (sequences, methods, groups, run options)
+    OUT/<sequence>/<group>/          one run folder per (sequence, method group), exactly the
+                                     folder ``exposim run SEQ --methods <group's methods>`` writes
+    OUT/results.json, report.md,     the dataset summary: per-sequence and per-method tables,
+    OUT/methods.png                  throughput and its projection to the full BorealHDR dataset
+
+A sequence is a folder holding ``camera_left/`` or ``camera_right/``, or a trajectory
+``.zip`` (:class:`emulator.io.borealhdr.ZipSource`); its name is the folder name or the
+zip's stem.  Methods are split into groups of ``group_size`` (default: all methods in one
+group, one unit per sequence: the methods of a group share decoded images, which on the
+shared sample makes a cycle 2.6x cheaper than seven one-method units; ``group_size=1`` gives
+the finest parallelism).  The methods of a group finish together, so a finished
+(sequence, method) is never recomputed.  A method's closed loop does not depend on the other methods of its group,
+so the CSVs are the same bytes for any grouping and any scheduler.
+
+Each unit runs :func:`run_unit`: it writes its run folder under a staging name
+(``.<group>.staging-<token>``) and renames it into place only when complete, so a unit that
+is killed mid-way (a worker that dies) leaves no partial folder under the final name, and a
+retry starts from scratch; a unit whose folder already exists is not recomputed (resume,
+or a duplicate attempt).  :func:`run_dataset` plans the units, runs them serially or on
+Dask (:mod:`emulator.distributed`) and writes the summary.  Nothing here prints.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import time
+import uuid
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+from threadpoolctl import threadpool_limits
+
+from emulator.errors import ExposimError, OutputExistsError
+
+__all__ = [
+    "DATASET_FILE",
+    "BOREALHDR_FULL",
+    "UNIT_BLAS_THREADS",
+    "Unit",
+    "discover_sequences",
+    "plan_groups",
+    "plan_units",
+    "run_unit",
+    "run_dataset",
+    "count_images",
+    "project_throughput",
+    "DatasetRunError",
+    "remove_stale_staging",
+    "throughput",
+    "to_plain",
+]
+
+#: The configuration file of a dataset run folder.
+DATASET_FILE = "dataset.json"
+#: The full BorealHDR dataset as published: trajectories, images (one per shot of a sweep,
+#: a stereo pair counted once: 6 per cycle at the recorder's 3.66 cycles/s) and duration.
+BOREALHDR_FULL = {"trajectories": 55, "images": 393_238, "duration_s": 5 * 3600.0}
+_STAGING = ".staging-"
+#: BLAS threads of a unit.  kim's Gaussian-process fit is sensitive to the last bits of its
+#: BLAS sums, which depend on the thread count (on the shared sample its first proposal is
+#: 35.0 ms with the default threads and 1.204 ms with one): every unit runs with one BLAS
+#: thread, as Dask's worker processes do (``OMP_NUM_THREADS=1``), so a unit gives the same
+#: bytes serially and on any worker.
+UNIT_BLAS_THREADS = 1
+
+
+class DatasetRunError(ExposimError):
+    """A dataset run that cannot start or resume (bad selection, different configuration)."""
+
+
+@dataclass(frozen=True)
+class Unit:
+    """One unit of work: a method group on one sequence, written to ``out/sequence/group``."""
+
+    sequence: str
+    path: str
+    methods: tuple[str, ...]
+    group: str
+
+    @property
+    def key(self) -> str:
+        return f"{self.sequence}/{self.group}"
+
+
+# ---------------------------------------------------------------------------- planning
+def discover_sequences(root: str | os.PathLike, selection: str = "all") -> dict[str, Path]:
+    """Sequences under ``root`` (name -> folder or zip), sorted by name; ``root`` itself if it is one.
+
+    ``selection`` is ``all`` or comma-separated names (a zip's name is its stem); an
+    unknown name raises :class:`DatasetRunError` listing the names found.
+    """
+    from emulator.io.borealhdr import is_recording
+
+    root = Path(root)
+    if not root.exists():
+        raise FileNotFoundError(f"{root}: dataset folder not found")
+    found: dict[str, Path] = {}
+    if is_recording(root):
+        found[root.stem if root.is_file() else root.name] = root
+    else:
+        for child in sorted(root.iterdir()):
+            if child.name.startswith(".") or not is_recording(child):
+                continue
+            name = child.stem if child.is_file() else child.name
+            if name in found:
+                raise DatasetRunError(f"{root}: sequence {name!r} is there twice ({found[name].name} and {child.name})")
+            found[name] = child
+    if not found:
+        raise DatasetRunError(f"{root}: no sequence (a folder with camera_left/ or camera_right/, or a .zip)")
+    if selection is None or selection.strip() == "all":
+        return found
+    wanted = [s.strip() for s in selection.split(",") if s.strip()]
+    unknown = [s for s in wanted if s not in found]
+    if unknown or not wanted:
+        raise DatasetRunError(f"{root}: no sequence named {', '.join(unknown) or repr(selection)}; "
+                              f"found: {', '.join(found)}")
+    return {name: found[name] for name in dict.fromkeys(wanted)}
+
+
+def plan_groups(methods: list[str], group_size: int = 1) -> list[tuple[str, ...]]:
+    """Methods in order, cut into groups of ``group_size`` (the last may be smaller)."""
+    if int(group_size) < 1:
+        raise DatasetRunError(f"group size must be >= 1, got {group_size!r}")
+    n = int(group_size)
+    return [tuple(methods[i:i + n]) for i in range(0, len(methods), n)]
+
+
+def _group_name(methods: tuple[str, ...]) -> str:
+    return "+".join(methods)
+
+
+def plan_units(sequences: Mapping[str, Path], methods: list[str], group_size: int = 1) -> list[Unit]:
+    """Every (sequence, method group), sequence-major."""
+    groups = plan_groups(methods, group_size)
+    return [Unit(name, str(Path(path).resolve()), g, _group_name(g)) for name, path in sequences.items() for g in groups]
+
+
+# ---------------------------------------------------------------------------- one unit
+def count_images(sequence) -> int:
+    """Images of a recording as BorealHDR counts them: one per shot (a stereo pair once)."""
+    return sum(max((len(f) for f in c.frames.values()), default=0) for c in sequence.cycles)
+
+
+def _unit_record(unit: Unit, folder: Path, reused: bool, wall_s: float | None = None) -> dict:
+    from emulator.io.files import RESULTS_FILE, read_results
+    from emulator.io.runfolder import read_run_json
+    from emulator.report.run import write_run_report
+
+    info = read_run_json(folder)
+    if not (folder / RESULTS_FILE).is_file():  # killed between the rename and the report
+        write_run_report(folder)
+    results = read_results(folder)
+    timing = info.get("timing") or {}
+    return {
+        "sequence": unit.sequence,
+        "group": unit.group,
+        "methods": list(unit.methods),
+        "folder": str(folder),
+        "reused": reused,
+        "status": info.get("status"),
+        "n_cycles": info.get("n_cycles"),
+        "cycles_done": info.get("cycles_done"),
+        "n_images": info.get("n_images"),
+        "n_brackets": info.get("n_brackets"),
+        "loop_s": timing.get("wall_s"),
+        "unit_s": wall_s,
+        "results": results.get("methods", {}),
+    }
+
+
+def _is_complete(folder: Path) -> bool:
+    from emulator.io.runfolder import RUN_FILE, read_run_json
+
+    return (folder / RUN_FILE).is_file() and read_run_json(folder).get("status") == "complete"
+
+
+def run_unit(unit: Unit, out_dir: str | os.PathLike, options: Mapping, *, fault_marker: str | None = None) -> dict:
+    """Run one (sequence, method group) into ``out_dir/sequence/group`` (idempotent, atomic).
+
+    ``options`` are keyword arguments of :func:`emulator.playback.run_to_folder` (mode,
+    selector, initial_ms, range_ms, options, save, response_path, jobs).  An existing
+    complete folder is returned as is (``reused``); otherwise the run goes to a staging
+    folder beside it that is renamed into place when complete; if another attempt renamed
+    its folder first, this one's is discarded.  Returns the unit's record (per-method
+    results, cycles, images, loop seconds).
+
+    ``fault_marker`` is a testing aid for worker failure: when given and the file does not
+    exist, the unit creates it and kills its own process (``os._exit``) after the first
+    cycle, leaving a partial staging folder behind, as a worker that dies mid-task does.
+    """
+    from emulator.io.borealhdr import load_sequence
+    from emulator.io.files import write_metadata
+    from emulator.io.runfolder import RUN_FILE, read_run_json
+    from emulator.playback import run_to_folder
+    from emulator.report.run import write_run_report
+
+    out_dir = Path(out_dir)
+    final = out_dir / unit.sequence / unit.group
+    if _is_complete(final):
+        return _unit_record(unit, final, reused=True)
+    if final.exists():
+        raise DatasetRunError(f"{final}: exists but is not a complete run; remove it to recompute")
+    final.parent.mkdir(parents=True, exist_ok=True)
+    staging = final.parent / f".{unit.group}{_STAGING}{uuid.uuid4().hex[:12]}"
+    progress = None
+    if fault_marker is not None and not Path(fault_marker).exists():
+        def progress(done: int, total: int) -> None:
+            from emulator.io.files import write_text
+
+            write_text(fault_marker, f"killed {unit.key} after cycle {done}\n")
+            os._exit(3)
+
+    t0 = time.perf_counter()
+    seq = load_sequence(unit.path)
+    try:
+        _load_blas_libraries()  # a limit covers only the libraries loaded when it is set
+        with threadpool_limits(limits=UNIT_BLAS_THREADS):  # the same arithmetic in this process and on any worker
+            run_to_folder(seq, list(unit.methods), staging, progress=progress, make_report=False,
+                          command=f"exposim run (dataset unit {unit.key})", **dict(options))
+        write_metadata(staging / RUN_FILE, {**read_run_json(staging), "n_images": count_images(seq),
+                                            "n_brackets": len(seq.brackets), "dataset_unit": unit.key},
+                       overwrite=True)
+        try:
+            os.rename(staging, final)
+        except OSError:
+            if not _is_complete(final):
+                raise
+            shutil.rmtree(staging, ignore_errors=True)  # another attempt finished first: keep its folder
+            return _unit_record(unit, final, reused=True)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    write_run_report(final)
+    record = _unit_record(unit, final, reused=False, wall_s=time.perf_counter() - t0)
+    return record
+
+
+def _load_blas_libraries() -> None:
+    """Load every BLAS the methods may use (numpy's, scipy's, scikit-learn's) before limiting them."""
+    import scipy.linalg  # noqa: F401
+
+    try:
+        import sklearn.gaussian_process  # noqa: F401
+    except ImportError:  # pragma: no cover - scikit-learn is a dependency
+        pass
+
+
+def remove_stale_staging(out_dir: str | os.PathLike) -> list[Path]:
+    """Remove staging folders left by killed units (only names :func:`run_unit` makes)."""
+    removed = []
+    for seq_dir in sorted(p for p in Path(out_dir).iterdir() if p.is_dir()):
+        for p in sorted(seq_dir.iterdir()):
+            if p.is_dir() and p.name.startswith(".") and _STAGING in p.name:
+                shutil.rmtree(p, ignore_errors=True)
+                removed.append(p)
+    return removed
+
+
+# ---------------------------------------------------------------------------- throughput
+def project_throughput(seconds_per_cycle: float, images_per_cycle: float, n_workers: int, *,
+                       n_units_per_trajectory: int = 1, dataset: Mapping = BOREALHDR_FULL) -> dict:
+    """Projected wall time of a dataset run from the measured cost of one cycle.
+
+    ``seconds_per_cycle`` is the worker-seconds one cycle costs with every method (the sum
+    over the method groups); the dataset has ``images / images_per_cycle`` cycles.  Units
+    are (trajectory, group), so at most ``trajectories * n_units_per_trajectory`` workers
+    are busy: ``wall = cycles * seconds_per_cycle / min(n_workers, units)`` (units taken as
+    equal; a lower bound when they are not).  Real-time factor: dataset duration / wall.
+    """
+    if not (seconds_per_cycle > 0 and images_per_cycle > 0 and int(n_workers) >= 1):
+        raise ValueError("seconds_per_cycle and images_per_cycle must be > 0 and n_workers >= 1")
+    cycles = dataset["images"] / images_per_cycle
+    units = int(dataset["trajectories"]) * int(n_units_per_trajectory)
+    busy = min(int(n_workers), units)
+    wall = cycles * seconds_per_cycle / busy
+    return {
+        "n_workers": int(n_workers),
+        "busy_workers": busy,
+        "dataset_cycles": cycles,
+        "dataset_images": int(dataset["images"]),
+        "worker_hours": cycles * seconds_per_cycle / 3600.0,
+        "wall_hours": wall / 3600.0,
+        "cycles_per_s": cycles / wall,
+        "images_per_s": dataset["images"] / wall,
+        "real_time_factor": dataset["duration_s"] / wall,
+    }
+
+
+def throughput(records: list[dict], wall_s: float, n_groups: int, workers: list[int] = (1, 2, 8, 16, 55)) -> dict:
+    """Measured throughput of a dataset run and its projection to the full BorealHDR dataset.
+
+    Cost: the summed closed-loop seconds of every unit (``run.json`` timing, reused units
+    included) per cycle of their sequences; ``wall_s`` is this invocation's elapsed time
+    (units computed now only).
+    """
+    per_seq: dict[str, dict] = {}
+    for r in records:
+        s = per_seq.setdefault(r["sequence"], {"cycles": r["n_cycles"] or 0, "images": r["n_images"] or 0,
+                                               "loop_s": 0.0})
+        s["loop_s"] += r["loop_s"] or 0.0
+    cycles = sum(s["cycles"] for s in per_seq.values())
+    images = sum(s["images"] for s in per_seq.values())
+    loop_s = sum(s["loop_s"] for s in per_seq.values())
+    computed = [r for r in records if not r["reused"]]
+    c_cycles = sum(r["n_cycles"] or 0 for r in computed) / max(n_groups, 1)
+    c_images = sum(r["n_images"] or 0 for r in computed) / max(n_groups, 1)
+    out = {
+        "cycles": cycles,
+        "images": images,
+        "worker_s": loop_s,
+        "seconds_per_cycle": loop_s / cycles if cycles else None,
+        "cycles_per_s_one_worker": cycles / loop_s if loop_s > 0 else None,
+        "images_per_s_one_worker": images / loop_s if loop_s > 0 else None,
+        "wall_s": wall_s,
+        "units_computed": len(computed),
+        "cycles_per_s_wall": c_cycles / wall_s if computed and wall_s > 0 else None,
+        "images_per_s_wall": c_images / wall_s if computed and wall_s > 0 else None,
+        "per_sequence": {name: {**s, "cycles_per_s": s["cycles"] / s["loop_s"] if s["loop_s"] > 0 else None,
+                                "images_per_s": s["images"] / s["loop_s"] if s["loop_s"] > 0 else None}
+                         for name, s in per_seq.items()},
+        "projection": [],
+    }
+    # images per full cycle: the brackets of a sweep (partial cycles of a short sample would
+    # otherwise inflate the dataset's cycle count); the measured ratio when unknown
+    per_cycle = max((r.get("n_brackets") or 0 for r in records), default=0) or (images / cycles if cycles else 0)
+    out["images_per_cycle"] = per_cycle
+    if cycles and per_cycle and loop_s > 0:
+        out["projection"] = [project_throughput(loop_s / cycles, per_cycle, n, n_units_per_trajectory=n_groups)
+                             for n in workers]
+    return out
+
+
+# ---------------------------------------------------------------------------- the run
+def _config(root, sequences, methods, group_size, options) -> dict:
+    return {
+        "root": str(Path(root).resolve()),
+        "sequences": {name: str(Path(p).resolve()) for name, p in sequences.items()},
+        "methods": list(methods),
+        "group_size": int(group_size),
+        "options": {k: (list(v) if isinstance(v, tuple) else v) for k, v in dict(options).items()},
+    }
+
+
+def run_dataset(
+    root: str | os.PathLike,
+    out_dir: str | os.PathLike,
+    *,
+    sequences: str = "all",
+    methods="all",
+    group_size: int | None = None,
+    options: Mapping | None = None,
+    scheduler: str = "serial",
+    n_workers: int | None = None,
+    retries: int = 2,
+    resume: bool = False,
+    progress: Callable[[int, int], None] | None = None,
+    fault_marker: str | None = None,
+) -> dict:
+    """Run methods on every selected sequence under ``root`` into ``out_dir``; returns the summary.
+
+    ``options``: keyword arguments of :func:`emulator.playback.run_to_folder` for every unit
+    (mode, selector, initial_ms, range_ms, options, save, response_path, jobs).
+    ``scheduler``: ``serial`` (in this process), ``local`` (a Dask ``LocalCluster`` of
+    ``n_workers`` processes, default sized to the machine) or ``tcp://HOST:PORT`` (an
+    existing Dask cluster that sees the same paths).  Refuses an existing ``out_dir`` that
+    holds a dataset run unless ``resume`` (then the configuration must be the same; complete
+    units are kept, others computed).  A unit that fails is retried ``retries`` times;
+    units that still fail are listed under ``errors`` and the others are kept.
+    ``progress(done, total)`` after each unit.
+    """
+    from emulator.io.files import read_metadata, write_metadata
+    from emulator.playback import parse_methods
+    from emulator.report.dataset import write_dataset_report
+
+    out = Path(out_dir)
+    options = dict(options or {})
+    if not (scheduler in ("serial", "local") or str(scheduler).startswith("tcp://")):
+        raise DatasetRunError(f"unknown scheduler {scheduler!r}; use serial, local or tcp://HOST:PORT")
+    found = discover_sequences(root, sequences)
+    names = parse_methods(methods) if isinstance(methods, str) else list(methods)
+    group_size = len(names) if group_size is None else int(group_size)
+    config = _config(root, found, names, group_size, options)
+    units = plan_units(found, names, group_size)
+    cfg_path = out / DATASET_FILE
+    if cfg_path.is_file():
+        if not resume:
+            raise OutputExistsError(f"{out}: holds a dataset run; use --resume to continue it or another -o")
+        old = read_metadata(cfg_path, DatasetRunError)
+        diff = [k for k in config if old.get(k) != to_plain(config[k])]
+        if diff:
+            raise DatasetRunError(f"{cfg_path}: --resume with a different configuration ({', '.join(diff)})")
+    else:
+        if out.exists() and any(out.iterdir()):
+            raise OutputExistsError(f"{out}: exists and is not empty; refusing to overwrite")
+        if resume:
+            raise DatasetRunError(f"{cfg_path}: no dataset run to resume")
+
+    if scheduler == "serial":
+        ctx = contextlib.nullcontext()
+    else:
+        from emulator.distributed import open_client, run_units
+
+        ctx = open_client(scheduler, n_workers=n_workers, retries=retries)
+    with ctx as client:  # a scheduler that cannot be reached fails before anything is written
+        if cfg_path.is_file():
+            remove_stale_staging(out)
+        else:
+            write_metadata(cfg_path, config)
+        if progress is not None:
+            progress(0, len(units))
+        t0 = time.perf_counter()
+        if client is None:
+            records, errors = [], []
+            for i, unit in enumerate(units, 1):
+                try:
+                    records.append(run_unit(unit, out, options, fault_marker=fault_marker))
+                except ExposimError as exc:  # a bad sequence: name it, keep the others
+                    errors.append({"unit": unit.key, "error": f"{type(exc).__name__}: {exc}"})
+                if progress is not None:
+                    progress(i, len(units))
+        else:
+            records, errors = run_units(client, units, out, options, retries=retries, progress=progress,
+                                        fault_marker=fault_marker)
+    wall_s = time.perf_counter() - t0
+    remove_stale_staging(out)  # attempts of units that were killed and ran again
+    order = {u.key: i for i, u in enumerate(units)}
+    records.sort(key=lambda r: order[f"{r['sequence']}/{r['group']}"])
+    errors.sort(key=lambda e: order[e["unit"]])
+    summary = {
+        "root": config["root"],
+        "sequences": list(found),
+        "methods": names,
+        "groups": [list(g) for g in plan_groups(names, group_size)],
+        "scheduler": scheduler,
+        "units": [{k: v for k, v in r.items() if k != "results"} for r in records],
+        "errors": errors,
+        "per_sequence": {name: {} for name in found},
+        "throughput": throughput(records, wall_s, len(plan_groups(names, group_size))),
+    }
+    for r in records:
+        summary["per_sequence"][r["sequence"]].update(r["results"])
+    return write_dataset_report(out, summary)
+
+
+def to_plain(value):
+    """``value`` as it reads back from JSON (tuples -> lists), for comparing configurations."""
+    import json
+
+    return json.loads(json.dumps(value, default=str))
+
