@@ -106,13 +106,15 @@ def build_parser(commands: list[Command] | None = None) -> argparse.ArgumentPars
             except Exception as exc:
                 cmd.error = f"{cmd.value} failed to register: {type(exc).__name__}: {exc}"
             else:
-                if cmd.name not in sub.choices:
-                    cmd.error = f"{cmd.value} did not add a '{cmd.name}' command"
-                continue
+                if cmd.name in sub.choices:
+                    continue
+                cmd.error = f"{cmd.value} did not add a '{cmd.name}' command"
         if cmd.name in sub.choices:
             sub.choices[cmd.name].set_defaults(func=_broken(cmd))
         else:
-            sub.add_parser(cmd.name, help=f"(broken: {cmd.error})").set_defaults(func=_broken(cmd))
+            broken = sub.add_parser(cmd.name, help=f"(broken: {cmd.error})")
+            broken.add_argument("args", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)  # say why, whatever the arguments
+            broken.set_defaults(func=_broken(cmd))
     parser.commands = commands  # what main() warns about
     return parser
 
