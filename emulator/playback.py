@@ -68,6 +68,7 @@ __all__ = [
     "DEFAULT_SELECTOR",
     "saved_image",
     "resolve_noise_model",
+    "guard_exposure",
 ]
 
 #: First exposure of every method, ms.
@@ -356,6 +357,21 @@ def _fractions(hist: np.ndarray, table: np.ndarray, valid: np.ndarray, white: in
     return float(hist[clipped].sum()) / n, float(hist[valid[: hist.size]].sum()) / n
 
 
+def guard_exposure(proposed, fallback_ms: float, range_ms) -> tuple[float, float, bool]:
+    """What the loop makes of a method's answer: ``(proposed, next_ms, guarded)``.
+
+    ``proposed`` as a float (NaN if it is not a number); a non-finite or non-positive answer
+    is replaced by ``fallback_ms`` (the exposure just used) and ``guarded`` is True; the
+    result is clamped to ``range_ms`` (compare ``next_ms`` with ``proposed`` to see a clamp).
+    """
+    try:
+        proposed = float(proposed)
+    except (TypeError, ValueError):
+        proposed = math.nan
+    bad = not (math.isfinite(proposed) and proposed > 0)
+    return proposed, _clamp(fallback_ms if bad else proposed, range_ms), bad
+
+
 def _clamp(value: float, range_ms) -> float:
     lo, hi = range_ms
     return min(max(value, lo), hi)
@@ -486,16 +502,9 @@ def iter_run(
         stats.add_method(name, elapsed)
         if timeout_s is not None and elapsed > timeout_s:
             raise MethodFailed(f"took {elapsed:.3g} s in next_exposure, over the limit of {timeout_s:g} s")
-        guarded = getattr(method, "guard_count", 0) > before
-        try:
-            proposed = float(proposed)
-        except (TypeError, ValueError):
-            proposed = math.nan
-        nxt = proposed
-        if not (math.isfinite(nxt) and nxt > 0):
-            guarded = True
-            nxt = target
-        clamped_value = _clamp(nxt, lo_hi)
+        proposed, clamped_value, bad = guard_exposure(proposed, target, lo_hi)
+        guarded = bad or getattr(method, "guard_count", 0) > before
+        nxt = target if bad else proposed
         right_img = None
         sat_r = val_r = None
         if other_cam is not None:

@@ -236,3 +236,22 @@ def test_real_sample_all_methods_stereo(sample_seq, tmp_path):
         steps = res.steps[name]
         assert len(steps) == 4 and all(math.isfinite(s.next_ms) and 0.02 <= s.next_ms <= 50 for s in steps)
         assert steps[0].target_ms == 4.0
+
+
+@pytest.mark.parametrize("answer, expected", [
+    (2.5, (2.5, 2.5, False)),
+    (np.float32(0.004), (float(np.float32(0.004)), 0.01, False)),  # clamped to the range, not guarded
+    (500, (500.0, 30.0, False)),
+    (0.0, (0.0, 4.0, True)),
+    (-1, (-1.0, 4.0, True)),
+    (float("inf"), (float("inf"), 4.0, True)),
+    ("fast", (None, 4.0, True)),  # not a number: NaN
+    (None, (None, 4.0, True)),
+])
+def test_guard_exposure(answer, expected):
+    from emulator.playback import guard_exposure
+
+    proposed, nxt, guarded = guard_exposure(answer, 4.0, (0.01, 30.0))
+    want_p, want_next, want_guard = expected
+    assert (math.isnan(proposed) if want_p is None else proposed == want_p)
+    assert (nxt, guarded) == (want_next, want_guard)

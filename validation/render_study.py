@@ -67,6 +67,7 @@ from pathlib import Path
 
 import numpy as np
 
+from emulator.commands import argtypes
 from emulator.errors import ExposimError
 from emulator.io.files import prepare_output, write_results, write_text
 from validation.common import SHOT_INTERVAL_MS, ValidationError, provenance, study_scene, to_percent
@@ -513,19 +514,8 @@ def _plot(results: dict, path: Path) -> None:
 
 
 # ------------------------------------------------------------------------------------------ command line
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"size must look like WIDTHxHEIGHT, got {text!r}") from None
-    return w, h
 
 
-def _ints(text: str) -> tuple:
-    try:
-        return tuple(int(v) for v in text.split(",") if v.strip())
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected comma-separated integers, got {text!r}") from None
 
 
 def _sizes_text(sizes) -> str:
@@ -554,9 +544,9 @@ def add_arguments(p: argparse.ArgumentParser, *, output_option: bool = False) ->
                    help=f"pipeline check: {csv(quick.scenes)} at {quick.width}x{quick.height}, spp "
                         f"{csv(quick.spp_levels)}, {quick.reference_spp}-spp reference (a few minutes)")
     p.add_argument("--scenes", help="comma-separated study scenes " + both(csv, "scenes"))
-    p.add_argument("--size", type=_size, help=f"study size WxH (default {full.width}x{full.height}; "
+    p.add_argument("--size", type=argtypes.size, help=f"study size WxH (default {full.width}x{full.height}; "
                                               f"--quick {quick.width}x{quick.height})")
-    p.add_argument("--spp", type=_ints, help="comma-separated spp levels " + both(csv, "spp_levels"))
+    p.add_argument("--spp", type=argtypes.ints, help="comma-separated spp levels " + both(csv, "spp_levels"))
     p.add_argument("--reference-spp", type=int, help="spp of the raw reference " + both(str, "reference_spp"))
     p.add_argument("--texture-scenes", help="comma-separated scenes for the texture targets, '' for none " +
                                             both(csv, "texture_scenes"))
@@ -589,7 +579,7 @@ def config_from_args(args: argparse.Namespace) -> RenderStudyConfig:
         changes["texture_scenes"] = tuple(s.strip() for s in args.texture_scenes.split(",") if s.strip())
     if args.texture_sizes:
         try:
-            changes["texture_sizes"] = tuple(_size(s) for s in args.texture_sizes.split(",") if s.strip())
+            changes["texture_sizes"] = tuple(argtypes.size(s) for s in args.texture_sizes.split(",") if s.strip())
         except argparse.ArgumentTypeError as exc:
             raise ValidationError(f"--texture-sizes: {exc}") from None
     if args.texture_spp is not None:

@@ -24,9 +24,9 @@ import numpy as np
 from emulator.calibration.result import (
     CalibrationResult,
     Progress,
-    _report,
-    planes_of,
     origin_warnings,
+    planes_of,
+    sweep_neighbours,
     table_top_for,
 )
 from emulator.calibration.solver import _blas_single_thread, _comparametric_irls, _finish, _Knots, _robust_scale
@@ -67,26 +67,12 @@ def comparagram_pairs(
     white, black = int(sequence.white_level), int(sequence.black_level)
     lo, hi = black + margin_dn, white - margin_dn
     gen = np.random.default_rng(rng)
-    jobs = []
-    for cyc in sequence.cycles:
-        for cam in cams:
-            frames = cyc.frames.get(cam, {})
-            es = sorted(frames)
-            for a, b in zip(es[:-1], es[1:]):
-                if b / a <= max_ratio:
-                    jobs.append((cyc, cam, a, b))
     out: list[dict] = []
-    cache: dict = {}
-    for k, (cyc, cam, a, b) in enumerate(jobs):
-        for e in (a, b):
-            key = (cyc.index, cam, e)
-            if key not in cache:
-                raw = cyc.frames[cam][e].load()
-                cache[key] = [_dithered_sorted(p, gen) for p in planes_of(raw, stride)]
-        for key in [key for key in cache if key[0] != cyc.index]:  # only this sweep is needed
-            del cache[key]
+    for cyc, cam, a, b, planes_a, planes_b in sweep_neighbours(
+            sequence, cams, max_ratio, lambda raw: [_dithered_sorted(p, gen) for p in planes_of(raw, stride)],
+            progress, "comparagram"):
         da_all, db_all = [], []
-        for pa, pb in zip(cache[(cyc.index, cam, a)], cache[(cyc.index, cam, b)]):
+        for pa, pb in zip(planes_a, planes_b):
             # clipped fractions (in dithered units the clip sits at lo + 0.5 / hi - 0.5)
             fa_lo = np.searchsorted(pa, lo + 0.5) / pa.size
             fb_lo = np.searchsorted(pb, lo + 0.5) / pb.size
@@ -114,7 +100,6 @@ def comparagram_pairs(
                     "d_hi": np.concatenate(db_all),
                 }
             )
-        _report(progress, k + 1, len(jobs), f"comparagram {cam} cycle {cyc.index} {a:g}->{b:g} ms")
     return out
 
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Callable, Iterator
 
 import numpy as np
 
@@ -16,7 +16,8 @@ from emulator.errors import ResponseError
 from emulator.io.pcalib import check_origin
 from emulator.response import CameraResponse
 
-__all__ = ["CalibrationResult", "Progress", "bayer_subsample", "table_top_for", "origin_warnings", "planes_of"]
+__all__ = ["CalibrationResult", "Progress", "bayer_subsample", "table_top_for", "origin_warnings", "planes_of",
+           "sweep_neighbours"]
 
 Progress = Callable[[int, int, str], None] | None
 
@@ -34,6 +35,31 @@ def table_top_for(white_level: int) -> int:
 def planes_of(raw: np.ndarray, stride: int) -> list[np.ndarray]:
     """The four Bayer planes of a mosaic, subsampled by ``stride``, flattened."""
     return [p.reshape(-1) for p in bayer_subsample(raw, stride)]
+
+
+def sweep_neighbours(sequence, cameras, max_ratio: float, prepare: Callable[[np.ndarray], object],
+                     progress: Progress = None, label: str = "pair") -> Iterator[tuple]:
+    """Every two consecutive brackets ``a < b`` of one sweep with ``b / a <= max_ratio``.
+
+    Yields ``(cycle, camera, a, b, prepared_a, prepared_b)`` for every cycle and camera, where
+    ``prepared_x = prepare(raw image at x ms)``; each image is read and prepared once, and
+    only the current sweep's are kept.  ``progress`` hears ``label cam cycle a->b ms`` after
+    each pair.
+    """
+    jobs = []
+    for cyc in sequence.cycles:
+        for cam in cameras:
+            es = sorted(cyc.frames.get(cam, {}))
+            jobs.extend((cyc, cam, a, b) for a, b in zip(es[:-1], es[1:]) if b / a <= max_ratio)
+    cache: dict = {}
+    for k, (cyc, cam, a, b) in enumerate(jobs):
+        for key in [key for key in cache if key[0] != cyc.index]:  # only this sweep is needed
+            del cache[key]
+        for e in (a, b):
+            if (cyc.index, cam, e) not in cache:
+                cache[(cyc.index, cam, e)] = prepare(cyc.frames[cam][e].load())
+        yield cyc, cam, a, b, cache[(cyc.index, cam, a)], cache[(cyc.index, cam, b)]
+        _report(progress, k + 1, len(jobs), f"{label} {cam} cycle {cyc.index} {a:g}->{b:g} ms")
 
 
 def origin_warnings(response: CameraResponse, black_level: int, source: str) -> list[str]:

@@ -14,7 +14,7 @@ from typing import Sequence as SequenceType
 
 import numpy as np
 
-from emulator.calibration.result import Progress, _report, planes_of
+from emulator.calibration.result import Progress, planes_of, sweep_neighbours
 from emulator.errors import CalibrationError
 from emulator.io.pcalib import PCALIB_TOP_VALUE
 from emulator.response import CameraResponse
@@ -81,26 +81,13 @@ def cross_bracket_error(
         resp = resp.with_levels(white_level=min(resp.white_level, seq.white_level), black_level=seq.black_level)
     span = float(seq.white_level - seq.black_level)
     cams = tuple(cameras) if cameras is not None else tuple(seq.cameras)
-    jobs = []
-    for cyc in seq.cycles:
-        for cam in cams:
-            es = sorted(cyc.frames.get(cam, {}))
-            for a, b in zip(es[:-1], es[1:]):
-                if b / a <= max_ratio:
-                    jobs.append((cyc, cam, a, b))
     pairs: list[dict] = []
-    cache: dict = {}
-    for k, (cyc, cam, a, b) in enumerate(jobs):
-        for e in (a, b):
-            key = (cyc.index, cam, e)
-            if key not in cache:
-                raw = cyc.frames[cam][e].load()
-                cache[key] = np.concatenate(planes_of(raw, stride)).reshape(1, -1)
-        for key in [key for key in cache if key[0] != cyc.index]:
-            del cache[key]
+    for cyc, cam, a, b, img_a, img_b in sweep_neighbours(
+            seq, cams, max_ratio, lambda raw: np.concatenate(planes_of(raw, stride)).reshape(1, -1), progress, "scoring"):
+        images = {a: img_a, b: img_b}
         for src, tgt in ((a, b), (b, a)):
-            emu = emulate(cache[(cyc.index, cam, src)], src, tgt, resp).ravel()
-            real = cache[(cyc.index, cam, tgt)].ravel()
+            emu = emulate(images[src], src, tgt, resp).ravel()
+            real = images[tgt].ravel()
             d = np.quantile(emu, qs) - np.quantile(real, qs)
             pairs.append(
                 {
@@ -111,7 +98,6 @@ def cross_bracket_error(
                     "rmse_pct": float(100.0 * np.sqrt(np.mean(d * d)) / span),
                 }
             )
-        _report(progress, k + 1, len(jobs), f"scoring {cam} cycle {cyc.index} {a:g}<->{b:g} ms")
     if not pairs:
         raise CalibrationError(f"{seq.path}: no sweep holds two consecutive brackets to compare")
     errs = np.array([p["rmse_pct"] for p in pairs])

@@ -8,6 +8,7 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
+from emulator.commands import argtypes
 from emulator.errors import ExposimError
 from validation.ae_study.config import CONFIGS
 from validation.ae_study.study import redraw, run_study
@@ -15,16 +16,8 @@ from validation.ae_study.study import redraw, run_study
 __all__ = ["add_arguments", "run_from_args", "main"]
 
 
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WxH, e.g. 256x160, got {text!r}") from None
-    return w, h
 
 
-def _scenes(text: str) -> tuple[str, ...]:
-    return tuple(s.strip() for s in text.split(",") if s.strip())
 
 
 def add_arguments(p: argparse.ArgumentParser, *, output_option: bool = False) -> None:
@@ -43,9 +36,9 @@ def add_arguments(p: argparse.ArgumentParser, *, output_option: bool = False) ->
                    help=f"{quick.n_cycles} cycles per scene instead of {full.n_cycles} (a pipeline check, a few minutes)")
     p.add_argument("--cycles", type=int,
                    help=f"bracket cycles per scene (default: {full.n_cycles}; {quick.n_cycles} with --quick)")
-    p.add_argument("--size", type=_size, help=f"image size WxH (default: {full.width}x{full.height})")
+    p.add_argument("--size", type=argtypes.size, help=f"image size WxH (default: {full.width}x{full.height})")
     p.add_argument("--spp", type=int, help=f"render samples per pixel (default: {full.spp})")
-    p.add_argument("--scenes", type=_scenes, help=f"comma-separated scenes (default: {','.join(full.scenes)})")
+    p.add_argument("--scenes", type=argtypes.names, help=f"comma-separated scenes (default: {','.join(full.scenes)})")
     p.add_argument("--force", action="store_true", help="overwrite an existing results.json")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.add_argument("--redraw", action="store_true",

@@ -15,6 +15,8 @@ import shlex
 import sys
 from pathlib import Path
 
+from emulator.commands import argtypes
+
 __all__ = ["register"]
 
 _HELP = {
@@ -25,12 +27,8 @@ _HELP = {
 }
 
 
-def _csv(text: str) -> tuple:
-    return tuple(s.strip() for s in text.split(",") if s.strip())
 
 
-def _floats(text: str) -> tuple:
-    return tuple(float(s) for s in _csv(text))
 
 
 class _DefaultsFormatter(argparse.ArgumentDefaultsHelpFormatter):
@@ -90,16 +88,16 @@ def register(sub: argparse._SubParsersAction) -> None:
             q.add_argument("--exposures", type=int, dest="n_exposures", help="number of ground-truth exposures")
         if name in ("emulation", "selectors"):
             q.add_argument("--repeats", type=int, help="captures per ground-truth exposure (noise estimate)")
-            q.add_argument("--responses", type=_csv, help="comma-separated camera responses")
+            q.add_argument("--responses", type=argtypes.names, help="comma-separated camera responses")
         if name in ("emulation", "motion", "speed"):
-            q.add_argument("--scenes", type=_csv, help="comma-separated study scenes")
+            q.add_argument("--scenes", type=argtypes.names, help="comma-separated study scenes")
         if name == "emulation":
-            q.add_argument("--vignetting", type=_floats, help="comma-separated extra vignetting strengths")
+            q.add_argument("--vignetting", type=argtypes.floats, help="comma-separated extra vignetting strengths")
         if name == "selectors":
-            q.add_argument("--train-scenes", type=_csv, help="scenes that tune the proposed selector")
-            q.add_argument("--test-scenes", type=_csv, help="held-out scenes")
+            q.add_argument("--train-scenes", type=argtypes.names, help="scenes that tune the proposed selector")
+            q.add_argument("--test-scenes", type=argtypes.names, help="held-out scenes")
         if name == "motion":
-            q.add_argument("--speeds", type=_floats, dest="speeds_mps", help="walking speeds, m/s")
+            q.add_argument("--speeds", type=argtypes.floats, dest="speeds_mps", help="walking speeds, m/s")
         q.set_defaults(func=_run, experiment=name)
         for action in q._actions:
             if action.dest in _OPTION_FIELDS and action.dest != "cache_dir":

@@ -13,6 +13,7 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
+from emulator.commands import argtypes
 from emulator.errors import ExposimError
 from validation.live.config import CONFIG_CHANGES, CONFIGS, DEFAULTS, LiveConfig
 
@@ -28,16 +29,8 @@ DESCRIPTION = (
     "and measures the noise variance ratio. Writes results.json, report.md, exposure_<scene>.png, metrics.png.")
 
 
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WxH, e.g. 256x160, got {text!r}") from None
-    return w, h
 
 
-def _names(text: str) -> tuple[str, ...]:
-    return tuple(s.strip() for s in text.split(",") if s.strip())
 
 
 def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
@@ -49,13 +42,13 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument("--quick", action="store_true",
                    help=f"reduced configuration: {quick.n_cycles} cycles per scene, {quick.noise_repeats} noise "
                         "repeats (a pipeline check in minutes); other options still apply")
-    p.add_argument("--scenes", type=_names, help=f"comma-separated scenes (default {','.join(full.scenes)})")
+    p.add_argument("--scenes", type=argtypes.names, help=f"comma-separated scenes (default {','.join(full.scenes)})")
     p.add_argument("--cycles", type=int,
                    help=f"bracket cycles per scene (default {full.n_cycles}; --quick {quick.n_cycles})")
-    p.add_argument("--size", type=_size, help=f"image size WxH (default {full.width}x{full.height})")
+    p.add_argument("--size", type=argtypes.size, help=f"image size WxH (default {full.width}x{full.height})")
     p.add_argument("--spp", type=int, help=f"render samples per pixel (default {full.spp})")
     p.add_argument("--seed", type=int, help=f"scene, render, camera and live-capture seed (default {full.seed})")
-    p.add_argument("--methods", type=_names,
+    p.add_argument("--methods", type=argtypes.names,
                    help=f"comma-separated AE methods (default all {len(full.methods)}: {', '.join(full.methods)})")
     p.add_argument("--noise-repeats", type=int,
                    help=f"captures per exposure for the noise variance ratio (default {full.noise_repeats}; "

@@ -11,7 +11,6 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -113,7 +112,7 @@ def iter_live(
     import synth
     from emulator.dataset import CAMERAS
     from emulator.io.borealhdr import load_sequence, sequence_response
-    from emulator.playback import DEFAULT_RANGE_MS, CycleStep, MethodStep, build_methods
+    from emulator.playback import DEFAULT_RANGE_MS, CycleStep, MethodStep, build_methods, guard_exposure
     from emulator.select import saturated_fraction, select
 
     if timing not in VARIANTS:
@@ -169,15 +168,9 @@ def iter_live(
             right = images[1] if len(images) > 1 else None
             before = getattr(method, "guard_count", 0)
             proposed = method.next_exposure(left, target)
-            guarded = getattr(method, "guard_count", 0) > before
-            try:
-                proposed = float(proposed)
-            except (TypeError, ValueError):
-                proposed = math.nan
-            nxt = proposed
-            if not (math.isfinite(nxt) and nxt > 0):
-                guarded, nxt = True, target
-            clamped = min(max(nxt, lo), hi)  # the guard and clamp of emulator.playback.iter_run
+            proposed, clamped, bad = guard_exposure(proposed, target, (lo, hi))  # as emulator.playback.iter_run
+            guarded = bad or getattr(method, "guard_count", 0) > before
+            nxt = target if bad else proposed
             sat = saturated_fraction(left, white_level=white, black_level=black)
             sat_r = None if right is None else saturated_fraction(right, white_level=white, black_level=black)
             steps[name] = MethodStep(
