@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from emulator.io.files import REPORT_FILE, RESULTS_FILE, read_results, write_results, write_text
+from emulator.io.files import REPORT_FILE, RESULTS_FILE, first_free, read_results, write_results, write_text
 
 __all__ = ["run_demo", "demo_config", "emulation_check", "new_output_dir", "demo_dataset", "demo_dataset_key"]
 
@@ -50,13 +50,7 @@ def demo_config(quick: bool = False) -> dict:
 
 def new_output_dir(base: str | Path = "exposim-demo") -> Path:
     """The first of ``exposim-demo-1``, ``-2``, ... that does not exist (never overwrites)."""
-    base = Path(base)
-    i = 1
-    while True:
-        cand = base.with_name(f"{base.name}-{i}")
-        if not cand.exists():
-            return cand
-        i += 1
+    return first_free(base, 1)
 
 
 def _synth_kwargs(cfg: dict) -> dict:

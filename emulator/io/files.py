@@ -47,6 +47,7 @@ __all__ = [
     "write_results",
     "read_results",
     "prepare_output",
+    "first_free",
     "save_figure",
     "write_arrays",
     "read_arrays",
@@ -223,6 +224,15 @@ def read_results(path: str | os.PathLike) -> dict:
     if not path.is_file():
         raise FileNotFoundError(f"{path}: results not found")
     return _read_json_object(path, DatasetError)
+
+
+def first_free(base: str | os.PathLike, start: int = 2) -> Path:
+    """The first of ``base-{start}``, ``base-{start+1}``, ... that does not exist (for outputs that never overwrite)."""
+    base = Path(base)
+    k = int(start)
+    while (base.with_name(f"{base.name}-{k}")).exists():
+        k += 1
+    return base.with_name(f"{base.name}-{k}")
 
 
 def prepare_output(folder: str | os.PathLike, *, force: bool = False) -> Path:

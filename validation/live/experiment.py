@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from emulator.io.files import REPORT_FILE, RESULTS_FILE, read_results, to_jsonable, write_results, write_text
+from emulator.io.files import REPORT_FILE, RESULTS_FILE, first_free, read_results, to_jsonable, write_results, write_text
 from validation.live.compare import exposure_log2_errors, image_errors, measure_noise_variance_ratio
 from validation.live.config import (
     BRIGHTENING_PAIRS,
@@ -44,12 +44,7 @@ def numbered_output(out) -> Path:
     out = Path(out)
     if not out.exists() or (out.is_dir() and not any(out.iterdir())):
         return out
-    k = 2
-    while True:
-        cand = out.with_name(f"{out.name}-{k}")
-        if not cand.exists():
-            return cand
-        k += 1
+    return first_free(out)
 
 
 def _bar(total: int, desc: str, enabled: bool):
