@@ -185,7 +185,7 @@ def _is_complete(folder: Path) -> bool:
 def run_unit(unit: Unit, out_dir: str | os.PathLike, options: Mapping, *, fault_marker: str | None = None) -> dict:
     """Run one (sequence, method group) into ``out_dir/sequence/group`` (idempotent, atomic).
 
-    ``options`` are keyword arguments of :func:`emulator.playback.run_to_folder` (mode,
+    ``options`` are keyword arguments of :func:`emulator.runner.run_to_folder` (mode,
     selector, initial_ms, range_ms, options, save, response_path, jobs).  An existing
     complete folder is returned as is (``reused``); otherwise the run goes to a staging
     folder beside it that is renamed into place when complete; if another attempt renamed
@@ -199,7 +199,7 @@ def run_unit(unit: Unit, out_dir: str | os.PathLike, options: Mapping, *, fault_
     from emulator.io.borealhdr import load_sequence
     from emulator.io.files import write_metadata
     from emulator.io.runfolder import RUN_FILE, read_run_json
-    from emulator.playback import run_to_folder
+    from emulator.runner import run_to_folder
     from emulator.report.run import write_run_report
 
     out_dir = Path(out_dir)
@@ -366,7 +366,7 @@ def run_dataset(
 ) -> dict:
     """Run methods on every selected sequence under ``root`` into ``out_dir``; returns the summary.
 
-    ``options``: keyword arguments of :func:`emulator.playback.run_to_folder` for every unit
+    ``options``: keyword arguments of :func:`emulator.runner.run_to_folder` for every unit
     (mode, selector, initial_ms, range_ms, options, save, response_path, jobs).
     ``scheduler``: ``serial`` (in this process), ``local`` (a Dask ``LocalCluster`` of
     ``n_workers`` processes, default sized to the machine) or ``tcp://HOST:PORT`` (an
@@ -377,7 +377,7 @@ def run_dataset(
     ``progress(done, total)`` after each unit.
     """
     from emulator.io.files import read_metadata, write_metadata
-    from emulator.playback import parse_methods
+    from emulator.autoexposure.methodset import parse_methods
     from emulator.report.dataset import write_dataset_report
 
     out = Path(out_dir)

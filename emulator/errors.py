@@ -18,6 +18,7 @@ __all__ = [
     "MetricsError",
     "RunFolderError",
     "TrajectoryError",
+    "PlaybackError",
 ]
 
 
@@ -60,3 +61,7 @@ class RunFolderError(MetricsError):
 
 class TrajectoryError(MetricsError):
     """A trajectory file is malformed, or two trajectories cannot be associated."""
+
+
+class PlaybackError(ExposimError):
+    """A run cannot proceed: bad configuration, or a resumed run that does not match its folder."""

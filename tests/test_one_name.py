@@ -19,7 +19,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 import emulator.errors
-from emulator import playback
+from emulator import playback, runner
 from emulator.autoexposure import DEFAULT_RANGE_MS, METHOD_NAMES, make_method
 from emulator.gray import bayer_to_gray8
 from emulator.io.borealhdr import load_sequence
@@ -234,7 +234,7 @@ def test_one_clamp_default_for_ae_methods_and_the_closed_loop():
     assert DEFAULT_RANGE_MS == (0.02, 50.0)
     # 22 frames/s: one shot every ~45.5 ms, so a 50 ms clamp is the shortest round bound above it
     assert 1000.0 / 22 < DEFAULT_RANGE_MS[1]
-    for fn in (playback.iter_run, playback.run, playback.run_to_folder):
+    for fn in (playback.iter_run, playback.run, runner.run_to_folder):
         assert inspect.signature(fn).parameters["range_ms"].default is DEFAULT_RANGE_MS, fn.__name__
     for name in METHOD_NAMES:
         assert make_method(name, mode="paper").range_ms == DEFAULT_RANGE_MS, name
@@ -342,7 +342,7 @@ def test_png8_run_images_are_the_metrics_gray8_with_black_level(tmp_path):
     seq = load_sequence(root)
     assert seq.black_level == black
     for save in ("png16", "png8"):
-        playback.run_to_folder(seq, ["classical-50"], tmp_path / save, save=save, make_report=False)
+        runner.run_to_folder(seq, ["classical-50"], tmp_path / save, save=save, make_report=False)
     r16, r8 = read_run_folder(tmp_path / "png16"), read_run_folder(tmp_path / "png8")
     assert (r8.white_level, r8.black_level) == (white, black)
     compared = 0

@@ -21,7 +21,8 @@ from emulator.autoexposure import METHOD_NAMES, MODES
 from emulator.dataset import Frame
 from emulator.io.borealhdr import load_sequence, write_frame
 from emulator.io.runfolder import CSV_COLUMNS, format_row
-from emulator.playback import iter_run, run, run_to_folder
+from emulator.playback import iter_run, run
+from emulator.runner import run_to_folder
 from emulator.io.pcalib import write_response
 from emulator.response import CameraResponse
 

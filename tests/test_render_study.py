@@ -110,11 +110,13 @@ def test_tiny_study_writes_table_plot_and_json(tmp_path):
     steps = []
     res = rs.run_render_study(tmp_path / "out", TINY, progress=steps.append, command="test")
     assert sum(steps) == rs.total_steps(TINY)
-    assert [(r["spp"], r["denoise"]) for r in res["rows"]] == [(1, "off"), (1, "oidn"), (2, "off"), (2, "oidn")]
+    assert [(r["spp"], r["denoise"]) for r in res["rows"]] == [
+        (s, d) for s in (1, 2) for d in ("off", "oidn", "oidn-fast")]
     for r in res["rows"]:
         assert r["time_s"] > 0 and r["rmse_pct"] >= 0 and 0 <= r["repeat_seeds"] <= 1 and r["flicker_pct"] >= 0
     on = json.loads((tmp_path / "out" / "results.json").read_text())
-    assert on["provenance"]["config"]["reference_spp"] == 8 and len(on["speedups"]) == 2
+    assert on["provenance"]["config"]["reference_spp"] == 8 and [(x["spp"], x["denoise"]) for x in on["speedups"]] == [
+        (1, "oidn"), (1, "oidn-fast"), (2, "oidn"), (2, "oidn-fast")]
     assert on["texture"][0]["kp_met"] is None  # no real sequence: no verdict
     report = (tmp_path / "out" / "report.md").read_text()
     assert "| 2 | " in report and "static_lab" in report and report == rs.render_study_table(on) + "\n"
@@ -179,7 +181,8 @@ def test_exposim_validate_render_runs_the_study(tmp_path, capsys):
     assert res["provenance"]["experiment"] == (
         f"exposim validate render -o {tmp_path / 'out'} --scenes static_lab --size 24x16 --spp 1,2 "
         f"--reference-spp 8 --texture-scenes '' --real {tmp_path / 'none'}")
-    assert [(r["spp"], r["denoise"]) for r in res["rows"]] == [(1, "off"), (1, "oidn"), (2, "off"), (2, "oidn")]
+    assert [(r["spp"], r["denoise"]) for r in res["rows"]] == [
+        (s, d) for s in (1, 2) for d in ("off", "oidn", "oidn-fast")]
     assert res["texture"] == [] and res["real"] == {"24x16": None}
     assert "wrote " + str(tmp_path / "out" / "results.json") in capsys.readouterr().out
     assert main(args) == 1  # an earlier results.json is never overwritten without --force

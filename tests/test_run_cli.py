@@ -9,7 +9,9 @@ import numpy as np
 import pytest
 
 from emulator.cli import main
-from emulator.playback import CSV_COLUMNS, PlaybackError, run_to_folder
+from emulator.errors import PlaybackError
+from emulator.io.runfolder import CSV_COLUMNS
+from emulator.runner import run_to_folder
 from test_playback import write_static_sequence
 
 METHODS = "classical-50,kim,zhang,fixed"

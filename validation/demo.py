@@ -209,7 +209,7 @@ def run_demo(output=None, *, quick: bool = False, progress=None, cache_dir=None)
     from emulator.io.borealhdr import load_sequence
     from emulator.metrics.bench import bench_features, bench_vo
     from emulator.metrics.vo import VOParameters
-    from emulator.playback import run_to_folder
+    from emulator.runner import run_to_folder
 
     def say(stage: str, done: int, total: int) -> None:
         if progress is not None:

@@ -7,8 +7,9 @@ Run from the repository root::
                                           [--texture-spp S] [--texture-poses N] [--real PATH] [--force]
 
 Per study scene (:data:`validation.common.STUDY_SCENES`), at the study size, for every spp
-level, the raw path-traced estimate (``denoise="off"``) and the default denoised render
-(Open Image Denoise with albedo and normal, :mod:`scenes.denoise`) of one pose, each
+level, the raw path-traced estimate (``denoise="off"``) and the two denoised renders
+(Open Image Denoise with albedo and normal, :mod:`scenes.denoise`: the default ``oidn`` and
+the cheaper ``oidn-fast``) of one pose, each
 against a raw reference of ``reference_spp`` samples (>= 1024 in the full study) at that
 pose:
 
@@ -92,7 +93,9 @@ DEFAULT_REAL_SEQUENCE = _shared_folder() / "data" / "borealhdr_sample" / "backpa
 TARGET_TOLERANCE = 0.25
 #: Keypoint repeatability target between two renders of one pose (issue 13).
 TARGET_REPEATABILITY = 0.80
-_MODES = ("off", "oidn")
+#: Render paths compared: the raw estimate and every named denoiser (:data:`scenes.denoise.DENOISERS`).
+_MODES = ("off", "oidn", "oidn-fast")
+_DENOISED = _MODES[1:]
 
 
 @dataclass(frozen=True)
@@ -204,7 +207,7 @@ def speedups(rows: list[dict]) -> list[dict]:
         lt = np.log([r["time_s"] for r in raw])
         le = np.log([max(r["rmse_pct"], 1e-12) for r in raw])
         for r in rows:
-            if r["scene"] != scene or r["denoise"] != "oidn":
+            if r["scene"] != scene or r["denoise"] == "off":
                 continue
             e = np.log(max(r["rmse_pct"], 1e-12))
             extrapolated = bool(e < le.min() or e > le.max())
@@ -224,7 +227,7 @@ def speedups(rows: list[dict]) -> list[dict]:
                 slope = slope if slope < 0 else -0.5  # never extrapolate a flat or rising curve
                 t_eq = lt[i1] + (e - le[i1]) / slope
             t_raw = float(np.exp(t_eq))
-            out.append({"scene": scene, "spp": r["spp"], "denoised_time_s": r["time_s"],
+            out.append({"scene": scene, "spp": r["spp"], "denoise": r["denoise"], "denoised_time_s": r["time_s"],
                         "denoised_rmse_pct": r["rmse_pct"], "raw_time_same_error_s": t_raw,
                         "speedup": t_raw / r["time_s"], "extrapolated": extrapolated})
     return out
@@ -285,13 +288,14 @@ def _scene_rows(key: str, config: RenderStudyConfig, tmp_cache: Path, tick, real
         for pose, seed in frames:
             raw, info = scenes.render_with_info(scene, pose, spp=int(spp), seed=int(seed), denoise="off",
                                                 cache_dir=tmp_cache, **kw)
-            den, dinfo = scenes.render_with_info(scene, pose, spp=int(spp), seed=int(seed), denoise="oidn",
-                                                 cache_dir=tmp_cache, **kw)
-            fallback = fallback or dinfo["fallback"]
             times["off"].append(info["render_s"])
-            times["oidn"].append(info["render_s"] + dinfo["aux_s"] + dinfo["denoise_s"])
             images["off"].append(raw)
-            images["oidn"].append(den)
+            for mode in _DENOISED:
+                den, dinfo = scenes.render_with_info(scene, pose, spp=int(spp), seed=int(seed), denoise=mode,
+                                                     cache_dir=tmp_cache, **kw)
+                fallback = fallback or dinfo["fallback"]
+                times[mode].append(info["render_s"] + dinfo["aux_s"] + dinfo["denoise_s"])
+                images[mode].append(den)
             tick()
         for mode in _MODES:
             imgs = images[mode]
@@ -308,7 +312,7 @@ def _scene_rows(key: str, config: RenderStudyConfig, tmp_cache: Path, tick, real
             st = image_stats(grays[0])
             rows.append({
                 "scene": key, "spp": int(scenes.effective_spp(int(spp))), "denoise": mode,
-                "denoise_applied": "off" if (mode == "oidn" and fallback) else mode,
+                "denoise_applied": "off" if (mode != "off" and fallback) else mode,
                 "time_s": float(np.median(times[mode][1:])),
                 "rmse_pct": float(np.mean(errs)),
                 "bright_rel_err": float(np.mean([b["bright_rel_err"] for b in bright])),
@@ -466,10 +470,10 @@ def render_study_table(results: dict) -> str:
         lines.append("")
     if results["speedups"]:
         lines += ["## Speed-up of the denoiser (raw time for the same error / denoised time)", "",
-                  "| scene | spp | denoised s | error % | raw s for that error | speed-up | target >= 10 |",
-                  "|---|---:|---:|---:|---:|---:|---|"]
+                  "| scene | denoiser | spp | denoised s | error % | raw s for that error | speed-up | target >= 10 |",
+                  "|---|---|---:|---:|---:|---:|---:|---|"]
         for s in results["speedups"]:
-            lines.append(f"| {s['scene']} | {s['spp']} | {_f(s['denoised_time_s'])} | {_f(s['denoised_rmse_pct'])} | "
+            lines.append(f"| {s['scene']} | {s.get('denoise', 'oidn')} | {s['spp']} | {_f(s['denoised_time_s'])} | {_f(s['denoised_rmse_pct'])} | "
                          f"{_f(s['raw_time_same_error_s'])}{' (extrapolated)' if s['extrapolated'] else ''} | "
                          f"{_f(s['speedup'])} | {_yes(s['speedup'] >= 10)} |")
         lines.append("")
@@ -495,14 +499,15 @@ def _plot(results: dict, path: Path) -> None:
     keys = list(results["scenes"])
     fig, axes = new_figure(len(keys), 5.0, 4.0)
     for ax, key in zip(axes, keys):
-        for mode, style in (("off", "o-"), ("oidn", "s-")):
+        for mode, style in (("off", "o-"), ("oidn", "s-"), ("oidn-fast", "^-")):
             rs = sorted((r for r in results["rows"] if r["scene"] == key and r["denoise"] == mode),
                         key=lambda r: r["spp"])
             if not rs:
                 continue
             x = [r["time_s"] for r in rs]
             y = [max(r["rmse_pct"], 1e-6) for r in rs]
-            ax.loglog(x, y, style, label="raw" if mode == "off" else "denoised (OIDN)")
+            ax.loglog(x, y, style, label={"off": "raw", "oidn": "denoised (OIDN)",
+                                          "oidn-fast": "denoised (OIDN fast)"}[mode])
             for r, xi, yi in zip(rs, x, y):
                 ax.annotate(str(r["spp"]), (xi, yi), textcoords="offset points", xytext=(3, 3), fontsize=7)
         ax.set_title(key)

@@ -115,7 +115,7 @@ def emulate_cycle(
 def _emulate(args) -> int:
     from emulator.io.borealhdr import load_sequence, sequence_response
     from emulator.io.png import write_png8, write_png16
-    from emulator.playback import saved_image
+    from emulator.runner import saved_image
 
     seq = load_sequence(args.sequence)
     cams = ("left", "right") if args.camera == "both" else (args.camera,)

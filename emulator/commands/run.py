@@ -1,4 +1,4 @@
-"""``exposim run``: AE methods in closed loop on a recording (calls :func:`emulator.playback.run_to_folder`)."""
+"""``exposim run``: AE methods in closed loop on a recording (calls :func:`emulator.runner.run_to_folder`)."""
 
 from __future__ import annotations
 
@@ -175,7 +175,8 @@ def _run(args) -> int:
                            "pass --sequences all for a dataset run")
     from emulator.autoexposure import DEFAULT_RANGE_MS
     from emulator.io.runfolder import RUN_FILE, read_run_json
-    from emulator.playback import DEFAULT_INITIAL_MS, DEFAULT_SELECTOR, run_to_folder
+    from emulator.playback import DEFAULT_INITIAL_MS, DEFAULT_SELECTOR
+    from emulator.runner import run_to_folder
 
     given = {
         "methods": args.methods,

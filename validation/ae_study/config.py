@@ -22,7 +22,7 @@ __all__ = [
 
 #: Scenes of the study (issue 7).
 SCENES = ("forest_winter", "forest_edge", "sun_glare")
-#: The seven AE methods, in the order of :func:`emulator.playback.parse_methods`.
+#: The seven AE methods, in the order of :func:`emulator.autoexposure.methodset.parse_methods`.
 METHODS = ("fixed", "classical-30", "classical-50", "classical-70", "shim", "zhang", "kim")
 #: The paper's names of the methods.
 PAPER_NAMES = {

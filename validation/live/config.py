@@ -29,7 +29,7 @@ __all__ = [
 
 #: Scenes of the experiment (issue 14: three named ones and one more).
 SCENES = ("forest_winter", "sun_glare", "forest_edge", "forest_summer")
-#: The seven AE methods (order of ``emulator.playback.parse_methods``).
+#: The seven AE methods (order of ``emulator.autoexposure.methodset.parse_methods``).
 METHODS = ("fixed", "classical-30", "classical-50", "classical-70", "shim", "zhang", "kim")
 #: Timing variants of the live loop.
 VARIANTS = ("same-instant", "fixed-instant")
@@ -117,7 +117,7 @@ class LiveConfig:
     def __post_init__(self) -> None:
         import scenes
 
-        from emulator.playback import parse_methods
+        from emulator.autoexposure.methodset import parse_methods
         from emulator.select import SELECTORS
 
         if not self.scenes:

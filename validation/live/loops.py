@@ -112,7 +112,8 @@ def iter_live(
     import synth
     from emulator.dataset import CAMERAS
     from emulator.io.borealhdr import load_sequence, sequence_response
-    from emulator.playback import DEFAULT_RANGE_MS, CycleStep, MethodStep, build_methods, guard_exposure
+    from emulator.autoexposure.methodset import build_methods
+    from emulator.playback import DEFAULT_RANGE_MS, CycleStep, MethodStep, guard_exposure
     from emulator.select import saturated_fraction, select
 
     if timing not in VARIANTS:
@@ -198,7 +199,7 @@ def write_run_folder(folder, sequence_path, cycles, names, *, white_level: int, 
                      description: dict | None = None) -> Path:
     """Write cycles (with images) as a run folder that ``exposim bench features|vo`` read.
 
-    The layout of :func:`emulator.playback.run_to_folder` with ``save="png16"``, written by
+    The layout of :func:`emulator.runner.run_to_folder` with ``save="png16"``, written by
     the same :class:`emulator.io.runfolder.RunWriter`: ``run.json``,
     ``<method>/exposures.csv``, ``<method>/images/{left,right}/<ts>.png``,
     ``<method>/images/times.txt``.  Refuses an existing non-empty folder
