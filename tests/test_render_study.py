@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import sys
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -123,6 +124,16 @@ def test_tiny_study_writes_table_plot_and_json(tmp_path):
     assert (tmp_path / "out" / "time_vs_error.png").stat().st_size > 1000
     with pytest.raises(OutputExistsError, match="refusing to overwrite"):
         rs.run_render_study(tmp_path / "out", TINY)
+    assert on["scenes"]["static_lab"]["reference_cached"] is False and "from the render cache" not in report
+
+
+@pytest.mark.render
+def test_a_cached_reference_is_reported_as_cached(tmp_path):
+    cfg = replace(TINY, spp_levels=(1,), texture_scenes=(), cache_dir=str(tmp_path / "cache"))
+    first = rs.run_render_study(tmp_path / "a", cfg)["scenes"]["static_lab"]
+    second = rs.run_render_study(tmp_path / "b", cfg)["scenes"]["static_lab"]
+    assert (first["reference_cached"], second["reference_cached"]) == (False, True)
+    assert "Reference 8 spp (from the render cache, " in (tmp_path / "b" / "report.md").read_text()
 
 
 @pytest.mark.render
