@@ -274,3 +274,25 @@ def test_validate_help_shows_the_defaults(capsys, monkeypatch):
     full, quick = EmulationConfig(), EmulationConfig.quick()
     assert f"render width (pixels) (default: {full.width}; with --quick: {quick.width})" in text
     assert f"(default: {full.n_exposures}; with --quick: {quick.n_exposures})" in text
+
+
+class _Stop(Exception):
+    pass
+
+
+def test_scheduler_reaches_the_renders_and_a_bad_one_creates_nothing(tmp_path, monkeypatch, capsys):
+    import scenes.synthesize
+
+    seen = {}
+
+    def fake_synthesize(*args, **kwargs):
+        seen.update(kwargs)
+        raise _Stop
+
+    monkeypatch.setattr(scenes.synthesize, "synthesize", fake_synthesize)
+    with pytest.raises(_Stop):
+        main([str(tmp_path / "run"), "--quick", "--no-progress", "--scheduler", "local"])
+    assert seen["scheduler"] == "local"
+    assert main([str(tmp_path / "bad"), "--quick", "--scheduler", "tcp:/x"]) == 1
+    assert "--scheduler must be 'local' or tcp://HOST:PORT, got 'tcp:/x'" in capsys.readouterr().err
+    assert not (tmp_path / "bad").exists()

@@ -10,6 +10,8 @@ from pathlib import Path
 
 from emulator.commands import argtypes
 from emulator.errors import ExposimError
+from scenes.commands.render import add_scheduler_option
+from scenes.parallel import check_scheduler
 from validation.ae_study.config import CONFIGS
 from validation.ae_study.study import redraw, run_study
 
@@ -39,6 +41,7 @@ def add_arguments(p: argparse.ArgumentParser, *, output_option: bool = False) ->
     p.add_argument("--size", type=argtypes.size, help=f"image size WxH (default: {full.width}x{full.height})")
     p.add_argument("--spp", type=int, help=f"render samples per pixel (default: {full.spp})")
     p.add_argument("--scenes", type=argtypes.names, help=f"comma-separated scenes (default: {','.join(full.scenes)})")
+    add_scheduler_option(p)
     p.add_argument("--force", action="store_true", help="overwrite an existing results.json")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.add_argument("--redraw", action="store_true",
@@ -65,7 +68,8 @@ def run_from_args(args: argparse.Namespace, command: str) -> dict:
     if args.scenes:
         changes["scenes"] = args.scenes
     cfg = replace(CONFIGS["quick" if args.quick else "full"], **changes)
-    return run_study(args.output, cfg, force=args.force, progress=not args.no_progress, command=command)
+    return run_study(args.output, cfg, force=args.force, progress=not args.no_progress, command=command,
+                     scheduler=check_scheduler(args.scheduler))
 
 
 def summary_lines(args: argparse.Namespace, results: dict) -> list[str]:

@@ -33,7 +33,7 @@ def _callback(bar):
 
 
 def run_study(out, config: StudyConfig = CONFIGS["full"], *, force: bool = False, progress: bool = True,
-              command: str | None = None, cache_dir=None) -> dict:
+              command: str | None = None, cache_dir=None, scheduler: str | None = None) -> dict:
     """Run the study into folder ``out`` (layout in the module docstring); returns results.json's content.
 
     Parameters
@@ -52,6 +52,9 @@ def run_study(out, config: StudyConfig = CONFIGS["full"], *, force: bool = False
         The command line, recorded.
     cache_dir : None, path or False
         Render cache (see :func:`scenes.render`).
+    scheduler : None, "local" or "tcp://HOST:PORT"
+        Render every shot of the walks as Dask tasks first (:func:`scenes.synthesize.synthesize`):
+        the same cache entries and recordings as serial.
 
     Raises
     ------
@@ -82,7 +85,7 @@ def run_study(out, config: StudyConfig = CONFIGS["full"], *, force: bool = False
         with _bar(cfg.n_cycles * 6, f"[{k + 1}/{len(cfg.scenes)}] synthesise {scene_name}", "shot", progress) as bar:
             synthesize(scene, ds, n_cycles=cfg.n_cycles, width=cfg.width, height=cfg.height, spp=cfg.spp,
                        stereo=True, seed=cfg.camera_seed, render_seed=cfg.render_seed, cache_dir=cache_dir,
-                       progress=_callback(bar))
+                       progress=_callback(bar), scheduler=scheduler)
         timings[f"synthesise_{scene_name}_s"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         seq = load_sequence(ds)

@@ -15,6 +15,8 @@ from pathlib import Path
 
 from emulator.commands import argtypes
 from emulator.errors import ExposimError
+from scenes.commands.render import add_scheduler_option
+from scenes.parallel import check_scheduler
 from validation.live.config import CONFIG_CHANGES, CONFIGS, DEFAULTS, LiveConfig
 
 __all__ = ["HELP", "DESCRIPTION", "add_arguments", "register", "build_parser", "config_from_args", "command_line",
@@ -56,6 +58,7 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument("--no-control", action="store_true", help="skip the re-seeded live control run")
     p.add_argument("--keep-radiance", action="store_true", help="keep the datasets' radiance EXRs (large)")
     p.add_argument("--cache-dir", help="render cache (default $EXPOSIM_CACHE or ~/.cache/exposim/renders)")
+    add_scheduler_option(p)
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.add_argument("--redraw", action="store_true",
                    help="only recompute the verdicts and rewrite results.json, report.md and the figures of the "
@@ -127,11 +130,13 @@ def run(args, prog: str = "exposim validate live") -> int:
         print(headline(results))
         return 0
     cfg = config_from_args(args)
+    scheduler = check_scheduler(args.scheduler)
     out = numbered_output(args.output)
     if out != args.output:
         log(f"live: {args.output} exists and is not empty; writing to {out}")
     results = run_live_experiment(out, cfg, progress=not args.no_progress, command=command_line(args, prog),
-                                  cache_dir=args.cache_dir, log=None if args.no_progress else log)
+                                  cache_dir=args.cache_dir, log=None if args.no_progress else log,
+                                  scheduler=scheduler)
     print(headline(results))
     print(f"wrote {out / 'results.json'}, {out / 'report.md'} in {results['timings']['total_s'] / 60:.1f} min")
     return 0

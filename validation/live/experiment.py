@@ -64,10 +64,14 @@ def _runs_summary(cycles, names) -> dict:
 
 
 def run_live_experiment(out, config: LiveConfig | None = None, *, progress: bool = True, command: str | None = None,
-                        cache_dir=None, log: Callable[[str], None] | None = None) -> dict:
+                        cache_dir=None, log: Callable[[str], None] | None = None,
+                        scheduler: str | None = None) -> dict:
     """Run the experiment into ``out`` (a new or empty folder; see :func:`numbered_output`).
 
-    ``config`` defaults to ``CONFIGS["full"]``.  Returns the content of ``results.json``.
+    ``config`` defaults to ``CONFIGS["full"]``.  ``scheduler`` (``"local"`` or
+    ``"tcp://HOST:PORT"``) renders every shot of the walks as Dask tasks first
+    (:func:`scenes.synthesize.synthesize`; the same recordings as serial).  Returns the
+    content of ``results.json``.
     """
     import scenes
     from emulator.io.borealhdr import load_sequence, sequence_response
@@ -101,7 +105,7 @@ def run_live_experiment(out, config: LiveConfig | None = None, *, progress: bool
         with _bar(cfg.n_cycles * 6, f"{tag}: render + record", progress) as bar:
             synthesize(scene, ds, n_cycles=cfg.n_cycles, width=cfg.width, height=cfg.height, spp=cfg.spp, stereo=True,
                        seed=cfg.seed, render_seed=cfg.seed, noise=cfg.capture_noise, save_radiance=True,
-                       cache_dir=cache_dir, progress=lambda d, n: bar.update(d - bar.n))
+                       cache_dir=cache_dir, progress=lambda d, n: bar.update(d - bar.n), scheduler=scheduler)
         timings[f"record_{scene_name}_s"] = time.perf_counter() - t0
         say(f"{tag}: recorded {cfg.n_cycles} cycles in {timings[f'record_{scene_name}_s']:.0f} s")
         seq = load_sequence(ds)
