@@ -58,3 +58,23 @@ def pcalib_path() -> Path:
     if not PCALIB.is_file():
         pytest.skip(f"shared pcalib file not found at {PCALIB}")
     return PCALIB
+
+
+class SynthesizeCalled(Exception):
+    """Raised by the ``stop_at_synthesize`` fixture's stand-in: the study got as far as rendering."""
+
+
+@pytest.fixture
+def stop_at_synthesize(monkeypatch) -> dict:
+    """Replace :func:`scenes.synthesize.synthesize` by a stand-in that records its keyword
+    arguments in the returned dict and raises :class:`SynthesizeCalled` (for plumbing tests)."""
+    import scenes.synthesize
+
+    seen: dict = {}
+
+    def stand_in(*args, **kwargs):
+        seen.update(kwargs)
+        raise SynthesizeCalled
+
+    monkeypatch.setattr(scenes.synthesize, "synthesize", stand_in)
+    return seen

@@ -9,6 +9,7 @@ import time
 
 import numpy as np
 import pytest
+from conftest import SynthesizeCalled
 
 from emulator.errors import OutputExistsError
 from validation.ae_study import (
@@ -276,23 +277,11 @@ def test_validate_help_shows_the_defaults(capsys, monkeypatch):
     assert f"(default: {full.n_exposures}; with --quick: {quick.n_exposures})" in text
 
 
-class _Stop(Exception):
-    pass
 
-
-def test_scheduler_reaches_the_renders_and_a_bad_one_creates_nothing(tmp_path, monkeypatch, capsys):
-    import scenes.synthesize
-
-    seen = {}
-
-    def fake_synthesize(*args, **kwargs):
-        seen.update(kwargs)
-        raise _Stop
-
-    monkeypatch.setattr(scenes.synthesize, "synthesize", fake_synthesize)
-    with pytest.raises(_Stop):
+def test_scheduler_reaches_the_renders_and_a_bad_one_creates_nothing(tmp_path, stop_at_synthesize, capsys):
+    with pytest.raises(SynthesizeCalled):
         main([str(tmp_path / "run"), "--quick", "--no-progress", "--scheduler", "local"])
-    assert seen["scheduler"] == "local"
+    assert stop_at_synthesize["scheduler"] == "local"
     assert main([str(tmp_path / "bad"), "--quick", "--scheduler", "tcp:/x"]) == 1
     assert "--scheduler must be 'local' or tcp://HOST:PORT, got 'tcp:/x'" in capsys.readouterr().err
     assert not (tmp_path / "bad").exists()

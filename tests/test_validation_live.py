@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+from conftest import SynthesizeCalled
 
 import synth
 from emulator.autoexposure import make_method
@@ -268,23 +269,11 @@ def test_exposim_validate_live_cli(tmp_path, render_cache, capsys, monkeypatch):
     assert all(again[key] == res[key] for key in REQUIRED_KEYS)
 
 
-class _Stop(Exception):
-    pass
 
-
-def test_scheduler_reaches_the_renders_and_a_bad_one_creates_nothing(tmp_path, monkeypatch, capsys):
-    import scenes.synthesize
-
-    seen = {}
-
-    def fake_synthesize(*args, **kwargs):
-        seen.update(kwargs)
-        raise _Stop
-
-    monkeypatch.setattr(scenes.synthesize, "synthesize", fake_synthesize)
-    with pytest.raises(_Stop):
+def test_scheduler_reaches_the_renders_and_a_bad_one_creates_nothing(tmp_path, stop_at_synthesize, capsys):
+    with pytest.raises(SynthesizeCalled):
         main(["-o", str(tmp_path / "run"), "--quick", "--no-progress", "--scheduler", "tcp://10.0.0.1:8786"])
-    assert seen["scheduler"] == "tcp://10.0.0.1:8786"
+    assert stop_at_synthesize["scheduler"] == "tcp://10.0.0.1:8786"
     assert main(["-o", str(tmp_path / "bad"), "--quick", "--scheduler", "cluster9"]) == 1
     assert "--scheduler must be 'local' or tcp://HOST:PORT, got 'cluster9'" in capsys.readouterr().err
     assert not (tmp_path / "bad").exists()
