@@ -21,15 +21,13 @@ OUTPUT_FILES = ("scene.json", "poses_left.txt", "poses_right.txt")
 
 
 def parse_size(text: str) -> tuple[int, int]:
-    """``"480x300"`` -> (480, 300)."""
-    parts = text.lower().split("x")
+    """``"480x300"`` -> (480, 300) (:func:`emulator.commands.argtypes.size`); a bad size is a :class:`SceneError`."""
+    from emulator.commands.argtypes import size
+
     try:
-        w, h = (int(p) for p in parts)
-    except ValueError:
-        raise SceneError(f"--size must look like WIDTHxHEIGHT (e.g. 480x300), got {text!r}") from None
-    if w < 1 or h < 1:
-        raise SceneError(f"--size must be positive, got {text!r}")
-    return w, h
+        return size(text)
+    except argparse.ArgumentTypeError as exc:
+        raise SceneError(f"--size: {exc}") from None
 
 
 def parse_params(items: list[str] | None) -> dict:
