@@ -36,14 +36,12 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
-from threadpoolctl import threadpool_limits
 
 from emulator.errors import ExposimError, OutputExistsError
 
 __all__ = [
     "DATASET_FILE",
     "BOREALHDR_FULL",
-    "UNIT_BLAS_THREADS",
     "Unit",
     "discover_sequences",
     "plan_groups",
@@ -64,12 +62,6 @@ DATASET_FILE = "dataset.json"
 #: a stereo pair counted once: 6 per cycle at the recorder's 3.66 cycles/s) and duration.
 BOREALHDR_FULL = {"trajectories": 55, "images": 393_238, "duration_s": 5 * 3600.0}
 _STAGING = ".staging-"
-#: BLAS threads of a unit.  kim's Gaussian-process fit is sensitive to the last bits of its
-#: BLAS sums, which depend on the thread count (on the shared sample its first proposal is
-#: 35.0 ms with the default threads and 1.204 ms with one): every unit runs with one BLAS
-#: thread, as Dask's worker processes do (``OMP_NUM_THREADS=1``), so a unit gives the same
-#: bytes serially and on any worker.
-UNIT_BLAS_THREADS = 1
 
 
 class DatasetRunError(ExposimError):
@@ -221,10 +213,10 @@ def run_unit(unit: Unit, out_dir: str | os.PathLike, options: Mapping, *, fault_
     t0 = time.perf_counter()
     seq = load_sequence(unit.path)
     try:
-        _load_blas_libraries()  # a limit covers only the libraries loaded when it is set
-        with threadpool_limits(limits=UNIT_BLAS_THREADS):  # the same arithmetic in this process and on any worker
-            run_to_folder(seq, list(unit.methods), staging, progress=progress, make_report=False,
-                          command=f"exposim run (dataset unit {unit.key})", **dict(options))
+        # the closed loop runs the methods under one BLAS thread (emulator.pools): the same
+        # arithmetic in this process and on any worker
+        run_to_folder(seq, list(unit.methods), staging, progress=progress, make_report=False,
+                      command=f"exposim run (dataset unit {unit.key})", **dict(options))
         write_metadata(staging / RUN_FILE, {**read_run_json(staging), "n_images": count_images(seq),
                                             "n_brackets": len(seq.brackets), "dataset_unit": unit.key},
                        overwrite=True)
@@ -241,16 +233,6 @@ def run_unit(unit: Unit, out_dir: str | os.PathLike, options: Mapping, *, fault_
     write_run_report(final)
     record = _unit_record(unit, final, reused=False, wall_s=time.perf_counter() - t0)
     return record
-
-
-def _load_blas_libraries() -> None:
-    """Load every BLAS the methods may use (numpy's, scipy's, scikit-learn's) before limiting them."""
-    import scipy.linalg  # noqa: F401
-
-    try:
-        import sklearn.gaussian_process  # noqa: F401
-    except ImportError:  # pragma: no cover - scikit-learn is a dependency
-        pass
 
 
 def remove_stale_staging(out_dir: str | os.PathLike) -> list[Path]:

@@ -14,7 +14,8 @@ asks for), their histogram is computed once, and from it each method's saturated
 fractions follow without touching the pixels again; each ratio's lookup table is built once
 (cached on the :class:`~emulator.response.CameraResponse`), and methods with the same target
 in a cycle share one emulated image.  The images handed to methods are read-only.  ``jobs > 1`` runs the methods of
-a cycle on threads (NumPy and OpenCV release the GIL); results do not depend on ``jobs``.
+a cycle on threads (NumPy and OpenCV release the GIL); results do not depend on ``jobs``, nor on
+the machine's cores (each cycle's methods run under one BLAS thread, :mod:`emulator.pools`).
 
 Library API: :func:`iter_run` (a generator of :class:`CycleStep`) and :func:`run` (tables in
 memory).  Nothing here prints.  Methods are chosen by name in
@@ -47,6 +48,7 @@ from emulator.dataset import CAMERAS, Sequence
 from emulator.emulate import apply_lut, check_exposure
 from emulator.errors import DatasetError, PlaybackError
 from emulator.io.borealhdr import load_sequence, sequence_response
+from emulator.pools import single_thread_pools
 from emulator.select import SELECTORS, select
 
 __all__ = [
@@ -467,10 +469,11 @@ def iter_run(
             images = _CycleImages(cycle, white, black, stats, noise_spec, shapes)
             brackets = {e: (lambda e=e: images.saturated(method_cam, e)) for e in avail}
             args = [(name, m, images, brackets, missing, cycle) for name, m in built.items() if name not in failed]
-            if pool is None:
-                results = [checked_step(a) for a in args]
-            else:
-                results = list(pool.map(checked_step, args))
+            with single_thread_pools(user_api="blas"):  # results independent of the machine's cores
+                if pool is None:
+                    results = [checked_step(a) for a in args]
+                else:
+                    results = list(pool.map(checked_step, args))
             now_failed = {}
             for a, st in zip(args, results):
                 if isinstance(st, MethodFailed):

@@ -256,3 +256,18 @@ def test_guard_exposure(answer, expected):
     want_p, want_next, want_guard = expected
     assert (math.isnan(proposed) if want_p is None else proposed == want_p)
     assert (nxt, guarded) == (want_next, want_guard)
+
+
+def test_exposures_do_not_depend_on_the_blas_thread_count(sample_seq):
+    """A multi-threaded BLAS sums np.dot in another order: before the loop ran its methods
+    under one BLAS thread, Zhang's borealhdr proposals differed in the last bit between 1 and
+    2 OpenBLAS threads on this sample (e.g. 0x1.f144993e58550p+2 vs ...4fp+2 at cycle 2)."""
+    from threadpoolctl import threadpool_limits
+
+    bits = {}
+    for n in (1, 2):
+        with threadpool_limits(limits=n, user_api="blas"):
+            res = run(sample_seq, "classical-50,shim,zhang", mode="borealhdr")
+        bits[n] = {m: [float(s.proposed_ms).hex() for s in res.steps[m]] for m in res.steps}
+    assert bits[1] == bits[2]
+    assert len(bits[1]["zhang"]) == 4

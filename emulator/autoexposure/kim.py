@@ -48,6 +48,7 @@ import cv2
 import numpy as np
 
 from emulator.autoexposure._base import MAX_DN, AutoExposureError, AutoExposureMethod
+from emulator.pools import single_thread_pools
 
 __all__ = [
     "Kim2018",
@@ -230,31 +231,11 @@ def metric_paper(y: np.ndarray, *, alpha=ACTIVATION_ALPHA, tau=ACTIVATION_TAU,
 
 
 _FAST_GPR = None
-_BLAS_CONTROLLER = None
-
-
-def _single_thread_blas():
-    """Context limiting BLAS and OpenMP to one thread around each step.
-
-    The optimizer's tiny BLAS calls are ~7x slower with a thread pool on a busy machine
-    (measured), and, more importantly, a multi-threaded BLAS sums in another order: GP-MI
-    amplifies those last-bit differences, so without the limit the exposures depend on the
-    machine's core count (on the shared sample: 35.0 ms vs 1.204 ms at cycle 1).  The
-    controller is built after scikit-learn and SciPy are loaded, so it sees every pool
-    they bring (NumPy's and SciPy's OpenBLAS, scikit-learn's OpenMP)."""
-    global _BLAS_CONTROLLER
-    try:
-        from threadpoolctl import ThreadpoolController
-    except ImportError:  # pragma: no cover - threadpoolctl comes with scikit-learn
-        import contextlib
-
-        return contextlib.nullcontext()
-    if _BLAS_CONTROLLER is None:
-        import scipy.linalg  # noqa: F401  (load the pools before the controller lists them)
-        import sklearn.gaussian_process  # noqa: F401
-
-        _BLAS_CONTROLLER = ThreadpoolController()
-    return _BLAS_CONTROLLER.limit(limits=1)
+#: Every step runs under one BLAS/OpenMP thread (:mod:`emulator.pools`): the optimizer's tiny
+#: BLAS calls are ~7x slower with a thread pool on a busy machine (measured), and GP-MI
+#: amplifies a multi-threaded BLAS's last-bit differences into other exposures.  SciPy and
+#: scikit-learn are loaded first, so their pools are covered too.
+_STEP_POOLS = ("scipy.linalg", "sklearn.gaussian_process")
 
 
 def _fast_gpr_class():
@@ -407,7 +388,7 @@ class Kim2018(AutoExposureMethod):
         )
         x = np.asarray(self.window_t, dtype=np.float64).reshape(-1, 1)
         yv = np.asarray(self.window_e, dtype=np.float64)
-        with warnings.catch_warnings(), _single_thread_blas():
+        with warnings.catch_warnings(), single_thread_pools(_STEP_POOLS):
             warnings.simplefilter("ignore", ConvergenceWarning)
             warnings.simplefilter("ignore", RuntimeWarning)
             gp.fit(x, yv)
@@ -452,7 +433,7 @@ class Kim2018(AutoExposureMethod):
         return t_new
 
     def _step(self, raw: np.ndarray, t: float) -> float:
-        with _single_thread_blas():
+        with single_thread_pools(_STEP_POOLS):
             return self.update(t, self.metric(self.gray(raw)))
 
     def _options(self) -> dict:

@@ -19,20 +19,15 @@ import numpy as np
 from emulator.calibration.result import _report
 from emulator.errors import CalibrationError
 from emulator.io.pcalib import PCALIB_TOP_VALUE
+from emulator.pools import single_thread_pools
 from emulator.response import CameraResponse
 
 
 def _blas_single_thread():
-    """Context limiting BLAS to one thread: the systems here are small (256 knots), and on
-    a loaded machine OpenBLAS threads spin-waiting cost 50x the work.  No-op without
-    threadpoolctl."""
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover - threadpoolctl comes with scikit-learn
-        import contextlib
-
-        return contextlib.nullcontext()
-    return threadpool_limits(limits=1, user_api="blas")
+    """One BLAS thread: the systems here are small (256 knots), and on a loaded machine
+    OpenBLAS threads spin-waiting cost 50x the work (:func:`emulator.pools.single_thread_pools`,
+    with SciPy's BLAS loaded)."""
+    return single_thread_pools(("scipy.linalg",), user_api="blas")
 
 
 # ============================================================================ numerics

@@ -114,6 +114,7 @@ def iter_live(
     from emulator.io.borealhdr import load_sequence, sequence_response
     from emulator.autoexposure.methodset import build_methods
     from emulator.playback import DEFAULT_RANGE_MS, CycleStep, MethodStep, guard_exposure
+    from emulator.pools import single_thread_pools
     from emulator.select import saturated_fraction, select
 
     if timing not in VARIANTS:
@@ -168,7 +169,8 @@ def iter_live(
             left = images[0]
             right = images[1] if len(images) > 1 else None
             before = getattr(method, "guard_count", 0)
-            proposed = method.next_exposure(left, target)
+            with single_thread_pools(user_api="blas"):  # as emulator.playback.iter_run
+                proposed = method.next_exposure(left, target)
             proposed, clamped, bad = guard_exposure(proposed, target, (lo, hi))  # as emulator.playback.iter_run
             guarded = bad or getattr(method, "guard_count", 0) > before
             nxt = target if bad else proposed
