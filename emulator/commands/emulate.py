@@ -53,12 +53,14 @@ def emulate_cycle(
 ):
     """Emulate one cycle; returns (info dict, {camera: image}).
 
-    The selector sees the brackets present for every requested camera and decides on the
-    first camera's saturation (the left one for a stereo pair), once for all cameras.
+    One shot of the closed loop's emulated provider (:class:`emulator.playback.EmulatedProvider`):
+    the selector sees the brackets present for every requested camera and decides on the
+    first camera's saturation (the left one for a stereo pair), once for all cameras, and
+    the stereo pair must carry one timestamp.
     """
-    from emulator.emulate import check_exposure, emulate
-    from emulator.io.borealhdr import sequence_response
-    from emulator.select import saturated_fraction, select
+    from emulator.emulate import check_exposure
+    from emulator.playback import EmulatedProvider, RunConfig
+    from emulator.select import saturated_fraction
 
     exposure_ms = check_exposure(exposure_ms, "--exposure-ms")
     if not 0 <= cycle_index < len(sequence):
@@ -66,47 +68,38 @@ def emulate_cycle(
     missing = [c for c in cameras if c not in sequence.cameras]
     if missing:
         raise ExposimError(f"{sequence.path}: no {', '.join(missing)} camera in this recording")
-    cycle = sequence[cycle_index]
-    available = cycle.available(cameras)
-    if not available:
+    config = RunConfig(selector=selector)
+    response = config.response_for(sequence, response)
+    provider = EmulatedProvider(sequence, config, response, cameras=tuple(cameras), cycles=[cycle_index])
+    tick = next(provider.ticks())
+    if tick.skipped:
         raise ExposimError(
             f"{sequence.path}: cycle {cycle_index} has no bracket present for {' and '.join(cameras)}"
         )
-    response = response or sequence_response(sequence)
-    lead = cameras[0]
-    levels = dict(white_level=sequence.white_level, black_level=sequence.black_level)
-    images = {}
-
-    def frac(b):
-        return lambda: saturated_fraction(_load(lead, b), **levels)
-
-    def _load(cam, b):
-        key = (cam, b)
-        if key not in images:
-            images[key] = cycle.frames[cam][b].load()
-        return images[key]
-
-    chosen = select(selector, exposure_ms, {b: frac(b) for b in available}, **levels)
+    shot = tick.shot(exposure_ms, want_right=len(cameras) > 1)
+    chosen = shot.bracket_ms
     info = {
         "sequence": str(sequence.path),
         "cycle": cycle_index,
         "target_ms": exposure_ms,
         "selector": selector,
         "bracket_ms": chosen,
-        "ratio": exposure_ms / chosen,
+        "ratio": shot.ratio,
         "response": response.name,
         "cameras": {},
     }
+    levels = dict(white_level=sequence.white_level, black_level=sequence.black_level)
     out = {}
-    for cam in cameras:
-        frame = cycle.frames[cam][chosen]
-        img, valid = emulate(_load(cam, chosen), chosen, exposure_ms, response, return_mask=True)
+    for cam, img, valid in ((cameras[0], shot.left, shot.valid_fraction),
+                            *(((cameras[1], shot.right, shot.valid_fraction_right),) if len(cameras) > 1 else ())):
+        frame = tick.cycle.frames[cam][chosen]
+        source, _ = tick.images.get(cam, chosen)
         out[cam] = img
         info["cameras"][cam] = {
             "source": str(frame.path),
             "timestamp_ns": frame.timestamp_ns,
-            "valid_fraction": float(valid.mean()),
-            "saturated_fraction_source": saturated_fraction(_load(cam, chosen), **levels),
+            "valid_fraction": float(valid),
+            "saturated_fraction_source": saturated_fraction(source, **levels),
         }
     info["valid_fraction"] = min(c["valid_fraction"] for c in info["cameras"].values())
     return info, out

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from emulator.errors import ExposimError
 
-__all__ = ["register", "parse_option"]
+__all__ = ["register", "config_from_args"]
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -94,9 +94,10 @@ def _add_plugin_arguments(p: argparse.ArgumentParser) -> None:
              + (f"; BROKEN plugins: {'; '.join(broken)}" if broken else ""))
     action = p._option_string_actions["--methods"]  # noqa: SLF001 - argparse has no public accessor
     action.help += extra.replace("%", "%%")
-    p.add_argument("--method-timeout", type=float, default=None, metavar="S",
+    p.add_argument("--method-timeout-s", "--method-timeout", dest="method_timeout_s", type=float, default=None,
+                   metavar="S",
                    help="per-call wall-time limit of a method, s: a slower call fails the method (its rows stop, "
-                   "the others go on); default none")
+                   "the others go on); default none (--method-timeout: deprecated alias)")
     p.add_argument("--strict", action="store_true",
                    help="exit with code 1 when a method failed (default: 0, failures named in the summary)")
 
@@ -108,19 +109,6 @@ def _warn_broken_plugins() -> None:
     for name, plugin in installed_methods().items():
         if plugin.error is not None:
             print(f"exposim run: warning: AE method plugin '{name}' is broken ({plugin.error})", file=sys.stderr)
-
-
-def parse_option(text: str) -> tuple[str, str, object]:
-    """``METHOD.KEY=VALUE`` -> (method, key, value); VALUE parsed as JSON when it can be."""
-    head, sep, value = text.partition("=")
-    method, dot, key = head.partition(".")
-    if not sep or not dot or not method or not key:
-        raise ExposimError(f"--option {text!r}: expected METHOD.KEY=VALUE, e.g. kim.seed=3")
-    try:
-        parsed = json.loads(value)
-    except json.JSONDecodeError:
-        parsed = value
-    return method.strip(), key.strip(), parsed
 
 
 def _command(args) -> str:
@@ -140,137 +128,110 @@ def _command(args) -> str:
         parts += ["--jobs", str(args.jobs)]
     if args.resume:
         parts.append("--resume")
-    if getattr(args, "method_timeout", None) is not None:
-        parts += ["--method-timeout", str(args.method_timeout)]
+    if getattr(args, "method_timeout_s", None) is not None:
+        parts += ["--method-timeout-s", str(args.method_timeout_s)]
     return shlex.join(parts)
 
 
-def _check_args(args) -> None:
-    """Refuse bad values by their flag before anything is read or created."""
-    import math
+#: RunConfig field -> the flag that sets it (errors name the flag).
+_FLAGS = {"initial_ms": "--initial-ms", "range_ms": "--range-ms", "jobs": "--jobs", "noise_seed": "--noise-seed",
+          "method_timeout_s": "--method-timeout-s", "selector": "--selector", "mode": "--mode", "save": "--save",
+          "noise": "--noise"}
 
-    if args.initial_ms is not None and not (math.isfinite(args.initial_ms) and args.initial_ms > 0):
-        raise ExposimError(f"--initial-ms {args.initial_ms!r}: must be a finite, positive number of ms")
-    if args.range_ms is not None:
-        lo, hi = args.range_ms
-        if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo <= hi):
-            raise ExposimError(f"--range-ms {lo!r} {hi!r}: need finite 0 < LOW <= HIGH (ms)")
-    if args.jobs < 1:
-        raise ExposimError(f"--jobs {args.jobs}: must be >= 1")
-    if args.noise_seed is not None and args.noise_seed < 0:
-        raise ExposimError(f"--noise-seed {args.noise_seed}: must be >= 0")
+
+def _given(args) -> dict:
+    """The run settings given on the command line (None: not given)."""
+    from emulator.playback import parse_options
+
+    options = parse_options(args.option)
+    if args.seed is not None:
+        options.setdefault("kim", {})["seed"] = args.seed
+    return {"initial_ms": args.initial_ms, "range_ms": tuple(args.range_ms) if args.range_ms else None,
+            "selector": args.selector, "mode": args.mode, "options": options or None, "jobs": args.jobs,
+            "save": args.save, "noise": args.noise, "noise_model": args.noise_model, "noise_seed": args.noise_seed,
+            "method_timeout_s": args.method_timeout_s,
+            "response_path": str(args.response) if args.response is not None else None}
+
+
+def config_from_args(args, base=None):
+    """The :class:`~emulator.playback.RunConfig` of the command line over ``base`` (a recorded one, on
+    ``--resume``); a bad value is refused by RunConfig, named here by its flag."""
+    from emulator.errors import PlaybackError
+    from emulator.playback import RunConfig
+
+    given = _given(args)
+    try:
+        return RunConfig.from_kwargs(base, **given)
+    except PlaybackError as exc:
+        field = str(exc).split(" ", 1)[0]
+        flag = _FLAGS.get(field)
+        if flag is None:
+            raise
+        value = given.get(field)
+        shown = " ".join(str(v) for v in value) if isinstance(value, tuple) else str(value)
+        raise ExposimError(f"{flag} {shown}: {exc}") from None
+
+
+def _check_args(args) -> None:
+    """What only the command line can get wrong (the values are RunConfig's to check)."""
     if args.noise_model is not None and args.noise != "consistent" and not args.resume:
         raise ExposimError("--noise-model is used only with --noise consistent")
+
+
+def _progress_bar(desc: str, unit: str):
+    """A tqdm bar on stderr and the one progress callback ``progress(done, total)`` that drives it."""
+    from tqdm import tqdm
+
+    bar = tqdm(total=None, unit=unit, desc=desc, file=sys.stderr, dynamic_ncols=True)
+
+    def progress(done: int, total: int) -> None:
+        if bar.total != total:
+            bar.total = total
+        bar.n = done
+        bar.refresh()
+
+    return bar, progress
 
 
 def _run(args) -> int:
     _check_args(args)
     if args.sequences is not None:
-        if args.noise not in (None, "none") or args.method_timeout is not None or args.strict:
-            raise ExposimError("--noise, --method-timeout and --strict apply to single-sequence runs; "
-                               "dataset runs (--sequences) do not take them yet")
         return _run_dataset(args)
     if args.scheduler not in (None, "serial"):
         raise ExposimError(f"--scheduler {args.scheduler}: a single sequence runs serially; "
                            "pass --sequences all for a dataset run")
-    from emulator.autoexposure import DEFAULT_RANGE_MS
     from emulator.io.runfolder import RUN_FILE, read_run_json
-    from emulator.playback import DEFAULT_INITIAL_MS, DEFAULT_SELECTOR
+    from emulator.playback import RunConfig
     from emulator.runner import run_to_folder
 
-    given = {
-        "methods": args.methods,
-        "save": args.save,
-        "mode": args.mode,
-        "initial_ms": args.initial_ms,
-        "range_ms": args.range_ms,
-        "selector": args.selector,
-        "noise": args.noise,
-        "noise_seed": args.noise_seed,
-    }
-    options: dict[str, dict] = {}
-    for text in args.option:
-        method, key, value = parse_option(text)
-        options.setdefault(method, {})[key] = value
-    if args.seed is not None:
-        options.setdefault("kim", {})["seed"] = args.seed
-    defaults = {
-        "methods": "all",
-        "save": "none",
-        "mode": "paper",
-        "initial_ms": DEFAULT_INITIAL_MS,
-        "range_ms": list(DEFAULT_RANGE_MS),
-        "selector": DEFAULT_SELECTOR,
-        "noise": "none",
-        "noise_seed": 0,
-    }
-    noise_model = args.noise_model
-    response_path = args.response
+    methods = args.methods
+    base = None
     if args.resume:
-        # The recorded configuration wins; arguments given explicitly must agree with it.
+        # The one resume rule (RunConfig.resumed): the recorded configuration wins, values given must equal it.
         if not (args.output / RUN_FILE).is_file():
             raise ExposimError(f"{args.output / RUN_FILE}: no run to resume (run.json missing)")
         recorded = read_run_json(args.output)
-        rec_noise = recorded.get("noise") or {"mode": "none"}
-        recorded = {**recorded, "noise": rec_noise.get("mode", "none"), "noise_seed": rec_noise.get("seed", 0)}
-        if given["methods"] is None and recorded.get("method_specs"):
-            given["methods"] = ",".join(recorded["method_specs"])  # import-path plugins by their path
-        if args.method_timeout is None:
-            args.method_timeout = recorded.get("method_timeout")
-        for key, value in given.items():
-            if value is None:
-                given[key] = recorded.get(key, defaults[key])
-        source = recorded.get("noise_model_file")
-        if noise_model is None and source and Path(source).name != "exposim.json" and Path(source).is_file():
-            noise_model = Path(source)
-        if not options:
-            options = recorded.get("options") or {}
-        if response_path is None and recorded.get("response") and Path(recorded["response"]).is_file():
-            response_path = Path(recorded["response"])
-    cfg = {k: (defaults[k] if v is None else v) for k, v in given.items()}
-    low, high = cfg["range_ms"]
-    if not low <= cfg["initial_ms"] <= high:
-        print(f"exposim run: warning: --initial-ms {cfg['initial_ms']:g} is outside --range-ms {low:g} {high:g}; "
-              f"clamped to {min(max(cfg['initial_ms'], low), high):g} ms (recorded in run.json)", file=sys.stderr)
+        base = RunConfig.from_json(recorded)
+        if methods is None and recorded.get("method_specs"):
+            methods = ",".join(recorded["method_specs"])  # import-path plugins by their path
+    config = config_from_args(args, base)
+    if config.start_ms != config.initial_ms:
+        low, high = config.range_ms
+        print(f"exposim run: warning: --initial-ms {config.initial_ms:g} is outside --range-ms {low:g} {high:g}; "
+              f"clamped to {config.start_ms:g} ms (recorded in run.json)", file=sys.stderr)
 
     _warn_broken_plugins()
-    progress = None
-    bar = None
-    if not args.no_progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=None, unit="cycle", desc="exposim run", file=sys.stderr, dynamic_ncols=True)
-
-        def progress(done: int, total: int) -> None:
-            if bar.total != total:
-                bar.total = total
-            bar.n = done
-            bar.refresh()
-
+    bar, progress = _progress_bar("exposim run", "cycle") if not args.no_progress else (None, None)
     try:
-        summary = run_to_folder(
-            args.sequence,
-            cfg["methods"],
-            args.output,
-            save=cfg["save"],
-            response_path=response_path,
-            initial_ms=cfg["initial_ms"],
-            range_ms=tuple(cfg["range_ms"]),
-            selector=cfg["selector"],
-            mode=cfg["mode"],
-            options=options,
-            jobs=args.jobs,
-            resume=args.resume,
-            progress=progress,
-            command=_command(args),
-            noise=cfg["noise"],
-            noise_model=noise_model,
-            noise_seed=cfg["noise_seed"],
-            method_timeout=args.method_timeout,
-        )
+        summary = run_to_folder(args.sequence, methods or "all", args.output, config, resume=args.resume,
+                                progress=progress, command=_command(args))
     finally:
         if bar is not None:
             bar.close()
+    return _print_run_summary(args, summary)
+
+
+def _print_run_summary(args, summary: dict) -> int:
     failed = {n: m["status"] for n, m in summary["methods"].items() if m.get("status", "ok") != "ok"}
     rc = 1 if failed and args.strict else 0
     if args.json:
@@ -285,7 +246,9 @@ def _run(args) -> int:
               f"sat {m['mean_saturated_fraction']:.2%}" if mean is not None else f"  {name:13s} no cycle")
     timing = summary.get("timing") or {}
     if timing.get("cycles_per_s"):
-        print(f"speed       {timing['cycles_per_s']:.2f} cycles/s")
+        steady = timing.get("steady_cycles_per_s")
+        print(f"speed       {timing['cycles_per_s']:.2f} cycles/s"
+              + (f" ({steady:.2f} after start-up, {timing['startup_s']:.2f} s)" if steady else ""))
     if failed:
         print(f"FAILED      {len(failed)} of {len(summary['methods'])} method(s); the others' results are complete"
               + (" (--strict: exit code 1)" if args.strict else ""))
@@ -299,25 +262,11 @@ def _run_dataset(args) -> int:
     from emulator.datasetrun import DATASET_FILE, run_dataset
     from emulator.io.files import read_metadata
 
+    from emulator.playback import RunConfig
+
     recorded = read_metadata(args.output / DATASET_FILE) if args.resume else {}
-    rec_opts = recorded.get("options", {})
-    options: dict = dict(rec_opts.get("options") or {})
-    for text in args.option:
-        method, key, value = parse_option(text)
-        options.setdefault(method, {})[key] = value
-    if args.seed is not None:
-        options.setdefault("kim", {})["seed"] = args.seed
-    run_options = {}
-    for key, value in (("mode", args.mode), ("selector", args.selector), ("initial_ms", args.initial_ms),
-                       ("range_ms", args.range_ms), ("save", args.save), ("response_path", args.response)):
-        if value is not None:
-            run_options[key] = str(value) if key == "response_path" else value
-        elif key in rec_opts:
-            run_options[key] = rec_opts[key]
-    if args.jobs != 1 or "jobs" in rec_opts:
-        run_options["jobs"] = args.jobs if args.jobs != 1 else rec_opts["jobs"]
-    if options:
-        run_options["options"] = options
+    base = RunConfig.from_json(recorded["config"]) if recorded.get("config") else None
+    config = config_from_args(args, base)
     methods = args.methods or ",".join(recorded.get("methods", [])) or "all"
     group_size = args.group_size or recorded.get("group_size")
     scheduler = args.scheduler or "local"
@@ -325,19 +274,17 @@ def _run_dataset(args) -> int:
     bar = None
     progress = None
     if not args.no_progress:
-        from tqdm import tqdm
-
         def progress(done: int, total: int) -> None:
-            nonlocal bar
+            nonlocal bar, drive
             if bar is None:  # made at the first report, after the run's checks passed
-                bar = tqdm(total=total, unit="unit", desc="exposim run (sequence, methods)", file=sys.stderr,
-                           dynamic_ncols=True)
-            bar.n = done
-            bar.refresh()
+                bar, drive = _progress_bar("exposim run (sequence, methods)", "unit")
+            drive(done, total)
+
+        drive = None
 
     try:
-        summary = run_dataset(args.sequence, args.output, sequences=args.sequences, methods=methods,
-                              group_size=group_size, options=run_options, scheduler=scheduler,
+        summary = run_dataset(args.sequence, args.output, config, sequences=args.sequences, methods=methods,
+                              group_size=group_size, scheduler=scheduler,
                               n_workers=args.workers, retries=args.retries, resume=args.resume, progress=progress)
     finally:
         if bar is not None:
@@ -359,4 +306,9 @@ def _run_dataset(args) -> int:
         first = summary["errors"][0]
         raise ExposimError(f"{len(summary['errors'])} unit(s) failed (see {args.output / 'report.md'}); "
                            f"first: {first['unit']}: {first['error']}")
+    failed = [f"{seq}/{m}" for seq, per in summary["per_sequence"].items() for m, fig in per.items()
+              if fig.get("status", "ok") != "ok"]
+    if failed and args.strict:
+        print(f"FAILED      {', '.join(failed)} (--strict: exit code 1)")
+        return 1
     return 0

@@ -68,6 +68,7 @@ __all__ = [
     "read_run_json",
     "read_csv_rows",
     "read_tables",
+    "tables_from_rows",
     "RunFrame",
     "MethodRun",
     "RunFolder",
@@ -148,6 +149,25 @@ def read_csv_rows(path: str | os.PathLike, *, repair: bool = False) -> list[list
     return rows[1:]
 
 
+def tables_from_rows(rows: dict[str, list[list[str]]]) -> dict[str, dict[str, np.ndarray]]:
+    """Each method's rows (as :func:`format_row` makes them) as the columns :func:`read_tables` gives."""
+    columns = CSV_COLUMNS + EXTRA_COLUMNS
+    return {name: _columns([dict(zip(columns, r)) for r in method_rows]) for name, method_rows in rows.items()}
+
+
+def _columns(rows: list[dict]) -> dict[str, np.ndarray]:
+    cols = {}
+    for col in CSV_COLUMNS + EXTRA_COLUMNS:
+        if col in _LIST_COLUMNS:
+            continue
+        vals = [r.get(col) or "" for r in rows]
+        if col in _INT_COLUMNS:
+            cols[col] = np.array([int(v) if v else 0 for v in vals], dtype=np.int64)
+        else:
+            cols[col] = np.array([float(v) if v else math.nan for v in vals], dtype=np.float64)
+    return cols
+
+
 def read_tables(run_dir: str | os.PathLike, methods: Iterable[str]) -> dict[str, dict[str, np.ndarray]]:
     """Each method's ``exposures.csv`` as columns: int64 for counters and flags, float64 else.
 
@@ -160,17 +180,7 @@ def read_tables(run_dir: str | os.PathLike, methods: Iterable[str]) -> dict[str,
         if not path.is_file():
             raise RunFolderError(f"{path}: missing; not a complete run folder")
         with open(path, newline="") as fh:
-            rows = list(csv.DictReader(fh))
-        cols = {}
-        for col in CSV_COLUMNS + EXTRA_COLUMNS:
-            if col in _LIST_COLUMNS:
-                continue
-            vals = [r.get(col) or "" for r in rows]
-            if col in _INT_COLUMNS:
-                cols[col] = np.array([int(v) if v else 0 for v in vals], dtype=np.int64)
-            else:
-                cols[col] = np.array([float(v) if v else math.nan for v in vals], dtype=np.float64)
-        tables[name] = cols
+            tables[name] = _columns(list(csv.DictReader(fh)))
     return tables
 
 
@@ -419,11 +429,12 @@ class RunWriter:
             return write_png8(path, image, overwrite=True)
         raise RunFolderError(f"{self.path}: this run saves no images (save = {self.save!r})")
 
-    def write_times(self, methods: Iterable[str]) -> None:
-        """Write each method's ``images/times.txt`` from its CSV (sorted by time)."""
+    def write_times(self, methods: Iterable[str], rows: dict | None = None) -> None:
+        """Write each method's ``images/times.txt`` (sorted by time) from its CSV rows: ``rows[name]``
+        when given (the run's rows in memory), else read from the CSV."""
         for name in methods:
-            rows = read_csv_rows(self.path / name / CSV_FILE)
-            lines = sorted((int(r[1]), float(r[2])) for r in rows)
+            rows_of = rows[name] if rows is not None else read_csv_rows(self.path / name / CSV_FILE)
+            lines = sorted((int(r[1]), float(r[2])) for r in rows_of)
             write_times(self.path / name / IMAGES_DIR / TIMES_FILE, [str(ns) for ns, _ in lines],
                         [format_timestamp_s(ns) for ns, _ in lines], [ms for _, ms in lines], overwrite=True)
 
