@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from emulator.playback import RunConfig
 from emulator.io.files import REPORT_FILE, RESULTS_FILE, first_free, read_results, to_jsonable, write_results, write_text
 from validation.live.compare import exposure_log2_errors, image_errors, measure_noise_variance_ratio
 from validation.live.config import (
@@ -117,7 +118,7 @@ def run_live_experiment(out, config: LiveConfig | None = None, *, progress: bool
         if ratio_input is None:
             first = seq.cycles[0].frames["left"][seq.cycles[0].available(("left",))[0]].timestamp_ns
             ratio_input = (radiance(first, "left"), camera, response, model)
-        common = dict(initial_ms=cfg.initial_ms, selector=cfg.selector, response=response)
+        common = dict(config=RunConfig(initial_ms=cfg.initial_ms, selector=cfg.selector), response=response)
         cycles: dict = {}
         t0 = time.perf_counter()
         for opt, mode in NOISE_OPTIONS.items():
