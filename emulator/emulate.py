@@ -23,12 +23,12 @@ the target would have had beyond that, from a :class:`emulator.noise.NoiseModel`
 from __future__ import annotations
 
 import math
-from concurrent.futures import ThreadPoolExecutor
 
 import cv2
 import numpy as np
 
 from emulator.errors import EmulationError
+from emulator.pools import lut_pool
 from emulator.response import CameraResponse
 
 __all__ = [
@@ -48,14 +48,6 @@ NOISE_MODES = ("none", "consistent")
 _BLOCK_ROWS = 16
 #: Images with at least this many pixels are split across two threads.
 _THREAD_MIN_PIXELS = 1 << 20
-_POOL: ThreadPoolExecutor | None = None
-
-
-def _pool() -> ThreadPoolExecutor:
-    global _POOL
-    if _POOL is None:
-        _POOL = ThreadPoolExecutor(max_workers=2, thread_name_prefix="exposim-lut")
-    return _POOL
 
 
 def check_exposure(value, name: str) -> float:
@@ -138,7 +130,7 @@ def apply_lut(table: np.ndarray, raw: np.ndarray, out: np.ndarray | None = None)
 
     if raw.size >= _THREAD_MIN_PIXELS and rows >= 2 * _BLOCK_ROWS:
         half = rows // 2
-        list(_pool().map(lambda ab: work(*ab), [(0, half), (half, rows)]))
+        list(lut_pool().map(lambda ab: work(*ab), [(0, half), (half, rows)]))
     else:
         work(0, rows)
     return out

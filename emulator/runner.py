@@ -14,8 +14,6 @@ of the bytes).
 
 from __future__ import annotations
 
-import os
-import shutil
 import threading
 from collections.abc import Callable
 from pathlib import Path
@@ -74,7 +72,7 @@ class _ImageSaver:
                     data = saved_image(img, self.save, white_level=self.white, black_level=self.black)
                     self._done[key] = self.writer.write_image(st.method, cam, st.timestamp_ns, data)
                 else:
-                    _share(first, dest)
+                    self.writer.share_image(first, st.method, cam, st.timestamp_ns)
         self._forget(st.cycle)
 
     def _forget(self, cycle: int) -> None:
@@ -82,16 +80,6 @@ class _ImageSaver:
             for key in [k for k in self._done if k[0] < cycle - 1]:
                 self._done.pop(key, None)
                 self._locks.pop(key, None)
-
-
-def _share(src: Path, dest: Path) -> None:
-    """``dest`` with the bytes of ``src``: a hard link where the file system allows, else a copy."""
-    tmp = dest.with_name(f".{dest.name}.{os.getpid()}.{threading.get_ident()}.tmp")
-    try:
-        os.link(src, tmp)
-    except OSError:
-        shutil.copyfile(src, tmp)
-    os.replace(tmp, dest)
 
 
 def _new_run_json(config: RunConfig, identity: dict, seq, built, method_specs, model, model_source, command,

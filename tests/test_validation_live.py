@@ -13,6 +13,7 @@ import synth
 from emulator.autoexposure import make_method
 from emulator.io.borealhdr import load_sequence, sequence_response
 from emulator.errors import EmulationError
+from emulator.response import CameraResponse
 from emulator.noise import NoiseModel
 from emulator.playback import iter_run
 from synth.noise_model import noise_model_of
@@ -156,8 +157,14 @@ def test_playback_consistent_noise_seeded(tmp_path):
     darkened = [(x, p) for x, p in zip(a, plain) if x.ratio < 1.0 and x.target_ms == p.target_ms]
     assert darkened, "no darkening cycle to check"
     assert any(not np.array_equal(x.left, p.left) for x, p in darkened)
-    with pytest.raises(EmulationError, match="noise_model"):
-        next(iter_run(seq, ["classical-50"], response=resp, noise="consistent"))
+    # no model given: the one the synthetic recording carries (its camera), the same numbers
+    carried = [cs.steps["classical-50"] for cs in iter_run(seq, ["classical-50"], keep_images=True,
+                                                           emulate_right=True, response=resp, noise="consistent",
+                                                           initial_ms=3.0, selector="closest")]
+    assert all(np.array_equal(x.left, y.left) for x, y in zip(a, carried))
+    linear = CameraResponse.linear(int(seq.white_level), black_level=int(seq.black_level))
+    with pytest.raises(EmulationError, match="noise_model"):  # a model of another response
+        next(iter_run(seq, ["classical-50"], response=linear, noise="consistent", noise_model=model))
 
 
 def test_kendall_tau_cases():

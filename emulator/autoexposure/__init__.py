@@ -29,10 +29,6 @@ More methods come as plugins (:mod:`emulator.autoexposure.registry`): an import 
 
 from __future__ import annotations
 
-import functools
-import inspect
-from collections.abc import Callable
-
 from emulator.autoexposure._base import (
     DEFAULT_RANGE_MS,
     MODES,
@@ -74,45 +70,8 @@ __all__ = [
 ]
 
 
-def _classical(percent: int) -> Callable[..., Classical]:
-    factory = functools.partial(Classical, percent)
-    factory.__doc__ = f"Classical mean-brightness control towards {percent} % of full scale."
-    return factory
-
-
-#: name -> factory(**options) -> method, in the paper's order.
-METHODS: dict[str, Callable[..., AutoExposureMethod]] = {
-    "fixed": Fixed,
-    "classical-30": _classical(30),
-    "classical-50": _classical(50),
-    "classical-70": _classical(70),
-    "shim": Shim2014,
-    "zhang": Zhang2017,
-    "kim": Kim2018,
-}
-METHOD_NAMES = tuple(METHODS)
-
-
-def accepts_option(name: str, option: str) -> bool:
-    """Whether the factory of method ``name`` takes the keyword ``option`` (e.g. ``response``)."""
-    factory = METHODS[name]
-    target = factory.func if isinstance(factory, functools.partial) else factory
-    return option in inspect.signature(target).parameters
-
-
-def make_method(name: str, **options) -> AutoExposureMethod:
-    """Build method ``name`` (see ``METHODS``) with keyword options; unknown names are refused."""
-    try:
-        factory = METHODS[name]
-    except KeyError:
-        raise AutoExposureError(f"unknown AE method {name!r}; choose one of {', '.join(METHODS)}") from None
-    try:
-        return factory(**options)
-    except TypeError as exc:
-        raise AutoExposureError(f"{name}: bad option ({exc})") from None
-
-
-from emulator.autoexposure.registry import (  # noqa: E402 - the registry reads METHODS lazily
+from emulator.autoexposure.builtin import METHOD_NAMES, METHODS, accepts_option, make_method
+from emulator.autoexposure.registry import (
     ENTRY_POINT_GROUP,
     MethodFailed,
     PluginMethod,

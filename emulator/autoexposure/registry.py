@@ -91,7 +91,7 @@ def is_import_path(text: str) -> bool:
 
 def check_method_name(name, source: str) -> str:
     """A plugin's name, checked against :data:`NAME_RE` and the built-in names."""
-    from emulator.autoexposure import METHODS
+    from emulator.autoexposure.builtin import METHODS
 
     if not isinstance(name, str) or not NAME_RE.match(name):
         raise AutoExposureError(f"AE method plugin {source}: bad method name {name!r} (letters, digits, '-' and '_' "

@@ -1,7 +1,7 @@
 """Decoded-frame cache: each 16-bit PNG of a recording stored once as a zstd-compressed ``.npy``.
 
 Decoding a 1920 x 1200 16-bit PNG costs ~30-40 ms on the project machine, and the closed
-loop decodes the same brackets on every run over a sequence.  :func:`build_frame_cache`
+loop decodes the same brackets on every run over a sequence.  :func:`emulator.tools.framecache.build_frame_cache`
 decodes every frame once and writes ``<cache>/camera_<side>/<exposure>/<timestamp>.<size>-<mtime_ns>.npy.zst``
 (the PNG's byte size and modification time in the name: a PNG replaced after the cache was
 built no longer matches its entry, and is decoded from the PNG again).  When
@@ -16,7 +16,6 @@ zstandard (level 3 by default), read straight into a fresh array (no copy).
 from __future__ import annotations
 
 import io
-from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -26,7 +25,7 @@ from emulator.errors import DatasetError
 __all__ = [
     "CACHE_DIRNAME",
     "CACHE_SUFFIX",
-    "build_frame_cache",
+    "encode_frame",
     "cached_frame_path",
     "read_cached_frame",
     "resolve_frame_cache",
@@ -36,7 +35,7 @@ __all__ = [
 CACHE_DIRNAME = ".exposim-frames"
 #: Suffix of a cache entry.
 CACHE_SUFFIX = ".npy.zst"
-#: zstandard level of :func:`build_frame_cache` (decoding speed barely depends on it).
+#: zstandard level of :func:`emulator.tools.framecache.build_frame_cache` (decoding speed barely depends on it).
 DEFAULT_LEVEL = 3
 
 
@@ -50,7 +49,7 @@ def resolve_frame_cache(sequence_dir, frame_cache) -> Path | None:
         if default.is_dir():
             return default
         if frame_cache is True:
-            raise DatasetError(f"{default}: no frame cache (build it with build_frame_cache)")
+            raise DatasetError(f"{default}: no frame cache (build it with `exposim cache`)")
         return None
     path = Path(frame_cache)
     if not path.is_dir():
@@ -66,7 +65,8 @@ def cached_frame_path(cache_dir, sequence_dir, png_path) -> Path:
     return Path(cache_dir) / rel.parent / f"{png_path.stem}.{st.st_size}-{st.st_mtime_ns}{CACHE_SUFFIX}"
 
 
-def _encode(img: np.ndarray, level: int) -> bytes:
+def encode_frame(img: np.ndarray, level: int = DEFAULT_LEVEL) -> bytes:
+    """The cache entry bytes of a decoded frame (zstd-compressed ``.npy``)."""
     import zstandard
 
     buf = io.BytesIO()
@@ -117,54 +117,4 @@ def read_cached_frame(path, *, png_path=None, white_level: int | None = None) ->
                                "(not 12-bit data?)")
     return img
 
-
-def build_frame_cache(
-    sequence_dir,
-    cache_dir=None,
-    *,
-    level: int = DEFAULT_LEVEL,
-    verify: bool = True,
-    progress: Callable[[int, int], None] | None = None,
-) -> dict:
-    """Decode every frame of a recording once and store it in ``cache_dir`` (default
-    ``<sequence>/.exposim-frames``); entries already present for the current PNG are kept.
-
-    ``verify`` reads each new entry back and compares it with the decoded PNG (byte for
-    byte); a mismatch raises and removes the entry.  Entries of an older version of a PNG
-    are removed.  Returns counts and sizes: ``frames``, ``written``, ``kept``, ``removed``,
-    ``png_bytes``, ``cache_bytes``, ``cache_dir``.  ``progress(done, total)`` after each frame.
-    """
-    from emulator.io.borealhdr import load_sequence
-    from emulator.io.files import atomic_write_bytes
-    from emulator.io.png import read_png16
-
-    root = Path(sequence_dir)
-    seq = load_sequence(root, frame_cache=False)
-    cache = Path(cache_dir) if cache_dir is not None else root / CACHE_DIRNAME
-    frames = [f for cycle in seq.cycles for cam in cycle.frames.values() for f in cam.values()]
-    frames.sort(key=lambda f: (f.camera, f.exposure_ms, f.timestamp_ns))
-    summary = {"cache_dir": str(cache), "frames": len(frames), "written": 0, "kept": 0, "removed": 0,
-               "png_bytes": 0, "cache_bytes": 0}
-    for i, frame in enumerate(frames, 1):
-        target = cached_frame_path(cache, root, frame.path)
-        summary["png_bytes"] += frame.path.stat().st_size
-        for old in target.parent.glob(f"{frame.path.stem}.*{CACHE_SUFFIX}") if target.parent.is_dir() else ():
-            if old != target:
-                old.unlink()
-                summary["removed"] += 1
-        if target.is_file():
-            summary["kept"] += 1
-        else:
-            img = read_png16(frame.path, white_level=frame.white_level)
-            atomic_write_bytes(target, _encode(img, level), overwrite=True)
-            if verify:
-                back = read_cached_frame(target, png_path=frame.path)
-                if back is None or back.shape != img.shape or back.tobytes() != img.tobytes():
-                    target.unlink(missing_ok=True)
-                    raise DatasetError(f"{target}: cache entry does not read back as {frame.path}")
-            summary["written"] += 1
-        summary["cache_bytes"] += target.stat().st_size
-        if progress is not None:
-            progress(i, len(frames))
-    return summary
 

@@ -41,7 +41,9 @@ import io
 import json
 import math
 import os
+import shutil
 import socket
+import threading
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -428,6 +430,18 @@ class RunWriter:
         if self.save == "png8":
             return write_png8(path, image, overwrite=True)
         raise RunFolderError(f"{self.path}: this run saves no images (save = {self.save!r})")
+
+    def share_image(self, source: Path, method: str, camera: str, timestamp_ns: int) -> Path:
+        """Give ``method`` the image already written at ``source`` (same bytes): a hard link where
+        the file system allows, else a copy; atomic."""
+        dest = self.image_path(method, camera, timestamp_ns)
+        tmp = dest.with_name(f".{dest.name}.{os.getpid()}.{threading.get_ident()}.tmp")
+        try:
+            os.link(source, tmp)
+        except OSError:
+            shutil.copyfile(source, tmp)
+        os.replace(tmp, dest)
+        return dest
 
     def write_times(self, methods: Iterable[str], rows: dict | None = None) -> None:
         """Write each method's ``images/times.txt`` (sorted by time) from its CSV rows: ``rows[name]``

@@ -10,16 +10,12 @@ sigma-clipped variance (:func:`robust_variance`); :func:`_fit` fits
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
-
 import cv2
 import numpy as np
 
+from emulator.noise.groups import BracketGroup
 from emulator.noise.model import PHASES
 from emulator.response import CameraResponse
-
-if TYPE_CHECKING:
-    from emulator.noise.insitu import BracketGroup
 
 __all__ = ["robust_variance"]
 
