@@ -84,7 +84,7 @@ class _ImageSaver:
 
 def _new_run_json(config: RunConfig, identity: dict, seq, built, method_specs, model, model_source, command,
                   created) -> dict:
-    from emulator import __version__
+    from emulator.version import __version__
 
     run_json = {
         **identity,

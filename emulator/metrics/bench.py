@@ -73,7 +73,7 @@ SYNTHETIC_REFERENCE = Path("ground_truth") / "poses_left.txt"
 
 
 def _version() -> str:
-    from emulator import __version__
+    from emulator.version import __version__
 
     return __version__
 
