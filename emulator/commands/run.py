@@ -64,10 +64,13 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="dataset run: SEQUENCE is a dataset root; run every sequence under it ('all') or the named "
                         "ones (folders or trajectory .zip files, a zip named by its stem); OUTDIR gets one folder per "
                         "sequence and a dataset summary (results.json, report.md, methods.png)")
-    p.add_argument("--scheduler", default=None, metavar="serial|local|tcp://HOST:PORT",
-                   help="dataset runs: serial, local (a Dask LocalCluster sized to the machine; default) or the "
-                        "address of a running Dask scheduler; single sequences always run serially")
-    p.add_argument("--workers", type=int, default=None, help="dataset runs on --scheduler local: worker processes")
+    p.add_argument("--scheduler", default=None, metavar="serial|threads|local|tcp://HOST:PORT",
+                   help="dataset runs: serial, threads (--workers threads of this process), local (a Dask "
+                        "LocalCluster sized to the machine; default) or the address of a running Dask scheduler; "
+                        "every path gives the same bytes and the same error rows; single sequences always run "
+                        "serially")
+    p.add_argument("--workers", type=int, default=None,
+                   help="dataset runs: worker processes (--scheduler local) or threads (--scheduler threads)")
     p.add_argument("--group-size", type=int, default=None,
                    help="dataset runs: methods per unit of work (default: all, one unit per sequence, the methods "
                         "sharing decoded images; 1: one (sequence, method) per unit, the finest parallelism)")

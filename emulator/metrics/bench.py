@@ -10,14 +10,12 @@ reference overlap) before the long computation starts.
 
 from __future__ import annotations
 
-import copy
 from collections.abc import Sequence
-from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 
-from emulator.errors import MetricsError, RunFolderError, TrajectoryError
+from emulator.errors import MetricsError, RunFolderError
 from emulator.io.files import REPORT_FILE, RESULTS_FILE, prepare_output, write_results, write_text
 from emulator.io.runfolder import MethodRun, RunFolder, read_run_folder
 from emulator.io.tum import write_tum
@@ -29,15 +27,16 @@ from emulator.metrics.features import (
     load_gray8,
     success_curve,
 )
-from emulator.metrics.rpe import rpe_by_length
 from emulator.metrics.stereo import (
-    estimate_stereo_extrinsics,
     find_calibration,
     load_stereo_calibration,
     stereo_rectification,
 )
-from emulator.metrics.trajectory import associate, read_trajectory, trajectory_from_poses
+from emulator.metrics.trajectory import associate, trajectory_from_poses
 from emulator.metrics.vo import VOParameters, run_stereo_vo
+from emulator.metrics.vobench import (CONVERSION, SYNTHETIC_REFERENCE, add_rpe, aligned_for_plot, calibration_record,
+                                      reference_and_deltas, reference_over_run, refined_extrinsics, vo_entry,
+                                      vo_parameters_record)
 
 __all__ = [
     "bench_features",
@@ -49,12 +48,6 @@ __all__ = [
     "SYNTHETIC_REFERENCE",
 ]
 
-#: The 12-bit to 8-bit conversion, as stated in the results.
-CONVERSION = (
-    "gray8 = clip(round((cv2.cvtColor(raw, COLOR_BayerRG2GRAY) - black_level) * 255 / "
-    "(white_level - black_level)), 0, 255) for png16 Bayer images (emulator.gray.bayer_to_gray8); png8 images, "
-    "converted by exposim run with the same function, are used as saved"
-)
 #: What happens when the VO loses track, as stated in the results.
 FAILURE_POLICY = (
     "a frame that fails (too few stereo points, too few matches, PnP failure, too few inliers, "
@@ -68,8 +61,6 @@ DEFAULT_DELTA_FRACTIONS = (0.1, 0.2, 0.3, 0.4, 0.5)
 #: period of a 10 Hz lidar reference, so every image inside the reference's time span is
 #: associated; the reference is then interpolated at the image times.
 REFERENCE_MAX_DIFF_S = 0.06
-#: Reference that synthetic sequences write, used when no reference is given.
-SYNTHETIC_REFERENCE = Path("ground_truth") / "poses_left.txt"
 
 
 def _version() -> str:
@@ -226,26 +217,6 @@ def bench_features(
 # --------------------------------------------------------------------------- VO
 
 
-def _reference_path(run: RunFolder, reference: str | Path | None) -> tuple[Path | None, str]:
-    if reference is not None:
-        return Path(reference), "given"
-    if run.sequence is not None and (run.sequence / SYNTHETIC_REFERENCE).is_file():
-        return run.sequence / SYNTHETIC_REFERENCE, "synthetic ground truth of the sequence"
-    return None, "none"
-
-
-def _aligned_for_plot(est, ref) -> np.ndarray:
-    """Estimate positions Sim(3)-aligned to the reference (evo Umeyama), for the top view."""
-    from evo.core.geometry import GeometryException
-
-    shown = copy.deepcopy(est)
-    try:
-        shown.align(ref, correct_scale=True)
-    except GeometryException:  # degenerate (straight) path: align the origins only
-        shown.align_origin(ref)
-    return shown.positions_xyz
-
-
 def bench_vo(
     run_dir: str | Path,
     out_dir: str | Path,
@@ -328,39 +299,9 @@ def bench_vo(
         calib.check_image_shape(first.shape, frames[0].left)
         if len(frames) < 2:
             raise RunFolderError(f"{run.methods[name].directory}: VO needs at least two frames, found {len(frames)}")
-    ref_path, ref_source = _reference_path(run, reference)
-    ref_traj = None
-    deltas = None
-    if ref_path is not None:
-        ref_traj = read_trajectory(ref_path)
-        for name, frames in selected.items():  # fail now, not after the VO: overlap check
-            stamps = [f.timestamp_ns for f in frames]
-            dummy = trajectory_from_poses(stamps, np.tile(np.eye(4), (len(stamps), 1, 1)))
-            ref_s, _ = associate(ref_traj, dummy, max_diff_s=max_diff_s, interpolate=True,
-                                 ref_name=str(ref_path), est_name=f"images of {name} in {run.path}")
-            if ref_s.num_poses < 2:
-                raise MetricsError(f"{ref_path}: only {ref_s.num_poses} reference pose overlaps the images of {name}")
-        if deltas_m is None:
-            t0 = min(f.timestamp_ns for fr in selected.values() for f in fr) / 1e9
-            t1 = max(f.timestamp_ns for fr in selected.values() for f in fr) / 1e9
-            span = [i for i, t in enumerate(ref_traj.timestamps) if t0 - max_diff_s <= t <= t1 + max_diff_s]
-            length = float(np.sum(np.linalg.norm(np.diff(ref_traj.positions_xyz[span], axis=0), axis=1)))
-            if not length > 0:
-                raise MetricsError(f"{ref_path}: the reference does not move during the run; give deltas_m")
-            deltas = [float(f) * length for f in delta_fractions]
-        else:
-            deltas = [float(d) for d in deltas_m]
-    extrinsics = None
-    if refine_extrinsics > 0:
-        frames = next(iter(selected.values()))
-        picks = np.unique(np.linspace(0, len(frames) - 1, min(refine_extrinsics, len(frames))).round().astype(int))
-        pairs = (
-            (load_gray8(frames[i].left, white_level=run.white_level, black_level=run.black_level),
-             load_gray8(frames[i].right, white_level=run.white_level, black_level=run.black_level))
-            for i in picks
-        )
-        extrinsics = estimate_stereo_extrinsics(calib, pairs, seed=parameters.seed)
-        calib = calib.with_extrinsics(extrinsics.R, extrinsics.T)
+    ref_path, ref_source, ref_traj, deltas = reference_and_deltas(run, selected, reference, deltas_m,
+                                                                   delta_fractions, max_diff_s)
+    calib, extrinsics = refined_extrinsics(calib, run, selected, refine_extrinsics, parameters.seed)
     rect = stereo_rectification(calib, scale=scale)
 
     method_results, aligned_xyz, ref_xyz = {}, {}, None
@@ -373,23 +314,7 @@ def bench_vo(
         )
         vo = run_stereo_vo(stream, rect, parameters)
         write_tum(out / name / "trajectory.txt", vo.timestamps_ns, vo.poses)
-        entry = {
-            "status": "success" if vo.succeeded else "failed",
-            "n_frames": int(vo.timestamps_ns.size),
-            "n_tracked": int(vo.tracked.sum()),
-            "failures": vo.failures_as_dicts(),
-            "trajectory": f"{name}/trajectory.txt",
-            "frames": {
-                "timestamps_ns": vo.timestamps_ns.tolist(),
-                "tracked": vo.tracked.tolist(),
-                "n_stereo_points": vo.n_stereo.tolist(),
-                "n_matches": vo.n_matches.tolist(),
-                "n_inliers": vo.n_inliers.tolist(),
-                "row_offset_px": [None if not np.isfinite(v) else round(float(v), 3) for v in vo.row_offset_px],
-            },
-            "rpe": None,
-            "rpe_skipped": None,
-        }
+        entry = vo_entry(vo, name)
         est = trajectory_from_poses(vo.timestamps_ns, vo.poses, name)
         if ref_traj is None:
             entry["rpe_skipped"] = "no reference"
@@ -398,26 +323,17 @@ def bench_vo(
             ref_s, est_s = associate(ref_traj, est, max_diff_s=max_diff_s, interpolate=True,
                                      ref_name=str(ref_path), est_name=name)
             if vo.succeeded or rpe_on_failure:
-                try:
-                    entry["rpe"] = rpe_by_length(ref_s, est_s, deltas, align_scale=align_scale,
-                                                 rel_delta_tol=rel_delta_tol)
-                except TrajectoryError as exc:
-                    entry["rpe_skipped"] = str(exc)
-                else:
-                    entry["rpe"]["n_associated"] = int(ref_s.num_poses)
-                    entry["rpe"]["computed_on_failed_run"] = not vo.succeeded
+                add_rpe(entry, ref_s, est_s, deltas, vo.succeeded, align_scale=align_scale,
+                         rel_delta_tol=rel_delta_tol)
             else:
                 entry["rpe_skipped"] = "VO failed (see failures); rerun with rpe_on_failure to compute it anyway"
-            aligned_xyz[name] = _aligned_for_plot(est_s, ref_s)
+            aligned_xyz[name] = aligned_for_plot(est_s, ref_s)
             if ref_xyz is None or ref_s.num_poses > len(ref_xyz):
                 ref_xyz = ref_s.positions_xyz
         method_results[name] = entry
 
     if ref_xyz is not None:  # plot the whole reference over the run's span, in its own frame
-        t0 = min(float(vo_e["frames"]["timestamps_ns"][0]) for vo_e in method_results.values()) / 1e9
-        t1 = max(float(vo_e["frames"]["timestamps_ns"][-1]) for vo_e in method_results.values()) / 1e9
-        keep = (ref_traj.timestamps >= t0 - max_diff_s) & (ref_traj.timestamps <= t1 + max_diff_s)
-        ref_xyz = ref_traj.positions_xyz[keep]
+        ref_xyz = reference_over_run(ref_traj, method_results, max_diff_s)
     results = {
         "benchmark": "vo",
         "exposim_version": _version(),
@@ -426,29 +342,11 @@ def bench_vo(
         "sequence": None if run.sequence is None else str(run.sequence),
         "reference": None if ref_path is None else str(ref_path),
         "reference_source": ref_source,
-        "calibration": {
-            "folder": str(calib_dir),
-            "baseline_m": calib.baseline_m,
-            "rectified_fx_px": float(rect.K[0, 0]),
-            "rectified_size": list(rect.size),
-            "image_size": list(calib.image_size),
-            "method": "cv2.stereoRectify from K, D of both cameras, R = R_r^T R_l, T = -R_r^T [b, 0, 0], alpha 0"
-            + ("; R and T direction re-estimated from left-right matches" if extrinsics else ""),
-            "refined_extrinsics": None if extrinsics is None else extrinsics.to_dict(),
-        },
-        "parameters": {
-            "vo": asdict(parameters),
-            "scale": scale,
-            "align_scale": align_scale,
-            "rel_delta_tol": rel_delta_tol,
-            "deltas_m": deltas,
-            "delta_fractions": None if deltas_m is not None else list(delta_fractions),
-            "max_diff_s": max_diff_s,
-            "association": "evo sync.associate_trajectories, SyncMethod.interpolation",
-            "rpe_on_failure": rpe_on_failure,
-            "max_frames": max_frames,
-            "conversion": CONVERSION,
-        },
+        "calibration": calibration_record(calib_dir, calib, rect, extrinsics),
+        "parameters": vo_parameters_record(parameters, scale=scale, align_scale=align_scale,
+                                           rel_delta_tol=rel_delta_tol, deltas=deltas, deltas_m=deltas_m,
+                                           delta_fractions=delta_fractions, max_diff_s=max_diff_s,
+                                           rpe_on_failure=rpe_on_failure, max_frames=max_frames),
         "failure_policy": FAILURE_POLICY,
         "n_runs": len(method_results),
         "n_failed": sum(1 for m in method_results.values() if m["status"] != "success"),

@@ -168,6 +168,78 @@ def _phase_names(bayer_pattern: str | None) -> list[str]:
     return names
 
 
+def _checked_groups(groups, response: CameraResponse) -> list:
+    """``groups`` as a list, each checked (:func:`estimate_noise_model`, Raises)."""
+    groups = list(groups)
+    if not groups:
+        raise NoiseModelError("no bracket groups given")
+    if not isinstance(response, CameraResponse):
+        raise NoiseModelError(f"response must be an emulator CameraResponse, got {type(response).__name__}")
+    for i, gr in enumerate(groups):
+        where = f"group {i} ({getattr(gr, 'label', '') or 'unnamed'})"
+        if not isinstance(gr, BracketGroup):
+            raise NoiseModelError(f"{where}: expected a BracketGroup, got {type(gr).__name__}")
+        if len(gr.raws) not in (2, 3) or len(gr.exposures_ms) != len(gr.raws):
+            raise NoiseModelError(f"{where}: need 2 or 3 images with one exposure each, got {len(gr.raws)} images "
+                                  f"and {len(gr.exposures_ms)} exposures")
+        for raw in gr.raws:
+            if not isinstance(raw, np.ndarray) or raw.dtype != np.uint16 or raw.ndim != 2:
+                raise NoiseModelError(f"{where}: images must be 2-D uint16 Bayer mosaics")
+            if raw.shape != gr.raws[0].shape:
+                raise NoiseModelError(f"{where}: shapes differ ({raw.shape} vs {gr.raws[0].shape})")
+            if int(raw.max()) > response.white_level:
+                raise NoiseModelError(f"{where}: DN {int(raw.max())} above the response's white level "
+                                      f"{response.white_level}")
+        if min(gr.raws[0].shape) < 16:
+            raise NoiseModelError(f"{where}: images too small ({gr.raws[0].shape})")
+        for t in gr.exposures_ms:
+            if not (isinstance(t, (int, float, np.floating, np.integer)) and math.isfinite(t) and t > 0):
+                raise NoiseModelError(f"{where}: exposure {t!r} must be finite and > 0 ms")
+        if gr.times_s is not None:
+            times = np.asarray(gr.times_s, dtype=np.float64)
+            if times.shape != (len(gr.raws),) or not np.all(np.isfinite(times)) or np.any(np.diff(times) <= 0):
+                raise NoiseModelError(f"{where}: times_s must be one finite, increasing instant per image, "
+                                      f"got {gr.times_s!r}")
+    return groups
+
+
+def _per_phase(cols: dict, names, gain: float, read: float, motion_term: bool):
+    """Gain and read noise fitted per Bayer phase: ``(per_channel, phase gains, phase read noises)``;
+    a phase with fewer than 3 bins takes the pooled values."""
+    per_channel = {}
+    phase_gain, phase_read = [], []
+    for p, nm in enumerate(names):
+        m = cols["phase"] == p
+        if np.count_nonzero(m) < 3:
+            per_channel[nm] = {"n_bins": int(np.count_nonzero(m))}
+            phase_gain.append(gain)
+            phase_read.append(read)
+            continue
+        a_p, b_p, c_p, _ = _fit_bins(cols, m, motion_term=motion_term)
+        gp, rp, sgp, srp = _gain_read(a_p, b_p, c_p)
+        per_channel[nm] = {"gain_e_per_h": gp, "read_noise_e": rp, "gain_std": sgp, "read_noise_std": srp,
+                           "n_bins": int(np.count_nonzero(m))}
+        phase_gain.append(gp if math.isfinite(gp) else gain)
+        phase_read.append(rp if math.isfinite(rp) else read)
+    return per_channel, phase_gain, phase_read
+
+
+def _per_group(groups, cols: dict, shifts, motion_term: bool) -> list[dict]:
+    """Each group's own fit (where it has 3 bins or more), its shifts and pixel counts."""
+    per_group = []
+    for i, gr in enumerate(groups):
+        m = cols["group"] == i
+        entry = {"label": gr.label, "exposures_ms": [float(t) for t in gr.exposures_ms],
+                 "shift_px": [[2 * a, 2 * b_] for a, b_ in shifts[i]], "n_bins": int(np.count_nonzero(m)),
+                 "n_pixels": int(cols["n"][m].sum())}
+        if np.count_nonzero(m) >= 3:
+            a_i, b_i, c_i, _ = _fit_bins(cols, m, motion_term=motion_term)
+            gi, ri, sgi, sri = _gain_read(a_i, b_i, c_i)
+            entry.update(gain_e_per_h=gi, read_noise_e=ri, gain_std=sgi, read_noise_std=sri)
+        per_group.append(entry)
+    return per_group
+
+
 def estimate_noise_model(
     groups,
     response: CameraResponse,
@@ -267,36 +339,7 @@ def estimate_noise_model(
     may be out of reach and r is then identified only by extrapolation: its uncertainty
     says so.
     """
-    groups = list(groups)
-    if not groups:
-        raise NoiseModelError("no bracket groups given")
-    if not isinstance(response, CameraResponse):
-        raise NoiseModelError(f"response must be an emulator CameraResponse, got {type(response).__name__}")
-    for i, gr in enumerate(groups):
-        where = f"group {i} ({getattr(gr, 'label', '') or 'unnamed'})"
-        if not isinstance(gr, BracketGroup):
-            raise NoiseModelError(f"{where}: expected a BracketGroup, got {type(gr).__name__}")
-        if len(gr.raws) not in (2, 3) or len(gr.exposures_ms) != len(gr.raws):
-            raise NoiseModelError(f"{where}: need 2 or 3 images with one exposure each, got {len(gr.raws)} images "
-                                  f"and {len(gr.exposures_ms)} exposures")
-        for raw in gr.raws:
-            if not isinstance(raw, np.ndarray) or raw.dtype != np.uint16 or raw.ndim != 2:
-                raise NoiseModelError(f"{where}: images must be 2-D uint16 Bayer mosaics")
-            if raw.shape != gr.raws[0].shape:
-                raise NoiseModelError(f"{where}: shapes differ ({raw.shape} vs {gr.raws[0].shape})")
-            if int(raw.max()) > response.white_level:
-                raise NoiseModelError(f"{where}: DN {int(raw.max())} above the response's white level "
-                                      f"{response.white_level}")
-        if min(gr.raws[0].shape) < 16:
-            raise NoiseModelError(f"{where}: images too small ({gr.raws[0].shape})")
-        for t in gr.exposures_ms:
-            if not (isinstance(t, (int, float, np.floating, np.integer)) and math.isfinite(t) and t > 0):
-                raise NoiseModelError(f"{where}: exposure {t!r} must be finite and > 0 ms")
-        if gr.times_s is not None:
-            times = np.asarray(gr.times_s, dtype=np.float64)
-            if times.shape != (len(gr.raws),) or not np.all(np.isfinite(times)) or np.any(np.diff(times) <= 0):
-                raise NoiseModelError(f"{where}: times_s must be one finite, increasing instant per image, "
-                                      f"got {gr.times_s!r}")
+    groups = _checked_groups(groups, response)
     if not 0 < flat_fraction <= 1:
         raise NoiseModelError(f"flat_fraction must be in (0, 1], got {flat_fraction!r}")
     names = _phase_names(bayer_pattern)
@@ -369,33 +412,9 @@ def estimate_noise_model(
                         "reach the read-noise regime")
     cols["weight"] = weights
 
-    per_channel = {}
-    phase_gain, phase_read = [], []
-    for p, nm in enumerate(names):
-        m = cols["phase"] == p
-        if np.count_nonzero(m) < 3:
-            per_channel[nm] = {"n_bins": int(np.count_nonzero(m))}
-            phase_gain.append(gain)
-            phase_read.append(read)
-            continue
-        a_p, b_p, c_p, _ = _fit_bins(cols, m, motion_term=motion_term)
-        gp, rp, sgp, srp = _gain_read(a_p, b_p, c_p)
-        per_channel[nm] = {"gain_e_per_h": gp, "read_noise_e": rp, "gain_std": sgp, "read_noise_std": srp,
-                           "n_bins": int(np.count_nonzero(m))}
-        phase_gain.append(gp if math.isfinite(gp) else gain)
-        phase_read.append(rp if math.isfinite(rp) else read)
+    per_channel, phase_gain, phase_read = _per_phase(cols, names, gain, read, motion_term)
 
-    per_group = []
-    for i, gr in enumerate(groups):
-        m = cols["group"] == i
-        entry = {"label": gr.label, "exposures_ms": [float(t) for t in gr.exposures_ms],
-                 "shift_px": [[2 * a, 2 * b_] for a, b_ in shifts[i]], "n_bins": int(np.count_nonzero(m)),
-                 "n_pixels": int(cols["n"][m].sum())}
-        if np.count_nonzero(m) >= 3:
-            a_i, b_i, c_i, _ = _fit_bins(cols, m, motion_term=motion_term)
-            gi, ri, sgi, sri = _gain_read(a_i, b_i, c_i)
-            entry.update(gain_e_per_h=gi, read_noise_e=ri, gain_std=sgi, read_noise_std=sri)
-        per_group.append(entry)
+    per_group = _per_group(groups, cols, shifts, motion_term)
     spread = {"gain_e_per_h": _percentiles(e.get("gain_e_per_h", float("nan")) for e in per_group),
               "read_noise_e": _percentiles(e.get("read_noise_e", float("nan")) for e in per_group)}
 

@@ -37,13 +37,14 @@ class _CycleImages:
     """Decoded brackets of one cycle, each decoded at most once (thread-safe), with histograms."""
 
     def __init__(self, cycle, white_level: int, black_level: int, stats: RunStats, noise=None,
-                 shapes: dict | None = None) -> None:
+                 shapes: dict | None = None, blur=None) -> None:
         self.cycle = cycle
         self.shapes = shapes  # the run's image size, shared by every cycle: a frame of another size is refused
         self.white = white_level
         self.black = black_level
         self.stats = stats
         self.noise = noise  # None, or (NoiseModel, seed) for noise-consistent emulation
+        self.blur = blur  # None, or a hook .apply(cycle, camera, exposure_ms, ratio, raw, out) -> out (blur-consistent)
         self._lock = threading.Lock()
         self._locks: dict = {}
         self._data: dict = {}
@@ -91,6 +92,8 @@ class _CycleImages:
             else:
                 t0 = time.perf_counter()
                 out = apply_lut(table, raw)
+                if self.blur is not None:
+                    out = self.blur.apply(self.cycle, camera, exposure_ms, ratio, raw, out)
                 if self.noise is not None:
                     out = self._add_noise(camera, exposure_ms, ratio, raw, out)
                 stats.add("emulate_s", time.perf_counter() - t0)
@@ -134,7 +137,7 @@ class EmulatedTick:
         self.missing = {c: cycle.missing(c) for c in p.cameras}
         avail = cycle.available(p.cameras)
         self.skipped = None if avail else "no bracket present for every camera"
-        self.images = _CycleImages(cycle, p.white, p.black, p.stats, p.noise, shapes)
+        self.images = _CycleImages(cycle, p.white, p.black, p.stats, p.noise, shapes, p.blur)
         lead = p.cameras[0]
         self.brackets = {e: (lambda e=e: self.images.saturated(lead, e)) for e in avail}
 
@@ -188,6 +191,9 @@ class EmulatedProvider:
         the recording's, left first).
     noise : None or (NoiseModel, seed)
         Noise-consistent emulation, each image seeded by (seed, cycle, camera, bracket, ratio).
+    blur : None or hook
+        Blur-consistent emulation: ``blur.apply(cycle, camera, bracket_ms, ratio, raw, emulated) -> image``,
+        once per emulated image, before the noise.
     cycles : iterable of int or None
         The cycle indices to visit (default all).
     """
@@ -195,7 +201,7 @@ class EmulatedProvider:
     latency_ticks = 0
 
     def __init__(self, sequence, config: RunConfig, response, *, cameras=None, noise=None, stats: RunStats | None = None,
-                 cycles=None) -> None:
+                 cycles=None, blur=None) -> None:
         self.sequence = sequence
         self.selector = config.selector
         self.response = response
@@ -207,6 +213,7 @@ class EmulatedProvider:
             cameras = cams
         self.cameras = tuple(cameras)
         self.noise = noise
+        self.blur = blur
         self.stats = stats if stats is not None else RunStats()
         self._cycles = None if cycles is None else list(cycles)
 

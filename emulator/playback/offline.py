@@ -25,7 +25,7 @@ def resolve_sequence(sequence) -> Sequence:
     return sequence if isinstance(sequence, Sequence) else load_sequence(sequence)
 
 
-def prepare_run(sequence, methods, config: RunConfig, response=None, *, stats: RunStats | None = None):
+def prepare_run(sequence, methods, config: RunConfig, response=None, *, stats: RunStats | None = None, blur=None):
     """What a run needs once its configuration is valid: ``(sequence, response, built methods, provider, noise source)``.
 
     The response is the run's at the recording's levels; methods built by name get
@@ -39,7 +39,7 @@ def prepare_run(sequence, methods, config: RunConfig, response=None, *, stats: R
     built = build_methods(methods, mode=config.mode, response=response, options=config.options)
     model, source = config.noise_for(seq, response)
     noise = None if model is None else (model, config.noise_seed)
-    provider = EmulatedProvider(seq, config, response, noise=noise, stats=stats)
+    provider = EmulatedProvider(seq, config, response, noise=noise, stats=stats, blur=blur)
     return seq, response, built, provider, (model, source)
 
 
@@ -53,6 +53,7 @@ def iter_run(
     keep_images: bool = False,
     on_step: Callable[[MethodStep], None] | None = None,
     stats: RunStats | None = None,
+    blur=None,
     **settings,
 ) -> Iterator[CycleStep]:
     """Run the closed loop cycle by cycle, yielding a :class:`CycleStep` per cycle.
@@ -76,6 +77,8 @@ def iter_run(
         Called in the worker right after each method's step, with the images attached.
     stats : RunStats or None
         Filled with counters and timings.
+    blur : hook or None
+        Blur-consistent emulation (:class:`~emulator.playback.emulated.EmulatedProvider`).
 
     A method that fails (raises :class:`~emulator.autoexposure.registry.MethodFailed`,
     returns a bad value through the plugin wrapper, or exceeds ``method_timeout_s``) gets no
@@ -84,7 +87,7 @@ def iter_run(
     """
     cfg = RunConfig.from_kwargs(config, **settings)
     stats = stats if stats is not None else RunStats()
-    _, _, built, provider, _ = prepare_run(sequence, methods, cfg, response, stats=stats)
+    _, _, built, provider, _ = prepare_run(sequence, methods, cfg, response, stats=stats, blur=blur)
     return closed_loop(provider, built, cfg, want_right=emulate_right, keep_images=keep_images, on_step=on_step,
                        stats=stats)
 
