@@ -28,6 +28,7 @@ import numpy as np
 
 from emulator.autoexposure import DEFAULT_RANGE_MS
 from emulator.errors import PlaybackError
+from emulator.io.runfolder import SAVE_MODES
 
 __all__ = [
     "RunConfig",
@@ -41,8 +42,6 @@ __all__ = [
 #: First exposure of every method, ms.
 DEFAULT_INITIAL_MS = 4.0
 DEFAULT_SELECTOR = "higher-no-sat"
-#: What a run saves of its emulated images.
-SAVE_MODES = ("none", "png16", "png8")
 MODES = ("paper", "borealhdr")
 #: Keys of ``run.json`` that are the configuration (a resume compares these).
 CONFIG_KEYS = ("selector", "initial_ms", "range_ms", "save", "mode", "options", "method_timeout_s", "noise")
@@ -295,7 +294,7 @@ class RunConfig:
         noise = run_json.get("noise") or {"mode": "none"}
         response = run_json.get("response_path") or run_json.get("response")
         timeout = run_json.get("method_timeout_s", run_json.get("method_timeout"))
-        model = run_json.get("noise_model_file")
+        model = run_json.get("noise_model_file") or run_json.get("noise_model")
         if model is not None and Path(model).name == "exposim.json":
             model = None  # the recording's own: found again from the recording
         return cls(
