@@ -14,8 +14,11 @@ of the bytes).
 
 from __future__ import annotations
 
+import contextlib
 import threading
+from collections import deque
 from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -45,41 +48,83 @@ def saved_image(image: np.ndarray, save: str, *, white_level: int, black_level: 
 
 
 class _ImageSaver:
-    """Writes each step's images, encoding one image once per (cycle, camera, target) (thread-safe)."""
+    """Writes each step's images in the background, one encoding per (cycle, camera, target) (thread-safe).
 
-    def __init__(self, writer: RunWriter, save: str, white: int, black: int) -> None:
+    The first step of a (cycle, camera, target) submits its image to a small pool of encoder
+    threads (PNG encoding releases the GIL, so it overlaps the loop); the other methods with
+    that target get the same bytes (:meth:`RunWriter.share_image`) when it is written.  At
+    most ``max_pending`` writes wait at a time (their images stay in memory); :meth:`close`
+    waits for all of them and raises the first error.
+    """
+
+    def __init__(self, writer: RunWriter, save: str, white: int, black: int, *, threads: int = 2,
+                 max_pending: int = 32) -> None:
         self.writer, self.save, self.white, self.black = writer, save, white, black
         self._lock = threading.Lock()
-        self._locks: dict = {}
         self._done: dict = {}
+        self._pending: deque = deque()
+        self._errors: list[BaseException] = []
+        self._max_pending = int(max_pending)
+        self._pool = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="exposim-save") \
+            if save != "none" else None
 
     def __call__(self, st: MethodStep) -> None:
-        if self.save == "none":
+        if self._pool is None:
             return
+        resumed = self.writer.recorded(st.method, st.cycle) is not None
         for cam, img in (("left", st.left), ("right", st.right)):
             if img is None:
                 continue
-            dest = self.writer.image_path(st.method, cam, st.timestamp_ns)
             key = (st.cycle, cam, st.target_ms)
             with self._lock:
-                lock = self._locks.setdefault(key, threading.Lock())
-            with lock:
-                if dest.exists() and self.writer.recorded(st.method, st.cycle) is not None:
-                    self._done.setdefault(key, dest)  # a resumed run's image, already there
-                    continue
                 first = self._done.get(key)
                 if first is None:
-                    data = saved_image(img, self.save, white_level=self.white, black_level=self.black)
-                    self._done[key] = self.writer.write_image(st.method, cam, st.timestamp_ns, data)
-                else:
-                    self.writer.share_image(first, st.method, cam, st.timestamp_ns)
+                    self._done[key] = self._pool.submit(self._write, img, st.method, cam, st.timestamp_ns, resumed)
+                    self._pending.append(self._done[key])
+                    continue
+            first.add_done_callback(lambda f, m=st.method, c=cam, t=st.timestamp_ns:
+                                    self._share(f, m, c, t, resumed))
         self._forget(st.cycle)
+        while True:
+            with self._lock:
+                oldest = self._pending.popleft() if len(self._pending) > self._max_pending else None
+            if oldest is None:
+                break
+            oldest.result()
+
+    def _write(self, img, method: str, cam: str, timestamp_ns: int, resumed: bool) -> Path:
+        dest = self.writer.image_path(method, cam, timestamp_ns)
+        if resumed and dest.exists():
+            return dest  # a resumed run's image, already there
+        data = saved_image(img, self.save, white_level=self.white, black_level=self.black)
+        return self.writer.write_image(method, cam, timestamp_ns, data)
+
+    def _share(self, first: Future, method: str, cam: str, timestamp_ns: int, resumed: bool) -> None:
+        try:
+            source = first.result()
+            dest = self.writer.image_path(method, cam, timestamp_ns)
+            if source != dest and not (resumed and dest.exists()):
+                self.writer.share_image(source, method, cam, timestamp_ns)
+        except BaseException as exc:  # raised again by close()
+            with self._lock:
+                self._errors.append(exc)
 
     def _forget(self, cycle: int) -> None:
         with self._lock:
             for key in [k for k in self._done if k[0] < cycle - 1]:
                 self._done.pop(key, None)
-                self._locks.pop(key, None)
+
+    def close(self) -> None:
+        """Wait for every write; raise the first error."""
+        if self._pool is None:
+            return
+        try:
+            for fut in list(self._pending):
+                fut.result()
+        finally:
+            self._pool.shutdown(wait=True)  # the sharing callbacks have run
+        if self._errors:
+            raise self._errors[0]
 
 
 def _new_run_json(config: RunConfig, identity: dict, seq, built, method_specs, model, model_source, command,
@@ -233,6 +278,7 @@ def _loop_into(writer: RunWriter, provider, built: dict, cfg: RunConfig, stats: 
                 writer.update(cycles_done=done, skipped_cycles=skipped, method_status=method_status)
             if progress is not None:
                 progress(done, n_cycles)
+        saver.close()  # every image written before the run is complete
         status = "complete"
     except KeyboardInterrupt:
         status = "interrupted"
@@ -241,6 +287,9 @@ def _loop_into(writer: RunWriter, provider, built: dict, cfg: RunConfig, stats: 
         run_json["error"] = f"{type(exc).__name__}: {exc}"
         raise
     finally:
+        if status != "complete":
+            with contextlib.suppress(BaseException):  # the loop's own error is the one raised
+                saver.close()
         if status == "complete":
             run_json.pop("error", None)
         writer.update(status=status, cycles_done=done, skipped_cycles=skipped, timing=stats.as_dict(),

@@ -223,3 +223,40 @@ def test_emulate_cycle_refuses_a_stereo_pair_of_two_instants(tmp_path):
     cycle.frames["right"][info["bracket_ms"]] = dataclasses.replace(frame, timestamp_ns=frame.timestamp_ns + 1)
     with pytest.raises(DatasetError, match="stereo pair mismatch"):
         emulate_cycle(seq, 1, 6.0)
+
+
+# ------------------------------------------------------------------ run folders from memory
+def test_run_folder_images_encoded_once_per_target_and_summary_from_memory(tmp_path):
+    import csv
+    import os
+
+    from emulator.io.runfolder import RunWriter, read_tables
+    from emulator.report.run import summarise_run
+    from emulator.runner import run_to_folder
+
+    root, _ = write_static_sequence(tmp_path / "seq", n_cycles=4, shape=(16, 24))
+    out = tmp_path / "run"
+    summary = run_to_folder(root, "fixed,classical-50,classical-70", out, RunConfig(save="png16", jobs=2),
+                            make_report=False)
+    assert summary == summarise_run(out)  # the summary from memory is the one the folder gives
+    tables = read_tables(out, ["fixed", "classical-50", "classical-70"])
+    for name, t in tables.items():
+        rows = list(csv.DictReader(open(out / name / "exposures.csv")))
+        assert len(rows) == 4 and all((out / name / "images" / cam / f"{r['timestamp_ns']}.png").is_file()
+                                      for r in rows for cam in ("left", "right"))
+    # cycle 0: every method at the initial exposure shares one encoded image per camera
+    ts0 = int(tables["fixed"]["timestamp_ns"][0])
+    for cam in ("left", "right"):
+        paths = [out / m / "images" / cam / f"{ts0}.png" for m in tables]
+        assert len({p.read_bytes() for p in paths}) == 1
+        assert len({os.stat(p).st_ino for p in paths}) == 1  # hard links: one encoding
+    # times.txt from memory equals the one built from the CSVs
+    before = {m: (out / m / "images" / "times.txt").read_bytes() for m in tables}
+    with RunWriter(out, resume=True) as w:
+        w.save = "png16"
+        w.write_times(list(tables))
+    assert {m: (out / m / "images" / "times.txt").read_bytes() for m in tables} == before
+    info = __import__("json").loads((out / "run.json").read_text())
+    timing = info["timing"]
+    assert timing["cycles"] == 4 and timing["steady_cycles"] == 3 and timing["startup_s"] > 0
+    assert timing["steady_cycles_per_s"] == pytest.approx(3 / (timing["wall_s"] - timing["startup_s"]))
