@@ -221,7 +221,7 @@ def write_run(sequence, methods, out_dir, config: RunConfig | None = None, *, re
     names = list(built)
     identity = {"sequence": str(Path(seq.path).resolve()), "methods": names, "response": cfg.response_name(response)}
 
-    with RunWriter(out, resume=resume) as writer:
+    with RunWriter(out, resume=resume, png_level=cfg.png_level) as writer:
         if resume:
             run_json = writer.run_json
             cfg.resumed(run_json, CONFIG_KEYS if resume_given is None else resume_given, where=str(out / RUN_FILE),

@@ -62,6 +62,7 @@ class Seen(Doubler):
     ("noise_seed", -1, "noise_seed must be a non-negative integer"),
     ("method_timeout_s", 0, "method_timeout_s must be finite and positive"),
     ("method_timeout_s", "x", "method_timeout_s must be a number"),
+    ("png_level", 10, "png_level must be an integer 0..9"),
 ])
 def test_run_config_refuses_each_bad_field_by_name(field, value, match):
     with pytest.raises(PlaybackError, match=match):
@@ -260,3 +261,18 @@ def test_run_folder_images_encoded_once_per_target_and_summary_from_memory(tmp_p
     timing = info["timing"]
     assert timing["cycles"] == 4 and timing["steady_cycles"] == 3 and timing["startup_s"] > 0
     assert timing["steady_cycles_per_s"] == pytest.approx(3 / (timing["wall_s"] - timing["startup_s"]))
+
+
+def test_png_level_changes_bytes_not_images():
+    import cv2
+
+    from emulator.io.png import encode_png
+
+    rng = np.random.default_rng(0)
+    for img in (rng.integers(0, 4095, (30, 40), dtype=np.uint16), rng.integers(0, 256, (30, 40), dtype=np.uint8)):
+        stored, packed = encode_png(img, level=0), encode_png(img, level=6)
+        assert stored != packed and len(stored) >= img.nbytes  # level 0 stores the rows
+        for data in (stored, packed):
+            assert np.array_equal(cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED), img)
+    with pytest.raises(DatasetError, match="PNG level must be an integer 0..9"):
+        encode_png(img, level=-1)

@@ -37,6 +37,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("-o", "--output", type=Path, required=True, help="run folder to create (must not exist or be empty)")
     p.add_argument("--save", choices=("none", "png16", "png8"), default=None,
                    help="save emulated images: none (default), png16 (12-bit Bayer DN) or png8 (8-bit gray)")
+    p.add_argument("--png-level", type=int, default=None, metavar="0..9",
+                   help="zlib level of the saved images (default 0: stored, the fastest; 1..9 smaller files, the "
+                        "same decoded images)")
     p.add_argument("--jobs", type=int, default=1, help="threads across methods (same output for any value)")
     p.add_argument("--mode", choices=("paper", "borealhdr"), default=None,
                    help="method behaviour: paper (default, reference defects corrected) or borealhdr (reference code)")
@@ -120,7 +123,8 @@ def _command(args) -> str:
     for flag, value in (("--methods", args.methods), ("--save", args.save), ("--mode", args.mode),
                         ("--initial-ms", args.initial_ms), ("--selector", args.selector),
                         ("--response", args.response), ("--seed", args.seed), ("--noise", args.noise),
-                        ("--noise-model", args.noise_model), ("--noise-seed", args.noise_seed)):
+                        ("--noise-model", args.noise_model), ("--noise-seed", args.noise_seed),
+                        ("--png-level", args.png_level)):
         if value is not None:
             parts += [flag, str(value)]
     if args.range_ms is not None:
@@ -138,6 +142,7 @@ def _command(args) -> str:
 
 #: RunConfig field -> the flag that sets it (errors name the flag).
 _FLAGS = {"initial_ms": "--initial-ms", "range_ms": "--range-ms", "jobs": "--jobs", "noise_seed": "--noise-seed",
+          "png_level": "--png-level",
           "method_timeout_s": "--method-timeout-s", "selector": "--selector", "mode": "--mode", "save": "--save",
           "noise": "--noise"}
 
@@ -153,7 +158,8 @@ def _given(args) -> dict:
             "selector": args.selector, "mode": args.mode, "options": options or None, "jobs": args.jobs,
             "save": args.save, "noise": args.noise, "noise_model": args.noise_model, "noise_seed": args.noise_seed,
             "method_timeout_s": args.method_timeout_s,
-            "response_path": str(args.response) if args.response is not None else None}
+            "response_path": str(args.response) if args.response is not None else None,
+            "png_level": args.png_level}
 
 
 def config_from_args(args, base=None):

@@ -104,8 +104,9 @@ class RunWriter:
     configuration and opens the CSVs, reading the rows already there (:meth:`recorded`).
     """
 
-    def __init__(self, out_dir: str | os.PathLike, *, resume: bool = False) -> None:
+    def __init__(self, out_dir: str | os.PathLike, *, resume: bool = False, png_level: int = 1) -> None:
         self.path = Path(out_dir)
+        self.png_level = int(png_level)  # zlib level of the saved images (emulator.io.png.encode_png)
         self.resume = bool(resume)
         self.run_json: dict = {}
         self.lock: RunLock | None = None
@@ -195,9 +196,9 @@ class RunWriter:
         """Write one emulated image as the run saves them (``uint16`` for png16, ``uint8`` grey for png8)."""
         path = self.image_path(method, camera, timestamp_ns)
         if self.save == "png16":
-            return write_png16(path, image, overwrite=True)
+            return write_png16(path, image, overwrite=True, level=self.png_level)
         if self.save == "png8":
-            return write_png8(path, image, overwrite=True)
+            return write_png8(path, image, overwrite=True, level=self.png_level)
         raise RunFolderError(f"{self.path}: this run saves no images (save = {self.save!r})")
 
     def share_image(self, source: Path, method: str, camera: str, timestamp_ns: int) -> Path:

@@ -122,6 +122,9 @@ class RunConfig:
         Per-call wall-time limit of ``next_exposure``, s (> 0), or None.
     response_path : str, path or None
         A pcalib file; None: the one found beside the recording.
+    png_level : int
+        zlib level of the saved images, 0..9 (default 0: stored, the fastest to write and read;
+        the decoded images are the same for any level, :func:`emulator.io.png.encode_png`).
     """
 
     initial_ms: float = DEFAULT_INITIAL_MS
@@ -136,6 +139,7 @@ class RunConfig:
     noise_seed: int = 0
     method_timeout_s: float | None = None
     response_path: str | None = None
+    png_level: int = 0
 
     def __post_init__(self) -> None:
         from emulator.select import SELECTORS
@@ -180,6 +184,10 @@ class RunConfig:
             put(self, "method_timeout_s", value)
         if self.response_path is not None:
             put(self, "response_path", str(self.response_path))
+        if isinstance(self.png_level, bool) or not isinstance(self.png_level, (int, np.integer)) \
+                or not 0 <= self.png_level <= 9:
+            raise PlaybackError(f"png_level must be an integer 0..9, got {self.png_level!r}")
+        put(self, "png_level", int(self.png_level))
         if isinstance(self.noise_model, Path):
             put(self, "noise_model", str(self.noise_model))
 
@@ -286,6 +294,7 @@ class RunConfig:
             "method_timeout_s": self.method_timeout_s,
             "noise": noise,
             "jobs": self.jobs,
+            "png_level": self.png_level,
         })
 
     @classmethod
@@ -310,6 +319,7 @@ class RunConfig:
             noise_seed=int(noise.get("seed", 0)),
             method_timeout_s=timeout,
             response_path=response if response and Path(response).is_file() else None,
+            png_level=int(run_json.get("png_level", 1)),  # folders from before the setting: level 1
         )
 
     def resumed(self, recorded: Mapping, given: Iterable[str] = CONFIG_KEYS, *, where: str = "run.json",
