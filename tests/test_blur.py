@@ -1,0 +1,112 @@
+"""Blur from the gyro: exact lengths for known rotations, a point blurred into a line of known
+length, byte-exact emulation at rest, and the real sample at rest changed by less than its noise."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from emulator.blur import (
+    AngularVelocity,
+    as_angular_velocity,
+    blur_homographies,
+    emulate_blur_consistent,
+    exposure_window_s,
+    integrate_rotation,
+    predict_blur,
+)
+from emulator.emulate import emulate
+from emulator.errors import EmulationError
+from emulator.response import CameraResponse
+
+F_PX = 500.0
+SIZE = (201, 101)
+K = np.array([[F_PX, 0.0, 100.0], [0.0, F_PX, 50.0], [0.0, 0.0, 1.0]])
+
+
+def yaw(rate_rad_s):
+    return lambda t: np.tile([0.0, rate_rad_s, 0.0], (np.size(t), 1))
+
+
+def test_integrate_constant_rate_is_exact():
+    _, R = integrate_rotation(yaw(0.3), 0.0, 0.1)
+    angle = math.atan2(R[-1][0, 2], R[-1][0, 0])
+    assert abs(angle - 0.03) < 1e-12
+    _, Rb = integrate_rotation(yaw(0.3), 0.1, 0.0)  # backwards: the inverse rotation
+    np.testing.assert_allclose(Rb[-1], R[-1].T, atol=1e-12)
+
+
+def test_centre_blur_of_a_yaw_is_f_tan_theta():
+    # yaw at 10 deg/s for 32 ms: the centre moves f * tan(0.32 deg) along x
+    rate = math.radians(10.0)
+    b = predict_blur(yaw(rate), K, SIZE, 0.0, 32.0, "start")
+    assert abs(b.centre_px - F_PX * math.tan(rate * 0.032)) < 1e-9
+    assert abs(b.rotation_deg - 0.32) < 1e-9 and abs(b.mean_rate_deg_s - 10.0) < 1e-6
+    assert b.max_px > b.centre_px  # off-axis points move further under a yaw
+    # roll about the optical axis: the centre stays, a corner moves r * theta
+    roll = predict_blur(lambda t: np.tile([0.0, 0.0, rate], (np.size(t), 1)), K, SIZE, 0.0, 32.0)
+    assert roll.centre_px < 1e-9 and abs(roll.max_px - math.hypot(100, 50) * rate * 0.032) < 1e-6
+
+
+def test_samples_and_callable_agree_and_nan_outside():
+    t = np.linspace(-1, 1, 201)
+    w = np.column_stack([0.1 * t, 0.2 + 0 * t, -0.05 + 0 * t])
+    samp = as_angular_velocity((t, w))
+    func = as_angular_velocity(lambda tt: np.column_stack([0.1 * tt, 0.2 + 0 * tt, -0.05 + 0 * tt]))
+    a, b = predict_blur(samp, K, SIZE, 0.1, 16.0), predict_blur(func, K, SIZE, 0.1, 16.0)
+    assert abs(a.max_px - b.max_px) < 1e-9
+    assert math.isnan(predict_blur(samp, K, SIZE, 0.995, 16.0).max_px)  # window leaves the samples
+    with pytest.raises(EmulationError, match="strictly increasing"):
+        AngularVelocity(t[::-1], w)
+
+
+@pytest.mark.parametrize("stamp, expect", [("start", (1.0, 1.01)), ("middle", (0.995, 1.005)), ("end", (0.99, 1.0))])
+def test_windows(stamp, expect):
+    assert np.allclose(exposure_window_s(1.0, 10.0, stamp), expect)
+
+
+def test_a_point_becomes_a_line_of_known_length():
+    """Source 1 ms, target 9 ms, yaw giving 5 px per ms at the centre: the extra 8 ms draw a line
+    of 40 px carrying (T - S) / S of the point's linear exposure."""
+    resp = CameraResponse.linear(4095)
+    rate = 5.0 / (F_PX * 1e-3)  # rad/s (small angle: 5 px/ms at the centre)
+    raw = np.zeros((SIZE[1], SIZE[0]), dtype=np.uint16)
+    raw[50, 100] = 1000
+    Hs, ws = blur_homographies(yaw(rate), K, SIZE, 0.0, 1.0, 9.0, "start")
+    assert abs(sum(ws) - 8.0) < 1e-12
+    out, valid = emulate_blur_consistent(raw, 1.0, 9.0, resp, Hs, ws, bayer=False)
+    row = out[50].astype(np.float64)
+    assert out[:49].max() == 0 and out[52:].max() == 0
+    assert row[100] >= 1000  # the point's own 1 ms stays where it was
+    line = np.flatnonzero(row[:100] > 0) if row[:100].any() else np.flatnonzero(row[101:] > 0) + 101
+    # the camera turns right (+y): the image moves left; from 0.5 ms (source middle) to 8.5 ms
+    x0, x1 = 100 - F_PX * math.tan(rate * 8.5e-3), 100 - F_PX * math.tan(rate * 0.5e-3)
+    assert abs(line.min() - x0) <= 1.0 and abs(line.max() - x1) <= 1.0
+    assert abs((x1 - x0) - 40.0) < 0.005 * 40  # 5 px/ms x 8 ms, up to tan() at 4.9 deg
+    assert abs((line.max() - line.min()) - (x1 - x0)) <= 1.0
+    # the line carries (9 - 1) / 1 x 1000 DN (linear response), up to the rounding of ~40 pixels
+    assert abs(row.sum() - 1000 - 8000) <= 0.5 * (line.size + 2)
+
+
+def test_at_rest_the_emulation_is_exact():
+    resp = CameraResponse.gamma(2.2, 4095)
+    rng = np.random.default_rng(0)
+    raw = rng.integers(0, 4096, size=(60, 80)).astype(np.uint16)
+    Hs, ws = blur_homographies(lambda t: np.zeros((np.size(t), 3)), K, (80, 60), 0.0, 2.0, 16.0)
+    out, valid = emulate_blur_consistent(raw, 2.0, 16.0, resp, Hs, ws)
+    plain, pvalid = emulate(raw, 2.0, 16.0, resp, return_mask=True)
+    np.testing.assert_array_equal(out, plain)
+    np.testing.assert_array_equal(valid, pvalid)
+
+
+def test_bayer_sites_are_warped_on_their_own_grid():
+    """A mosaic of four constant colour planes keeps each site's colour under blur (no mixing)."""
+    resp = CameraResponse.linear(4095)
+    raw = np.empty((60, 80), dtype=np.uint16)
+    raw[0::2, 0::2], raw[0::2, 1::2], raw[1::2, 0::2], raw[1::2, 1::2] = 100, 200, 300, 400
+    Hs, ws = blur_homographies(yaw(1.0), K, (80, 60), 0.0, 2.0, 8.0)
+    assert len(Hs) > 1
+    out, _ = emulate_blur_consistent(raw, 2.0, 8.0, resp, Hs, ws)
+    np.testing.assert_array_equal(out, raw * 4)
