@@ -28,7 +28,9 @@ from emulator.blur import (
     blur_homographies,
     blur_mismatch_px,
     emulate_blur_consistent,
+    GyroBias,
     gyro_in_camera,
+    still_gyro_bias,
     predict_blur,
     scale_intrinsics,
 )
@@ -93,6 +95,8 @@ class RecordingMotion:
     intrinsics: dict
     stamp: str = DEFAULT_STAMP
     R_cam_imu: np.ndarray = field(default_factory=lambda: R_CAM_IMU_FLU.copy())
+    #: The gyro offset subtracted (None: none, e.g. a synthetic ``omega``).
+    bias: GyroBias | None = None
 
     def t_s(self, timestamp_ns: int) -> float:
         return (int(timestamp_ns) - self.origin_ns) * 1e-9
@@ -118,14 +122,16 @@ class RecordingMotion:
 
 
 def recording_motion(sequence, calibration=None, *, stamp: str = DEFAULT_STAMP, R_cam_imu=R_CAM_IMU_FLU,
-                     omega=None, origin_ns: int = 0) -> RecordingMotion | None:
+                     omega=None, origin_ns: int = 0, remove_bias: bool = True) -> RecordingMotion | None:
     """The motion of a recording, or None when it has no IMU (and no ``omega`` is given).
 
     ``calibration``: a folder with ``left.yaml`` (and ``right.yaml``), or None to find one
     (:func:`find_camera_calibration`); :class:`CalibrationError` when none is found.
     ``omega``: angular velocity in camera axes (anything
     :func:`emulator.blur.as_angular_velocity` takes, times in s since ``origin_ns``),
-    used instead of the IMU (synthetic walks).
+    used instead of the IMU (synthetic walks).  ``remove_bias``: subtract the gyro offset
+    measured where the IMU is still (:func:`emulator.blur.still_gyro_bias`; on the
+    BorealHDR sample 0.4-0.8 deg/s, as much as the sample's cycles turn).
     """
     from emulator.io.camera_info import read_camera_info
 
@@ -134,9 +140,11 @@ def recording_motion(sequence, calibration=None, *, stamp: str = DEFAULT_STAMP, 
     if omega is None:
         if getattr(sequence, "imu", None) is None:
             return None
-        omega, origin_ns = gyro_in_camera(sequence.imu, R_cam_imu)
+        imu = sequence.imu
+        bias = still_gyro_bias(imu.timestamp_ns, imu.gyro_rad_s, imu.acc_m_s2) if remove_bias else None
+        omega, origin_ns = gyro_in_camera(imu, R_cam_imu, bias_rad_s=None if bias is None else bias.bias_rad_s)
     else:
-        omega = as_angular_velocity(omega)
+        omega, bias = as_angular_velocity(omega), None
     folder = find_camera_calibration(sequence, calibration)
     if folder is None:
         raise CalibrationError(
@@ -148,7 +156,7 @@ def recording_motion(sequence, calibration=None, *, stamp: str = DEFAULT_STAMP, 
         if path.is_file():
             info = read_camera_info(path)
             intrinsics[cam] = (np.asarray(info.K, dtype=np.float64), (int(info.width), int(info.height)))
-    return RecordingMotion(omega, int(origin_ns), intrinsics, stamp, np.asarray(R_cam_imu, dtype=np.float64))
+    return RecordingMotion(omega, int(origin_ns), intrinsics, stamp, np.asarray(R_cam_imu, dtype=np.float64), bias)
 
 
 def blur_table(sequence, motion: RecordingMotion, camera: str = "left") -> list[dict]:

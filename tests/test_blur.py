@@ -57,7 +57,7 @@ def test_samples_and_callable_agree_and_nan_outside():
     func = as_angular_velocity(lambda tt: np.column_stack([0.1 * tt, 0.2 + 0 * tt, -0.05 + 0 * tt]))
     a, b = predict_blur(samp, K, SIZE, 0.1, 16.0), predict_blur(func, K, SIZE, 0.1, 16.0)
     assert abs(a.max_px - b.max_px) < 1e-9
-    assert math.isnan(predict_blur(samp, K, SIZE, 0.995, 16.0).max_px)  # window leaves the samples
+    assert math.isnan(predict_blur(samp, K, SIZE, 0.995, 16.0, "start").max_px)  # window leaves the samples
     with pytest.raises(EmulationError, match="strictly increasing"):
         AngularVelocity(t[::-1], w)
 

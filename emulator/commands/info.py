@@ -20,8 +20,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--calibration", type=Path, default=None, metavar="DIR",
                    help="folder with left.yaml/right.yaml (ROS camera_info) for the blur in pixels (default: "
                         "calibration/ inside or beside the recording, BorealHDR: the one of the recording's month)")
-    p.add_argument("--stamp", choices=("start", "middle", "end"), default="start",
-                   help="where a frame's timestamp lies in its exposure window (default start; docs/blur.md)")
+    p.add_argument("--stamp", choices=("start", "middle", "end"), default="end",
+                   help="where a frame's timestamp lies in its exposure window (default end, fitted on the BorealHDR sample; docs/blur.md)")
     p.set_defaults(func=_info)
 
 
