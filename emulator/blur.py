@@ -26,7 +26,8 @@ Blur-consistent emulation (:func:`emulate_blur_consistent`): where the target ex
 extra time (placed by ``stamp``).  In linear exposure (``h = g(DN)``) the target is the
 source plus the source re-projected to each sub-instant of the extra time,
 ``h_T = h_S + sum_j (w_j / S) warp_{H_j}(h_S)`` with ``sum_j w_j = T - S``, then
-``DN_T = f(h_T)``.  At rest every ``H_j`` is the identity and the result is the plain
+``DN_T = f(h_T)``; only the source's structure is moved, not its noise
+(``structure_sigma_px``).  At rest every ``H_j`` is the identity and the result is the plain
 emulation, byte for byte.  Where ``T < S`` the source's extra blur cannot be removed;
 :func:`blur_mismatch_px` measures it.
 """
@@ -65,6 +66,7 @@ __all__ = [
     "blur_mismatch_px",
     "blur_homographies",
     "emulate_blur_consistent",
+    "STRUCTURE_SIGMA_PX",
 ]
 
 #: Where a frame's timestamp lies in its exposure window.
@@ -426,8 +428,14 @@ def _is_identity(H: np.ndarray, size) -> bool:
     return bool(np.abs(_project(H[None], pts)[0] - pts).max() < _REST_PX)
 
 
+#: Default Gaussian sigma (px of one Bayer plane) of the structure the blur moves (see
+#: :func:`emulate_blur_consistent`): the source's own noise is not smeared.
+STRUCTURE_SIGMA_PX = 1.0
+
+
 def emulate_blur_consistent(raw: np.ndarray, source_ms: float, target_ms: float, response,
-                            homographies, weights_ms, *, bayer: bool = True) -> tuple[np.ndarray, np.ndarray]:
+                            homographies, weights_ms, *, bayer: bool = True,
+                            structure_sigma_px: float = STRUCTURE_SIGMA_PX) -> tuple[np.ndarray, np.ndarray]:
     """Emulate ``raw`` (a ``source_ms`` shot) at ``target_ms`` with the blur of the extra time.
 
     Parameters
@@ -442,6 +450,12 @@ def emulate_blur_consistent(raw: np.ndarray, source_ms: float, target_ms: float,
     homographies, weights_ms : lists
         From :func:`blur_homographies` (full-resolution pixels); weights sum to
         ``target_ms - source_ms``.
+    structure_sigma_px : float
+        The blur moves the source's structure, not its noise: ``h_T = (T/S) h_S +
+        sum_j (w_j/S) (warp_j(s) - s)`` with ``s`` the source smoothed by a Gaussian of this
+        sigma (px of one Bayer plane).  0: ``s = h_S`` (the warps then also average the
+        source's noise, which a live capture's noise never is: on the BorealHDR sample that
+        alone made 32 ms frames emulated from 4 ms 10 % less sharp than plain emulation).
 
     Returns
     -------
@@ -467,8 +481,7 @@ def emulate_blur_consistent(raw: np.ndarray, source_ms: float, target_ms: float,
                              f"{target_ms - source_ms:.6g} ms")
     h = response.inverse(raw).astype(np.float32)
     clipped = ((raw >= response.white_level) | (raw <= response.black_level)).astype(np.float32)
-    rest_w = sum(w for H, w in zip(homographies, weights_ms) if _is_identity(np.asarray(H), size))
-    acc = h * np.float32((source_ms + rest_w) / source_ms)
+    acc = h * np.float32(target_ms / source_ms)
     touched = clipped.copy()
     phases = [(0, 0), (1, 0), (0, 1), (1, 1)] if bayer else [(None, None)]
     for H, w in moving:
@@ -479,9 +492,11 @@ def emulate_blur_consistent(raw: np.ndarray, source_ms: float, target_ms: float,
             else:
                 sl, Hp = (slice(py, None, 2), slice(px, None, 2)), _bayer_plane_homography(H, px, py)
             plane = np.ascontiguousarray(h[sl])
+            if structure_sigma_px > 0:
+                plane = cv2.GaussianBlur(plane, (0, 0), float(structure_sigma_px), borderType=cv2.BORDER_REPLICATE)
             dsize = (plane.shape[1], plane.shape[0])
-            acc[sl] += np.float32(w / source_ms) * cv2.warpPerspective(
-                plane, Hp, dsize, flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+            acc[sl] += np.float32(w / source_ms) * (cv2.warpPerspective(
+                plane, Hp, dsize, flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE) - plane)
             touched[sl] = np.maximum(touched[sl], cv2.warpPerspective(
                 np.ascontiguousarray(clipped[sl]), Hp, dsize, flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE))
     out = np.clip(np.rint(response.forward(acc)), response.black_level, response.white_level).astype(np.uint16)
