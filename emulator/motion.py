@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import math
+import threading
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -176,10 +177,52 @@ class BlurHook:
     :meth:`emulate` returns the blur-consistent image and the blur mismatch (px, the
     source's excess blur over a capture at the target; > 0 only where the target is
     shorter than the source bracket, the added blur makes it 0 where it is longer).
+    :meth:`apply` is the loop's entry (:mod:`emulator.playback`): it also records one row per
+    emulated image for ``blur.csv`` (:meth:`write_table`).
     """
 
     motion: RecordingMotion
     response: object
+    _rows: dict = field(default_factory=dict, repr=False)
+    _lock: object = field(default_factory=threading.Lock, repr=False)
+
+    def describe(self) -> dict:
+        """What ``run.json`` records under ``"blur"``."""
+        m = self.motion
+        return {"mode": "consistent", "stamp": m.stamp, "R_cam_imu": m.R_cam_imu.tolist(),
+                "gyro_bias": None if m.bias is None else m.bias.to_dict(),
+                "focal_px": {cam: float(K[0, 0]) for cam, (K, _) in m.intrinsics.items()}}
+
+    def apply(self, cycle, camera: str, source_ms: float, ratio: float, raw: np.ndarray,
+              plain: np.ndarray) -> np.ndarray:
+        """The emulated image of ``raw`` (``plain``: its exact emulation at ``ratio``), blur-consistent."""
+        target_ms = source_ms * ratio
+        frame = cycle.frames[camera][source_ms]
+        size = (raw.shape[1], raw.shape[0])
+        src = self.motion.frame_blur(camera, frame.timestamp_ns, source_ms, size).max_px
+        tgt = self.motion.frame_blur(camera, frame.timestamp_ns, target_ms, size).max_px
+        added = target_ms > source_ms
+        out = plain
+        if added:
+            Hs, ws = self.motion.homographies(camera, frame.timestamp_ns, source_ms, target_ms, size)
+            out, _ = emulate_blur_consistent(raw, source_ms, target_ms, self.response, Hs, ws)
+        excess = 0.0 if added else max(0.0, src - tgt)
+        row = {"cycle": cycle.index, "camera": camera, "timestamp_ns": frame.timestamp_ns, "bracket_ms": source_ms,
+               "target_ms": target_ms, "source_blur_px": src, "target_blur_px": tgt, "excess_blur_px": excess,
+               "added": added}
+        with self._lock:
+            self._rows[(cycle.index, camera, source_ms, target_ms)] = row
+        return out
+
+    def rows(self) -> list[dict]:
+        with self._lock:
+            return list(self._rows.values())
+
+    def write_table(self, run_dir) -> Path:
+        """Write the recorded rows to ``<run_dir>/blur.csv`` (:mod:`emulator.io.blurtable`)."""
+        from emulator.io.blurtable import write_blur_table
+
+        return write_blur_table(run_dir, self.rows())
 
     def emulate(self, camera: str, timestamp_ns: int, raw: np.ndarray, source_ms: float, target_ms: float):
         size = (raw.shape[1], raw.shape[0])
