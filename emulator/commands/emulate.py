@@ -28,8 +28,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--cycle", type=int, required=True, help="cycle index, from 0 (see `exposim info`)")
     p.add_argument("--camera", choices=("left", "right", "both"), default="both",
                    help="camera(s) to emulate (default both: the ones the recording has)")
-    p.add_argument("--selector", choices=("higher-no-sat", "closest", "reference"), default="higher-no-sat",
-                   help="bracket selector, decided on the first camera's saturation (default higher-no-sat)")
+    p.add_argument("--selector", choices=("higher-no-sat", "closest", "reference", "blur-aware"),
+                   default="higher-no-sat",
+                   help="bracket selector, decided on the first camera's saturation (default higher-no-sat); "
+                        "blur-aware: HigherNoSat that takes the lower bracket when the higher one's excess blur "
+                        "(from the gyro) costs more than the lower one's noise (docs/blur.md)")
     p.add_argument("--response", type=Path, help="pcalib file (default: found beside the recording)")
     p.add_argument("--from-ms", type=float, default=None, metavar="E",
                    help="emulate from the bracket of E ms (must be in the cycle) instead of the selector's choice")
@@ -111,14 +114,23 @@ def emulate_cycle(
             raise ExposimError(f"--from-ms {from_ms:g}: cycle {cycle_index} of {sequence.path} has no {from_ms:g} ms "
                                f"bracket for {' and '.join(cameras)} (present: {', '.join(f'{b:g}' for b in available)})")
         chosen = from_ms
-    else:
-        chosen = select(selector, exposure_ms, {b: frac(b) for b in available}, **levels)
     from emulator.motion import blur_hook, recording_motion
 
     hook = blur_hook(blur, sequence, response, calibration=calibration, stamp=stamp)
     motion = hook.motion if hook is not None else (
-        recording_motion(sequence, calibration, stamp=stamp) if sequence.imu is not None and _has_calibration(
-            sequence, calibration) else None)
+        recording_motion(sequence, calibration, stamp=stamp) if sequence.imu is not None and (
+            selector == "blur-aware" or _has_calibration(sequence, calibration)) else None)
+    if from_ms is not None:
+        pass
+    elif selector == "blur-aware":
+        from emulator.select import blur_aware
+
+        if motion is None:
+            raise ExposimError(f"--selector blur-aware needs the recording's gyro (imu/imu.csv); {sequence.path} has none")
+        chosen = blur_aware(exposure_ms, {b: frac(b) for b in available}, **levels, excess_blur_px=lambda b: (
+            motion.mismatch_px(lead, cycle.frames[lead][b].timestamp_ns, b, exposure_ms)))
+    else:
+        chosen = select(selector, exposure_ms, {b: frac(b) for b in available}, **levels)
     info = {
         "sequence": str(sequence.path),
         "cycle": cycle_index,
