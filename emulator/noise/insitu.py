@@ -526,7 +526,7 @@ def bootstrap_gain(bins: dict, groups=None, *, n_boot: int = 400, seed: int = 0,
 
 def noise_strata(estimate: NoiseEstimate, *, n_boot: int = 400, seed: int = 0, motion_term: bool = True,
                  bayer_pattern: str | None = "RGGB") -> dict:
-    """The gain pooled, per exposure stratum and per Bayer phase, each with formal and bootstrap SE.
+    """The gain pooled, per exposure stratum, per Bayer phase and per both, with formal and bootstrap SE.
 
     Strata are the groups' exposure sets (``"4-8-16"``, ``"8-16-32"`` ...); the bootstrap
     resamples whole groups within the stratum.  Phases refit every group's points of one
@@ -541,9 +541,15 @@ def noise_strata(estimate: NoiseEstimate, *, n_boot: int = 400, seed: int = 0, m
         idx = [i for i, x in enumerate(labels) if x == lab and np.any(bins["group"] == i)]
         if idx:
             out["exposure"][lab] = bootstrap_gain(bins, idx, n_boot=n_boot, seed=seed, motion_term=motion_term)
+    out["phase_exposure"] = {}
     for p, name in enumerate(_phase_names(bayer_pattern)):
         m = bins["phase"] == p
         if m.any():
             sub = {k: np.asarray(v)[m] for k, v in bins.items()}
             out["phase"][name] = bootstrap_gain(sub, n_boot=n_boot, seed=seed, motion_term=motion_term)
+            for lab in out["exposure"]:
+                idx = [i for i, x in enumerate(labels) if x == lab and np.any(sub["group"] == i)]
+                if idx:
+                    out["phase_exposure"][f"{name} {lab}"] = bootstrap_gain(sub, idx, n_boot=n_boot, seed=seed,
+                                                                            motion_term=motion_term)
     return out
