@@ -123,7 +123,8 @@ class RecordingMotion:
 
 
 def recording_motion(sequence, calibration=None, *, stamp: str = DEFAULT_STAMP, R_cam_imu=R_CAM_IMU_FLU,
-                     omega=None, origin_ns: int = 0, remove_bias: bool = True) -> RecordingMotion | None:
+                     omega=None, origin_ns: int = 0, remove_bias: bool = True,
+                     intrinsics: dict | None = None) -> RecordingMotion | None:
     """The motion of a recording, or None when it has no IMU (and no ``omega`` is given).
 
     ``calibration``: a folder with ``left.yaml`` (and ``right.yaml``), or None to find one
@@ -132,7 +133,8 @@ def recording_motion(sequence, calibration=None, *, stamp: str = DEFAULT_STAMP, 
     :func:`emulator.blur.as_angular_velocity` takes, times in s since ``origin_ns``),
     used instead of the IMU (synthetic walks).  ``remove_bias``: subtract the gyro offset
     measured where the IMU is still (:func:`emulator.blur.still_gyro_bias`; on the
-    BorealHDR sample 0.4-0.8 deg/s, as much as the sample's cycles turn).
+    BorealHDR sample 0.4-0.8 deg/s, as much as the sample's cycles turn).  ``intrinsics``:
+    camera -> (K (3x3), (width, height)) instead of calibration files (synthetic cameras).
     """
     from emulator.io.camera_info import read_camera_info
 
@@ -146,6 +148,11 @@ def recording_motion(sequence, calibration=None, *, stamp: str = DEFAULT_STAMP, 
         omega, origin_ns = gyro_in_camera(imu, R_cam_imu, bias_rad_s=None if bias is None else bias.bias_rad_s)
     else:
         omega, bias = as_angular_velocity(omega), None
+    if intrinsics is not None:
+        intrinsics = {cam: (np.asarray(K, dtype=np.float64), (int(size[0]), int(size[1])))
+                      for cam, (K, size) in intrinsics.items()}
+        return RecordingMotion(omega, int(origin_ns), intrinsics, stamp, np.asarray(R_cam_imu, dtype=np.float64),
+                               bias)
     folder = find_camera_calibration(sequence, calibration)
     if folder is None:
         raise CalibrationError(

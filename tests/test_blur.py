@@ -147,3 +147,22 @@ def test_sample_at_rest_changes_less_than_noise(sample_seq):
         assert excess == 0.0  # target longer: the added blur leaves no mismatch
         blur = hook.motion.frame_blur("left", frames[tgt].timestamp_ns if tgt in frames else 0, tgt)
         assert blur.max_px < 1.5  # at rest: about 1 px at 32 ms, 1920 px wide
+
+
+def test_recording_motion_takes_a_synthetic_angular_velocity(tmp_path):
+    """The synthetic side's plug: an angular velocity and intrinsics, no IMU, no calibration files."""
+    from emulator.motion import recording_motion
+
+    class Seq:
+        imu = None
+        path = tmp_path
+        cycles = []
+
+    assert recording_motion(Seq()) is None  # no IMU, nothing given: no motion
+    m = recording_motion(Seq(), omega=yaw(math.radians(10.0)), origin_ns=1_000_000_000,
+                         intrinsics={"left": (K, SIZE)}, stamp="start")
+    b = m.frame_blur("left", 1_500_000_000, 32.0)
+    assert abs(b.centre_px - F_PX * math.tan(math.radians(10.0) * 0.032)) < 1e-9
+    assert m.frame_blur("right", 1_500_000_000, 32.0) == b  # a camera without intrinsics uses the left's
+    assert m.mismatch_px("left", 1_500_000_000, 32.0, 8.0) == pytest.approx(
+        b.max_px - m.frame_blur("left", 1_500_000_000, 8.0).max_px)
