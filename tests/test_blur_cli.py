@@ -86,3 +86,19 @@ def test_run_blur_consistent_records_and_resumes(sample_seq, tmp_path, capsys):
     # a resume must repeat the choice
     assert main(base + ["-o", str(blurred), "--resume", "--blur", "none"]) == 1
     assert "blur" in capsys.readouterr().err
+
+
+def test_info_without_imu_says_so_and_nothing_else_changes(tmp_path, capsys):
+    try:
+        from test_playback import write_static_sequence
+    except ImportError:
+        from tests.test_playback import write_static_sequence
+    seq, _ = write_static_sequence(tmp_path / "seq", n_cycles=2, shape=(8, 8))
+    assert main(["info", str(seq), "--json"]) == 0
+    desc = json.loads(capsys.readouterr().out)
+    assert desc["imu"] is None and desc["blur"] is None and desc["n_cycles"] == 2
+    assert main(["info", str(seq)]) == 0
+    assert "imu        none (no imu/imu.csv)" in capsys.readouterr().out
+    assert main(["run", str(seq), "--methods", "fixed", "-o", str(tmp_path / "r"), "--blur", "consistent",
+                 "--no-progress"]) == 1
+    assert "needs the recording's gyro" in capsys.readouterr().err and not (tmp_path / "r").exists()

@@ -31,7 +31,13 @@ register.order = 10  # place in `exposim --help`
 def _info(args) -> int:
     from emulator.io.borealhdr import load_sequence
 
-    seq = load_sequence(args.sequence)
+    import warnings
+
+    from emulator.io.imu import ImuMissingWarning
+
+    with warnings.catch_warnings():  # info reports the IMU itself ("imu": null / "imu  none")
+        warnings.simplefilter("ignore", ImuMissingWarning)
+        seq = load_sequence(args.sequence)
     desc = seq.describe()
     desc["imu"], desc["blur"] = _motion(seq, args)
     if args.json:
