@@ -146,7 +146,7 @@ def noise(seq, resp):
 
     motion = recording_motion(seq)
     out = {}
-    for tag, kw in (("all", {}), ("still_le_1px", {"motion": motion, "max_motion_px": 1.0})):
+    for tag, kw in (("all", {}), ("still_le_2.5px", {"motion": motion, "max_motion_px": 2.5})):
         groups = bracket_groups(seq, size=3, **kw)
         est = estimate_noise_model(groups, resp)
         out[tag] = {"n_groups": len(groups), "gain_e_per_h": est.gain_e_per_h, "gain_std": est.gain_std,
