@@ -208,12 +208,12 @@ class BlurHook:
         size = (raw.shape[1], raw.shape[0])
         src = self.motion.frame_blur(camera, frame.timestamp_ns, source_ms, size).max_px
         tgt = self.motion.frame_blur(camera, frame.timestamp_ns, target_ms, size).max_px
-        added = target_ms > source_ms
+        added = target_ms > source_ms and math.isfinite(tgt)  # outside the gyro's span: plain emulation
         out = plain
         if added:
             Hs, ws = self.motion.homographies(camera, frame.timestamp_ns, source_ms, target_ms, size)
             out, _ = emulate_blur_consistent(raw, source_ms, target_ms, self.response, Hs, ws)
-        excess = 0.0 if added else max(0.0, src - tgt)
+        excess = 0.0 if added else (max(0.0, src - tgt) if math.isfinite(src - tgt) else math.nan)
         row = {"cycle": cycle.index, "camera": camera, "timestamp_ns": frame.timestamp_ns, "bracket_ms": source_ms,
                "target_ms": target_ms, "source_blur_px": src, "target_blur_px": tgt, "excess_blur_px": excess,
                "added": added}

@@ -166,3 +166,26 @@ def test_recording_motion_takes_a_synthetic_angular_velocity(tmp_path):
     assert m.frame_blur("right", 1_500_000_000, 32.0) == b  # a camera without intrinsics uses the left's
     assert m.mismatch_px("left", 1_500_000_000, 32.0, 8.0) == pytest.approx(
         b.max_px - m.frame_blur("left", 1_500_000_000, 8.0).max_px)
+
+
+def test_hook_outside_the_gyro_span_emulates_plainly():
+    """A frame the gyro does not cover gets the plain emulation and a NaN excess, not an error."""
+    from types import SimpleNamespace
+
+    from emulator.motion import BlurHook, RecordingMotion
+
+    t = np.linspace(0.0, 1.0, 101)
+    motion = RecordingMotion(as_angular_velocity((t, np.tile([0.0, 0.5, 0.0], (101, 1)))), 0, {"left": (K, SIZE)},
+                             "start")
+    resp = CameraResponse.linear(4095)
+    raw = np.random.default_rng(3).integers(100, 3000, size=(SIZE[1], SIZE[0])).astype(np.uint16)
+    plain = emulate(raw, 2.0, 8.0, resp)
+    hook = BlurHook(motion, resp)
+    for index, (ts_ns, blurred) in enumerate(((500_000_000, True), (5_000_000_000, False))):
+        frame = SimpleNamespace(timestamp_ns=ts_ns)
+        cycle = SimpleNamespace(index=index, frames={"left": {2.0: frame}})
+        out = hook.apply(cycle, "left", 2.0, 4.0, raw, plain)
+        assert (not np.array_equal(out, plain)) == blurred
+    rows = sorted(hook.rows(), key=lambda r: r["timestamp_ns"])
+    assert len(rows) == 2 and rows[0]["added"] and rows[0]["excess_blur_px"] == 0.0
+    assert not rows[1]["added"] and math.isnan(rows[1]["excess_blur_px"])
