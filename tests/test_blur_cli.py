@@ -102,3 +102,14 @@ def test_info_without_imu_says_so_and_nothing_else_changes(tmp_path, capsys):
     assert main(["run", str(seq), "--methods", "fixed", "-o", str(tmp_path / "r"), "--blur", "consistent",
                  "--no-progress"]) == 1
     assert "needs the recording's gyro" in capsys.readouterr().err and not (tmp_path / "r").exists()
+
+
+def test_emulate_blur_aware_selector(sample_seq, tmp_path, capsys):
+    args = ["emulate", str(sample_seq), "--exposure-ms", "12", "--cycle", "1", "--camera", "left", "--json"]
+    assert main(args + ["-o", str(tmp_path / "a"), "--blur-aware"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    # at rest the 16 ms bracket's excess blur (< 0.1 px) costs less than the 8 ms bracket's noise (0.22)
+    assert info["selector"] == "blur-aware" and info["bracket_ms"] == 16.0
+    assert 0 < info["cameras"]["left"]["blur_mismatch_px"] < 0.2
+    assert main(args + ["-o", str(tmp_path / "b"), "--blur-aware", "--selector", "closest"]) == 1
+    assert "--blur-aware applies to --selector higher-no-sat" in capsys.readouterr().err

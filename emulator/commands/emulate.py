@@ -28,11 +28,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--cycle", type=int, required=True, help="cycle index, from 0 (see `exposim info`)")
     p.add_argument("--camera", choices=("left", "right", "both"), default="both",
                    help="camera(s) to emulate (default both: the ones the recording has)")
-    p.add_argument("--selector", choices=("higher-no-sat", "closest", "reference", "blur-aware"),
-                   default="higher-no-sat",
-                   help="bracket selector, decided on the first camera's saturation (default higher-no-sat); "
-                        "blur-aware: HigherNoSat that takes the lower bracket when the higher one's excess blur "
-                        "(from the gyro) costs more than the lower one's noise (docs/blur.md)")
+    p.add_argument("--selector", choices=("higher-no-sat", "closest", "reference"), default="higher-no-sat",
+                   help="bracket selector, decided on the first camera's saturation (default higher-no-sat)")
+    p.add_argument("--blur-aware", action="store_true",
+                   help="with higher-no-sat: take the lower bracket when the higher one's excess blur (from the "
+                        "gyro) costs more than the lower one's noise (emulator.select.blur_aware; docs/blur.md)")
     p.add_argument("--response", type=Path, help="pcalib file (default: found beside the recording)")
     p.add_argument("--from-ms", type=float, default=None, metavar="E",
                    help="emulate from the bracket of E ms (must be in the cycle) instead of the selector's choice")
@@ -72,6 +72,7 @@ def emulate_cycle(
     The selector sees the brackets present for every requested camera and decides on the
     first camera's saturation (the left one for a stereo pair), once for all cameras.
     ``from_ms`` forces the source bracket instead (it must be present for every camera).
+    ``selector="blur-aware"``: :func:`emulator.select.blur_aware` with the recording's gyro.
     ``blur="consistent"`` adds the blur of the extra exposure time from the recording's
     gyro (:mod:`emulator.motion`); with an IMU, each camera's entry records the predicted
     blur of the source and of a capture at the target (px, largest over the image) and
@@ -190,7 +191,10 @@ def _emulate(args) -> int:
     response = None
     if args.response is not None:
         response = sequence_response(seq, args.response)
-    info, images = emulate_cycle(seq, args.cycle, args.exposure_ms, cameras=cams, selector=args.selector, response=response,
+    if args.blur_aware and args.selector != "higher-no-sat":
+        raise ExposimError(f"--blur-aware applies to --selector higher-no-sat, not {args.selector}")
+    selector = "blur-aware" if args.blur_aware else args.selector
+    info, images = emulate_cycle(seq, args.cycle, args.exposure_ms, cameras=cams, selector=selector, response=response,
                                from_ms=args.from_ms, blur=args.blur, calibration=args.calibration, stamp=args.stamp)
     targets = {
         cam: args.output / f"{cam}_cycle{args.cycle:04d}_{args.exposure_ms:g}ms.png" for cam in images
