@@ -190,15 +190,31 @@ class BlurHook:
 
     motion: RecordingMotion
     response: object
+    #: Select brackets with :func:`emulator.select.blur_aware` instead of HigherNoSat.
+    blur_aware: bool = False
     _rows: dict = field(default_factory=dict, repr=False)
     _lock: object = field(default_factory=threading.Lock, repr=False)
 
     def describe(self) -> dict:
         """What ``run.json`` records under ``"blur"``."""
         m = self.motion
-        return {"mode": "consistent", "stamp": m.stamp, "R_cam_imu": m.R_cam_imu.tolist(),
+        return {"mode": "consistent", "blur_aware": bool(self.blur_aware), "stamp": m.stamp,
+                "R_cam_imu": m.R_cam_imu.tolist(),
                 "gyro_bias": None if m.bias is None else m.bias.to_dict(),
                 "focal_px": {cam: float(K[0, 0]) for cam, (K, _) in m.intrinsics.items()}}
+
+    def select(self, selector: str, cycle, camera: str, target_ms: float, brackets, select_kw: dict):
+        """The loop's bracket choice: ``selector``, or :func:`emulator.select.blur_aware` when
+        :attr:`blur_aware` (``selector`` must then be ``higher-no-sat``)."""
+        from emulator.select import blur_aware, select
+
+        if not self.blur_aware:
+            return select(selector, target_ms, brackets, **select_kw)
+        if selector != "higher-no-sat":
+            raise EmulationError(f"the blur-aware selection refines higher-no-sat, not {selector!r}")
+        frames = cycle.frames[camera]
+        return blur_aware(target_ms, brackets, **select_kw, excess_blur_px=lambda b: self.motion.mismatch_px(
+            camera, frames[b].timestamp_ns, b, target_ms))
 
     def apply(self, cycle, camera: str, source_ms: float, ratio: float, raw: np.ndarray,
               plain: np.ndarray) -> np.ndarray:
@@ -242,17 +258,22 @@ class BlurHook:
         return max(0.0, m) if math.isfinite(m) else m
 
 
-def blur_hook(mode: str, sequence, response, *, calibration=None, stamp: str = DEFAULT_STAMP) -> BlurHook | None:
+def blur_hook(mode: str, sequence, response, *, calibration=None, stamp: str = DEFAULT_STAMP,
+              blur_aware: bool = False) -> BlurHook | None:
     """None for ``mode="none"``; for ``"consistent"`` a :class:`BlurHook` (needs an IMU and a calibration).
 
-    Raises :class:`EmulationError` for an unknown mode or a recording without an IMU.
+    ``blur_aware``: the hook also selects brackets (:meth:`BlurHook.select`).  Raises
+    :class:`EmulationError` for an unknown mode, ``blur_aware`` without ``"consistent"``, or
+    a recording without an IMU.
     """
     if mode not in BLUR_MODES:
         raise EmulationError(f"blur must be one of {', '.join(BLUR_MODES)}, got {mode!r}")
     if mode == "none":
+        if blur_aware:
+            raise EmulationError("the blur-aware selection needs blur 'consistent' (--blur consistent)")
         return None
     motion = recording_motion(sequence, calibration, stamp=stamp)
     if motion is None:
         raise EmulationError(f"{sequence.path}: --blur consistent needs the recording's gyro (imu/imu.csv), "
                              "and this recording has none")
-    return BlurHook(motion, response)
+    return BlurHook(motion, response, bool(blur_aware))

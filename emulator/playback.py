@@ -397,7 +397,8 @@ def iter_run(
 
     def step_one(name: str, method, images: _CycleImages, brackets: dict, missing: dict, cycle) -> MethodStep:
         target = targets[name]
-        key = select(selector, target, brackets, **select_kw)
+        key = (select(selector, target, brackets, **select_kw) if images.blur is None
+               else images.blur.select(selector, cycle, method_cam, target, brackets, select_kw))
         frame = cycle.frames[method_cam][key]
         raw, hist = images.get(method_cam, key)
         ratio = target / key

@@ -115,6 +115,7 @@ def run_to_folder(
     noise_seed: int = 0,
     method_timeout: float | None = None,
     blur: str = "none",
+    blur_aware: bool = False,
 ) -> dict:
     """Run AE methods on a recording and write a run folder (:mod:`emulator.io.runfolder`).
 
@@ -181,8 +182,10 @@ def run_to_folder(
     clamped_initial = _clamp(config["initial_ms"], config["range_ms"])
     from emulator.motion import blur_hook
 
-    hook = blur_hook(blur, seq, response)  # None for "none"; blur.csv and run.json "blur" (docs/blur.md)
+    hook = blur_hook(blur, seq, response, blur_aware=blur_aware)  # None for "none"; blur.csv, run.json "blur"
     config["blur"] = {"mode": "none"} if hook is None else hook.describe()
+    if blur_aware and selector != "higher-no-sat":
+        raise PlaybackError(f"the blur-aware selection refines selector higher-no-sat, not {selector!r}")
 
     with RunWriter(out, resume=resume) as writer:
         if resume:

@@ -113,3 +113,23 @@ def test_emulate_blur_aware_selector(sample_seq, tmp_path, capsys):
     assert 0 < info["cameras"]["left"]["blur_mismatch_px"] < 0.2
     assert main(args + ["-o", str(tmp_path / "b"), "--blur-aware", "--selector", "closest"]) == 1
     assert "--blur-aware applies to --selector higher-no-sat" in capsys.readouterr().err
+
+
+def test_run_blur_aware_selection(sample_seq, tmp_path, capsys):
+    base = ["run", str(sample_seq), "--methods", "classical-50,fixed", "--no-progress"]
+    out = tmp_path / "aware"
+    assert main(base + ["-o", str(out), "--blur", "consistent", "--blur-aware"]) == 0
+    rj = json.loads((out / "run.json").read_text())
+    assert rj["blur"]["blur_aware"] is True and "--blur-aware" in rj["command"]
+    # at rest no bracket's excess blur outweighs the noise: the choices are HigherNoSat's
+    plain = tmp_path / "plain"
+    assert main(base + ["-o", str(plain), "--blur", "consistent"]) == 0
+    for m in ("classical-50", "fixed"):
+        a = (out / m / "exposures.csv").read_text()
+        assert a == (plain / m / "exposures.csv").read_text()
+    # a resume without the flag takes it from run.json; refusals name what is wrong, before any folder
+    assert main(base + ["-o", str(out), "--resume"]) == 0
+    assert main(base + ["-o", str(tmp_path / "x"), "--blur-aware"]) == 1
+    assert "needs blur 'consistent'" in capsys.readouterr().err and not (tmp_path / "x").exists()
+    assert main(base + ["-o", str(tmp_path / "y"), "--blur", "consistent", "--blur-aware", "--selector", "closest"]) == 1
+    assert "refines selector higher-no-sat" in capsys.readouterr().err and not (tmp_path / "y").exists()
