@@ -4,7 +4,8 @@
 
 stamp      image shift between consecutive shots (phase correlation of the log exposure-normalised
            green planes) against the gyro's rotation between the shots' mid-exposures, for stamp
-           positions 0 (start) .. 1.5 of the exposure window, with and without the gyro offset
+           positions 0 (start) .. 1.5 of the exposure window, with and without the gyro offset; and an
+           unconstrained least-squares map from the gyro's rotation (IMU axes) to the image shift
 rest       per emulated image: RMS change of --blur consistent against plain emulation, over the
            noise of a capture at the target and over the emulated image's own noise (full well
            2005 e- in situ and 10 500 e- synth preset)
@@ -50,7 +51,8 @@ def stamp(seq, resp):
             lb = np.log(np.maximum(resp.g[rb] / b.exposure_ms, 1e-3))
             (dx, dy), _ = cv2.phaseCorrelate(la, lb, win)
             pairs.append((cam, a, b, np.array([2 * dx, 2 * dy])))
-    out = {"n_pairs": len(pairs), "rms_image_shift_px": float(np.sqrt(np.mean([p[3] ** 2 for p in pairs]))), "fits": []}
+    out = {"n_pairs": len(pairs), "rms_image_shift_px": float(np.sqrt(np.mean([p[3] ** 2 for p in pairs]))), "fits": [],
+           "axis_fit": _axis_fit(seq, pairs)}
     for bias in (True, False):
         motion = recording_motion(seq, remove_bias=bias)
         for alpha in (0.0, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5):
@@ -62,6 +64,30 @@ def stamp(seq, resp):
             out["fits"].append({"gyro_offset_removed": bias, "stamp_fraction": alpha,
                                 "rms_residual_px": float(np.sqrt(np.mean(np.square(res))))})
     return out
+
+
+def _axis_fit(seq, pairs):
+    """Least squares image shift (x, y) = A theta_imu over the pairs (gyro in IMU axes, offset removed,
+    stamp at the end), against the assumed A = [[0, -f, 0], [f, 0, 0]] @ R_CAM_IMU_FLU."""
+    from emulator.blur import R_CAM_IMU_FLU, exposure_window_s
+
+    motion = recording_motion(seq, R_cam_imu=np.eye(3))
+    X, Y = [], []
+    for cam, a, b, s in pairs:
+        ta = np.mean(exposure_window_s(motion.t_s(a.timestamp_ns), a.exposure_ms, "end"))
+        tb = np.mean(exposure_window_s(motion.t_s(b.timestamp_ns), b.exposure_ms, "end"))
+        _, R = integrate_rotation(motion.omega, ta, tb)
+        X.append(cv2.Rodrigues(R[-1])[0].ravel())
+        Y.append(s)
+    X, Y = np.array(X), np.array(Y)
+    A = np.linalg.lstsq(X, Y, rcond=None)[0]
+    f = float(motion.K("left")[0][0, 0])
+    M = np.array([[0.0, -f, 0.0], [f, 0.0, 0.0]]) @ R_CAM_IMU_FLU
+    sig = np.sqrt(np.sum((Y - X @ A) ** 2, axis=0) / (len(Y) - 3))
+    se = np.outer(sig, np.sqrt(np.diag(np.linalg.inv(X.T @ X))))
+    return {"fitted_px_per_rad": A.T.tolist(), "fitted_se_px_per_rad": se.tolist(), "assumed_px_per_rad": M.tolist(),
+            "rms_residual_fitted_px": float(np.sqrt(np.mean((Y - X @ A) ** 2))),
+            "rms_residual_assumed_px": float(np.sqrt(np.mean((Y - X @ M.T) ** 2)))}
 
 
 def seq_w(seq):
