@@ -201,3 +201,31 @@ def test_forward_dn_is_rint_of_f(resp):
     got = _forward_dn(resp, h)
     # identical but for exact .5 ties (rint rounds them to even, the grid up)
     assert got.dtype == np.uint16 and np.count_nonzero(got != expect) <= 2
+
+
+def test_still_gyro_bias_and_smoothing():
+    from emulator.blur import smooth_angular_velocity, still_gyro_bias
+
+    rng = np.random.default_rng(7)
+    t_ns = np.arange(0, 4_000_000_000, 10_000_000, dtype=np.int64)  # 4 s at 100 Hz
+    bias = np.array([0.01, -0.02, 0.005])
+    gyro = bias + rng.normal(0, 0.01, size=(t_ns.size, 3))
+    acc = np.tile([0.0, 0.0, 9.81], (t_ns.size, 1)) + rng.normal(0, 0.02, size=(t_ns.size, 3))
+    walking = (t_ns >= 1_000_000_000) & (t_ns < 3_000_000_000)  # seconds 1-3: shaken, turning
+    acc[walking] += rng.normal(0, 1.0, size=(walking.sum(), 3))
+    gyro[walking] += 0.3
+    est = still_gyro_bias(t_ns, gyro, acc)
+    assert est.still_s == [(0.0, 1.0), (3.0, 4.0)]
+    assert est.n_samples == 200
+    np.testing.assert_allclose(est.bias_rad_s, bias, atol=4 * 0.01 / np.sqrt(200))
+    np.testing.assert_allclose(est.noise_rad_s, 0.01, rtol=0.2)
+    none = still_gyro_bias(t_ns[walking], gyro[walking], acc[walking])
+    assert none.n_samples == 0 and np.all(none.bias_rad_s == 0)
+    # smoothing keeps a constant, and the rotation over any interval longer than the window
+    t = np.arange(0.0, 2.0, 0.01) + rng.uniform(-0.003, 0.003, 200)  # 100 Hz with jitter, as an IMU
+    w = np.column_stack([np.sin(2 * np.pi * 1.5 * t), np.ones_like(t), 0 * t])
+    sm = smooth_angular_velocity(t, w, 0.05)
+    np.testing.assert_allclose(sm[:, 1], 1.0, atol=1e-12)
+    inner = (t > 0.1) & (t < 1.9)
+    # a 1.5 Hz gait keeps sinc(1.5 x 0.05) = 99 % of its amplitude (up to the irregular sampling)
+    assert np.max(np.abs(sm[inner, 0] - 0.9908 * w[inner, 0])) < 0.02

@@ -20,6 +20,7 @@ def test_info_json_has_imu_and_blur_per_frame(sample_seq, capsys):
     assert desc["imu"]["n_samples"] == 19988
     blur = desc["blur"]
     assert blur["stamp"] == "end" and blur["camera"] == "left"
+    assert blur["focal_px"] == 1180.80514  # calibration/september_2023, the recording's month (april: 1168.15)
     n_left = sum(len(c["left"]) for c in desc["cycles"])
     assert len(blur["frames"]) == n_left == 18
     by_exp = {}
