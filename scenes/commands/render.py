@@ -122,7 +122,7 @@ def register(subparsers) -> None:
     cache.add_argument("--no-cache", action="store_true", help="do not read or write the render cache")
     p.add_argument("--force", action="store_true", help="overwrite existing output files")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.set_defaults(func=run_render)
+    p.set_defaults(func=run_render, extras=("synth",))
 
 
 def _timestamps_and_poses(scene, args):

@@ -51,7 +51,7 @@ def register(subparsers) -> None:
     p.add_argument("--force", action="store_true",
                    help="replace an existing exposim dataset (refused, naming them, if it holds files synth did not write)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.set_defaults(func=_run)
+    p.set_defaults(func=_run, extras=("synth",))
 
 
 register.order = 70  # place in `exposim --help`

@@ -23,7 +23,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("-o", "--output", type=Path, default=None, help="output folder (default: a new exposim-demo-N)")
     p.add_argument("--quick", action="store_true", help="smallest configuration (for tests)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
-    p.set_defaults(func=_demo)
+    p.set_defaults(func=_demo, extras=("synth",))
 
 
 register.order = 90  # place in `exposim --help`

@@ -98,7 +98,7 @@ def register(sub: argparse._SubParsersAction) -> None:
             q.add_argument("--test-scenes", type=argtypes.names, help="held-out scenes")
         if name == "motion":
             q.add_argument("--speeds", type=argtypes.floats, dest="speeds_mps", help="walking speeds, m/s")
-        q.set_defaults(func=_run, experiment=name)
+        q.set_defaults(func=_run, experiment=name, extras=("synth",))
         for action in q._actions:
             if action.dest in _OPTION_FIELDS and action.dest != "cache_dir":
                 action.config_default = _config_default(name, action.dest)
@@ -121,7 +121,7 @@ def _register_render(vsub) -> None:
 
     q = vsub.add_parser("render", help=_RENDER_HELP, description=_RENDER_HELP)
     add_arguments(q, output_option=True)
-    q.set_defaults(func=_run_render, experiment="render")
+    q.set_defaults(func=_run_render, experiment="render", extras=("synth",))
 
 
 def _run_render(args) -> int:
@@ -155,7 +155,7 @@ def _register_ae_study(vsub) -> None:
              "stereo walks, with a verdict on each of the paper's findings")
     q = vsub.add_parser("ae-study", help=help_, description=help_, formatter_class=_DefaultsFormatter)
     add_arguments(q, output_option=True)
-    q.set_defaults(func=_run_ae_study, experiment="ae-study")
+    q.set_defaults(func=_run_ae_study, experiment="ae-study", extras=("synth",))
 
 
 def _run_ae_study(args) -> int:
