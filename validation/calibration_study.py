@@ -54,6 +54,7 @@ from emulator.calibration import (  # noqa: E402
     response_error,
 )
 from emulator.io.files import save_figure  # noqa: E402
+from emulator.report.figures import subplots  # noqa: E402
 from emulator.io.pcalib import PCALIB_TABLE_TOP, read_response  # noqa: E402
 from emulator.io.stack import write_stack  # noqa: E402
 from emulator.response import CameraResponse  # noqa: E402
@@ -415,15 +416,10 @@ def real_sample_part(progress) -> tuple[dict, dict]:
 
 # ---------------------------------------------------------------------------- report
 def _plots(results: dict, arrays: dict, out: Path) -> list[str]:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     names = []
     presets = [p for p in PRESETS if f"{p}_truth" in arrays]
     if presets:
-        fig, axes = plt.subplots(2, len(presets), figsize=(4.2 * len(presets), 7), squeeze=False)
+        fig, axes = subplots(2, len(presets), figsize=(4.2 * len(presets), 7), squeeze=False)
         for j, p in enumerate(presets):
             gt = arrays[f"{p}_truth"]
             dn = np.arange(gt.size)
@@ -445,11 +441,10 @@ def _plots(results: dict, arrays: dict, out: Path) -> list[str]:
             axe.grid(alpha=0.3)
         fig.tight_layout()
         save_figure(fig, out / "static_stacks.png", dpi=100)
-        plt.close(fig)
         names.append("static_stacks.png")
     ins = [p for p in PRESETS if f"insitu_{p}_truth" in arrays]
     if ins:
-        fig, axes = plt.subplots(1, len(ins), figsize=(4.2 * len(ins), 3.6), squeeze=False)
+        fig, axes = subplots(1, len(ins), figsize=(4.2 * len(ins), 3.6), squeeze=False)
         for j, p in enumerate(ins):
             gt, g = arrays[f"insitu_{p}_truth"], arrays[f"insitu_{p}_recovered"][: arrays[f"insitu_{p}_truth"].size]
             sl = slice(DN_RANGE[0], DN_RANGE[1] + 1)
@@ -461,11 +456,10 @@ def _plots(results: dict, arrays: dict, out: Path) -> list[str]:
             axes[0, j].legend(fontsize=8)
         fig.tight_layout()
         save_figure(fig, out / "in_situ_synthetic.png", dpi=100)
-        plt.close(fig)
         names.append("in_situ_synthetic.png")
     real = results.get("real_sample", {})
     if "real_pcalib" in arrays:
-        fig, (ax, axb) = plt.subplots(1, 2, figsize=(12, 4))
+        fig, (ax, axb) = subplots(1, 2, figsize=(12, 4))
         gt = arrays["real_pcalib"]
         ax.plot(gt, "k-", lw=2, label="pcalib_inside1")
         for key, style in (("both", "C3-"), ("left", "C0--"), ("right", "C2:")):
@@ -486,7 +480,6 @@ def _plots(results: dict, arrays: dict, out: Path) -> list[str]:
         axb.grid(alpha=0.3, which="both")
         fig.tight_layout()
         save_figure(fig, out / "real_sample.png", dpi=100)
-        plt.close(fig)
         names.append("real_sample.png")
     return names
 

@@ -11,7 +11,7 @@ from pathlib import Path
 
 from emulator.io.files import save_figure
 
-__all__ = ["new_figure", "save"]
+__all__ = ["new_figure", "subplots", "save"]
 
 
 def new_figure(ncols: int = 1, width: float = 5.0, height: float = 4.0, *, nrows: int = 1):
@@ -23,6 +23,20 @@ def new_figure(ncols: int = 1, width: float = 5.0, height: float = 4.0, *, nrows
     FigureCanvasAgg(fig)
     axes = fig.subplots(nrows, ncols, squeeze=False).ravel()
     return fig, axes
+
+
+def subplots(nrows: int = 1, ncols: int = 1, *, figsize=(6.4, 4.8), **kwargs):
+    """``pyplot.subplots`` without ``pyplot``: (figure on an Agg canvas, axes as ``Figure.subplots`` gives them).
+
+    ``kwargs`` go to :meth:`matplotlib.figure.Figure.subplots` (``sharex``, ``sharey``,
+    ``squeeze``, ...); nothing touches matplotlib's global backend or figure manager.
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=figsize)
+    FigureCanvasAgg(fig)
+    return fig, fig.subplots(nrows, ncols, **kwargs)
 
 
 def save(fig, path: str | os.PathLike, *, dpi: int = 110, overwrite: bool = True) -> Path:
