@@ -73,7 +73,12 @@ def test_dask_scheduler_without_the_extra_names_it(tmp_path, sample_seq):
                           "--methods", "classical-50", "--save", "none", "-o", "out", "--scheduler", "local", "--no-progress")
     assert got.returncode == 1
     assert got.stderr.strip().splitlines() == [
-        "exposim run: error: the 'dask' extra is not installed (no module dask): pip install 'exposim[dask]'"]
+        "exposim run: error: a Dask scheduler needs the 'dask' extra (no module dask): pip install 'exposim[dask]'"]
+    # without --scheduler a dataset run falls back to serial when Dask is not installed
+    got = exposim_without(tmp_path, "dask,distributed", "run", str(sample_seq.parent), "--sequences", "all",
+                          "--methods", "classical-50", "--save", "none", "-o", "out2", "--json", "--no-progress")
+    assert got.returncode == 0, got.stderr
+    assert '"scheduler": "serial"' in got.stdout
 
 
 def test_module_not_found_of_an_extra_becomes_the_one_line():

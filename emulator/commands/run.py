@@ -8,6 +8,7 @@ import shlex
 import sys
 from pathlib import Path
 
+from emulator.distributed import SCHEDULER_HELP, resolve_scheduler
 from emulator.errors import ExposimError
 
 __all__ = ["register", "parse_option"]
@@ -64,9 +65,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="dataset run: SEQUENCE is a dataset root; run every sequence under it ('all') or the named "
                         "ones (folders or trajectory .zip files, a zip named by its stem); OUTDIR gets one folder per "
                         "sequence and a dataset summary (results.json, report.md, methods.png)")
-    p.add_argument("--scheduler", default=None, metavar="serial|local|tcp://HOST:PORT",
-                   help="dataset runs: serial, local (a Dask LocalCluster sized to the machine; default) or the "
-                        "address of a running Dask scheduler; single sequences always run serially")
+    p.add_argument("--scheduler", default=None, metavar="serial|local|tcp://HOST:PORT|tls://HOST:PORT",
+                   help="dataset runs: " + SCHEDULER_HELP + ", else local (serial without the dask extra); "
+                        "single sequences always run serially")
+    p.add_argument("--scheduler-file", type=Path, default=None, metavar="PATH",
+                   help="dataset runs: the scheduler file of a running Dask cluster (dask scheduler "
+                        "--scheduler-file PATH, dask-jobqueue)")
     p.add_argument("--workers", type=int, default=None, help="dataset runs on --scheduler local: worker processes")
     p.add_argument("--group-size", type=int, default=None,
                    help="dataset runs: methods per unit of work (default: all, one unit per sequence, the methods "
@@ -170,8 +174,8 @@ def _run(args) -> int:
             raise ExposimError("--noise, --method-timeout and --strict apply to single-sequence runs; "
                                "dataset runs (--sequences) do not take them yet")
         return _run_dataset(args)
-    if args.scheduler not in (None, "serial"):
-        raise ExposimError(f"--scheduler {args.scheduler}: a single sequence runs serially; "
+    if args.scheduler not in (None, "serial") or args.scheduler_file is not None:
+        raise ExposimError(f"--scheduler {args.scheduler or 'file'}: a single sequence runs serially; "
                            "pass --sequences all for a dataset run")
     from emulator.autoexposure import DEFAULT_RANGE_MS
     from emulator.io.runfolder import RUN_FILE, read_run_json
@@ -320,7 +324,7 @@ def _run_dataset(args) -> int:
         run_options["options"] = options
     methods = args.methods or ",".join(recorded.get("methods", [])) or "all"
     group_size = args.group_size or recorded.get("group_size")
-    scheduler = args.scheduler or "local"
+    scheduler, scheduler_file = resolve_scheduler(args.scheduler, args.scheduler_file)
 
     bar = None
     progress = None
@@ -338,6 +342,7 @@ def _run_dataset(args) -> int:
     try:
         summary = run_dataset(args.sequence, args.output, sequences=args.sequences, methods=methods,
                               group_size=group_size, options=run_options, scheduler=scheduler,
+                              scheduler_file=scheduler_file,
                               n_workers=args.workers, retries=args.retries, resume=args.resume, progress=progress)
     finally:
         if bar is not None:
@@ -347,7 +352,7 @@ def _run_dataset(args) -> int:
     else:
         t = summary["throughput"]
         print(f"dataset run {args.output}  ({len(summary['sequences'])} sequences, {len(summary['units'])} units, "
-              f"scheduler {scheduler})")
+              f"scheduler {summary['scheduler']})")
         for name, m in summary["per_method"].items():
             mean = m["mean_exposure_ms"]
             print(f"  {name:13s} {m['cycles']:6d} cycles  mean {mean:8.3f} ms" if mean is not None
