@@ -58,6 +58,7 @@ from emulator.report.figures import subplots  # noqa: E402
 from emulator.io.pcalib import PCALIB_TABLE_TOP, read_response  # noqa: E402
 from emulator.io.stack import write_stack  # noqa: E402
 from emulator.response import CameraResponse  # noqa: E402
+from emulator.report.html import write_report
 
 __all__ = ["run_study", "main", "opencv_curves", "codes_to_dn_curve", "stack_exposures"]
 
@@ -597,7 +598,7 @@ def run_study(out, *, quick: bool = False, force: bool = False, radiance_source:
     write_arrays(out / "curves.npz", arrays)
     figures = _plots(results, arrays, out)
     write_results(out / "results.json", results, float_digits=12)
-    write_text(out / "report.md", _report(results, figures))
+    write_report(out, _report(results, figures))
     return results
 
 

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from emulator.io.files import REPORT_FILE, RESULTS_FILE, first_free, read_results, write_results, write_text
+from emulator.report.html import write_report
 
 __all__ = ["run_demo", "demo_config", "emulation_check", "new_output_dir", "demo_dataset", "demo_dataset_key"]
 
@@ -272,7 +273,7 @@ def run_demo(output=None, *, quick: bool = False, progress=None, cache_dir=None)
     }
     write_results(out / RESULTS_FILE, results)
     report = _report(out, cfg, emu, run_dir, feats, vo, timings, dataset, reused)
-    write_text(out / REPORT_FILE, report)
+    write_report(out, report)
     return {"output": out, "report": report, "total_s": timings["total_s"], "dataset": dataset,
             "dataset_reused": reused}
 

@@ -71,6 +71,7 @@ import numpy as np
 from emulator.commands import argtypes
 from emulator.errors import ExposimError
 from emulator.io.files import prepare_output, write_results, write_text
+from emulator.report.html import write_report
 from validation.common import SHOT_INTERVAL_MS, ValidationError, provenance, study_scene, to_percent
 
 __all__ = ["RenderStudyConfig", "CONFIGS", "run_render_study", "render_study_table", "speedups", "main",
@@ -415,7 +416,7 @@ def run_render_study(output, config: RenderStudyConfig | None = None, *, force: 
     }
     write_results(folder / "results.json", results, float_digits=12)
     _plot(results, folder / "time_vs_error.png")
-    write_text(folder / "report.md", render_study_table(results) + "\n")
+    write_report(folder, render_study_table(results) + "\n")
     return results
 
 

@@ -23,6 +23,7 @@ from emulator.io.files import (
     write_text,
 )
 from emulator.report.figures import subplots
+from emulator.report.html import write_report
 from validation.common import PAPER_MAX_RMSE_PERCENT, PAPER_MEDIAN_RMSE_PERCENT, ValidationError, provenance
 
 __all__ = ["EXPERIMENTS", "make_config", "run_experiment"]
@@ -102,7 +103,7 @@ def run_experiment(name: str, output, *, config=None, quick: bool = False, force
     results["figures"] = figures
     write_arrays(folder / "arrays.npz", out["arrays"])
     write_results(folder / RESULTS_FILE, results, float_digits=12)
-    write_text(folder / REPORT_FILE, md)
+    write_report(folder, md)
     return results
 
 

@@ -38,6 +38,7 @@ from emulator.metrics.stereo import (
 )
 from emulator.metrics.trajectory import associate, read_trajectory, trajectory_from_poses
 from emulator.metrics.vo import VOParameters, run_stereo_vo
+from emulator.report.html import write_report
 
 __all__ = [
     "bench_features",
@@ -94,6 +95,27 @@ def _frames(method: MethodRun, max_frames: int | None):
 
 
 # --------------------------------------------------------------------------- features
+
+
+def _features_sheet(run, result: dict, max_frames, n_cycles: int = 6) -> str:
+    """Contact sheet of the images a benchmark compared (first run): sampled left frames per method."""
+    from emulator.report.html import Thumb, _sample, contact_sheet, thumbnail
+
+    rows = []
+    for name, method in run.methods.items():
+        frames = _frames(method, max_frames)
+        per = {} if result is None else result["methods"].get(name, {})
+        cells = []
+        for i in _sample(len(frames), n_cycles):
+            f = frames[i]
+            gray = load_gray8(f.left, white_level=run.white_level, black_level=run.black_level)
+            exposure = "?" if f.exposure_ms is None else f"{f.exposure_ms:.2f} ms"
+            caption = f"frame {i}: {exposure}"
+            if per.get("n_keypoints"):
+                caption += f", {per['n_keypoints'][i]} keypoints"
+            cells.append(Thumb(thumbnail(gray), caption))
+        rows.append((name, cells))
+    return contact_sheet(rows, title=f"Images compared ({run.path.name}, left camera, sampled frames)")
 
 
 def bench_features(
@@ -218,7 +240,9 @@ def bench_features(
     from emulator.report import bench as report
 
     report.plot_features(results, out / "fig4_features.png")
-    write_text(out / REPORT_FILE, report.features_report(results, "fig4_features.png"))
+    sheet = _features_sheet(runs[0], run_results[0], max_frames)
+    write_report(out, report.features_report(results, "fig4_features.png"), figures=["fig4_features.png"],
+                 sheets=[sheet])
     write_results(out / RESULTS_FILE, results)
     return results
 
@@ -460,8 +484,8 @@ def bench_vo(
 
     report.plot_rpe(results, out / "fig6_rpe.png")
     report.plot_trajectories(aligned_xyz, ref_xyz if ref_traj is not None else None, out / "trajectories.png")
-    write_text(out / REPORT_FILE,
-               report.vo_report(results, {"RPE against trajectory length (Fig. 6)": "fig6_rpe.png",
-                                          "trajectories": "trajectories.png"}))
+    write_report(out, report.vo_report(results, {"RPE against trajectory length (Fig. 6)": "fig6_rpe.png",
+                                                 "trajectories": "trajectories.png"}),
+                 figures=["fig6_rpe.png", "trajectories.png"], sheets=[_features_sheet(run, None, max_frames)])
     write_results(out / RESULTS_FILE, results)
     return results

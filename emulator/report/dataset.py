@@ -14,6 +14,7 @@ import numpy as np
 
 from emulator.io.files import REPORT_FILE, RESULTS_FILE, write_results, write_text
 from emulator.report.figures import new_figure, save
+from emulator.report.html import write_report
 
 __all__ = ["PLOT_FILE", "per_method_table", "plot_methods", "dataset_markdown", "write_dataset_report"]
 
@@ -129,5 +130,29 @@ def write_dataset_report(out_dir: str | os.PathLike, summary: dict) -> dict:
     write_results(out / RESULTS_FILE, summary)
     if summary["per_sequence"] and summary["units"]:
         plot_methods(summary, out / PLOT_FILE)
-    write_text(out / REPORT_FILE, dataset_markdown(summary))
+    write_report(out, dataset_markdown(summary), figures=[PLOT_FILE], sheets=[_unit_pages(out, summary)])
     return summary
+
+
+def _unit_pages(out: Path, summary: dict) -> str:
+    """HTML: a link to every unit's own report.html, and the first unit's contact sheet."""
+    import html
+
+    from emulator.io.runfolder import read_run_json, read_tables
+    from emulator.report.html import HTML_REPORT_FILE, run_contact_sheet
+
+    units = [u for u in summary["units"] if (Path(u["folder"]) / HTML_REPORT_FILE).is_file()]
+    if not units:
+        return ""
+    items = []
+    for u in units:
+        rel = Path(u["folder"]).resolve().relative_to(out.resolve()) if Path(u["folder"]).resolve().is_relative_to(
+            out.resolve()) else Path(u["folder"])
+        items.append(f'<li><a href="{html.escape((rel / HTML_REPORT_FILE).as_posix())}">'
+                     f"{html.escape(u['sequence'])} / {html.escape(u['group'])}</a></li>")
+    first = Path(units[0]["folder"])
+    info = read_run_json(first)
+    sheet = run_contact_sheet(first, info["methods"], read_tables(first, info["methods"]),
+                              white_level=info.get("white_level"))
+    sheet = sheet.replace("What each method saw", f"What each method saw on {html.escape(units[0]['sequence'])}", 1)
+    return "<h2>Run folders</h2>\n<ul>" + "".join(items) + "</ul>\n" + sheet

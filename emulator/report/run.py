@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from emulator.io.files import REPORT_FILE, RESULTS_FILE, write_results, write_text
+from emulator.report.html import run_contact_sheet, write_report
 from emulator.io.runfolder import read_run_json, read_tables
 from emulator.report.figures import new_figure, save
 
@@ -161,5 +162,6 @@ def write_run_report(run_dir: str | os.PathLike) -> dict:
     summary = summarise_run(run_dir, info, tables)
     plot_exposure(info, tables, run_dir / PLOT_FILE)
     write_results(run_dir / RESULTS_FILE, summary)
-    write_text(run_dir / REPORT_FILE, run_markdown(info, summary))
+    sheet = run_contact_sheet(run_dir, info["methods"], tables, white_level=info.get("white_level"))
+    write_report(run_dir, run_markdown(info, summary), figures=[PLOT_FILE], sheets=[sheet])
     return summary

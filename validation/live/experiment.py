@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from emulator.io.files import REPORT_FILE, RESULTS_FILE, first_free, read_results, to_jsonable, write_results, write_text
+from emulator.report.html import write_report
 from validation.live.compare import exposure_log2_errors, image_errors, measure_noise_variance_ratio
 from validation.live.config import (
     BRIGHTENING_PAIRS,
@@ -260,7 +261,7 @@ def finish(out, raw: dict) -> dict:
         plot_trajectories(per_scene[s]["trajectories"], out / f"exposure_{s}.png", title=s)
     if cfg.metrics:
         plot_metrics(results, out / "metrics.png")
-    write_text(out / REPORT_FILE, report_markdown(results))
+    write_report(out, report_markdown(results))
     write_results(out / RESULTS_FILE, results)
     return results
 
