@@ -273,9 +273,20 @@ def run_demo(output=None, *, quick: bool = False, progress=None, cache_dir=None)
     }
     write_results(out / RESULTS_FILE, results)
     report = _report(out, cfg, emu, run_dir, feats, vo, timings, dataset, reused)
-    write_report(out, report)
+    write_report(out, report, figures=["run/exposure.png", "features/fig4_features.png", "vo/fig6_rpe.png"],
+                 sheets=[_run_sheet(run_dir)])
     return {"output": out, "report": report, "total_s": timings["total_s"], "dataset": dataset,
             "dataset_reused": reused}
+
+
+def _run_sheet(run_dir: Path) -> str:
+    """The closed-loop run's contact sheet (each method's emulated frames over sampled cycles)."""
+    from emulator.io.runfolder import read_run_json, read_tables
+    from emulator.report.html import run_contact_sheet
+
+    info = read_run_json(run_dir)
+    return run_contact_sheet(run_dir, info["methods"], read_tables(run_dir, info["methods"]),
+                             white_level=info.get("white_level"))
 
 
 def _method_rows(feats: dict, vo: dict, run_summary_path: Path) -> list[str]:

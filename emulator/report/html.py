@@ -245,9 +245,10 @@ def write_report(folder: str | os.PathLike, markdown: str, *, figures: Iterable[
     """
     folder = Path(folder)
     md_path = write_text(folder / REPORT_FILE, markdown)
-    uris = _figures(folder, figures)
+    shown = list(dict.fromkeys(re.findall(r"!\[[^\]]*\]\(([^)\s]+)\)", markdown)))
+    uris = _figures(folder, None if figures is None else [*figures, *shown])
+    uris.update(_figures(folder, [name for name in shown if name not in uris]))
     body = markdown_to_html(markdown, uris)
-    shown = set(re.findall(r"!\[[^\]]*\]\(([^)\s]+)\)", markdown))
     rest = [name for name in uris if name not in shown]
     if sheets:
         sheet_html = "\n".join(s for s in sheets if s)
