@@ -1,4 +1,4 @@
-"""Validation of the inverse-response calibration (issue 8): synthetic stacks, OpenCV, in situ, real sample.
+"""Validation of the inverse-response calibration: synthetic stacks, OpenCV, in situ, real sample.
 
 Run from the repository root::
 

@@ -1,4 +1,4 @@
-"""Render study (issue 13): speed against error of raw and denoised renders, and realism vs real frames.
+"""Render study: speed against error of raw and denoised renders, and realism vs real frames.
 
 Run from the repository root::
 
@@ -68,6 +68,7 @@ from pathlib import Path
 
 import numpy as np
 
+from emulator.commands.progress import add_quiet, bars_enabled
 from emulator.commands import argtypes
 from emulator.errors import ExposimError
 from emulator.io.files import prepare_output, write_results, write_text
@@ -569,7 +570,7 @@ def add_arguments(p: argparse.ArgumentParser, *, output_option: bool = False) ->
                         "or ~/.cache/exposim/renders)")
     p.add_argument("--cache", dest="cache", help=argparse.SUPPRESS)  # old spelling
     p.add_argument("--force", action="store_true", help="overwrite an existing results.json")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_quiet(p)
 
 
 def config_from_args(args: argparse.Namespace) -> RenderStudyConfig:
@@ -606,7 +607,7 @@ def run_from_args(args: argparse.Namespace, command: str) -> dict:
     config = config_from_args(args)
     from tqdm import tqdm
 
-    with tqdm(total=total_steps(config), desc="render study", unit="step", disable=args.no_progress,
+    with tqdm(total=total_steps(config), desc="render study", unit="step", disable=not bars_enabled(args.quiet),
               file=sys.stderr) as bar:
         return run_render_study(args.output, config, force=args.force, progress=bar.update, command=command)
 

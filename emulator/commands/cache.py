@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from emulator.commands.progress import add_quiet, bars_enabled
+
 __all__ = ["register"]
 
 
@@ -23,6 +25,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("sequence", type=Path, help="recording folder holding camera_left/ and camera_right/")
     p.add_argument("--cache-dir", type=Path, default=None,
                    help="where to write the cache (default: SEQUENCE/.exposim-frames, found automatically)")
+    add_quiet(p)
     p.add_argument("--level", type=int, default=3, help="zstandard compression level (default: %(default)s)")
     p.set_defaults(func=_cache)
 
@@ -37,7 +40,7 @@ def _cache(args) -> int:
 
     if not 1 <= args.level <= 22:
         raise SystemExit(f"exposim cache: error: --level must be 1..22, got {args.level}")
-    with tqdm(total=None, unit="frame", desc="cache", disable=None) as bar:
+    with tqdm(total=None, unit="frame", desc="cache", disable=not bars_enabled(args.quiet)) as bar:
         def progress(done, total):
             bar.total = total
             bar.update(done - bar.n)

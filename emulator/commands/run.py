@@ -8,6 +8,7 @@ import shlex
 import sys
 from pathlib import Path
 
+from emulator.commands.progress import add_quiet, bars_enabled
 from emulator.distributed import SCHEDULER_HELP, resolve_scheduler
 from emulator.errors import ExposimError
 
@@ -76,7 +77,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="dataset runs: methods per unit of work (default: all, one unit per sequence, the methods "
                         "sharing decoded images; 1: one (sequence, method) per unit, the finest parallelism)")
     p.add_argument("--retries", type=int, default=2, help="dataset runs on Dask: retries of a failed unit (default 2)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_quiet(p)
     p.add_argument("--json", action="store_true", help="print the results summary as JSON")
     _add_plugin_arguments(p)
     p.set_defaults(func=_run)
@@ -240,12 +241,13 @@ def _run(args) -> int:
     _warn_broken_plugins()
     progress = None
     bar = None
-    if not args.no_progress:
+    if bars_enabled(args.quiet):
         from tqdm import tqdm
 
-        bar = tqdm(total=None, unit="cycle", desc="exposim run", file=sys.stderr, dynamic_ncols=True)
-
         def progress(done: int, total: int) -> None:
+            nonlocal bar
+            if bar is None:  # made at the first report, after the run's checks passed
+                bar = tqdm(total=total, unit="cycle", desc="exposim run", file=sys.stderr, dynamic_ncols=True)
             if bar.total != total:
                 bar.total = total
             bar.n = done
@@ -328,7 +330,7 @@ def _run_dataset(args) -> int:
 
     bar = None
     progress = None
-    if not args.no_progress:
+    if bars_enabled(args.quiet):
         from tqdm import tqdm
 
         def progress(done: int, total: int) -> None:

@@ -115,7 +115,7 @@ def run_study(out, config: StudyConfig = CONFIGS["full"], *, force: bool = False
     from emulator import __version__
 
     results = {
-        "study": "ae_study (issue 7)",
+        "study": "ae_study",
         "exposim_version": __version__,
         "command": command,
         "config": cfg.to_dict(),

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from emulator.commands.progress import add_quiet, bars_enabled
+
 __all__ = ["register"]
 
 
@@ -22,7 +24,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("-o", "--output", type=Path, default=None, help="output folder (default: a new exposim-demo-N)")
     p.add_argument("--quick", action="store_true", help="smallest configuration (for tests)")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
+    add_quiet(p, "no progress bars")
     p.set_defaults(func=_demo, extras=("synth",))
 
 
@@ -45,7 +47,7 @@ def _demo(args) -> int:
         if bar is None:
             for old in bars.values():
                 old.close()
-            bar = bars[stage] = tqdm(total=total, desc=stage, file=sys.stderr, disable=args.quiet)
+            bar = bars[stage] = tqdm(total=total, desc=stage, file=sys.stderr, disable=not bars_enabled(args.quiet))
         bar.total = total
         bar.n = done
         bar.refresh()

@@ -247,7 +247,7 @@ def finish(out, raw: dict) -> dict:
     results["noise_variance_ratio_brightening_detail"] = nvr_up
     results["emulation_ratio_use"] = ratio_use(per_scene, list(cfg.methods))
     results.update({
-        "experiment": "live versus emulated (issue 14)",
+        "experiment": "live versus emulated",
         "exposim_version": raw.get("exposim_version"),
         "command": raw.get("command"),
         "config": cfg.to_dict(),
