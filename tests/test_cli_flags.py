@@ -130,3 +130,14 @@ def test_failed_bench_leaves_no_output_folder_and_json_prints_results(tmp_path, 
     printed = json.loads(capsys.readouterr().out)
     assert printed == json.loads((tmp_path / "feat" / "results.json").read_text())
     assert (tmp_path / "feat" / "report.html").is_file()
+
+
+def test_a_missing_response_names_the_flag(tmp_path, capsys):
+    import shutil
+
+    seq = write_static_sequence(tmp_path / "seq", n_cycles=2, shape=(32, 48))[0]
+    shutil.rmtree(seq / "calibration")
+    assert main(["run", str(seq), "--methods", "classical-50", "-o", str(tmp_path / "r"), "-q"]) == 1
+    err = capsys.readouterr().err
+    assert "no response file found" in err and "pass the inverse response with --response FILE" in err
+    assert not (tmp_path / "r").exists()

@@ -188,8 +188,13 @@ def test_resume_of_a_run_with_an_import_path_plugin(seq, plug, tmp_path, capsys)
 
 
 def test_import_path_errors_are_named(seq, plug):
-    with pytest.raises(AutoExposureError, match=r"'no_such_mod_q:X'.*cannot import no_such_mod_q.*ModuleNotFoundError"):
+    with pytest.raises(AutoExposureError, match=r"'no_such_mod_q:X': no module no_such_mod_q on the Python path; run "
+                                                r"from the folder that holds no_such_mod_q.py with PYTHONPATH=\."):
         build_methods("classical-50,no_such_mod_q:X")
+    (plug / "imports_missing.py").write_text("import no_such_dependency_q\n")
+    with pytest.raises(AutoExposureError, match=r"cannot import imports_missing: ModuleNotFoundError: No module named "
+                                                r"'no_such_dependency_q'"):  # the plugin's own import fails: as it is
+        build_methods("imports_missing:X")
     with pytest.raises(AutoExposureError, match=r"plug_mod has no attribute 'Missing'"):
         build_methods(["plug_mod:Missing"])
     with pytest.raises(AutoExposureError, match=r"built Kim, which has no next_exposure"):

@@ -61,7 +61,7 @@ def png_data_uri(data: bytes) -> str:
 
 
 def thumbnail(image: np.ndarray, *, white_level: int | None = None, width_px: int = THUMB_WIDTH_PX) -> np.ndarray:
-    """A viewable 8-bit thumbnail of a saved image, ``width_px`` wide.
+    """A viewable 8-bit thumbnail of a saved image, at most ``width_px`` wide (never enlarged).
 
     ``uint16`` (12-bit Bayer DN): each 2x2 Bayer block averaged to one grey pixel, scaled
     by ``white_level`` and gamma-encoded (1/2.2); ``uint8`` grey or BGR: resized as is.
@@ -76,9 +76,11 @@ def thumbnail(image: np.ndarray, *, white_level: int | None = None, width_px: in
         image = np.round(255.0 * np.clip(block / top, 0.0, 1.0) ** (1 / 2.2)).astype(np.uint8)
     elif image.dtype != np.uint8:
         raise ValueError(f"thumbnail needs a uint8 or uint16 image, got {image.dtype}")
+    if image.shape[1] <= width_px:  # never enlarged: the page scales it, the file stays small
+        return np.ascontiguousarray(image)
     scale = width_px / image.shape[1]
     size = (width_px, max(1, round(image.shape[0] * scale)))
-    return cv2.resize(image, size, interpolation=cv2.INTER_AREA if scale < 1 else cv2.INTER_LINEAR)
+    return cv2.resize(image, size, interpolation=cv2.INTER_AREA)
 
 
 def _encode(image: np.ndarray) -> bytes:
