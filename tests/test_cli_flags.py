@@ -141,3 +141,24 @@ def test_a_missing_response_names_the_flag(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "no response file found" in err and "pass the inverse response with --response FILE" in err
     assert not (tmp_path / "r").exists()
+
+
+def test_a_frame_cache_elsewhere_serves_run_info_and_emulate(tmp_path, capsys):
+    seq = write_static_sequence(tmp_path / "seq", n_cycles=3, shape=(32, 48))[0]
+    before = sorted(p.relative_to(seq) for p in seq.rglob("*"))
+    cache = tmp_path / "frames"
+    assert main(["cache", str(seq), "--frame-cache", str(cache), "-q"]) == 0
+    assert len(list(cache.rglob("*.npy.zst"))) == 3 * 6 * 2
+    assert main(["run", str(seq), "--methods", "classical-50", "-o", str(tmp_path / "plain"), "-q"]) == 0
+    assert main(["run", str(seq), "--methods", "classical-50", "-o", str(tmp_path / "cached"), "-q",
+                 "--frame-cache", str(cache)]) == 0
+    csv = "classical-50/exposures.csv"
+    assert (tmp_path / "cached" / csv).read_bytes() == (tmp_path / "plain" / csv).read_bytes()
+    capsys.readouterr()
+    assert main(["info", str(seq), "--frame-cache", str(cache), "--json"]) == 0
+    assert len(json.loads(capsys.readouterr().out)["cycles"]) == 3
+    assert main(["emulate", str(seq), "--exposure-ms", "3", "--cycle", "1", "--frame-cache", str(cache),
+                 "-o", str(tmp_path / "emu")]) == 0
+    assert sorted(p.relative_to(seq) for p in seq.rglob("*")) == before  # nothing written into the recording
+    assert main(["info", str(seq), "--frame-cache", str(tmp_path / "nope")]) == 1
+    assert "frame cache folder not found" in capsys.readouterr().err

@@ -23,8 +23,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         ),
     )
     p.add_argument("sequence", type=Path, help="recording folder holding camera_left/ and camera_right/")
-    p.add_argument("--cache-dir", type=Path, default=None,
-                   help="where to write the cache (default: SEQUENCE/.exposim-frames, found automatically)")
+    p.add_argument("--frame-cache", type=Path, default=None, metavar="DIR",
+                   help="where to write the cache (default: SEQUENCE/.exposim-frames, found automatically); a "
+                        "folder elsewhere serves a read-only recording: give run, info and emulate the same "
+                        "--frame-cache DIR")
+    p.add_argument("--cache-dir", dest="frame_cache", type=Path, help=argparse.SUPPRESS)  # old spelling
     add_quiet(p)
     p.add_argument("--level", type=int, default=3, help="zstandard compression level (default: %(default)s)")
     p.set_defaults(func=_cache)
@@ -45,7 +48,7 @@ def _cache(args) -> int:
             bar.total = total
             bar.update(done - bar.n)
 
-        s = build_frame_cache(args.sequence, args.cache_dir, level=args.level, progress=progress)
+        s = build_frame_cache(args.sequence, args.frame_cache, level=args.level, progress=progress)
     ratio = s["cache_bytes"] / s["png_bytes"] if s["png_bytes"] else float("nan")
     print(f"{s['cache_dir']}: {s['frames']} frames ({s['written']} written, {s['kept']} kept, "
           f"{s['removed']} stale removed), {s['cache_bytes'] / 1e6:.1f} MB ({ratio:.2f} x the PNGs)")

@@ -49,6 +49,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--selector", choices=("higher-no-sat", "closest", "reference"), default=None,
                    help="bracket selector (default higher-no-sat)")
     p.add_argument("--response", type=Path, default=None, help="pcalib file (default: found beside the recording)")
+    p.add_argument("--frame-cache", type=Path, default=None, metavar="DIR",
+                   help="read decoded frames from this frame cache (made by 'exposim cache SEQ --frame-cache DIR'; "
+                        "default: SEQUENCE/.exposim-frames when it exists)")
     p.add_argument("--seed", type=int, default=None, help="seed of kim's Gaussian-process optimizer (default 0)")
     p.add_argument("--option", action="append", default=[], metavar="METHOD.KEY=VALUE",
                    help="a method option, e.g. zhang.percentile=0.7 or kim.window=8 (VALUE is JSON or text); repeatable")
@@ -170,6 +173,9 @@ def _check_args(args) -> None:
 
 def _run(args) -> int:
     _check_args(args)
+    if args.sequences is not None and args.frame_cache is not None:
+        raise ExposimError("--frame-cache applies to one sequence; a dataset run reads each sequence's own "
+                           "SEQUENCE/.exposim-frames")
     if args.sequences is not None:
         if args.noise not in (None, "none") or args.method_timeout is not None or args.strict:
             raise ExposimError("--noise, --method-timeout and --strict apply to single-sequence runs; "
@@ -253,9 +259,14 @@ def _run(args) -> int:
             bar.n = done
             bar.refresh()
 
+    source = args.sequence
+    if args.frame_cache is not None:  # a frame cache elsewhere (a read-only recording)
+        from emulator.io.borealhdr import load_sequence
+
+        source = load_sequence(args.sequence, frame_cache=args.frame_cache)
     try:
         summary = run_to_folder(
-            args.sequence,
+            source,
             cfg["methods"],
             args.output,
             save=cfg["save"],
