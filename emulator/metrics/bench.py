@@ -97,6 +97,19 @@ def _frames(method: MethodRun, max_frames: int | None):
 # --------------------------------------------------------------------------- features
 
 
+def tau_grid(max_min_matches: int, *, n: int = 100) -> list[int]:
+    """Thresholds of the success curve: the paper's 5..500 in steps of 5, extended past the
+    largest per-run minimum of matches (where every curve is 0), in about ``n`` steps.
+
+    >>> tau_grid(120)[:3], tau_grid(120)[-1], tau_grid(17762)[-1], len(tau_grid(17762))
+    ([5, 10, 15], 500, 17820, 99)
+    """
+    top = max(int(DEFAULT_TAUS[-1]), int(max_min_matches) + 1)
+    step = max(5, -(-top // n // 5) * 5)
+    top = -(-top // step) * step
+    return list(range(step, top + step, step))
+
+
 def _features_sheet(run, result: dict, max_frames, n_cycles: int = 6) -> str:
     """Contact sheet of the images a benchmark compared (first run): sampled left frames per method."""
     from emulator.report.html import Thumb, _sample, contact_sheet, thumbnail
@@ -129,7 +142,7 @@ def bench_features(
     matcher: str = "flann",
     scale: float = 1.0,
     max_frames: int | None = None,
-    taus: Sequence[int] = DEFAULT_TAUS,
+    taus: Sequence[int] | None = None,
     seed: int = 0,
     force: bool = False,
     progress: bool = False,
@@ -152,8 +165,9 @@ def bench_features(
         Image scale before SIFT, (0, 1]; 1 = full resolution (the paper).
     max_frames : int, optional
         Use only the first ``max_frames`` images of each method (a reduced run).
-    taus : sequence of int
-        Thresholds of the success curve.
+    taus : sequence of int, optional
+        Thresholds of the success curve; default :func:`tau_grid`, the paper's 5..500
+        extended until every method's curve reaches 0.
     force : bool
         Overwrite an existing ``results.json``.
     progress : bool
@@ -206,6 +220,9 @@ def bench_features(
     names: list[str] = []
     for r in run_results:
         names += [m for m in r["methods"] if m not in names]
+    if taus is None:  # to where every curve has reached 0, so the success verdicts are not trivially true
+        taus = tau_grid(max((r["methods"][m].get("min_matches") or 0 for r in run_results for m in r["methods"]),
+                            default=0))
     taus = [int(t) for t in taus]
     summary, rates = {}, {}
     for name in names:

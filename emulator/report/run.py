@@ -14,7 +14,7 @@ import numpy as np
 from emulator.io.files import REPORT_FILE, RESULTS_FILE, write_results, write_text
 from emulator.report.html import run_contact_sheet, write_report
 from emulator.io.runfolder import read_run_json, read_tables
-from emulator.report.figures import new_figure, save
+from emulator.report.figures import legend_outside, log_ticks_at, new_figure, plural, same_as, save
 
 __all__ = ["PLOT_FILE", "summarise_run", "plot_exposure", "run_markdown", "write_run_report"]
 
@@ -70,22 +70,32 @@ def summarise_run(run_dir: str | os.PathLike, info: dict | None = None, tables: 
 
 
 def plot_exposure(info: dict, tables: dict, path: str | os.PathLike) -> Path:
-    """Target exposure of every method against time (log scale), the brackets as grey lines."""
+    """Target exposure of every method against time (log scale, ticks at the brackets), the brackets as grey lines.
+
+    Methods whose exposure sequences are identical are drawn dashed on top of each other and
+    named so in the legend ("= classical-50"); the legend sits outside the data.
+    """
     fig, (ax,) = new_figure(1, 9.0, 4.5)
     t0 = min((int(t["timestamp_ns"][0]) for t in tables.values() if t["timestamp_ns"].size), default=0)
-    for b in info.get("brackets_ms", []):
+    brackets = list(info.get("brackets_ms", []))
+    for b in brackets:
         ax.axhline(b, color="0.85", lw=0.8, zorder=0)
+    twins = same_as({name: t["target_ms"] for name, t in tables.items() if t["timestamp_ns"].size})
     for name, t in tables.items():
         if not t["timestamp_ns"].size:
             continue
         x = (t["timestamp_ns"] - t0) / 1e9
-        ax.step(x, t["target_ms"], where="post", marker="o", ms=3, lw=1.3, label=name)
+        if name in twins:
+            ax.step(x, t["target_ms"], where="post", ls="--", lw=1.3, label=f"{name} (= {twins[name]})")
+        else:
+            ax.step(x, t["target_ms"], where="post", marker="o", ms=3, lw=1.3, label=name)
     ax.set_yscale("log")
+    log_ticks_at(ax, brackets)
     ax.set_xlabel("time since first bracket [s]")
-    ax.set_ylabel("exposure [ms]")
+    ax.set_ylabel("exposure [ms] (ticks: the brackets)")
     ax.set_title(f"Exposure per cycle ({info.get('mode', '')} mode, start {info.get('initial_ms')} ms)")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8, ncol=2)
+    ax.grid(True, which="major", alpha=0.3)
+    legend_outside(ax)
     return save(fig, path)
 
 
