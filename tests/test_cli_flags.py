@@ -162,3 +162,27 @@ def test_a_frame_cache_elsewhere_serves_run_info_and_emulate(tmp_path, capsys):
     assert sorted(p.relative_to(seq) for p in seq.rglob("*")) == before  # nothing written into the recording
     assert main(["info", str(seq), "--frame-cache", str(tmp_path / "nope")]) == 1
     assert "frame cache folder not found" in capsys.readouterr().err
+
+
+def test_one_ratio_threshold_for_features_and_vo():
+    from emulator.commands.bench import _RATIO_TEST
+    from emulator.metrics.features import RATIO_TEST
+    from emulator.metrics.vo import VOParameters
+
+    assert _RATIO_TEST == RATIO_TEST == VOParameters().ratio
+    for words in (("exposim", "bench", "features"), ("exposim", "bench", "vo")):
+        action = options(LEAVES[words])["--ratio"]
+        assert action.default is None and f"default {RATIO_TEST}, the library's RATIO_TEST" in action.help
+
+
+def test_a_plugin_shows_as_plugin_not_none_in_the_run_report(tmp_path, monkeypatch):
+    from emulator.runner import run_to_folder
+
+    (tmp_path / "plain_ae.py").write_text((ROOT / "examples" / "my_ae.py").read_text())
+    monkeypatch.syspath_prepend(str(tmp_path))
+    seq = write_static_sequence(tmp_path / "seq", n_cycles=3, shape=(32, 48))[0]
+    summary = run_to_folder(seq, "classical-50,plain_ae:MyAE", tmp_path / "run")
+    assert {n: m["mode"] for n, m in summary["methods"].items()} == {"classical-50": "paper", "my-ae": "plugin"}
+    report = (tmp_path / "run" / "report.md").read_text()
+    assert "| my-ae | plugin |" in report and "None" not in report
+    sys.modules.pop("plain_ae", None)

@@ -39,6 +39,16 @@ def _command_line(args: argparse.Namespace, positional: tuple[str, ...]) -> str:
     return shlex.join(parts)
 
 
+#: emulator.metrics.features.RATIO_TEST, repeated here so that --help does not import OpenCV (a test keeps them equal).
+_RATIO_TEST = 0.8
+
+
+def _ratio(args) -> float:
+    from emulator.metrics.features import RATIO_TEST
+
+    return RATIO_TEST if args.ratio is None else args.ratio
+
+
 def _methods(value: str | None) -> list[str] | None:
     return [m.strip() for m in value.split(",") if m.strip()] if value else None
 
@@ -85,7 +95,7 @@ def _bench_features(args, bench_features):
         args.output,
         methods=_methods(args.methods),
         grid=(args.grid, args.grid),
-        ratio=args.ratio,
+        ratio=_ratio(args),
         n_features=args.n_features,
         matcher=args.matcher,
         scale=args.scale,
@@ -118,7 +128,7 @@ def _vo(args: argparse.Namespace) -> int:
     from emulator.metrics.vo import VOParameters
 
     params = VOParameters(
-        ratio=args.ratio,
+        ratio=_ratio(args),
         n_features=args.n_features,
         matcher=args.matcher,
         min_matches=args.min_matches,
@@ -211,7 +221,8 @@ def _help(parser: argparse.ArgumentParser):
 
 
 def _common_sift(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--ratio", type=float, default=0.8, help="Lowe ratio test threshold (default 0.8)")
+    p.add_argument("--ratio", type=float, default=None,
+                   help=f"Lowe ratio test threshold (default {_RATIO_TEST}, the library's RATIO_TEST, for features and VO)")
     p.add_argument("--n-features", type=int, default=0, help="SIFT keypoints kept per image, 0 = all (default)")
     p.add_argument("--matcher", choices=("flann", "bf"), default="flann",
                    help="nearest neighbours: kd-trees (default) or exact brute force")

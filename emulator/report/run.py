@@ -39,7 +39,7 @@ def summarise_run(run_dir: str | os.PathLike, info: dict | None = None, tables: 
 
         brackets, counts = np.unique(t["bracket_ms"], return_counts=True) if n else (np.array([]), np.array([]))
         methods[name] = {
-            "mode": info.get("method_options", {}).get(name, {}).get("mode"),
+            "mode": _mode(info, name),
             "cycles": int(n),
             "mean_exposure_ms": stat(np.mean, target),
             "median_exposure_ms": stat(np.median, target),
@@ -67,6 +67,14 @@ def summarise_run(run_dir: str | os.PathLike, info: dict | None = None, tables: 
         "methods": methods,
         "timing": info.get("timing"),
     }
+
+
+def _mode(info: dict, name: str) -> str:
+    """The method's mode as the report shows it: paper/borealhdr, or "plugin" for a method without one."""
+    opts = info.get("method_options", {}).get(name, {})
+    if opts.get("mode") is not None:
+        return str(opts["mode"])
+    return "plugin" if opts.get("plugin") else "-"
 
 
 def plot_exposure(info: dict, tables: dict, path: str | os.PathLike) -> Path:
@@ -113,7 +121,8 @@ def run_markdown(info: dict, summary: dict) -> str:
         f"- mode: {info.get('mode')}, selector: {info.get('selector')} (left camera's saturation decides)",
         f"- initial exposure {info.get('initial_ms')} ms, clamp {info.get('range_ms')} ms, response `{info.get('response')}`",
         f"- images: {info.get('save')}",
-        f"- command: `{info.get('command')}`, exposim {info.get('version')}",
+        f"- command: `{info.get('command') or 'emulator.runner.run_to_folder (library call)'}`, "
+        f"exposim {info.get('version')}",
         "",
         f"![exposure against time]({PLOT_FILE})",
         "",
