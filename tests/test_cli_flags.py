@@ -41,7 +41,7 @@ WITH_BARS = {"run", "cache", "calibrate", "bench features", "bench vo", "render"
              "validate emulation", "validate selectors", "validate motion", "validate speed", "validate ae-study",
              "validate live", "validate render"}
 #: Commands that print results (a table, a summary, a figure).
-WITH_RESULTS = {"info", "emulate", "run", "calibrate", "bench features", "bench vo", "bench rpe"}
+WITH_RESULTS = {"info", "cache", "emulate", "run", "calibrate", "bench features", "bench vo", "bench rpe"}
 
 
 def options(parser) -> dict[str, argparse.Action]:
@@ -147,7 +147,9 @@ def test_a_frame_cache_elsewhere_serves_run_info_and_emulate(tmp_path, capsys):
     seq = write_static_sequence(tmp_path / "seq", n_cycles=3, shape=(32, 48))[0]
     before = sorted(p.relative_to(seq) for p in seq.rglob("*"))
     cache = tmp_path / "frames"
-    assert main(["cache", str(seq), "--frame-cache", str(cache), "-q"]) == 0
+    assert main(["cache", str(seq), "--frame-cache", str(cache), "-q", "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["frames"] == summary["written"] == 3 * 6 * 2 and summary["cache_dir"] == str(cache)
     assert len(list(cache.rglob("*.npy.zst"))) == 3 * 6 * 2
     assert main(["run", str(seq), "--methods", "classical-50", "-o", str(tmp_path / "plain"), "-q"]) == 0
     assert main(["run", str(seq), "--methods", "classical-50", "-o", str(tmp_path / "cached"), "-q",

@@ -134,3 +134,11 @@ def test_dataset_report_links_every_unit_page_and_shows_the_first_sheet(tmp_path
     assert all((tmp_path / "out" / link).is_file() for link in links)
     assert "What each method saw on seqA" in text
     assert len(re.findall(r'<img src="data:image/png;base64,', text)) >= 2
+
+
+def test_table_cells_with_intervals_stay_numeric():
+    got = markdown_to_html("| m | rpe (%) |\n| --- | ---: |\n| a | 1.23 [0.98, 1.51] |\n| b | 0.41 (0.30..0.52) |\n"
+                           "| c | n/a |\n")
+    assert '<td class="num">1.23 <span class="ci">[0.98, 1.51]</span></td>' in got
+    assert '<td class="num">0.41 <span class="ci">(0.30..0.52)</span></td>' in got
+    assert "<td>n/a</td>" in got

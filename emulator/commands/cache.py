@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 from pathlib import Path
 
 from emulator.commands.progress import add_quiet, bars_enabled
@@ -29,6 +30,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "--frame-cache DIR")
     p.add_argument("--cache-dir", dest="frame_cache", type=Path, help=argparse.SUPPRESS)  # old spelling
     add_quiet(p)
+    p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.add_argument("--level", type=int, default=3, help="zstandard compression level (default: %(default)s)")
     p.set_defaults(func=_cache)
 
@@ -49,6 +51,9 @@ def _cache(args) -> int:
             bar.update(done - bar.n)
 
         s = build_frame_cache(args.sequence, args.frame_cache, level=args.level, progress=progress)
+    if args.json:
+        print(json.dumps({k: str(v) if isinstance(v, Path) else v for k, v in s.items()}, indent=1))
+        return 0
     ratio = s["cache_bytes"] / s["png_bytes"] if s["png_bytes"] else float("nan")
     print(f"{s['cache_dir']}: {s['frames']} frames ({s['written']} written, {s['kept']} kept, "
           f"{s['removed']} stale removed), {s['cache_bytes'] / 1e6:.1f} MB ({ratio:.2f} x the PNGs)")

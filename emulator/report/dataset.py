@@ -136,23 +136,6 @@ def write_dataset_report(out_dir: str | os.PathLike, summary: dict) -> dict:
 
 def _unit_pages(out: Path, summary: dict) -> str:
     """HTML: a link to every unit's own report.html, and the first unit's contact sheet."""
-    import html
+    from emulator.report.html import run_folder_pages
 
-    from emulator.io.runfolder import read_run_json, read_tables
-    from emulator.report.html import HTML_REPORT_FILE, run_contact_sheet
-
-    units = [u for u in summary["units"] if (Path(u["folder"]) / HTML_REPORT_FILE).is_file()]
-    if not units:
-        return ""
-    items = []
-    for u in units:
-        rel = Path(u["folder"]).resolve().relative_to(out.resolve()) if Path(u["folder"]).resolve().is_relative_to(
-            out.resolve()) else Path(u["folder"])
-        items.append(f'<li><a href="{html.escape((rel / HTML_REPORT_FILE).as_posix())}">'
-                     f"{html.escape(u['sequence'])} / {html.escape(u['group'])}</a></li>")
-    first = Path(units[0]["folder"])
-    info = read_run_json(first)
-    sheet = run_contact_sheet(first, info["methods"], read_tables(first, info["methods"]),
-                              white_level=info.get("white_level"))
-    sheet = sheet.replace("What each method saw", f"What each method saw on {html.escape(units[0]['sequence'])}", 1)
-    return "<h2>Run folders</h2>\n<ul>" + "".join(items) + "</ul>\n" + sheet
+    return run_folder_pages(out, [(f"{u['sequence']} / {u['group']}", u["folder"]) for u in summary["units"]])

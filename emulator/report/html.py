@@ -26,7 +26,7 @@ import numpy as np
 from emulator.io.files import REPORT_FILE, write_text
 
 __all__ = ["HTML_REPORT_FILE", "Thumb", "markdown_to_html", "png_data_uri", "thumbnail", "contact_sheet",
-           "render_page", "write_report", "run_contact_sheet"]
+           "render_page", "write_report", "run_contact_sheet", "run_folder_pages"]
 
 #: File name of the HTML report, beside ``report.md``.
 HTML_REPORT_FILE = "report.html"
@@ -42,6 +42,7 @@ pre{background:#f4f4f4;padding:.6em;overflow-x:auto}img{max-width:100%}
 figure{margin:1em 0}.sheet{display:grid;gap:6px;align-items:start}
 .sheet figure{margin:0}.sheet img{width:100%;image-rendering:auto;border:1px solid #ddd}
 .sheet figcaption{font-size:.75em;color:#444}.rowlabel{font-weight:600;font-size:.85em;align-self:center}
+.ci{color:#777;font-size:.85em;white-space:nowrap}
 """
 
 
@@ -111,7 +112,10 @@ def contact_sheet(rows: Sequence[tuple[str, Sequence[Thumb]]], *, title: str | N
 
 
 # ---------------------------------------------------------------------------- markdown subset
-_NUM = re.compile(r"^[-+]?(\d[\d ,.]*%?|\d*\.\d+%?|nan|inf)( ?[a-z%/]{0,8})?$", re.IGNORECASE)
+#: A number, optionally with a unit and an interval: ``1.23``, ``32.8 %``, ``1.23 [0.98, 1.51]``,
+#: ``0.41 (0.30..0.52)``; such cells are right-aligned, the interval in a lighter type.
+_NUM = re.compile(r"^[-+]?(\d[\d ,.]*%?|\d*\.\d+%?|nan|inf)( ?[a-z%/]{0,8})?(?P<ci> ?(\[[^\]]*\]|\([^)]*\)))?$",
+                  re.IGNORECASE)
 
 
 def _inline(text: str, images: dict[str, str]) -> str:
@@ -148,10 +152,17 @@ def _table(lines: list[str], images: dict[str, str]) -> str:
     body = [cells(line) for line in lines[2:]] if len(lines) > 1 and set(lines[1].replace("|", "").strip()) <= set("-: ") \
         else [cells(line) for line in lines[1:]]
     out = ["<table><thead><tr>" + "".join(f"<th>{_inline(c, images)}</th>" for c in head) + "</tr></thead><tbody>"]
+    def cell(c: str) -> str:
+        m = _NUM.match(c)
+        if not m:
+            return f"<td>{_inline(c, images)}</td>"
+        if m.group("ci"):
+            value, ci = c[:m.start("ci")].rstrip(), m.group("ci").strip()
+            return f'<td class="num">{_inline(value, images)} <span class="ci">{html.escape(ci)}</span></td>'
+        return f'<td class="num">{_inline(c, images)}</td>'
+
     for row in body:
-        out.append("<tr>" + "".join(
-            f'<td class="num">{_inline(c, images)}</td>' if _NUM.match(c) else f"<td>{_inline(c, images)}</td>"
-            for c in row) + "</tr>")
+        out.append("<tr>" + "".join(cell(c) for c in row) + "</tr>")
     out.append("</tbody></table>")
     return "\n".join(out)
 
@@ -316,3 +327,27 @@ def run_contact_sheet(run_dir: str | os.PathLike, methods: Sequence[str], tables
                 "<code>--save none</code>); run with <code>--save png8</code> or <code>--save png16</code> to see "
                 "each method's emulated frames here.</p>")
     return contact_sheet(rows, title=f"What each method saw ({camera} camera, emulated, sampled cycles)")
+
+
+def run_folder_pages(out: str | os.PathLike, folders: Sequence[tuple[str, str | os.PathLike]], *,
+                     n_sheets: int = 1) -> str:
+    """HTML for a report over several run folders: a link to each one's ``report.html`` and the
+    contact sheets of the first ``n_sheets`` of them (every page stays a few MB at most)."""
+    from emulator.io.runfolder import read_run_json, read_tables
+
+    out = Path(out).resolve()
+    folders = [(label, Path(folder)) for label, folder in folders if (Path(folder) / HTML_REPORT_FILE).is_file()]
+    if not folders:
+        return ""
+    items = []
+    for label, folder in folders:
+        target = folder.resolve()
+        href = (target.relative_to(out) if target.is_relative_to(out) else target) / HTML_REPORT_FILE
+        items.append(f'<li><a href="{html.escape(href.as_posix())}">{html.escape(label)}</a></li>')
+    parts = ["<h2>Run folders</h2>\n<ul>" + "".join(items) + "</ul>"]
+    for label, folder in folders[:max(int(n_sheets), 0)]:
+        info = read_run_json(folder)
+        sheet = run_contact_sheet(folder, info["methods"], read_tables(folder, info["methods"]),
+                                  white_level=info.get("white_level"))
+        parts.append(sheet.replace("What each method saw", f"What each method saw on {html.escape(label)}", 1))
+    return "\n".join(parts)

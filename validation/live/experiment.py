@@ -261,9 +261,24 @@ def finish(out, raw: dict) -> dict:
         plot_trajectories(per_scene[s]["trajectories"], out / f"exposure_{s}.png", title=s)
     if cfg.metrics:
         plot_metrics(results, out / "metrics.png")
-    write_report(out, report_markdown(results))
+    write_report(out, report_markdown(results), sheets=[_live_sheets(out, cfg.scenes[0])])
     write_results(out / RESULTS_FILE, results)
     return results
+
+
+def _live_sheets(out: Path, scene: str) -> str:
+    """Contact sheets of the first scene: what each method saw in every run (emulated and live)."""
+    from emulator.io.runfolder import read_run_json, read_tables
+    from emulator.report.html import run_contact_sheet
+
+    parts = []
+    folder = Path(out) / "runs" / scene
+    for run_dir in sorted(p for p in folder.glob("*") if (p / "run.json").is_file()):
+        info = read_run_json(run_dir)
+        sheet = run_contact_sheet(run_dir, info["methods"], read_tables(run_dir, info["methods"]),
+                                  white_level=info.get("white_level"))
+        parts.append(sheet.replace("What each method saw", f"{scene}, {run_dir.name}: what each method saw", 1))
+    return "\n".join(parts)
 
 
 def redraw(out) -> dict:
