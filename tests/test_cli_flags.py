@@ -41,7 +41,9 @@ WITH_BARS = {"run", "cache", "calibrate", "bench features", "bench vo", "render"
              "validate emulation", "validate selectors", "validate motion", "validate speed", "validate ae-study",
              "validate live", "validate render"}
 #: Commands that print results (a table, a summary, a figure).
-WITH_RESULTS = {"info", "cache", "emulate", "run", "calibrate", "bench features", "bench vo", "bench rpe"}
+WITH_RESULTS = {"info", "cache", "emulate", "run", "calibrate", "bench features", "bench vo", "bench rpe", "demo",
+                "validate emulation", "validate selectors", "validate motion", "validate speed",
+                "validate ae-study", "validate live", "validate render"}
 
 
 def options(parser) -> dict[str, argparse.Action]:
@@ -188,3 +190,17 @@ def test_a_plugin_shows_as_plugin_not_none_in_the_run_report(tmp_path, monkeypat
     report = (tmp_path / "run" / "report.md").read_text()
     assert "| my-ae | plugin |" in report and "None" not in report
     sys.modules.pop("plain_ae", None)
+
+
+@pytest.mark.render
+def test_validate_json_prints_results_json(tmp_path, capsys, monkeypatch):
+    monkeypatch.setenv("EXPOSIM_DENOISE", "off")
+    out = tmp_path / "emul"
+    assert main(["validate", "emulation", "--quick", "-o", str(out), "--exposures", "6", "--responses", "borealhdr",
+                 "--scenes", "static_lab", "--size", "32x20", "--spp", "4", "-q", "--json"]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    assert printed == json.loads((out / "results.json").read_text())
+    command = printed["provenance"]["command"]
+    assert "--size 32x20" in command and "--width" not in command
+    html = (out / "report.html").read_text()
+    assert html.count('<img src="data:image/png;base64,') == len([f for f in printed["figures"] if f.endswith(".png")])

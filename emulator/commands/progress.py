@@ -11,13 +11,27 @@ from __future__ import annotations
 import argparse
 import sys
 
-__all__ = ["add_quiet", "bars_enabled", "progress_bar"]
+__all__ = ["add_quiet", "add_json", "print_json", "bars_enabled", "progress_bar"]
 
 
 def add_quiet(parser: argparse.ArgumentParser, help: str = "no progress bar") -> None:
     """Add ``-q/--quiet`` (dest ``quiet``) and the hidden alias ``--no-progress``."""
     parser.add_argument("-q", "--quiet", action="store_true", help=help)
     parser.add_argument("--no-progress", dest="quiet", action="store_true", help=argparse.SUPPRESS)
+
+
+def add_json(parser: argparse.ArgumentParser, help: str = "print results.json to stdout instead of the summary") -> None:
+    """Add ``--json`` (dest ``json``)."""
+    parser.add_argument("--json", action="store_true", help=help)
+
+
+def print_json(results) -> None:
+    """Print ``results`` as JSON on stdout (paths and numpy values made plain)."""
+    import json
+
+    from emulator.io.files import to_jsonable
+
+    print(json.dumps(to_jsonable(results), indent=1))
 
 
 def bars_enabled(quiet: bool = False, stream=None) -> bool:

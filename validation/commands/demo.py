@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from emulator.commands.progress import add_quiet, bars_enabled
+from emulator.commands.progress import add_json, add_quiet, bars_enabled, print_json
 
 __all__ = ["register"]
 
@@ -25,6 +25,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("-o", "--output", type=Path, default=None, help="output folder (default: a new exposim-demo-N)")
     p.add_argument("--quick", action="store_true", help="smallest configuration (for tests)")
     add_quiet(p, "no progress bars")
+    add_json(p, "print the demo's results.json to stdout instead of its report")
     p.set_defaults(func=_demo, extras=("synth",))
 
 
@@ -58,6 +59,11 @@ def _demo(args) -> int:
     finally:
         for bar in bars.values():
             bar.close()
+    if args.json:
+        from emulator.io.files import read_results
+
+        print_json(read_results(result["output"]))
+        return 0
     print(result["report"])
     how = "reused from an earlier demo" if result["dataset_reused"] else "synthesised now, kept for the next demo"
     print(f"\nexposim demo: recording {result['dataset']} ({how})")

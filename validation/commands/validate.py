@@ -15,7 +15,7 @@ import shlex
 import sys
 from pathlib import Path
 
-from emulator.commands.progress import add_quiet, bars_enabled
+from emulator.commands.progress import add_json, add_quiet, bars_enabled, print_json
 from emulator.commands import argtypes
 
 __all__ = ["register"]
@@ -91,6 +91,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         q.add_argument("--quick", action="store_true", help="reduced configuration (seconds, for tests)")
         q.add_argument("--force", action="store_true", help="overwrite an existing results.json")
         add_quiet(q)
+        add_json(q)
         q.add_argument("--cache-dir", help="render cache folder (default $EXPOSIM_CACHE or ~/.cache/exposim/renders)")
         q.add_argument("--size", type=argtypes.size, metavar="WxH", help="render size in pixels, WIDTHxHEIGHT")
         q.add_argument("--spp", type=int, help="render samples per pixel")
@@ -133,6 +134,7 @@ def _register_render(vsub) -> None:
 
     q = vsub.add_parser("render", help=_RENDER_HELP, description=_RENDER_HELP)
     add_arguments(q, output_option=True)
+    add_json(q)
     q.set_defaults(func=_run_render, experiment="render", extras=("synth",))
 
 
@@ -151,6 +153,9 @@ def _run_render(args) -> int:
                 value = "x".join(map(str, value)) if key == "size" else ",".join(map(str, value))
             words += ["--" + key.replace("_", "-"), str(value)]
     results = run_from_args(args, shlex.join(words))
+    if args.json:
+        print_json(results)
+        return 0
     print_summary(results, args.output)
     return 0
 
@@ -167,6 +172,7 @@ def _register_ae_study(vsub) -> None:
              "stereo walks, with a verdict on each of the paper's findings")
     q = vsub.add_parser("ae-study", help=help_, description=help_, formatter_class=_DefaultsFormatter)
     add_arguments(q, output_option=True)
+    add_json(q)
     q.set_defaults(func=_run_ae_study, experiment="ae-study", extras=("synth",))
 
 
@@ -183,6 +189,9 @@ def _run_ae_study(args) -> int:
     if args.scenes:
         words += ["--scenes", ",".join(args.scenes)]
     results = run_from_args(args, shlex.join(words))
+    if args.json:
+        print_json(results)
+        return 0
     print("\n".join(summary_lines(args, results)))
     return 0
 
@@ -207,6 +216,11 @@ def _run(args) -> int:
     finally:
         if bar is not None:
             bar.close()
+    if args.json:  # the file as written (the studies round floats to 12 digits)
+        from emulator.io.files import read_results
+
+        print_json(read_results(args.output))
+        return 0
     print(_headline(args.experiment, results))
     print(f"wrote {args.output / 'results.json'}, {args.output / 'report.md'} and {len(results['figures'])} figure(s)")
     return 0

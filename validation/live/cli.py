@@ -13,7 +13,7 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-from emulator.commands.progress import add_quiet, bars_enabled
+from emulator.commands.progress import add_json, add_quiet, bars_enabled, print_json
 from emulator.commands import argtypes
 from emulator.errors import ExposimError
 from scenes.commands.render import add_scheduler_option
@@ -61,6 +61,7 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument("--cache-dir", help="render cache (default $EXPOSIM_CACHE or ~/.cache/exposim/renders)")
     add_scheduler_option(p)
     add_quiet(p, "no progress bars")
+    add_json(p)
     p.add_argument("--redraw", action="store_true",
                    help="only recompute the verdicts and rewrite results.json, report.md and the figures of the "
                         "existing folder OUT from its raw.json")
@@ -128,6 +129,9 @@ def run(args, prog: str = "exposim validate live") -> int:
 
     if args.redraw:
         results = redraw(args.output)
+        if args.json:
+            print_json(results)
+            return 0
         print(headline(results))
         return 0
     cfg = config_from_args(args)
@@ -138,6 +142,9 @@ def run(args, prog: str = "exposim validate live") -> int:
     results = run_live_experiment(out, cfg, progress=bars_enabled(args.quiet), command=command_line(args, prog),
                                   cache_dir=args.cache_dir, log=None if args.quiet else log,
                                   scheduler=scheduler)
+    if args.json:
+        print_json(results)
+        return 0
     print(headline(results))
     print(f"wrote {out / 'results.json'}, {out / 'report.md'} in {results['timings']['total_s'] / 60:.1f} min")
     return 0
