@@ -616,7 +616,7 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     run_study(args.output, quick=args.quick, force=args.force, radiance_source=args.radiance, parts=parts,
               command=command, progress=lambda m: print(f"[{time.perf_counter() - t0:7.1f} s] {m}", flush=True))
-    print(f"wrote {args.output / 'results.json'}, {args.output / 'report.md'}")
+    print(f"wrote {args.output / 'results.json'}, {args.output / 'report.md'}, {args.output / 'report.html'}")
     return 0
 
 

@@ -615,7 +615,7 @@ def run_from_args(args: argparse.Namespace, command: str) -> dict:
 def print_summary(results: dict, output: Path) -> None:
     """The table and the written files, on stdout (command lines only)."""
     print(render_study_table(results))
-    print(f"wrote {output / 'results.json'}, {output / 'report.md'}, {output / 'time_vs_error.png'}")
+    print(f"wrote {output / 'results.json'}, {output / 'report.md'}, {output / 'report.html'}, {output / 'time_vs_error.png'}")
 
 
 def main(argv=None) -> int:

@@ -308,6 +308,8 @@ def _run(args) -> int:
               + (" (--strict: exit code 1)" if args.strict else ""))
         for name, why in failed.items():
             print(f"  {name:13s} {why}")
+    if (args.output / "report.html").is_file():
+        print(f"report      {args.output / 'report.html'} (open in a browser)")
     return rc
 
 

@@ -67,5 +67,5 @@ def _demo(args) -> int:
     print(result["report"])
     how = "reused from an earlier demo" if result["dataset_reused"] else "synthesised now, kept for the next demo"
     print(f"\nexposim demo: recording {result['dataset']} ({how})")
-    print(f"exposim demo: wrote {result['output']} in {result['total_s']:.0f} s (report.md, results.json, figures)")
+    print(f"exposim demo: wrote {result['output']} in {result['total_s']:.0f} s (report.md, report.html, results.json, figures)")
     return 0

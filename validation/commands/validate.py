@@ -222,7 +222,7 @@ def _run(args) -> int:
         print_json(read_results(args.output))
         return 0
     print(_headline(args.experiment, results))
-    print(f"wrote {args.output / 'results.json'}, {args.output / 'report.md'} and {len(results['figures'])} figure(s)")
+    print(f"wrote {args.output / 'results.json'}, {args.output / 'report.md'}, {args.output / 'report.html'} and {len(results['figures'])} figure(s)")
     return 0
 
 

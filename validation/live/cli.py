@@ -146,7 +146,7 @@ def run(args, prog: str = "exposim validate live") -> int:
         print_json(results)
         return 0
     print(headline(results))
-    print(f"wrote {out / 'results.json'}, {out / 'report.md'} in {results['timings']['total_s'] / 60:.1f} min")
+    print(f"wrote {out / 'results.json'}, {out / 'report.md'}, {out / 'report.html'} in {results['timings']['total_s'] / 60:.1f} min")
     return 0
 
 
