@@ -63,20 +63,20 @@ def test_real_data_commands_run_without_the_extras(tmp_path, sample_seq):
     assert got.returncode == 0, got.stderr
     assert '"cycles"' in got.stdout
     got = exposim_without(tmp_path, SYNTH_AND_DASK, "run", str(sample_seq), "--methods", "classical-50,shim",
-                          "--save", "none", "-o", "run", "--no-progress")
+                          "--save", "none", "-o", "run", "-q")
     assert got.returncode == 0, got.stderr
     assert (tmp_path / "run" / "results.json").is_file()
 
 
 def test_dask_scheduler_without_the_extra_names_it(tmp_path, sample_seq):
     got = exposim_without(tmp_path, "dask,distributed", "run", str(sample_seq.parent), "--sequences", "all",
-                          "--methods", "classical-50", "--save", "none", "-o", "out", "--scheduler", "local", "--no-progress")
+                          "--methods", "classical-50", "--save", "none", "-o", "out", "--scheduler", "local", "-q")
     assert got.returncode == 1
     assert got.stderr.strip().splitlines() == [
         "exposim run: error: a Dask scheduler needs the 'dask' extra (no module dask): pip install 'exposim[dask]'"]
     # without --scheduler a dataset run falls back to serial when Dask is not installed
     got = exposim_without(tmp_path, "dask,distributed", "run", str(sample_seq.parent), "--sequences", "all",
-                          "--methods", "classical-50", "--save", "none", "-o", "out2", "--json", "--no-progress")
+                          "--methods", "classical-50", "--save", "none", "-o", "out2", "--json", "-q")
     assert got.returncode == 0, got.stderr
     assert '"scheduler": "serial"' in got.stdout
 
