@@ -16,6 +16,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Describe a BorealHDR-layout recording (cycles are grouped by timestamp).",
     )
     p.add_argument("sequence", type=Path, help="recording folder holding camera_left/ and camera_right/, or a trajectory .zip")
+    p.add_argument("--frame-cache", type=Path, default=None, metavar="DIR",
+                   help="read decoded frames from this frame cache (made by 'exposim cache SEQ --frame-cache DIR'; "
+                        "default: SEQUENCE/.exposim-frames when it exists)")
     p.add_argument("--json", action="store_true", help="print one JSON object (cycles as a list)")
     p.add_argument("--calibration", type=Path, default=None, metavar="DIR",
                    help="folder with left.yaml/right.yaml (ROS camera_info) for the blur in pixels (default: "
@@ -37,7 +40,7 @@ def _info(args) -> int:
 
     with warnings.catch_warnings():  # info reports the IMU itself ("imu": null / "imu  none")
         warnings.simplefilter("ignore", ImuMissingWarning)
-        seq = load_sequence(args.sequence)
+        seq = load_sequence(args.sequence, frame_cache=args.frame_cache)
     desc = seq.describe()
     desc["imu"], desc["blur"] = _motion(seq, args)
     if args.json:
