@@ -329,7 +329,8 @@ def run_dataset(
     sequences: str = "all",
     methods="all",
     group_size: int | None = None,
-    scheduler: str = "serial",
+    scheduler="serial",
+    scheduler_file: str | os.PathLike | None = None,
     n_workers: int | None = None,
     retries: int = 2,
     resume: bool = False,
@@ -342,13 +343,15 @@ def run_dataset(
     ``settings`` override its fields, e.g. ``save="png16"``, ``noise="consistent"``,
     ``method_timeout_s=1``).  ``scheduler``: ``serial`` (in this process), ``threads``
     (``n_workers`` threads of this process), ``local`` (a Dask ``LocalCluster`` of
-    ``n_workers`` processes, default sized to the machine) or the address of an existing
-    Dask cluster that sees the same paths (:func:`emulator.distributed.open_client`).
-    Refuses an existing ``out_dir`` that holds a dataset run unless ``resume`` (then the
-    configuration must be the same; complete units are kept, others computed).  Every
-    path runs the units through :func:`emulator.distributed.run_tasks`: a unit that raises
-    any exception becomes an error row (Dask retries it ``retries`` times first), the
-    others are kept, and the bytes written are the same on every path.
+    ``n_workers`` processes, default sized to the machine), ``tcp://HOST:PORT`` or
+    ``tls://HOST:PORT`` (an existing Dask cluster that sees the same paths), or an open
+    :class:`distributed.Client` (used, not closed); ``scheduler_file`` instead names a
+    Dask scheduler file (see :mod:`emulator.distributed`).  Refuses an existing ``out_dir``
+    that holds a dataset run unless ``resume`` (then the configuration must be the same;
+    complete units are kept, others computed).  Every path runs the units through
+    :func:`emulator.distributed.run_tasks`: a unit that raises any exception becomes an
+    error row (Dask retries it ``retries`` times first), the others are kept, and the
+    bytes written are the same on every path.
     ``progress(done, total)`` after each unit.
     """
     from emulator.autoexposure.methodset import parse_methods
@@ -359,8 +362,14 @@ def run_dataset(
 
     out = Path(out_dir)
     cfg = RunConfig.from_kwargs(config, **settings)
-    if not (scheduler in ("serial", "threads", "local") or "://" in str(scheduler)):
-        raise DatasetRunError(f"unknown scheduler {scheduler!r}; use serial, threads, local or tcp://HOST:PORT")
+    from emulator.distributed import check_scheduler, is_client
+
+    if scheduler_file is not None and scheduler in ("serial", None):
+        scheduler = "file"
+    if scheduler not in ("file", "threads"):
+        check_scheduler(scheduler)
+    scheduler_name = (f"client {scheduler.scheduler.address}" if is_client(scheduler) else
+                      f"file {scheduler_file}" if scheduler == "file" else str(scheduler))
     found = discover_sequences(root, sequences)
     names = parse_methods(methods) if isinstance(methods, str) else list(methods)
     group_size = len(names) if group_size is None else int(group_size)
@@ -381,7 +390,9 @@ def run_dataset(
             raise DatasetRunError(f"{cfg_path}: no dataset run to resume")
 
     in_process = scheduler in ("serial", "threads")
-    ctx = contextlib.nullcontext() if in_process else open_client(scheduler, n_workers=n_workers, retries=retries)
+    ctx = contextlib.nullcontext() if in_process else open_client(
+        scheduler, scheduler_file=None if scheduler_file is None else str(scheduler_file), n_workers=n_workers,
+        retries=retries)
     with ctx as client:  # a scheduler that cannot be reached fails before anything is written
         if cfg_path.is_file():
             remove_stale_staging(out)
@@ -402,7 +413,7 @@ def run_dataset(
         "sequences": list(found),
         "methods": names,
         "groups": [list(g) for g in plan_groups(names, group_size)],
-        "scheduler": scheduler,
+        "scheduler": scheduler_name,
         "units": [{k: v for k, v in r.items() if k != "results"} for r in records],
         "errors": errors,
         "per_sequence": {name: {} for name in found},

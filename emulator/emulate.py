@@ -261,21 +261,21 @@ def emulate(
     ratio = float(target_ms) / float(source_ms)
     model = _check_noise_model(noise_model, response, noise, return_excess)
     if noise == "consistent":
-        from emulator.noise import check_rng, consistent_noise
+        from emulator.noise.tables import check_rng, consistent_noise
 
         out = consistent_noise(raw, out, ratio, model, check_rng(rng))
     results = [out]
     if return_mask:
         results.append(validity_mask(raw, ratio, response))
     if return_excess:
-        from emulator.noise import excess_map
+        from emulator.noise.tables import excess_map
 
         results.append(excess_map(raw, ratio, model, consistent=noise == "consistent"))
     return tuple(results) if len(results) > 1 else results[0]
 
 
 def _check_noise_model(noise_model, response: CameraResponse, noise: str, return_excess: bool):
-    from emulator.noise import NoiseModel
+    from emulator.noise.model import NoiseModel
 
     why = f'noise="{noise}"' if noise != "none" else "return_excess"
     if noise_model is None:

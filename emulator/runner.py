@@ -128,12 +128,12 @@ class _ImageSaver:
 
 
 def _new_run_json(config: RunConfig, identity: dict, seq, built, method_specs, model, model_source, command,
-                  created) -> dict:
+                  created, blur_hook=None) -> dict:
     from emulator.version import __version__
 
     run_json = {
         **identity,
-        **config.to_json(model),
+        **config.to_json(model, blur_hook),
         "white_level": int(seq.white_level),
         "black_level": int(seq.black_level),
         "cameras": list(seq.cameras),
@@ -217,7 +217,8 @@ def write_run(sequence, methods, out_dir, config: RunConfig | None = None, *, re
     seq = resolve_sequence(sequence)
     method_specs = parse_methods(methods) if isinstance(methods, str) else list(methods)
     stats = RunStats()
-    seq, response, built, provider, (model, model_source) = prepare_run(seq, method_specs, cfg, response, stats=stats)
+    prep = prepare_run(seq, method_specs, cfg, response, stats=stats)
+    seq, response, built, provider, model, model_source, hook = prep
     names = list(built)
     identity = {"sequence": str(Path(seq.path).resolve()), "methods": names, "response": cfg.response_name(response)}
 
@@ -225,18 +226,20 @@ def write_run(sequence, methods, out_dir, config: RunConfig | None = None, *, re
         if resume:
             run_json = writer.run_json
             cfg.resumed(run_json, CONFIG_KEYS if resume_given is None else resume_given, where=str(out / RUN_FILE),
-                        noise_model=model, identity=identity)
+                        noise_model=model, blur_hook=hook, identity=identity)
             run_json["resumed"] = run_json.get("resumed", 0) + 1
             run_json.setdefault("resume_commands", []).append(command)
             if writer.lock.stale_owner:
                 run_json.setdefault("stale_locks", []).append(writer.lock.stale_owner)
         else:
             run_json = _new_run_json(cfg, identity, seq, built, method_specs, model, model_source, command,
-                                     writer.lock.owner["started"])
+                                     writer.lock.owner["started"], hook)
             run_json.update(run_json_extra or {})
         run_json["jobs"] = cfg.jobs
         writer.start(run_json, names, seq.cameras, cfg.save)
         rows = _loop_into(writer, provider, built, cfg, stats, out, progress, len(seq.cycles))
+        if hook is not None:
+            hook.write_table(out)  # blur.csv: each emulated image's blur
         if cfg.save != "none":
             writer.write_times(names, rows)
     return writer.run_json, tables_from_rows(rows)

@@ -32,7 +32,7 @@ SCHEDULER_HELP = ("render the frames as Dask tasks: 'local' (a local cluster of 
                   "tcp://HOST:PORT (a running 'dask scheduler'); same cache entries and same output bytes "
                   "as the default serial render")
 
-_TCP = re.compile(r"^tcp://[A-Za-z0-9_.\-\[\]:]+:\d{1,5}$")
+_TCP = re.compile(r"^(tcp|tls)://[A-Za-z0-9_.\-\[\]:]+:\d{1,5}$")
 
 
 def check_scheduler(spec: str | None) -> str | None:
@@ -42,7 +42,7 @@ def check_scheduler(spec: str | None) -> str | None:
     spec = str(spec).strip()
     if spec == "local" or _TCP.match(spec):
         return spec
-    raise RenderError(f"--scheduler must be 'local' or tcp://HOST:PORT, got {spec!r}")
+    raise RenderError(f"--scheduler must be 'local' or tcp://HOST:PORT, got {spec!r} (tls://HOST:PORT also works)")
 
 
 @contextlib.contextmanager

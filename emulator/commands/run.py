@@ -8,6 +8,8 @@ import shlex
 import sys
 from pathlib import Path
 
+from emulator.commands.progress import add_quiet, bars_enabled
+from emulator.distributed import SCHEDULER_HELP, resolve_scheduler
 from emulator.errors import ExposimError
 
 __all__ = ["register", "config_from_args"]
@@ -50,12 +52,22 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--selector", choices=("higher-no-sat", "closest", "reference"), default=None,
                    help="bracket selector (default higher-no-sat)")
     p.add_argument("--response", type=Path, default=None, help="pcalib file (default: found beside the recording)")
+    p.add_argument("--frame-cache", type=Path, default=None, metavar="DIR",
+                   help="read decoded frames from this frame cache (made by 'exposim cache SEQ --frame-cache DIR'; "
+                        "default: SEQUENCE/.exposim-frames when it exists)")
     p.add_argument("--seed", type=int, default=None, help="seed of kim's Gaussian-process optimizer (default 0)")
     p.add_argument("--option", action="append", default=[], metavar="METHOD.KEY=VALUE",
                    help="a method option, e.g. zhang.percentile=0.7 or kim.window=8 (VALUE is JSON or text); repeatable")
     p.add_argument("--noise", choices=("none", "consistent"), default=None,
                    help="none (default): exact emulation (eq. 2); consistent: add the noise a capture at the "
                         "target exposure would have where the source bracket is cleaner (needs a noise model)")
+    p.add_argument("--blur", choices=("none", "consistent"), default=None,
+                   help="none (default): exact emulation; consistent: add the gyro's blur of the extra exposure time "
+                        "where the target is longer than the bracket, and record each image's excess blur in blur.csv "
+                        "(needs imu/imu.csv and a camera calibration; docs/blur.md)")
+    p.add_argument("--blur-aware", action="store_true",
+                   help="with --blur consistent and --selector higher-no-sat: take the lower bracket when the higher "
+                        "one's excess blur costs more than the lower one's noise (emulator.select.blur_aware)")
     p.add_argument("--noise-model", type=Path, default=None, metavar="FILE.json",
                    help="noise model for --noise consistent (`exposim calibrate --noise`); default: the model "
                         "a synthetic recording's exposim.json carries")
@@ -67,18 +79,20 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="dataset run: SEQUENCE is a dataset root; run every sequence under it ('all') or the named "
                         "ones (folders or trajectory .zip files, a zip named by its stem); OUTDIR gets one folder per "
                         "sequence and a dataset summary (results.json, report.md, methods.png)")
-    p.add_argument("--scheduler", default=None, metavar="serial|threads|local|tcp://HOST:PORT",
-                   help="dataset runs: serial, threads (--workers threads of this process), local (a Dask "
-                        "LocalCluster sized to the machine; default) or the address of a running Dask scheduler; "
-                        "every path gives the same bytes and the same error rows; single sequences always run "
-                        "serially")
+    p.add_argument("--scheduler", default=None, metavar="serial|threads|local|tcp://HOST:PORT|tls://HOST:PORT",
+                   help="dataset runs: " + SCHEDULER_HELP + ", or threads (--workers threads of this process), else "
+                        "local (serial without the dask extra); every path gives the same bytes and the same error "
+                        "rows; single sequences always run serially")
+    p.add_argument("--scheduler-file", type=Path, default=None, metavar="PATH",
+                   help="dataset runs: the scheduler file of a running Dask cluster (dask scheduler "
+                        "--scheduler-file PATH, dask-jobqueue)")
     p.add_argument("--workers", type=int, default=None,
                    help="dataset runs: worker processes (--scheduler local) or threads (--scheduler threads)")
     p.add_argument("--group-size", type=int, default=None,
                    help="dataset runs: methods per unit of work (default: all, one unit per sequence, the methods "
                         "sharing decoded images; 1: one (sequence, method) per unit, the finest parallelism)")
     p.add_argument("--retries", type=int, default=2, help="dataset runs on Dask: retries of a failed unit (default 2)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_quiet(p)
     p.add_argument("--json", action="store_true", help="print the results summary as JSON")
     _add_plugin_arguments(p)
     p.set_defaults(func=_run)
@@ -123,7 +137,7 @@ def _command(args) -> str:
     for flag, value in (("--methods", args.methods), ("--save", args.save), ("--mode", args.mode),
                         ("--initial-ms", args.initial_ms), ("--selector", args.selector),
                         ("--response", args.response), ("--seed", args.seed), ("--noise", args.noise),
-                        ("--noise-model", args.noise_model), ("--noise-seed", args.noise_seed),
+                        ("--blur", args.blur), ("--noise-model", args.noise_model), ("--noise-seed", args.noise_seed),
                         ("--png-level", args.png_level)):
         if value is not None:
             parts += [flag, str(value)]
@@ -133,6 +147,8 @@ def _command(args) -> str:
         parts += ["--option", text]
     if args.jobs != 1:
         parts += ["--jobs", str(args.jobs)]
+    if getattr(args, "blur_aware", False):
+        parts.append("--blur-aware")
     if args.resume:
         parts.append("--resume")
     if getattr(args, "method_timeout_s", None) is not None:
@@ -142,7 +158,7 @@ def _command(args) -> str:
 
 #: RunConfig field -> the flag that sets it (errors name the flag).
 _FLAGS = {"initial_ms": "--initial-ms", "range_ms": "--range-ms", "jobs": "--jobs", "noise_seed": "--noise-seed",
-          "png_level": "--png-level",
+          "png_level": "--png-level", "blur": "--blur", "blur_aware": "--blur-aware",
           "method_timeout_s": "--method-timeout-s", "selector": "--selector", "mode": "--mode", "save": "--save",
           "noise": "--noise"}
 
@@ -159,7 +175,7 @@ def _given(args) -> dict:
             "save": args.save, "noise": args.noise, "noise_model": args.noise_model, "noise_seed": args.noise_seed,
             "method_timeout_s": args.method_timeout_s,
             "response_path": str(args.response) if args.response is not None else None,
-            "png_level": args.png_level}
+            "png_level": args.png_level, "blur": args.blur, "blur_aware": True if args.blur_aware else None}
 
 
 def config_from_args(args, base=None):
@@ -204,10 +220,13 @@ def _progress_bar(desc: str, unit: str):
 
 def _run(args) -> int:
     _check_args(args)
+    if args.sequences is not None and args.frame_cache is not None:
+        raise ExposimError("--frame-cache applies to one sequence; a dataset run reads each sequence's own "
+                           "SEQUENCE/.exposim-frames")
     if args.sequences is not None:
         return _run_dataset(args)
-    if args.scheduler not in (None, "serial"):
-        raise ExposimError(f"--scheduler {args.scheduler}: a single sequence runs serially; "
+    if args.scheduler not in (None, "serial") or args.scheduler_file is not None:
+        raise ExposimError(f"--scheduler {args.scheduler or 'file'}: a single sequence runs serially; "
                            "pass --sequences all for a dataset run")
     from emulator.io.runfolder import RUN_FILE, read_run_json
     from emulator.playback import RunConfig
@@ -230,9 +249,27 @@ def _run(args) -> int:
               f"clamped to {config.start_ms:g} ms (recorded in run.json)", file=sys.stderr)
 
     _warn_broken_plugins()
-    bar, progress = _progress_bar("exposim run", "cycle") if not args.no_progress else (None, None)
+    progress = None
+    bar = None
+    if bars_enabled(args.quiet):
+        from tqdm import tqdm
+
+        def progress(done: int, total: int) -> None:
+            nonlocal bar
+            if bar is None:  # made at the first report, after the run's checks passed
+                bar = tqdm(total=total, unit="cycle", desc="exposim run", file=sys.stderr, dynamic_ncols=True)
+            if bar.total != total:
+                bar.total = total
+            bar.n = done
+            bar.refresh()
+
+    source = args.sequence
+    if args.frame_cache is not None:  # a frame cache elsewhere (a read-only recording)
+        from emulator.io.borealhdr import load_sequence
+
+        source = load_sequence(args.sequence, frame_cache=args.frame_cache)
     try:
-        summary = run_to_folder(args.sequence, methods or "all", args.output, config, resume=args.resume,
+        summary = run_to_folder(source, methods or "all", args.output, config, resume=args.resume,
                                 progress=progress, command=_command(args))
     finally:
         if bar is not None:
@@ -263,6 +300,8 @@ def _print_run_summary(args, summary: dict) -> int:
               + (" (--strict: exit code 1)" if args.strict else ""))
         for name, why in failed.items():
             print(f"  {name:13s} {why}")
+    if (args.output / "report.html").is_file():
+        print(f"report      {args.output / 'report.html'} (open in a browser)")
     return rc
 
 
@@ -270,7 +309,6 @@ def _run_dataset(args) -> int:
     """``exposim run ROOT --sequences ...``: every (sequence, method group) unit, then the dataset summary."""
     from emulator.datasetrun import DATASET_FILE, run_dataset
     from emulator.io.files import read_metadata
-
     from emulator.playback import RunConfig
 
     recorded = read_metadata(args.output / DATASET_FILE) if args.resume else {}
@@ -278,11 +316,12 @@ def _run_dataset(args) -> int:
     config = config_from_args(args, base)
     methods = args.methods or ",".join(recorded.get("methods", [])) or "all"
     group_size = args.group_size or recorded.get("group_size")
-    scheduler = args.scheduler or "local"
+    scheduler, scheduler_file = (("threads", None) if args.scheduler == "threads" and args.scheduler_file is None
+                                 else resolve_scheduler(args.scheduler, args.scheduler_file))
 
     bar = None
     progress = None
-    if not args.no_progress:
+    if bars_enabled(args.quiet):
         def progress(done: int, total: int) -> None:
             nonlocal bar, drive
             if bar is None:  # made at the first report, after the run's checks passed
@@ -293,7 +332,7 @@ def _run_dataset(args) -> int:
 
     try:
         summary = run_dataset(args.sequence, args.output, config, sequences=args.sequences, methods=methods,
-                              group_size=group_size, scheduler=scheduler,
+                              group_size=group_size, scheduler=scheduler, scheduler_file=scheduler_file,
                               n_workers=args.workers, retries=args.retries, resume=args.resume, progress=progress)
     finally:
         if bar is not None:
@@ -303,7 +342,7 @@ def _run_dataset(args) -> int:
     else:
         t = summary["throughput"]
         print(f"dataset run {args.output}  ({len(summary['sequences'])} sequences, {len(summary['units'])} units, "
-              f"scheduler {scheduler})")
+              f"scheduler {summary['scheduler']})")
         for name, m in summary["per_method"].items():
             mean = m["mean_exposure_ms"]
             print(f"  {name:13s} {m['cycles']:6d} cycles  mean {mean:8.3f} ms" if mean is not None

@@ -44,7 +44,7 @@ DEFAULT_INITIAL_MS = 4.0
 DEFAULT_SELECTOR = "higher-no-sat"
 MODES = ("paper", "borealhdr")
 #: Keys of ``run.json`` that are the configuration (a resume compares these).
-CONFIG_KEYS = ("selector", "initial_ms", "range_ms", "save", "mode", "options", "method_timeout_s", "noise")
+CONFIG_KEYS = ("selector", "initial_ms", "range_ms", "save", "mode", "options", "method_timeout_s", "noise", "blur")
 
 
 def parse_option(text: str) -> tuple[str, str, object]:
@@ -122,6 +122,12 @@ class RunConfig:
         Per-call wall-time limit of ``next_exposure``, s (> 0), or None.
     response_path : str, path or None
         A pcalib file; None: the one found beside the recording.
+    blur : {"none", "consistent"}
+        Blur-consistent emulation from the recording's gyro (:func:`emulator.motion.blur_hook`;
+        ``run.json`` ``"blur"``, ``blur.csv``).
+    blur_aware : bool
+        With ``blur="consistent"`` and the ``higher-no-sat`` selector: the hook also selects
+        brackets, weighing the higher bracket's excess blur against the lower one's noise.
     png_level : int
         zlib level of the saved images, 0..9 (default 0: stored, the fastest to write and read;
         the decoded images are the same for any level, :func:`emulator.io.png.encode_png`).
@@ -140,6 +146,8 @@ class RunConfig:
     method_timeout_s: float | None = None
     response_path: str | None = None
     png_level: int = 0
+    blur: str = "none"
+    blur_aware: bool = False
 
     def __post_init__(self) -> None:
         from emulator.select import SELECTORS
@@ -188,6 +196,16 @@ class RunConfig:
                 or not 0 <= self.png_level <= 9:
             raise PlaybackError(f"png_level must be an integer 0..9, got {self.png_level!r}")
         put(self, "png_level", int(self.png_level))
+        from emulator.blur import BLUR_MODES
+
+        if self.blur not in BLUR_MODES:
+            raise PlaybackError(f"blur must be one of {', '.join(BLUR_MODES)}, got {self.blur!r}")
+        put(self, "blur_aware", bool(self.blur_aware))
+        if self.blur_aware and self.blur != "consistent":
+            raise PlaybackError("blur_aware: the blur-aware selection needs blur 'consistent' (--blur consistent)")
+        if self.blur_aware and self.selector != "higher-no-sat":
+            raise PlaybackError(f"blur_aware: the blur-aware selection refines selector higher-no-sat, not "
+                                f"{self.selector!r}")
         if isinstance(self.noise_model, Path):
             put(self, "noise_model", str(self.noise_model))
 
@@ -276,8 +294,17 @@ class RunConfig:
         return _check_noise_model(model, response, self.noise, False), source
 
     # ------------------------------------------------------------------ run.json
-    def to_json(self, noise_model=None) -> dict:
-        """The configuration keys of ``run.json`` (``noise`` holds the model's figures when given)."""
+    def blur_for(self, sequence, response):
+        """The run's blur hook (:class:`emulator.motion.BlurHook`), or None for ``blur="none"``."""
+        if self.blur == "none":
+            return None
+        from emulator.motion import blur_hook
+
+        return blur_hook(self.blur, sequence, response, blur_aware=self.blur_aware)
+
+    def to_json(self, noise_model=None, blur_hook=None) -> dict:
+        """The configuration keys of ``run.json`` (``noise`` holds the model's figures when given,
+        ``blur`` the hook's description)."""
         if self.noise == "none":
             noise = {"mode": "none"}
         else:
@@ -295,6 +322,8 @@ class RunConfig:
             "noise": noise,
             "jobs": self.jobs,
             "png_level": self.png_level,
+            "blur": (blur_hook.describe() if blur_hook is not None else
+                     {"mode": self.blur, **({"blur_aware": True} if self.blur_aware else {})}),
         })
 
     @classmethod
@@ -320,10 +349,12 @@ class RunConfig:
             method_timeout_s=timeout,
             response_path=response if response and Path(response).is_file() else None,
             png_level=int(run_json.get("png_level", 1)),  # folders from before the setting: level 1
+            blur=(run_json.get("blur") or {}).get("mode", "none"),  # folders from before --blur: none
+            blur_aware=bool((run_json.get("blur") or {}).get("blur_aware", False)),
         )
 
     def resumed(self, recorded: Mapping, given: Iterable[str] = CONFIG_KEYS, *, where: str = "run.json",
-                noise_model=None, identity: Mapping | None = None) -> "RunConfig":
+                noise_model=None, blur_hook=None, identity: Mapping | None = None) -> "RunConfig":
         """The one ``--resume`` rule: the recorded configuration wins; values given must equal it.
 
         ``recorded`` is the ``run.json`` of the folder; ``given`` names the fields of this
@@ -335,19 +366,20 @@ class RunConfig:
         :class:`PlaybackError` naming the keys.
         """
         old = RunConfig.from_json(recorded)
-        mine = self.to_json(noise_model)
+        mine = self.to_json(noise_model, blur_hook)
         theirs = dict(recorded)
         theirs.setdefault("method_timeout_s", theirs.get("method_timeout"))
         theirs["noise"] = theirs.get("noise") or {"mode": "none"}
+        theirs["blur"] = theirs.get("blur") or {"mode": "none"}
         given = set(given)
         diff = []
         for key in CONFIG_KEYS:
             if key not in given:
                 continue
             a, b = mine.get(key), theirs.get(key)
-            if key == "noise":
-                a = {k: v for k, v in (a or {}).items() if k != "model" or "model" in (b or {})}
-                b = {k: v for k, v in (b or {}).items() if k != "model" or "model" in (a or {})}
+            if key in ("noise", "blur"):  # the figures of a model or hook only where both sides have them
+                a, b = ({k: v for k, v in (x or {}).items() if k in ("mode", "seed", "blur_aware") or k in (y or {})}
+                        for x, y in ((a, b), (b, a)))
             if _plain(a) != _plain(b):
                 diff.append(key)
         for key, a in dict(identity or {}).items():

@@ -142,8 +142,12 @@ class EmulatedTick:
         self.brackets = {e: (lambda e=e: self.images.saturated(lead, e)) for e in avail}
 
     def select(self, target_ms: float) -> float:
+        """The bracket of ``target_ms`` (the blur hook's choice when it selects, ``--blur-aware``)."""
         p = self.provider
-        return select(p.selector, target_ms, self.brackets, white_level=p.white, black_level=p.black)
+        kw = {"white_level": p.white, "black_level": p.black}
+        if p.blur is None:
+            return select(p.selector, target_ms, self.brackets, **kw)
+        return p.blur.select(p.selector, self.cycle, p.cameras[0], target_ms, self.brackets, kw)
 
     def shot(self, target_ms: float, want_right: bool = False) -> Shot:
         """The shot of ``target_ms``: the selected bracket emulated (first camera; second when asked)."""

@@ -8,6 +8,7 @@ Both are :func:`emulator.playback.loop.closed_loop` over an
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
+from typing import NamedTuple
 
 from emulator.dataset import Sequence
 from emulator.playback.config import RunConfig
@@ -15,7 +16,7 @@ from emulator.playback.emulated import EmulatedProvider
 from emulator.playback.loop import closed_loop
 from emulator.playback.records import CycleStep, MethodStep, RunResult, RunStats
 
-__all__ = ["iter_run", "run", "prepare_run", "resolve_sequence"]
+__all__ = ["iter_run", "run", "prepare_run", "Prepared", "resolve_sequence"]
 
 
 def resolve_sequence(sequence) -> Sequence:
@@ -25,13 +26,23 @@ def resolve_sequence(sequence) -> Sequence:
     return sequence if isinstance(sequence, Sequence) else load_sequence(sequence)
 
 
-def prepare_run(sequence, methods, config: RunConfig, response=None, *, stats: RunStats | None = None, blur=None):
-    """What a run needs once its configuration is valid: ``(sequence, response, built methods, provider, noise source)``.
+class Prepared(NamedTuple):
+    """What a run needs once its configuration is valid (:func:`prepare_run`)."""
 
-    The response is the run's at the recording's levels; methods built by name get
-    ``config.mode``, ``config.options[name]`` and that response; the provider emulates with
-    ``config``'s selector and noise.
-    """
+    sequence: Sequence
+    response: object
+    methods: dict
+    provider: EmulatedProvider
+    noise_model: object
+    noise_source: str | None
+    blur: object
+
+
+def prepare_run(sequence, methods, config: RunConfig, response=None, *, stats: RunStats | None = None,
+                blur=None) -> Prepared:
+    """Resolve the recording's side of a run: the response at the recording's levels, the methods
+    (built by name with ``config.mode``, ``config.options[name]`` and that response), the noise
+    model, the blur hook (``blur``, else ``config``'s), and the emulated provider."""
     from emulator.autoexposure.methodset import build_methods
 
     seq = resolve_sequence(sequence)
@@ -39,8 +50,9 @@ def prepare_run(sequence, methods, config: RunConfig, response=None, *, stats: R
     built = build_methods(methods, mode=config.mode, response=response, options=config.options)
     model, source = config.noise_for(seq, response)
     noise = None if model is None else (model, config.noise_seed)
-    provider = EmulatedProvider(seq, config, response, noise=noise, stats=stats, blur=blur)
-    return seq, response, built, provider, (model, source)
+    hook = blur if blur is not None else config.blur_for(seq, response)
+    provider = EmulatedProvider(seq, config, response, noise=noise, stats=stats, blur=hook)
+    return Prepared(seq, response, built, provider, model, source, hook)
 
 
 def iter_run(
@@ -87,8 +99,8 @@ def iter_run(
     """
     cfg = RunConfig.from_kwargs(config, **settings)
     stats = stats if stats is not None else RunStats()
-    _, _, built, provider, _ = prepare_run(sequence, methods, cfg, response, stats=stats, blur=blur)
-    return closed_loop(provider, built, cfg, want_right=emulate_right, keep_images=keep_images, on_step=on_step,
+    prep = prepare_run(sequence, methods, cfg, response, stats=stats, blur=blur)
+    return closed_loop(prep.provider, prep.methods, cfg, want_right=emulate_right, keep_images=keep_images, on_step=on_step,
                        stats=stats)
 
 
@@ -107,11 +119,12 @@ def run(
     """
     cfg = RunConfig.from_kwargs(config, **settings)
     stats = RunStats()
-    seq, _, built, provider, _ = prepare_run(sequence, methods, cfg, response, stats=stats)
+    prep = prepare_run(sequence, methods, cfg, response, stats=stats)
+    seq, built = prep.sequence, prep.methods
     steps: dict[str, list[MethodStep]] = {name: [] for name in built}
     skipped: list[tuple[int, str]] = []
     failed: dict[str, str] = {}
-    for i, cs in enumerate(closed_loop(provider, built, cfg, stats=stats), 1):
+    for i, cs in enumerate(closed_loop(prep.provider, built, cfg, stats=stats), 1):
         failed.update(cs.failed)
         if cs.skipped:
             skipped.append((cs.cycle, cs.skipped))
