@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from emulator.stats import rng_of, variance_components
-from validation.verdicts.agreement import ALPHA, OMEGA2_MAX, judge
+from validation.verdicts.agreement import ALPHA, OMEGA2_MAX, VERDICTS, judge_batch
 from validation.verdicts.simulate import Scales, simulate_tables
 
 __all__ = ["verdict_rates", "scales_from_tables", "smallest_detectable_omega2", "walks_needed", "power_summary"]
@@ -23,11 +23,8 @@ def verdict_rates(kind: str, n_walks: int, scales: Scales, *, n_seeds: int = 200
     rng = rng_of(seed)
     t = simulate_tables(kind, n_walks, scales, n_methods=n_methods, n_seeds=n_seeds, seed=rng,
                         omega2_true=omega2_true, beta=beta)
-    counts = {"agrees": 0, "disagrees": 0, "undetermined": 0}
-    for s in range(n_seeds):
-        v = judge(t["live"][s], t["emulated"][s], n_resamples=n_resamples, seed=rng, detail=False)["verdict"]
-        counts[v] += 1
-    return {k: c / n_seeds for k, c in counts.items()}
+    v = judge_batch(t["live"], t["emulated"], n_resamples=n_resamples, seed=rng)["verdict"]
+    return {name: float(np.mean(v == k)) for k, name in enumerate(VERDICTS)}
 
 
 def scales_from_tables(live, emulated=None, control=None) -> Scales:
