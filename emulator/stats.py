@@ -11,6 +11,8 @@ Every number a report writes that compares methods carries an interval from here
 * :func:`statistic_interval`: a statistic (mean, median) of one sample with its interval,
   :func:`difference_interval`: the difference of a statistic between two methods on the
   same cycles or units (paired: the same resampled indices for both);
+* :func:`compare_methods`: per method a statistic with its interval and its difference
+  from the best method with an interval (what every report table that ranks methods shows);
 * :func:`holm`: Holm's step-down adjustment of p-values;
 * :func:`tost_paired`: two one-sided t-tests of equivalence of paired differences within
   a margin;
@@ -43,6 +45,7 @@ __all__ = [
     "variance_components",
     "covariance_components",
     "kendall_tau_b",
+    "compare_methods",
 ]
 
 #: Confidence level of every interval in the reports.
@@ -359,3 +362,63 @@ def kendall_tau_b(x, y) -> np.ndarray:
     with np.errstate(divide="ignore", invalid="ignore"):
         tau = (sx * sy).sum(axis=-1) / np.sqrt((n0 - tx) * (n0 - ty))
     return np.where((tx == n0) | (ty == n0), np.nan, tau)
+
+
+def _resample(n: int, n_resamples: int, seed, block: bool, block_length: int | None) -> np.ndarray:
+    return (block_bootstrap_indices(n, n_resamples, seed, block_length) if block
+            else bootstrap_indices(n, n_resamples, seed))
+
+
+def compare_methods(series, statistic="median", *, higher_is_better: bool = True, block: bool = False,
+                    block_length: int | None = None, confidence: float = CONFIDENCE, n_resamples: int = N_RESAMPLES,
+                    seed=0) -> dict:
+    """Each method's statistic with its interval, and its difference from the best method with an interval.
+
+    Parameters
+    ----------
+    series : mapping of str to array_like
+        Per method, the values the statistic is taken over (per cycle, per image pair, per
+        sequence); non-finite values are left out.  Methods whose series have the same
+        length are taken as aligned (the same cycles or units): their difference is a paired
+        bootstrap; otherwise the two are resampled independently.
+    higher_is_better : bool
+        Which end of the statistic is the best method.
+    block : bool
+        Series are time series: circular block bootstrap (:func:`block_bootstrap_indices`).
+
+    Returns
+    -------
+    dict
+        ``{"best": name, "methods": {name: {estimate, ci95, n, difference_to_best: {estimate,
+        ci95, excludes_zero}}}, "method": how the intervals were resampled}``; the best
+        method's difference is None.  ``excludes_zero`` False means this data cannot tell the
+        method from the best one.
+    """
+    rng = rng_of(seed)
+    f = _stat(statistic)
+    raw = {m: np.asarray(v, dtype=np.float64).ravel() for m, v in series.items()}
+    out = {m: statistic_interval(v, f, block=block, block_length=block_length, confidence=confidence,
+                                 n_resamples=n_resamples, seed=rng) for m, v in raw.items()}
+    have = {m: r["estimate"] for m, r in out.items() if r["estimate"] is not None}
+    best = (max if higher_is_better else min)(have, key=have.get) if have else None
+    for m, r in out.items():
+        r.pop("method", None)
+        r["difference_to_best"] = None
+        if best is None or m == best or r["estimate"] is None:
+            continue
+        a, b = raw[m], raw[best]
+        if a.size == b.size:
+            d = difference_interval(a, b, f, block=block, block_length=block_length, confidence=confidence,
+                                    n_resamples=n_resamples, seed=rng)
+        else:
+            a, b = a[np.isfinite(a)], b[np.isfinite(b)]
+            d = {"estimate": float(f(a, None) - f(b, None)), "ci95": None, "excludes_zero": None}
+            if a.size >= 2 and b.size >= 2:
+                ra = f(a[_resample(a.size, n_resamples, rng, block, block_length)], 1)
+                rb = f(b[_resample(b.size, n_resamples, rng, block, block_length)], 1)
+                lo, hi = percentile_interval(ra - rb, confidence)
+                d["ci95"], d["excludes_zero"] = [float(lo), float(hi)], bool(lo > 0 or hi < 0)
+        r["difference_to_best"] = {k: d[k] for k in ("estimate", "ci95", "excludes_zero")}
+    how = ("circular block bootstrap" if block else "bootstrap") + f", {n_resamples} resamples, {confidence:.0%}"
+    return {"best": best, "statistic": statistic if isinstance(statistic, str) else "custom", "methods": out,
+            "method": how}

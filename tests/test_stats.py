@@ -126,3 +126,20 @@ def test_kendall_tau_b_matches_scipy_and_ties_are_undefined():
         else:
             assert ours[k] == pytest.approx(ref)
     assert np.isnan(stats.kendall_tau_b(np.ones(7), np.arange(7.0)))
+
+
+def test_compare_methods_best_difference_and_unaligned():
+    rng = np.random.default_rng(0)
+    common = rng.normal(0, 5, 200)  # shared by the aligned methods: cancels in the paired difference
+    series = {"a": common + 10.0 + rng.normal(0, 0.3, 200), "b": common + 9.0 + rng.normal(0, 0.3, 200),
+              "c": common[:150] + 9.5 + rng.normal(0, 0.3, 150), "d": []}
+    r = stats.compare_methods(series, "mean", seed=0)
+    assert r["best"] == "a" and r["methods"]["d"]["estimate"] is None
+    b = r["methods"]["b"]["difference_to_best"]
+    assert b["excludes_zero"] and -1.2 < b["ci95"][0] < b["ci95"][1] < -0.8  # paired: the shared part cancels
+    lower = stats.compare_methods(series, "mean", higher_is_better=False, seed=0)
+    assert lower["best"] == "b" and lower["methods"]["b"]["difference_to_best"] is None
+    # unaligned (different lengths): independent resampling, the shared part no longer cancels: wider
+    ca = stats.compare_methods({"a": series["a"], "c": series["c"]}, "mean", seed=1)
+    d = ca["methods"]["c"]["difference_to_best"]
+    assert d["ci95"][1] - d["ci95"][0] > 1.0 and d["excludes_zero"] is False

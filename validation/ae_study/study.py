@@ -10,7 +10,7 @@ from pathlib import Path
 
 from emulator.io.files import REPORT_FILE, RESULTS_FILE, prepare_output, read_results, write_results, write_text
 from validation.ae_study.config import CONFIGS, PAPER, VO_CONFIGURATION_NOTE, StudyConfig, StudyError, config_from_dict
-from validation.ae_study.findings import evaluate_findings, findings_paragraph
+from validation.ae_study.findings import evaluate_findings, findings_paragraph, findings_with_evidence
 from validation.ae_study.report import plot_summary, report_markdown
 from validation.ae_study.summary import summarise
 
@@ -109,7 +109,7 @@ def run_study(out, config: StudyConfig = CONFIGS["full"], *, force: bool = False
                                   rpe_on_failure=True, force=True, progress=progress, command=command)
         timings[f"vo_{scene_name}_s"] = time.perf_counter() - t0
     summary = summarise(cfg, features, vo, runs)
-    findings = evaluate_findings(summary, cfg.taus)
+    findings = findings_with_evidence(summary, evaluate_findings(summary, cfg.taus), cfg.taus, seed=cfg.scene_seed)
     timings["total_s"] = time.perf_counter() - t_start
     from emulator import __version__
 
@@ -166,7 +166,9 @@ def redraw(out) -> dict:
     results["config"] = cfg.to_dict()
     results["vo_configuration_note"] = VO_CONFIGURATION_NOTE
     results["summary"] = summarise(cfg, features, vo, runs)
-    results["findings"] = evaluate_findings(results["summary"], results["config"]["taus"])
+    results["findings"] = findings_with_evidence(
+        results["summary"], evaluate_findings(results["summary"], results["config"]["taus"]),
+        results["config"]["taus"], seed=cfg.scene_seed)
     results["findings_paragraph"] = findings_paragraph(results["findings"])
     results["redrawn"] = results.get("redrawn", 0) + 1
     plot_summary(results, out / "ae_study_summary.png")
