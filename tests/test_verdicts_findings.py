@@ -73,3 +73,31 @@ def test_a_true_effect_is_found_at_the_study_size():
     # one per-walk noise SD (docs/verdicts.md: the paper's RPE gap is 0.3 SD at today's noise; a power table there)
     assert finding_power("rpe_trans_worst_kim", 1.0, 30, n_seeds=60, seed=3) >= 0.8
     assert finding_power("gradient_ahead_vo", 1.0, 30, n_seeds=60, seed=4) >= 0.8
+
+
+def test_replicated_study_judges_over_all_walks(tmp_path):
+    from validation.ae_study.findings import evaluate_findings
+    from validation.ae_study.study import finish_replicated_study
+
+    rng = np.random.default_rng(9)
+
+    def study(seed):
+        per_scene = {}
+        for scene in ("forest_winter", "sun_glare", "forest_edge"):
+            rows = {}
+            for k, m in enumerate(METHODS):
+                v = float(rng.normal(50, 1)) + (20.0 if m == "fixed" else 0.0)  # fixed tracks far more
+                rows[m] = {"median_matches": v, "median_uniformity": 0.3, "sequence_success": {"100": False},
+                           "segment_success": {"100": {"rate": 0.0}}, "vo": None}
+            per_scene[scene] = rows
+        overall = {m: {"median_matches": 1.0, "n_sequences": 3, "vo_failed_runs": 0} for m in METHODS}
+        summary = {"per_scene": per_scene, "overall": overall}
+        return {"config": {"scene_seed": seed, "taus": [5, 100]}, "summary": summary,
+                "findings": [f for f in evaluate_findings(summary) if f["id"] == "fixed_most_matches"],
+                "timings": {"total_s": 1.0}}
+
+    res = finish_replicated_study(tmp_path, [study(0), study(1)], command="test")
+    assert res["n_walks"] == 6
+    f = res["findings"][0]
+    assert f["id"] == "fixed_most_matches" and f["verdict"] == "holds" and f["effect"] > 15
+    assert (tmp_path / "report.md").read_text().count("fixed_most_matches") == 1
