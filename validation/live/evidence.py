@@ -163,7 +163,17 @@ def judge_metrics(tables: dict, methods, *, n_resamples: int = 1000, seed: int =
                                  "reason": f"{int(ok.sum())} complete walks, fewer than {MIN_WALKS}: no variance "
                                            "components to size the study from"}
             continue
-        sc = scales_from_tables(live, control=None if control is None else control[metric])
+        sc = scales_from_tables(live[ok])
+        same = tables.get("live-same-instant", {}).get(metric)
+        if control is not None and same is not None:
+            # run noise from two live runs that differ only in their capture-noise seeds (same-instant and its
+            # re-seeded control); the rest of the reference's residual is walk x method
+            both = ok & np.all(np.isfinite(same), axis=1)
+            if both.sum() >= 2:
+                noise = scales_from_tables(same[both], control=control[metric][both]).sd_noise
+                resid = sc.sd_noise ** 2 + sc.sd_walk_method ** 2
+                sc = type(sc)(sd_method=sc.sd_method, sd_walk_method=float(np.sqrt(max(resid - noise ** 2, 0.0))),
+                              sd_noise=float(min(noise, np.sqrt(resid))), sd_walk=sc.sd_walk)
         if sc.sd_method <= 0:
             power_out[metric] = {"status": "not computed", "scales": sc.__dict__,
                                  "reason": "live shows no method effect at this size (variance component <= 0)"}
