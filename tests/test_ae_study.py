@@ -289,3 +289,15 @@ def test_scheduler_reaches_the_renders_and_a_bad_one_creates_nothing(tmp_path, s
     assert main([str(tmp_path / "bad"), "--quick", "--scheduler", "tcp:/x"]) == 1
     assert "--scheduler must be 'local' or tcp://HOST:PORT, got 'tcp:/x'" in capsys.readouterr().err
     assert not (tmp_path / "bad").exists()
+
+
+def test_ae_study_replicates_shift_every_seed(tmp_path, stop_at_synthesize):
+    from conftest import SynthesizeCalled
+
+    from validation.ae_study.cli import main as ae_main
+
+    with pytest.raises(SynthesizeCalled):
+        ae_main([str(tmp_path / "rep"), "--quick", "--no-progress", "--replicates", "3"])
+    assert stop_at_synthesize["seed"] == 0 and stop_at_synthesize["render_seed"] == 0
+    assert (tmp_path / "rep" / "replicates" / "seed0").is_dir()
+    assert ae_main([str(tmp_path / "bad"), "--quick", "--replicates", "0"]) == 1

@@ -286,3 +286,13 @@ def test_scheduler_reaches_the_renders_and_a_bad_one_creates_nothing(tmp_path, s
     assert main(["-o", str(tmp_path / "bad"), "--quick", "--scheduler", "cluster9"]) == 1
     assert "--scheduler must be 'local' or tcp://HOST:PORT, got 'cluster9'" in capsys.readouterr().err
     assert not (tmp_path / "bad").exists()
+
+
+def test_replicates_run_each_seed_into_its_own_folder(tmp_path, stop_at_synthesize, capsys):
+    with pytest.raises(SynthesizeCalled):
+        main(["-o", str(tmp_path / "rep"), "--quick", "--no-progress", "--replicates", "2", "--seed", "7"])
+    # the first replicate got as far as rendering, with its own seed, in its own folder
+    assert stop_at_synthesize["seed"] == 7
+    assert (tmp_path / "rep" / "replicates" / "seed7").is_dir()
+    assert main(["-o", str(tmp_path / "bad"), "--quick", "--replicates", "0"]) == 1
+    assert "--replicates must be >= 1, got 0" in capsys.readouterr().err

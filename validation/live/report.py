@@ -268,7 +268,10 @@ def report_markdown(results: dict) -> str:
     if results["flip_causes"]:
         sp = results.get("live_spread") or {}
         lines += ["## Why rankings flip", "",
-                  "Each pair of methods ordered oppositely live and emulated, attributed to the first cause that "
+                  "Not calibrated (issue 22): the live spread is one draw, so even an emulator that is one more live "
+                  "draw puts a quarter of its discordant pairs beyond it; the per-metric verdicts above are the "
+                  "calibrated answer. Each pair of methods ordered oppositely live and emulated, attributed to the "
+                  "first cause that "
                   "applies (`flip_causes` in validation/live/verdicts.py): within the live spread (both differences "
                   "at most the largest |live - live re-seeded| of the metric over the methods: "
                   + ", ".join(f"{m} {fmt(v)}" for m, v in sp.items()) + "), motion (fixed-instant only), noise level "
