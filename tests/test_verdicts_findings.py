@@ -101,3 +101,12 @@ def test_replicated_study_judges_over_all_walks(tmp_path):
     f = res["findings"][0]
     assert f["id"] == "fixed_most_matches" and f["verdict"] == "holds" and f["effect"] > 15
     assert (tmp_path / "report.md").read_text().count("fixed_most_matches") == 1
+
+
+def test_a_study_without_the_claimed_methods_is_undetermined():
+    t = {k: v[:, :3] for k, v in simulated_tables(10, seed=0).items()}
+    res = {r["id"]: r for r in evaluate(t, ("fixed", "classical-30", "classical-50"), n_resamples=50,
+                                        n_permutations=200, seed=0)}
+    assert res["rpe_trans_worst_kim"]["verdict"] == "undetermined"
+    assert "kim" in res["rpe_trans_worst_kim"]["reason"]
+    assert res["fixed_most_matches"]["effect"] is not None

@@ -183,6 +183,12 @@ def evaluate(tables: dict[str, np.ndarray], methods=_METHODS, *, n_resamples: in
         u = t.shape[0]
         row = {"id": fid, "effect": None, "ci95": [None, None], "p": None, "p_adjusted": None,
                "verdict": "undetermined", "n_walks": int(u), "definition": definition, "reason": ""}
+        absent = [m for m in CLAIMED[fid] if m not in methods]
+        if absent or len(methods) <= len(CLAIMED[fid]):
+            row["reason"] = (f"method(s) {', '.join(absent)} not in this study" if absent
+                             else "no other method to compare with")
+            rows.append(row)
+            continue
         if u == 0:
             row["reason"] = f"no walk with a {metric} value for every method"
             rows.append(row)
