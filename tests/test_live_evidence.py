@@ -50,7 +50,7 @@ def test_replicated_results_contract(tmp_path, kind, expected):
     sim = simulate_tables(kind, 40, Scales(sd_method=1.0, sd_walk_method=0.3, sd_noise=0.3), seed=7)
     tables = {CONDITIONS["cycle-rate live"]: sim["live"][0], CONDITIONS["emulated"]: sim["emulated"][0],
               "live-same-instant-reseeded": sim["control"][0]}
-    res = finish_replicated(tmp_path, _records(tables, 10), command="test", power_seeds=10)
+    res = finish_replicated(tmp_path, _records(tables, 10), command="test", power_seeds=0)
     on_disk = json.loads((tmp_path / "results.json").read_text())
     assert on_disk["n_walks"] == 40 == res["n_walks"]
     assert set(on_disk["metrics"]) == set(METRICS)
@@ -61,7 +61,7 @@ def test_replicated_results_contract(tmp_path, kind, expected):
         assert on_disk["metrics"][m]["verdict"] == expected, on_disk["metrics"][m]
     assert on_disk["conditions"]["native-rate live"]["status"] == "not run"
     assert on_disk["comparisons"]["cycle-rate vs native-rate live"]["status"] == "not run"
-    assert on_disk["power"]["median_matches"]["status"] == "computed"
+    assert on_disk["power"] == {}  # power_seeds 0: not simulated
     assert "## Verdicts per metric" in (tmp_path / "report.md").read_text()
 
 
@@ -74,3 +74,18 @@ def test_quick_sized_record_is_undetermined(tmp_path):
     assert res["n_walks"] == 4
     assert {r["verdict"] for r in res["metrics"].values()} == {"undetermined"}
     assert all("fewer than 5" in r["reason"] for r in res["metrics"].values())
+
+
+@pytest.mark.slow
+def test_power_per_metric_from_the_walks(tmp_path):
+    from validation.live.experiment import finish_replicated
+
+    sim = simulate_tables("live-draw", 40, Scales(sd_method=1.0, sd_walk_method=0.3, sd_noise=0.3), seed=7)
+    tables = {CONDITIONS["cycle-rate live"]: sim["live"][0], CONDITIONS["emulated"]: sim["emulated"][0],
+              "live-same-instant-reseeded": sim["control"][0]}
+    res = finish_replicated(tmp_path, _records(tables, 10), command="test", power_seeds=10)
+    p = res["power"]["median_matches"]
+    assert p["status"] == "computed" and p["n_walks"] == 40
+    assert p["scales"]["sd_method"] == pytest.approx(1.0, rel=0.35)  # the simulated method SD, recovered
+    assert p["walks_needed_for_agrees"] is not None and p["walks_needed_for_agrees"] <= 40
+    assert "What this size can decide" in (tmp_path / "report.md").read_text()

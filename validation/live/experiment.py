@@ -296,7 +296,7 @@ def evidence(cfg: LiveConfig, records: list[dict], power_seeds: int = 100) -> di
     walks, tables = walk_values(records, cfg.methods)
     out = {"walks": walks, "n_walks": len(walks)}
     if tables:
-        out.update(judge_metrics(tables, cfg.methods, seed=cfg.seed, power_seeds=power_seeds))
+        out.update(judge_metrics(tables, cfg.methods, seed=cfg.seed, power=power_seeds > 0, power_seeds=power_seeds))
         out["n_walks"] = len(walks)
     else:
         out.update({"metrics": {}, "reason": "no benchmark metrics in this experiment (metrics off)"})
