@@ -73,7 +73,7 @@ def test_quick_sized_record_is_undetermined(tmp_path):
     res = finish_replicated(tmp_path, _records(tables, 1), command="test")
     assert res["n_walks"] == 4
     assert {r["verdict"] for r in res["metrics"].values()} == {"undetermined"}
-    assert all("fewer than 5" in r["reason"] for r in res["metrics"].values())
+    assert all("fewer than 10" in r["reason"] for r in res["metrics"].values())
 
 
 @pytest.mark.slow

@@ -96,8 +96,8 @@ def test_replicated_study_judges_over_all_walks(tmp_path):
                 "findings": [f for f in evaluate_findings(summary) if f["id"] == "fixed_most_matches"],
                 "timings": {"total_s": 1.0}}
 
-    res = finish_replicated_study(tmp_path, [study(0), study(1)], command="test")
-    assert res["n_walks"] == 6
+    res = finish_replicated_study(tmp_path, [study(k) for k in range(4)], command="test")
+    assert res["n_walks"] == 12
     f = res["findings"][0]
     assert f["id"] == "fixed_most_matches" and f["verdict"] == "holds" and f["effect"] > 15
     assert (tmp_path / "report.md").read_text().count("fixed_most_matches") == 1

@@ -44,7 +44,7 @@ def add_arguments(p: argparse.ArgumentParser, *, output_option: bool = False) ->
     p.add_argument("--replicates", type=int, default=1,
                    help="run the study on this many seeds (scene, camera and render seeds +0, +1, ...): each scene "
                         "of each is an independent walk of the findings' statistics (default 1; a verdict needs "
-                        ">= 5 walks)")
+                        ">= 10 walks)")
     add_scheduler_option(p)
     p.add_argument("--force", action="store_true", help="overwrite an existing results.json")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")

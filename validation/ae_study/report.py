@@ -124,7 +124,7 @@ def report_markdown(results: dict) -> str:
                      f"{_fmt(f['holds']) if f['holds'] is not None else 'undecided'} | {f['detail']} |")
     lines += ["", "Verdict: the finding's effect (signed, positive = the paper's claim; see `effect_definition` in "
               "results.json) against interchangeable methods (labels permuted within each walk), Holm across the "
-              "findings; undetermined with fewer than 5 walks; by-construction findings cannot fail and are not "
+              "findings; undetermined with fewer than 10 walks; by-construction findings cannot fail and are not "
               "counted. The point comparison is the single-number test of issue 7, without evidence."]
     lines += ["", "## Figures", "", "![summary](ae_study_summary.png)", "",
               "![features (Fig. 4)](features/fig4_features.png)", "",

@@ -57,7 +57,7 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
                         f"--quick {quick.noise_repeats})")
     p.add_argument("--replicates", type=int, default=1,
                    help="run the experiment on this many seeds (--seed, +1, ...): each scene of each is an "
-                        "independent walk of the replicated verdicts (default 1; the verdicts need >= 5 walks, "
+                        "independent walk of the replicated verdicts (default 1; the verdicts need >= 10 walks, "
                         "docs/verdicts.md sizes a decision)")
     p.add_argument("--no-control", action="store_true", help="skip the re-seeded live control run")
     p.add_argument("--keep-radiance", action="store_true", help="keep the datasets' radiance EXRs (large)")

@@ -101,7 +101,7 @@ def evidence_markdown(results: dict) -> str:
              f"(plain, the benchmark's default, declared before the data) against {results.get('reference_condition')}."
              " omega2 = var over the methods of (emulated - live method effects) / var of the live method effects; "
              f"agrees: its 95 % interval at or below {OMEGA2_MAX}; disagrees: above; undetermined otherwise, or when "
-             "live does not separate the methods (a tie is not agreement), or with fewer than 5 walks.", ""]
+             "live does not separate the methods (a tie is not agreement), or with fewer than 10 walks.", ""]
     metrics = results.get("metrics") or {}
     if not metrics:
         lines += [results.get("reason", "No metrics."), ""]

@@ -61,8 +61,10 @@ __all__ = ["ALPHA", "OMEGA2_MAX", "MIN_WALKS", "VERDICTS", "complete_walks", "om
 ALPHA = 0.05
 #: The goal: an emulator agrees when omega2's 95 % interval lies at or below this.
 OMEGA2_MAX = 0.2
-#: Fewest complete walks for a verdict other than undetermined.
-MIN_WALKS = 5
+#: Fewest complete walks for a verdict other than undetermined: below 10, a perfect emulator was judged
+#: ``disagrees`` in up to 7 % of simulated studies (5 walks, noise 2.8 method SD; docs/verdicts.md), at 10
+#: and more in at most 2 % (noise 1 to 7 method SD).
+MIN_WALKS = 10
 #: The verdicts of :func:`judge`.
 VERDICTS = ("agrees", "disagrees", "undetermined")
 
