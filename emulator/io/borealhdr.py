@@ -4,6 +4,7 @@ Layout (BorealHDR, also written by ``synth``)::
 
     <sequence>/camera_left/<exposure_ms>/<timestamp_ns>.png    16-bit PNG, 12-bit Bayer DN
     <sequence>/camera_right/<exposure_ms>/<timestamp_ns>.png
+    <sequence>/imu/imu.csv         optional IMU (gyro, accelerometer), :mod:`emulator.io.imu`
     <sequence>/exposim.json        optional metadata (white/black level, brackets) from synth
     <sequence>/calibration/response.txt or pcalib*.txt, or <sequence>/../calibration/pcalib*.txt
                                    the inverse response (pcalib format)
@@ -37,6 +38,7 @@ import numpy as np
 from emulator.dataset import CAMERAS, Frame, Sequence, build_sequence
 from emulator.errors import DatasetError
 from emulator.io.files import parse_json_object, write_metadata
+from emulator.io.imu import read_imu
 from emulator.io.framecache import cached_frame_path, read_cached_frame, resolve_frame_cache
 from emulator.io.png import decode_png16, write_png16
 from emulator.response import BOREALHDR_BLACK_LEVEL, BOREALHDR_WHITE_LEVEL
@@ -129,8 +131,8 @@ class ZipSource:
 
     The recording is the one folder of the archive that holds ``camera_left/`` and/or
     ``camera_right/``, under whatever folder prefix (``backpack_.../camera_left/...`` or
-    ``camera_left/...`` at the top); everything else the archive carries (lidar, IMU, ...)
-    is ignored, as are ``__MACOSX/`` and hidden members.  Paths are ``<zip>/<relative
+    ``camera_left/...`` at the top); its ``imu/imu.csv`` is read (:mod:`emulator.io.imu`),
+    everything else the archive carries (lidar, ...) is ignored, as are ``__MACOSX/`` and hidden members.  Paths are ``<zip>/<relative
     path>`` (:attr:`root` is the zip file), so messages name a member as
     ``/data/backpack.zip/camera_left/8.0/123.png``.  Raises :class:`DatasetError` naming the
     zip for an unreadable (corrupt) archive, an archive without a recording, or one with
@@ -388,8 +390,10 @@ def load_sequence(
     if not per_camera:
         raise DatasetError(f"{root}: no camera_left/ or camera_right/ folder (not a BorealHDR sequence)")
     _check_sizes(source, per_camera, root)
-    return build_sequence(root, per_camera, white_level=white, black_level=black,
-                          brackets_ms=meta.get("brackets_ms", ()), metadata=meta, gaps=gaps)
+    seq = build_sequence(root, per_camera, white_level=white, black_level=black,
+                         brackets_ms=meta.get("brackets_ms", ()), metadata=meta, gaps=gaps)
+    seq.imu = read_imu(root, source)  # None (and one ImuMissingWarning) without imu/imu.csv
+    return seq
 
 
 def read_frame(frame: Frame) -> np.ndarray:
@@ -456,7 +460,8 @@ def sequence_response(sequence: Sequence, path: str | os.PathLike | None = None)
     if resp_path is None:
         raise DatasetError(
             f"{sequence.path}: no response file found (looked for calibration/response.txt or "
-            f"pcalib*.txt in the sequence and beside it); pass one explicitly"
+            f"pcalib*.txt in the sequence and beside it); pass the inverse response with --response FILE "
+            f"(a pcalib*.txt of the camera, or one made by 'exposim calibrate')"
         )
     response = read_response(resp_path, white_level=max(PCALIB_TABLE_TOP, sequence.white_level),
                              black_level=sequence.black_level)

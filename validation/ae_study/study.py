@@ -9,6 +9,7 @@ from dataclasses import asdict
 from pathlib import Path
 
 from emulator.io.files import REPORT_FILE, RESULTS_FILE, prepare_output, read_results, write_results, write_text
+from emulator.report.html import run_folder_pages, write_report
 from validation.ae_study.config import CONFIGS, PAPER, VO_CONFIGURATION_NOTE, StudyConfig, StudyError, config_from_dict
 from validation.ae_study.findings import evaluate_findings, findings_paragraph, findings_with_evidence
 from validation.ae_study.report import plot_summary, report_markdown
@@ -117,7 +118,7 @@ def run_study(out, config: StudyConfig = CONFIGS["full"], *, force: bool = False
     from emulator import __version__
 
     results = {
-        "study": "ae_study (issue 7)",
+        "study": "ae_study",
         "exposim_version": __version__,
         "command": command,
         "config": cfg.to_dict(),
@@ -139,7 +140,8 @@ def run_study(out, config: StudyConfig = CONFIGS["full"], *, force: bool = False
         },
     }
     plot_summary(results, out / "ae_study_summary.png")
-    write_text(out / REPORT_FILE, report_markdown(results))
+    write_report(out, report_markdown(results), sheets=[run_folder_pages(
+        out, [(s, out / "runs" / s) for s in cfg.scenes], n_sheets=len(cfg.scenes))])
     write_results(out / RESULTS_FILE, results)
     return results
 
@@ -180,12 +182,12 @@ def finish_replicated_study(out, studies: list[dict], command: str | None = None
     findings = findings_with_evidence(pooled, first["findings"], taus, seed=first["config"]["scene_seed"])
     for f in findings:
         f["point_comparison_of"] = f"{REPLICATES_DIR}/seed{first['config']['scene_seed']}"
-    results = {"study": "ae_study, replicated (issue 22)", "command": command, "config": first["config"],
+    results = {"study": "ae_study, replicated", "command": command, "config": first["config"],
                "replicates": [f"{REPLICATES_DIR}/seed{st['config']['scene_seed']}" for st in studies],
                "walks": list(per_scene), "n_walks": len(per_scene), "findings": findings,
                "findings_paragraph": findings_paragraph(findings),
                "timings": {"total_s": float(sum(st["timings"].get("total_s", 0.0) for st in studies))}}
-    lines = ["# Synthetic AE study, replicated (issue 22)", "",
+    lines = ["# Synthetic AE study, replicated", "",
              f"{len(studies)} replicate(s), {len(per_scene)} walks ({', '.join(per_scene)}). Command: `{command}`", "",
              results["findings_paragraph"], "",
              "| finding | verdict | effect | 95 % interval | adjusted p | walks | effect definition |",
@@ -195,7 +197,7 @@ def finish_replicated_study(out, studies: list[dict], command: str | None = None
         lines.append(f"| {f['id']} | {f['verdict']} | {_fmt(f['effect'])} | {_fmt(ci[0])}..{_fmt(ci[1])} | "
                      f"{_fmt(f['p_adjusted'], '.2g')} | {f.get('n_walks') if f.get('n_walks') is not None else '-'} | "
                      f"{f.get('effect_definition') or f.get('verdict_reason')} |")
-    write_text(out / REPORT_FILE, "\n".join(lines) + "\n")
+    write_report(out, "\n".join(lines) + "\n")
     write_results(out / RESULTS_FILE, results)
     return results
 
@@ -237,6 +239,7 @@ def redraw(out) -> dict:
     results["findings_paragraph"] = findings_paragraph(results["findings"])
     results["redrawn"] = results.get("redrawn", 0) + 1
     plot_summary(results, out / "ae_study_summary.png")
-    write_text(out / REPORT_FILE, report_markdown(results))
+    write_report(out, report_markdown(results), sheets=[run_folder_pages(
+        out, [(s, out / "runs" / s) for s in cfg.scenes], n_sheets=len(cfg.scenes))])
     write_results(path, results)
     return results

@@ -163,7 +163,7 @@ def report_markdown(results: dict) -> str:
     best = results["headline_noise"]
     goals = results["goals"]
     lines = [
-        "# Live versus emulated closed loop (issue 14)",
+        "# Live versus emulated closed loop",
         "",
         f"{len(cfg['scenes'])} synthetic stereo walks ({', '.join(cfg['scenes'])}), {cfg['n_cycles']} cycles each, "
         f"{cfg['width']}x{cfg['height']} px at {cfg['spp']} spp, {len(cfg['methods'])} AE methods, seed {cfg['seed']}. "
@@ -174,7 +174,7 @@ def report_markdown(results: dict) -> str:
     if "metrics" in results:
         lines += [evidence_markdown(results)]
     lines += [
-        "## Verdict (issue 14 figures: single comparisons, no intervals)",
+        "## Verdict (single comparisons, no intervals)",
         "",
     ]
     tau_min = results["rank_kendall_tau_min"]
@@ -268,7 +268,7 @@ def report_markdown(results: dict) -> str:
     if results["flip_causes"]:
         sp = results.get("live_spread") or {}
         lines += ["## Why rankings flip", "",
-                  "Not calibrated (issue 22): the live spread is one draw, so even an emulator that is one more live "
+                  "Not calibrated: the live spread is one draw, so even an emulator that is one more live "
                   "draw puts a quarter of its discordant pairs beyond it; the per-metric verdicts above are the "
                   "calibrated answer. Each pair of methods ordered oppositely live and emulated, attributed to the "
                   "first cause that "
