@@ -201,7 +201,7 @@ def test_bench_vo_cli(short_run, tmp_path, capsys):
     assert m["status"] == "success"
     for entry in m["rpe"]["deltas"]:  # steps of ~0.17 m: one pair per delta length
         assert entry["n_pairs"] >= 1 and entry["trans_pct"]["median"] < 2.0
-    assert (out / "fixed" / "trajectory.txt").is_file()
+    assert (out / "fixed.txt").is_file()
 
 
 def test_bench_vo_bad_reference(short_run, tmp_path, capsys):

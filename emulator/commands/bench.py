@@ -46,6 +46,18 @@ def _floats(value: str) -> list[float]:
         raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {value!r}") from None
 
 
+def _refine_mode(value: str):
+    if value.strip().lower() == "auto":
+        return "auto"
+    try:
+        n = int(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected 'auto' or a number of stereo pairs, got {value!r}") from None
+    if n < 0:
+        raise argparse.ArgumentTypeError(f"expected 'auto', 0 or a positive number of stereo pairs, got {n}")
+    return n
+
+
 def _features(args: argparse.Namespace) -> int:
     from emulator.metrics.bench import bench_features
 
@@ -112,6 +124,15 @@ def _vo(args: argparse.Namespace) -> int:
         command=_command_line(args, ("run_dir",)),
     )
     if not args.quiet:
+        choice = results["calibration"]["choice"]
+        ext = results["calibration"]["extrinsics"]
+        print(f"calibration: {choice['folder']} ({choice['reason']})", file=sys.stderr)
+        if ext.get("epipolar_residual_px") is not None:
+            print(f"extrinsics: {ext['mode']}, epipolar residual {ext['epipolar_residual_px']:.2f} px"
+                  + (f" -> {ext['estimate']['epipolar_residual_after_px']:.2f} px after refinement"
+                     if ext.get("refined") else "") + f": {ext['reason']}", file=sys.stderr)
+        for note in results["limitations"]:
+            print(f"not computed / limited: {note}", file=sys.stderr)
         for name, m in results["methods"].items():
             line = f"{name}: {m['status']}, {m['n_tracked']}/{m['n_frames']} frames tracked"
             if m["rpe"]:
@@ -126,7 +147,10 @@ def _vo(args: argparse.Namespace) -> int:
 
         for verdict in vo_verdicts(results):
             print(f"verdict: {verdict}", file=sys.stderr)
-        print(f"wrote {args.output}/results.json, fig6_rpe.png, trajectories.png, report.md", file=sys.stderr)
+        print(f"wrote {args.output}/results.json, <method>.txt (TUM; evo_traj tum {args.output}/*.txt), "
+              "fig6_rpe.png, trajectories.png, report.md"
+              + (", evo/rpe_*/<method>.zip (evo_res)" if any(m["evo_results"] for m in results["methods"].values())
+                 else ""), file=sys.stderr)
     return 0
 
 
@@ -209,11 +233,14 @@ def register(subparsers) -> None:
     v.add_argument("run_dir", metavar="RUN_DIR", help="output folder of `exposim run` (left and right images saved)")
     v.add_argument("--reference", help="reference trajectory, TUM format, left camera-to-world (default: the "
                    "sequence's ground_truth/poses_left.txt if it exists)")
-    v.add_argument("--calibration", help="folder with left.yaml, right.yaml (default: <sequence>/calibration)")
+    v.add_argument("--calibration", help="folder with left.yaml, right.yaml (default: chosen from the layout and "
+                   "the recording's date: <sequence>/calibration, calibration/<month>_<year>/ beside the recording, "
+                   "or calibration_files/calibration_vo/<month>_<year>/ of a BorealHDR clone)")
     v.add_argument("--baseline-m", type=float, help="override the calibration's stereo baseline (m)")
-    v.add_argument("--refine-extrinsics", type=int, default=0, metavar="N",
-                   help="re-estimate the rig's relative rotation from left-right matches of N stereo pairs "
-                   "(BorealHDR Sept. 2023 files lack it); default 0: calibration as given")
+    v.add_argument("--refine-extrinsics", type=_refine_mode, default="auto", metavar="auto|N",
+                   help="re-estimate the rig's relative rotation from left-right matches: 'auto' (default) when "
+                   "the median epipolar residual of 2 stereo pairs under the calibration exceeds half the row "
+                   "tolerance (the BorealHDR Sept. 2023 files: 16 px); N > 0: always, from N pairs; 0: never")
     v.add_argument("--scale", type=float, default=1.0, help="rectified image scale, (0, 1] (default 1)")
     v.add_argument("--deltas", type=_floats, help="RPE pair lengths in m, comma-separated (default: 10..50 %% "
                    "of the reference path length)")

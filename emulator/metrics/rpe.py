@@ -134,6 +134,7 @@ def rpe_by_length(
     *,
     align_scale: bool = True,
     rel_delta_tol: float = 0.1,
+    evo_results: list | None = None,
 ) -> dict:
     """RPE as a function of travelled distance (paper Fig. 6), through evo.
 
@@ -149,6 +150,11 @@ def rpe_by_length(
     rel_delta_tol : float
         A pair is used when its reference path length is within ``rel_delta_tol * delta``
         of ``delta``.
+    evo_results : list, optional
+        When given, receives ``(relation, delta_m, evo.core.result.Result)`` for every
+        delta with pairs, ``relation`` ``"trans"`` (metres) or ``"rot"`` (degrees): evo's
+        own result objects, with both trajectories, for
+        ``evo.tools.file_interface.save_res_file`` (``evo_res`` reads them).
 
     Returns
     -------
@@ -184,6 +190,7 @@ def rpe_by_length(
                 "(a straight or static trajectory); compute the RPE without scale alignment"
             ) from None
         scale = float(scale)
+    traj_est_name = getattr(traj_est, "name", None) or "estimate"
     ref_poses = traj_ref.poses_se3
     cumulative = geometry.accumulated_distances(traj_ref.positions_xyz)
     out = []
@@ -193,6 +200,7 @@ def rpe_by_length(
             raise MetricsError(f"deltas must be positive, got {delta}")
         entry = {"delta_m": delta, "n_pairs": 0, "trans_pct": None, "rot_deg_per_m": None}
         errors = {}
+        pending: list = []
         try:
             for relation in (metrics.PoseRelation.translation_part, metrics.PoseRelation.rotation_angle_deg):
                 metric = metrics.RPE(
@@ -200,6 +208,12 @@ def rpe_by_length(
                 )
                 metric.process_data((traj_ref, est))
                 errors[relation] = np.asarray(metric.error, dtype=np.float64)
+                if evo_results is not None:
+                    res = metric.get_result(ref_name="reference", est_name=traj_est_name)
+                    res.add_trajectory("reference", traj_ref)
+                    res.add_trajectory(traj_est_name, est)
+                    kind = "trans" if relation == metrics.PoseRelation.translation_part else "rot"
+                    pending.append((kind, delta, res))
         except filters.FilterException:  # no pair of this length
             out.append(entry)
             continue
@@ -209,6 +223,8 @@ def rpe_by_length(
         )
         length = cumulative[pairs[:, 1]] - cumulative[pairs[:, 0]]
         entry["n_pairs"] = int(pairs.shape[0])
+        if evo_results is not None:
+            evo_results.extend(pending)
         entry["trans_pct"] = _stats(errors[metrics.PoseRelation.translation_part] / length * 100.0)
         entry["rot_deg_per_m"] = _stats(errors[metrics.PoseRelation.rotation_angle_deg] / length)
         out.append(entry)
