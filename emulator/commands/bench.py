@@ -155,19 +155,28 @@ def _vo(args: argparse.Namespace) -> int:
 
 
 def _rpe(args: argparse.Namespace) -> int:
-    from emulator.metrics.rpe import rpe_files
+    from emulator.metrics.rpe import looks_like_estimate, rpe_files
 
+    # The order is evo's (REF EST); it was EST REF before, and swapping the two
+    # changes the numbers, so say which file is which and flag a likely swap.
+    ref_why, est_why = looks_like_estimate(args.ref), looks_like_estimate(args.est)
     # evo may print notices on stdout (e.g. when it creates its settings file); keep
     # stdout for the result only.
     with contextlib.redirect_stdout(sys.stderr):
         stats = rpe_files(
-            args.est,
             args.ref,
+            args.est,
             delta=args.delta,
             delta_unit=args.delta_unit,
             align_scale=args.align_scale,
             max_diff_s=args.max_diff,
         )
+    print(f"reference: {args.ref} ({stats['n_ref_poses']} poses); estimate: {args.est} "
+          f"({stats['n_est_poses']} poses) (order REF EST, as evo_rpe)", file=sys.stderr)
+    if ref_why and not est_why:
+        print(f"warning: the reference {args.ref} looks like an estimate ({ref_why}); the order is REF EST as in "
+              "evo_rpe (earlier exposim builds took EST REF): swap the files if they are the wrong way round",
+              file=sys.stderr)
     if args.json:
         print(json.dumps({"rmse": stats["rmse"], "mean": stats["mean"], "median": stats["median"]}))
     else:
@@ -258,12 +267,14 @@ def register(subparsers) -> None:
 
     r = sub.add_parser(
         "rpe",
-        help="translation RPE of two TUM files, as evo_rpe computes it",
-        description="Translation RPE of EST against REF through evo's library; equals "
-        "`evo_rpe tum REF EST --pose_relation trans_part --delta D --delta_unit U [--correct_scale]`.",
+        help="translation RPE of two TUM files, REF then EST, as evo_rpe computes it",
+        description="Translation RPE of EST against REF through evo's library, arguments in evo's order; equals "
+        "`evo_rpe tum REF EST --pose_relation trans_part --delta D --delta_unit U [--correct_scale]`. "
+        "(Earlier exposim builds took EST REF.) Which file is the reference is printed on stderr, with a "
+        "warning when REF looks like an estimate (written by bench vo, or starting exactly at the identity).",
     )
+    r.add_argument("ref", metavar="REF.txt", help="reference trajectory (TUM), first as in evo_rpe")
     r.add_argument("est", metavar="EST.txt", help="estimated trajectory (TUM)")
-    r.add_argument("ref", metavar="REF.txt", help="reference trajectory (TUM)")
     r.add_argument("--delta", type=float, default=1.0, help="pair spacing (default 1)")
     r.add_argument("--delta-unit", choices=("m", "f"), default="f", help="metres or frames (default f)")
     r.add_argument("--align-scale", action="store_true", help="correct the estimate's scale (evo --correct_scale)")

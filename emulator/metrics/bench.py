@@ -29,7 +29,7 @@ from emulator.metrics.features import (
     load_gray8,
     success_curve,
 )
-from emulator.metrics.rpe import rpe_by_length
+from emulator.metrics.rpe import ESTIMATE_HEADER, rpe_by_length
 from emulator.metrics.stereo import (
     choose_calibration,
     epipolar_residual_px,
@@ -463,7 +463,7 @@ def bench_vo(
         )
         vo = run_stereo_vo(stream, rect, parameters)
         write_tum(out / f"{name}.txt", vo.timestamps_ns, vo.poses,
-                  header=f"exposim bench vo estimate: method {name}, left camera, camera-to-world, "
+                  header=f"{ESTIMATE_HEADER[2:]}: method {name}, left camera, camera-to-world, "
                   f"first frame at the origin, metres (run {run.path})")
         entry = {
             "status": "success" if vo.succeeded else "failed",

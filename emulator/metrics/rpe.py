@@ -32,6 +32,8 @@ from emulator.metrics.trajectory import EVO_T_MAX_DIFF_S, associate, read_trajec
 __all__ = [
     "rpe_files",
     "rpe_by_length",
+    "looks_like_estimate",
+    "ESTIMATE_HEADER",
     "DELTA_UNITS",
 ]
 
@@ -40,8 +42,8 @@ DELTA_UNITS = ("m", "f")
 
 
 def rpe_files(
-    est_path: str | Path,
     ref_path: str | Path,
+    est_path: str | Path,
     *,
     delta: float = 1,
     delta_unit: str = "f",
@@ -58,8 +60,8 @@ def rpe_files(
 
     Parameters
     ----------
-    est_path, ref_path : str or pathlib.Path
-        Estimate and reference TUM files (note the order: estimate first).
+    ref_path, est_path : str or pathlib.Path
+        Reference and estimate TUM files, in evo's order (``evo_rpe tum REF EST``).
     delta : float
         Pair spacing, in ``delta_unit``.
     delta_unit : {"f", "m"}
@@ -86,6 +88,7 @@ def rpe_files(
         raise MetricsError(f"delta must be an integer number of frames, got {delta}")
     ref = read_trajectory(ref_path)
     est = read_trajectory(est_path)
+    n_ref, n_est = int(ref.num_poses), int(est.num_poses)
     # evo_rpe: traj_ref.sync_with(traj_est, nearest_time, max_diff, offset 0), which is
     # sync.associate_trajectories(ref, est, ...), wrapped here for a clear error.
     ref, est = associate(ref, est, max_diff_s=max_diff_s, ref_name=str(ref_path), est_name=str(est_path))
@@ -115,7 +118,40 @@ def rpe_files(
         "max": stats["max"],
         "n_pairs": int(result.np_arrays["error_array"].size),
         "scale": scale,
+        "n_ref_poses": n_ref,
+        "n_est_poses": n_est,
     }
+
+
+#: First comment line of the trajectories ``bench vo`` writes (see :func:`looks_like_estimate`).
+ESTIMATE_HEADER = "# exposim bench vo estimate"
+
+
+def looks_like_estimate(path: str | Path) -> str | None:
+    """Why a TUM file looks like an odometry estimate rather than a reference, or None.
+
+    Two signs: the header that ``exposim bench vo`` writes on its estimates, or a first pose
+    that is exactly the identity (a VO starts its trajectory at the origin; a lidar or
+    ground-truth reference almost never does).
+    """
+    path = Path(path)
+    try:
+        with path.open(encoding="utf-8-sig") as fh:
+            first = fh.readline()
+    except OSError:
+        return None
+    if first.startswith(ESTIMATE_HEADER):
+        return "it was written by exposim bench vo as an estimate"
+    from emulator.io.tum import read_tum
+
+    try:
+        tum = read_tum(path)
+    except Exception:  # malformed files are reported by the RPE itself
+        return None
+    q = tum.quaternions_xyzw[0]
+    if np.all(tum.positions[0] == 0) and q[0] == q[1] == q[2] == 0 and abs(q[3]) == 1:
+        return "its first pose is exactly the identity, as a VO estimate starts"
+    return None
 
 
 def _stats(values: np.ndarray) -> dict:
