@@ -76,6 +76,12 @@ def test_evo_named_trajectories_and_result_files(pitched, tmp_path):
             entry = next(e for e in results["methods"][name]["rpe"]["deltas"] if e["delta_m"] == delta)
             assert res.np_arrays["error_array"].size == entry["n_pairs"]
             assert {"reference", name} <= set(res.trajectories)
+    exe = shutil.which("evo_traj")
+    if exe:  # evo_traj tum OUT/*.txt names each trajectory by its method
+        done = subprocess.run([exe, "tum", *sorted(str(p) for p in out.glob("*.txt")), "--no_warnings"],
+                              capture_output=True, text=True, timeout=120)
+        assert done.returncode == 0, done.stderr
+        assert "name:\tfixed" in done.stdout and "name:\tshim" in done.stdout
     exe = shutil.which("evo_res")
     if exe:  # evo's own tool reads them and labels each by method
         zips = sorted(str(p) for p in (out / "evo" / "rpe_trans_0.17m").glob("*.zip"))
