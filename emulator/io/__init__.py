@@ -18,6 +18,7 @@ module                     format
 :mod:`.tum`                TUM pose files (one quaternion convention: xyzw, qw >= 0)
 :mod:`.camera_info`        ROS ``camera_info`` YAML
 :mod:`.exr`                OpenEXR radiance
+:mod:`.export`             one method's run images for SLAM: EuRoC, TUM lists, ROS 2 bag
 :mod:`.runfolder`          the run folder of ``exposim run`` (writer with lock and
                            resume, reader, CSV tables)
 =========================  ==========================================================

@@ -30,6 +30,7 @@ from emulator.errors import TrajectoryError
 from emulator.io.files import atomic_write_bytes, format_timestamp_s
 
 __all__ = ["TumTrajectory", "rotation_to_quaternion", "format_tum_line", "write_tum", "read_tum",
+           "read_tum_comments",
            "parse_timestamp_ns"]
 
 
@@ -135,6 +136,20 @@ class TumTrajectory:
             out[:, :3, :3] = Rotation.from_quat(self.quaternions_xyzw).as_matrix()
             out[:, :3, 3] = self.positions
         return out
+
+
+def read_tum_comments(path: str | os.PathLike) -> list[str]:
+    """The comment lines (``#``, prefix removed) at the top of a TUM file; [] if unreadable."""
+    out: list[str] = []
+    try:
+        with Path(path).open(encoding="utf-8-sig") as fh:
+            for line in fh:
+                if not line.startswith("#"):
+                    break
+                out.append(line[1:].strip())
+    except (OSError, UnicodeDecodeError):
+        return []
+    return out
 
 
 def read_tum(path: str | os.PathLike, *, allow_empty: bool = False) -> TumTrajectory:

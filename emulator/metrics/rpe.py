@@ -134,15 +134,12 @@ def looks_like_estimate(path: str | Path) -> str | None:
     that is exactly the identity (a VO starts its trajectory at the origin; a lidar or
     ground-truth reference almost never does).
     """
+    from emulator.io.tum import read_tum, read_tum_comments
+
     path = Path(path)
-    try:
-        with path.open(encoding="utf-8-sig") as fh:
-            first = fh.readline()
-    except OSError:
-        return None
-    if first.startswith(ESTIMATE_HEADER):
+    comments = read_tum_comments(path)
+    if comments and ("# " + comments[0]).startswith(ESTIMATE_HEADER):
         return "it was written by exposim bench vo as an estimate"
-    from emulator.io.tum import read_tum
 
     try:
         tum = read_tum(path)
