@@ -44,7 +44,12 @@ def test_auto_refines_a_pitched_rig_and_records_why(pitched, tmp_path):
     assert ext["epipolar_residual_px"] > 2.0  # f tan(0.8 deg) = 2.7 px
     assert ext["estimate"]["epipolar_residual_after_px"] < 0.5
     assert ext["threshold_px"] == THRESHOLD_PX
-    assert all(m["status"] == "success" for m in results["methods"].values())
+    assert ext["estimate"]["rotation_deg"][0] == pytest.approx(-0.8, abs=0.05)  # the pitch that was put in
+    assert ext["estimate"]["rotation_deg"][1] == 0.0  # yaw and baseline direction stay as calibrated
+    for m in results["methods"].values():  # depth scale intact: the VO agrees with the ground truth
+        assert m["status"] == "success"
+        assert m["rpe"]["scale"] == pytest.approx(1.0, abs=0.02)
+        assert m["rpe"]["deltas"][0]["trans_pct"]["median"] < 2.0
     assert results["calibration"]["choice"]["reason"] == "the recording's own calibration/ folder"
     # the same data without refinement: stereo depth is lost, and the results say so in words
     plain = bench_vo(pitched["run"], tmp_path / "plain", deltas_m=[0.17], refine_extrinsics=0, methods=["fixed"])

@@ -90,7 +90,7 @@ NO_REFERENCE_NOTE = (
     "camera images and the IMU, the upstream repository's data_sample adds lidar scans and GNSS; neither has a pose "
     "file). BorealHDR's "
     "reference trajectories are computed from the 3-D lidar and the IMU by a lidar-inertial SLAM based on "
-    "libpointmatcher (norlab-icp-mapper); exported as a TUM file of the left camera's poses (camera-to-world, "
+    "libpointmatcher; exported as a TUM file of the left camera's poses (camera-to-world, "
     "OpenCV axes; what exposim's examples call lidar_poses.txt) it is given with --reference FILE. Without it the "
     "VO's tracking statistics and trajectories are still computed."
 )
@@ -545,7 +545,7 @@ def bench_vo(
             "rectified_size": list(rect.size),
             "image_size": list(calib.image_size),
             "method": "cv2.stereoRectify from K, D of both cameras, R = R_r^T R_l, T = -R_r^T [b, 0, 0], alpha 0"
-            + ("; R and T direction re-estimated from left-right matches" if extrinsics else ""),
+            + ("; R re-estimated (pitch and roll; yaw and T as calibrated) from left-right matches" if extrinsics else ""),
             "choice": choice.to_dict(),
             "extrinsics": extrinsics_record,
             "refined_extrinsics": extrinsics,
