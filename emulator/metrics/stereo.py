@@ -14,9 +14,9 @@ their rectification matrices are identity, so ``R = I`` and ``T = [-b, 0, 0]`` w
 That identity rotation is not the real rig's: on the shared sample, matches are 16 px
 apart vertically after rectification (a relative pitch of about 0.8 deg), so no stereo
 match survives the row check and the VO reports ``too_few_stereo_points`` with the
-measured row offset.  :func:`estimate_stereo_extrinsics` re-estimates R (and the
-direction of T, scaled to the calibrated baseline) from left-right matches of a few
-frames; with it the row offset on the sample drops to 0.1-0.2 px.  Whether the data need
+measured row offset.  :func:`estimate_stereo_extrinsics` re-estimates the pitch and roll of R from
+left-right matches of a few frames (yaw and the baseline keep their calibrated values);
+with it the row offset on the sample drops below 0.2 px.  Whether the data need
 it is measured (:func:`epipolar_residual_px` of left-right matches under the given
 calibration); ``bench vo`` refines by default when that residual exceeds half the VO's
 row tolerance, and records the measurement and the decision in its results.
