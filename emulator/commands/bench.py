@@ -159,7 +159,7 @@ def _rpe(args: argparse.Namespace) -> int:
 
     # The order is evo's (REF EST); it was EST REF before, and swapping the two
     # changes the numbers, so say which file is which and flag a likely swap.
-    ref_why, est_why = looks_like_estimate(args.ref), looks_like_estimate(args.est)
+    (ref_score, ref_why), (est_score, _) = looks_like_estimate(args.ref), looks_like_estimate(args.est)
     # evo may print notices on stdout (e.g. when it creates its settings file); keep
     # stdout for the result only.
     with contextlib.redirect_stdout(sys.stderr):
@@ -173,7 +173,7 @@ def _rpe(args: argparse.Namespace) -> int:
         )
     print(f"reference: {args.ref} ({stats['n_ref_poses']} poses); estimate: {args.est} "
           f"({stats['n_est_poses']} poses) (order REF EST, as evo_rpe)", file=sys.stderr)
-    if ref_why and not est_why:
+    if ref_score > est_score:
         print(f"warning: the reference {args.ref} looks like an estimate ({ref_why}); the order is REF EST as in "
               "evo_rpe (earlier exposim builds took EST REF): swap the files if they are the wrong way round",
               file=sys.stderr)

@@ -127,28 +127,28 @@ def rpe_files(
 ESTIMATE_HEADER = "# exposim bench vo estimate"
 
 
-def looks_like_estimate(path: str | Path) -> str | None:
-    """Why a TUM file looks like an odometry estimate rather than a reference, or None.
+def looks_like_estimate(path: str | Path) -> tuple[int, str | None]:
+    """How strongly a TUM file looks like an odometry estimate rather than a reference.
 
-    Two signs: the header that ``exposim bench vo`` writes on its estimates, or a first pose
-    that is exactly the identity (a VO starts its trajectory at the origin; a lidar or
-    ground-truth reference almost never does).
+    ``(2, why)`` for the header that ``exposim bench vo`` writes on its estimates, ``(1,
+    why)`` for a first pose that is exactly the identity (a VO starts its trajectory at the
+    origin; a lidar reference rarely does, a synthetic one may), ``(0, None)`` otherwise.
     """
     from emulator.io.tum import read_tum, read_tum_comments
 
     path = Path(path)
     comments = read_tum_comments(path)
     if comments and ("# " + comments[0]).startswith(ESTIMATE_HEADER):
-        return "it was written by exposim bench vo as an estimate"
+        return 2, "it was written by exposim bench vo as an estimate"
 
     try:
         tum = read_tum(path)
     except Exception:  # malformed files are reported by the RPE itself
-        return None
+        return 0, None
     q = tum.quaternions_xyzw[0]
     if np.all(tum.positions[0] == 0) and q[0] == q[1] == q[2] == 0 and abs(q[3]) == 1:
-        return "its first pose is exactly the identity, as a VO estimate starts"
-    return None
+        return 1, "its first pose is exactly the identity, as a VO estimate starts"
+    return 0, None
 
 
 def _stats(values: np.ndarray) -> dict:
