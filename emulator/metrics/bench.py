@@ -545,7 +545,8 @@ def bench_vo(
             "rectified_size": list(rect.size),
             "image_size": list(calib.image_size),
             "method": "cv2.stereoRectify from K, D of both cameras, R = R_r^T R_l, T = -R_r^T [b, 0, 0], alpha 0"
-            + ("; R re-estimated (pitch and roll; yaw and T as calibrated) from left-right matches" if extrinsics else ""),
+            + ("; R (pitch, roll) and the baseline direction re-estimated from left-right matches (yaw and "
+               "baseline length as calibrated)" if extrinsics else ""),
             "choice": choice.to_dict(),
             "extrinsics": extrinsics_record,
             "refined_extrinsics": extrinsics,

@@ -15,8 +15,9 @@ That identity rotation is not the real rig's: on the shared sample, matches are 
 apart vertically after rectification (a relative pitch of about 0.8 deg), so no stereo
 match survives the row check and the VO reports ``too_few_stereo_points`` with the
 measured row offset.  :func:`estimate_stereo_extrinsics` re-estimates the pitch and roll of R from
-left-right matches of a few frames (yaw and the baseline keep their calibrated values);
-with it the row offset on the sample drops below 0.2 px.  Whether the data need
+left-right matches of a few frames, and the baseline's direction (yaw and the
+baseline length keep their calibrated values); with it the row offset on the sample
+drops to 0.1-0.3 px.  Whether the data need
 it is measured (:func:`epipolar_residual_px` of left-right matches under the given
 calibration); ``bench vo`` refines by default when that residual exceeds half the VO's
 row tolerance, and records the measurement and the decision in its results.
@@ -205,8 +206,8 @@ class ExtrinsicsEstimate:
     R : numpy.ndarray
         (3, 3) rotation left to right camera.
     T : numpy.ndarray
-        (3,) translation left to right, metres: the calibration's (direction and baseline
-        are kept).
+        (3,) translation left to right, metres: the estimated direction at the
+        calibration's baseline length.
     rotation_deg : list of float
         ``R`` as a rotation vector in degrees (x: pitch, y: yaw, z: roll offsets).
     rotation_change_deg : float
@@ -346,14 +347,14 @@ def estimate_stereo_extrinsics(
     yet their images are 16 px apart vertically after rectification: a relative pitch
     of about 0.8 deg).  The matches of all given pairs, undistorted with each camera's K
     and D, fix a small rotation ``dR`` about the right camera's x (pitch) and z (roll)
-    axes, ``R = dR R_calibrated``, by robust least squares on their signed epipolar
-    distances (``scipy.optimize.least_squares``, soft-L1 loss of scale ``threshold_px``,
-    then plain least squares on the matches within ``3 threshold_px``).  The baseline
-    direction and the yaw stay as calibrated: they barely move the epipolar lines of a
-    horizontal rig (a yaw error shifts every disparity by about ``f tan(yaw)`` and so
-    changes the depth scale, which left-right matches cannot tell from a different scene
-    depth; an essential-matrix estimate of them on the synthetic box room was off by 0.9 deg
-    of yaw and 9 deg of baseline direction, and scaled the VO by 1.6).
+    axes, ``R = dR R_calibrated``, and a tilt of the baseline direction (about z: a
+    vertical component; about y: a forward one), by robust least squares on their signed
+    epipolar distances (``scipy.optimize.least_squares``, soft-L1 loss of scale
+    ``threshold_px``, then plain least squares on the matches within ``3 threshold_px``).
+    The baseline length and the yaw stay as calibrated: a yaw error shifts every disparity
+    by about ``f tan(yaw)`` and so changes the depth scale, which left-right matches cannot
+    tell from a different scene depth (an essential-matrix estimate with free yaw on the
+    synthetic box room was off by 0.9 deg of yaw and scaled the VO by 1.6).
 
     Parameters
     ----------
@@ -385,16 +386,19 @@ def estimate_stereo_extrinsics(
     n_matches = matches.n_matches
     if n_matches < 50:
         raise CalibrationError(f"estimate_stereo_extrinsics: only {n_matches} left-right matches (need 50)")
-    R0, T = calibration.R, calibration.T
+    R0, T0 = calibration.R, calibration.T
+    baseline = float(np.linalg.norm(T0))
     focal = float(calibration.left.K[0, 0])
 
-    def rotation(p: np.ndarray) -> np.ndarray:
-        return Rotation.from_rotvec([p[0], 0.0, p[1]]).as_matrix() @ R0
+    def pose(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        R = Rotation.from_rotvec([p[0], 0.0, p[1]]).as_matrix() @ R0
+        T = Rotation.from_rotvec([0.0, p[3], p[2]]).as_matrix() @ T0
+        return R, T
 
     def residuals(p: np.ndarray, subset: StereoMatches) -> np.ndarray:
-        return _epipolar_signed_px(rotation(p), T, subset, focal)
+        return _epipolar_signed_px(*pose(p), subset, focal)
 
-    fit = least_squares(residuals, np.zeros(2), args=(matches,), loss="soft_l1", f_scale=threshold_px)
+    fit = least_squares(residuals, np.zeros(4), args=(matches,), loss="soft_l1", f_scale=threshold_px)
     inlier = np.abs(residuals(fit.x, matches)) <= 3.0 * threshold_px
     n_inliers = int(inlier.sum())
     if n_inliers < max(20, 0.2 * n_matches):
@@ -403,10 +407,11 @@ def estimate_stereo_extrinsics(
             f"rotation within {3 * threshold_px:g} px; estimate rejected")
     subset = StereoMatches(matches.left[inlier], matches.right[inlier], matches.n_pairs)
     fit = least_squares(residuals, fit.x, args=(subset,))
-    R = rotation(fit.x)
+    R, T = pose(fit.x)
+    T = T * (baseline / float(np.linalg.norm(T)))
     return ExtrinsicsEstimate(
         R=R,
-        T=T.copy(),
+        T=T,
         rotation_deg=list(np.degrees(Rotation.from_matrix(R).as_rotvec())),
         rotation_change_deg=rotation_angle_deg(R @ R0.T),
         n_matches=n_matches,
