@@ -453,7 +453,8 @@ def sequence_response(sequence: Sequence, path: str | os.PathLike | None = None)
     if resp_path is None:
         raise DatasetError(
             f"{sequence.path}: no response file found (looked for response.txt or pcalib*.txt in calibration/ "
-            f"and calibration_files/ of the recording and of up to 3 folders above it); pass one with --response FILE"
+            f"and calibration_files/ of the recording and of up to 3 folders above it); pass the inverse response "
+            f"with --response FILE (a pcalib*.txt of the camera, or one made by 'exposim calibrate')"
         )
     response = read_response(resp_path, white_level=max(PCALIB_TABLE_TOP, sequence.white_level),
                              black_level=sequence.black_level)
