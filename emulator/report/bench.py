@@ -361,6 +361,19 @@ def vo_report(results: dict, figures: dict[str, str]) -> str:
         "",
         f"VO failed on {n_failed} of {len(results['methods'])} method run(s).",
         "",
+    ]
+    choice = results["calibration"].get("choice")
+    ext = results["calibration"].get("extrinsics")
+    if choice:
+        lines += [f"Calibration choice: {choice['reason']}"
+                  + (f" (recording date {choice['recording_date']})" if choice.get("recording_date") else "") + ".", ""]
+    if ext and ext.get("epipolar_residual_px") is not None:
+        after = ext.get("estimate", {}).get("epipolar_residual_after_px") if ext.get("refined") else None
+        lines += [f"Stereo extrinsics ({ext['mode']}): {ext['criterion']}; measured {ext['epipolar_residual_px']:.2f} px"
+                  + (f", {after:.2f} px after refinement" if after is not None else "") + f". {ext['reason']}.", ""]
+    if results.get("limitations"):
+        lines += ["## What could not be computed, and why", ""] + [f"- {n}" for n in results["limitations"]] + [""]
+    lines += [
         "| method | status | frames | tracked | failures | scale | median RPE trans. (% of delta), per pair length "
         "delta (m) | median RPE rot. (deg/m), per pair length delta (m) |",
         "| --- | --- | --- | --- | --- | --- | --- | --- |",
