@@ -27,7 +27,8 @@ def table_commands(text: str) -> list[str]:
 
 def test_command_table_lists_every_registered_command_in_help_order():
     registered = [c.name for c in load_commands() if c.error is None]
-    assert sorted(registered) == ["bench", "cache", "calibrate", "demo", "emulate", "info", "new-method", "render", "run",
+    assert sorted(registered) == ["bench", "cache", "calibrate", "demo", "emulate", "export", "info", "new-method",
+                                  "render", "run",
                                   "synth", "validate"]
     assert table_commands(COMMANDS) == registered
 

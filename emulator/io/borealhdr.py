@@ -6,8 +6,9 @@ Layout (BorealHDR, also written by ``synth``)::
     <sequence>/camera_right/<exposure_ms>/<timestamp_ns>.png
     <sequence>/imu/imu.csv         optional IMU (gyro, accelerometer), :mod:`emulator.io.imu`
     <sequence>/exposim.json        optional metadata (white/black level, brackets) from synth
-    <sequence>/calibration/response.txt or pcalib*.txt, or <sequence>/../calibration/pcalib*.txt
-                                   the inverse response (pcalib format)
+    <sequence>/calibration/response.txt or pcalib*.txt, or <sequence>/../calibration/pcalib*.txt,
+    or <clone>/calibration_files/pcalib_inside1.txt   the inverse response (pcalib format);
+                                   see emulator.io.layout for the search
 
 :func:`load_sequence` scans the layout into the in-memory model of :mod:`emulator.dataset`
 (cycles grouped by timestamp); images decode lazily through :func:`read_frame`.  The scan
@@ -39,6 +40,7 @@ from emulator.dataset import CAMERAS, Frame, Sequence, build_sequence
 from emulator.errors import DatasetError
 from emulator.io.files import parse_json_object, write_metadata
 from emulator.io.imu import read_imu
+from emulator.io.layout import find_response_file
 from emulator.io.framecache import cached_frame_path, read_cached_frame, resolve_frame_cache
 from emulator.io.png import decode_png16, write_png16
 from emulator.response import BOREALHDR_BLACK_LEVEL, BOREALHDR_WHITE_LEVEL
@@ -432,19 +434,14 @@ def write_frame(
 def find_response(sequence_path: str | os.PathLike) -> Path | None:
     """Locate the inverse-response file of a recording, or None.
 
-    Looks for ``<seq>/calibration/response.txt`` or ``pcalib*.txt`` (synthetic datasets),
-    then ``<seq>/../calibration/pcalib*.txt`` (the BorealHDR sample layout).
+    Walks up from the recording (:func:`emulator.io.layout.find_response_file`):
+    ``<seq>/calibration/response.txt`` or ``pcalib*.txt`` (synthetic datasets),
+    ``<seq>/../calibration/pcalib*.txt`` (the BorealHDR sample layout),
+    ``<clone>/calibration_files/pcalib_inside1.txt`` (a clone of the BorealHDR repository,
+    recordings under ``<clone>/data_sample/``), up to three folders up, beside a symlinked
+    zip and beside its target.
     """
-    seq = Path(sequence_path)
-    for d in (seq / "calibration", seq.parent / "calibration"):
-        if not d.is_dir():
-            continue
-        if (d / "response.txt").is_file():
-            return d / "response.txt"
-        found = sorted(d.glob("pcalib*.txt"))
-        if found:
-            return found[0]
-    return None
+    return find_response_file(sequence_path)
 
 
 def sequence_response(sequence: Sequence, path: str | os.PathLike | None = None):
@@ -459,9 +456,9 @@ def sequence_response(sequence: Sequence, path: str | os.PathLike | None = None)
     resp_path = Path(path) if path is not None else find_response(sequence.path)
     if resp_path is None:
         raise DatasetError(
-            f"{sequence.path}: no response file found (looked for calibration/response.txt or "
-            f"pcalib*.txt in the sequence and beside it); pass the inverse response with --response FILE "
-            f"(a pcalib*.txt of the camera, or one made by 'exposim calibrate')"
+            f"{sequence.path}: no response file found (looked for response.txt or pcalib*.txt in calibration/ "
+            f"and calibration_files/ of the recording and of up to 3 folders above it); pass the inverse response "
+            f"with --response FILE (a pcalib*.txt of the camera, or one made by 'exposim calibrate')"
         )
     response = read_response(resp_path, white_level=max(PCALIB_TABLE_TOP, sequence.white_level),
                              black_level=sequence.black_level)

@@ -113,8 +113,9 @@ def read_cached_frame(path, *, png_path=None, white_level: int | None = None) ->
     if white_level is not None:
         top = int(img.max())
         if top > white_level:
-            raise DatasetError(f"{png_path or path}: maximum DN {top} exceeds white_level {white_level} "
-                               "(not 12-bit data?)")
+            from emulator.io.png import white_level_message
+
+            raise DatasetError(white_level_message(png_path or path, top, white_level))
     return img
 
 

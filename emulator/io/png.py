@@ -22,7 +22,7 @@ import numpy as np
 from emulator.errors import DatasetError
 from emulator.io.files import atomic_write_bytes
 
-__all__ = ["decode_png16", "read_png16", "write_png16", "write_png8", "read_image", "encode_png"]
+__all__ = ["decode_png16", "read_png16", "write_png16", "write_png8", "read_image", "encode_png", "white_level_message"]
 
 
 def _read_bytes(path: Path) -> bytes:
@@ -52,8 +52,23 @@ def decode_png16(data: bytes, name: str | os.PathLike, *, white_level: int | Non
     if white_level is not None:
         top = int(img.max())
         if top > white_level:
-            raise DatasetError(f"{name}: maximum DN {top} exceeds white_level {white_level} (not 12-bit data?)")
+            raise DatasetError(white_level_message(name, top, white_level))
     return img
+
+
+def white_level_message(name, top: int, white_level: int) -> str:
+    """Why an image's DN above the white level is refused, and the fix.
+
+    >>> white_level_message("a.png", 4095, 4094)  # doctest: +ELLIPSIS
+    'a.png: maximum DN 4095 exceeds the white level 4094 (...--white-level 4095...'
+    """
+    if top <= 4095:
+        return (f"{name}: maximum DN {top} exceeds the white level {white_level} (the default is BorealHDR's 4094, "
+                f"where its sensor saturates); for full-range 12-bit data give the camera's white level: "
+                f"--white-level 4095 (exposim calibrate) or \"white_level\": 4095 in the recording's or stack's "
+                "exposim.json")
+    return (f"{name}: maximum DN {top} exceeds 4095: not 12-bit data (exposim reads 12-bit DN in 16-bit PNGs; "
+            f"white level {white_level})")
 
 
 def read_png16(path: str | os.PathLike, *, white_level: int | None = None) -> np.ndarray:

@@ -31,6 +31,8 @@ __all__ = [
     "FAILED_STYLE",
     "MAX_EQUAL_ASPECT",
     "features_report",
+    "features_intervals",
+    "features_intervals_markdown",
     "features_verdicts",
     "vo_report",
     "vo_verdicts",
@@ -272,6 +274,36 @@ def vo_verdicts(results: dict) -> list[str]:
     return [vo_failure_verdict(n_failed, len(methods), reasons), rpe_verdict(trans, rot, deltas, on_failed)]
 
 
+def features_intervals(results: dict) -> dict:
+    """Median matches (over consecutive pairs) and median uniformity (over images) per method with 95 %
+    circular-block-bootstrap intervals, and each method's difference from the best
+    (:func:`emulator.stats.compare_methods`; pairs and images are time series)."""
+    from emulator.stats import compare_methods
+
+    methods = list(results["methods"])
+    matches = {m: [c for run in results["runs"] for c in run["methods"].get(m, {}).get("matches", [])]
+               for m in methods}
+    uniformity = {m: [u for run in results["runs"] for u in run["methods"].get(m, {}).get("uniformity", [])]
+                  for m in methods}
+    return {"median_matches": compare_methods(matches, "median", block=True, seed=0),
+            "median_uniformity": compare_methods(uniformity, "median", block=True, seed=1)}
+
+
+def features_intervals_markdown(results: dict) -> list[str]:
+    """The tables of :func:`features_intervals` (nothing when no method has a pair)."""
+    from emulator.report.intervals import comparison_table
+
+    iv = features_intervals(results)
+    if iv["median_matches"]["best"] is None:
+        return []
+    lines = ["Methods compared with 95 % intervals (circular block bootstrap over consecutive pairs / images; "
+             "\"cannot tell apart\": the difference's interval holds 0):", ""]
+    lines += comparison_table(iv["median_matches"], "median matches", spec=".1f")
+    if iv["median_uniformity"]["best"] is not None:
+        lines += [""] + comparison_table(iv["median_uniformity"], "median uniformity (%)", spec=".1f", scale=100.0)
+    return lines
+
+
 def features_report(results: dict, figure: str) -> str:
     """Markdown report of the feature benchmark, beside the paper's Fig. 4 numbers."""
     p = results["parameters"]
@@ -298,7 +330,9 @@ def features_report(results: dict, figure: str) -> str:
             f"{_fmt(m['median_matches'], '.0f')} | {_fmt(m['min_matches'], 'd')} | "
             f"{_fmt(None if m['success_at_100'] is None else 100 * m['success_at_100'], '.0f')} |"
         )
-    lines += ["", DASH_NOTE, "", "Paper (55 trajectories, 1920x1200 images):", ""]
+    lines += ["", DASH_NOTE, ""]
+    lines += features_intervals_markdown(results)
+    lines += ["", "Paper (55 trajectories, 1920x1200 images):", ""]
     lines += [f"- {k}: {v}" for k, v in PAPER_FEATURES.items()]
     lines += ["", "## Verdicts", ""] + [f"- {v}" for v in features_verdicts(results)]
     lines += ["", f"Command: `{results.get('command') or '(library call)'}`", ""]
@@ -327,6 +361,19 @@ def vo_report(results: dict, figures: dict[str, str]) -> str:
         "",
         f"VO failed on {n_failed} of {len(results['methods'])} method run(s).",
         "",
+    ]
+    choice = results["calibration"].get("choice")
+    ext = results["calibration"].get("extrinsics")
+    if choice:
+        lines += [f"Calibration choice: {choice['reason']}"
+                  + (f" (recording date {choice['recording_date']})" if choice.get("recording_date") else "") + ".", ""]
+    if ext and ext.get("epipolar_residual_px") is not None:
+        after = ext.get("estimate", {}).get("epipolar_residual_after_px") if ext.get("refined") else None
+        lines += [f"Stereo extrinsics ({ext['mode']}): {ext['criterion']}; measured {ext['epipolar_residual_px']:.2f} px"
+                  + (f", {after:.2f} px after refinement" if after is not None else "") + f". {ext['reason']}.", ""]
+    if results.get("limitations"):
+        lines += ["## What could not be computed, and why", ""] + [f"- {n}" for n in results["limitations"]] + [""]
+    lines += [
         "| method | status | frames | tracked | failures | scale | median RPE trans. (% of delta), per pair length "
         "delta (m) | median RPE rot. (deg/m), per pair length delta (m) |",
         "| --- | --- | --- | --- | --- | --- | --- | --- |",

@@ -54,7 +54,19 @@ def summarise_run(run_dir: str | os.PathLike, info: dict | None = None, tables: 
             "method_ms_per_frame": (info.get("timing") or {}).get("method_ms_per_frame", {}).get(name),
             "status": (info.get("method_status") or {}).get(name, "ok"),
         }
+    from emulator.stats import compare_methods, statistic_interval
+
+    intervals = {
+        "definition": "per method over the run's cycles, circular block bootstrap (blocks of n^(1/3) consecutive "
+                      "cycles), 95 %",
+        "mean_exposure_ms": {n: {k: v for k, v in statistic_interval(tables[n]["target_ms"], "mean", block=True,
+                                                                     seed=[0, k_]).items() if k != "method"}
+                             for k_, n in enumerate(names)},
+        "mean_saturated_fraction": compare_methods({n: tables[n]["saturated_fraction"] for n in names}, "mean",
+                                                   higher_is_better=False, block=True, seed=1),
+    }
     return {
+        "intervals": intervals,
         "run": str(run_dir),
         "sequence": info.get("sequence"),
         "status": info.get("status"),
@@ -140,6 +152,15 @@ def run_markdown(info: dict, summary: dict) -> str:
             f"{_fmt(m['min_exposure_ms'])} | {_fmt(m['max_exposure_ms'])} | {_fmt(pct(m['mean_saturated_fraction']), '.2f')} | "
             f"{_fmt(pct(m['mean_valid_fraction']), '.2f')} | {m['non_finite_proposals']} | {_fmt(m['method_ms_per_frame'], '.1f')} |"
         )
+    iv = summary.get("intervals")
+    if iv:
+        from emulator.report.intervals import comparison_table
+
+        lines += ["", "Mean exposure per method with its 95 % interval (" + iv["definition"] + "): "
+                  + ", ".join(f"{n} {_fmt(r['estimate'])} ms [{_fmt(r['ci95'][0] if r['ci95'] else None)}, "
+                              f"{_fmt(r['ci95'][1] if r['ci95'] else None)}]" for n, r in iv["mean_exposure_ms"].items())
+                  + ".", "", "Mean saturated fraction (%), lower is better:", ""]
+        lines += comparison_table(iv["mean_saturated_fraction"], "mean saturated (%)", spec=".2f", scale=100.0)
     lines += ["", "Saturated: pixels at the white level in the emulated image; valid: pixels the emulation could "
               "reconstruct (not clipped in the bracket). \"-\": no cycle of that method (or no timing recorded)."]
     if "fixed" in summary["methods"]:

@@ -56,6 +56,10 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument("--noise-repeats", type=int,
                    help=f"captures per exposure for the noise variance ratio (default {full.noise_repeats}; "
                         f"--quick {quick.noise_repeats})")
+    p.add_argument("--replicates", type=int, default=1,
+                   help="run the experiment on this many seeds (--seed, +1, ...): each scene of each is an "
+                        "independent walk of the replicated verdicts (default 1; the verdicts need >= 10 walks, "
+                        "docs/verdicts.md sizes a decision)")
     p.add_argument("--no-control", action="store_true", help="skip the re-seeded live control run")
     p.add_argument("--keep-radiance", action="store_true", help="keep the datasets' radiance EXRs (large)")
     p.add_argument("--cache-dir", help="render cache (default $EXPOSIM_CACHE or ~/.cache/exposim/renders)")
@@ -111,6 +115,8 @@ def command_line(args, prog: str) -> str:
         elif isinstance(value, tuple):
             value = ",".join(value)
         words += ["--" + key.replace("_", "-"), str(value)]
+    if getattr(args, "replicates", 1) != 1:
+        words += ["--replicates", str(args.replicates)]
     words += [flag for flag, on in (("--no-control", args.no_control), ("--keep-radiance", args.keep_radiance)) if on]
     return shlex.join(words)
 
@@ -121,7 +127,7 @@ def run(args, prog: str = "exposim validate live") -> int:
     Raises :class:`~emulator.errors.ExposimError` for bad options or input (the caller
     prints it as one line).
     """
-    from validation.live.experiment import numbered_output, redraw, run_live_experiment
+    from validation.live.experiment import numbered_output, redraw, run_live_experiment, run_replicated
     from validation.live.report import headline
 
     def log(msg: str) -> None:
@@ -135,13 +141,18 @@ def run(args, prog: str = "exposim validate live") -> int:
         print(headline(results))
         return 0
     cfg = config_from_args(args)
+    if args.replicates < 1:
+        raise ExposimError(f"--replicates must be >= 1, got {args.replicates}")
     scheduler = check_scheduler(args.scheduler)
     out = numbered_output(args.output)
     if out != args.output:
         log(f"live: {args.output} exists and is not empty; writing to {out}")
-    results = run_live_experiment(out, cfg, progress=bars_enabled(args.quiet), command=command_line(args, prog),
-                                  cache_dir=args.cache_dir, log=None if args.quiet else log,
-                                  scheduler=scheduler)
+    kw = dict(progress=bars_enabled(args.quiet), command=command_line(args, prog), cache_dir=args.cache_dir,
+              log=None if args.quiet else log, scheduler=scheduler)
+    if args.replicates > 1:
+        results = run_replicated(out, cfg, args.replicates, **kw)
+    else:
+        results = run_live_experiment(out, cfg, **kw)
     if args.json:
         print_json(results)
         return 0
