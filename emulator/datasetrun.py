@@ -362,7 +362,7 @@ def run_dataset(
     from emulator.autoexposure.methodset import parse_methods
     from emulator.report.dataset import write_dataset_report
 
-    out = Path(out_dir)
+    out = Path(os.path.abspath(out_dir))  # absolute: a plugin's os.chdir cannot move the output
     options = dict(options or {})
     if not (scheduler in ("serial", "local") or str(scheduler).startswith("tcp://")):
         raise DatasetRunError(f"unknown scheduler {scheduler!r}; use serial, local or tcp://HOST:PORT")

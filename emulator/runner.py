@@ -8,6 +8,7 @@ The loop itself is :mod:`emulator.playback`; the folder's layout, writer and rea
 from __future__ import annotations
 
 import json
+import os
 from collections.abc import Callable, Mapping
 from pathlib import Path
 
@@ -138,7 +139,7 @@ def run_to_folder(
     """
     if out_dir is None:
         raise PlaybackError("out_dir is required")
-    out = Path(out_dir)
+    out = Path(os.path.abspath(out_dir))  # absolute: a method's os.chdir cannot split the folder
     if save not in SAVE_MODES:
         raise PlaybackError(f"save must be one of {', '.join(SAVE_MODES)}, got {save!r}")
     seq = _resolve_sequence(sequence)

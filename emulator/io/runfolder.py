@@ -324,7 +324,7 @@ class RunWriter:
     """
 
     def __init__(self, out_dir: str | os.PathLike, *, resume: bool = False) -> None:
-        self.path = Path(out_dir)
+        self.path = Path(os.path.abspath(out_dir))  # absolute from the start: a chdir later changes nothing
         self.resume = bool(resume)
         self.run_json: dict = {}
         self.lock: RunLock | None = None
