@@ -48,7 +48,7 @@ import warnings
 import cv2
 import numpy as np
 
-from emulator.autoexposure._base import MAX_DN, AutoExposureError, AutoExposureMethod
+from emulator.autoexposure._base import MAX_DN, AutoExposureError, AutoExposureMethod, check_seed
 from emulator.pools import single_thread_pools
 
 __all__ = [
@@ -377,7 +377,7 @@ class Kim2018(AutoExposureMethod):
         if restart_seeding not in RESTART_SEEDINGS:
             raise AutoExposureError(f"restart_seeding must be one of {', '.join(RESTART_SEEDINGS)}, got {restart_seeding!r}")
         self.restart_seeding = restart_seeding
-        self.seed = int(seed)
+        self.seed = check_seed(seed)
         self.window = int(window)
         self.gamma_mi = float(gamma_mi if gamma_mi is not None else (GAMMA_MI_REF if self.mode == "borealhdr" else GAMMA_MI_PAPER))
         self.eta0 = float(eta0)
@@ -432,6 +432,7 @@ class Kim2018(AutoExposureMethod):
         self.last["metric"] = metric
         if not math.isfinite(metric):
             self.last["guard"] = "non-finite metric"
+            self.guard_count += 1  # a fallback, recorded: the loop marks the cycle guarded
             return t
         self.window_t.insert(0, float(t))
         self.window_e.insert(0, float(metric))
@@ -443,6 +444,7 @@ class Kim2018(AutoExposureMethod):
             self.window_t.pop(0)
             self.window_e.pop(0)
             self.last["guard"] = f"GP fit failed: {exc}"
+            self.guard_count += 1  # a fallback, recorded: the loop marks the cycle guarded
             return t
         var = std**2
         phi = math.sqrt(self.gamma_mi) * (np.sqrt(var + self.eta) - math.sqrt(self.eta))

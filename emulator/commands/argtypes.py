@@ -8,7 +8,10 @@ from __future__ import annotations
 
 import argparse
 
-__all__ = ["size", "names", "ints", "floats"]
+__all__ = ["size", "names", "ints", "floats", "seed", "positive_int", "SEED_MAX"]
+
+#: Largest seed NumPy's legacy ``RandomState`` (Kim's optimizer restarts) takes: 2**32 - 1.
+SEED_MAX = 2**32 - 1
 
 
 def size(text: str) -> tuple[int, int]:
@@ -42,3 +45,25 @@ def ints(text: str) -> tuple[int, ...]:
 def floats(text: str) -> tuple[float, ...]:
     """``"0.5,1.5"`` -> ``(0.5, 1.5)``."""
     return _numbers(text, float, "numbers")
+
+
+def seed(text: str) -> int:
+    """A random seed: an integer in 0 .. 2**32 - 1 (what every seeded generator here takes)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer seed in 0..{SEED_MAX}, got {text!r}") from None
+    if not 0 <= value <= SEED_MAX:
+        raise argparse.ArgumentTypeError(f"seed must be in 0..{SEED_MAX}, got {text!r}")
+    return value
+
+
+def positive_int(text: str) -> int:
+    """An integer >= 1 (a count: workers, group size, jobs)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {text!r}")
+    return value

@@ -8,6 +8,7 @@ import shlex
 import sys
 from pathlib import Path
 
+from emulator.commands import argtypes
 from emulator.errors import ExposimError
 
 __all__ = ["register", "parse_option"]
@@ -37,7 +38,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("-o", "--output", type=Path, required=True, help="run folder to create (must not exist or be empty)")
     p.add_argument("--save", choices=("none", "png16", "png8"), default=None,
                    help="save emulated images: none (default), png16 (12-bit Bayer DN) or png8 (8-bit gray)")
-    p.add_argument("--jobs", type=int, default=1, help="threads across methods (same output for any value)")
+    p.add_argument("--jobs", type=argtypes.positive_int, default=1, help="threads across methods (same output for any value)")
     p.add_argument("--mode", choices=("paper", "borealhdr"), default=None,
                    help="method behaviour: paper (default, reference defects corrected) or borealhdr (reference code)")
     p.add_argument("--initial-ms", type=float, default=None,
@@ -47,7 +48,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--selector", choices=("higher-no-sat", "closest", "reference"), default=None,
                    help="bracket selector (default higher-no-sat)")
     p.add_argument("--response", type=Path, default=None, help="pcalib file (default: found beside the recording)")
-    p.add_argument("--seed", type=int, default=None, help="seed of kim's Gaussian-process optimizer (default 0)")
+    p.add_argument("--seed", type=argtypes.seed, default=None, help="seed of kim's Gaussian-process optimizer (default 0)")
     p.add_argument("--option", action="append", default=[], metavar="METHOD.KEY=VALUE",
                    help="a method option, e.g. zhang.percentile=0.7 or kim.window=8 (VALUE is JSON or text); repeatable")
     p.add_argument("--noise", choices=("none", "consistent"), default=None,
@@ -56,7 +57,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--noise-model", type=Path, default=None, metavar="FILE.json",
                    help="noise model for --noise consistent (`exposim calibrate --noise`); default: the model "
                         "a synthetic recording's exposim.json carries")
-    p.add_argument("--noise-seed", type=int, default=None,
+    p.add_argument("--noise-seed", type=argtypes.seed, default=None,
                    help="seed of the added noise (default 0); the same seed gives the same bytes")
     p.add_argument("--resume", action="store_true",
                    help="continue an interrupted run in OUTDIR (its run.json gives the configuration)")
@@ -67,8 +68,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scheduler", default=None, metavar="serial|local|tcp://HOST:PORT",
                    help="dataset runs: serial, local (a Dask LocalCluster sized to the machine; default) or the "
                         "address of a running Dask scheduler; single sequences always run serially")
-    p.add_argument("--workers", type=int, default=None, help="dataset runs on --scheduler local: worker processes")
-    p.add_argument("--group-size", type=int, default=None,
+    p.add_argument("--workers", type=argtypes.positive_int, default=None, help="dataset runs on --scheduler local: worker processes")
+    p.add_argument("--group-size", type=argtypes.positive_int, default=None,
                    help="dataset runs: methods per unit of work (default: all, one unit per sequence, the methods "
                         "sharing decoded images; 1: one (sequence, method) per unit, the finest parallelism)")
     p.add_argument("--retries", type=int, default=2, help="dataset runs on Dask: retries of a failed unit (default 2)")
@@ -271,7 +272,7 @@ def _run(args) -> int:
     finally:
         if bar is not None:
             bar.close()
-    failed = {n: m["status"] for n, m in summary["methods"].items() if m.get("status", "ok") != "ok"}
+    failed = {n: m["status"] for n, m in summary["methods"].items() if m.get("status", "ok").startswith("failed")}
     rc = 1 if failed and args.strict else 0
     if args.json:
         print(json.dumps(summary, indent=1))
@@ -292,6 +293,20 @@ def _run(args) -> int:
         for name, why in failed.items():
             print(f"  {name:13s} {why}")
     return rc
+
+
+def _check_methods_once(methods: str, run_options: dict) -> None:
+    """Build every method once with the run's options (no response: only the options are checked),
+    so that a bad ``--option`` or a plugin that cannot be built is refused before a dataset run
+    writes anything (it would otherwise fail in every unit and leave a dataset.json behind)."""
+    import warnings
+
+    from emulator.autoexposure.methodset import build_methods
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        build_methods(methods, mode=run_options.get("mode") or "paper", response=None,
+                      options=run_options.get("options"))
 
 
 def _run_dataset(args) -> int:
@@ -321,6 +336,7 @@ def _run_dataset(args) -> int:
     methods = args.methods or ",".join(recorded.get("methods", [])) or "all"
     group_size = args.group_size or recorded.get("group_size")
     scheduler = args.scheduler or "local"
+    _check_methods_once(methods, run_options)  # a bad option fails here, before dataset.json exists
 
     bar = None
     progress = None
