@@ -416,10 +416,12 @@ def run_dataset(
     order = {u.key: i for i, u in enumerate(units)}
     records.sort(key=lambda r: order[f"{r['sequence']}/{r['group']}"])
     errors.sort(key=lambda e: order[e["unit"]])
+    run_names = _run_names(names)
     summary = {
         "root": config["root"],
         "sequences": list(found),
-        "methods": names,
+        "methods": run_names,
+        "method_specs": {n: spec for spec, n in zip(names, run_names) if n != spec},
         "groups": [list(g) for g in plan_groups(names, group_size)],
         "scheduler": scheduler,
         "units": [{k: v for k, v in r.items() if k != "results"} for r in records],
@@ -429,7 +431,26 @@ def run_dataset(
     }
     for r in records:
         summary["per_sequence"][r["sequence"]].update(r["results"])
+    summary["failed_methods"] = _failed_everywhere(summary["per_sequence"], run_names)
     return write_dataset_report(out, summary)
+
+
+def _run_names(specs) -> list[str]:
+    """The name each method runs under (an import path ``pkg.mod:Class`` -> its plugin name), so
+    that the summary finds its results, which the units record under that name."""
+    from emulator.autoexposure.registry import is_import_path, plugin_from_path
+
+    return [plugin_from_path(s).name if isinstance(s, str) and is_import_path(s) else s for s in specs]
+
+
+def _failed_everywhere(per_sequence: Mapping, names) -> dict[str, str]:
+    """Methods that failed on every sequence they ran on: name -> the first reason."""
+    out = {}
+    for name in names:
+        statuses = [per[name].get("status", "ok") for per in per_sequence.values() if name in per]
+        if statuses and all(str(st).startswith("failed") for st in statuses):
+            out[name] = statuses[0]
+    return out
 
 
 def to_plain(value):

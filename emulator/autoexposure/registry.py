@@ -259,7 +259,7 @@ class PluginMethod:
             value = self.method.next_exposure(raw, exposure_ms)
         except Exception as exc:
             raise MethodFailed(f"raised {type(exc).__name__}: {exc}") from exc
-        if isinstance(value, (bool, np.bool_)):
+        if isinstance(value, (bool, np.bool_, str, bytes)):  # "12.5" is text, not a number
             raise MethodFailed(f"returned {value!r}, not an exposure in ms")
         try:
             ms = float(value)

@@ -375,4 +375,9 @@ def _run_dataset(args) -> int:
         first = summary["errors"][0]
         raise ExposimError(f"{len(summary['errors'])} unit(s) failed (see {args.output / 'report.md'}); "
                            f"first: {first['unit']}: {first['error']}")
+    failed = summary.get("failed_methods") or {}
+    if failed:
+        name, why = next(iter(failed.items()))
+        raise ExposimError(f"{len(failed)} method(s) failed in every unit (see {args.output / 'report.md'}); "
+                           f"first: {name}: {why}")
     return 0
