@@ -224,7 +224,7 @@ def run_to_folder(
                     f"initial_ms {config['initial_ms']:g} is outside range_ms {config['range_ms']}; "
                     f"clamped to {clamped_initial:g} ms")
         run_json["jobs"] = int(jobs)
-        writer.start(run_json, names, seq.cameras, save)
+        writer.start(run_json, names, seq.cameras, save, cycles=[c.index for c in seq.cycles])  # resume: validated
 
         def write_images(st: MethodStep) -> None:
             if save == "none":

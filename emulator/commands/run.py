@@ -8,7 +8,6 @@ import shlex
 import sys
 from pathlib import Path
 
-from emulator.commands import argtypes
 from emulator.errors import ExposimError
 
 __all__ = ["register", "parse_option"]
@@ -38,7 +37,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("-o", "--output", type=Path, required=True, help="run folder to create (must not exist or be empty)")
     p.add_argument("--save", choices=("none", "png16", "png8"), default=None,
                    help="save emulated images: none (default), png16 (12-bit Bayer DN) or png8 (8-bit gray)")
-    p.add_argument("--jobs", type=argtypes.positive_int, default=1, help="threads across methods (same output for any value)")
+    p.add_argument("--jobs", type=int, default=1, help="threads across methods (same output for any value)")
     p.add_argument("--mode", choices=("paper", "borealhdr"), default=None,
                    help="method behaviour: paper (default, reference defects corrected) or borealhdr (reference code)")
     p.add_argument("--initial-ms", type=float, default=None,
@@ -48,7 +47,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--selector", choices=("higher-no-sat", "closest", "reference"), default=None,
                    help="bracket selector (default higher-no-sat)")
     p.add_argument("--response", type=Path, default=None, help="pcalib file (default: found beside the recording)")
-    p.add_argument("--seed", type=argtypes.seed, default=None, help="seed of kim's Gaussian-process optimizer (default 0)")
+    p.add_argument("--seed", type=int, default=None, help="seed of kim's Gaussian-process optimizer (default 0)")
     p.add_argument("--option", action="append", default=[], metavar="METHOD.KEY=VALUE",
                    help="a method option, e.g. zhang.percentile=0.7 or kim.window=8 (VALUE is JSON or text); repeatable")
     p.add_argument("--noise", choices=("none", "consistent"), default=None,
@@ -57,7 +56,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--noise-model", type=Path, default=None, metavar="FILE.json",
                    help="noise model for --noise consistent (`exposim calibrate --noise`); default: the model "
                         "a synthetic recording's exposim.json carries")
-    p.add_argument("--noise-seed", type=argtypes.seed, default=None,
+    p.add_argument("--noise-seed", type=int, default=None,
                    help="seed of the added noise (default 0); the same seed gives the same bytes")
     p.add_argument("--resume", action="store_true",
                    help="continue an interrupted run in OUTDIR (its run.json gives the configuration)")
@@ -68,8 +67,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scheduler", default=None, metavar="serial|local|tcp://HOST:PORT",
                    help="dataset runs: serial, local (a Dask LocalCluster sized to the machine; default) or the "
                         "address of a running Dask scheduler; single sequences always run serially")
-    p.add_argument("--workers", type=argtypes.positive_int, default=None, help="dataset runs on --scheduler local: worker processes")
-    p.add_argument("--group-size", type=argtypes.positive_int, default=None,
+    p.add_argument("--workers", type=int, default=None, help="dataset runs on --scheduler local: worker processes")
+    p.add_argument("--group-size", type=int, default=None,
                    help="dataset runs: methods per unit of work (default: all, one unit per sequence, the methods "
                         "sharing decoded images; 1: one (sequence, method) per unit, the finest parallelism)")
     p.add_argument("--retries", type=int, default=2, help="dataset runs on Dask: retries of a failed unit (default 2)")
@@ -160,6 +159,14 @@ def _check_args(args) -> None:
         raise ExposimError(f"--jobs {args.jobs}: must be >= 1")
     if args.noise_seed is not None and args.noise_seed < 0:
         raise ExposimError(f"--noise-seed {args.noise_seed}: must be >= 0")
+    from emulator.commands.argtypes import SEED_MAX
+
+    for flag, seed in (("--seed", args.seed), ("--noise-seed", args.noise_seed)):
+        if seed is not None and not 0 <= seed <= SEED_MAX:
+            raise ExposimError(f"{flag} {seed}: must be in 0..{SEED_MAX}")
+    for flag, count in (("--workers", args.workers), ("--group-size", args.group_size)):
+        if count is not None and count < 1:  # 0 would silently mean "default"
+            raise ExposimError(f"{flag} {count}: must be >= 1")
     if args.noise_model is not None and args.noise != "consistent" and not args.resume:
         raise ExposimError("--noise-model is used only with --noise consistent")
 
