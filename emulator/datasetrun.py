@@ -391,7 +391,11 @@ def run_dataset(
         from emulator.distributed import open_client, run_units
 
         ctx = open_client(scheduler, n_workers=n_workers, retries=retries)
-    with ctx as client:  # a scheduler that cannot be reached fails before anything is written
+    from emulator.io.runfolder import RunLock
+
+    out.mkdir(parents=True, exist_ok=True)
+    # one process per dataset folder: a concurrent --resume is refused and never removes a live run's staging
+    with RunLock.acquire(out), ctx as client:  # a scheduler that cannot be reached fails before anything is written
         if cfg_path.is_file():
             remove_stale_staging(out)
         else:
@@ -411,8 +415,8 @@ def run_dataset(
         else:
             records, errors = run_units(client, units, out, options, retries=retries, progress=progress,
                                         fault_marker=fault_marker)
+        remove_stale_staging(out)  # attempts of units that were killed and ran again (under the lock)
     wall_s = time.perf_counter() - t0
-    remove_stale_staging(out)  # attempts of units that were killed and ran again
     order = {u.key: i for i, u in enumerate(units)}
     records.sort(key=lambda r: order[f"{r['sequence']}/{r['group']}"])
     errors.sort(key=lambda e: order[e["unit"]])

@@ -71,3 +71,53 @@ def test_a_plugin_failing_in_every_unit_is_named_and_the_exit_code_is_1(data, tm
     assert results["per_method"]["classical-50"]["cycles"] == 6  # the others are kept
     report = (out / "report.md").read_text()
     assert "Methods that failed in every unit: 1" in report and "- broken: failed: raised RuntimeError" in report
+
+
+SLOW = '''
+import time
+
+
+class Slow:
+    name = "slow"
+
+    def reset(self):
+        pass
+
+    def next_exposure(self, raw, exposure_ms):
+        time.sleep(0.4)
+        return 5.0
+'''
+
+
+def test_a_concurrent_resume_is_refused_and_leaves_the_live_run_whole(tmp_path, capsys, monkeypatch):
+    import os
+    import subprocess
+    import time
+
+    (tmp_path / "slow_plug.py").write_text(SLOW)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    root = tmp_path / "data"
+    for name in ("a", "b"):
+        write_static_sequence(root / name, n_cycles=4, shape=(32, 48))
+    out = tmp_path / "out"
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), os.environ.get("PYTHONPATH", "")])}
+    live = subprocess.Popen([sys.executable, "-m", "emulator.cli", "run", str(root), "--sequences", "all",
+                             "--scheduler", "serial", "--methods", "slow_plug:Slow", "-o", str(out), "--no-progress"],
+                            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    try:
+        deadline = time.monotonic() + 60
+        while not any(p.name.startswith(".") for d in out.glob("*") if d.is_dir() for p in d.iterdir()):
+            assert time.monotonic() < deadline and live.poll() is None, "the live run never staged a unit"
+            time.sleep(0.05)
+        staging = [p for d in out.glob("*") if d.is_dir() for p in d.iterdir() if p.name.startswith(".")]
+        rc = main(["run", str(root), "--sequences", "all", "--scheduler", "serial", "--methods", "slow_plug:Slow",
+                   "-o", str(out), "--resume", "--no-progress"])
+        err = capsys.readouterr().err.strip().splitlines()
+        assert rc == 1 and len(err) == 1 and "being written by another process" in err[0] and str(out) in err[0]
+        assert all(p.exists() for p in staging if live.poll() is None)
+    finally:
+        stdout, stderr = live.communicate(timeout=120)
+    assert live.returncode == 0, stderr
+    results = json.loads((out / "results.json").read_text())
+    assert results["errors"] == [] and results["per_method"]["slow"]["cycles"] == 8
+    assert not (out / "run.lock").exists()
