@@ -83,3 +83,66 @@ def frame_cycle(frames, frame):
                 c.frames[frame.camera][frame.exposure_ms].path == frame.path:
             return seq.cycles.index(c)
     raise AssertionError(frame.path)
+
+
+# ------------------------------------------------------------------------------ render cache
+def _store_two(tmp_path):
+    from scenes.cache import KEY_ATTRIBUTE, canonical_json, store_entry
+
+    rng = np.random.default_rng(0)
+    out = {}
+    for name in ("a", "b"):
+        material = {"v": 2, "scene": name}
+        img = rng.random((6, 8, 3), dtype=np.float32)
+        path = store_entry(tmp_path / f"{name}.exr", img, {KEY_ATTRIBUTE: canonical_json(material)})
+        out[name] = (path, material, img)
+    return out
+
+
+def test_render_cache_entries_carry_key_and_checksum(tmp_path):
+    from scenes.cache import CacheEntryError, load_entry, store_entry
+
+    e = _store_two(tmp_path)
+    (pa, ma, ia), (pb, mb, ib) = e["a"], e["b"]
+    assert np.array_equal(load_entry(pa, ma), ia)
+    da, db = pa.read_bytes(), pb.read_bytes()
+    pa.write_bytes(db)  # swapped
+    pb.write_bytes(da)
+    with pytest.raises(CacheEntryError, match="another render"):
+        load_entry(pa, ma)
+    # altered pixels under the right key: the checksum tells
+    from emulator.io.exr import write_exr
+
+    from scenes.cache import KEY_ATTRIBUTE, SHA_ATTRIBUTE, canonical_json, pixels_sha256
+
+    write_exr(pa, ia * 2, overwrite=True, attributes={KEY_ATTRIBUTE: canonical_json(ma), SHA_ATTRIBUTE: pixels_sha256(ia)})
+    with pytest.raises(CacheEntryError, match="checksum"):
+        load_entry(pa, ma)
+    for bad in (np.full_like(ia, np.nan), ia - 5.0):  # NaN, negative: refused as a fresh render is
+        store_entry(pa, bad.astype(np.float32), {KEY_ATTRIBUTE: canonical_json(ma)})
+        with pytest.raises(CacheEntryError, match="non-finite or negative"):
+            load_entry(pa, ma)
+
+
+@pytest.mark.render
+def test_a_bad_render_cache_entry_is_rendered_again_and_replaced(tmp_path):
+    import scenes
+    from scenes.cache import load_entry
+
+    scene = scenes.get_scene("static_lab", seed=0)
+    pose = scene.default_pose()
+    kw = dict(width=24, height=16, spp=2, seed=1, cache_dir=tmp_path, denoise="off")
+    first = scenes.render(scene, pose, **kw)
+    (entry,) = tmp_path.rglob("*.exr")
+    good = entry.read_bytes()
+    from scenes.cache import KEY_ATTRIBUTE, store_entry
+    from emulator.io.exr import write_exr  # noqa: F401
+
+    import OpenEXR
+
+    with OpenEXR.File(str(entry), header_only=True) as f:
+        key = f.header()[KEY_ATTRIBUTE]
+    store_entry(entry, np.full_like(first, -5.0), {KEY_ATTRIBUTE: key})  # a hit holding -5
+    again = scenes.render(scene, pose, **kw)
+    assert again.tobytes() == first.tobytes() and entry.read_bytes() == good
+    assert load_entry(entry).tobytes() == first.tobytes()
