@@ -125,8 +125,23 @@ def plan_groups(methods: list[str], group_size: int = 1) -> list[tuple[str, ...]
     return [tuple(methods[i:i + n]) for i in range(0, len(methods), n)]
 
 
+#: Longest group folder name, bytes: file names stop at 255 bytes, and a unit's staging
+#: folder adds a dot, a marker and a random suffix to it.
+MAX_GROUP_NAME_BYTES = 200
+
+
 def _group_name(methods: tuple[str, ...]) -> str:
-    return "+".join(methods)
+    """``"m1+m2+..."``; a name over :data:`MAX_GROUP_NAME_BYTES` is cut and made unique by a hash
+    of the whole (the unit's record keeps the full method list)."""
+    import hashlib
+
+    name = "+".join(methods)
+    raw = name.encode()
+    if len(raw) <= MAX_GROUP_NAME_BYTES:
+        return name
+    digest = hashlib.sha256(raw).hexdigest()[:16]
+    head = raw[: MAX_GROUP_NAME_BYTES - len(digest) - 1].decode(errors="ignore")
+    return f"{head}~{digest}"
 
 
 def plan_units(sequences: Mapping[str, Path], methods: list[str], group_size: int = 1) -> list[Unit]:

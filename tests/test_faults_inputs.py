@@ -120,3 +120,104 @@ def test_bad_option_in_a_dataset_run_leaves_no_dataset_json(tmp_path, capsys):
     assert main(["run", str(data), "--sequences", "all", "--scheduler", "serial", "--methods", "kim", "-o", str(out),
                  "--option", "kim.window=3", "--no-progress"]) == 0
     assert (out / "dataset.json").is_file()
+
+
+# ------------------------------------------------------------------ bounded before they cost memory
+def test_response_from_dev_zero_is_refused_without_reading_it_all(seq, tmp_path, capsys):
+    import os
+
+    if not os.path.exists("/dev/zero"):
+        pytest.skip("no /dev/zero")
+    out = tmp_path / "run"
+    assert main(["run", str(seq), "--methods", "shim", "-o", str(out), "--response", "/dev/zero",
+                 "--no-progress"]) == 1
+    _one_line_error(capsys, "/dev/zero", "larger than 4 MiB")
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("argv,words", [
+    (["validate", "render", "--size", "100000x100000"], ["--size", "10000.0 megapixels"]),
+    (["validate", "live", "--size", "8192x8192"], ["--size", "67.1 megapixels"]),
+    (["validate", "render", "--size", "1x1"], ["--size", "at least 4 pixels"]),
+])
+def test_image_sizes_are_checked_before_anything_is_allocated(argv, words, capsys):
+    import resource
+
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith(f"exposim {argv[0]} {argv[1]}: error: ") and all(w in err[-1] for w in words)
+    assert resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before < 200_000  # kB: nothing big allocated
+
+
+def test_synth_refuses_a_size_run_would_refuse(tmp_path, capsys):
+    out = tmp_path / "syn"
+    rc = main(["synth", "forest_winter", "--size", "1x1", "-o", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 1 and len(err) == 1 and "--size" in err[0] and "at least 4" in err[0]
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("white", [4096, 65536])
+def test_calibrate_white_level_beyond_the_bit_depth_is_refused(tmp_path, capsys, white):
+    from emulator.io.stack import write_stack
+
+    imgs = [np.full((16, 16), v, np.uint16) for v in (100, 400, 1600)]
+    root = write_stack(tmp_path / "st", imgs, [1.0, 4.0, 16.0])
+    out = tmp_path / "resp.txt"
+    rc = main(["calibrate", str(root), "-o", str(out), "--white-level", str(white), "--no-progress"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 1 and len(err) == 1 and f"white_level {white}" in err[0] and "4095" in err[0]
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("argv,words", [
+    (["class"], ["'class'", "keyword"]),
+    (["None"], ["'None'", "keyword"]),
+    (["numpy"], ["'numpy'", "already importable"]),
+    (["my-fine-ae-xyz", "--class-name", "def"], ["'def'"]),
+    (["my-fine-ae-xyz", "--class-name", "None"], ["'None'"]),
+])
+def test_new_method_refuses_names_that_would_not_compile_or_shadow(tmp_path, capsys, argv, words):
+    out = tmp_path / "nm"
+    assert main(["new-method", *argv, "-o", str(out)]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and all(w in err[0] for w in words), err
+    assert not out.exists()
+
+
+def test_new_method_output_compiles(tmp_path):
+    out = tmp_path / "nm"
+    assert main(["new-method", "my-fine-ae-xyz", "-o", str(out)]) == 0
+    for f in out.glob("*.py"):
+        compile(f.read_text(), str(f), "exec")
+
+
+def test_long_method_groups_get_folder_names_the_filesystem_takes(tmp_path, monkeypatch):
+    from emulator.datasetrun import MAX_GROUP_NAME_BYTES, plan_units
+
+    long_a, long_b = "a" * 150, "b" * 150
+    plug = tmp_path / "long_plug.py"
+    plug.write_text("".join(f'''
+class {c.upper()}:
+    name = "{n}"
+
+    def reset(self):
+        pass
+
+    def next_exposure(self, raw, exposure_ms):
+        return 5.0
+''' for c, n in (("a", long_a), ("b", long_b))))
+    monkeypatch.syspath_prepend(str(tmp_path))
+    data = tmp_path / "data"
+    write_static_sequence(data / "s", n_cycles=2, shape=(32, 48))
+    units = plan_units({"s": data / "s"}, [long_a, long_b], 2)
+    assert len(units[0].group.encode()) <= MAX_GROUP_NAME_BYTES
+    assert plan_units({"s": data / "s"}, [long_a, long_b + "c"], 2)[0].group != units[0].group
+    out = tmp_path / "out"
+    assert main(["run", str(data), "--sequences", "all", "--scheduler", "serial", "--methods",
+                 "long_plug:A,long_plug:B", "-o", str(out), "--no-progress"]) == 0
+    results = __import__("json").loads((out / "results.json").read_text())
+    assert results["errors"] == [] and results["per_method"][long_a]["cycles"] == 2

@@ -249,8 +249,12 @@ def prepare_output(folder: str | os.PathLike, *, force: bool = False) -> Path:
 # ---------------------------------------------------------------------------- figures and arrays
 def save_figure(fig, path: str | os.PathLike, *, dpi: int = 110, overwrite: bool = True) -> Path:
     """Render a matplotlib figure to PNG and write it atomically (the figure is not closed)."""
+    import warnings
+
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=dpi)
+    with warnings.catch_warnings():  # layout advice from matplotlib is no message for the user
+        warnings.simplefilter("ignore", UserWarning)
+        fig.savefig(buf, format="png", dpi=dpi)
     return atomic_write_bytes(path, buf.getvalue(), overwrite=overwrite)
 
 
