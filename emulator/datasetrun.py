@@ -423,7 +423,7 @@ def run_dataset(
             for i, unit in enumerate(units, 1):
                 try:
                     records.append(run_unit(unit, out, options, fault_marker=fault_marker))
-                except ExposimError as exc:  # a bad sequence: name it, keep the others
+                except (ExposimError, OSError) as exc:  # a bad sequence or file: name the unit, keep the others
                     errors.append({"unit": unit.key, "error": f"{type(exc).__name__}: {exc}"})
                 if progress is not None:
                     progress(i, len(units))

@@ -424,8 +424,13 @@ class RunWriter:
     def append_row(self, method: str, row: list[str]) -> None:
         """Append one CSV row (flushed: a killed run keeps every finished row)."""
         fh, writer = self._csv[method]
-        writer.writerow(row)
-        fh.flush()
+        try:
+            writer.writerow(row)
+            fh.flush()
+        except OSError as exc:  # a full disk: name the file
+            from emulator.io.files import with_path
+
+            raise with_path(exc, self.path / method / CSV_FILE) from None
 
     def image_path(self, method: str, camera: str, timestamp_ns: int) -> Path:
         return self.path / method / IMAGES_DIR / camera / f"{int(timestamp_ns)}.png"
