@@ -106,3 +106,19 @@ def test_serial_dataset_run_names_a_unit_with_an_os_error_and_keeps_the_others(t
     assert [u["sequence"] for u in results["units"]] == ["a", "c"]
     assert results["errors"][0]["unit"] == "b/classical-50"
     assert png.name in results["errors"][0]["error"]  # the file is named
+
+
+@pytest.mark.parametrize("damage", ["truncate", "flip"])
+def test_a_damaged_png_is_one_line_without_libpng_noise(tmp_path, damage):
+    seq, _ = write_static_sequence(tmp_path / "seq", n_cycles=2, shape=(32, 48))
+    pngs = sorted((seq / "camera_left").rglob("*.png"))
+    for png in pngs:  # every left frame: whichever bracket the loop reads first is damaged
+        data = png.read_bytes()
+        png.write_bytes(data[: len(data) - 20] if damage == "truncate" else data[:60] + bytes([data[60] ^ 0xFF]) +
+                        data[61:])
+    proc = subprocess.run([sys.executable, "-m", "emulator.cli", "run", str(seq), "--methods", "classical-50",
+                           "-o", str(tmp_path / "run"), "--no-progress"], capture_output=True, text=True)
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 1 and len(lines) == 1, lines
+    assert any(p.name in lines[0] for p in pngs) and "corrupt or truncated PNG" in lines[0]
+    assert "libpng" not in proc.stderr
