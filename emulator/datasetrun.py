@@ -354,7 +354,8 @@ def run_dataset(
     methods="all",
     group_size: int | None = None,
     options: Mapping | None = None,
-    scheduler: str = "serial",
+    scheduler="serial",
+    scheduler_file: str | os.PathLike | None = None,
     n_workers: int | None = None,
     retries: int = 2,
     resume: bool = False,
@@ -366,8 +367,10 @@ def run_dataset(
     ``options``: keyword arguments of :func:`emulator.runner.run_to_folder` for every unit
     (mode, selector, initial_ms, range_ms, options, save, response_path, jobs).
     ``scheduler``: ``serial`` (in this process), ``local`` (a Dask ``LocalCluster`` of
-    ``n_workers`` processes, default sized to the machine) or ``tcp://HOST:PORT`` (an
-    existing Dask cluster that sees the same paths).  Refuses an existing ``out_dir`` that
+    ``n_workers`` processes, default sized to the machine), ``tcp://HOST:PORT`` or
+    ``tls://HOST:PORT`` (an existing Dask cluster that sees the same paths), or an open
+    :class:`distributed.Client` (used, not closed); ``scheduler_file`` instead names a
+    Dask scheduler file (see :mod:`emulator.distributed`).  Refuses an existing ``out_dir`` that
     holds a dataset run unless ``resume`` (then the configuration must be the same; complete
     units are kept, others computed).  A unit that fails is retried ``retries`` times;
     units that still fail are listed under ``errors`` and the others are kept.
@@ -379,8 +382,14 @@ def run_dataset(
 
     out = Path(os.path.abspath(out_dir))  # absolute: a plugin's os.chdir cannot move the output
     options = dict(options or {})
-    if not (scheduler in ("serial", "local") or str(scheduler).startswith("tcp://")):
-        raise DatasetRunError(f"unknown scheduler {scheduler!r}; use serial, local or tcp://HOST:PORT")
+    from emulator.distributed import check_scheduler, is_client
+
+    if scheduler_file is not None and scheduler in ("serial", None):
+        scheduler = "file"
+    if scheduler != "file":
+        check_scheduler(scheduler)
+    scheduler_name = (f"client {scheduler.scheduler.address}" if is_client(scheduler) else
+                      f"file {scheduler_file}" if scheduler == "file" else str(scheduler))
     found = discover_sequences(root, sequences)
     names = parse_methods(methods) if isinstance(methods, str) else list(methods)
     group_size = len(names) if group_size is None else int(group_size)
@@ -405,7 +414,8 @@ def run_dataset(
     else:
         from emulator.distributed import open_client, run_units
 
-        ctx = open_client(scheduler, n_workers=n_workers, retries=retries)
+        ctx = open_client(scheduler, scheduler_file=None if scheduler_file is None else str(scheduler_file),
+                          n_workers=n_workers, retries=retries)
     from emulator.io.runfolder import RunLock
 
     out.mkdir(parents=True, exist_ok=True)
@@ -442,7 +452,7 @@ def run_dataset(
         "methods": run_names,
         "method_specs": {n: spec for spec, n in zip(names, run_names) if n != spec},
         "groups": [list(g) for g in plan_groups(names, group_size)],
-        "scheduler": scheduler,
+        "scheduler": scheduler_name,
         "units": [{k: v for k, v in r.items() if k != "results"} for r in records],
         "errors": errors,
         "per_sequence": {name: {} for name in found},

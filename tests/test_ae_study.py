@@ -273,7 +273,9 @@ def test_validate_help_shows_the_defaults(capsys, monkeypatch):
     assert f"(default: {full.width}x{full.height})" in text and f"(default: {full.spp})" in text
     text = _help(capsys, monkeypatch, "validate", "emulation")
     full, quick = EmulationConfig(), EmulationConfig.quick()
-    assert f"render width (pixels) (default: {full.width}; with --quick: {quick.width})" in text
+    assert (f"render size in pixels, WIDTHxHEIGHT (default: {full.width}x{full.height}; with --quick: "
+            f"{quick.width}x{quick.height})") in text
+    assert "--width" not in text and "--height" not in text
     assert f"(default: {full.n_exposures}; with --quick: {quick.n_exposures})" in text
 
 

@@ -135,9 +135,14 @@ def test_rpe_figure_names_the_dotted_line():
     for ax in fig.axes:
         lines = {line.get_label(): line.get_linestyle() for line in ax.get_lines()}
         assert lines == {"fixed": "-", "kim (VO failed on 2 frames)": report.FAILED_STYLE}
-        legend = ax.get_legend()
-        assert {t.get_text() for t in legend.get_texts()} == set(lines)
-        assert "dotted" in legend.get_title().get_text()
+    first, last = fig.axes
+    assert first.get_legend() is None  # one legend for both panels, beside the second, outside its data
+    legend = last.get_legend()
+    assert {t.get_text() for t in legend.get_texts()} == set(lines)
+    assert "dotted" in legend.get_title().get_text()
+    fig.canvas.draw()
+    box = legend.get_window_extent().transformed(last.transAxes.inverted())
+    assert box.x0 >= 1.0  # to the right of the axes
 
 
 def _span(lim) -> float:

@@ -231,7 +231,7 @@ def test_exposim_validate_live_cli(tmp_path, render_cache, capsys, monkeypatch):
     assert exc.value.code == 0
     text = " ".join(capsys.readouterr().out.split())
     for opt in ("--output", "--quick", "--scenes", "--cycles", "--size", "--spp", "--seed", "--methods",
-                "--noise-repeats", "--no-control", "--keep-radiance", "--cache-dir", "--no-progress", "--redraw"):
+                "--noise-repeats", "--no-control", "--keep-radiance", "--cache-dir", "--quiet", "--redraw"):
         assert opt in text, opt
     # the defaults are shown, and they are the configuration's
     full, quick = CONFIGS["full"], CONFIGS["quick"]

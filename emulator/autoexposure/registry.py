@@ -113,6 +113,13 @@ def load_import_path(path: str) -> Callable:
         raise AutoExposureError(f"AE method {path!r}: expected an import path package.module:attr")
     try:
         obj = importlib.import_module(module_name)
+    except ModuleNotFoundError as exc:
+        if exc.name is not None and module_name.split(".")[0] == exc.name.split(".")[0]:  # the plugin itself, not its imports
+            raise AutoExposureError(
+                f"AE method {path!r}: no module {module_name} on the Python path; run from the folder that holds "
+                f"{module_name.split('.')[0]}.py with PYTHONPATH=. (or add its folder to PYTHONPATH), or pip install "
+                "its package") from exc
+        raise AutoExposureError(f"AE method {path!r}: cannot import {module_name}: {type(exc).__name__}: {exc}") from exc
     except (Exception, SystemExit) as exc:  # report the plugin's own error, by name
         raise AutoExposureError(f"AE method {path!r}: cannot import {module_name}: {type(exc).__name__}: {exc}") from exc
     for part in attr.split("."):

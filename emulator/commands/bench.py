@@ -10,7 +10,11 @@ import argparse
 import contextlib
 import json
 import shlex
+import shutil
 import sys
+from pathlib import Path
+
+from emulator.commands.progress import add_quiet, bars_enabled
 
 __all__ = ["register"]
 
@@ -35,6 +39,16 @@ def _command_line(args: argparse.Namespace, positional: tuple[str, ...]) -> str:
     return shlex.join(parts)
 
 
+#: emulator.metrics.features.RATIO_TEST, repeated here so that --help does not import OpenCV (a test keeps them equal).
+_RATIO_TEST = 0.8
+
+
+def _ratio(args) -> float:
+    from emulator.metrics.features import RATIO_TEST
+
+    return RATIO_TEST if args.ratio is None else args.ratio
+
+
 def _methods(value: str | None) -> list[str] | None:
     return [m.strip() for m in value.split(",") if m.strip()] if value else None
 
@@ -46,23 +60,53 @@ def _floats(value: str) -> list[float]:
         raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {value!r}") from None
 
 
+@contextlib.contextmanager
+def _removed_on_failure(output):
+    """Remove ``output`` again if this command created it and then failed (no empty -o folder left)."""
+    path = Path(output)
+    existed = path.exists()
+    try:
+        yield
+    except BaseException:
+        if not existed and path.is_dir():
+            shutil.rmtree(path, ignore_errors=True)
+        raise
+
+
+def _print_json(results: dict) -> None:
+    from emulator.io.files import to_jsonable
+
+    print(json.dumps(to_jsonable(results), indent=1))
+
+
 def _features(args: argparse.Namespace) -> int:
     from emulator.metrics.bench import bench_features
 
-    results = bench_features(
+    with _removed_on_failure(args.output):
+        results = _bench_features(args, bench_features)
+    if args.json:
+        _print_json(results)
+    return _features_summary(args, results)
+
+
+def _bench_features(args, bench_features):
+    return bench_features(
         args.run_dirs,
         args.output,
         methods=_methods(args.methods),
         grid=(args.grid, args.grid),
-        ratio=args.ratio,
+        ratio=_ratio(args),
         n_features=args.n_features,
         matcher=args.matcher,
         scale=args.scale,
         max_frames=args.max_frames,
         force=args.force,
-        progress=not args.quiet,
+        progress=bars_enabled(args.quiet),
         command=_command_line(args, ("run_dirs",)),
     )
+
+
+def _features_summary(args, results) -> int:
     if not args.quiet:
         for name, m in results["methods"].items():
             u = m["median_uniformity"]
@@ -75,7 +119,7 @@ def _features(args: argparse.Namespace) -> int:
 
         for verdict in features_verdicts(results):
             print(f"verdict: {verdict}", file=sys.stderr)
-        print(f"wrote {args.output}/results.json, fig4_features.png, report.md", file=sys.stderr)
+        print(f"wrote {args.output}/results.json, fig4_features.png, report.md, report.html", file=sys.stderr)
     return 0
 
 
@@ -84,7 +128,7 @@ def _vo(args: argparse.Namespace) -> int:
     from emulator.metrics.vo import VOParameters
 
     params = VOParameters(
-        ratio=args.ratio,
+        ratio=_ratio(args),
         n_features=args.n_features,
         matcher=args.matcher,
         min_matches=args.min_matches,
@@ -92,7 +136,15 @@ def _vo(args: argparse.Namespace) -> int:
         max_step_m=args.max_step_m,
         seed=args.seed,
     )
-    results = bench_vo(
+    with _removed_on_failure(args.output):
+        results = _bench_vo(args, bench_vo, params)
+    if args.json:
+        _print_json(results)
+    return _vo_summary(args, results)
+
+
+def _bench_vo(args, bench_vo, params):
+    return bench_vo(
         args.run_dir,
         args.output,
         reference=args.reference,
@@ -108,9 +160,12 @@ def _vo(args: argparse.Namespace) -> int:
         rpe_on_failure=args.rpe_on_failure,
         max_frames=args.max_frames,
         force=args.force,
-        progress=not args.quiet,
+        progress=bars_enabled(args.quiet),
         command=_command_line(args, ("run_dir",)),
     )
+
+
+def _vo_summary(args, results) -> int:
     if not args.quiet:
         for name, m in results["methods"].items():
             line = f"{name}: {m['status']}, {m['n_tracked']}/{m['n_frames']} frames tracked"
@@ -126,7 +181,7 @@ def _vo(args: argparse.Namespace) -> int:
 
         for verdict in vo_verdicts(results):
             print(f"verdict: {verdict}", file=sys.stderr)
-        print(f"wrote {args.output}/results.json, fig6_rpe.png, trajectories.png, report.md", file=sys.stderr)
+        print(f"wrote {args.output}/results.json, fig6_rpe.png, trajectories.png, report.md, report.html", file=sys.stderr)
     return 0
 
 
@@ -166,7 +221,8 @@ def _help(parser: argparse.ArgumentParser):
 
 
 def _common_sift(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--ratio", type=float, default=0.8, help="Lowe ratio test threshold (default 0.8)")
+    p.add_argument("--ratio", type=float, default=None,
+                   help=f"Lowe ratio test threshold (default {_RATIO_TEST}, the library's RATIO_TEST, for features and VO)")
     p.add_argument("--n-features", type=int, default=0, help="SIFT keypoints kept per image, 0 = all (default)")
     p.add_argument("--matcher", choices=("flann", "bf"), default="flann",
                    help="nearest neighbours: kd-trees (default) or exact brute force")
@@ -174,7 +230,8 @@ def _common_sift(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-frames", type=int, help="use only the first N images of each method (a reduced run)")
     p.add_argument("-o", "--output", required=True, help="output folder (results.json, figures, report.md)")
     p.add_argument("--force", action="store_true", help="overwrite an existing results.json")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bars or summary")
+    add_quiet(p, "no progress bars or summary")
+    p.add_argument("--json", action="store_true", help="print results.json to stdout")
 
 
 def register(subparsers) -> None:

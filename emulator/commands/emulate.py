@@ -31,6 +31,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--selector", choices=("higher-no-sat", "closest", "reference"), default="higher-no-sat",
                    help="bracket selector, decided on the first camera's saturation (default higher-no-sat)")
     p.add_argument("--response", type=Path, help="pcalib file (default: found beside the recording)")
+    p.add_argument("--frame-cache", type=Path, default=None, metavar="DIR",
+                   help="read decoded frames from this frame cache (made by 'exposim cache SEQ --frame-cache DIR'; "
+                        "default: SEQUENCE/.exposim-frames when it exists)")
     p.add_argument("--save", choices=("png16", "png8"), default="png16",
                    help="png16 (default): 12-bit Bayer DN in a 16-bit PNG; png8: demosaiced 8-bit grey, viewable")
     p.add_argument("-o", "--output", type=Path, required=True, help="output folder for the PNG(s) (created)")
@@ -117,7 +120,7 @@ def _emulate(args) -> int:
     from emulator.io.png import write_png8, write_png16
     from emulator.runner import saved_image
 
-    seq = load_sequence(args.sequence)
+    seq = load_sequence(args.sequence, frame_cache=args.frame_cache)
     cams = ("left", "right") if args.camera == "both" else (args.camera,)
     if args.camera == "both":
         cams = tuple(c for c in cams if c in seq.cameras) or cams

@@ -16,6 +16,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Describe a BorealHDR-layout recording (cycles are grouped by timestamp).",
     )
     p.add_argument("sequence", type=Path, help="recording folder holding camera_left/ and camera_right/, or a trajectory .zip")
+    p.add_argument("--frame-cache", type=Path, default=None, metavar="DIR",
+                   help="read decoded frames from this frame cache (made by 'exposim cache SEQ --frame-cache DIR'; "
+                        "default: SEQUENCE/.exposim-frames when it exists)")
     p.add_argument("--json", action="store_true", help="print one JSON object (cycles as a list)")
     p.set_defaults(func=_info)
 
@@ -26,7 +29,7 @@ register.order = 10  # place in `exposim --help`
 def _info(args) -> int:
     from emulator.io.borealhdr import load_sequence
 
-    seq = load_sequence(args.sequence)
+    seq = load_sequence(args.sequence, frame_cache=args.frame_cache)
     desc = seq.describe()
     if args.json:
         print(json.dumps(desc, indent=1))

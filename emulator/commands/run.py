@@ -8,6 +8,8 @@ import shlex
 import sys
 from pathlib import Path
 
+from emulator.commands.progress import add_quiet, bars_enabled
+from emulator.distributed import SCHEDULER_HELP, resolve_scheduler
 from emulator.errors import ExposimError
 
 __all__ = ["register", "parse_option"]
@@ -47,6 +49,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--selector", choices=("higher-no-sat", "closest", "reference"), default=None,
                    help="bracket selector (default higher-no-sat)")
     p.add_argument("--response", type=Path, default=None, help="pcalib file (default: found beside the recording)")
+    p.add_argument("--frame-cache", type=Path, default=None, metavar="DIR",
+                   help="read decoded frames from this frame cache (made by 'exposim cache SEQ --frame-cache DIR'; "
+                        "default: SEQUENCE/.exposim-frames when it exists)")
     p.add_argument("--seed", type=int, default=None, help="seed of kim's Gaussian-process optimizer (default 0)")
     p.add_argument("--option", action="append", default=[], metavar="METHOD.KEY=VALUE",
                    help="a method option, e.g. zhang.percentile=0.7 or kim.window=8 (VALUE is JSON or text); repeatable")
@@ -64,15 +69,18 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="dataset run: SEQUENCE is a dataset root; run every sequence under it ('all') or the named "
                         "ones (folders or trajectory .zip files, a zip named by its stem); OUTDIR gets one folder per "
                         "sequence and a dataset summary (results.json, report.md, methods.png)")
-    p.add_argument("--scheduler", default=None, metavar="serial|local|tcp://HOST:PORT",
-                   help="dataset runs: serial, local (a Dask LocalCluster sized to the machine; default) or the "
-                        "address of a running Dask scheduler; single sequences always run serially")
+    p.add_argument("--scheduler", default=None, metavar="serial|local|tcp://HOST:PORT|tls://HOST:PORT",
+                   help="dataset runs: " + SCHEDULER_HELP + ", else local (serial without the dask extra); "
+                        "single sequences always run serially")
+    p.add_argument("--scheduler-file", type=Path, default=None, metavar="PATH",
+                   help="dataset runs: the scheduler file of a running Dask cluster (dask scheduler "
+                        "--scheduler-file PATH, dask-jobqueue)")
     p.add_argument("--workers", type=int, default=None, help="dataset runs on --scheduler local: worker processes")
     p.add_argument("--group-size", type=int, default=None,
                    help="dataset runs: methods per unit of work (default: all, one unit per sequence, the methods "
                         "sharing decoded images; 1: one (sequence, method) per unit, the finest parallelism)")
     p.add_argument("--retries", type=int, default=2, help="dataset runs on Dask: retries of a failed unit (default 2)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_quiet(p)
     p.add_argument("--json", action="store_true", help="print the results summary as JSON")
     _add_plugin_arguments(p)
     p.set_defaults(func=_run)
@@ -173,13 +181,16 @@ def _check_args(args) -> None:
 
 def _run(args) -> int:
     _check_args(args)
+    if args.sequences is not None and args.frame_cache is not None:
+        raise ExposimError("--frame-cache applies to one sequence; a dataset run reads each sequence's own "
+                           "SEQUENCE/.exposim-frames")
     if args.sequences is not None:
         if args.noise not in (None, "none") or args.method_timeout is not None or args.strict:
             raise ExposimError("--noise, --method-timeout and --strict apply to single-sequence runs; "
                                "dataset runs (--sequences) do not take them yet")
         return _run_dataset(args)
-    if args.scheduler not in (None, "serial"):
-        raise ExposimError(f"--scheduler {args.scheduler}: a single sequence runs serially; "
+    if args.scheduler not in (None, "serial") or args.scheduler_file is not None:
+        raise ExposimError(f"--scheduler {args.scheduler or 'file'}: a single sequence runs serially; "
                            "pass --sequences all for a dataset run")
     from emulator.autoexposure import DEFAULT_RANGE_MS
     from emulator.io.runfolder import RUN_FILE, read_run_json
@@ -244,20 +255,26 @@ def _run(args) -> int:
     _warn_broken_plugins()
     progress = None
     bar = None
-    if not args.no_progress:
+    if bars_enabled(args.quiet):
         from tqdm import tqdm
 
-        bar = tqdm(total=None, unit="cycle", desc="exposim run", file=sys.stderr, dynamic_ncols=True)
-
         def progress(done: int, total: int) -> None:
+            nonlocal bar
+            if bar is None:  # made at the first report, after the run's checks passed
+                bar = tqdm(total=total, unit="cycle", desc="exposim run", file=sys.stderr, dynamic_ncols=True)
             if bar.total != total:
                 bar.total = total
             bar.n = done
             bar.refresh()
 
+    source = args.sequence
+    if args.frame_cache is not None:  # a frame cache elsewhere (a read-only recording)
+        from emulator.io.borealhdr import load_sequence
+
+        source = load_sequence(args.sequence, frame_cache=args.frame_cache)
     try:
         summary = run_to_folder(
-            args.sequence,
+            source,
             cfg["methods"],
             args.output,
             save=cfg["save"],
@@ -299,6 +316,8 @@ def _run(args) -> int:
               + (" (--strict: exit code 1)" if args.strict else ""))
         for name, why in failed.items():
             print(f"  {name:13s} {why}")
+    if (args.output / "report.html").is_file():
+        print(f"report      {args.output / 'report.html'} (open in a browser)")
     return rc
 
 
@@ -342,12 +361,12 @@ def _run_dataset(args) -> int:
         run_options["options"] = options
     methods = args.methods or ",".join(recorded.get("methods", [])) or "all"
     group_size = args.group_size or recorded.get("group_size")
-    scheduler = args.scheduler or "local"
+    scheduler, scheduler_file = resolve_scheduler(args.scheduler, args.scheduler_file)
     _check_methods_once(methods, run_options)  # a bad option fails here, before dataset.json exists
 
     bar = None
     progress = None
-    if not args.no_progress:
+    if bars_enabled(args.quiet):
         from tqdm import tqdm
 
         def progress(done: int, total: int) -> None:
@@ -361,6 +380,7 @@ def _run_dataset(args) -> int:
     try:
         summary = run_dataset(args.sequence, args.output, sequences=args.sequences, methods=methods,
                               group_size=group_size, options=run_options, scheduler=scheduler,
+                              scheduler_file=scheduler_file,
                               n_workers=args.workers, retries=args.retries, resume=args.resume, progress=progress)
     finally:
         if bar is not None:
@@ -370,7 +390,7 @@ def _run_dataset(args) -> int:
     else:
         t = summary["throughput"]
         print(f"dataset run {args.output}  ({len(summary['sequences'])} sequences, {len(summary['units'])} units, "
-              f"scheduler {scheduler})")
+              f"scheduler {summary['scheduler']})")
         for name, m in summary["per_method"].items():
             mean = m["mean_exposure_ms"]
             print(f"  {name:13s} {m['cycles']:6d} cycles  mean {mean:8.3f} ms" if mean is not None

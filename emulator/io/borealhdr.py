@@ -466,7 +466,8 @@ def sequence_response(sequence: Sequence, path: str | os.PathLike | None = None)
     if resp_path is None:
         raise DatasetError(
             f"{sequence.path}: no response file found (looked for calibration/response.txt or "
-            f"pcalib*.txt in the sequence and beside it); pass one explicitly"
+            f"pcalib*.txt in the sequence and beside it); pass the inverse response with --response FILE "
+            f"(a pcalib*.txt of the camera, or one made by 'exposim calibrate')"
         )
     response = read_response(resp_path, white_level=max(PCALIB_TABLE_TOP, sequence.white_level),
                              black_level=sequence.black_level)

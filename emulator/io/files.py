@@ -34,6 +34,7 @@ import numpy as np
 from emulator.errors import DatasetError, ExposimError, OutputExistsError
 
 __all__ = [
+    "read_bytes",
     "RESULTS_FILE",
     "REPORT_FILE",
     "atomic_write_bytes",
@@ -127,6 +128,11 @@ def make_staging_dir(parent: str | os.PathLike, prefix: str) -> Path:
 def write_text(path: str | os.PathLike, text: str, *, overwrite: bool = True) -> Path:
     """Write UTF-8 text (a markdown report, a text table) atomically."""
     return atomic_write_bytes(path, text.encode("utf-8"), overwrite=overwrite)
+
+
+def read_bytes(path: str | os.PathLike) -> bytes:
+    """The bytes of a file (a figure to embed in a report)."""
+    return Path(path).read_bytes()
 
 
 def read_text(path: str | os.PathLike, error: type[Exception] = DatasetError) -> str:

@@ -38,6 +38,7 @@ from emulator.metrics.stereo import (
 )
 from emulator.metrics.trajectory import associate, read_trajectory, trajectory_from_poses
 from emulator.metrics.vo import VOParameters, run_stereo_vo
+from emulator.report.html import write_report
 
 __all__ = [
     "bench_features",
@@ -96,6 +97,40 @@ def _frames(method: MethodRun, max_frames: int | None):
 # --------------------------------------------------------------------------- features
 
 
+def tau_grid(max_min_matches: int, *, n: int = 100) -> list[int]:
+    """Thresholds of the success curve: the paper's 5..500 in steps of 5, extended past the
+    largest per-run minimum of matches (where every curve is 0), in about ``n`` steps.
+
+    >>> tau_grid(120)[:3], tau_grid(120)[-1], tau_grid(17762)[-1], len(tau_grid(17762))
+    ([5, 10, 15], 500, 17820, 99)
+    """
+    top = max(int(DEFAULT_TAUS[-1]), int(max_min_matches) + 1)
+    step = max(5, -(-top // n // 5) * 5)
+    top = -(-top // step) * step
+    return list(range(step, top + step, step))
+
+
+def _features_sheet(run, result: dict, max_frames, n_cycles: int = 6) -> str:
+    """Contact sheet of the images a benchmark compared (first run): sampled left frames per method."""
+    from emulator.report.html import Thumb, _sample, contact_sheet, thumbnail
+
+    rows = []
+    for name, method in run.methods.items():
+        frames = _frames(method, max_frames)
+        per = {} if result is None else result["methods"].get(name, {})
+        cells = []
+        for i in _sample(len(frames), n_cycles):
+            f = frames[i]
+            gray = load_gray8(f.left, white_level=run.white_level, black_level=run.black_level)
+            exposure = "?" if f.exposure_ms is None else f"{f.exposure_ms:.2f} ms"
+            caption = f"frame {i}: {exposure}"
+            if per.get("n_keypoints"):
+                caption += f", {per['n_keypoints'][i]} keypoints"
+            cells.append(Thumb(thumbnail(gray), caption))
+        rows.append((name, cells))
+    return contact_sheet(rows, title=f"Images compared ({run.path.name}, left camera, sampled frames)")
+
+
 def bench_features(
     run_dirs: str | Path | Sequence[str | Path],
     out_dir: str | Path,
@@ -107,7 +142,7 @@ def bench_features(
     matcher: str = "flann",
     scale: float = 1.0,
     max_frames: int | None = None,
-    taus: Sequence[int] = DEFAULT_TAUS,
+    taus: Sequence[int] | None = None,
     seed: int = 0,
     force: bool = False,
     progress: bool = False,
@@ -130,8 +165,9 @@ def bench_features(
         Image scale before SIFT, (0, 1]; 1 = full resolution (the paper).
     max_frames : int, optional
         Use only the first ``max_frames`` images of each method (a reduced run).
-    taus : sequence of int
-        Thresholds of the success curve.
+    taus : sequence of int, optional
+        Thresholds of the success curve; default :func:`tau_grid`, the paper's 5..500
+        extended until every method's curve reaches 0.
     force : bool
         Overwrite an existing ``results.json``.
     progress : bool
@@ -184,6 +220,9 @@ def bench_features(
     names: list[str] = []
     for r in run_results:
         names += [m for m in r["methods"] if m not in names]
+    if taus is None:  # to where every curve has reached 0, so the success verdicts are not trivially true
+        taus = tau_grid(max((r["methods"][m].get("min_matches") or 0 for r in run_results for m in r["methods"]),
+                            default=0))
     taus = [int(t) for t in taus]
     summary, rates = {}, {}
     for name in names:
@@ -218,7 +257,9 @@ def bench_features(
     from emulator.report import bench as report
 
     report.plot_features(results, out / "fig4_features.png")
-    write_text(out / REPORT_FILE, report.features_report(results, "fig4_features.png"))
+    sheet = _features_sheet(runs[0], run_results[0], max_frames)
+    write_report(out, report.features_report(results, "fig4_features.png"), figures=["fig4_features.png"],
+                 sheets=[sheet])
     write_results(out / RESULTS_FILE, results)
     return results
 
@@ -460,8 +501,8 @@ def bench_vo(
 
     report.plot_rpe(results, out / "fig6_rpe.png")
     report.plot_trajectories(aligned_xyz, ref_xyz if ref_traj is not None else None, out / "trajectories.png")
-    write_text(out / REPORT_FILE,
-               report.vo_report(results, {"RPE against trajectory length (Fig. 6)": "fig6_rpe.png",
-                                          "trajectories": "trajectories.png"}))
+    write_report(out, report.vo_report(results, {"RPE against trajectory length (Fig. 6)": "fig6_rpe.png",
+                                                 "trajectories": "trajectories.png"}),
+                 figures=["fig6_rpe.png", "trajectories.png"], sheets=[_features_sheet(run, None, max_frames)])
     write_results(out / RESULTS_FILE, results)
     return results

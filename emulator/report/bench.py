@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from emulator.report.figures import new_figure, save
+from emulator.report.figures import legend_outside, log_ticks_at, new_figure, plural, same_as, save
 from emulator.report.verdicts import (
     DASH_NOTE,
     matches_verdict,
@@ -87,15 +87,25 @@ def plot_features(results: dict, path: str | Path) -> Path:
     b.set_ylabel("matches between consecutive images")
     b.set_title(f"(b) matches (ratio test {results['parameters']['ratio']})")
     curve = results["success_curve"]
-    for m in methods:
-        rate = curve["rate"].get(m)
-        if rate is not None:
-            c.plot(curve["taus"], 100.0 * np.asarray(rate), label=m, drawstyle="steps-post")
-    c.set_xlabel(r"$\tau_\mathrm{matches}$")
+    rates = {m: curve["rate"][m] for m in methods if curve["rate"].get(m) is not None}
+    twins = same_as(rates)
+    taus = list(curve["taus"])
+    step = taus[-1] - taus[-2] if len(taus) > 1 else 1
+    x = taus + [taus[-1] + step] if taus else taus  # the last step drawn to its end
+    for m, rate in rates.items():
+        y = 100.0 * np.append(rate, rate[-1]) if taus else []
+        if m in twins:  # drawn dashed over its twin, and named so: identical curves hide each other
+            c.plot(x, y, ls="--", label=f"{m} (= {twins[m]})", drawstyle="steps-post")
+        else:
+            c.plot(x, y, label=m, drawstyle="steps-post")
+    if taus:
+        c.set_xlim(0, x[-1])
+    c.axvline(100, color="0.6", lw=0.8, ls=":", zorder=0)  # the paper's reference threshold
+    c.set_xlabel(r"$\tau_\mathrm{matches}$ (dotted: 100, the paper's)")
     c.set_ylabel("successful runs (%)")
     c.set_ylim(-2, 102)
-    c.set_title(f"(c) success rate over {results['n_runs']} run folder(s)")
-    c.legend(fontsize="small")
+    c.set_title(f"(c) success rate over {plural(results['n_runs'], 'run folder')}")
+    legend_outside(c)
     return save(fig, path)
 
 
@@ -120,7 +130,7 @@ def rpe_figure(results: dict):
             continue
         failed = method["status"] != "success"
         style = FAILED_STYLE if failed else "-"
-        label = f"{name} (VO failed on {len(method.get('failures', []))} frames)" if failed else name
+        label = f"{name} (VO failed on {plural(len(method.get('failures', [])), 'frame')})" if failed else name
         a.plot(d, [e["trans_pct"]["median"] for e in rpe["deltas"] if e["trans_pct"]], style, marker="o", label=label)
         b.plot(d, [e["rot_deg_per_m"]["median"] for e in rpe["deltas"] if e["rot_deg_per_m"]], style, marker="o",
                label=label)
@@ -129,9 +139,10 @@ def rpe_figure(results: dict):
         ax.set_xlabel("pair length delta (m)")
         ax.set_ylabel(label)
         if drawn:
-            ax.legend(fontsize="small", title="dotted: VO failed (RPE shown anyway)"
-                      if any(m["status"] != "success" and m.get("rpe") for m in results["methods"].values())
-                      else None, title_fontsize="small")
+            if ax is b:  # one legend, outside the data, for both panels
+                legend_outside(ax, title="dotted: VO failed (RPE shown anyway)"
+                               if any(m["status"] != "success" and m.get("rpe") for m in results["methods"].values())
+                               else None, title_fontsize="small")
         else:
             ax.text(0.5, 0.5, "no RPE (no reference or every run failed)", ha="center", va="center",
                     transform=ax.transAxes)
@@ -184,7 +195,7 @@ def trajectories_figure(trajectories: dict, reference_xyz: np.ndarray | None):
     to_scale = min(span_x, span_y) > 0 and max(span_x, span_y) / min(span_x, span_y) <= MAX_EQUAL_ASPECT
     if to_scale:
         ax.set_aspect("equal", adjustable="box")
-    ax.legend(fontsize="small")
+    legend_outside(ax)
     title = ("VO trajectories (Sim(3)-aligned to the reference)" if reference_xyz is not None
              else "VO trajectories")
     ax.set_title(title + ("" if to_scale else "\naxes not to scale"))

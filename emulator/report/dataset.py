@@ -14,6 +14,7 @@ import numpy as np
 
 from emulator.io.files import REPORT_FILE, RESULTS_FILE, write_results, write_text
 from emulator.report.figures import new_figure, save
+from emulator.report.html import write_report
 
 __all__ = ["PLOT_FILE", "per_method_table", "plot_methods", "dataset_markdown", "write_dataset_report"]
 
@@ -133,5 +134,12 @@ def write_dataset_report(out_dir: str | os.PathLike, summary: dict) -> dict:
     write_results(out / RESULTS_FILE, summary)
     if summary["per_sequence"] and summary["units"]:
         plot_methods(summary, out / PLOT_FILE)
-    write_text(out / REPORT_FILE, dataset_markdown(summary))
+    write_report(out, dataset_markdown(summary), figures=[PLOT_FILE], sheets=[_unit_pages(out, summary)])
     return summary
+
+
+def _unit_pages(out: Path, summary: dict) -> str:
+    """HTML: a link to every unit's own report.html, and the first unit's contact sheet."""
+    from emulator.report.html import run_folder_pages
+
+    return run_folder_pages(out, [(f"{u['sequence']} / {u['group']}", u["folder"]) for u in summary["units"]])

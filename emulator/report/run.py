@@ -12,8 +12,9 @@ from pathlib import Path
 import numpy as np
 
 from emulator.io.files import REPORT_FILE, RESULTS_FILE, write_results, write_text
+from emulator.report.html import run_contact_sheet, write_report
 from emulator.io.runfolder import read_run_json, read_tables
-from emulator.report.figures import new_figure, save
+from emulator.report.figures import legend_outside, log_ticks_at, new_figure, plural, same_as, save
 
 __all__ = ["PLOT_FILE", "summarise_run", "plot_exposure", "run_markdown", "write_run_report"]
 
@@ -50,7 +51,7 @@ def summarise_run(run_dir: str | os.PathLike, info: dict | None = None, tables: 
 
         brackets, counts = np.unique(t["bracket_ms"], return_counts=True) if n else (np.array([]), np.array([]))
         methods[name] = {
-            "mode": info.get("method_options", {}).get(name, {}).get("mode"),
+            "mode": _mode(info, name),
             "cycles": int(n),
             "mean_exposure_ms": stat(np.mean, target),
             "median_exposure_ms": stat(np.median, target),
@@ -81,23 +82,41 @@ def summarise_run(run_dir: str | os.PathLike, info: dict | None = None, tables: 
     }
 
 
+def _mode(info: dict, name: str) -> str:
+    """The method's mode as the report shows it: paper/borealhdr, or "plugin" for a method without one."""
+    opts = info.get("method_options", {}).get(name, {})
+    if opts.get("mode") is not None:
+        return str(opts["mode"])
+    return "plugin" if opts.get("plugin") else "-"
+
+
 def plot_exposure(info: dict, tables: dict, path: str | os.PathLike) -> Path:
-    """Target exposure of every method against time (log scale), the brackets as grey lines."""
+    """Target exposure of every method against time (log scale, ticks at the brackets), the brackets as grey lines.
+
+    Methods whose exposure sequences are identical are drawn dashed on top of each other and
+    named so in the legend ("= classical-50"); the legend sits outside the data.
+    """
     fig, (ax,) = new_figure(1, 9.0, 4.5)
     t0 = min((int(t["timestamp_ns"][0]) for t in tables.values() if t["timestamp_ns"].size), default=0)
-    for b in info.get("brackets_ms", []):
+    brackets = list(info.get("brackets_ms", []))
+    for b in brackets:
         ax.axhline(b, color="0.85", lw=0.8, zorder=0)
+    twins = same_as({name: t["target_ms"] for name, t in tables.items() if t["timestamp_ns"].size})
     for name, t in tables.items():
         if not t["timestamp_ns"].size:
             continue
         x = (t["timestamp_ns"] - t0) / 1e9
-        ax.step(x, t["target_ms"], where="post", marker="o", ms=3, lw=1.3, label=name)
+        if name in twins:
+            ax.step(x, t["target_ms"], where="post", ls="--", lw=1.3, label=f"{name} (= {twins[name]})")
+        else:
+            ax.step(x, t["target_ms"], where="post", marker="o", ms=3, lw=1.3, label=name)
     ax.set_yscale("log")
+    log_ticks_at(ax, brackets)
     ax.set_xlabel("time since first bracket [s]")
-    ax.set_ylabel("exposure [ms]")
+    ax.set_ylabel("exposure [ms] (ticks: the brackets)")
     ax.set_title(f"Exposure per cycle ({info.get('mode', '')} mode, start {info.get('initial_ms')} ms)")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8, ncol=2)
+    ax.grid(True, which="major", alpha=0.3)
+    legend_outside(ax)
     return save(fig, path)
 
 
@@ -115,7 +134,8 @@ def run_markdown(info: dict, summary: dict) -> str:
         f"- mode: {info.get('mode')}, selector: {info.get('selector')} (left camera's saturation decides)",
         f"- initial exposure {info.get('initial_ms')} ms, clamp {info.get('range_ms')} ms, response `{info.get('response')}`",
         f"- images: {info.get('save')}",
-        f"- command: `{info.get('command')}`, exposim {info.get('version')}",
+        f"- command: `{info.get('command') or 'emulator.runner.run_to_folder (library call)'}`, "
+        f"exposim {info.get('version')}",
         "",
         f"![exposure against time]({PLOT_FILE})",
         "",
@@ -178,5 +198,6 @@ def write_run_report(run_dir: str | os.PathLike) -> dict:
     summary = summarise_run(run_dir, info, tables)
     plot_exposure(info, tables, run_dir / PLOT_FILE)
     write_results(run_dir / RESULTS_FILE, summary)
-    write_text(run_dir / REPORT_FILE, run_markdown(info, summary))
+    sheet = run_contact_sheet(run_dir, info["methods"], tables, white_level=info.get("white_level"))
+    write_report(run_dir, run_markdown(info, summary), figures=[PLOT_FILE], sheets=[sheet])
     return summary

@@ -8,6 +8,7 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
+from emulator.commands.progress import add_quiet, bars_enabled
 from emulator.commands import argtypes
 from emulator.errors import ExposimError
 from scenes.commands.render import add_scheduler_option
@@ -43,7 +44,7 @@ def add_arguments(p: argparse.ArgumentParser, *, output_option: bool = False) ->
     p.add_argument("--scenes", type=argtypes.names, help=f"comma-separated scenes (default: {','.join(full.scenes)})")
     add_scheduler_option(p)
     p.add_argument("--force", action="store_true", help="overwrite an existing results.json")
-    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    add_quiet(p, "no progress bars")
     p.add_argument("--redraw", action="store_true",
                    help="only re-evaluate the findings and rewrite report.md and the figure from OUT/results.json")
 
@@ -68,7 +69,7 @@ def run_from_args(args: argparse.Namespace, command: str) -> dict:
     if args.scenes:
         changes["scenes"] = args.scenes
     cfg = replace(CONFIGS["quick" if args.quick else "full"], **changes)
-    return run_study(args.output, cfg, force=args.force, progress=not args.no_progress, command=command,
+    return run_study(args.output, cfg, force=args.force, progress=bars_enabled(args.quiet), command=command,
                      scheduler=check_scheduler(args.scheduler))
 
 

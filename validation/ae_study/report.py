@@ -35,7 +35,7 @@ def report_markdown(results: dict) -> str:
     lo, hi = taus[0], taus[-1]
     summary = results["summary"]
     lines = [
-        "# Synthetic AE study (issue 7): the paper's section V-D on synthetic stereo walks",
+        "# Synthetic AE study: the paper's section V-D on synthetic stereo walks",
         "",
         f"Scenes {', '.join(cfg['scenes'])}; {cfg['n_cycles']} bracket cycles each (1..32 ms, 22 frames/s, "
         f"{cfg['n_cycles'] * 6 / 22:.1f} s of walk at 2 km/h), {cfg['width']}x{cfg['height']} px, {cfg['spp']} spp, "

@@ -9,6 +9,7 @@ from dataclasses import asdict
 from pathlib import Path
 
 from emulator.io.files import REPORT_FILE, RESULTS_FILE, prepare_output, read_results, write_results, write_text
+from emulator.report.html import run_folder_pages, write_report
 from validation.ae_study.config import CONFIGS, PAPER, VO_CONFIGURATION_NOTE, StudyConfig, StudyError, config_from_dict
 from validation.ae_study.findings import evaluate_findings, findings_paragraph
 from validation.ae_study.report import plot_summary, report_markdown
@@ -114,7 +115,7 @@ def run_study(out, config: StudyConfig = CONFIGS["full"], *, force: bool = False
     from emulator import __version__
 
     results = {
-        "study": "ae_study (issue 7)",
+        "study": "ae_study",
         "exposim_version": __version__,
         "command": command,
         "config": cfg.to_dict(),
@@ -136,7 +137,8 @@ def run_study(out, config: StudyConfig = CONFIGS["full"], *, force: bool = False
         },
     }
     plot_summary(results, out / "ae_study_summary.png")
-    write_text(out / REPORT_FILE, report_markdown(results))
+    write_report(out, report_markdown(results), sheets=[run_folder_pages(
+        out, [(s, out / "runs" / s) for s in cfg.scenes], n_sheets=len(cfg.scenes))])
     write_results(out / RESULTS_FILE, results)
     return results
 
@@ -170,6 +172,7 @@ def redraw(out) -> dict:
     results["findings_paragraph"] = findings_paragraph(results["findings"])
     results["redrawn"] = results.get("redrawn", 0) + 1
     plot_summary(results, out / "ae_study_summary.png")
-    write_text(out / REPORT_FILE, report_markdown(results))
+    write_report(out, report_markdown(results), sheets=[run_folder_pages(
+        out, [(s, out / "runs" / s) for s in cfg.scenes], n_sheets=len(cfg.scenes))])
     write_results(path, results)
     return results

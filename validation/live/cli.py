@@ -13,6 +13,7 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
+from emulator.commands.progress import add_json, add_quiet, bars_enabled, print_json
 from emulator.commands import argtypes
 from emulator.errors import ExposimError
 from scenes.commands.render import add_scheduler_option
@@ -24,7 +25,7 @@ __all__ = ["HELP", "DESCRIPTION", "add_arguments", "register", "build_parser", "
 
 HELP = "live versus emulated closed loop: does the emulated benchmark rank the AE methods as a live camera would?"
 DESCRIPTION = (
-    "Issue 14. On synthetic stereo walks, every AE method runs twice: emulated (the normal closed loop on the "
+    "On synthetic stereo walks, every AE method runs twice: emulated (the normal closed loop on the "
     "bracketed recording, plain and noise-consistent emulation) and live (each cycle the camera captures at the "
     "method's own exposure from the rendered radiance, at the emulator's bracket instant or at the cycle's first "
     "shot). Compares exposure trajectories, images, features/VO metrics and the methods' rankings (Kendall tau), "
@@ -59,7 +60,8 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument("--keep-radiance", action="store_true", help="keep the datasets' radiance EXRs (large)")
     p.add_argument("--cache-dir", help="render cache (default $EXPOSIM_CACHE or ~/.cache/exposim/renders)")
     add_scheduler_option(p)
-    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    add_quiet(p, "no progress bars")
+    add_json(p)
     p.add_argument("--redraw", action="store_true",
                    help="only recompute the verdicts and rewrite results.json, report.md and the figures of the "
                         "existing folder OUT from its raw.json")
@@ -127,6 +129,9 @@ def run(args, prog: str = "exposim validate live") -> int:
 
     if args.redraw:
         results = redraw(args.output)
+        if args.json:
+            print_json(results)
+            return 0
         print(headline(results))
         return 0
     cfg = config_from_args(args)
@@ -134,11 +139,14 @@ def run(args, prog: str = "exposim validate live") -> int:
     out = numbered_output(args.output)
     if out != args.output:
         log(f"live: {args.output} exists and is not empty; writing to {out}")
-    results = run_live_experiment(out, cfg, progress=not args.no_progress, command=command_line(args, prog),
-                                  cache_dir=args.cache_dir, log=None if args.no_progress else log,
+    results = run_live_experiment(out, cfg, progress=bars_enabled(args.quiet), command=command_line(args, prog),
+                                  cache_dir=args.cache_dir, log=None if args.quiet else log,
                                   scheduler=scheduler)
+    if args.json:
+        print_json(results)
+        return 0
     print(headline(results))
-    print(f"wrote {out / 'results.json'}, {out / 'report.md'} in {results['timings']['total_s'] / 60:.1f} min")
+    print(f"wrote {out / 'results.json'}, {out / 'report.md'}, {out / 'report.html'} in {results['timings']['total_s'] / 60:.1f} min")
     return 0
 
 

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from emulator.io.files import REPORT_FILE, RESULTS_FILE, first_free, read_results, to_jsonable, write_results, write_text
+from emulator.report.html import write_report
 from validation.live.compare import exposure_log2_errors, image_errors, measure_noise_variance_ratio
 from validation.live.config import (
     BRIGHTENING_PAIRS,
@@ -246,7 +247,7 @@ def finish(out, raw: dict) -> dict:
     results["noise_variance_ratio_brightening_detail"] = nvr_up
     results["emulation_ratio_use"] = ratio_use(per_scene, list(cfg.methods))
     results.update({
-        "experiment": "live versus emulated (issue 14)",
+        "experiment": "live versus emulated",
         "exposim_version": raw.get("exposim_version"),
         "command": raw.get("command"),
         "config": cfg.to_dict(),
@@ -260,9 +261,24 @@ def finish(out, raw: dict) -> dict:
         plot_trajectories(per_scene[s]["trajectories"], out / f"exposure_{s}.png", title=s)
     if cfg.metrics:
         plot_metrics(results, out / "metrics.png")
-    write_text(out / REPORT_FILE, report_markdown(results))
+    write_report(out, report_markdown(results), sheets=[_live_sheets(out, cfg.scenes[0])])
     write_results(out / RESULTS_FILE, results)
     return results
+
+
+def _live_sheets(out: Path, scene: str) -> str:
+    """Contact sheets of the first scene: what each method saw in every run (emulated and live)."""
+    from emulator.io.runfolder import read_run_json, read_tables
+    from emulator.report.html import run_contact_sheet
+
+    parts = []
+    folder = Path(out) / "runs" / scene
+    for run_dir in sorted(p for p in folder.glob("*") if (p / "run.json").is_file()):
+        info = read_run_json(run_dir)
+        sheet = run_contact_sheet(run_dir, info["methods"], read_tables(run_dir, info["methods"]),
+                                  white_level=info.get("white_level"))
+        parts.append(sheet.replace("What each method saw", f"{scene}, {run_dir.name}: what each method saw", 1))
+    return "\n".join(parts)
 
 
 def redraw(out) -> dict:

@@ -90,7 +90,7 @@ def report_markdown(results: dict) -> str:
     best = results["headline_noise"]
     goals = results["goals"]
     lines = [
-        "# Live versus emulated closed loop (issue 14)",
+        "# Live versus emulated closed loop",
         "",
         f"{len(cfg['scenes'])} synthetic stereo walks ({', '.join(cfg['scenes'])}), {cfg['n_cycles']} cycles each, "
         f"{cfg['width']}x{cfg['height']} px at {cfg['spp']} spp, {len(cfg['methods'])} AE methods, seed {cfg['seed']}. "
