@@ -179,13 +179,12 @@ def load_entry(path, material: dict | None = None) -> np.ndarray:
     if a.ndim != 3:
         raise RenderError(f"{path}: not an RGB OpenEXR file (one channel)")
     if material is not None:
-        import OpenEXR
+        from emulator.io.exr import read_exr_attributes
 
         try:
-            # (not as a context manager: its __enter__ gives an empty header in some processes)
-            header = dict(OpenEXR.File(str(path), header_only=True).header())
-        except (RuntimeError, OSError, ValueError) as exc:
-            raise RenderError(f"{path}: not a readable OpenEXR file ({exc})") from exc
+            header = read_exr_attributes(path)
+        except DatasetError as exc:
+            raise RenderError(str(exc)) from exc
         if header.get(KEY_ATTRIBUTE) != canonical_json(material):
             raise CacheEntryError(f"{path}: render cache entry of another render (key material differs)")
         sha = header.get(SHA_ATTRIBUTE)  # absent in entries written before checksums: key and values still checked
