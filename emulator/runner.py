@@ -286,6 +286,7 @@ def run_to_folder(
                           method_status=method_status)
         if save != "none":
             writer.write_times(names)
+        _write_method_output(out, names)  # what methods printed (isolated from the run's stdout)
     if make_report:
         from emulator.report.run import write_run_report
 
@@ -293,3 +294,19 @@ def run_to_folder(
     from emulator.report.run import summarise_run
 
     return summarise_run(out)
+
+
+#: File in a method's folder holding what the method printed (stdout and stderr, in order).
+METHOD_OUTPUT_FILE = "output.txt"
+
+
+def _write_method_output(out: Path, names) -> None:
+    """Write each method's captured output (:mod:`emulator.autoexposure.isolation`) to its folder."""
+    from emulator.autoexposure.isolation import captured_output
+    from emulator.io.files import atomic_write_bytes
+
+    for name in names:
+        text, total = captured_output(name, clear=True)
+        if total:
+            note = "" if total == len(text) else f"\n[... {total - len(text)} more characters not kept]\n"
+            atomic_write_bytes(out / name / METHOD_OUTPUT_FILE, (text + note).encode(), overwrite=True)

@@ -212,9 +212,9 @@ def test_a_method_that_prints_leaves_json_output_intact(seq, alone, hostile, tmp
     doc = json.loads(captured.out)  # one JSON document: nothing the plugin printed
     assert doc["methods"]["printer"]["status"] == "ok"
     assert "hello" not in captured.out and "stderr" not in captured.err
-    text, total = captured_output("printer", clear=True)
-    assert text.startswith("hello from the plugin\nand on stderr\n") and total == 6 * len(
-        "hello from the plugin\nand on stderr\n")
+    assert (out / "printer" / "output.txt").read_text() == 6 * "hello from the plugin\nand on stderr\n"
+    assert captured_output("printer") == ("", 0)  # handed to the run folder
+    assert not (out / "shim" / "output.txt").exists()
     _assert_others_unchanged_and_run_complete(out, alone, "printer", "ok")
 
 
