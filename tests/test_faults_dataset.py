@@ -30,6 +30,18 @@ class Broken:
 
     def next_exposure(self, raw, exposure_ms):
         raise RuntimeError("always")
+
+
+class Exits:
+    name = "exits"
+
+    def reset(self):
+        pass
+
+    def next_exposure(self, raw, exposure_ms):
+        import sys
+
+        sys.exit(0)
 '''
 
 
@@ -121,3 +133,13 @@ def test_a_concurrent_resume_is_refused_and_leaves_the_live_run_whole(tmp_path, 
     results = json.loads((out / "results.json").read_text())
     assert results["errors"] == [] and results["per_method"]["slow"]["cycles"] == 8
     assert not (out / "run.lock").exists()
+
+
+def test_a_plugin_calling_sys_exit_does_not_stop_a_serial_dataset_run(data, tmp_path, capsys):
+    out = tmp_path / "out"
+    assert _run(data, out, "classical-50,ds_plug:Exits") == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "exits: failed: called sys.exit(0) at cycle 0" in err[0]
+    results = json.loads((out / "results.json").read_text())
+    assert [u["sequence"] for u in results["units"]] == ["a", "b"]  # both units ran to the end
+    assert results["per_method"]["classical-50"]["cycles"] == 6
