@@ -48,6 +48,7 @@ def _config_of(run_json: dict) -> dict:
     out = {k: run_json.get(k) for k in ("sequence", "methods", "selector", "initial_ms", "range_ms", "save", "mode",
                                         "options", "response", "method_timeout")}
     out["noise"] = run_json.get("noise") or {"mode": "none"}  # run folders from before --noise: none
+    out["blur"] = run_json.get("blur") or {"mode": "none"}  # run folders from before --blur: none
     return out
 
 
@@ -114,6 +115,8 @@ def run_to_folder(
     noise_model=None,
     noise_seed: int = 0,
     method_timeout: float | None = None,
+    blur: str = "none",
+    blur_aware: bool = False,
 ) -> dict:
     """Run AE methods on a recording and write a run folder (:mod:`emulator.io.runfolder`).
 
@@ -178,6 +181,12 @@ def run_to_folder(
                        {"mode": noise, "seed": int(noise_seed),
                         "model": {k: v for k, v in model.to_dict().items() if k != "response"}})
     clamped_initial = _clamp(config["initial_ms"], config["range_ms"])
+    from emulator.motion import blur_hook
+
+    hook = blur_hook(blur, seq, response, blur_aware=blur_aware)  # None for "none"; blur.csv, run.json "blur"
+    config["blur"] = {"mode": "none"} if hook is None else hook.describe()
+    if blur_aware and selector != "higher-no-sat":
+        raise PlaybackError(f"the blur-aware selection refines selector higher-no-sat, not {selector!r}")
 
     with RunWriter(out, resume=resume) as writer:
         if resume:
@@ -247,7 +256,7 @@ def run_to_folder(
             gen = iter_run(seq, list(built.values()), initial_ms=initial_ms, range_ms=range_ms, selector=selector,
                            response=response, jobs=jobs, emulate_right=save != "none", on_step=write_images,
                            stats=stats, noise=noise, noise_model=model, noise_seed=noise_seed,
-                           method_timeout=timeout_s)
+                           method_timeout=timeout_s, blur=hook)
             for cs in gen:
                 method_status.update(cs.failed)
                 if cs.skipped:
@@ -284,6 +293,8 @@ def run_to_folder(
                 run_json.pop("error", None)
             writer.update(status=status, cycles_done=done, skipped_cycles=skipped, timing=stats.as_dict(),
                           method_status=method_status)
+        if hook is not None:
+            hook.write_table(out)
         if save != "none":
             writer.write_times(names)
         _write_method_output(out, names)  # what methods printed (isolated from the run's stdout)

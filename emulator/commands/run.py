@@ -58,6 +58,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--noise", choices=("none", "consistent"), default=None,
                    help="none (default): exact emulation (eq. 2); consistent: add the noise a capture at the "
                         "target exposure would have where the source bracket is cleaner (needs a noise model)")
+    p.add_argument("--blur", choices=("none", "consistent"), default=None,
+                   help="none (default): exact emulation; consistent: add the gyro's blur of the extra exposure time "
+                        "where the target is longer than the bracket, and record each image's excess blur in blur.csv "
+                        "(needs imu/imu.csv and a camera calibration; docs/blur.md)")
+    p.add_argument("--blur-aware", action="store_true",
+                   help="with --blur consistent and --selector higher-no-sat: take the lower bracket when the higher "
+                        "one's excess blur costs more than the lower one's noise (emulator.select.blur_aware)")
     p.add_argument("--noise-model", type=Path, default=None, metavar="FILE.json",
                    help="noise model for --noise consistent (`exposim calibrate --noise`); default: the model "
                         "a synthetic recording's exposim.json carries")
@@ -136,7 +143,7 @@ def _command(args) -> str:
     parts = ["exposim", "run", str(args.sequence), "-o", str(args.output)]
     for flag, value in (("--methods", args.methods), ("--save", args.save), ("--mode", args.mode),
                         ("--initial-ms", args.initial_ms), ("--selector", args.selector),
-                        ("--response", args.response), ("--seed", args.seed), ("--noise", args.noise),
+                        ("--response", args.response), ("--seed", args.seed), ("--noise", args.noise), ("--blur", args.blur),
                         ("--noise-model", args.noise_model), ("--noise-seed", args.noise_seed)):
         if value is not None:
             parts += [flag, str(value)]
@@ -146,6 +153,8 @@ def _command(args) -> str:
         parts += ["--option", text]
     if args.jobs != 1:
         parts += ["--jobs", str(args.jobs)]
+    if getattr(args, "blur_aware", False):
+        parts.append("--blur-aware")
     if args.resume:
         parts.append("--resume")
     if getattr(args, "method_timeout", None) is not None:
@@ -185,8 +194,10 @@ def _run(args) -> int:
         raise ExposimError("--frame-cache applies to one sequence; a dataset run reads each sequence's own "
                            "SEQUENCE/.exposim-frames")
     if args.sequences is not None:
-        if args.noise not in (None, "none") or args.method_timeout is not None or args.strict:
-            raise ExposimError("--noise, --method-timeout and --strict apply to single-sequence runs; "
+        if args.noise not in (None, "none") or args.blur not in (None, "none") or args.blur_aware \
+                or args.method_timeout is not None or args.strict:
+            raise ExposimError("--noise, --blur, --blur-aware, --method-timeout and --strict apply to single-sequence "
+                               "runs; "
                                "dataset runs (--sequences) do not take them yet")
         return _run_dataset(args)
     if args.scheduler not in (None, "serial") or args.scheduler_file is not None:
@@ -206,6 +217,7 @@ def _run(args) -> int:
         "selector": args.selector,
         "noise": args.noise,
         "noise_seed": args.noise_seed,
+        "blur": args.blur,
     }
     options: dict[str, dict] = {}
     for text in args.option:
@@ -222,6 +234,7 @@ def _run(args) -> int:
         "selector": DEFAULT_SELECTOR,
         "noise": "none",
         "noise_seed": 0,
+        "blur": "none",
     }
     noise_model = args.noise_model
     response_path = args.response
@@ -231,11 +244,14 @@ def _run(args) -> int:
             raise ExposimError(f"{args.output / RUN_FILE}: no run to resume (run.json missing)")
         recorded = read_run_json(args.output)
         rec_noise = recorded.get("noise") or {"mode": "none"}
-        recorded = {**recorded, "noise": rec_noise.get("mode", "none"), "noise_seed": rec_noise.get("seed", 0)}
+        recorded = {**recorded, "noise": rec_noise.get("mode", "none"), "noise_seed": rec_noise.get("seed", 0),
+                    "blur": (recorded.get("blur") or {"mode": "none"}).get("mode", "none"),
+                    "blur_spec": recorded.get("blur") or {}}
         if given["methods"] is None and recorded.get("method_specs"):
             given["methods"] = ",".join(recorded["method_specs"])  # import-path plugins by their path
         if args.method_timeout is None:
             args.method_timeout = recorded.get("method_timeout")
+        args.blur_aware = args.blur_aware or bool((recorded.get("blur_spec") or {}).get("blur_aware"))
         for key, value in given.items():
             if value is None:
                 given[key] = recorded.get(key, defaults[key])
@@ -292,6 +308,8 @@ def _run(args) -> int:
             noise_model=noise_model,
             noise_seed=cfg["noise_seed"],
             method_timeout=args.method_timeout,
+            blur=cfg["blur"],
+            blur_aware=args.blur_aware,
         )
     finally:
         if bar is not None:

@@ -4,6 +4,7 @@ Layout (BorealHDR, also written by ``synth``)::
 
     <sequence>/camera_left/<exposure_ms>/<timestamp_ns>.png    16-bit PNG, 12-bit Bayer DN
     <sequence>/camera_right/<exposure_ms>/<timestamp_ns>.png
+    <sequence>/imu/imu.csv         optional IMU (gyro, accelerometer), :mod:`emulator.io.imu`
     <sequence>/exposim.json        optional metadata (white/black level, brackets) from synth
     <sequence>/calibration/response.txt or pcalib*.txt, or <sequence>/../calibration/pcalib*.txt
                                    the inverse response (pcalib format)
@@ -40,6 +41,7 @@ from emulator.errors import DatasetError
 from emulator.io.files import parse_json_object, write_metadata
 from emulator.io.framecache import FrameCacheEntryError, cached_frame_path, read_cached_frame, resolve_frame_cache, \
     write_cached_frame
+from emulator.io.imu import read_imu
 from emulator.io.png import decode_png16, write_png16
 from emulator.response import BOREALHDR_BLACK_LEVEL, BOREALHDR_WHITE_LEVEL
 
@@ -131,8 +133,8 @@ class ZipSource:
 
     The recording is the one folder of the archive that holds ``camera_left/`` and/or
     ``camera_right/``, under whatever folder prefix (``backpack_.../camera_left/...`` or
-    ``camera_left/...`` at the top); everything else the archive carries (lidar, IMU, ...)
-    is ignored, as are ``__MACOSX/`` and hidden members.  Paths are ``<zip>/<relative
+    ``camera_left/...`` at the top); its ``imu/imu.csv`` is read (:mod:`emulator.io.imu`),
+    everything else the archive carries (lidar, ...) is ignored, as are ``__MACOSX/`` and hidden members.  Paths are ``<zip>/<relative
     path>`` (:attr:`root` is the zip file), so messages name a member as
     ``/data/backpack.zip/camera_left/8.0/123.png``.  Raises :class:`DatasetError` naming the
     zip for an unreadable (corrupt) archive, an archive without a recording, or one with
@@ -390,8 +392,10 @@ def load_sequence(
     if not per_camera:
         raise DatasetError(f"{root}: no camera_left/ or camera_right/ folder (not a BorealHDR sequence)")
     _check_sizes(source, per_camera, root)
-    return build_sequence(root, per_camera, white_level=white, black_level=black,
-                          brackets_ms=meta.get("brackets_ms", ()), metadata=meta, gaps=gaps)
+    seq = build_sequence(root, per_camera, white_level=white, black_level=black,
+                         brackets_ms=meta.get("brackets_ms", ()), metadata=meta, gaps=gaps)
+    seq.imu = read_imu(root, source)  # None (and one ImuMissingWarning) without imu/imu.csv
+    return seq
 
 
 def read_frame(frame: Frame) -> np.ndarray:
