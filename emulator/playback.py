@@ -42,6 +42,7 @@ import cv2
 import numpy as np
 
 from emulator.autoexposure import DEFAULT_RANGE_MS, AutoExposureMethod
+from emulator.autoexposure.isolation import call_method
 from emulator.autoexposure.methodset import build_methods
 from emulator.autoexposure.registry import MethodFailed
 from emulator.dataset import CAMERAS, Sequence
@@ -408,7 +409,7 @@ def iter_run(
         bracket_sat = images.saturated(method_cam, key)
         before = getattr(method, "guard_count", 0)
         t0 = time.perf_counter()
-        proposed = method.next_exposure(left, target)  # MethodFailed: caught by the cycle loop
+        proposed = call_method(method, left, target)  # isolated; MethodFailed: caught by the cycle loop
         elapsed = time.perf_counter() - t0
         stats.add_method(name, elapsed)
         if timeout_s is not None and elapsed > timeout_s:

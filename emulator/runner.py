@@ -8,6 +8,7 @@ The loop itself is :mod:`emulator.playback`; the folder's layout, writer and rea
 from __future__ import annotations
 
 import json
+import os
 from collections.abc import Callable, Mapping
 from pathlib import Path
 
@@ -141,7 +142,7 @@ def run_to_folder(
     """
     if out_dir is None:
         raise PlaybackError("out_dir is required")
-    out = Path(out_dir)
+    out = Path(os.path.abspath(out_dir))  # absolute: a method's os.chdir cannot split the folder
     if save not in SAVE_MODES:
         raise PlaybackError(f"save must be one of {', '.join(SAVE_MODES)}, got {save!r}")
     seq = _resolve_sequence(sequence)
@@ -232,7 +233,7 @@ def run_to_folder(
                     f"initial_ms {config['initial_ms']:g} is outside range_ms {config['range_ms']}; "
                     f"clamped to {clamped_initial:g} ms")
         run_json["jobs"] = int(jobs)
-        writer.start(run_json, names, seq.cameras, save)
+        writer.start(run_json, names, seq.cameras, save, cycles=[c.index for c in seq.cycles])  # resume: validated
 
         def write_images(st: MethodStep) -> None:
             if save == "none":
@@ -296,6 +297,7 @@ def run_to_folder(
             hook.write_table(out)
         if save != "none":
             writer.write_times(names)
+        _write_method_output(out, names)  # what methods printed (isolated from the run's stdout)
     if make_report:
         from emulator.report.run import write_run_report
 
@@ -303,3 +305,19 @@ def run_to_folder(
     from emulator.report.run import summarise_run
 
     return summarise_run(out)
+
+
+#: File in a method's folder holding what the method printed (stdout and stderr, in order).
+METHOD_OUTPUT_FILE = "output.txt"
+
+
+def _write_method_output(out: Path, names) -> None:
+    """Write each method's captured output (:mod:`emulator.autoexposure.isolation`) to its folder."""
+    from emulator.autoexposure.isolation import captured_output
+    from emulator.io.files import atomic_write_bytes
+
+    for name in names:
+        text, total = captured_output(name, clear=True)
+        if total:
+            note = "" if total == len(text) else f"\n[... {total - len(text)} more characters not kept]\n"
+            atomic_write_bytes(out / name / METHOD_OUTPUT_FILE, (text + note).encode(), overwrite=True)

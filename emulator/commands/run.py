@@ -176,6 +176,14 @@ def _check_args(args) -> None:
         raise ExposimError(f"--jobs {args.jobs}: must be >= 1")
     if args.noise_seed is not None and args.noise_seed < 0:
         raise ExposimError(f"--noise-seed {args.noise_seed}: must be >= 0")
+    from emulator.commands.argtypes import SEED_MAX
+
+    for flag, seed in (("--seed", args.seed), ("--noise-seed", args.noise_seed)):
+        if seed is not None and not 0 <= seed <= SEED_MAX:
+            raise ExposimError(f"{flag} {seed}: must be in 0..{SEED_MAX}")
+    for flag, count in (("--workers", args.workers), ("--group-size", args.group_size)):
+        if count is not None and count < 1:  # 0 would silently mean "default"
+            raise ExposimError(f"{flag} {count}: must be >= 1")
     if args.noise_model is not None and args.noise != "consistent" and not args.resume:
         raise ExposimError("--noise-model is used only with --noise consistent")
 
@@ -306,7 +314,7 @@ def _run(args) -> int:
     finally:
         if bar is not None:
             bar.close()
-    failed = {n: m["status"] for n, m in summary["methods"].items() if m.get("status", "ok") != "ok"}
+    failed = {n: m["status"] for n, m in summary["methods"].items() if m.get("status", "ok").startswith("failed")}
     rc = 1 if failed and args.strict else 0
     if args.json:
         print(json.dumps(summary, indent=1))
@@ -329,6 +337,20 @@ def _run(args) -> int:
     if (args.output / "report.html").is_file():
         print(f"report      {args.output / 'report.html'} (open in a browser)")
     return rc
+
+
+def _check_methods_once(methods: str, run_options: dict) -> None:
+    """Build every method once with the run's options (no response: only the options are checked),
+    so that a bad ``--option`` or a plugin that cannot be built is refused before a dataset run
+    writes anything (it would otherwise fail in every unit and leave a dataset.json behind)."""
+    import warnings
+
+    from emulator.autoexposure.methodset import build_methods
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        build_methods(methods, mode=run_options.get("mode") or "paper", response=None,
+                      options=run_options.get("options"))
 
 
 def _run_dataset(args) -> int:
@@ -358,6 +380,7 @@ def _run_dataset(args) -> int:
     methods = args.methods or ",".join(recorded.get("methods", [])) or "all"
     group_size = args.group_size or recorded.get("group_size")
     scheduler, scheduler_file = resolve_scheduler(args.scheduler, args.scheduler_file)
+    _check_methods_once(methods, run_options)  # a bad option fails here, before dataset.json exists
 
     bar = None
     progress = None
@@ -397,4 +420,9 @@ def _run_dataset(args) -> int:
         first = summary["errors"][0]
         raise ExposimError(f"{len(summary['errors'])} unit(s) failed (see {args.output / 'report.md'}); "
                            f"first: {first['unit']}: {first['error']}")
+    failed = summary.get("failed_methods") or {}
+    if failed:
+        name, why = next(iter(failed.items()))
+        raise ExposimError(f"{len(failed)} method(s) failed in every unit (see {args.output / 'report.md'}); "
+                           f"first: {name}: {why}")
     return 0
