@@ -125,8 +125,23 @@ def plan_groups(methods: list[str], group_size: int = 1) -> list[tuple[str, ...]
     return [tuple(methods[i:i + n]) for i in range(0, len(methods), n)]
 
 
+#: Longest group folder name, bytes: file names stop at 255 bytes, and a unit's staging
+#: folder adds a dot, a marker and a random suffix to it.
+MAX_GROUP_NAME_BYTES = 200
+
+
 def _group_name(methods: tuple[str, ...]) -> str:
-    return "+".join(methods)
+    """``"m1+m2+..."``; a name over :data:`MAX_GROUP_NAME_BYTES` is cut and made unique by a hash
+    of the whole (the unit's record keeps the full method list)."""
+    import hashlib
+
+    name = "+".join(methods)
+    raw = name.encode()
+    if len(raw) <= MAX_GROUP_NAME_BYTES:
+        return name
+    digest = hashlib.sha256(raw).hexdigest()[:16]
+    head = raw[: MAX_GROUP_NAME_BYTES - len(digest) - 1].decode(errors="ignore")
+    return f"{head}~{digest}"
 
 
 def plan_units(sequences: Mapping[str, Path], methods: list[str], group_size: int = 1) -> list[Unit]:
@@ -360,7 +375,7 @@ def run_dataset(
     from emulator.playback import RunConfig
     from emulator.report.dataset import write_dataset_report
 
-    out = Path(out_dir)
+    out = Path(os.path.abspath(out_dir))  # absolute: a plugin's os.chdir cannot move the output
     cfg = RunConfig.from_kwargs(config, **settings)
     from emulator.distributed import check_scheduler, is_client
 
@@ -393,7 +408,11 @@ def run_dataset(
     ctx = contextlib.nullcontext() if in_process else open_client(
         scheduler, scheduler_file=None if scheduler_file is None else str(scheduler_file), n_workers=n_workers,
         retries=retries)
-    with ctx as client:  # a scheduler that cannot be reached fails before anything is written
+    from emulator.io.runfolder import RunLock
+
+    out.mkdir(parents=True, exist_ok=True)
+    # one process per dataset folder: a concurrent --resume is refused and never removes a live run's staging
+    with RunLock.acquire(out), ctx as client:  # a scheduler that cannot be reached fails before anything is written
         if cfg_path.is_file():
             remove_stale_staging(out)
         else:
@@ -401,17 +420,19 @@ def run_dataset(
         if progress is not None:
             progress(0, len(units))
         t0 = time.perf_counter()
-        outcomes = run_tasks(run_unit, [(u, str(out.resolve()), cfg) for u in units], client=client,
+        outcomes = run_tasks(run_unit, [(u, str(out), cfg) for u in units], client=client,
                              threads=(n_workers or 2) if scheduler == "threads" else 1, retries=retries,
                              progress=progress, keys=[u.key for u in units])
+        remove_stale_staging(out)  # attempts of units that were killed and ran again (under the lock)
     records = [o.result for o in outcomes if o.error is None]
     errors = [{"unit": o.key, "error": o.error} for o in outcomes if o.error is not None]
     wall_s = time.perf_counter() - t0
-    remove_stale_staging(out)  # attempts of units that were killed and ran again
+    run_names = _run_names(names)
     summary = {
         "root": config_json["root"],
         "sequences": list(found),
-        "methods": names,
+        "methods": run_names,
+        "method_specs": {n: spec for spec, n in zip(names, run_names) if n != spec},
         "groups": [list(g) for g in plan_groups(names, group_size)],
         "scheduler": scheduler_name,
         "units": [{k: v for k, v in r.items() if k != "results"} for r in records],
@@ -421,7 +442,26 @@ def run_dataset(
     }
     for r in records:
         summary["per_sequence"][r["sequence"]].update(r["results"])
+    summary["failed_methods"] = _failed_everywhere(summary["per_sequence"], run_names)
     return write_dataset_report(out, summary)
+
+
+def _run_names(specs) -> list[str]:
+    """The name each method runs under (an import path ``pkg.mod:Class`` -> its plugin name), so
+    that the summary finds its results, which the units record under that name."""
+    from emulator.autoexposure.registry import is_import_path, plugin_from_path
+
+    return [plugin_from_path(s).name if isinstance(s, str) and is_import_path(s) else s for s in specs]
+
+
+def _failed_everywhere(per_sequence: Mapping, names) -> dict[str, str]:
+    """Methods that failed on every sequence they ran on: name -> the first reason."""
+    out = {}
+    for name in names:
+        statuses = [per[name].get("status", "ok") for per in per_sequence.values() if name in per]
+        if statuses and all(str(st).startswith("failed") for st in statuses):
+            out[name] = statuses[0]
+    return out
 
 
 def to_plain(value):

@@ -15,6 +15,7 @@ of the bytes).
 from __future__ import annotations
 
 import contextlib
+import os
 import threading
 from collections import deque
 from collections.abc import Callable
@@ -212,7 +213,7 @@ def write_run(sequence, methods, out_dir, config: RunConfig | None = None, *, re
     (the final ``run.json`` and each method's columns, :func:`emulator.io.runfolder.tables_from_rows`)."""
     if out_dir is None:
         raise PlaybackError("out_dir is required")
-    out = Path(out_dir)
+    out = Path(os.path.abspath(out_dir))  # absolute: a method's os.chdir cannot split the folder
     cfg = RunConfig.from_kwargs(config, **settings)
     seq = resolve_sequence(sequence)
     method_specs = parse_methods(methods) if isinstance(methods, str) else list(methods)
@@ -236,12 +237,13 @@ def write_run(sequence, methods, out_dir, config: RunConfig | None = None, *, re
                                      writer.lock.owner["started"], hook)
             run_json.update(run_json_extra or {})
         run_json["jobs"] = cfg.jobs
-        writer.start(run_json, names, seq.cameras, cfg.save)
+        writer.start(run_json, names, seq.cameras, cfg.save, cycles=[c.index for c in seq.cycles])  # resume: validated
         rows = _loop_into(writer, provider, built, cfg, stats, out, progress, len(seq.cycles))
         if hook is not None:
             hook.write_table(out)  # blur.csv: each emulated image's blur
         if cfg.save != "none":
             writer.write_times(names, rows)
+        _write_method_output(out, names)  # what methods printed (isolated from the run's stdout)
     return writer.run_json, tables_from_rows(rows)
 
 
@@ -298,3 +300,19 @@ def _loop_into(writer: RunWriter, provider, built: dict, cfg: RunConfig, stats: 
         writer.update(status=status, cycles_done=done, skipped_cycles=skipped, timing=stats.as_dict(),
                       method_status=method_status)
     return rows
+
+
+#: File in a method's folder holding what the method printed (stdout and stderr, in order).
+METHOD_OUTPUT_FILE = "output.txt"
+
+
+def _write_method_output(out: Path, names) -> None:
+    """Write each method's captured output (:mod:`emulator.autoexposure.isolation`) to its folder."""
+    from emulator.autoexposure.isolation import captured_output
+    from emulator.io.files import atomic_write_bytes
+
+    for name in names:
+        text, total = captured_output(name, clear=True)
+        if total:
+            note = "" if total == len(text) else f"\n[... {total - len(text)} more characters not kept]\n"
+            atomic_write_bytes(out / name / METHOD_OUTPUT_FILE, (text + note).encode(), overwrite=True)

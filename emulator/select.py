@@ -45,6 +45,8 @@ EQUAL_RTOL = 1e-9
 
 def saturated_fraction(raw: np.ndarray, *, white_level: int, black_level: int) -> float:
     """Fraction of pixels at or below ``black_level`` or at or above ``white_level``."""
+    if not int(white_level) > int(black_level):
+        raise ExposimError(f"saturated_fraction: white_level {white_level!r} must exceed black_level {black_level!r}")
     raw = np.asarray(raw)
     if raw.size == 0:
         raise ExposimError("saturated_fraction: empty image")
@@ -66,7 +68,22 @@ def _fraction(value, *, white_level: int, black_level: int) -> float:
 def _sorted_brackets(brackets: Mapping) -> list[float]:
     if not brackets:
         raise ExposimError("no brackets to select from")
-    return sorted(check_exposure(b, "bracket exposure_ms") for b in brackets)
+    out = sorted(check_exposure(_number(b), "bracket exposure_ms") for b in brackets)
+    dup = sorted({v for v in out if out.count(v) > 1})
+    if dup:
+        raise ExposimError(f"brackets given twice: {', '.join(f'{v:g}' for v in dup)} ms (keys "
+                           f"{', '.join(repr(k) for k in brackets if float(k) in dup)})")
+    return out
+
+
+def _number(key):
+    """A bracket key as a number: folder-name strings (``"4.0"``) are read as numbers; ``True`` is not one."""
+    if isinstance(key, str):
+        try:
+            return float(key)
+        except ValueError:
+            return key  # refused by check_exposure, naming it
+    return key
 
 
 def _key(brackets: Mapping, value: float):

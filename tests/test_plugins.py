@@ -327,7 +327,8 @@ def test_plugin_wrapper_checks_every_result():
 
     raw = np.zeros((8, 8), np.uint16)
     for value, why in ((math.nan, "returned NaN"), (-math.inf, r"returned a non-finite exposure \(-inf ms\)"),
-                       (0.0, r"non-positive exposure \(0.0 ms\)"), ("3", None), (True, "returned True"),
+                       (0.0, r"non-positive exposure \(0.0 ms\)"), ("3", "returned '3', not an exposure"),
+                       (np.float32(3.0), None), (True, "returned True"),
                        (None, "returned None")):
         method = PluginMethod(Bad(value), "bad", "x:Bad")
         if why is None:

@@ -33,6 +33,7 @@ from emulator.autoexposure._frame import FRAME_MEMO
 from emulator.errors import ExposimError
 
 __all__ = [
+    "MethodFailed",
     "AutoExposure",
     "AutoExposureMethod",
     "AutoExposureError",
@@ -45,6 +46,8 @@ __all__ = [
     "to_gray",
     "bayer_to_gray_reference",
     "check_mode",
+    "check_seed",
+    "SEED_MAX",
     "check_range",
 ]
 
@@ -72,6 +75,11 @@ MIN_SIDE = 4
 
 class AutoExposureError(ExposimError):
     """Invalid input to an auto-exposure method (image type or shape, exposure, option)."""
+
+
+class MethodFailed(AutoExposureError):
+    """A method's call failed: it raised, returned a non-finite or non-positive exposure, or
+    took longer than the per-call limit.  The closed loop records it and drops the method."""
 
 
 @runtime_checkable
@@ -114,6 +122,19 @@ def check_exposure_ms(value) -> float:
     if not (math.isfinite(t) and t > 0):
         raise AutoExposureError(f"exposure_ms must be finite and positive (milliseconds), got {value!r}")
     return t
+
+
+#: Largest seed of NumPy's legacy ``RandomState`` (Kim's optimizer restarts): 2**32 - 1.
+SEED_MAX = 2**32 - 1
+
+
+def check_seed(value, name: str = "seed") -> int:
+    """An integer seed in 0 .. 2**32 - 1 (``bool`` and non-integral numbers refused)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise AutoExposureError(f"{name} must be an integer in 0..{SEED_MAX}, got {value!r}")
+    if not 0 <= int(value) <= SEED_MAX:
+        raise AutoExposureError(f"{name} must be in 0..{SEED_MAX}, got {value!r}")
+    return int(value)
 
 
 def check_raw(raw) -> np.ndarray:

@@ -44,7 +44,7 @@ from importlib import metadata
 
 import numpy as np
 
-from emulator.autoexposure._base import AutoExposureError
+from emulator.autoexposure._base import AutoExposureError, MethodFailed
 
 __all__ = [
     "ENTRY_POINT_GROUP",
@@ -63,11 +63,6 @@ __all__ = [
 ENTRY_POINT_GROUP = "exposim.methods"
 #: What a method name may hold: it names a folder and the NAME of ``--option NAME.KEY=VALUE``.
 NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]*$")
-
-
-class MethodFailed(AutoExposureError):
-    """A method's call failed: it raised, returned a non-finite or non-positive exposure, or
-    took longer than the per-call limit.  The closed loop records it and drops the method."""
 
 
 @dataclass
@@ -222,11 +217,12 @@ def build_plugin(plugin: MethodPlugin, *, mode: str = "paper", response=None,
         if key not in options and _names_param(factory, key):
             kwargs[key] = value
     kwargs.update(options)
+    from emulator.autoexposure.isolation import call_factory
+
     try:
-        method = factory(**kwargs)
-    except Exception as exc:
-        raise AutoExposureError(f"AE method {plugin.name!r} ({plugin.value}) could not be built with options "
-                                f"{options}: {type(exc).__name__}: {exc}") from exc
+        method = call_factory(factory, plugin.name, plugin.value, **kwargs)  # SystemExit included
+    except AutoExposureError as exc:
+        raise AutoExposureError(f"{exc} (options {options})") from exc.__cause__
     if not callable(getattr(method, "next_exposure", None)):
         raise AutoExposureError(f"AE method {plugin.name!r} ({plugin.value}) built {type(method).__name__}, which has "
                                 "no next_exposure(raw, exposure_ms) method")
@@ -265,7 +261,7 @@ class PluginMethod:
             value = self.method.next_exposure(raw, exposure_ms)
         except Exception as exc:
             raise MethodFailed(f"raised {type(exc).__name__}: {exc}") from exc
-        if isinstance(value, (bool, np.bool_)):
+        if isinstance(value, (bool, np.bool_, str, bytes)):  # "12.5" is text, not a number
             raise MethodFailed(f"returned {value!r}, not an exposure in ms")
         try:
             ms = float(value)

@@ -56,5 +56,5 @@ def _cache(args) -> int:
         return 0
     ratio = s["cache_bytes"] / s["png_bytes"] if s["png_bytes"] else float("nan")
     print(f"{s['cache_dir']}: {s['frames']} frames ({s['written']} written, {s['kept']} kept, "
-          f"{s['removed']} stale removed), {s['cache_bytes'] / 1e6:.1f} MB ({ratio:.2f} x the PNGs)")
+          f"{s['removed']} stale removed, {s['rebuilt']} bad rebuilt), {s['cache_bytes'] / 1e6:.1f} MB ({ratio:.2f} x the PNGs)")
     return 0

@@ -199,6 +199,14 @@ def config_from_args(args, base=None):
 
 def _check_args(args) -> None:
     """What only the command line can get wrong (the values are RunConfig's to check)."""
+    from emulator.commands.argtypes import SEED_MAX
+
+    for flag, seed in (("--seed", args.seed), ("--noise-seed", args.noise_seed)):
+        if seed is not None and not 0 <= seed <= SEED_MAX:
+            raise ExposimError(f"{flag} {seed}: must be in 0..{SEED_MAX}")
+    for flag, count in (("--workers", args.workers), ("--group-size", args.group_size)):
+        if count is not None and count < 1:  # 0 would silently mean "default"
+            raise ExposimError(f"{flag} {count}: must be >= 1")
     if args.noise_model is not None and args.noise != "consistent" and not args.resume:
         raise ExposimError("--noise-model is used only with --noise consistent")
 
@@ -278,7 +286,7 @@ def _run(args) -> int:
 
 
 def _print_run_summary(args, summary: dict) -> int:
-    failed = {n: m["status"] for n, m in summary["methods"].items() if m.get("status", "ok") != "ok"}
+    failed = {n: m["status"] for n, m in summary["methods"].items() if m.get("status", "ok").startswith("failed")}
     rc = 1 if failed and args.strict else 0
     if args.json:
         print(json.dumps(summary, indent=1))
@@ -305,6 +313,20 @@ def _print_run_summary(args, summary: dict) -> int:
     return rc
 
 
+def _check_methods_once(methods: str, run_options: dict) -> None:
+    """Build every method once with the run's options (no response: only the options are checked),
+    so that a bad ``--option`` or a plugin that cannot be built is refused before a dataset run
+    writes anything (it would otherwise fail in every unit and leave a dataset.json behind)."""
+    import warnings
+
+    from emulator.autoexposure.methodset import build_methods
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        build_methods(methods, mode=run_options.get("mode") or "paper", response=None,
+                      options=run_options.get("options"))
+
+
 def _run_dataset(args) -> int:
     """``exposim run ROOT --sequences ...``: every (sequence, method group) unit, then the dataset summary."""
     from emulator.datasetrun import DATASET_FILE, run_dataset
@@ -318,6 +340,7 @@ def _run_dataset(args) -> int:
     group_size = args.group_size or recorded.get("group_size")
     scheduler, scheduler_file = (("threads", None) if args.scheduler == "threads" and args.scheduler_file is None
                                  else resolve_scheduler(args.scheduler, args.scheduler_file))
+    _check_methods_once(methods, {"mode": config.mode, "options": config.options})  # before dataset.json exists
 
     bar = None
     progress = None
@@ -354,9 +377,14 @@ def _run_dataset(args) -> int:
         first = summary["errors"][0]
         raise ExposimError(f"{len(summary['errors'])} unit(s) failed (see {args.output / 'report.md'}); "
                            f"first: {first['unit']}: {first['error']}")
-    failed = [f"{seq}/{m}" for seq, per in summary["per_sequence"].items() for m, fig in per.items()
-              if fig.get("status", "ok") != "ok"]
-    if failed and args.strict:
-        print(f"FAILED      {', '.join(failed)} (--strict: exit code 1)")
+    failed = summary.get("failed_methods") or {}
+    if failed:
+        name, why = next(iter(failed.items()))
+        raise ExposimError(f"{len(failed)} method(s) failed in every unit (see {args.output / 'report.md'}); "
+                           f"first: {name}: {why}")
+    failed_units = [f"{seq}/{m}" for seq, per in summary["per_sequence"].items() for m, fig in per.items()
+                    if str(fig.get("status", "ok")).startswith("failed")]
+    if failed_units and args.strict:
+        print(f"FAILED      {', '.join(failed_units)} (--strict: exit code 1)")
         return 1
     return 0

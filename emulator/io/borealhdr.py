@@ -24,6 +24,7 @@ fallback anywhere in exposim.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 import os
@@ -39,9 +40,10 @@ import numpy as np
 from emulator.dataset import CAMERAS, Frame, Sequence, build_sequence
 from emulator.errors import DatasetError
 from emulator.io.files import parse_json_object, write_metadata
+from emulator.io.framecache import FrameCacheEntryError, cached_frame_path, read_cached_frame, resolve_frame_cache, \
+    write_cached_frame
 from emulator.io.imu import read_imu
 from emulator.io.layout import find_response_file
-from emulator.io.framecache import cached_frame_path, read_cached_frame, resolve_frame_cache
 from emulator.io.png import decode_png16, write_png16
 from emulator.response import BOREALHDR_BLACK_LEVEL, BOREALHDR_WHITE_LEVEL
 
@@ -403,12 +405,20 @@ def read_frame(frame: Frame) -> np.ndarray:
 
     A frame with a decoded-frame cache entry reads it instead of the PNG (same bytes).
     """
+    bad_entry = False
     if frame.cache_path is not None:
-        img = read_cached_frame(frame.cache_path, png_path=frame.path, white_level=frame.white_level)
+        try:
+            img = read_cached_frame(frame.cache_path, png_path=frame.path, white_level=frame.white_level)
+        except FrameCacheEntryError:  # never used: decoded from the PNG and written again
+            img, bad_entry = None, True
         if img is not None:
             return img
     source = frame.source if frame.source is not None else FolderSource(frame.path.parent)
-    return decode_png16(source.read_bytes(frame.path), frame.path, white_level=frame.white_level)
+    img = decode_png16(source.read_bytes(frame.path), frame.path, white_level=frame.white_level)
+    if bad_entry:
+        with contextlib.suppress(OSError):  # a read-only cache: the PNG's pixels are used anyway
+            write_cached_frame(frame.cache_path, img)
+    return img
 
 
 # ---------------------------------------------------------------------------- writer

@@ -31,6 +31,36 @@ def _read_bytes(path: Path) -> bytes:
     return path.read_bytes()
 
 
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+def png_structure_problem(data: bytes) -> str | None:
+    """What is wrong with a PNG's chunk structure (lengths, CRCs, IHDR first, IEND last), or None.
+
+    Checked before decoding so that a damaged file is one clear error, without the lines
+    libpng prints on stderr.  Costs one CRC pass over the file (about a millisecond per MB).
+    """
+    import struct
+    import zlib
+
+    pos, n = 8, len(data)
+    first = True
+    while pos + 12 <= n:
+        length, ctype = struct.unpack(">I4s", data[pos:pos + 8])
+        end = pos + 12 + length
+        if end > n:
+            return f"chunk {ctype.decode('latin-1')!r} runs past the end of the file"
+        if zlib.crc32(data[pos + 4:pos + 8 + length]) != struct.unpack(">I", data[end - 4:end])[0]:
+            return f"CRC error in chunk {ctype.decode('latin-1')!r}"
+        if first and ctype != b"IHDR":
+            return "first chunk is not IHDR"
+        first = False
+        if ctype == b"IEND":
+            return None
+        pos = end
+    return "no IEND chunk (truncated)"
+
+
 def decode_png16(data: bytes, name: str | os.PathLike, *, white_level: int | None = None) -> np.ndarray:
     """Decode the bytes of a 16-bit single-channel PNG holding 12-bit DN.
 
@@ -39,6 +69,9 @@ def decode_png16(data: bytes, name: str | os.PathLike, *, white_level: int | Non
     ``white_level``.
     """
     buf = np.frombuffer(data, dtype=np.uint8)
+    problem = png_structure_problem(data) if data[:8] == PNG_SIGNATURE else None
+    if problem is not None:  # refused before libpng sees it: no "libpng error:" line on stderr
+        raise DatasetError(f"{name}: cannot decode image (corrupt or truncated PNG: {problem}, {buf.size} bytes)")
     img = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED) if buf.size else None
     if img is None:
         raise DatasetError(f"{name}: cannot decode image (corrupt or truncated PNG, {buf.size} bytes)")

@@ -5,7 +5,8 @@ frame rate) asks its methods through here, so the guard (a non-finite or non-pos
 answer keeps the exposure just used), the clamp to the configured range, the wall-time
 limit and the method's failure (:class:`~emulator.autoexposure.registry.MethodFailed`)
 are handled once.  Keep it the single call site: isolation of a method (read-only inputs,
-numpy error state, working directory, stdout) wraps this call.
+numpy error state, working directory, stdout; :mod:`emulator.autoexposure.isolation`) wraps
+this call.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import math
 import time
 from dataclasses import dataclass
 
+from emulator.autoexposure.isolation import call_method as isolated_call
 from emulator.autoexposure.registry import MethodFailed
 
 __all__ = ["MethodAnswer", "call_method", "guard_exposure", "clamp"]
@@ -59,7 +61,7 @@ def call_method(method, raw, exposure_ms: float, *, range_ms, timeout_s: float |
     """
     before = getattr(method, "guard_count", 0)
     t0 = time.perf_counter()
-    proposed = method.next_exposure(raw, exposure_ms)
+    proposed = isolated_call(method, raw, exposure_ms)  # isolated (emulator.autoexposure.isolation)
     elapsed = time.perf_counter() - t0
     if timeout_s is not None and elapsed > timeout_s:
         raise MethodFailed(f"took {elapsed:.3g} s in next_exposure, over the limit of {timeout_s:g} s")

@@ -147,6 +147,10 @@ def dataset_markdown(summary: dict) -> str:
                          f"{_fmt(p['images_per_s'])} | {_fmt(p['real_time_factor'])} |")
     if summary["errors"]:
         lines += ["", "## Failed units", ""] + [f"- {e['unit']}: {e['error']}" for e in summary["errors"]]
+    failed = summary.get("failed_methods") or {}
+    if failed:
+        lines += ["", f"## Methods that failed in every unit: {len(failed)}", ""]
+        lines += [f"- {m}: {why}" for m, why in failed.items()]
     return "\n".join(lines) + "\n"
 
 

@@ -22,6 +22,18 @@ __all__ = ["PLOT_FILE", "summarise_run", "plot_exposure", "run_markdown", "write
 PLOT_FILE = "exposure.png"
 
 
+def _status(status: str, guarded, cycles) -> str:
+    """A method's status: a failure as recorded; a method that fell back in some cycles (a
+    non-finite proposal, Kim's failed GP fit: column ``guarded``) is not reported "ok"."""
+    n = int(np.sum(guarded)) if len(guarded) else 0
+    if status != "ok" or not n:
+        return status
+    first = [int(c) for c in np.asarray(cycles)[np.asarray(guarded).astype(bool)][:5]]
+    more = ", ..." if n > len(first) else ""
+    return (f"fell back in {n} of {len(guarded)} cycles (kept its exposure; cycles "
+            f"{', '.join(map(str, first))}{more})")
+
+
 def summarise_run(run_dir: str | os.PathLike, info: dict | None = None, tables: dict | None = None) -> dict:
     """Per-method figures of a run (the content of its ``results.json``)."""
     run_dir = Path(run_dir)
@@ -52,7 +64,8 @@ def summarise_run(run_dir: str | os.PathLike, info: dict | None = None, tables: 
             "clamped": int(t["clamped"].sum()),
             "bracket_use": {f"{b:g}": int(c) for b, c in zip(brackets, counts)},
             "method_ms_per_frame": (info.get("timing") or {}).get("method_ms_per_frame", {}).get(name),
-            "status": (info.get("method_status") or {}).get(name, "ok"),
+            "status": _status((info.get("method_status") or {}).get(name, "ok"), t["guarded"], t["cycle"]),
+            "fallback_cycles": [int(c) for c in t["cycle"][t["guarded"].astype(bool)]] if n else [],
         }
     from emulator.stats import compare_methods, statistic_interval
 
@@ -170,7 +183,11 @@ def run_markdown(info: dict, summary: dict) -> str:
             n += 1  # the reference code's counter test adjusts on N + 1 calls
         lines += ["", f"`fixed` (M_fixed) runs classical-50 for its first {n if n is not None else 'few'} frames and "
                   "then freezes its exposure: on a run that short it is identical to classical-50."]
-    failed = {n: m["status"] for n, m in summary["methods"].items() if m.get("status", "ok") != "ok"}
+    failed = {n: m["status"] for n, m in summary["methods"].items() if m.get("status", "ok").startswith("failed")}
+    fell = {n: m["status"] for n, m in summary["methods"].items() if m.get("status", "ok").startswith("fell back")}
+    if fell:
+        lines += ["", f"Methods that fell back (kept their exposure; column `guarded`): {len(fell)}"]
+        lines += [f"- {n}: {why}" for n, why in fell.items()]
     if failed:
         lines += ["", f"Failed methods: {len(failed)} (their rows stop before the cycle named)"]
         lines += [f"- {n}: {why}" for n, why in failed.items()]
