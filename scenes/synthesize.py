@@ -14,6 +14,7 @@ import numpy as np
 
 from emulator.errors import ExposimError
 from scenes.denoise import effective_denoise
+from scenes.walks import CAMERA_FROM_IMU, DEFAULT_WALK
 
 __all__ = ["synthesize", "DEFAULT_SATURATE_MS"]
 
@@ -44,6 +45,8 @@ def synthesize(
     save_radiance: bool = False,
     start_time_ns: int = 1_700_000_000_000_000_000,
     speed_mps: float | None = None,
+    walk: str | None = None,
+    imu_rate_hz: float = 100.0,
     cache_dir=None,
     variant: str | None = None,
     denoise=None,
@@ -71,6 +74,12 @@ def synthesize(
         reference radiance (white surface facing the sun) saturates at ``saturate_ms``.
     speed_mps : float, optional
         Walking speed (default: the trajectory's 2 km/h).
+    walk : str, optional
+        The walk (:func:`scenes.walks.make_walk`): ``"borealhdr"`` (default: turns like the
+        BorealHDR backpack), ``"gentle"`` or ``"replay:PATH"``.
+    imu_rate_hz : float
+        Rate of the walk's gyro and accelerometer written as ``imu/imu.csv`` (IMU frame x
+        forward, y left, z up: :data:`scenes.walks.CAMERA_FROM_IMU`; 0: none).
     denoise : str or scenes.denoise.DenoiseSettings, optional
         ``"oidn"``: low-spp render denoised by Open Image Denoise; ``"off"``: the raw
         path-traced estimate (see :func:`scenes.render`).  Default (None): ``"oidn"``, or
@@ -108,7 +117,9 @@ def synthesize(
     n_shots = n_cycles * len(brackets_ms)
     duration_s = n_shots / fps + 1.0
     walk_kwargs = {} if speed_mps is None else {"speed_mps": float(speed_mps)}
-    traj = scene.trajectory(duration_s, **walk_kwargs)
+    traj = scene.trajectory(duration_s, walk=walk, **walk_kwargs)
+    imu = None if scene.is_static or not imu_rate_hz else _imu_of(traj, n_shots / fps + 0.1, imu_rate_hz,
+                                                                    start_time_ns)
     render_variant = variant or scenes.choose_variant()
     settings, fallback = effective_denoise(denoise)
     shot_index: dict[float, int] = {}
@@ -158,7 +169,11 @@ def synthesize(
                    "variant": render_variant, "fov_deg": cam.fov_x_deg,
                    "denoise": settings.key_material(), "denoise_fallback": fallback},
         "saturate_ms": saturate_ms,
-        "trajectory": {"static": scene.is_static, "speed_mps": speed_mps},
+        "trajectory": {"static": scene.is_static, "speed_mps": speed_mps,
+                       "walk": None if scene.is_static else (walk or DEFAULT_WALK)},
+        "imu": None if imu is None else {"file": "imu/imu.csv", "rate_hz": float(imu_rate_hz),
+                                         "frame": "x forward, y left, z up (rigid with the left camera)",
+                                         "camera_from_imu": CAMERA_FROM_IMU.tolist()},
     }
     return synth.capture_sequence(
         source,
@@ -178,4 +193,15 @@ def synthesize(
         progress=progress,
         start_time_ns=start_time_ns,
         source_description=description,
+        imu=imu,
     )
+
+
+def _imu_of(traj, end_s: float, rate_hz: float, start_time_ns: int):
+    """The walk's IMU samples (:func:`scenes.walks.imu_samples`) on the recording's clock."""
+    from emulator.io.imu import ImuData
+    from scenes.walks import imu_samples
+
+    t, gyro, acc = imu_samples(traj, rate_hz, t1_s=min(end_s, traj.duration_s))
+    stamps = int(start_time_ns) + np.round(t * 1e9).astype(np.int64)
+    return ImuData(timestamp_ns=stamps, gyro_rad_s=gyro, acc_m_s2=acc, ros_time_ns=stamps.copy())

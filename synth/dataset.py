@@ -51,6 +51,7 @@ MANIFEST_FILE = "exposim-files.json"
 _LAYOUT_RE = re.compile(
     r"^(?:exposim\.json"
     r"|calibration/(?:response\.txt|left\.yaml|right\.yaml)"
+    r"|imu/imu\.csv"
     r"|ground_truth/poses_(?:left|right)\.txt"
     r"|camera_(?:left|right)/[0-9.]+/\d+\.png"
     r"|ground_truth/radiance/camera_(?:left|right)/\d+\.exr"

@@ -12,6 +12,7 @@ ignores the rest; every file goes through :mod:`emulator.io`)::
 
     <seq>/camera_left/<exposure_ms>/<timestamp_ns>.png    16-bit PNG, raw Bayer DN
     <seq>/camera_right/<exposure_ms>/<timestamp_ns>.png   (stereo)
+    <seq>/imu/imu.csv                  the walk's gyro and accelerometer (``imu=``; scenes.synthesize)
     <seq>/exposim.json                 levels, brackets, fps, baseline, camera, seed, source, ...
     <seq>/calibration/response.txt     the exact inverse response, one sample per DN (pcalib)
     <seq>/calibration/left.yaml        ROS camera_info (right.yaml for stereo: P[0,3] = -fx * B)
@@ -244,6 +245,7 @@ def capture_sequence(
     overwrite: bool = False,
     progress=None,
     source_description=None,
+    imu=None,
 ) -> Path:
     """Capture a bracket-cycling recording of a radiance source and write it with its ground truth.
 
@@ -297,6 +299,8 @@ def capture_sequence(
         Called as ``progress(shots_done, shots_total)`` after every shot.
     source_description : JSON-ready object or None
         Recorded in ``exposim.json``; default: ``source.describe()`` when it exists.
+    imu : emulator.io.imu.ImuData or None
+        The gyro and accelerometer of the walk, written as ``imu/imu.csv`` (BorealHDR format).
 
     Returns
     -------
@@ -383,6 +387,10 @@ def capture_sequence(
             if progress is not None:
                 progress(shot.index + 1, len(shots))
 
+        if imu is not None:
+            from emulator.io.imu import IMU_FILE, write_imu
+
+            write_imu(staging.joinpath(*IMU_FILE), imu)
         gt_dir = staging / "ground_truth"
         for side in sides:
             write_tum(gt_dir / f"poses_{side}.txt", [s.timestamp_ns for s in shots], np.stack(poses[side]),
