@@ -46,6 +46,7 @@ def synthesize(
     start_time_ns: int = 1_700_000_000_000_000_000,
     speed_mps: float | None = None,
     walk: str | None = None,
+    blur: bool = True,
     imu_rate_hz: float = 100.0,
     cache_dir=None,
     variant: str | None = None,
@@ -77,6 +78,12 @@ def synthesize(
     walk : str, optional
         The walk (:func:`scenes.walks.make_walk`): ``"borealhdr"`` (default: turns like the
         BorealHDR backpack), ``"gentle"`` or ``"replay:PATH"``.
+    blur : bool
+        Integrate every capture over its own exposure window ``[t, t + exposure]`` along the
+        walk (:class:`scenes.blur.ShotRenderer`: one render per shot and camera at the middle
+        of the longest window, warped to the sub-instants the predicted blur asks for); a
+        shot at rest is one plain render.  False: the scene at the trigger instant (no blur).
+        Static scenes never blur.
     imu_rate_hz : float
         Rate of the walk's gyro and accelerometer written as ``imu/imu.csv`` (IMU frame x
         forward, y left, z up: :data:`scenes.walks.CAMERA_FROM_IMU`; 0: none).
@@ -120,6 +127,7 @@ def synthesize(
     traj = scene.trajectory(duration_s, walk=walk, **walk_kwargs)
     imu = None if scene.is_static or not imu_rate_hz else _imu_of(traj, n_shots / fps + 0.1, imu_rate_hz,
                                                                     start_time_ns)
+    blur = bool(blur) and not scene.is_static
     render_variant = variant or scenes.choose_variant()
     settings, fallback = effective_denoise(denoise)
     shot_index: dict[float, int] = {}
@@ -146,12 +154,40 @@ def synthesize(
                                                                                  else ("left",))]
         jobs = []
         for t, side, idx in keys:
-            job = render_job(t, side, idx)
+            job = shot_renderer(t, side)[0].render_job() if blur else render_job(t, side, idx)
             job["cache_dir"] = False if folder is None else folder  # explicit: a worker decides nothing
             jobs.append(job)
         for (t, side, _), image in zip(keys, render_many(jobs, scheduler=scheduler, progress=render_progress)):
-            if folder is None:  # no cache to read them back from: keep them for the capture
+            if folder is None and not blur:  # no cache to read them back from: keep them for the capture
                 prefetched[(round(t, 9), side)] = image
+
+    shot_renderers: dict = {}
+    max_window_ms = max(list(brackets_ms) + list(gt_exposures_ms))
+
+    def shot_renderer(timestamp_s: float, camera_name: str):
+        """The :class:`scenes.blur.ShotRenderer` of one shot and camera (the latest shot's are kept)."""
+        from scenes.blur import ShotRenderer
+
+        key = (round(timestamp_s, 9), camera_name)
+        if key not in shot_renderers:
+            if not any(k[0] == key[0] for k in shot_renderers):
+                shot_renderers.clear()
+            idx = shot_index.setdefault(key[0], len(shot_index))
+            job = render_job(timestamp_s, camera_name, idx)
+            shot_renderers[key] = (ShotRenderer(scene, _poses_of(traj, camera_name, baseline), timestamp_s,
+                                                max_window_ms, width=width, height=height, spp=spp,
+                                                seed=job["seed"], fov_deg=cam.fov_x_deg, cache_dir=cache_dir,
+                                                variant=render_variant, denoise=settings), job["pose"])
+        return shot_renderers[key]
+
+    def blurred_source(timestamp_s: float, camera_name: str, exposure_ms: float):
+        shot, pose = shot_renderer(timestamp_s, camera_name)
+        return shot.radiance(exposure_ms)[0], np.asarray(pose, dtype=np.float64)
+
+    blurred_source.exposure_aware = True
+    blurred_source.timestamps_note = ("trigger instant of each shot = start of its exposure; every capture "
+                                      "integrates the radiance over [t, t + exposure] along the trajectory "
+                                      "(scenes.blur); poses are at the trigger instant")
 
     def source(timestamp_s: float, camera_name: str):
         idx = shot_index.setdefault(round(timestamp_s, 9), len(shot_index))
@@ -167,7 +203,9 @@ def synthesize(
         "scene_description": scene.description,
         "render": {"width": width, "height": height, "spp": spp, "render_seed": render_seed,
                    "variant": render_variant, "fov_deg": cam.fov_x_deg,
-                   "denoise": settings.key_material(), "denoise_fallback": fallback},
+                   "denoise": settings.key_material(), "denoise_fallback": fallback,
+                   "exposure_integration": "scenes.blur (warped sub-instants of one render per shot)" if blur
+                   else "none (trigger instant)"},
         "saturate_ms": saturate_ms,
         "trajectory": {"static": scene.is_static, "speed_mps": speed_mps,
                        "walk": None if scene.is_static else (walk or DEFAULT_WALK)},
@@ -176,7 +214,7 @@ def synthesize(
                                          "camera_from_imu": CAMERA_FROM_IMU.tolist()},
     }
     return synth.capture_sequence(
-        source,
+        blurred_source if blur else source,
         out_dir,
         cam,
         brackets_ms=tuple(brackets_ms),
@@ -195,6 +233,17 @@ def synthesize(
         source_description=description,
         imu=imu,
     )
+
+
+def _poses_of(traj, camera_name: str, baseline_m: float):
+    """``times -> (N, 4, 4)`` poses of one camera of the rig along ``traj``."""
+    from scenes import trajectory as tr
+
+    def poses(times_s):
+        p = np.asarray(traj.poses(times_s), dtype=np.float64)
+        return p if camera_name == "left" else np.stack([tr.stereo_right(m, baseline_m) for m in p])
+
+    return poses
 
 
 def _imu_of(traj, end_s: float, rate_hz: float, start_time_ns: int):

@@ -380,8 +380,10 @@ def imu_samples(traj, rate_hz: float = 100.0, *, t0_s: float = 0.0, t1_s: float 
     t = t0_s + np.arange(int(math.floor((end - t0_s) * rate_hz + 1e-9)) + 1) / float(rate_hz)
     gyro = angular_velocity(traj, t) @ CAMERA_FROM_IMU
     h = 5e-3
-    p = [poses_of(traj, np.clip(t + d, 0.0, traj.duration_s)) for d in (-h, 0.0, h)]
+    centre = np.clip(t, min(h, 0.5 * traj.duration_s), max(traj.duration_s - h, 0.5 * traj.duration_s))
+    p = [poses_of(traj, np.clip(centre + d, 0.0, traj.duration_s)) for d in (-h, 0.0, h)]
     acc_world = (p[2][:, :3, 3] - 2.0 * p[1][:, :3, 3] + p[0][:, :3, 3]) / (h * h)
+    p[1] = poses_of(traj, t)
     acc_world[:, 2] += gravity_mps2
     acc_cam = np.einsum("nji,nj->ni", p[1][:, :3, :3], acc_world)
     return t, gyro, acc_cam @ CAMERA_FROM_IMU

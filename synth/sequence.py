@@ -188,11 +188,14 @@ def _check_pose(pose, where: str) -> np.ndarray:
 def _frame_getter(source, stereo: bool):
     """``get(shot, side) -> (radiance, pose)`` and the number of frames (None: unbounded)."""
     if callable(source):
-        return (lambda shot, side: source(shot.time_s, side)), None
+        if getattr(source, "exposure_aware", False):  # integrates over each shot's own exposure window
+            return (lambda shot, side, exposure_ms=None: source(
+                shot.time_s, side, shot.exposure_ms if exposure_ms is None else exposure_ms)), None
+        return (lambda shot, side, exposure_ms=None: source(shot.time_s, side)), None
     if isinstance(source, (list, tuple)):
         frames = source
 
-        def get(shot, side):
+        def get(shot, side, exposure_ms=None):
             item = frames[shot.index]
             if isinstance(item, dict):
                 if side not in item:
@@ -253,7 +256,10 @@ def capture_sequence(
     ----------
     source : callable or list
         ``source(timestamp_s, camera) -> (radiance, pose)`` with ``timestamp_s`` the
-        seconds since the recording start (float), ``camera`` ``"left"`` or ``"right"``,
+        seconds since the recording start (float), ``camera`` ``"left"`` or ``"right"``
+        (a callable with ``exposure_aware = True`` is called as ``source(timestamp_s, camera,
+        exposure_ms)`` and returns the radiance integrated over ``[t, t + exposure]``, also for
+        each ground-truth exposure),
         ``radiance`` float32 (H, W, 3) or (H, W) in W m^-2 sr^-1 and ``pose`` a 4x4
         camera-to-world matrix (x right, y down, z forward).  Or a list with one entry per
         shot: ``(radiance, pose)``, or ``{"left": (radiance, pose), "right": (...)}`` for
@@ -379,8 +385,11 @@ def capture_sequence(
                 if save_radiance:
                     write_exr(staging / "ground_truth" / "radiance" / folder / f"{shot.timestamp_ns}.exr", radiance)
                 for j, t in enumerate(gt_exposures):
+                    gt_radiance = radiance
+                    if getattr(source, "exposure_aware", False):  # its own exposure window
+                        gt_radiance = get_frame(shot, side, t)[0]
                     for kind in GT_CAPTURES[gt_captures]:
-                        gt = capture(radiance, t, camera, noise=kind == "noisy",
+                        gt = capture(gt_radiance, t, camera, noise=kind == "noisy",
                                      seed=np.random.SeedSequence([seed, c, shot.index, 1 + j]))
                         write_png16(staging / "ground_truth" / f"captures_{kind}" / folder / exposure_folder_name(t)
                                     / f"{shot.timestamp_ns}.png", gt)
@@ -404,7 +413,8 @@ def capture_sequence(
                                   baseline_m=baseline_m, seed=seed, noise=noise, gt_exposures=gt_exposures,
                                   save_radiance=save_radiance, start_time_ns=start_time_ns,
                                   start_bracket_index=start_bracket_index,
-                                  source=_describe(source, source_description))
+                                  source=_describe(source, source_description),
+                                  timestamps_note=getattr(source, "timestamps_note", None))
         write_recording_metadata(staging, meta)
         write_manifest(staging)
         publish(staging, out_dir, overwrite)
