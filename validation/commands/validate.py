@@ -107,6 +107,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     register_live(vsub)
     _register_render(vsub)
+    from validation.blur.cli import register as register_blur  # issue 21: exposure-time blur
+
+    register_blur(vsub)
 
 
 register.order = 80  # place in `exposim --help`
