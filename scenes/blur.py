@@ -232,25 +232,29 @@ class ShotRenderer:
         self.info["depth_s"] = time.perf_counter() - t
         self._src = (src, inv_depth, anchor, k_src)
 
-    def radiance(self, exposure_ms: float, *, n_subinstants_override: int | None = None) -> tuple[np.ndarray, dict]:
-        """Mean radiance over ``[t0_s, t0_s + exposure_ms]``: float32 (H, W, 3), and ``{blur_px, n_subinstants}``."""
+    def radiance(self, exposure_ms: float, *, start_s: float | None = None,
+                 n_subinstants_override: int | None = None) -> tuple[np.ndarray, dict]:
+        """Mean radiance over ``[start, start + exposure_ms]`` (``start`` default ``t0_s``; the window
+        must lie in ``[t0_s, t0_s + max_exposure_ms]``): float32 (H, W, 3), and ``{blur_px, n_subinstants}``."""
         exposure_ms = float(exposure_ms)
-        if not 0.0 <= exposure_ms <= self.max_exposure_ms + 1e-9:
-            raise RenderError(f"exposure_ms must be in [0, {self.max_exposure_ms:g}] ms, got {exposure_ms!r}")
+        start = self.t0_s if start_s is None else float(start_s)
+        t1 = start + 1e-3 * exposure_ms
+        end = self.t0_s + 1e-3 * self.max_exposure_ms
+        if not (exposure_ms >= 0.0 and self.t0_s - 1e-9 <= start and t1 <= end + 1e-9):
+            raise RenderError(f"the window [{start:.6f}, {t1:.6f}] s must lie in [{self.t0_s:.6f}, {end:.6f}] s")
         self._prepare()
         src, inv_depth, anchor, k_src = self._src
-        if self.at_rest:
-            return src, {"blur_px": self.blur_px(exposure_ms), "n_subinstants": 1}
-        t1 = self.t0_s + 1e-3 * exposure_ms
-        blur = predicted_blur_px(np.asarray(self.pose_at(np.linspace(self.t0_s, t1, _PATH_SAMPLES))), self.width,
+        blur = predicted_blur_px(np.asarray(self.pose_at(np.linspace(start, t1, _PATH_SAMPLES))), self.width,
                                  self.height, self.fov_deg, near_depth_m=self.near_depth_m)
+        if self.at_rest:
+            return src, {"blur_px": blur, "n_subinstants": 1}
         n = (n_subinstants(blur, self.samples_per_px) if n_subinstants_override is None
              else int(n_subinstants_override))
         fx = k_src[0, 0]
         k_dst = np.array([[fx, 0, (self.width - 1) / 2.0], [0, fx, (self.height - 1) / 2.0], [0, 0, 1.0]])
         t = time.perf_counter()
         acc = np.zeros((self.height, self.width, src.shape[2]), dtype=np.float64)
-        for pose in np.asarray(self.pose_at(subinstant_times_s(self.t0_s, t1, n)), dtype=np.float64):
+        for pose in np.asarray(self.pose_at(subinstant_times_s(start, t1, n)), dtype=np.float64):
             acc += warp_to_pose(src, inv_depth, anchor, k_src, pose, k_dst, self.width, self.height)
         self.info["warp_s"] += time.perf_counter() - t
         return (acc / n).astype(np.float32), {"blur_px": blur, "n_subinstants": n}

@@ -47,6 +47,7 @@ def synthesize(
     speed_mps: float | None = None,
     walk: str | None = None,
     blur: bool = True,
+    render_per: str = "shot",
     imu_rate_hz: float = 100.0,
     cache_dir=None,
     variant: str | None = None,
@@ -84,6 +85,11 @@ def synthesize(
         of the longest window, warped to the sub-instants the predicted blur asks for); a
         shot at rest is one plain render.  False: the scene at the trigger instant (no blur).
         Static scenes never blur.
+    render_per : str
+        With ``blur``: ``"shot"`` (one render per shot and camera) or ``"cycle"`` (one render
+        per bracket sweep and camera, at the sweep's middle with a margin for the sweep's
+        motion, warped to every shot's sub-instants: a sixth of the renders, so six times the
+        spp at the same cost; render noise then moves with the scene within a sweep).
     imu_rate_hz : float
         Rate of the walk's gyro and accelerometer written as ``imu/imu.csv`` (IMU frame x
         forward, y left, z up: :data:`scenes.walks.CAMERA_FROM_IMU`; 0: none).
@@ -128,6 +134,8 @@ def synthesize(
     imu = None if scene.is_static or not imu_rate_hz else _imu_of(traj, n_shots / fps + 0.1, imu_rate_hz,
                                                                     start_time_ns)
     blur = bool(blur) and not scene.is_static
+    if render_per not in ("shot", "cycle"):
+        raise ExposimError(f"render_per must be 'shot' or 'cycle', got {render_per!r}")
     render_variant = variant or scenes.choose_variant()
     settings, fallback = effective_denoise(denoise)
     shot_index: dict[float, int] = {}
@@ -154,7 +162,7 @@ def synthesize(
                                                                                  else ("left",))]
         jobs = []
         for t, side, idx in keys:
-            job = shot_renderer(t, side)[0].render_job() if blur else render_job(t, side, idx)
+            job = shot_renderer(t, side).render_job() if blur else render_job(t, side, idx)
             job["cache_dir"] = False if folder is None else folder  # explicit: a worker decides nothing
             jobs.append(job)
         for (t, side, _), image in zip(keys, render_many(jobs, scheduler=scheduler, progress=render_progress)):
@@ -164,25 +172,31 @@ def synthesize(
     shot_renderers: dict = {}
     max_window_ms = max(list(brackets_ms) + list(gt_exposures_ms))
 
+    n_brackets = len(brackets_ms)
+
     def shot_renderer(timestamp_s: float, camera_name: str):
-        """The :class:`scenes.blur.ShotRenderer` of one shot and camera (the latest shot's are kept)."""
+        """The :class:`scenes.blur.ShotRenderer` serving one shot (or its whole cycle) and camera."""
         from scenes.blur import ShotRenderer
 
-        key = (round(timestamp_s, 9), camera_name)
+        idx = shot_index.setdefault(round(timestamp_s, 9), len(shot_index))
+        first = idx - idx % n_brackets if render_per == "cycle" else idx
+        start_s = round(first / fps, 9)
+        span_ms = (1e3 * (n_brackets - 1) / fps if render_per == "cycle" else 0.0) + max_window_ms
+        key = (first, camera_name)
         if key not in shot_renderers:
-            if not any(k[0] == key[0] for k in shot_renderers):
+            if not any(k[0] == first for k in shot_renderers):
                 shot_renderers.clear()
-            idx = shot_index.setdefault(key[0], len(shot_index))
-            job = render_job(timestamp_s, camera_name, idx)
-            shot_renderers[key] = (ShotRenderer(scene, _poses_of(traj, camera_name, baseline), timestamp_s,
-                                                max_window_ms, width=width, height=height, spp=spp,
-                                                seed=job["seed"], fov_deg=cam.fov_x_deg, cache_dir=cache_dir,
-                                                variant=render_variant, denoise=settings), job["pose"])
+            job = render_job(start_s, camera_name, first)
+            shot_renderers[key] = ShotRenderer(scene, _poses_of(traj, camera_name, baseline), start_s, span_ms,
+                                               width=width, height=height, spp=spp, seed=job["seed"],
+                                               fov_deg=cam.fov_x_deg, cache_dir=cache_dir, variant=render_variant,
+                                               denoise=settings)
         return shot_renderers[key]
 
     def blurred_source(timestamp_s: float, camera_name: str, exposure_ms: float):
-        shot, pose = shot_renderer(timestamp_s, camera_name)
-        return shot.radiance(exposure_ms)[0], np.asarray(pose, dtype=np.float64)
+        shot = shot_renderer(timestamp_s, camera_name)
+        pose = _poses_of(traj, camera_name, baseline)(np.array([timestamp_s]))[0]
+        return shot.radiance(exposure_ms, start_s=max(timestamp_s, shot.t0_s))[0], pose
 
     blurred_source.exposure_aware = True
     blurred_source.timestamps_note = ("trigger instant of each shot = start of its exposure; every capture "
@@ -204,8 +218,8 @@ def synthesize(
         "render": {"width": width, "height": height, "spp": spp, "render_seed": render_seed,
                    "variant": render_variant, "fov_deg": cam.fov_x_deg,
                    "denoise": settings.key_material(), "denoise_fallback": fallback,
-                   "exposure_integration": "scenes.blur (warped sub-instants of one render per shot)" if blur
-                   else "none (trigger instant)"},
+                   "exposure_integration": f"scenes.blur (warped sub-instants of one render per {render_per})"
+                   if blur else "none (trigger instant)"},
         "saturate_ms": saturate_ms,
         "trajectory": {"static": scene.is_static, "speed_mps": speed_mps,
                        "walk": None if scene.is_static else (walk or DEFAULT_WALK)},

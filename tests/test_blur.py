@@ -113,3 +113,25 @@ def test_a_moving_shot_blurs_along_the_walk(tmp_path):
     assert info_short["n_subinstants"] == blur.n_subinstants(info_short["blur_px"])
     assert info["blur_px"] == pytest.approx(
         blur.predicted_blur_px(traj.poses(np.linspace(1.0, 1.032, 5)), 48, 30), rel=1e-12)
+
+
+@pytest.mark.render
+def test_synthesize_blurs_with_one_render_per_cycle(tmp_path):
+    import json
+
+    from emulator.io.imu import read_imu
+    from scenes.synthesize import synthesize
+
+    counts = {}
+    for mode in ("shot", "cycle"):
+        cache = tmp_path / f"cache-{mode}"
+        out = synthesize("forest_summer", tmp_path / mode, n_cycles=1, width=32, height=20, spp=1, denoise="off",
+                         cache_dir=cache, render_per=mode)
+        counts[mode] = len(list(cache.rglob("*.exr")))
+        meta = json.loads((out / "exposim.json").read_text())
+        assert meta["source"]["render"]["exposure_integration"].endswith(f"one render per {mode})")
+        assert meta["timestamps"].startswith("trigger instant of each shot = start of its exposure")
+        imu = read_imu(out)
+        assert imu is not None and abs(imu.rate_hz - 100.0) < 1e-6
+        assert imu.timestamp_ns[0] == 1_700_000_000_000_000_000
+    assert counts == {"shot": 12, "cycle": 2}  # 6 shots x 2 cameras, or one render per camera
