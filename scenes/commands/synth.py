@@ -44,6 +44,8 @@ def register(subparsers) -> None:
     p.add_argument("--param", action="append", metavar="KEY=VALUE", help="scene parameter (repeatable)")
     p.add_argument("--no-blur", action="store_true",
                    help="sample the scene at each trigger instant instead of integrating over the exposure window")
+    p.add_argument("--render-per", choices=("shot", "cycle"), default="shot",
+                   help="one render per shot, or per bracket sweep warped to every shot (default shot)")
     p.add_argument("--mono", action="store_true", help="left camera only")
     p.add_argument("--noiseless", action="store_true", help="exact noiseless captures")
     p.add_argument("--gt-exposures", default="", help="comma-separated target exposures (ms) to capture as ground truth")
@@ -94,7 +96,7 @@ def _run(args: argparse.Namespace) -> int:
 
         path = synthesize(
             scene, args.output, n_cycles=args.cycles, width=width, height=height, spp=args.spp,
-            camera=args.camera, saturate_ms=args.saturate_ms, speed_mps=args.speed, walk=args.walk, blur=not args.no_blur,
+            camera=args.camera, saturate_ms=args.saturate_ms, speed_mps=args.speed, walk=args.walk, blur=not args.no_blur, render_per=args.render_per,
             seed=args.noise_seed,
             stereo=not args.mono, noise=not args.noiseless, gt_exposures_ms=gt, save_radiance=args.save_radiance,
             cache_dir=args.cache, denoise=args.denoise, overwrite=args.force, progress=progress,
