@@ -15,6 +15,7 @@ import numpy as np
 from emulator.errors import ExposimError
 from scenes.denoise import effective_denoise
 from scenes.walks import CAMERA_FROM_IMU, DEFAULT_WALK
+from scenes.walkshots import WalkShots
 
 __all__ = ["synthesize", "DEFAULT_SATURATE_MS"]
 
@@ -149,6 +150,21 @@ def synthesize(
         return dict(scene=scene, pose=pose, width=width, height=height, spp=spp, seed=frame_seed,
                     fov_deg=cam.fov_x_deg, cache_dir=cache_dir, variant=render_variant, denoise=settings)
 
+    shots = WalkShots(scene, traj, render=dict(width=width, height=height, spp=spp, fov_deg=cam.fov_x_deg,
+                                               cache_dir=cache_dir, variant=render_variant, denoise=settings,
+                                               render_seed=render_seed),
+                      fps=fps, n_brackets=len(brackets_ms), max_window_ms=max(list(brackets_ms) + list(gt_exposures_ms)),
+                      baseline_m=baseline, render_per=render_per)
+
+    def shot_renderer(timestamp_s: float, camera_name: str):
+        """The :class:`scenes.blur.ShotRenderer` serving one shot (or its whole cycle) and camera."""
+        return shots.renderer(shot_index.setdefault(round(timestamp_s, 9), len(shot_index)), camera_name)
+
+    def blurred_source(timestamp_s: float, camera_name: str, exposure_ms: float):
+        idx = shot_index.setdefault(round(timestamp_s, 9), len(shot_index))
+        pose = shots.poses(camera_name)(np.array([timestamp_s]))[0]
+        return shots.radiance(idx, camera_name, exposure_ms), pose
+
     prefetched: dict = {}
     if scheduler is not None:
         from scenes.cache import resolve_cache_dir
@@ -168,35 +184,6 @@ def synthesize(
         for (t, side, _), image in zip(keys, render_many(jobs, scheduler=scheduler, progress=render_progress)):
             if folder is None and not blur:  # no cache to read them back from: keep them for the capture
                 prefetched[(round(t, 9), side)] = image
-
-    shot_renderers: dict = {}
-    max_window_ms = max(list(brackets_ms) + list(gt_exposures_ms))
-
-    n_brackets = len(brackets_ms)
-
-    def shot_renderer(timestamp_s: float, camera_name: str):
-        """The :class:`scenes.blur.ShotRenderer` serving one shot (or its whole cycle) and camera."""
-        from scenes.blur import ShotRenderer
-
-        idx = shot_index.setdefault(round(timestamp_s, 9), len(shot_index))
-        first = idx - idx % n_brackets if render_per == "cycle" else idx
-        start_s = round(first / fps, 9)
-        span_ms = (1e3 * (n_brackets - 1) / fps if render_per == "cycle" else 0.0) + max_window_ms
-        key = (first, camera_name)
-        if key not in shot_renderers:
-            if not any(k[0] == first for k in shot_renderers):
-                shot_renderers.clear()
-            job = render_job(start_s, camera_name, first)
-            shot_renderers[key] = ShotRenderer(scene, _poses_of(traj, camera_name, baseline), start_s, span_ms,
-                                               width=width, height=height, spp=spp, seed=job["seed"],
-                                               fov_deg=cam.fov_x_deg, cache_dir=cache_dir, variant=render_variant,
-                                               denoise=settings)
-        return shot_renderers[key]
-
-    def blurred_source(timestamp_s: float, camera_name: str, exposure_ms: float):
-        shot = shot_renderer(timestamp_s, camera_name)
-        pose = _poses_of(traj, camera_name, baseline)(np.array([timestamp_s]))[0]
-        return shot.radiance(exposure_ms, start_s=max(timestamp_s, shot.t0_s))[0], pose
 
     blurred_source.exposure_aware = True
     blurred_source.timestamps_note = ("trigger instant of each shot = start of its exposure; every capture "
@@ -219,7 +206,8 @@ def synthesize(
                    "variant": render_variant, "fov_deg": cam.fov_x_deg,
                    "denoise": settings.key_material(), "denoise_fallback": fallback,
                    "exposure_integration": f"scenes.blur (warped sub-instants of one render per {render_per})"
-                   if blur else "none (trigger instant)"},
+                   if blur else "none (trigger instant)",
+                   "blur_shots": shots.describe() if blur else None},
         "saturate_ms": saturate_ms,
         "trajectory": {"static": scene.is_static, "speed_mps": speed_mps,
                        "walk": None if scene.is_static else (walk or DEFAULT_WALK)},
@@ -247,17 +235,6 @@ def synthesize(
         source_description=description,
         imu=imu,
     )
-
-
-def _poses_of(traj, camera_name: str, baseline_m: float):
-    """``times -> (N, 4, 4)`` poses of one camera of the rig along ``traj``."""
-    from scenes import trajectory as tr
-
-    def poses(times_s):
-        p = np.asarray(traj.poses(times_s), dtype=np.float64)
-        return p if camera_name == "left" else np.stack([tr.stereo_right(m, baseline_m) for m in p])
-
-    return poses
 
 
 def _imu_of(traj, end_s: float, rate_hz: float, start_time_ns: int):

@@ -135,3 +135,31 @@ def test_synthesize_blurs_with_one_render_per_cycle(tmp_path):
         assert imu is not None and abs(imu.rate_hz - 100.0) < 1e-6
         assert imu.timestamp_ns[0] == 1_700_000_000_000_000_000
     assert counts == {"shot": 12, "cycle": 2}  # 6 shots x 2 cameras, or one render per camera
+
+
+@pytest.mark.render
+def test_live_radiance_rebuilds_the_brackets_and_integrates_other_exposures(tmp_path):
+    import json
+
+    from emulator.io.exr import read_exr
+    from scenes.synthesize import synthesize
+    from scenes.walkshots import walk_radiance
+
+    import scenes
+
+    scene = scenes.get_scene("forest_summer")
+    cache = tmp_path / "cache"
+    out = synthesize(scene, tmp_path / "ds", n_cycles=1, width=32, height=20, spp=1, denoise="off", cache_dir=cache,
+                     save_radiance=True, stereo=False)
+    brackets = json.loads((out / "exposim.json").read_text())["brackets_ms"]
+    live = walk_radiance(out, scene, cache_dir=cache)
+    assert live.exposure_aware
+    stamps = sorted(int(p.stem) for p in (out / "ground_truth" / "radiance" / "camera_left").glob("*.exr"))
+    n_renders = len(list(cache.rglob("*.exr")))
+    for ts, e in zip(stamps, brackets):
+        saved = read_exr(out / "ground_truth" / "radiance" / "camera_left" / f"{ts}.exr")
+        np.testing.assert_array_equal(live(ts, "left", e), saved)
+    assert not np.array_equal(live(stamps[-1], "left", 1.0), live(stamps[-1], "left", 32.0))
+    assert len(list(cache.rglob("*.exr"))) == n_renders  # the writer's renders, nothing new
+    assert walk_radiance(synthesize(scene, tmp_path / "sharp", n_cycles=1, width=32, height=20, spp=1,
+                                    denoise="off", cache_dir=cache, blur=False, stereo=False), scene) is None

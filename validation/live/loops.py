@@ -84,7 +84,9 @@ def iter_live(
         The bracketed recording of the walk: it gives the cycles, their shot timestamps,
         and (same-instant timing) the brackets the selector looks at.
     radiance : callable(timestamp_ns, camera) -> ndarray
-        The radiance each camera saw at a shot's instant (e.g. :class:`DatasetRadiance`).
+        The radiance each camera saw at a shot's instant (e.g. :class:`DatasetRadiance`); one
+        with ``exposure_aware = True`` is called ``radiance(timestamp_ns, camera, exposure_ms)``
+        and integrates over the live shot's own exposure window (:func:`scenes.walkshots.walk_radiance`).
     camera : synth.Camera
         The recording's camera (``synth.sequence.load_camera``).
     methods : names or AE method instances
@@ -162,7 +164,9 @@ def iter_live(
                 ck = (ts, cam, target)
                 if ck not in captures:
                     rng = np.random.SeedSequence([int(seed), _LIVE_TAG, int(cycle.index), c, *_words(target)])
-                    img = synth.capture(radiance(ts, cam), target, camera, seed=rng, noise=noise)
+                    # an exposure-aware provider integrates over the live shot's own window [t, t + target]
+                    rad = radiance(ts, cam, target) if getattr(radiance, "exposure_aware", False) else radiance(ts, cam)
+                    img = synth.capture(rad, target, camera, seed=rng, noise=noise)
                     img.setflags(write=False)
                     captures[ck] = img
                 images.append(captures[ck])
