@@ -254,21 +254,23 @@ def gait_walk(duration_s: float, *, seed: int = 0, speed_mps: float = 2.0 / 3.6,
 
 
 def read_gyro_csv(path) -> tuple[np.ndarray, np.ndarray]:
-    """(timestamps in s from the first sample, rates (N, 3) rad/s in the IMU frame) of a BorealHDR ``imu.csv``."""
+    """(timestamps in s from the first sample, rates (N, 3) rad/s in the IMU frame) of a BorealHDR ``imu.csv``.
+
+    Parsed by :func:`emulator.io.imu.parse_imu` (a malformed file is a ``DatasetError`` naming the line).
+    """
     from pathlib import Path
+
+    from emulator.io.files import read_text
+    from emulator.io.imu import parse_imu
 
     p = Path(path)
     if not p.is_file():
         raise SceneError(f"{p}: no such gyro file")
-    try:
-        data = np.genfromtxt(p, delimiter=",", names=True)
-        t_ns = np.asarray(data["timestamp"], dtype=np.float64)
-        omega = np.stack([np.asarray(data[k], dtype=np.float64) for k in ("gyro_x", "gyro_y", "gyro_z")], axis=1)
-    except (ValueError, KeyError) as exc:
-        raise SceneError(f"{p}: not a BorealHDR imu.csv (timestamp,...,gyro_x,gyro_y,gyro_z,...): {exc}") from None
-    if t_ns.size < 2 or not np.all(np.isfinite(omega)) or not np.all(np.diff(t_ns) > 0):
-        raise SceneError(f"{p}: needs at least two samples with increasing timestamps and finite rates")
-    return (t_ns - t_ns[0]) * 1e-9, omega
+    imu = parse_imu(read_text(p), p)
+    if len(imu) < 2:
+        raise SceneError(f"{p}: needs at least two samples")
+    t_ns = imu.timestamp_ns
+    return (t_ns - t_ns[0]).astype(np.float64) * 1e-9, np.asarray(imu.gyro_rad_s, dtype=np.float64)
 
 
 @dataclass(frozen=True, eq=False)
