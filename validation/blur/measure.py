@@ -84,10 +84,27 @@ def reference_comparison(scene, traj, t0_s: float, cfg, camera) -> dict:
     err = pct(rmse_dn(d_m[0], d_ref))
     expected = float(np.hypot(ref_noise, method_noise))
     return {"t0_s": t0_s, "blur_px": methods[0][1]["blur_px"], "n_subinstants": methods[0][1]["n_subinstants"],
+            "by_subinstants": _by_subinstants(scene, traj, t0_s, cfg, kw, d_ref, camera),
             "error_percent": err, "reference_noise_percent": ref_noise, "method_noise_percent": method_noise,
             "expected_noise_percent": expected, "error_over_noise": err / expected if expected > 0 else None,
             "excess_percent": float(np.sqrt(max(err * err - expected * expected, 0.0))),
             "no_blur_error_percent": pct(rmse_dn(_dn(sharp, camera, cfg.exposure_ms), d_ref))}
+
+
+def _by_subinstants(scene, traj, t0_s, cfg, kw, d_ref, camera) -> list[dict]:
+    """Error against the reference and warp seconds for 1, 2, 4, ... sub-instants (one render, reused)."""
+    from scenes.blur import ShotRenderer
+
+    shot = ShotRenderer(scene, traj.poses, t0_s, cfg.exposure_ms, spp=cfg.spp, seed=cfg.seed + 1, **kw)
+    rows = []
+    for n in (1, 2, 4, 8, 16, 32):
+        before = shot.info["warp_s"]
+        img = shot.radiance(cfg.exposure_ms, n_subinstants_override=n)[0]
+        err = rmse_dn(_dn(img, camera, cfg.exposure_ms), d_ref)
+        rows.append({"n_subinstants": n, "error_percent": float(to_percent(err, camera.white_level,
+                                                                           camera.black_level)),
+                     "warp_s": shot.info["warp_s"] - before})
+    return rows
 
 
 def cost_comparison(scene, traj, t0_s: float, cfg, camera) -> dict:

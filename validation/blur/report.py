@@ -33,6 +33,12 @@ def report_markdown(r: dict) -> str:
                      f"{_f(row['error_percent'])} | {_f(row['reference_noise_percent'])} | "
                      f"{_f(row['method_noise_percent'])} | {_f(row['error_over_noise'])} | "
                      f"{_f(row['no_blur_error_percent'])} |")
+    lines += ["", "### Error against the number of sub-instants (one render, warped n times)", "",
+              "| t0 (s) | " + " | ".join(f"n={row['n_subinstants']}" for row in r["reference"][0]["by_subinstants"])
+              + " |", "| --- |" + " --- |" * len(r["reference"][0]["by_subinstants"])]
+    for row in r["reference"]:
+        lines.append(f"| {row['t0_s']:.2f} | " + " | ".join(
+            f"{_f(x['error_percent'])} % / {1e3 * x['warp_s']:.1f} ms" for x in row["by_subinstants"]) + " |")
     c = r["cost"]
     lines += ["", "## Cost", "", f"At rest {_f(c['at_rest_s'])} s, blurred {_f(c['blurred_s'])} s "
               f"({c['n_subinstants']} sub-instants, {c['margin_px']} px margin, warps {_f(c['warp_s'])} s, depth "
