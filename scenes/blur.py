@@ -10,9 +10,9 @@ made here, from one render per shot:
 2. ``n = ceil(SUBINSTANTS_PER_PX * blur)`` sub-instants at the midpoints of n equal parts of
    the window (at most :data:`MAX_SUBINSTANTS`).  A frame at rest (n = 1) is one plain
    :func:`scenes.render` at the window's middle: it costs what a still frame costs.
-3. Otherwise render once, at the window's middle pose, with a margin of ``ceil(blur) + 2``
-   pixels on every side (same focal length, wider field of view), plus a depth pass
-   (Mitsuba's ``aov`` integrator, ``dd.y:depth``: the distance along each pixel's ray,
+3. Otherwise render once, at the window's middle pose, with a margin on every side of the
+   longer image path from the middle to either end of the window plus 2 pixels (same focal
+   length, wider field of view), plus a depth pass (Mitsuba's ``aov`` integrator, ``dd.y:depth``: the distance along each pixel's ray,
    turned into z-depth here), and warp that render to every sub-instant's pose: a backward
    warp by the rotation homography plus the parallax of the source depth (three fixed-point
    iterations on the destination's inverse depth), bilinear (OpenCV ``remap``).  The shot
@@ -196,13 +196,23 @@ class ShotRenderer:
         return predicted_blur_px(np.asarray(self.pose_at(times), dtype=np.float64), self.width, self.height,
                                  self.fov_deg, near_depth_m=self.near_depth_m)
 
+    def margin_px(self) -> int:
+        """Pixels of margin the render needs: the longer image path from the anchor to either end
+        of the span (points at ``near_depth_m``), rounded up, plus 2 for the interpolation."""
+        t1 = self.t0_s + 1e-3 * self.max_exposure_ms
+        halves = [(self.t0_s, self.anchor_s), (self.anchor_s, t1)]
+        reach = max(predicted_blur_px(np.asarray(self.pose_at(np.linspace(a, b, _PATH_SAMPLES)), dtype=np.float64),
+                                      self.width, self.height, self.fov_deg, near_depth_m=self.near_depth_m)
+                    for a, b in halves if b > a)
+        return int(math.ceil(reach)) + 2
+
     def render_job(self) -> dict:
         """The :func:`scenes.render` keyword arguments of the one render (for a Dask prefetch)."""
         anchor = np.asarray(self.pose_at(np.array([self.anchor_s])), dtype=np.float64)[0]
         if self.at_rest:
             return dict(scene=self.scene, pose=anchor, width=self.width, height=self.height, fov_deg=self.fov_deg,
                         **self.render_args)
-        margin = int(math.ceil(self.max_blur_px)) + 2
+        margin = self.margin_px()
         fx = intrinsics(self.width, self.height, self.fov_deg)[0]
         ws, hs = self.width + 2 * margin, self.height + 2 * margin
         return dict(scene=self.scene, pose=anchor, width=ws, height=hs,

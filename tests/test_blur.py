@@ -106,7 +106,9 @@ def test_a_moving_shot_blurs_along_the_walk(tmp_path):
     shot = blur.ShotRenderer(scene, traj.poses, 1.0, 32.0, **kw)
     long_, info = shot.radiance(32.0)
     short, info_short = shot.radiance(1.0)
-    assert not shot.at_rest and shot.info["margin_px"] == math.ceil(shot.max_blur_px) + 2
+    assert not shot.at_rest and shot.info["margin_px"] == shot.margin_px()
+    # the render sits at the window's middle: about half the path reaches either end
+    assert 2 + 0.4 * shot.max_blur_px <= shot.margin_px() <= math.ceil(0.6 * shot.max_blur_px) + 2
     assert info["n_subinstants"] == blur.n_subinstants(info["blur_px"]) >= 2
     assert info_short["blur_px"] < info["blur_px"] / 10
     assert long_.shape == short.shape == (30, 48, 3) and long_.dtype == np.float32
