@@ -12,8 +12,8 @@ made here, from one render per shot:
    :func:`scenes.render` at the window's middle: it costs what a still frame costs.
 3. Otherwise render once, at the window's middle pose, with a margin on every side of the
    longer image path from the middle to either end of the window plus 2 pixels (same focal
-   length, wider field of view), plus a depth pass (Mitsuba's ``aov`` integrator, ``dd.y:depth``: the distance along each pixel's ray,
-   turned into z-depth here), and warp that render to every sub-instant's pose: a backward
+   length, wider field of view), plus a depth pass (Mitsuba's ``aov`` integrator,
+   ``dd.y:depth``: the distance along each pixel's ray, turned into z-depth here), and warp that render to every sub-instant's pose: a backward
    warp by the rotation homography plus the parallax of the source depth (three fixed-point
    iterations on the destination's inverse depth), bilinear (OpenCV ``remap``).  The shot
    is the mean of the warped images.
