@@ -13,10 +13,10 @@ made here, from one render per shot:
 3. Otherwise render once, at the window's middle pose, with a margin on every side of the
    longer image path from the middle to either end of the window plus 2 pixels (same focal
    length, wider field of view), plus a depth pass (Mitsuba's ``aov`` integrator,
-   ``dd.y:depth``: the distance along each pixel's ray, turned into z-depth here), and warp that render to every sub-instant's pose: a backward
-   warp by the rotation homography plus the parallax of the source depth (three fixed-point
-   iterations on the destination's inverse depth), bilinear (OpenCV ``remap``).  The shot
-   is the mean of the warped images.
+   ``dd.y:depth``: the distance along each pixel's ray, turned into z-depth here), and warp
+   that render to every sub-instant's pose: a backward warp by the rotation homography plus
+   the parallax of the source depth (three fixed-point iterations on the destination's
+   inverse depth), bilinear (OpenCV ``remap``).  The shot is the mean of the warped images.
 
 The timestamp convention of synthetic shots: a shot with timestamp t and exposure T
 integrates over ``[t, t + T]`` (the trigger starts the exposure).  Surfaces hidden at the
