@@ -4,12 +4,17 @@ numpy and OpenCV only; nothing here imports ``synth``, ``scenes`` or ``validatio
 (the command line loads their sub-commands lazily).
 """
 
+from importlib import metadata as _metadata
+
 from emulator.emulate import emulate, emulation_lut
 from emulator.errors import DatasetError, EmulationError, ExposimError, OutputExistsError, ResponseError
 from emulator.response import CameraResponse
 from emulator.select import SELECTORS, closest, higher_no_sat, saturated_fraction, select
 
-__version__ = "0.1.0"
+try:  # one source: the version in pyproject.toml, as installed
+    __version__ = _metadata.version("exposim")
+except _metadata.PackageNotFoundError:  # imported from a source tree that was never installed
+    __version__ = "0+unknown"
 
 __all__ = [
     "CameraResponse",

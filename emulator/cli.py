@@ -11,8 +11,10 @@ A command that fails to load is reported by name: ``--help`` lists it as broken,
 it prints why, and running another command prints a one-line warning.
 
 Errors become one line on stderr, ``exposim CMD: error: ...``, and exit code 1:
-:class:`~emulator.errors.ExposimError` (bad input), and any :class:`OSError` (a missing,
-unreadable or unwritable path: the message names it).  Ctrl-C gives exit code 130; a
+:class:`~emulator.errors.ExposimError` (bad input), any :class:`OSError` (a missing,
+unreadable or unwritable path: the message names it), and a missing optional extra (a
+command's ``extras`` default, checked before it runs, or a :class:`ModuleNotFoundError` of
+an extra's module: ``pip install 'exposim[synth]'``).  Ctrl-C gives exit code 130; a
 closed pipe on stdout (``exposim info SEQ | head -1``) ends quietly (exit code 1, as
 Python's documentation on SIGPIPE recommends).
 """
@@ -26,6 +28,7 @@ from dataclasses import dataclass
 from importlib import metadata
 
 from emulator.errors import ExposimError
+from emulator.extras import missing_extra_message, require
 
 __all__ = ["main", "build_parser", "load_commands", "ENTRY_POINT_GROUP", "Command"]
 
@@ -138,7 +141,29 @@ def _quiet_stdout() -> None:
         pass
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (what batch schedulers send), handled like Ctrl-C: runs record "interrupted"."""
+
+
+def _on_sigterm(signum, frame):
+    raise Terminated()
+
+
 def main(argv: list[str] | None = None) -> int:
+    import signal
+    import threading
+
+    previous = None
+    if threading.current_thread() is threading.main_thread():
+        previous = signal.signal(signal.SIGTERM, _on_sigterm)
+    try:
+        return _main(argv)
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _main(argv: list[str] | None) -> int:
     command = "exposim"
     try:
         parser = build_parser()
@@ -151,10 +176,18 @@ def main(argv: list[str] | None = None) -> int:
             parser.print_help()
             return 2
         try:
+            for extra in getattr(args, "extras", ()):  # before any output exists: one line naming the extra
+                require(extra)
             result = args.func(args)
             sys.stdout.flush()
         except BrokenPipeError:
             raise
+        except ModuleNotFoundError as exc:
+            message = missing_extra_message(exc)
+            if message is None:
+                raise
+            print(f"{command}: error: {message}", file=sys.stderr)
+            return 1
         except ExposimError as exc:
             print(f"{command}: error: {exc}", file=sys.stderr)
             return 1
@@ -165,7 +198,10 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:
         _quiet_stdout()
         return 1
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
+        if isinstance(exc, Terminated):
+            print(f"{command}: terminated (SIGTERM)", file=sys.stderr)
+            return 143
         print(f"{command}: interrupted", file=sys.stderr)
         return 130
 

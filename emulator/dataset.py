@@ -115,6 +115,8 @@ class Sequence:
     black_level: int
     metadata: dict = field(default_factory=dict)
     gaps: list[str] = field(default_factory=list)
+    #: The recording's IMU (:class:`emulator.io.imu.ImuData`), None without ``imu/imu.csv``.
+    imu: object = field(default=None, compare=False, repr=False)
 
     def __len__(self) -> int:
         return len(self.cycles)

@@ -125,8 +125,23 @@ def plan_groups(methods: list[str], group_size: int = 1) -> list[tuple[str, ...]
     return [tuple(methods[i:i + n]) for i in range(0, len(methods), n)]
 
 
+#: Longest group folder name, bytes: file names stop at 255 bytes, and a unit's staging
+#: folder adds a dot, a marker and a random suffix to it.
+MAX_GROUP_NAME_BYTES = 200
+
+
 def _group_name(methods: tuple[str, ...]) -> str:
-    return "+".join(methods)
+    """``"m1+m2+..."``; a name over :data:`MAX_GROUP_NAME_BYTES` is cut and made unique by a hash
+    of the whole (the unit's record keeps the full method list)."""
+    import hashlib
+
+    name = "+".join(methods)
+    raw = name.encode()
+    if len(raw) <= MAX_GROUP_NAME_BYTES:
+        return name
+    digest = hashlib.sha256(raw).hexdigest()[:16]
+    head = raw[: MAX_GROUP_NAME_BYTES - len(digest) - 1].decode(errors="ignore")
+    return f"{head}~{digest}"
 
 
 def plan_units(sequences: Mapping[str, Path], methods: list[str], group_size: int = 1) -> list[Unit]:
@@ -339,7 +354,8 @@ def run_dataset(
     methods="all",
     group_size: int | None = None,
     options: Mapping | None = None,
-    scheduler: str = "serial",
+    scheduler="serial",
+    scheduler_file: str | os.PathLike | None = None,
     n_workers: int | None = None,
     retries: int = 2,
     resume: bool = False,
@@ -351,8 +367,10 @@ def run_dataset(
     ``options``: keyword arguments of :func:`emulator.runner.run_to_folder` for every unit
     (mode, selector, initial_ms, range_ms, options, save, response_path, jobs).
     ``scheduler``: ``serial`` (in this process), ``local`` (a Dask ``LocalCluster`` of
-    ``n_workers`` processes, default sized to the machine) or ``tcp://HOST:PORT`` (an
-    existing Dask cluster that sees the same paths).  Refuses an existing ``out_dir`` that
+    ``n_workers`` processes, default sized to the machine), ``tcp://HOST:PORT`` or
+    ``tls://HOST:PORT`` (an existing Dask cluster that sees the same paths), or an open
+    :class:`distributed.Client` (used, not closed); ``scheduler_file`` instead names a
+    Dask scheduler file (see :mod:`emulator.distributed`).  Refuses an existing ``out_dir`` that
     holds a dataset run unless ``resume`` (then the configuration must be the same; complete
     units are kept, others computed).  A unit that fails is retried ``retries`` times;
     units that still fail are listed under ``errors`` and the others are kept.
@@ -362,10 +380,16 @@ def run_dataset(
     from emulator.autoexposure.methodset import parse_methods
     from emulator.report.dataset import write_dataset_report
 
-    out = Path(out_dir)
+    out = Path(os.path.abspath(out_dir))  # absolute: a plugin's os.chdir cannot move the output
     options = dict(options or {})
-    if not (scheduler in ("serial", "local") or str(scheduler).startswith("tcp://")):
-        raise DatasetRunError(f"unknown scheduler {scheduler!r}; use serial, local or tcp://HOST:PORT")
+    from emulator.distributed import check_scheduler, is_client
+
+    if scheduler_file is not None and scheduler in ("serial", None):
+        scheduler = "file"
+    if scheduler != "file":
+        check_scheduler(scheduler)
+    scheduler_name = (f"client {scheduler.scheduler.address}" if is_client(scheduler) else
+                      f"file {scheduler_file}" if scheduler == "file" else str(scheduler))
     found = discover_sequences(root, sequences)
     names = parse_methods(methods) if isinstance(methods, str) else list(methods)
     group_size = len(names) if group_size is None else int(group_size)
@@ -390,8 +414,13 @@ def run_dataset(
     else:
         from emulator.distributed import open_client, run_units
 
-        ctx = open_client(scheduler, n_workers=n_workers, retries=retries)
-    with ctx as client:  # a scheduler that cannot be reached fails before anything is written
+        ctx = open_client(scheduler, scheduler_file=None if scheduler_file is None else str(scheduler_file),
+                          n_workers=n_workers, retries=retries)
+    from emulator.io.runfolder import RunLock
+
+    out.mkdir(parents=True, exist_ok=True)
+    # one process per dataset folder: a concurrent --resume is refused and never removes a live run's staging
+    with RunLock.acquire(out), ctx as client:  # a scheduler that cannot be reached fails before anything is written
         if cfg_path.is_file():
             remove_stale_staging(out)
         else:
@@ -404,24 +433,26 @@ def run_dataset(
             for i, unit in enumerate(units, 1):
                 try:
                     records.append(run_unit(unit, out, options, fault_marker=fault_marker))
-                except ExposimError as exc:  # a bad sequence: name it, keep the others
+                except (ExposimError, OSError) as exc:  # a bad sequence or file: name the unit, keep the others
                     errors.append({"unit": unit.key, "error": f"{type(exc).__name__}: {exc}"})
                 if progress is not None:
                     progress(i, len(units))
         else:
             records, errors = run_units(client, units, out, options, retries=retries, progress=progress,
                                         fault_marker=fault_marker)
+        remove_stale_staging(out)  # attempts of units that were killed and ran again (under the lock)
     wall_s = time.perf_counter() - t0
-    remove_stale_staging(out)  # attempts of units that were killed and ran again
     order = {u.key: i for i, u in enumerate(units)}
     records.sort(key=lambda r: order[f"{r['sequence']}/{r['group']}"])
     errors.sort(key=lambda e: order[e["unit"]])
+    run_names = _run_names(names)
     summary = {
         "root": config["root"],
         "sequences": list(found),
-        "methods": names,
+        "methods": run_names,
+        "method_specs": {n: spec for spec, n in zip(names, run_names) if n != spec},
         "groups": [list(g) for g in plan_groups(names, group_size)],
-        "scheduler": scheduler,
+        "scheduler": scheduler_name,
         "units": [{k: v for k, v in r.items() if k != "results"} for r in records],
         "errors": errors,
         "per_sequence": {name: {} for name in found},
@@ -429,7 +460,26 @@ def run_dataset(
     }
     for r in records:
         summary["per_sequence"][r["sequence"]].update(r["results"])
+    summary["failed_methods"] = _failed_everywhere(summary["per_sequence"], run_names)
     return write_dataset_report(out, summary)
+
+
+def _run_names(specs) -> list[str]:
+    """The name each method runs under (an import path ``pkg.mod:Class`` -> its plugin name), so
+    that the summary finds its results, which the units record under that name."""
+    from emulator.autoexposure.registry import is_import_path, plugin_from_path
+
+    return [plugin_from_path(s).name if isinstance(s, str) and is_import_path(s) else s for s in specs]
+
+
+def _failed_everywhere(per_sequence: Mapping, names) -> dict[str, str]:
+    """Methods that failed on every sequence they ran on: name -> the first reason."""
+    out = {}
+    for name in names:
+        statuses = [per[name].get("status", "ok") for per in per_sequence.values() if name in per]
+        if statuses and all(str(st).startswith("failed") for st in statuses):
+            out[name] = statuses[0]
+    return out
 
 
 def to_plain(value):

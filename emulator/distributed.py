@@ -1,12 +1,21 @@
 """Dask execution of dataset units (:mod:`emulator.datasetrun`): a local cluster or an existing one.
 
-``scheduler``:
+``scheduler`` (see :func:`open_client`):
 
 * ``local``: a :class:`dask.distributed.LocalCluster` on this machine, localhost only, one
-  single-threaded worker process per core (``n_workers`` overrides), no dashboard;
-* ``tcp://HOST:PORT``: the scheduler of an existing cluster (``dask scheduler`` and
-  ``dask worker tcp://HOST:PORT`` started by the user); the workers must run the same
-  exposim and see the recordings and the output folder under the same paths.
+  single-threaded worker process per core (``n_workers`` overrides), no dashboard, worker
+  scratch space in a temporary folder removed on exit;
+* ``tcp://HOST:PORT`` or ``tls://HOST:PORT``: the scheduler of an existing cluster
+  (``dask scheduler`` and ``dask worker ADDRESS`` started by the user; TLS certificates come
+  from Dask's own configuration, ``distributed.comm.tls``); the workers must run the same
+  exposim and see the recordings and the output folder under the same paths;
+* a scheduler file (``scheduler_file=PATH``, what ``dask scheduler --scheduler-file PATH``
+  and dask-jobqueue write);
+* a :class:`distributed.Client` the caller made (a ``dask_jobqueue.SLURMCluster``'s), used
+  as it is and left open.
+
+:func:`resolve_scheduler` picks one for the command line: ``--scheduler-file``, else
+``--scheduler``, else ``$DASK_SCHEDULER_ADDRESS``, else the caller's default.
 
 Every unit is one task (:func:`emulator.datasetrun.run_unit`), submitted with
 ``retries`` (a unit that raises is run again) and ``pure=False``; a worker that dies
@@ -21,16 +30,86 @@ from __future__ import annotations
 import logging
 import os
 from collections.abc import Callable, Mapping
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from pathlib import Path
 
 from emulator.errors import ExposimError
 
-__all__ = ["SchedulerError", "default_workers", "local_client", "connect", "open_client", "run_units"]
+__all__ = ["SchedulerError", "ENV_ADDRESS", "SCHEDULER_HELP", "default_workers", "is_address", "is_client", "check_scheduler",
+           "resolve_scheduler", "local_client", "connect", "open_client", "run_units"]
 
 
 class SchedulerError(ExposimError):
     """A Dask scheduler that cannot be started or reached, or a unit that failed on it."""
+
+
+#: The environment variable Dask's own clients read for the scheduler's address.
+ENV_ADDRESS = "DASK_SCHEDULER_ADDRESS"
+#: Address schemes of an existing scheduler.
+SCHEMES = ("tcp://", "tls://")
+#: ``--help`` of the command line's ``--scheduler``.
+SCHEDULER_HELP = ("'serial', 'local' (a Dask LocalCluster on this machine), or the address of a running Dask "
+                  f"scheduler (tcp://HOST:PORT or tls://HOST:PORT); default: ${ENV_ADDRESS} when set")
+
+
+def is_address(spec) -> bool:
+    """True for ``tcp://HOST:PORT`` or ``tls://HOST:PORT`` (a running scheduler's address).
+
+    >>> is_address("tls://10.0.0.1:8786"), is_address("local"), is_address("http://x:1")
+    (True, False, False)
+    """
+    if not isinstance(spec, str) or not spec.startswith(SCHEMES):
+        return False
+    host, _, port = spec.split("://", 1)[1].rpartition(":")
+    return bool(host) and port.isdigit()
+
+
+def is_client(obj) -> bool:
+    """True for a :class:`distributed.Client` (checked without importing Dask)."""
+    return any(c.__name__ == "Client" and c.__module__.startswith("distributed") for c in type(obj).__mro__)
+
+
+def check_scheduler(spec, *, serial_ok: bool = True):
+    """``spec`` when it names a scheduler this module can use, else :class:`SchedulerError`."""
+    if is_client(spec) or spec == "local" or is_address(spec) or (serial_ok and spec == "serial"):
+        return spec
+    raise SchedulerError(f"unknown scheduler {spec!r}; use serial, local, tcp://HOST:PORT or tls://HOST:PORT "
+                         "(or --scheduler-file PATH)")
+
+
+def resolve_scheduler(scheduler: str | None, scheduler_file=None, *, default: str = "local",
+                      environ: Mapping[str, str] | None = None) -> tuple[str, str | None]:
+    """(scheduler, scheduler file) from the command line: the file, else ``scheduler``, else ``$DASK_SCHEDULER_ADDRESS``.
+
+    The file's scheduler is returned as ``"file"``.  ``default`` applies when nothing is
+    given; ``local`` falls back to ``serial`` when the ``dask`` extra is not installed.
+
+    >>> resolve_scheduler(None, environ={"DASK_SCHEDULER_ADDRESS": "tls://h:8786"})
+    ('tls://h:8786', None)
+    >>> resolve_scheduler("serial", environ={"DASK_SCHEDULER_ADDRESS": "tcp://h:8786"})
+    ('serial', None)
+    """
+    environ = os.environ if environ is None else environ
+    if scheduler_file is not None:
+        if scheduler not in (None, "file"):
+            raise SchedulerError(f"give --scheduler {scheduler} or --scheduler-file {scheduler_file}, not both")
+        path = Path(scheduler_file)
+        if not path.is_file():
+            raise SchedulerError(f"{path}: no such scheduler file (written by dask scheduler --scheduler-file)")
+        return "file", str(path)
+    if scheduler is not None:
+        return check_scheduler(scheduler), None
+    env = environ.get(ENV_ADDRESS, "").strip()
+    if env:
+        if not is_address(env):
+            raise SchedulerError(f"${ENV_ADDRESS}={env!r} is not tcp://HOST:PORT or tls://HOST:PORT")
+        return env, None
+    if default == "local":
+        from emulator.extras import missing_modules
+
+        if missing_modules("dask"):
+            return "serial", None
+    return check_scheduler(default), None
 
 
 def default_workers() -> int:
@@ -43,17 +122,30 @@ def default_workers() -> int:
 
 @contextmanager
 def local_client(n_workers: int | None = None, *, allowed_failures: int = 3):
-    """A client of a fresh ``LocalCluster`` (processes, one thread each, localhost, no dashboard)."""
+    """A client of a fresh ``LocalCluster`` (processes, one thread each, localhost, no dashboard).
+
+    The scheduler's HTTP server (health checks only, no dashboard) listens on a free
+    localhost port, so a busy 8787 gives no warning; the workers' scratch space (spill
+    files and their locks) lives in a temporary folder removed when the cluster closes.
+    """
+    import tempfile
+
+    from emulator.extras import require
+
+    require("dask", "a Dask scheduler")
     import dask
     from dask.distributed import Client, LocalCluster
 
     n = int(n_workers or default_workers())
     if n < 1:
         raise SchedulerError(f"n_workers must be >= 1, got {n_workers!r}")
-    with dask.config.set({"distributed.scheduler.allowed-failures": int(allowed_failures),
-                          "distributed.worker.daemon": False}):
+    with tempfile.TemporaryDirectory(prefix="exposim-dask-") as scratch, \
+            dask.config.set({"distributed.scheduler.allowed-failures": int(allowed_failures),
+                             "distributed.worker.daemon": False, "temporary-directory": scratch}):
         cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                               dashboard_address=None, silence_logs=logging.CRITICAL)  # task errors come back through the futures
+                               dashboard_address=None, local_directory=scratch,
+                               scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
+                               silence_logs=logging.CRITICAL)  # task errors come back through the futures
         try:
             with Client(cluster) as client:
                 yield client
@@ -62,31 +154,56 @@ def local_client(n_workers: int | None = None, *, allowed_failures: int = 3):
 
 
 @contextmanager
-def connect(address: str, *, timeout_s: float = 10.0):
-    """A client of an existing scheduler at ``tcp://HOST:PORT``; :class:`SchedulerError` if unreachable."""
+def connect(address: str | None = None, *, scheduler_file: str | None = None, timeout_s: float = 10.0):
+    """A client of an existing scheduler (``tcp://`` or ``tls://`` address, or a scheduler file).
+
+    :class:`SchedulerError` if it cannot be reached or has no worker.
+    """
+    from emulator.extras import require
+
+    require("dask", "a Dask scheduler")
     from dask.distributed import Client
 
+    where = address if scheduler_file is None else f"scheduler file {scheduler_file}"
     try:
-        client = Client(address, timeout=f"{timeout_s}s")
-    except (OSError, TimeoutError) as exc:
-        raise SchedulerError(f"{address}: cannot reach the Dask scheduler ({exc})") from None
+        if scheduler_file is not None:
+            client = Client(scheduler_file=str(scheduler_file), timeout=f"{timeout_s}s")
+        else:
+            client = Client(address, timeout=f"{timeout_s}s")
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise SchedulerError(f"{where}: cannot reach the Dask scheduler ({exc})") from None
+    except TypeError as exc:  # tls:// without certificates: distributed asks for an ssl_context
+        if "ssl_context" not in str(exc):
+            raise
+        raise SchedulerError(f"{where}: a tls:// scheduler needs TLS certificates in Dask's configuration "
+                             "(distributed.comm.tls.ca-file and distributed.comm.tls.client.cert/key, e.g. in "
+                             "~/.config/dask/distributed.yaml or DASK_DISTRIBUTED__COMM__TLS__CA_FILE)") from None
     try:
         if not client.scheduler_info().get("workers"):
             client.wait_for_workers(1, timeout=timeout_s)
         yield client
     except TimeoutError:
-        raise SchedulerError(f"{address}: the Dask scheduler has no worker (start one: dask worker {address})") from None
+        raise SchedulerError(f"{where}: the Dask scheduler has no worker (start one: dask worker "
+                             f"{address or '--scheduler-file ' + str(scheduler_file)})") from None
     finally:
         client.close()
 
 
-def open_client(scheduler: str, *, n_workers: int | None = None, retries: int = 2):
-    """A client context for ``local`` (a fresh LocalCluster) or ``tcp://HOST:PORT`` (an existing scheduler)."""
+def open_client(scheduler, *, scheduler_file: str | None = None, n_workers: int | None = None, retries: int = 2):
+    """A client context for ``local``, a ``tcp://``/``tls://`` address, a scheduler file, or a given Client.
+
+    A :class:`distributed.Client` passed as ``scheduler`` is used as it is and not closed.
+    """
+    if scheduler_file is not None and scheduler in (None, "file"):
+        return connect(scheduler_file=scheduler_file)
+    if is_client(scheduler):
+        return nullcontext(scheduler)
     if scheduler == "local":
         return local_client(n_workers, allowed_failures=max(int(retries), 0) + 1)
-    if str(scheduler).startswith("tcp://"):
+    if is_address(scheduler):
         return connect(scheduler)
-    raise SchedulerError(f"unknown scheduler {scheduler!r}; use serial, local or tcp://HOST:PORT")
+    check_scheduler(scheduler, serial_ok=False)
+    raise SchedulerError(f"scheduler {scheduler!r} runs in this process; no client to open")
 
 
 def run_units(

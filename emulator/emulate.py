@@ -59,7 +59,10 @@ def _pool() -> ThreadPoolExecutor:
 
 
 def check_exposure(value, name: str) -> float:
-    """Return ``value`` as float, refusing non-finite or non-positive exposures."""
+    """Return ``value`` as float, refusing non-finite or non-positive exposures, and values that
+    are not numbers (``True``, ``"8"``)."""
+    if isinstance(value, (bool, np.bool_, str, bytes)):
+        raise EmulationError(f"{name} must be a number of milliseconds, got {value!r}")
     try:
         v = float(value)
     except (TypeError, ValueError):
@@ -259,6 +262,8 @@ def emulate(
     """
     if noise not in NOISE_MODES:
         raise EmulationError(f"noise must be one of {', '.join(map(repr, NOISE_MODES))}, got {noise!r}")
+    if not isinstance(response, CameraResponse):
+        raise EmulationError(f"response must be a CameraResponse, got {type(response).__name__}")
     table, _ = emulation_lut(response, source_ms, target_ms)
     raw = check_raw(raw, response.white_level)
     out = apply_lut(table, raw)

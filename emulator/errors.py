@@ -19,6 +19,7 @@ __all__ = [
     "RunFolderError",
     "TrajectoryError",
     "PlaybackError",
+    "MissingExtraError",
 ]
 
 
@@ -65,3 +66,7 @@ class TrajectoryError(MetricsError):
 
 class PlaybackError(ExposimError):
     """A run cannot proceed: bad configuration, or a resumed run that does not match its folder."""
+
+
+class MissingExtraError(ExposimError, ImportError):
+    """A feature needs an optional extra that is not installed (``pip install 'exposim[NAME]'``)."""

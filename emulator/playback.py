@@ -42,6 +42,7 @@ import cv2
 import numpy as np
 
 from emulator.autoexposure import DEFAULT_RANGE_MS, AutoExposureMethod
+from emulator.autoexposure.isolation import call_method
 from emulator.autoexposure.methodset import build_methods
 from emulator.autoexposure.registry import MethodFailed
 from emulator.dataset import CAMERAS, Sequence
@@ -174,13 +175,14 @@ class _CycleImages:
     """Decoded brackets of one cycle, each decoded at most once (thread-safe), with histograms."""
 
     def __init__(self, cycle, white_level: int, black_level: int, stats: RunStats, noise=None,
-                 shapes: dict | None = None) -> None:
+                 shapes: dict | None = None, blur=None) -> None:
         self.cycle = cycle
         self.shapes = shapes  # the run's image size, shared by every cycle: a frame of another size is refused
         self.white = white_level
         self.black = black_level
         self.stats = stats
         self.noise = noise  # None, or (NoiseModel, seed) for noise-consistent emulation
+        self.blur = blur  # None, or an emulator.motion.BlurHook for blur-consistent emulation
         self._lock = threading.Lock()
         self._locks: dict = {}
         self._data: dict = {}
@@ -228,6 +230,8 @@ class _CycleImages:
             else:
                 t0 = time.perf_counter()
                 out = apply_lut(table, raw)
+                if self.blur is not None:
+                    out = self.blur.apply(self.cycle, camera, exposure_ms, ratio, raw, out)
                 if self.noise is not None:
                     out = self._add_noise(camera, exposure_ms, ratio, raw, out)
                 stats.add("emulate_s", time.perf_counter() - t0)
@@ -325,6 +329,7 @@ def iter_run(
     noise_model=None,
     noise_seed: int = 0,
     method_timeout: float | None = None,
+    blur=None,
 ) -> Iterator[CycleStep]:
     """Run the closed loop cycle by cycle, yielding a :class:`CycleStep` per cycle.
 
@@ -363,6 +368,9 @@ def iter_run(
         (:class:`~emulator.autoexposure.registry.MethodFailed`): the method gets no step from
         that cycle on, the cycle's :attr:`CycleStep.failed` names it with the reason, and the
         other methods go on unchanged.
+    blur : emulator.motion.BlurHook or None
+        Blur-consistent emulation (``--blur consistent``, :func:`emulator.motion.blur_hook`):
+        each emulated image goes through it once; it records each image's blur mismatch.
     """
     seq = _resolve_sequence(sequence)
     initial_ms = check_exposure(initial_ms, "initial_ms")
@@ -390,7 +398,8 @@ def iter_run(
 
     def step_one(name: str, method, images: _CycleImages, brackets: dict, missing: dict, cycle) -> MethodStep:
         target = targets[name]
-        key = select(selector, target, brackets, **select_kw)
+        key = (select(selector, target, brackets, **select_kw) if images.blur is None
+               else images.blur.select(selector, cycle, method_cam, target, brackets, select_kw))
         frame = cycle.frames[method_cam][key]
         raw, hist = images.get(method_cam, key)
         ratio = target / key
@@ -400,7 +409,7 @@ def iter_run(
         bracket_sat = images.saturated(method_cam, key)
         before = getattr(method, "guard_count", 0)
         t0 = time.perf_counter()
-        proposed = method.next_exposure(left, target)  # MethodFailed: caught by the cycle loop
+        proposed = call_method(method, left, target)  # isolated; MethodFailed: caught by the cycle loop
         elapsed = time.perf_counter() - t0
         stats.add_method(name, elapsed)
         if timeout_s is not None and elapsed > timeout_s:
@@ -466,7 +475,7 @@ def iter_run(
                 stats.cycles += 1
                 yield CycleStep(cycle.index, {}, missing, skipped="no bracket present for every camera")
                 continue
-            images = _CycleImages(cycle, white, black, stats, noise_spec, shapes)
+            images = _CycleImages(cycle, white, black, stats, noise_spec, shapes, blur)
             brackets = {e: (lambda e=e: images.saturated(method_cam, e)) for e in avail}
             args = [(name, m, images, brackets, missing, cycle) for name, m in built.items() if name not in failed]
             with single_thread_pools(user_api="blas"):  # results independent of the machine's cores

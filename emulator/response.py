@@ -190,8 +190,18 @@ class CameraResponse:
 
     # ------------------------------------------------------------------ emulation tables
     def lut(self, ratio: float) -> tuple[np.ndarray, np.ndarray]:
-        """(uint16 table L_k, bool validity table) for ratio k, cached (see emulator.emulate)."""
-        key = float(ratio)
+        """(uint16 table L_k, bool validity table) for ratio k, cached (see emulator.emulate).
+
+        Raises :class:`ResponseError` for a ratio that is not a finite positive number.
+        """
+        if isinstance(ratio, (bool, np.bool_, str, bytes)):
+            raise ResponseError(f"lut: ratio must be a finite positive number, got {ratio!r}")
+        try:
+            key = float(ratio)
+        except (TypeError, ValueError):
+            raise ResponseError(f"lut: ratio must be a finite positive number, got {ratio!r}") from None
+        if not (math.isfinite(key) and key > 0.0):
+            raise ResponseError(f"lut: ratio must be a finite positive number, got {ratio!r}")
         with self._lock:  # methods of one run may emulate from several threads
             hit = self._luts.get(key)
             if hit is not None:

@@ -8,6 +8,7 @@ The loop itself is :mod:`emulator.playback`; the folder's layout, writer and rea
 from __future__ import annotations
 
 import json
+import os
 from collections.abc import Callable, Mapping
 from pathlib import Path
 
@@ -47,6 +48,7 @@ def _config_of(run_json: dict) -> dict:
     out = {k: run_json.get(k) for k in ("sequence", "methods", "selector", "initial_ms", "range_ms", "save", "mode",
                                         "options", "response", "method_timeout")}
     out["noise"] = run_json.get("noise") or {"mode": "none"}  # run folders from before --noise: none
+    out["blur"] = run_json.get("blur") or {"mode": "none"}  # run folders from before --blur: none
     return out
 
 
@@ -113,6 +115,8 @@ def run_to_folder(
     noise_model=None,
     noise_seed: int = 0,
     method_timeout: float | None = None,
+    blur: str = "none",
+    blur_aware: bool = False,
 ) -> dict:
     """Run AE methods on a recording and write a run folder (:mod:`emulator.io.runfolder`).
 
@@ -138,7 +142,7 @@ def run_to_folder(
     """
     if out_dir is None:
         raise PlaybackError("out_dir is required")
-    out = Path(out_dir)
+    out = Path(os.path.abspath(out_dir))  # absolute: a method's os.chdir cannot split the folder
     if save not in SAVE_MODES:
         raise PlaybackError(f"save must be one of {', '.join(SAVE_MODES)}, got {save!r}")
     seq = _resolve_sequence(sequence)
@@ -177,6 +181,12 @@ def run_to_folder(
                        {"mode": noise, "seed": int(noise_seed),
                         "model": {k: v for k, v in model.to_dict().items() if k != "response"}})
     clamped_initial = _clamp(config["initial_ms"], config["range_ms"])
+    from emulator.motion import blur_hook
+
+    hook = blur_hook(blur, seq, response, blur_aware=blur_aware)  # None for "none"; blur.csv, run.json "blur"
+    config["blur"] = {"mode": "none"} if hook is None else hook.describe()
+    if blur_aware and selector != "higher-no-sat":
+        raise PlaybackError(f"the blur-aware selection refines selector higher-no-sat, not {selector!r}")
 
     with RunWriter(out, resume=resume) as writer:
         if resume:
@@ -223,7 +233,7 @@ def run_to_folder(
                     f"initial_ms {config['initial_ms']:g} is outside range_ms {config['range_ms']}; "
                     f"clamped to {clamped_initial:g} ms")
         run_json["jobs"] = int(jobs)
-        writer.start(run_json, names, seq.cameras, save)
+        writer.start(run_json, names, seq.cameras, save, cycles=[c.index for c in seq.cycles])  # resume: validated
 
         def write_images(st: MethodStep) -> None:
             if save == "none":
@@ -246,7 +256,7 @@ def run_to_folder(
             gen = iter_run(seq, list(built.values()), initial_ms=initial_ms, range_ms=range_ms, selector=selector,
                            response=response, jobs=jobs, emulate_right=save != "none", on_step=write_images,
                            stats=stats, noise=noise, noise_model=model, noise_seed=noise_seed,
-                           method_timeout=timeout_s)
+                           method_timeout=timeout_s, blur=hook)
             for cs in gen:
                 method_status.update(cs.failed)
                 if cs.skipped:
@@ -283,8 +293,11 @@ def run_to_folder(
                 run_json.pop("error", None)
             writer.update(status=status, cycles_done=done, skipped_cycles=skipped, timing=stats.as_dict(),
                           method_status=method_status)
+        if hook is not None:
+            hook.write_table(out)
         if save != "none":
             writer.write_times(names)
+        _write_method_output(out, names)  # what methods printed (isolated from the run's stdout)
     if make_report:
         from emulator.report.run import write_run_report
 
@@ -292,3 +305,19 @@ def run_to_folder(
     from emulator.report.run import summarise_run
 
     return summarise_run(out)
+
+
+#: File in a method's folder holding what the method printed (stdout and stderr, in order).
+METHOD_OUTPUT_FILE = "output.txt"
+
+
+def _write_method_output(out: Path, names) -> None:
+    """Write each method's captured output (:mod:`emulator.autoexposure.isolation`) to its folder."""
+    from emulator.autoexposure.isolation import captured_output
+    from emulator.io.files import atomic_write_bytes
+
+    for name in names:
+        text, total = captured_output(name, clear=True)
+        if total:
+            note = "" if total == len(text) else f"\n[... {total - len(text)} more characters not kept]\n"
+            atomic_write_bytes(out / name / METHOD_OUTPUT_FILE, (text + note).encode(), overwrite=True)

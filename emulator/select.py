@@ -33,6 +33,8 @@ __all__ = [
     "NoiseModel",
     "predicted_mse_table",
     "predicted_error",
+    "blur_aware",
+    "PX_PER_NOISE",
 ]
 
 #: HigherNoSat takes the higher bracket while its saturated fraction is below this.
@@ -43,6 +45,8 @@ EQUAL_RTOL = 1e-9
 
 def saturated_fraction(raw: np.ndarray, *, white_level: int, black_level: int) -> float:
     """Fraction of pixels at or below ``black_level`` or at or above ``white_level``."""
+    if not int(white_level) > int(black_level):
+        raise ExposimError(f"saturated_fraction: white_level {white_level!r} must exceed black_level {black_level!r}")
     raw = np.asarray(raw)
     if raw.size == 0:
         raise ExposimError("saturated_fraction: empty image")
@@ -64,7 +68,22 @@ def _fraction(value, *, white_level: int, black_level: int) -> float:
 def _sorted_brackets(brackets: Mapping) -> list[float]:
     if not brackets:
         raise ExposimError("no brackets to select from")
-    return sorted(check_exposure(b, "bracket exposure_ms") for b in brackets)
+    out = sorted(check_exposure(_number(b), "bracket exposure_ms") for b in brackets)
+    dup = sorted({v for v in out if out.count(v) > 1})
+    if dup:
+        raise ExposimError(f"brackets given twice: {', '.join(f'{v:g}' for v in dup)} ms (keys "
+                           f"{', '.join(repr(k) for k in brackets if float(k) in dup)})")
+    return out
+
+
+def _number(key):
+    """A bracket key as a number: folder-name strings (``"4.0"``) are read as numbers; ``True`` is not one."""
+    if isinstance(key, str):
+        try:
+            return float(key)
+        except ValueError:
+            return key  # refused by check_exposure, naming it
+    return key
 
 
 def _key(brackets: Mapping, value: float):
@@ -255,6 +274,57 @@ def predicted_error(
     best = min(scores, key=lambda kk: (round(scores[kk], 9), -float(kk)))
     return (best, scores) if return_scores else best
 
+
+
+#: Default weight of blur against noise in :func:`blur_aware`: one pixel of excess blur costs
+#: as much as emulating from a bracket with twice the target's relative noise.
+PX_PER_NOISE = 1.0
+
+
+def blur_aware(
+    target_ms: float,
+    brackets: Mapping,
+    *,
+    white_level: int,
+    black_level: int,
+    excess_blur_px: Callable[[float], float] | None = None,
+    px_per_noise: float = PX_PER_NOISE,
+    threshold: float = SATURATION_THRESHOLD,
+):
+    """HigherNoSat that weighs the higher bracket's excess blur against the lower one's noise.
+
+    As :func:`higher_no_sat` at or outside the bracket range, at a bracket, and when the
+    higher bounding bracket ``b_h`` saturates.  Otherwise both bounding brackets qualify:
+    the lower one ``b_l`` is emulated upwards and carries ``sqrt(target / b_l)`` times the
+    relative shot noise of a capture at the target (cost ``sqrt(target / b_l) - 1``); the
+    higher one keeps ``excess_blur_px(b_h)`` pixels of blur a capture at the target would
+    not have (cost ``excess / px_per_noise``).  The cheaper wins; ties go to ``b_h``.  Without
+    motion (``excess_blur_px`` None or 0) it is HigherNoSat.
+
+    Parameters
+    ----------
+    excess_blur_px : callable(bracket_ms) -> float, optional
+        Blur of the bracket beyond a capture at the target, px (e.g.
+        :meth:`emulator.motion.RecordingMotion.mismatch_px`); NaN counts as 0.
+    px_per_noise : float
+        Pixels of excess blur that cost as much as a doubled relative noise (> 0).
+
+    >>> blur_aware(12.0, {8.0: 0.0, 16.0: 0.0}, white_level=4095, black_level=0)
+    16.0
+    >>> blur_aware(12.0, {8.0: 0.0, 16.0: 0.0}, white_level=4095, black_level=0, excess_blur_px=lambda b: 2.0)
+    8.0
+    """
+    if not (isinstance(px_per_noise, (int, float)) and math.isfinite(px_per_noise) and px_per_noise > 0):
+        raise ExposimError(f"px_per_noise must be a finite number > 0, got {px_per_noise!r}")
+    choice = higher_no_sat(target_ms, brackets, white_level=white_level, black_level=black_level, threshold=threshold)
+    target_ms = check_exposure(target_ms, "target_ms")
+    equal, low, high = bounding(target_ms, _sorted_brackets(brackets))
+    if excess_blur_px is None or equal is not None or low == high or float(choice) != high:
+        return choice
+    excess = float(excess_blur_px(high))
+    excess = 0.0 if not math.isfinite(excess) else max(0.0, excess)
+    noise_cost = math.sqrt(target_ms / low) - 1.0
+    return _key(brackets, low) if excess / px_per_noise > noise_cost else choice
 
 
 SELECTORS: dict[str, Callable] = {

@@ -10,6 +10,13 @@ float32 with lossless ZIP compression) and costs only the read.  Files are
 written to a temporary name and moved into place with :func:`os.replace`, so a
 reader never sees a partial file.  The EXR bytes are deterministic: the same
 render writes the same file.
+
+Every entry carries, as EXR header attributes, its key material (``exposim_render_key``)
+and the SHA-256 of its pixels (``exposim_pixels_sha256``); :func:`load_entry` given the
+material checks both, and that the radiance is finite and non-negative, as a fresh render
+is checked (an entry written before checksums has its key and values checked).  A bad entry
+(another key's file, altered pixels, NaN or negative values) raises :class:`CacheEntryError`, and :func:`scenes.render.render`
+renders again and replaces it.
 """
 
 from __future__ import annotations
@@ -26,7 +33,21 @@ import numpy as np
 from scenes.errors import RenderError
 
 __all__ = ["ENV_CACHE_DIR", "default_cache_dir", "resolve_cache_dir", "canonical_json", "library_versions",
-           "render_key", "cache_path", "store_entry", "load_entry"]
+           "render_key", "cache_path", "store_entry", "load_entry", "CacheEntryError", "pixels_sha256",
+           "KEY_ATTRIBUTE", "SHA_ATTRIBUTE"]
+
+#: EXR header attributes of an entry: its key material (canonical JSON) and its pixels' SHA-256.
+KEY_ATTRIBUTE = "exposim_render_key"
+SHA_ATTRIBUTE = "exposim_pixels_sha256"
+
+
+class CacheEntryError(RenderError):
+    """A render-cache entry that must not be used (wrong key, bad checksum, NaN or negative)."""
+
+
+def pixels_sha256(radiance: np.ndarray) -> str:
+    """SHA-256 of the float32 pixel bytes (C order)."""
+    return hashlib.sha256(np.ascontiguousarray(radiance, dtype=np.float32).tobytes()).hexdigest()
 
 #: Environment variable overriding the default cache folder.
 ENV_CACHE_DIR = "EXPOSIM_CACHE"
@@ -130,16 +151,21 @@ def store_entry(path, radiance: np.ndarray, attributes: dict | None = None) -> P
     a = np.ascontiguousarray(radiance)
     if a.dtype != np.float32 or a.ndim != 3 or a.shape[2] != 3:
         raise RenderError(f"{path}: a cache entry must be float32 (H, W, 3) radiance, got {a.dtype} {a.shape}")
-    return write_exr(path, a, overwrite=True, attributes=attributes)
+    return write_exr(path, a, overwrite=True, attributes={**(attributes or {}), SHA_ATTRIBUTE: pixels_sha256(a)})
 
 
-def load_entry(path) -> np.ndarray:
+def load_entry(path, material: dict | None = None) -> np.ndarray:
     """Read one cache entry as float32 (H, W, 3).
+
+    With ``material`` (what :func:`render_key` hashed), the entry must hold that key material
+    and the checksum of its pixels, and its radiance must be finite and non-negative.
 
     Raises
     ------
     FileNotFoundError
         The file does not exist.
+    CacheEntryError
+        The entry is another key's, fails its checksum, or holds NaN or negative radiance.
     RenderError
         The file is not a readable RGB EXR.
     """
@@ -152,4 +178,18 @@ def load_entry(path) -> np.ndarray:
         raise RenderError(str(exc)) from exc
     if a.ndim != 3:
         raise RenderError(f"{path}: not an RGB OpenEXR file (one channel)")
+    if material is not None:
+        from emulator.io.exr import read_exr_attributes
+
+        try:
+            header = read_exr_attributes(path)
+        except DatasetError as exc:
+            raise RenderError(str(exc)) from exc
+        if header.get(KEY_ATTRIBUTE) != canonical_json(material):
+            raise CacheEntryError(f"{path}: render cache entry of another render (key material differs)")
+        sha = header.get(SHA_ATTRIBUTE)  # absent in entries written before checksums: key and values still checked
+        if sha is not None and sha != pixels_sha256(a):
+            raise CacheEntryError(f"{path}: render cache entry fails its pixel checksum")
+        if not np.all(np.isfinite(a)) or a.min() < 0.0:
+            raise CacheEntryError(f"{path}: render cache entry holds non-finite or negative radiance")
     return a

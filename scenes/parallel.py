@@ -33,7 +33,7 @@ SCHEDULER_HELP = ("render the frames as Dask tasks: 'local' (a local cluster of 
                   "tcp://HOST:PORT (a running 'dask scheduler'); same cache entries and same output bytes "
                   "as the default serial render")
 
-_TCP = re.compile(r"^tcp://[A-Za-z0-9_.\-\[\]:]+:\d{1,5}$")
+_TCP = re.compile(r"^(tcp|tls)://[A-Za-z0-9_.\-\[\]:]+:\d{1,5}$")
 
 
 def check_scheduler(spec: str | None) -> str | None:
@@ -43,7 +43,7 @@ def check_scheduler(spec: str | None) -> str | None:
     spec = str(spec).strip()
     if spec == "local" or _TCP.match(spec):
         return spec
-    raise RenderError(f"--scheduler must be 'local' or tcp://HOST:PORT, got {spec!r}")
+    raise RenderError(f"--scheduler must be 'local' or tcp://HOST:PORT, got {spec!r} (tls://HOST:PORT also works)")
 
 
 @contextlib.contextmanager
@@ -58,6 +58,9 @@ def dask_client(spec: str, *, n_workers: int | None = None):
     spec = check_scheduler(spec)
     if spec is None:
         raise RenderError("dask_client needs a scheduler ('local' or tcp://HOST:PORT)")
+    from emulator.extras import require
+
+    require("dask", "a Dask scheduler")
     from dask.distributed import Client, LocalCluster
 
     cluster = None

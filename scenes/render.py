@@ -22,7 +22,8 @@ import warnings
 import numpy as np
 
 from scenes.base import Scene, get_scene
-from scenes.cache import cache_path, canonical_json, load_entry, render_key, resolve_cache_dir, store_entry
+from scenes.cache import KEY_ATTRIBUTE, cache_path, canonical_json, load_entry, render_key, resolve_cache_dir, \
+    store_entry
 from scenes.camera import DEFAULT_FOV_DEG, _check_fov, _check_size, check_pose
 from scenes.denoise import DenoiseSettings, denoise_oidn, effective_denoise, resolve_denoise, warn_unavailable
 from scenes.errors import RenderError
@@ -101,13 +102,13 @@ def _render_aux_uncached(scene: Scene, pose: np.ndarray, *, width: int, height: 
     return np.ascontiguousarray(a[..., :3]), np.ascontiguousarray(a[..., 3:])
 
 
-def _read_cached(path, width: int, height: int):
+def _read_cached(path, width: int, height: int, material: dict | None = None):
     if path is None or not path.is_file():
         return None
     try:
-        cached = load_entry(path)
+        cached = load_entry(path, material)  # key, checksum, finite and non-negative (scenes.cache)
     except RenderError:
-        return None  # unreadable (e.g. truncated by a crash elsewhere): render again
+        return None  # unreadable or bad (truncated, swapped, altered): render again and replace it
     return cached if cached.shape == (height, width, 3) else None
 
 
@@ -115,7 +116,7 @@ def _write_cached(path, image: np.ndarray, material: dict) -> None:
     if path is None:
         return
     try:
-        store_entry(path, image, {"exposim_render_key": canonical_json(material)})
+        store_entry(path, image, {KEY_ATTRIBUTE: canonical_json(material)})
     except OSError as exc:  # a read-only or full cache must not lose a finished render
         warnings.warn(f"render cache: could not write {path}: {exc}", RuntimeWarning, stacklevel=4)
 
@@ -255,13 +256,13 @@ def render_with_info(
         return cache_path(folder, key), material
 
     final_path, final_material = entry(settings.key_material())
-    cached = _read_cached(final_path, width, height)
+    cached = _read_cached(final_path, width, height, final_material)
     if cached is not None:
         info["cache_hit"] = True
         return cached, info
 
     raw_path, raw_material = (final_path, final_material) if not settings.enabled else entry(None)
-    raw = _read_cached(raw_path, width, height) if settings.enabled else None
+    raw = _read_cached(raw_path, width, height, raw_material) if settings.enabled else None
     if raw is None:
         ensure_variant(variant)
         t0 = time.perf_counter()

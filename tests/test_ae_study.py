@@ -89,9 +89,13 @@ def test_tiny_study_report_is_generated_from_the_findings(tiny_study):
     assert results["findings_paragraph"] == findings_paragraph(results["findings"])
     assert results["findings_paragraph"] in report
     # the findings are a function of the summary alone
-    assert evaluate_findings(results["summary"], results["config"]["taus"]) == results["findings"]
+    plain = evaluate_findings(results["summary"], results["config"]["taus"])
+    assert [{k: f[k] for k in p} for f, p in zip(results["findings"], plain)] == plain
     for f in results["findings"]:
         assert f["holds"] in (True, False, None) and f["detail"]
+        # issue 22's contract; one walk decides nothing
+        assert set(f) >= {"id", "effect", "ci95", "p_adjusted", "verdict"}
+        assert f["verdict"] in ("undetermined", "by-construction")
 
 
 @pytest.mark.render
@@ -273,7 +277,9 @@ def test_validate_help_shows_the_defaults(capsys, monkeypatch):
     assert f"(default: {full.width}x{full.height})" in text and f"(default: {full.spp})" in text
     text = _help(capsys, monkeypatch, "validate", "emulation")
     full, quick = EmulationConfig(), EmulationConfig.quick()
-    assert f"render width (pixels) (default: {full.width}; with --quick: {quick.width})" in text
+    assert (f"render size in pixels, WIDTHxHEIGHT (default: {full.width}x{full.height}; with --quick: "
+            f"{quick.width}x{quick.height})") in text
+    assert "--width" not in text and "--height" not in text
     assert f"(default: {full.n_exposures}; with --quick: {quick.n_exposures})" in text
 
 
@@ -285,3 +291,15 @@ def test_scheduler_reaches_the_renders_and_a_bad_one_creates_nothing(tmp_path, s
     assert main([str(tmp_path / "bad"), "--quick", "--scheduler", "tcp:/x"]) == 1
     assert "--scheduler must be 'local' or tcp://HOST:PORT, got 'tcp:/x'" in capsys.readouterr().err
     assert not (tmp_path / "bad").exists()
+
+
+def test_ae_study_replicates_shift_every_seed(tmp_path, stop_at_synthesize):
+    from conftest import SynthesizeCalled
+
+    from validation.ae_study.cli import main as ae_main
+
+    with pytest.raises(SynthesizeCalled):
+        ae_main([str(tmp_path / "rep"), "--quick", "--no-progress", "--replicates", "3"])
+    assert stop_at_synthesize["seed"] == 0 and stop_at_synthesize["render_seed"] == 0
+    assert (tmp_path / "rep" / "replicates" / "seed0").is_dir()
+    assert ae_main([str(tmp_path / "bad"), "--quick", "--replicates", "0"]) == 1

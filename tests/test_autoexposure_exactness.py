@@ -94,8 +94,12 @@ def test_zhang_derivatives_equal_frozen(frames, sample):
 
 @pytest.mark.slow
 def test_kim_metrics_equal_frozen(frames):
+    # borealhdr: the frozen float64 table form ends in a 2.3M-element BLAS dot whose last bits
+    # follow OpenBLAS's kernel and thread count; the library now rounds REF's formula once
+    # (tests/test_autoexposure_kim.py::test_metric_ref_is_ref_formula_correctly_rounded), so the
+    # two agree to the frozen form's own accuracy, not bit for bit.
     for name, _, y in _grays(frames, REF_BAYER_CODE):
-        assert kim_mod.metric_ref(y) == ref.metric_ref(y), name
+        assert kim_mod.metric_ref(y) == pytest.approx(ref.metric_ref(y), rel=1e-13, abs=0), name
     for name, _, y in _grays(frames, RGGB_BAYER_CODE):
         assert kim_mod.metric_paper(y) == ref.metric_paper(y), name
 
@@ -107,7 +111,8 @@ def _frozen(monkeypatch):
     monkeypatch.setattr(Zhang2017, "_ref_derivative", lambda self, y, t, *a, **k: ref._ref_derivative(self, y, t))
     monkeypatch.setattr(Zhang2017, "_paper_derivative",
                         lambda self, y, t, *a, **k: ref._paper_derivative(self, y, t))
-    monkeypatch.setattr(kim_mod, "metric_ref", lambda y, *a, **k: ref.metric_ref(y))
+    # kim's borealhdr metric is not patched: it is correctly rounded now, no longer the frozen
+    # float64 form (test_kim_metrics_equal_frozen)
     monkeypatch.setattr(kim_mod, "metric_paper", lambda y, *a, **k: ref.metric_paper(y))
 
 

@@ -16,7 +16,7 @@ from scipy.spatial.transform import Rotation
 from emulator.cli import main
 from emulator.gray import bayer_to_gray8
 from emulator.io.runfolder import read_run_folder
-from emulator.io.tum import write_tum
+from emulator.io.tum import read_tum, write_tum
 
 try:
     from test_metrics_vo import SHARED, make_synthetic_run
@@ -80,7 +80,7 @@ def evo_rpe_stats(ref: Path, est: Path, out_zip: Path, *args: str) -> dict:
 )
 def test_bench_rpe_equals_evo_rpe(trajectory_pair, tmp_path, capsys, ours, theirs):
     est, ref = trajectory_pair
-    code, out, err = run_cli(capsys, "bench", "rpe", str(est), str(ref), *ours, "--json")
+    code, out, err = run_cli(capsys, "bench", "rpe", str(ref), str(est), *ours, "--json")  # evo's order
     assert code == 0, err
     assert out.count("\n") == 1  # exactly one JSON object on stdout
     mine = json.loads(out)
@@ -92,12 +92,54 @@ def test_bench_rpe_equals_evo_rpe(trajectory_pair, tmp_path, capsys, ours, their
 
 def test_bench_rpe_errors(trajectory_pair, tmp_path, capsys):
     est, ref = trajectory_pair
-    code, out, err = run_cli(capsys, "bench", "rpe", str(est), str(tmp_path / "nope.txt"), "--json")
+    code, out, err = run_cli(capsys, "bench", "rpe", str(tmp_path / "nope.txt"), str(est), "--json")
     assert code == 1 and out == "" and "nope.txt" in err and err.count("\n") == 1
     far = tmp_path / "far.txt"
     write_tum(far, [10**9, 2 * 10**9, 3 * 10**9], np.tile(np.eye(4), (3, 1, 1)))
-    code, out, err = run_cli(capsys, "bench", "rpe", str(far), str(ref), "--json")
+    code, out, err = run_cli(capsys, "bench", "rpe", str(ref), str(far), "--json")
     assert code == 1 and out == "" and "no timestamps overlap" in err
+
+
+def test_bench_rpe_takes_evo_order_and_flags_a_swap(trajectory_pair, tmp_path, capsys):
+    """REF EST as evo_rpe; evo's own API on the same files gives the same numbers, the swapped
+    order different ones, and an estimate given as the reference is flagged."""
+    from evo.core import metrics, sync
+    from evo.main_rpe import rpe
+    from evo.tools import file_interface
+
+    est, ref = trajectory_pair
+    code, out, err = run_cli(capsys, "bench", "rpe", str(ref), str(est), "--json")
+    assert code == 0, err
+    assert f"reference: {ref} (80 poses); estimate: {est} (76 poses) (order REF EST" in err and "warning" not in err
+    mine = json.loads(out)
+    traj_ref = file_interface.read_tum_trajectory_file(ref)
+    traj_est = file_interface.read_tum_trajectory_file(est)
+    traj_ref, traj_est = sync.associate_trajectories(traj_ref, traj_est, max_diff=0.01)
+    theirs = rpe(traj_ref, traj_est, metrics.PoseRelation.translation_part, delta=1,
+                 delta_unit=metrics.Unit.frames).stats
+    assert mine["rmse"] == pytest.approx(theirs["rmse"], abs=1e-12, rel=0)
+    # 1-frame translation errors are symmetric; with the scale correction (applied to the
+    # estimate) the order matters
+    _, out_scaled, _ = run_cli(capsys, "bench", "rpe", str(ref), str(est), "--align-scale", "--json")
+    _, out_swapped, _ = run_cli(capsys, "bench", "rpe", str(est), str(ref), "--align-scale", "--json")
+    assert json.loads(out_swapped)["rmse"] != pytest.approx(json.loads(out_scaled)["rmse"], rel=1e-2)
+    # a bench vo estimate (header) or a trajectory starting at the identity, given first: flagged
+    vo_est = tmp_path / "fixed.txt"
+    poses = np.tile(np.eye(4), (3, 1, 1))
+    poses[:, 0, 3] = [0.0, 0.1, 0.2]
+    stamps = read_tum(ref).timestamps_ns[:3].tolist()
+    write_tum(vo_est, stamps, poses, header="exposim bench vo estimate: method fixed")
+    code, _, err = run_cli(capsys, "bench", "rpe", str(vo_est), str(ref), "--json")
+    assert "warning: the reference" in err and "written by exposim bench vo" in err
+    plain = tmp_path / "plain.txt"
+    write_tum(plain, stamps, poses)
+    code, _, err = run_cli(capsys, "bench", "rpe", str(plain), str(ref), "--json")
+    assert "exactly the identity" in err
+    # both start at the identity (a synthetic reference may): only bench vo's header tells them apart
+    code, _, err = run_cli(capsys, "bench", "rpe", str(vo_est), str(plain), "--json")
+    assert "written by exposim bench vo" in err
+    code, _, err = run_cli(capsys, "bench", "rpe", str(plain), str(vo_est), "--json")
+    assert "warning" not in err
 
 
 # --------------------------------------------------------------------------- features
@@ -201,7 +243,7 @@ def test_bench_vo_cli(short_run, tmp_path, capsys):
     assert m["status"] == "success"
     for entry in m["rpe"]["deltas"]:  # steps of ~0.17 m: one pair per delta length
         assert entry["n_pairs"] >= 1 and entry["trans_pct"]["median"] < 2.0
-    assert (out / "fixed" / "trajectory.txt").is_file()
+    assert (out / "fixed.txt").is_file()
 
 
 def test_bench_vo_bad_reference(short_run, tmp_path, capsys):

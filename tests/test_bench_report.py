@@ -135,9 +135,14 @@ def test_rpe_figure_names_the_dotted_line():
     for ax in fig.axes:
         lines = {line.get_label(): line.get_linestyle() for line in ax.get_lines()}
         assert lines == {"fixed": "-", "kim (VO failed on 2 frames)": report.FAILED_STYLE}
-        legend = ax.get_legend()
-        assert {t.get_text() for t in legend.get_texts()} == set(lines)
-        assert "dotted" in legend.get_title().get_text()
+    first, last = fig.axes
+    assert first.get_legend() is None  # one legend for both panels, beside the second, outside its data
+    legend = last.get_legend()
+    assert {t.get_text() for t in legend.get_texts()} == set(lines)
+    assert "dotted" in legend.get_title().get_text()
+    fig.canvas.draw()
+    box = legend.get_window_extent().transformed(last.transAxes.inverted())
+    assert box.x0 >= 1.0  # to the right of the axes
 
 
 def _span(lim) -> float:
@@ -180,3 +185,15 @@ def test_run_report_units_dashes_and_fixed(mode, adjusted):
     assert "| 1.25 | 98.00 | 0 | - |" in table[2]  # fractions shown in percent, no timing: "-"
     assert '"-": no cycle of that method (or no timing recorded)' in after[1]
     assert f"`fixed` (M_fixed) runs classical-50 for its first {adjusted} frames and then freezes" in md
+
+
+def test_features_report_compares_methods_with_intervals():
+    res = _features_results({"fixed": [61, 40, 55, 58, 60, 52], "kim": [30, 12, 20, 25, 22, 18]})
+    iv = report.features_intervals(res)
+    m = iv["median_matches"]
+    assert m["best"] == "fixed" and m["methods"]["fixed"]["estimate"] == 56.5
+    d = m["methods"]["kim"]["difference_to_best"]
+    assert d["estimate"] == 21.0 - 56.5 and d["excludes_zero"] is True
+    md = report.features_report(res, "fig4.png")
+    assert "| method | median matches | 95 % interval | difference from the best (fixed) |" in md
+    assert "| kim | 21.0 |" in md and "| differs |" in md

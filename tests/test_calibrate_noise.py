@@ -71,7 +71,7 @@ def test_readme_row_names_the_noise_option():
 
     from emulator.cli import build_parser
 
-    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
+    readme = (Path(__file__).resolve().parents[1] / "docs" / "commands.md").read_text(encoding="utf-8")
     row = next(line for line in readme.splitlines() if line.startswith("| `exposim calibrate "))
     assert "`--noise SEQ -o noise.json`" in row
     sub = build_parser()._subparsers._group_actions[0].choices  # noqa: SLF001 - argparse has no public accessor

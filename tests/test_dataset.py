@@ -152,7 +152,7 @@ def test_corrupt_and_8bit_png(tmp_path):
         eight.load()
     hot = seq[0].frames["left"][16.0]
     write_png16(hot.path, np.full((8, 8), 4095, np.uint16), overwrite=True)
-    with pytest.raises(DatasetError, match="maximum DN 4095 exceeds white_level 4094"):
+    with pytest.raises(DatasetError, match="maximum DN 4095 exceeds the white level 4094.*--white-level 4095"):
         hot.load()
     with pytest.raises(FileNotFoundError):
         read_png16(tmp_path / "none.png")

@@ -192,3 +192,18 @@ def test_throughput_from_unit_records():
     t2 = throughput([{k: v for k, v in r.items() if k != "n_brackets"} for r in recs], wall_s=2.0, n_groups=2,
                     workers=[4])
     assert t2["images_per_cycle"] == 6.0 and t2["projection"] == t["projection"]
+
+
+def test_method_intervals_over_sequences():
+    from emulator.report.dataset import method_intervals
+
+    per_seq = {f"s{k}": {"a": {"mean_exposure_ms": 4.0 + k, "mean_saturated_fraction": 0.10 + 0.01 * k},
+                         "b": {"mean_exposure_ms": 8.0 + k, "mean_saturated_fraction": 0.02 + 0.01 * k}}
+               for k in range(6)}
+    iv = method_intervals(per_seq, ["a", "b"])
+    sat = iv["mean_saturated_fraction"]
+    assert sat["best"] == "b"
+    d = sat["methods"]["a"]["difference_to_best"]
+    # paired by sequence: the difference is 0.08 on every sequence, so its interval is exactly [0.08, 0.08]
+    assert d["estimate"] == pytest.approx(0.08) and d["ci95"] == pytest.approx([0.08, 0.08]) and d["excludes_zero"]
+    assert iv["mean_exposure_ms"]["methods"]["a"]["estimate"] == pytest.approx(6.5)

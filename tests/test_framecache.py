@@ -60,11 +60,14 @@ def test_default_folder_stale_entries_and_errors(tmp_path):
     assert not fresh.cache_path.exists() and np.array_equal(fresh.load(), new)
     assert build_frame_cache(root)["removed"] == 1 and fresh.cache_path.is_file()
     assert np.array_equal(load_sequence(root)[0].frames["left"][1.0].load(), new)
-    # a corrupt entry is an error naming the file, not a silent fallback
+    # a corrupt entry is an error naming the file when read directly; loading a frame never
+    # uses it: the PNG is decoded and the entry written again (issue 24)
     entry = cached_frame_path(root / CACHE_DIRNAME, root, frame.path)
     entry.write_bytes(entry.read_bytes()[:40])
     with pytest.raises(DatasetError, match="corrupt|truncated"):
-        load_sequence(root)[0].frames["left"][1.0].load()
+        read_cached_frame(entry)
+    assert np.array_equal(load_sequence(root)[0].frames["left"][1.0].load(), new)
+    assert np.array_equal(read_cached_frame(entry), new)
     # white level is checked as for the PNG
     good = cached_frame_path(root / CACHE_DIRNAME, root, seq[0].frames["right"][1.0].path)
     with pytest.raises(DatasetError, match="white_level"):

@@ -370,7 +370,7 @@ def test_bench_vo_on_synthetic_run(synthetic, tmp_path):
         assert entry["n_pairs"] > 0
         assert entry["trans_pct"]["median"] < 1.0
         assert entry["rot_deg_per_m"]["median"] < 0.5
-    est = read_trajectory(tmp_path / "out" / "fixed" / "trajectory.txt")
+    est = read_trajectory(tmp_path / "out" / "fixed.txt")
     assert est.num_poses == 3
     for name in ("results.json", "report.md", "fig6_rpe.png", "trajectories.png"):
         assert (tmp_path / "out" / name).is_file()

@@ -25,7 +25,7 @@ from emulator.runner import run_to_folder
 from test_playback import K_DN_PER_MS, write_static_sequence
 
 ROOT = Path(__file__).resolve().parents[1]
-README = (ROOT / "README.md").read_text(encoding="utf-8")
+PLUGINS_DOC = (ROOT / "docs" / "plugins.md").read_text(encoding="utf-8")  # the plugin guide
 GROUP = "exposim.methods"
 
 #: Plugins that fail in each way the loop must catch, on their ``at``-th call (1-based).
@@ -106,9 +106,9 @@ def seq(tmp_path_factory):
 
 @pytest.fixture
 def plug(tmp_path, monkeypatch):
-    """The module ``plug_mod`` (PLUG) and ``readme_ae`` (the README's example block), importable."""
+    """The module ``plug_mod`` (PLUG) and ``readme_ae`` (the plugin guide's example block), importable."""
     (tmp_path / "plug_mod.py").write_text(PLUG)
-    block = README.split("<!-- plugin-example -->", 1)[1].split("```python\n", 1)[1].split("```", 1)[0]
+    block = PLUGINS_DOC.split("<!-- plugin-example -->", 1)[1].split("```python\n", 1)[1].split("```", 1)[0]
     (tmp_path / "readme_ae.py").write_text(block)
     monkeypatch.syspath_prepend(str(tmp_path))
     for mod in ("plug_mod", "readme_ae"):
@@ -128,9 +128,9 @@ def csv_cycles(path):
     return [int(line.split(",")[0]) for line in lines]
 
 
-# ------------------------------------------------------------------ README example, import path
+# ------------------------------------------------------------------ docs/plugins.md example, import path
 def test_readme_example_is_the_shipped_example():
-    block = README.split("<!-- plugin-example -->", 1)[1].split("```python\n", 1)[1].split("```", 1)[0]
+    block = PLUGINS_DOC.split("<!-- plugin-example -->", 1)[1].split("```python\n", 1)[1].split("```", 1)[0]
     assert block == (ROOT / "examples" / "my_ae.py").read_text()
     assert 10 <= len([line for line in block.splitlines() if line.strip()]) <= 16
 
@@ -188,8 +188,13 @@ def test_resume_of_a_run_with_an_import_path_plugin(seq, plug, tmp_path, capsys)
 
 
 def test_import_path_errors_are_named(seq, plug):
-    with pytest.raises(AutoExposureError, match=r"'no_such_mod_q:X'.*cannot import no_such_mod_q.*ModuleNotFoundError"):
+    with pytest.raises(AutoExposureError, match=r"'no_such_mod_q:X': no module no_such_mod_q on the Python path; run "
+                                                r"from the folder that holds no_such_mod_q.py with PYTHONPATH=\."):
         build_methods("classical-50,no_such_mod_q:X")
+    (plug / "imports_missing.py").write_text("import no_such_dependency_q\n")
+    with pytest.raises(AutoExposureError, match=r"cannot import imports_missing: ModuleNotFoundError: No module named "
+                                                r"'no_such_dependency_q'"):  # the plugin's own import fails: as it is
+        build_methods("imports_missing:X")
     with pytest.raises(AutoExposureError, match=r"plug_mod has no attribute 'Missing'"):
         build_methods(["plug_mod:Missing"])
     with pytest.raises(AutoExposureError, match=r"built Kim, which has no next_exposure"):
@@ -322,7 +327,8 @@ def test_plugin_wrapper_checks_every_result():
 
     raw = np.zeros((8, 8), np.uint16)
     for value, why in ((math.nan, "returned NaN"), (-math.inf, r"returned a non-finite exposure \(-inf ms\)"),
-                       (0.0, r"non-positive exposure \(0.0 ms\)"), ("3", None), (True, "returned True"),
+                       (0.0, r"non-positive exposure \(0.0 ms\)"), ("3", "returned '3', not an exposure"),
+                       (np.float32(3.0), None), (True, "returned True"),
                        (None, "returned None")):
         method = PluginMethod(Bad(value), "bad", "x:Bad")
         if why is None:

@@ -1,4 +1,5 @@
-"""README.md stays true: its command table is the registered commands, CI runs its test command."""
+"""README.md and docs/ stay true: the command table (docs/commands.md) is the registered commands, CI runs
+the README's test command, and every relative link of the README and docs/ resolves inside the repository."""
 
 from __future__ import annotations
 
@@ -10,10 +11,11 @@ from emulator.cli import build_parser, load_commands
 
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text(encoding="utf-8")
+COMMANDS = (ROOT / "docs" / "commands.md").read_text(encoding="utf-8")
 
 
 def table_commands(text: str) -> list[str]:
-    """The commands of the README's "## Commands" table, in order (``exposim NAME ...`` cells)."""
+    """The commands of the "## Commands" table of docs/commands.md, in order (``exposim NAME ...`` cells)."""
     section = text.split("## Commands", 1)[1].split("\n## ", 1)[0]
     names = []
     for line in section.splitlines():
@@ -25,13 +27,14 @@ def table_commands(text: str) -> list[str]:
 
 def test_command_table_lists_every_registered_command_in_help_order():
     registered = [c.name for c in load_commands() if c.error is None]
-    assert sorted(registered) == ["bench", "cache", "calibrate", "demo", "emulate", "info", "new-method", "render", "run",
+    assert sorted(registered) == ["bench", "cache", "calibrate", "demo", "emulate", "export", "info", "new-method",
+                                  "render", "run",
                                   "synth", "validate"]
-    assert table_commands(README) == registered
+    assert table_commands(COMMANDS) == registered
 
 
 def test_table_parser_sees_a_missing_row():
-    shortened = README.replace("| `exposim render SCENE", "| render SCENE")
+    shortened = COMMANDS.replace("| `exposim render SCENE", "| render SCENE")
     assert "render" not in table_commands(shortened)
 
 
@@ -40,7 +43,7 @@ def test_selector_choices_in_the_table_are_the_parsers():
     sub = parser._subparsers._group_actions[0].choices  # noqa: SLF001 - argparse has no public accessor
     for cmd in ("emulate", "run"):
         action = next(a for a in sub[cmd]._actions if "--selector" in a.option_strings)
-        row = next(line for line in README.splitlines() if line.startswith(f"| `exposim {cmd} "))
+        row = next(line for line in COMMANDS.splitlines() if line.startswith(f"| `exposim {cmd} "))
         assert f"--selector {'|'.join(action.choices)}".replace("|", r"\|") in row, (cmd, action.choices)
 
 
@@ -52,3 +55,39 @@ def test_ci_runs_the_readme_test_command():
     block = README.split("<!-- test-command -->", 1)[1].split("```", 2)[1].strip()
     assert got == block
     assert got.endswith("python -m pytest -q")
+
+
+def _relative_links(text: str) -> list[str]:
+    return [m for m in re.findall(r"\]\(([^)#\s]+)(?:#[^)]*)?\)", text) if "://" not in m]
+
+
+def test_every_relative_link_of_the_readme_and_docs_resolves_inside_the_repository():
+    pages = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
+    broken = []
+    for page in pages:
+        text = page.read_text(encoding="utf-8")
+        for link in _relative_links(text):
+            target = (page.parent / link).resolve()
+            if not target.exists() or ROOT.resolve() not in target.parents:
+                broken.append(f"{page.relative_to(ROOT)} -> {link}")
+        if "../shared" in text or "shared/DESIGN" in text:
+            broken.append(f"{page.relative_to(ROOT)} names a file outside the repository")
+    assert broken == []
+    assert _relative_links("[a](docs/x.md) [b](https://h/y.md) [c](y.md#s)") == ["docs/x.md", "y.md"]
+
+
+def test_readme_is_short_and_links_the_reference():
+    assert len(README.splitlines()) <= 90
+    for page in ("docs/commands.md", "docs/datasets.md", "docs/plugins.md", "docs/design.md"):
+        assert f"]({page})" in README, page
+
+
+def test_every_results_page_names_its_date_commit_and_machine():
+    pages = sorted((ROOT / "docs" / "results").glob("*.md"))
+    assert len(pages) >= 4
+    for page in pages:
+        head = page.read_text(encoding="utf-8").splitlines()[:5]
+        assert head[2] == "| measured | commit | machine |", page.name
+        date, commit, machine = (c.strip() for c in head[4].strip("|").split("|"))
+        assert re.fullmatch(r"\d{4}-\d{2}-\d{2}", date) and re.fullmatch(r"`[0-9a-f]{7,40}`", commit), page.name
+        assert "cores" in machine, page.name

@@ -28,6 +28,7 @@ def _tree(folder):
 def test_scheduler_spec_is_checked(tmp_path, capsys):
     assert check_scheduler(None) is None and check_scheduler("local") == "local"
     assert check_scheduler("tcp://10.0.0.5:8786") == "tcp://10.0.0.5:8786"
+    assert check_scheduler("tls://10.0.0.5:8786") == "tls://10.0.0.5:8786"
     for bad in ("remote", "tcp://host", "http://h:1", "localx"):
         with pytest.raises(RenderError, match="--scheduler must be 'local' or tcp://HOST:PORT"):
             check_scheduler(bad)

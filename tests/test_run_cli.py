@@ -208,19 +208,24 @@ def _all_parsers():
                 stack += [(f"{name} {k}", v) for k, v in action.choices.items()]
 
 
-def test_cache_folder_option_is_cache_dir_everywhere(capsys):
-    seen = []
+def test_cache_folder_options_render_cache_dir_and_frame_cache(capsys):
+    """--cache-dir is the render cache everywhere; --frame-cache the decoded-frame cache (distinct names)."""
+    seen, frames = [], []
     for name, parser in _all_parsers():
         help_text = parser.format_help()
         for action in parser._actions:
             for opt in action.option_strings:
                 if "cache" in opt and opt != "--no-cache":
-                    if opt == "--cache":  # the old spelling: kept as a hidden alias only
-                        assert action.help == "==SUPPRESS==" and "--cache " not in help_text, name
+                    if opt == "--cache" or (opt == "--cache-dir" and name == "exposim cache"):  # old spellings
+                        assert action.help == "==SUPPRESS==" and f"{opt} " not in help_text, name
+                    elif opt == "--frame-cache":
+                        frames.append(name)
                     else:
                         assert opt == "--cache-dir", (name, opt)
+                        assert "render cache" in action.help, name
                         seen.append(name)
-    assert {"exposim cache", "exposim render", "exposim synth"} <= set(seen)
+    assert {"exposim render", "exposim synth"} <= set(seen)
+    assert set(frames) == {"exposim cache", "exposim run", "exposim info", "exposim emulate"}
     from emulator.cli import build_parser
 
     sub = build_parser()._subparsers._group_actions[0].choices  # noqa: SLF001
@@ -246,7 +251,7 @@ def test_fixed_is_explained_in_help_readme_and_report(clean_run):
     methods_help = " ".join(next(a for a in sub["run"]._actions if "--methods" in a.option_strings).help.split())
     assert f"'fixed' runs classical-50 for its first {n} frames ({n + 1} with --mode borealhdr) and then freezes" \
         in methods_help
-    readme = " ".join((Path(__file__).resolve().parents[1] / "README.md").read_text().split())
+    readme = " ".join((Path(__file__).resolve().parents[1] / "docs" / "commands.md").read_text().split())
     assert f"`fixed` (runs `classical-50` for its first {n} frames, {n + 1} with `--mode borealhdr`, then freezes" \
         in readme
     report = (clean_run / "report.md").read_text()

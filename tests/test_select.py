@@ -99,3 +99,24 @@ def test_predicted_error_selector():
     assert predicted_error(5.0, {4.0: hist, 8.0: hist}, response=r, noise=quiet, **LV) == 8.0
     with pytest.raises(ExposimError, match="no brackets"):
         predicted_error(5.0, {}, response=r, noise=quiet, **LV)
+
+
+def test_blur_aware_weighs_excess_blur_against_noise():
+    from emulator.select import blur_aware, higher_no_sat
+
+    br = {4.0: 0.0, 8.0: 0.0, 16.0: 0.0}
+    lv = dict(white_level=4095, black_level=0)
+    # no motion: HigherNoSat, for every target
+    for t in (1.0, 4.0, 5.0, 12.0, 40.0):
+        assert blur_aware(t, br, **lv) == higher_no_sat(t, br, **lv)
+        assert blur_aware(t, br, **lv, excess_blur_px=lambda b: 0.0) == higher_no_sat(t, br, **lv)
+    # target 12 between 8 and 16: the lower bracket costs sqrt(12/8) - 1 = 0.2247 of noise
+    cost = 12.0 ** 0.5 / 8.0 ** 0.5 - 1.0
+    assert blur_aware(12.0, br, **lv, excess_blur_px=lambda b: cost * 0.99) == 16.0
+    assert blur_aware(12.0, br, **lv, excess_blur_px=lambda b: cost * 1.01) == 8.0
+    assert blur_aware(12.0, br, **lv, excess_blur_px=lambda b: 2 * cost, px_per_noise=2.0 / 0.99) == 16.0
+    # a saturated higher bracket is never chosen, and NaN blur counts as none
+    assert blur_aware(12.0, {8.0: 0.0, 16.0: 0.5}, **lv, excess_blur_px=lambda b: 0.0) == 8.0
+    assert blur_aware(12.0, br, **lv, excess_blur_px=lambda b: float("nan")) == 16.0
+    with pytest.raises(ExposimError, match="px_per_noise"):
+        blur_aware(12.0, br, **lv, px_per_noise=0.0)

@@ -200,7 +200,7 @@ def test_cli_writes_folder_and_refuses_overwrite(tmp_path, capsys):
 
     out = tmp_path / "emul"
     argv = ["validate", "emulation", "--quick", "-o", str(out), "--exposures", "6", "--responses", "borealhdr",
-            "--scenes", "static_lab", "--width", "32", "--height", "20", "--spp", "4", "--no-progress"]
+            "--scenes", "static_lab", "--size", "32x20", "--spp", "4", "--no-progress"]
     assert main(argv) == 0
     r = json.loads((out / "results.json").read_text())
     for key in ("median_rmse_percent", "max_rmse_percent", "noiseless_max_rmse_percent"):

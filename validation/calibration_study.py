@@ -1,4 +1,4 @@
-"""Validation of the inverse-response calibration (issue 8): synthetic stacks, OpenCV, in situ, real sample.
+"""Validation of the inverse-response calibration: synthetic stacks, OpenCV, in situ, real sample.
 
 Run from the repository root::
 
@@ -54,9 +54,11 @@ from emulator.calibration import (  # noqa: E402
     response_error,
 )
 from emulator.io.files import save_figure  # noqa: E402
+from emulator.report.figures import subplots  # noqa: E402
 from emulator.io.pcalib import PCALIB_TABLE_TOP, read_response  # noqa: E402
 from emulator.io.stack import write_stack  # noqa: E402
 from emulator.response import CameraResponse  # noqa: E402
+from emulator.report.html import write_report
 
 __all__ = ["run_study", "main", "opencv_curves", "codes_to_dn_curve", "stack_exposures"]
 
@@ -415,15 +417,10 @@ def real_sample_part(progress) -> tuple[dict, dict]:
 
 # ---------------------------------------------------------------------------- report
 def _plots(results: dict, arrays: dict, out: Path) -> list[str]:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     names = []
     presets = [p for p in PRESETS if f"{p}_truth" in arrays]
     if presets:
-        fig, axes = plt.subplots(2, len(presets), figsize=(4.2 * len(presets), 7), squeeze=False)
+        fig, axes = subplots(2, len(presets), figsize=(4.2 * len(presets), 7), squeeze=False)
         for j, p in enumerate(presets):
             gt = arrays[f"{p}_truth"]
             dn = np.arange(gt.size)
@@ -445,11 +442,10 @@ def _plots(results: dict, arrays: dict, out: Path) -> list[str]:
             axe.grid(alpha=0.3)
         fig.tight_layout()
         save_figure(fig, out / "static_stacks.png", dpi=100)
-        plt.close(fig)
         names.append("static_stacks.png")
     ins = [p for p in PRESETS if f"insitu_{p}_truth" in arrays]
     if ins:
-        fig, axes = plt.subplots(1, len(ins), figsize=(4.2 * len(ins), 3.6), squeeze=False)
+        fig, axes = subplots(1, len(ins), figsize=(4.2 * len(ins), 3.6), squeeze=False)
         for j, p in enumerate(ins):
             gt, g = arrays[f"insitu_{p}_truth"], arrays[f"insitu_{p}_recovered"][: arrays[f"insitu_{p}_truth"].size]
             sl = slice(DN_RANGE[0], DN_RANGE[1] + 1)
@@ -461,11 +457,10 @@ def _plots(results: dict, arrays: dict, out: Path) -> list[str]:
             axes[0, j].legend(fontsize=8)
         fig.tight_layout()
         save_figure(fig, out / "in_situ_synthetic.png", dpi=100)
-        plt.close(fig)
         names.append("in_situ_synthetic.png")
     real = results.get("real_sample", {})
     if "real_pcalib" in arrays:
-        fig, (ax, axb) = plt.subplots(1, 2, figsize=(12, 4))
+        fig, (ax, axb) = subplots(1, 2, figsize=(12, 4))
         gt = arrays["real_pcalib"]
         ax.plot(gt, "k-", lw=2, label="pcalib_inside1")
         for key, style in (("both", "C3-"), ("left", "C0--"), ("right", "C2:")):
@@ -486,7 +481,6 @@ def _plots(results: dict, arrays: dict, out: Path) -> list[str]:
         axb.grid(alpha=0.3, which="both")
         fig.tight_layout()
         save_figure(fig, out / "real_sample.png", dpi=100)
-        plt.close(fig)
         names.append("real_sample.png")
     return names
 
@@ -604,7 +598,7 @@ def run_study(out, *, quick: bool = False, force: bool = False, radiance_source:
     write_arrays(out / "curves.npz", arrays)
     figures = _plots(results, arrays, out)
     write_results(out / "results.json", results, float_digits=12)
-    write_text(out / "report.md", _report(results, figures))
+    write_report(out, _report(results, figures))
     return results
 
 
@@ -622,7 +616,7 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     run_study(args.output, quick=args.quick, force=args.force, radiance_source=args.radiance, parts=parts,
               command=command, progress=lambda m: print(f"[{time.perf_counter() - t0:7.1f} s] {m}", flush=True))
-    print(f"wrote {args.output / 'results.json'}, {args.output / 'report.md'}")
+    print(f"wrote {args.output / 'results.json'}, {args.output / 'report.md'}, {args.output / 'report.html'}")
     return 0
 
 

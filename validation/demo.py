@@ -23,6 +23,8 @@ from pathlib import Path
 import numpy as np
 
 from emulator.io.files import REPORT_FILE, RESULTS_FILE, first_free, read_results, write_results, write_text
+from emulator.report.figures import plural
+from emulator.report.html import write_report
 
 __all__ = ["run_demo", "demo_config", "emulation_check", "new_output_dir", "demo_dataset", "demo_dataset_key"]
 
@@ -272,9 +274,20 @@ def run_demo(output=None, *, quick: bool = False, progress=None, cache_dir=None)
     }
     write_results(out / RESULTS_FILE, results)
     report = _report(out, cfg, emu, run_dir, feats, vo, timings, dataset, reused)
-    write_text(out / REPORT_FILE, report)
+    write_report(out, report, figures=["run/exposure.png", "features/fig4_features.png", "vo/fig6_rpe.png"],
+                 sheets=[_run_sheet(run_dir)])
     return {"output": out, "report": report, "total_s": timings["total_s"], "dataset": dataset,
             "dataset_reused": reused}
+
+
+def _run_sheet(run_dir: Path) -> str:
+    """The closed-loop run's contact sheet (each method's emulated frames over sampled cycles)."""
+    from emulator.io.runfolder import read_run_json, read_tables
+    from emulator.report.html import run_contact_sheet
+
+    info = read_run_json(run_dir)
+    return run_contact_sheet(run_dir, info["methods"], read_tables(run_dir, info["methods"]),
+                             white_level=info.get("white_level"))
 
 
 def _method_rows(feats: dict, vo: dict, run_summary_path: Path) -> list[str]:
@@ -283,7 +296,7 @@ def _method_rows(feats: dict, vo: dict, run_summary_path: Path) -> list[str]:
     fm = feats.get("methods", {})
     vm = vo.get("methods", {})
     lines = [
-        "| method | median exposure (ms) | mean saturated (%) | median uniformity | median matches | VO failed frames | RPE trans. median (%), longest delta |",
+        "| method | median exposure (ms) | mean saturated (%) | median uniformity (%) | median matches | VO failed frames | RPE trans. median (%), longest delta |",
         "| --- | --- | --- | --- | --- | --- | --- |",
     ]
     for name in methods or fm:
@@ -292,8 +305,10 @@ def _method_rows(feats: dict, vo: dict, run_summary_path: Path) -> list[str]:
         v = vm.get(name, {})
         lines.append(
             f"| {name} | {_fmt(m.get('median_exposure_ms'))} | {_fmt(100 * m['mean_saturated_fraction'] if 'mean_saturated_fraction' in m else None)} "
-            f"| {_fmt(f.get('median_uniformity'))} | {_fmt(f.get('median_matches'))} "
-            f"| {len(v.get('failures', []))} of {v.get('n_frames', '-')} frames | {_fmt(_rpe_median(v))} |"
+            f"| {_fmt(None if f.get('median_uniformity') is None else 100 * f['median_uniformity'])} "
+            f"| {_fmt(f.get('median_matches'))} "
+            f"| {len(v.get('failures', []))} of {plural(v['n_frames'], 'frame') if 'n_frames' in v else '- frames'} "
+            f"| {_fmt(_rpe_median(v))} |"
         )
     return lines
 
@@ -324,7 +339,8 @@ def _report(out: Path, cfg: dict, emu: dict, run_dir: Path, feats: dict, vo: dic
         "",
         f"Scene `{cfg['scene']}`, {cfg['n_cycles']} bracket cycles (1..32 ms, 22 frames/s), "
         f"{cfg['width']}x{cfg['height']} px, {cfg['spp']} spp, synthetic BorealHDR camera (noise on), stereo; "
-        f"VO ratio test {cfg['vo_ratio']}.",
+        f"SIFT ratio test {feats.get('parameters', {}).get('ratio')} for the features (the library's) and "
+        f"{cfg['vo_ratio']} for VO (at this image size the stricter test leaves too few matches to track).",
         "",
         f"Synthetic recording: `{dataset}` ("
         + ("reused: an earlier demo with the same configuration synthesised it" if reused else "synthesised now")

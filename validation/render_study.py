@@ -1,4 +1,4 @@
-"""Render study (issue 13): speed against error of raw and denoised renders, and realism vs real frames.
+"""Render study: speed against error of raw and denoised renders, and realism vs real frames.
 
 Run from the repository root::
 
@@ -68,9 +68,11 @@ from pathlib import Path
 
 import numpy as np
 
+from emulator.commands.progress import add_quiet, bars_enabled
 from emulator.commands import argtypes
 from emulator.errors import ExposimError
 from emulator.io.files import prepare_output, write_results, write_text
+from emulator.report.html import write_report
 from validation.common import SHOT_INTERVAL_MS, ValidationError, provenance, study_scene, to_percent
 
 __all__ = ["RenderStudyConfig", "CONFIGS", "run_render_study", "render_study_table", "speedups", "main",
@@ -415,7 +417,7 @@ def run_render_study(output, config: RenderStudyConfig | None = None, *, force: 
     }
     write_results(folder / "results.json", results, float_digits=12)
     _plot(results, folder / "time_vs_error.png")
-    write_text(folder / "report.md", render_study_table(results) + "\n")
+    write_report(folder, render_study_table(results) + "\n")
     return results
 
 
@@ -568,7 +570,7 @@ def add_arguments(p: argparse.ArgumentParser, *, output_option: bool = False) ->
                         "or ~/.cache/exposim/renders)")
     p.add_argument("--cache", dest="cache", help=argparse.SUPPRESS)  # old spelling
     p.add_argument("--force", action="store_true", help="overwrite an existing results.json")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_quiet(p)
 
 
 def config_from_args(args: argparse.Namespace) -> RenderStudyConfig:
@@ -605,7 +607,7 @@ def run_from_args(args: argparse.Namespace, command: str) -> dict:
     config = config_from_args(args)
     from tqdm import tqdm
 
-    with tqdm(total=total_steps(config), desc="render study", unit="step", disable=args.no_progress,
+    with tqdm(total=total_steps(config), desc="render study", unit="step", disable=not bars_enabled(args.quiet),
               file=sys.stderr) as bar:
         return run_render_study(args.output, config, force=args.force, progress=bar.update, command=command)
 
@@ -613,7 +615,7 @@ def run_from_args(args: argparse.Namespace, command: str) -> dict:
 def print_summary(results: dict, output: Path) -> None:
     """The table and the written files, on stdout (command lines only)."""
     print(render_study_table(results))
-    print(f"wrote {output / 'results.json'}, {output / 'report.md'}, {output / 'time_vs_error.png'}")
+    print(f"wrote {output / 'results.json'}, {output / 'report.md'}, {output / 'report.html'}, {output / 'time_vs_error.png'}")
 
 
 def main(argv=None) -> int:

@@ -1,6 +1,7 @@
 """Writing the validation experiments: results.json, arrays.npz, PNG figures and report.md.
 
-The only module of :mod:`validation` that plots (matplotlib, Agg backend, imported lazily)
+The only module of :mod:`validation` that plots (matplotlib's ``Figure`` API on an Agg
+canvas: no ``pyplot``, so a notebook's backend is left alone)
 and assembles an output folder (through :mod:`emulator.io.files`); the
 experiment modules return dicts and arrays.  :func:`run_experiment` is what
 ``exposim validate`` calls.
@@ -21,20 +22,13 @@ from emulator.io.files import (
     write_results,
     write_text,
 )
+from emulator.report.figures import subplots
+from emulator.report.html import write_report
 from validation.common import PAPER_MAX_RMSE_PERCENT, PAPER_MEDIAN_RMSE_PERCENT, ValidationError, provenance
 
 __all__ = ["EXPERIMENTS", "make_config", "run_experiment"]
 
 EXPERIMENTS = ("emulation", "selectors", "motion", "speed")
-
-
-def _plt():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
 
 
 def make_config(name: str, *, quick: bool = False, **overrides):
@@ -109,7 +103,7 @@ def run_experiment(name: str, output, *, config=None, quick: bool = False, force
     results["figures"] = figures
     write_arrays(folder / "arrays.npz", out["arrays"])
     write_results(folder / RESULTS_FILE, results, float_digits=12)
-    write_text(folder / REPORT_FILE, md)
+    write_report(folder, md)
     return results
 
 
@@ -136,16 +130,17 @@ def emulation_verdict(r: dict, which: str) -> str:
 
 
 def _emulation_figures(out: dict, folder: Path) -> list[str]:
-    plt = _plt()
     r, a = out["results"], out["arrays"]
     exposures = a["exposures_ms"]
     brackets = a["brackets_ms"]
     names = []
-    colors = plt.cm.viridis(np.linspace(0.0, 0.9, len(brackets)))
+    from matplotlib import colormaps
+
+    colors = colormaps["viridis"](np.linspace(0.0, 0.9, len(brackets)))
     hist_idx = [int(np.argmin(np.abs(exposures - t))) for t in r["hist_exposures_ms"]]
     main = r["main_camera"]
     for scene in r["per_scene"]:
-        fig, axes = plt.subplots(1, 2, figsize=(12, 4.2), sharey=False)
+        fig, axes = subplots(1, 2, figsize=(12, 4.2), sharey=False)
         ser = r["series"][scene][main]
         for ax, region in zip(axes, ("all", "valid")):
             err = a[f"{scene}/sub_{region}"]
@@ -168,14 +163,13 @@ def _emulation_figures(out: dict, folder: Path) -> list[str]:
         fig.tight_layout()
         name = f"rmse_vs_exposure_{scene}.png"
         save_figure(fig, folder / name, dpi=110)
-        plt.close(fig)
         names.append(name)
 
         edges = a.get(f"{scene}/hist_edges")
         if edges is None or not hist_idx:
             continue
         sel_idx = a[f"{scene}/selected"]
-        fig, axes = plt.subplots(len(brackets), len(hist_idx), figsize=(2.3 * len(hist_idx), 1.25 * len(brackets)),
+        fig, axes = subplots(len(brackets), len(hist_idx), figsize=(2.3 * len(hist_idx), 1.25 * len(brackets)),
                                  sharex=True)
         axes = np.atleast_2d(axes)
         centers = 0.5 * (edges[:-1] + edges[1:])
@@ -203,10 +197,9 @@ def _emulation_figures(out: dict, folder: Path) -> list[str]:
         fig.tight_layout()
         name = f"distributions_{scene}.png"
         save_figure(fig, folder / name, dpi=100)
-        plt.close(fig)
         names.append(name)
 
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4))
+    fig, axes = subplots(1, 2, figsize=(12, 4))
     scenes_ = list(r["per_scene"])
     x = np.arange(len(scenes_))
     for ax, region in zip(axes, ("valid", "all")):
@@ -224,10 +217,9 @@ def _emulation_figures(out: dict, folder: Path) -> list[str]:
         ax.legend(fontsize=7)
     fig.tight_layout()
     save_figure(fig, folder / "summary_per_scene.png", dpi=110)
-    plt.close(fig)
     names.append("summary_per_scene.png")
 
-    fig, ax = plt.subplots(figsize=(8, 3.8))
+    fig, ax = subplots(figsize=(8, 3.8))
     labels = list(r["by_camera"])
     x = np.arange(len(labels))
     ax.bar(x - 0.2, [r["by_camera"][lbl]["sub_valid"]["median"] or 0 for lbl in labels], 0.4, label="median")
@@ -240,7 +232,6 @@ def _emulation_figures(out: dict, folder: Path) -> list[str]:
     ax.legend(fontsize=8)
     fig.tight_layout()
     save_figure(fig, folder / "summary_per_camera.png", dpi=110)
-    plt.close(fig)
     names.append("summary_per_camera.png")
     return names
 
@@ -318,11 +309,10 @@ def _emulation_md(r: dict, figures: list[str]) -> str:
 
 # ------------------------------------------------------------------------------------------ selectors
 def _selectors_figures(out: dict, folder: Path) -> list[str]:
-    plt = _plt()
     r, a = out["results"], out["arrays"]
     exposures = a["exposures_ms"]
     names = []
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4), sharey=True)
+    fig, axes = subplots(1, 2, figsize=(12, 4), sharey=True)
     for ax, split in zip(axes, ("train", "test")):
         scenes_ = r["train_scenes"] if split == "train" else r["test_scenes"]
         for n_i, name in enumerate(r["selectors"]):
@@ -346,10 +336,9 @@ def _selectors_figures(out: dict, folder: Path) -> list[str]:
     axes[0].legend(fontsize=8)
     fig.tight_layout()
     save_figure(fig, folder / "excess_vs_exposure.png", dpi=110)
-    plt.close(fig)
     names.append("excess_vs_exposure.png")
 
-    fig, ax = plt.subplots(figsize=(8, 3.8))
+    fig, ax = subplots(figsize=(8, 3.8))
     x = np.arange(len(r["selectors"]))
     for k, split in enumerate(("train", "test")):
         vals = [r["summary"][split]["exact_all"][n]["excess_over_oracle"]["mean"] for n in r["selectors"]]
@@ -359,7 +348,6 @@ def _selectors_figures(out: dict, folder: Path) -> list[str]:
     ax.legend()
     fig.tight_layout()
     save_figure(fig, folder / "selector_summary.png", dpi=110)
-    plt.close(fig)
     names.append("selector_summary.png")
     return names
 
@@ -393,10 +381,9 @@ _SOURCE_TITLE = {"mitsuba": "rendered forest scenes (walk)", "chart": "translati
 
 
 def _motion_figures(out: dict, folder: Path) -> list[str]:
-    plt = _plt()
     r, a = out["results"], out["arrays"]
     sources = list(r["sources"])
-    fig, axes = plt.subplots(1, len(sources) + 1, figsize=(5.5 * (len(sources) + 1), 4.2))
+    fig, axes = subplots(1, len(sources) + 1, figsize=(5.5 * (len(sources) + 1), 4.2))
     axes = np.atleast_1d(axes)
     for ax, source in zip(axes, sources):
         d = r["sources"][source]
@@ -430,7 +417,6 @@ def _motion_figures(out: dict, folder: Path) -> list[str]:
     ax.grid(alpha=0.3)
     fig.tight_layout()
     save_figure(fig, folder / "motion_error.png", dpi=110)
-    plt.close(fig)
     return ["motion_error.png"]
 
 
@@ -473,9 +459,8 @@ def _motion_md(r: dict, figures: list[str]) -> str:
 
 # ------------------------------------------------------------------------------------------ speed
 def _speed_figures(out: dict, folder: Path) -> list[str]:
-    plt = _plt()
     r = out["results"]
-    fig, ax = plt.subplots(figsize=(7.5, 4.5))
+    fig, ax = subplots(figsize=(7.5, 4.5))
     for row in r["table"]:
         t = row.get("ms_per_full_frame", row["ms_per_study_image"])
         y = row["rmse_all"]["median"]
@@ -491,7 +476,6 @@ def _speed_figures(out: dict, folder: Path) -> list[str]:
     ax.grid(alpha=0.3, which="both")
     fig.tight_layout()
     save_figure(fig, folder / "speed_vs_error.png", dpi=110)
-    plt.close(fig)
     return ["speed_vs_error.png"]
 
 

@@ -45,6 +45,8 @@ __all__ = [
     "to_gray",
     "bayer_to_gray_reference",
     "check_mode",
+    "check_seed",
+    "SEED_MAX",
     "check_range",
 ]
 
@@ -114,6 +116,19 @@ def check_exposure_ms(value) -> float:
     if not (math.isfinite(t) and t > 0):
         raise AutoExposureError(f"exposure_ms must be finite and positive (milliseconds), got {value!r}")
     return t
+
+
+#: Largest seed of NumPy's legacy ``RandomState`` (Kim's optimizer restarts): 2**32 - 1.
+SEED_MAX = 2**32 - 1
+
+
+def check_seed(value, name: str = "seed") -> int:
+    """An integer seed in 0 .. 2**32 - 1 (``bool`` and non-integral numbers refused)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise AutoExposureError(f"{name} must be an integer in 0..{SEED_MAX}, got {value!r}")
+    if not 0 <= int(value) <= SEED_MAX:
+        raise AutoExposureError(f"{name} must be in 0..{SEED_MAX}, got {value!r}")
+    return int(value)
 
 
 def check_raw(raw) -> np.ndarray:

@@ -5,7 +5,8 @@ exposure; methods with the same target share one read-only array), and each used
 demosaic it again.  :data:`FRAME_MEMO` memoises such quantities by the identity of the
 input array, for arrays that cannot change: read-only, owning their data or viewing only
 read-only arrays.  A writeable array is never memoised (its content may change between
-calls), so calling a method on a scratch buffer behaves exactly as before.
+calls), so calling a method on a scratch buffer behaves exactly as before.  Values are
+views of immutable ``bytes`` buffers, which no method can make writeable.
 
 The entry keeps a reference to the input array, so its ``id`` cannot be reused by another
 array while the entry lives; values are returned read-only.  Thread-safe (the playback runs
@@ -58,7 +59,9 @@ class FrameMemo:
                 return entry[1]
         value = compute()
         if isinstance(value, np.ndarray):
-            value.setflags(write=False)
+            # a view of an immutable bytes buffer: a method cannot make it writeable again and
+            # change it for the others (emulator.autoexposure.isolation)
+            value = np.frombuffer(np.ascontiguousarray(value).tobytes(), dtype=value.dtype).reshape(value.shape)
         with self._lock:
             self.misses += 1
             self._data[k] = (frame, value)

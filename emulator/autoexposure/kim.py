@@ -41,13 +41,14 @@ points all miss gives the jump every time, where REF, with fresh draws, usually 
 
 from __future__ import annotations
 
+import decimal
 import math
 import warnings
 
 import cv2
 import numpy as np
 
-from emulator.autoexposure._base import MAX_DN, AutoExposureError, AutoExposureMethod
+from emulator.autoexposure._base import MAX_DN, AutoExposureError, AutoExposureMethod, check_seed
 from emulator.pools import single_thread_pools
 
 __all__ = [
@@ -119,6 +120,9 @@ LOCAL_ENTROPY_SIZE = 3
 #: advanced by every fit, as REF's global state; borealhdr default) or "per-fit" (every fit
 #: draws from a fresh RandomState(seed); paper default).
 RESTART_SEEDINGS = ("stream", "per-fit")
+#: Decimal digits of the 256-bin arithmetic of :func:`metric_ref` (float64 has 17; 30 keeps
+#: the result correctly rounded but for values within 1e-13 ulp of a rounding boundary).
+_DECIMAL_DIGITS = 30
 
 
 def softmax_weights(q: np.ndarray, counts: np.ndarray | None = None) -> np.ndarray:
@@ -149,34 +153,59 @@ def _sobel_16u(img8: np.ndarray, dx: int, dy: int) -> np.ndarray:
 
 def metric_ref(y: np.ndarray, *, alpha=ACTIVATION_ALPHA, tau=ACTIVATION_TAU,
                threshold=ENTROPY_THRESHOLD) -> float:
-    """REF's metric E of a gray image (uint16 DN); NaN where REF divides by zero."""
+    """REF's metric E of a gray image (uint16 DN), correctly rounded; NaN where REF divides by zero.
+
+    Every per-pixel quantity of REF depends on the pixel only through its Y_8 bin (except Q),
+    so E = sum_b W_b Q_b + mean(Q) sum_b n_b A_b M_b W_b over the 256 bins, with Q_b the exact
+    integer sum of Q over bin b.  The 256-term arithmetic runs in 30-digit decimal (exp and ln
+    correctly rounded by :mod:`decimal`), so E is the exact value of REF's formula rounded once
+    to float64: the same bits on every machine, BLAS and thread count.  Why it matters: GP-MI
+    turns last-bit differences of E into different exposures (on a replay of the shared sample,
+    a 1e-16 relative change of one frame's E moves cycle 10 from 9.099 to 9.168 ms), so any
+    float64 evaluation order (a BLAS dot, NumPy's pairwise sums, whose rounding differs
+    between versions and CPUs) makes the trajectory depend on the machine.
+    """
     y8 = _y8(y)
     s = y8.size
-    hist = cv2.calcHist([y8], [0], None, [256], [0, 256]).ravel().astype(np.float64)
-    occ = hist > 0
-    p = hist / s
-    h = np.zeros(256)
-    h[occ] = -p[occ] * np.log2(p[occ])
+    hist = cv2.calcHist([y8], [0], None, [256], [0, 256]).ravel()
     gx = _sobel_16u(y8, 1, 0)
     gy = _sobel_16u(y8, 0, 1)
     q_img = gx * gx  # uint16: wraps mod 65536 like REF
     q_img += gy * gy
-    q_flat = q_img.ravel().astype(np.float64)
-    q_mean = float(q_flat.sum()) / s
-    mu = float(np.dot(hist, h)) / s
-    var = float(np.dot(hist, (h - mu) ** 2)) / s
-    hh, cc = h[occ], hist[occ]
-    h_lo, h_hi = hh.min(), hh.max()
-    if not (var > 0.0) or h_hi == h_lo:
-        return math.nan
-    w = np.zeros(256)
-    w[occ] = softmax_weights((hh - mu) ** 2 / (2.0 * var), cc)
-    h_norm = (hh - h_lo) / (h_hi - h_lo)
-    act = _activation(h_norm, alpha, tau)
-    mask = h_norm < threshold
-    # sum_i W(Y8_i) Q_i: the per-bin weight gathered by a 256-entry lookup table
-    w_img = cv2.LUT(y8, w.reshape(1, 256))
-    return float(np.dot(w_img.ravel(), q_flat) + q_mean * np.dot(cc * act * mask, w[occ]))
+    # per-bin sums of Q: integers below 2**53, so exact in float64 whatever the summation order
+    q_bin = np.bincount(y8.ravel(), weights=q_img.ravel(), minlength=256)
+    return _metric_ref_bins([int(c) for c in hist], [int(q) for q in q_bin], s, alpha, tau, threshold)
+
+
+def _metric_ref_bins(counts: list, q_bin: list, s: int, alpha, tau, threshold) -> float:
+    """REF's metric from the Y_8 histogram and per-bin Q sums, in exact-enough decimal arithmetic."""
+    with decimal.localcontext(decimal.Context(prec=_DECIMAL_DIGITS, Emax=999999, Emin=-999999)):
+        D = decimal.Decimal
+        n = D(s)
+        occ = [b for b in range(256) if counts[b] > 0]
+        ln2 = D(2).ln()
+        h = {b: -(D(counts[b]) / n) * ((D(counts[b]) / n).ln() / ln2) for b in occ}
+        mu = sum(D(counts[b]) * h[b] for b in occ) / n
+        var = sum(D(counts[b]) * (h[b] - mu) ** 2 for b in occ) / n
+        h_lo, h_hi = min(h.values()), max(h.values())
+        if not var > 0 or h_hi == h_lo:
+            return math.nan
+        # REF's weights exp(+(H - mu)^2 / (2 sigma^2)) / sum: the 1/sigma factor cancels
+        e = {b: ((h[b] - mu) ** 2 / (2 * var)).exp() for b in occ}
+        total = sum(D(counts[b]) * e[b] for b in occ)
+        q_sum = sum(D(q) for q in q_bin)
+        thr = D(repr(float(threshold)))
+        a, t = D(repr(float(alpha))), D(repr(float(tau)))
+        gated = D(0)
+        weighted = D(0)
+        for b in occ:
+            w = e[b] / total
+            weighted += w * D(q_bin[b])
+            h_norm = (h[b] - h_lo) / (h_hi - h_lo)
+            if h_norm < thr:
+                act = 2 / (1 + (-a * h_norm + t).exp()) - 1
+                gated += D(counts[b]) * act * w
+        return float(weighted + q_sum / n * gated)
 
 
 def local_entropy(img8: np.ndarray, size: int = LOCAL_ENTROPY_SIZE) -> np.ndarray:
@@ -348,7 +377,7 @@ class Kim2018(AutoExposureMethod):
         if restart_seeding not in RESTART_SEEDINGS:
             raise AutoExposureError(f"restart_seeding must be one of {', '.join(RESTART_SEEDINGS)}, got {restart_seeding!r}")
         self.restart_seeding = restart_seeding
-        self.seed = int(seed)
+        self.seed = check_seed(seed)
         self.window = int(window)
         self.gamma_mi = float(gamma_mi if gamma_mi is not None else (GAMMA_MI_REF if self.mode == "borealhdr" else GAMMA_MI_PAPER))
         self.eta0 = float(eta0)
@@ -403,6 +432,7 @@ class Kim2018(AutoExposureMethod):
         self.last["metric"] = metric
         if not math.isfinite(metric):
             self.last["guard"] = "non-finite metric"
+            self.guard_count += 1  # a fallback, recorded: the loop marks the cycle guarded
             return t
         self.window_t.insert(0, float(t))
         self.window_e.insert(0, float(metric))
@@ -414,6 +444,7 @@ class Kim2018(AutoExposureMethod):
             self.window_t.pop(0)
             self.window_e.pop(0)
             self.last["guard"] = f"GP fit failed: {exc}"
+            self.guard_count += 1  # a fallback, recorded: the loop marks the cycle guarded
             return t
         var = std**2
         phi = math.sqrt(self.gamma_mi) * (np.sqrt(var + self.eta) - math.sqrt(self.eta))

@@ -113,6 +113,13 @@ def load_import_path(path: str) -> Callable:
         raise AutoExposureError(f"AE method {path!r}: expected an import path package.module:attr")
     try:
         obj = importlib.import_module(module_name)
+    except ModuleNotFoundError as exc:
+        if exc.name is not None and module_name.split(".")[0] == exc.name.split(".")[0]:  # the plugin itself, not its imports
+            raise AutoExposureError(
+                f"AE method {path!r}: no module {module_name} on the Python path; run from the folder that holds "
+                f"{module_name.split('.')[0]}.py with PYTHONPATH=. (or add its folder to PYTHONPATH), or pip install "
+                "its package") from exc
+        raise AutoExposureError(f"AE method {path!r}: cannot import {module_name}: {type(exc).__name__}: {exc}") from exc
     except (Exception, SystemExit) as exc:  # report the plugin's own error, by name
         raise AutoExposureError(f"AE method {path!r}: cannot import {module_name}: {type(exc).__name__}: {exc}") from exc
     for part in attr.split("."):
@@ -215,11 +222,12 @@ def build_plugin(plugin: MethodPlugin, *, mode: str = "paper", response=None,
         if key not in options and _names_param(factory, key):
             kwargs[key] = value
     kwargs.update(options)
+    from emulator.autoexposure.isolation import call_factory
+
     try:
-        method = factory(**kwargs)
-    except Exception as exc:
-        raise AutoExposureError(f"AE method {plugin.name!r} ({plugin.value}) could not be built with options "
-                                f"{options}: {type(exc).__name__}: {exc}") from exc
+        method = call_factory(factory, plugin.name, plugin.value, **kwargs)  # SystemExit included
+    except AutoExposureError as exc:
+        raise AutoExposureError(f"{exc} (options {options})") from exc.__cause__
     if not callable(getattr(method, "next_exposure", None)):
         raise AutoExposureError(f"AE method {plugin.name!r} ({plugin.value}) built {type(method).__name__}, which has "
                                 "no next_exposure(raw, exposure_ms) method")
@@ -258,7 +266,7 @@ class PluginMethod:
             value = self.method.next_exposure(raw, exposure_ms)
         except Exception as exc:
             raise MethodFailed(f"raised {type(exc).__name__}: {exc}") from exc
-        if isinstance(value, (bool, np.bool_)):
+        if isinstance(value, (bool, np.bool_, str, bytes)):  # "12.5" is text, not a number
             raise MethodFailed(f"returned {value!r}, not an exposure in ms")
         try:
             ms = float(value)

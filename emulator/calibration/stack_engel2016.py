@@ -207,6 +207,10 @@ def fit_inverse_response(
     dn = np.asarray(dn)
     if dn.ndim != 2:
         raise CalibrationError(f"{source}: samples must be (images, pixels), got shape {dn.shape}")
+    if dn.dtype.kind not in "ui":
+        if dn.dtype.kind != "f" or not np.all(np.isfinite(dn)):
+            raise CalibrationError(f"{source}: dn must be finite digital numbers, got {dn.dtype} "
+                                   f"{'with NaN or infinity' if dn.dtype.kind == 'f' else ''}".rstrip())
     t = np.asarray(exposures_ms, dtype=np.float64)
     if t.shape != (dn.shape[0],):
         raise CalibrationError(f"{source}: {dn.shape[0]} images but {t.size} exposure times")

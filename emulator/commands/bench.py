@@ -10,7 +10,11 @@ import argparse
 import contextlib
 import json
 import shlex
+import shutil
 import sys
+from pathlib import Path
+
+from emulator.commands.progress import add_quiet, bars_enabled
 
 __all__ = ["register"]
 
@@ -35,6 +39,16 @@ def _command_line(args: argparse.Namespace, positional: tuple[str, ...]) -> str:
     return shlex.join(parts)
 
 
+#: emulator.metrics.features.RATIO_TEST, repeated here so that --help does not import OpenCV (a test keeps them equal).
+_RATIO_TEST = 0.8
+
+
+def _ratio(args) -> float:
+    from emulator.metrics.features import RATIO_TEST
+
+    return RATIO_TEST if args.ratio is None else args.ratio
+
+
 def _methods(value: str | None) -> list[str] | None:
     return [m.strip() for m in value.split(",") if m.strip()] if value else None
 
@@ -46,23 +60,65 @@ def _floats(value: str) -> list[float]:
         raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {value!r}") from None
 
 
+def _refine_mode(value: str):
+    if value.strip().lower() == "auto":
+        return "auto"
+    try:
+        n = int(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected 'auto' or a number of stereo pairs, got {value!r}") from None
+    if n < 0:
+        raise argparse.ArgumentTypeError(f"expected 'auto', 0 or a positive number of stereo pairs, got {n}")
+    return n
+
+
+@contextlib.contextmanager
+def _removed_on_failure(output):
+    """Remove ``output`` again if this command created it and then failed (no empty -o folder left)."""
+    path = Path(output)
+    existed = path.exists()
+    try:
+        yield
+    except BaseException:
+        if not existed and path.is_dir():
+            shutil.rmtree(path, ignore_errors=True)
+        raise
+
+
+def _print_json(results: dict) -> None:
+    from emulator.io.files import to_jsonable
+
+    print(json.dumps(to_jsonable(results), indent=1))
+
+
 def _features(args: argparse.Namespace) -> int:
     from emulator.metrics.bench import bench_features
 
-    results = bench_features(
+    with _removed_on_failure(args.output):
+        results = _bench_features(args, bench_features)
+    if args.json:
+        _print_json(results)
+    return _features_summary(args, results)
+
+
+def _bench_features(args, bench_features):
+    return bench_features(
         args.run_dirs,
         args.output,
         methods=_methods(args.methods),
         grid=(args.grid, args.grid),
-        ratio=args.ratio,
+        ratio=_ratio(args),
         n_features=args.n_features,
         matcher=args.matcher,
         scale=args.scale,
         max_frames=args.max_frames,
         force=args.force,
-        progress=not args.quiet,
+        progress=bars_enabled(args.quiet),
         command=_command_line(args, ("run_dirs",)),
     )
+
+
+def _features_summary(args, results) -> int:
     if not args.quiet:
         for name, m in results["methods"].items():
             u = m["median_uniformity"]
@@ -75,7 +131,7 @@ def _features(args: argparse.Namespace) -> int:
 
         for verdict in features_verdicts(results):
             print(f"verdict: {verdict}", file=sys.stderr)
-        print(f"wrote {args.output}/results.json, fig4_features.png, report.md", file=sys.stderr)
+        print(f"wrote {args.output}/results.json, fig4_features.png, report.md, report.html", file=sys.stderr)
     return 0
 
 
@@ -84,7 +140,7 @@ def _vo(args: argparse.Namespace) -> int:
     from emulator.metrics.vo import VOParameters
 
     params = VOParameters(
-        ratio=args.ratio,
+        ratio=_ratio(args),
         n_features=args.n_features,
         matcher=args.matcher,
         min_matches=args.min_matches,
@@ -92,7 +148,15 @@ def _vo(args: argparse.Namespace) -> int:
         max_step_m=args.max_step_m,
         seed=args.seed,
     )
-    results = bench_vo(
+    with _removed_on_failure(args.output):
+        results = _bench_vo(args, bench_vo, params)
+    if args.json:
+        _print_json(results)
+    return _vo_summary(args, results)
+
+
+def _bench_vo(args, bench_vo, params):
+    return bench_vo(
         args.run_dir,
         args.output,
         reference=args.reference,
@@ -108,10 +172,22 @@ def _vo(args: argparse.Namespace) -> int:
         rpe_on_failure=args.rpe_on_failure,
         max_frames=args.max_frames,
         force=args.force,
-        progress=not args.quiet,
+        progress=bars_enabled(args.quiet),
         command=_command_line(args, ("run_dir",)),
     )
+
+
+def _vo_summary(args, results) -> int:
     if not args.quiet:
+        choice = results["calibration"]["choice"]
+        ext = results["calibration"]["extrinsics"]
+        print(f"calibration: {choice['folder']} ({choice['reason']})", file=sys.stderr)
+        if ext.get("epipolar_residual_px") is not None:
+            print(f"extrinsics: {ext['mode']}, epipolar residual {ext['epipolar_residual_px']:.2f} px"
+                  + (f" -> {ext['estimate']['epipolar_residual_after_px']:.2f} px after refinement"
+                     if ext.get("refined") else "") + f": {ext['reason']}", file=sys.stderr)
+        for note in results["limitations"]:
+            print(f"not computed / limited: {note}", file=sys.stderr)
         for name, m in results["methods"].items():
             line = f"{name}: {m['status']}, {m['n_tracked']}/{m['n_frames']} frames tracked"
             if m["rpe"]:
@@ -126,24 +202,36 @@ def _vo(args: argparse.Namespace) -> int:
 
         for verdict in vo_verdicts(results):
             print(f"verdict: {verdict}", file=sys.stderr)
-        print(f"wrote {args.output}/results.json, fig6_rpe.png, trajectories.png, report.md", file=sys.stderr)
+        print(f"wrote {args.output}/results.json, <method>.txt (TUM; evo_traj tum {args.output}/*.txt), "
+              "fig6_rpe.png, trajectories.png, report.md, report.html"
+              + (", evo/rpe_*/<method>.zip (evo_res)" if any(m["evo_results"] for m in results["methods"].values())
+                 else ""), file=sys.stderr)
     return 0
 
 
 def _rpe(args: argparse.Namespace) -> int:
-    from emulator.metrics.rpe import rpe_files
+    from emulator.metrics.rpe import looks_like_estimate, rpe_files
 
+    # The order is evo's (REF EST); it was EST REF before, and swapping the two
+    # changes the numbers, so say which file is which and flag a likely swap.
+    (ref_score, ref_why), (est_score, _) = looks_like_estimate(args.ref), looks_like_estimate(args.est)
     # evo may print notices on stdout (e.g. when it creates its settings file); keep
     # stdout for the result only.
     with contextlib.redirect_stdout(sys.stderr):
         stats = rpe_files(
-            args.est,
             args.ref,
+            args.est,
             delta=args.delta,
             delta_unit=args.delta_unit,
             align_scale=args.align_scale,
             max_diff_s=args.max_diff,
         )
+    print(f"reference: {args.ref} ({stats['n_ref_poses']} poses); estimate: {args.est} "
+          f"({stats['n_est_poses']} poses) (order REF EST, as evo_rpe)", file=sys.stderr)
+    if ref_score > est_score:
+        print(f"warning: the reference {args.ref} looks like an estimate ({ref_why}); the order is REF EST as in "
+              "evo_rpe (earlier exposim builds took EST REF): swap the files if they are the wrong way round",
+              file=sys.stderr)
     if args.json:
         print(json.dumps({"rmse": stats["rmse"], "mean": stats["mean"], "median": stats["median"]}))
     else:
@@ -166,7 +254,8 @@ def _help(parser: argparse.ArgumentParser):
 
 
 def _common_sift(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--ratio", type=float, default=0.8, help="Lowe ratio test threshold (default 0.8)")
+    p.add_argument("--ratio", type=float, default=None,
+                   help=f"Lowe ratio test threshold (default {_RATIO_TEST}, the library's RATIO_TEST, for features and VO)")
     p.add_argument("--n-features", type=int, default=0, help="SIFT keypoints kept per image, 0 = all (default)")
     p.add_argument("--matcher", choices=("flann", "bf"), default="flann",
                    help="nearest neighbours: kd-trees (default) or exact brute force")
@@ -174,7 +263,8 @@ def _common_sift(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-frames", type=int, help="use only the first N images of each method (a reduced run)")
     p.add_argument("-o", "--output", required=True, help="output folder (results.json, figures, report.md)")
     p.add_argument("--force", action="store_true", help="overwrite an existing results.json")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bars or summary")
+    add_quiet(p, "no progress bars or summary")
+    p.add_argument("--json", action="store_true", help="print results.json to stdout")
 
 
 def register(subparsers) -> None:
@@ -209,11 +299,14 @@ def register(subparsers) -> None:
     v.add_argument("run_dir", metavar="RUN_DIR", help="output folder of `exposim run` (left and right images saved)")
     v.add_argument("--reference", help="reference trajectory, TUM format, left camera-to-world (default: the "
                    "sequence's ground_truth/poses_left.txt if it exists)")
-    v.add_argument("--calibration", help="folder with left.yaml, right.yaml (default: <sequence>/calibration)")
+    v.add_argument("--calibration", help="folder with left.yaml, right.yaml (default: chosen from the layout and "
+                   "the recording's date: <sequence>/calibration, calibration/<month>_<year>/ beside the recording, "
+                   "or calibration_files/calibration_vo/<month>_<year>/ of a BorealHDR clone)")
     v.add_argument("--baseline-m", type=float, help="override the calibration's stereo baseline (m)")
-    v.add_argument("--refine-extrinsics", type=int, default=0, metavar="N",
-                   help="re-estimate the rig's relative rotation from left-right matches of N stereo pairs "
-                   "(BorealHDR Sept. 2023 files lack it); default 0: calibration as given")
+    v.add_argument("--refine-extrinsics", type=_refine_mode, default="auto", metavar="auto|N",
+                   help="re-estimate the rig's relative rotation from left-right matches: 'auto' (default) when "
+                   "the median epipolar residual of 2 stereo pairs under the calibration exceeds half the row "
+                   "tolerance (the BorealHDR Sept. 2023 files: 16 px); N > 0: always, from N pairs; 0: never")
     v.add_argument("--scale", type=float, default=1.0, help="rectified image scale, (0, 1] (default 1)")
     v.add_argument("--deltas", type=_floats, help="RPE pair lengths in m, comma-separated (default: 10..50 %% "
                    "of the reference path length)")
@@ -231,12 +324,14 @@ def register(subparsers) -> None:
 
     r = sub.add_parser(
         "rpe",
-        help="translation RPE of two TUM files, as evo_rpe computes it",
-        description="Translation RPE of EST against REF through evo's library; equals "
-        "`evo_rpe tum REF EST --pose_relation trans_part --delta D --delta_unit U [--correct_scale]`.",
+        help="translation RPE of two TUM files, REF then EST, as evo_rpe computes it",
+        description="Translation RPE of EST against REF through evo's library, arguments in evo's order; equals "
+        "`evo_rpe tum REF EST --pose_relation trans_part --delta D --delta_unit U [--correct_scale]`. "
+        "(Earlier exposim builds took EST REF.) Which file is the reference is printed on stderr, with a "
+        "warning when REF looks like an estimate (written by bench vo, or starting exactly at the identity).",
     )
+    r.add_argument("ref", metavar="REF.txt", help="reference trajectory (TUM), first as in evo_rpe")
     r.add_argument("est", metavar="EST.txt", help="estimated trajectory (TUM)")
-    r.add_argument("ref", metavar="REF.txt", help="reference trajectory (TUM)")
     r.add_argument("--delta", type=float, default=1.0, help="pair spacing (default 1)")
     r.add_argument("--delta-unit", choices=("m", "f"), default="f", help="metres or frames (default f)")
     r.add_argument("--align-scale", action="store_true", help="correct the estimate's scale (evo --correct_scale)")

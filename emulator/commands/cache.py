@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import json
 from pathlib import Path
+
+from emulator.commands.progress import add_quiet, bars_enabled
 
 __all__ = ["register"]
 
@@ -21,8 +24,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         ),
     )
     p.add_argument("sequence", type=Path, help="recording folder holding camera_left/ and camera_right/")
-    p.add_argument("--cache-dir", type=Path, default=None,
-                   help="where to write the cache (default: SEQUENCE/.exposim-frames, found automatically)")
+    p.add_argument("--frame-cache", type=Path, default=None, metavar="DIR",
+                   help="where to write the cache (default: SEQUENCE/.exposim-frames, found automatically); a "
+                        "folder elsewhere serves a read-only recording: give run, info and emulate the same "
+                        "--frame-cache DIR")
+    p.add_argument("--cache-dir", dest="frame_cache", type=Path, help=argparse.SUPPRESS)  # old spelling
+    add_quiet(p)
+    p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.add_argument("--level", type=int, default=3, help="zstandard compression level (default: %(default)s)")
     p.set_defaults(func=_cache)
 
@@ -37,13 +45,16 @@ def _cache(args) -> int:
 
     if not 1 <= args.level <= 22:
         raise SystemExit(f"exposim cache: error: --level must be 1..22, got {args.level}")
-    with tqdm(total=None, unit="frame", desc="cache", disable=None) as bar:
+    with tqdm(total=None, unit="frame", desc="cache", disable=not bars_enabled(args.quiet)) as bar:
         def progress(done, total):
             bar.total = total
             bar.update(done - bar.n)
 
-        s = build_frame_cache(args.sequence, args.cache_dir, level=args.level, progress=progress)
+        s = build_frame_cache(args.sequence, args.frame_cache, level=args.level, progress=progress)
+    if args.json:
+        print(json.dumps({k: str(v) if isinstance(v, Path) else v for k, v in s.items()}, indent=1))
+        return 0
     ratio = s["cache_bytes"] / s["png_bytes"] if s["png_bytes"] else float("nan")
     print(f"{s['cache_dir']}: {s['frames']} frames ({s['written']} written, {s['kept']} kept, "
-          f"{s['removed']} stale removed), {s['cache_bytes'] / 1e6:.1f} MB ({ratio:.2f} x the PNGs)")
+          f"{s['removed']} stale removed, {s['rebuilt']} bad rebuilt), {s['cache_bytes'] / 1e6:.1f} MB ({ratio:.2f} x the PNGs)")
     return 0

@@ -20,6 +20,8 @@ import argparse
 import json
 from pathlib import Path
 
+from emulator.commands.progress import add_quiet, bars_enabled
+
 __all__ = ["register"]
 
 
@@ -65,7 +67,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-score", action="store_true", help="recording: skip the cross-bracket score")
     p.add_argument("--seed", type=int, default=0, help="random seed (pixel subset, dither)")
     p.add_argument("--json", action="store_true", help="print the result as one JSON object")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_quiet(p)
     p.set_defaults(func=_calibrate)
 
 
@@ -116,7 +118,7 @@ def _calibrate(args) -> int:
             if p.exists():
                 raise OutputExistsError(f"{p}: exists; refusing to overwrite (use --force)")
 
-    progress, close = _progress_bar(not args.no_progress and not args.json)
+    progress, close = _progress_bar(bars_enabled(args.quiet or args.json))
     score = None
     reference = None
     try:
@@ -212,7 +214,7 @@ def _calibrate_noise(args) -> int:
     seq = load_sequence(args.noise)
     response = sequence_response(seq)
     cams = None if args.camera == "both" else (args.camera,)
-    progress, close = _progress_bar(not args.no_progress and not args.json)
+    progress, close = _progress_bar(bars_enabled(args.quiet or args.json))
     try:
         groups = bracket_groups(seq, cameras=cams, max_groups=args.max_groups, progress=progress)
         estimate = estimate_noise_model(groups, response, name=f"in-situ:{seq.path}", progress=progress)

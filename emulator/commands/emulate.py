@@ -30,7 +30,22 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="camera(s) to emulate (default both: the ones the recording has)")
     p.add_argument("--selector", choices=("higher-no-sat", "closest", "reference"), default="higher-no-sat",
                    help="bracket selector, decided on the first camera's saturation (default higher-no-sat)")
+    p.add_argument("--blur-aware", action="store_true",
+                   help="with higher-no-sat: take the lower bracket when the higher one's excess blur (from the "
+                        "gyro) costs more than the lower one's noise (emulator.select.blur_aware; docs/blur.md)")
     p.add_argument("--response", type=Path, help="pcalib file (default: found beside the recording)")
+    p.add_argument("--from-ms", type=float, default=None, metavar="E",
+                   help="emulate from the bracket of E ms (must be in the cycle) instead of the selector's choice")
+    p.add_argument("--blur", choices=("none", "consistent"), default="none",
+                   help="none (default): exact eq. 2; consistent: add the gyro's blur of the extra exposure time "
+                        "where the target is longer than the bracket (needs imu/imu.csv; docs/blur.md)")
+    p.add_argument("--calibration", type=Path, default=None, metavar="DIR",
+                   help="folder with left.yaml/right.yaml for --blur (default: found as `exposim info` does)")
+    p.add_argument("--stamp", choices=("start", "middle", "end"), default="end",
+                   help="where a frame's timestamp lies in its exposure window, for --blur (default end; docs/blur.md)")
+    p.add_argument("--frame-cache", type=Path, default=None, metavar="DIR",
+                   help="read decoded frames from this frame cache (made by 'exposim cache SEQ --frame-cache DIR'; "
+                        "default: SEQUENCE/.exposim-frames when it exists)")
     p.add_argument("--save", choices=("png16", "png8"), default="png16",
                    help="png16 (default): 12-bit Bayer DN in a 16-bit PNG; png8: demosaiced 8-bit grey, viewable")
     p.add_argument("-o", "--output", type=Path, required=True, help="output folder for the PNG(s) (created)")
@@ -50,11 +65,22 @@ def emulate_cycle(
     cameras: tuple[str, ...] = ("left", "right"),
     selector: str = "higher-no-sat",
     response=None,
+    from_ms: float | None = None,
+    blur: str = "none",
+    calibration=None,
+    stamp: str = "end",
 ):
     """Emulate one cycle; returns (info dict, {camera: image}).
 
     The selector sees the brackets present for every requested camera and decides on the
     first camera's saturation (the left one for a stereo pair), once for all cameras.
+    ``from_ms`` forces the source bracket instead (it must be present for every camera).
+    ``selector="blur-aware"``: :func:`emulator.select.blur_aware` with the recording's gyro.
+    ``blur="consistent"`` adds the blur of the extra exposure time from the recording's
+    gyro (:mod:`emulator.motion`); with an IMU, each camera's entry records the predicted
+    blur of the source and of a capture at the target (px, largest over the image) and
+    ``blur_mismatch_px`` (source minus target: > 0 is blur the emulated image keeps; with
+    ``consistent`` the added blur makes it 0 where the target is longer).
     """
     from emulator.emulate import check_exposure, emulate
     from emulator.io.borealhdr import sequence_response
@@ -86,13 +112,36 @@ def emulate_cycle(
             images[key] = cycle.frames[cam][b].load()
         return images[key]
 
-    chosen = select(selector, exposure_ms, {b: frac(b) for b in available}, **levels)
+    if from_ms is not None:
+        from_ms = check_exposure(from_ms, "--from-ms")
+        if from_ms not in available:
+            raise ExposimError(f"--from-ms {from_ms:g}: cycle {cycle_index} of {sequence.path} has no {from_ms:g} ms "
+                               f"bracket for {' and '.join(cameras)} (present: {', '.join(f'{b:g}' for b in available)})")
+        chosen = from_ms
+    from emulator.motion import blur_hook, recording_motion
+
+    hook = blur_hook(blur, sequence, response, calibration=calibration, stamp=stamp)
+    motion = hook.motion if hook is not None else (
+        recording_motion(sequence, calibration, stamp=stamp) if sequence.imu is not None and (
+            selector == "blur-aware" or _has_calibration(sequence, calibration)) else None)
+    if from_ms is not None:
+        pass
+    elif selector == "blur-aware":
+        from emulator.select import blur_aware
+
+        if motion is None:
+            raise ExposimError(f"--selector blur-aware needs the recording's gyro (imu/imu.csv); {sequence.path} has none")
+        chosen = blur_aware(exposure_ms, {b: frac(b) for b in available}, **levels, excess_blur_px=lambda b: (
+            motion.mismatch_px(lead, cycle.frames[lead][b].timestamp_ns, b, exposure_ms)))
+    else:
+        chosen = select(selector, exposure_ms, {b: frac(b) for b in available}, **levels)
     info = {
         "sequence": str(sequence.path),
         "cycle": cycle_index,
         "target_ms": exposure_ms,
-        "selector": selector,
+        "selector": selector if from_ms is None else "forced (--from-ms)",
         "bracket_ms": chosen,
+        "blur": blur,
         "ratio": exposure_ms / chosen,
         "response": response.name,
         "cameras": {},
@@ -100,16 +149,37 @@ def emulate_cycle(
     out = {}
     for cam in cameras:
         frame = cycle.frames[cam][chosen]
-        img, valid = emulate(_load(cam, chosen), chosen, exposure_ms, response, return_mask=True)
+        raw = _load(cam, chosen)
+        if hook is not None:
+            from emulator.blur import emulate_blur_consistent
+
+            Hs, ws = motion.homographies(cam, frame.timestamp_ns, chosen, exposure_ms, (raw.shape[1], raw.shape[0]))
+            img, valid = emulate_blur_consistent(raw, chosen, exposure_ms, response, Hs, ws)
+        else:
+            img, valid = emulate(raw, chosen, exposure_ms, response, return_mask=True)
         out[cam] = img
         info["cameras"][cam] = {
             "source": str(frame.path),
             "timestamp_ns": frame.timestamp_ns,
             "valid_fraction": float(valid.mean()),
-            "saturated_fraction_source": saturated_fraction(_load(cam, chosen), **levels),
+            "saturated_fraction_source": saturated_fraction(raw, **levels),
         }
+        if motion is not None:
+            size = (raw.shape[1], raw.shape[0])
+            src = motion.frame_blur(cam, frame.timestamp_ns, chosen, size).max_px
+            tgt = motion.frame_blur(cam, frame.timestamp_ns, exposure_ms, size).max_px
+            mismatch = src - tgt
+            if hook is not None and mismatch < 0:
+                mismatch = 0.0
+            info["cameras"][cam].update(source_blur_px=src, target_blur_px=tgt, blur_mismatch_px=mismatch)
     info["valid_fraction"] = min(c["valid_fraction"] for c in info["cameras"].values())
     return info, out
+
+
+def _has_calibration(sequence, calibration) -> bool:
+    from emulator.motion import find_camera_calibration
+
+    return find_camera_calibration(sequence, calibration) is not None
 
 
 def _emulate(args) -> int:
@@ -117,14 +187,18 @@ def _emulate(args) -> int:
     from emulator.io.png import write_png8, write_png16
     from emulator.runner import saved_image
 
-    seq = load_sequence(args.sequence)
+    seq = load_sequence(args.sequence, frame_cache=args.frame_cache)
     cams = ("left", "right") if args.camera == "both" else (args.camera,)
     if args.camera == "both":
         cams = tuple(c for c in cams if c in seq.cameras) or cams
     response = None
     if args.response is not None:
         response = sequence_response(seq, args.response)
-    info, images = emulate_cycle(seq, args.cycle, args.exposure_ms, cameras=cams, selector=args.selector, response=response)
+    if args.blur_aware and args.selector != "higher-no-sat":
+        raise ExposimError(f"--blur-aware applies to --selector higher-no-sat, not {args.selector}")
+    selector = "blur-aware" if args.blur_aware else args.selector
+    info, images = emulate_cycle(seq, args.cycle, args.exposure_ms, cameras=cams, selector=selector, response=response,
+                               from_ms=args.from_ms, blur=args.blur, calibration=args.calibration, stamp=args.stamp)
     targets = {
         cam: args.output / f"{cam}_cycle{args.cycle:04d}_{args.exposure_ms:g}ms.png" for cam in images
     }
@@ -143,8 +217,11 @@ def _emulate(args) -> int:
     else:
         print(
             f"cycle {info['cycle']}: target {info['target_ms']:g} ms from bracket {info['bracket_ms']:g} ms "
-            f"(ratio {info['ratio']:.4g}, {info['selector']}), valid pixels {100 * info['valid_fraction']:.2f} %"
+            f"(ratio {info['ratio']:.4g}, {info['selector']}), valid pixels {100 * info['valid_fraction']:.2f} %, "
+            f"blur {info['blur']}"
         )
         for cam, c in info["cameras"].items():
-            print(f"  {cam:5s} {c['source']} (t = {c['timestamp_ns']} ns) -> {c['output']}")
+            blur = (f"; blur source {c['source_blur_px']:.2f} px, target {c['target_blur_px']:.2f} px, excess "
+                    f"{c['blur_mismatch_px']:+.2f} px" if "blur_mismatch_px" in c else "")
+            print(f"  {cam:5s} {c['source']} (t = {c['timestamp_ns']} ns) -> {c['output']}{blur}")
     return 0

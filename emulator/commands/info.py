@@ -16,7 +16,15 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Describe a BorealHDR-layout recording (cycles are grouped by timestamp).",
     )
     p.add_argument("sequence", type=Path, help="recording folder holding camera_left/ and camera_right/, or a trajectory .zip")
+    p.add_argument("--frame-cache", type=Path, default=None, metavar="DIR",
+                   help="read decoded frames from this frame cache (made by 'exposim cache SEQ --frame-cache DIR'; "
+                        "default: SEQUENCE/.exposim-frames when it exists)")
     p.add_argument("--json", action="store_true", help="print one JSON object (cycles as a list)")
+    p.add_argument("--calibration", type=Path, default=None, metavar="DIR",
+                   help="folder with left.yaml/right.yaml (ROS camera_info) for the blur in pixels (default: "
+                        "calibration/ inside or beside the recording, BorealHDR: the one of the recording's month)")
+    p.add_argument("--stamp", choices=("start", "middle", "end"), default="end",
+                   help="where a frame's timestamp lies in its exposure window (default end, fitted on the BorealHDR sample; docs/blur.md)")
     p.set_defaults(func=_info)
 
 
@@ -26,8 +34,15 @@ register.order = 10  # place in `exposim --help`
 def _info(args) -> int:
     from emulator.io.borealhdr import load_sequence
 
-    seq = load_sequence(args.sequence)
+    import warnings
+
+    from emulator.io.imu import ImuMissingWarning
+
+    with warnings.catch_warnings():  # info reports the IMU itself ("imu": null / "imu  none")
+        warnings.simplefilter("ignore", ImuMissingWarning)
+        seq = load_sequence(args.sequence, frame_cache=args.frame_cache)
     desc = seq.describe()
+    desc["imu"], desc["blur"] = _motion(seq, args)
     if args.json:
         print(json.dumps(desc, indent=1))
         return 0
@@ -43,4 +58,56 @@ def _info(args) -> int:
         print("gaps")
         for g in seq.gaps:
             print(f"  {g}")
+    _print_blur(seq, desc["imu"], desc["blur"])
     return 0
+
+
+def _motion(seq, args) -> tuple[dict | None, dict | None]:
+    """(IMU summary, predicted blur per left frame) for ``info``; (None, None) without an IMU."""
+    from emulator.errors import CalibrationError
+    from emulator.motion import blur_table, recording_motion
+
+    if seq.imu is None:
+        return None, None
+    try:
+        motion = recording_motion(seq, args.calibration, stamp=args.stamp)
+    except CalibrationError as exc:
+        if args.calibration is not None:
+            raise
+        return seq.imu.describe(), {"error": str(exc)}
+    cam = "left" if "left" in seq.cameras else seq.cameras[0]
+    return seq.imu.describe(), {
+        "camera": cam,
+        "stamp": motion.stamp,
+        "R_cam_imu": motion.R_cam_imu.tolist(),
+        "focal_px": float(motion.K(cam)[0][0, 0]),
+        "frames": blur_table(seq, motion, cam),
+    }
+
+
+def _cell(row: dict | None) -> str:
+    text = "-" if row is None else "{:.2f}/{:.2f}".format(row["max_px"], row["centre_px"])
+    return f"{text:>14s}"
+
+
+def _print_blur(seq, imu: dict | None, blur: dict | None) -> None:
+    if imu is None:
+        print("imu        none (no imu/imu.csv): blur is not predicted")
+        return
+    rate = imu["angular_speed_deg_s"]
+    print(f"imu        {imu['n_samples']} samples at {imu['rate_hz']:.1f} Hz; angular speed p50 {rate['p50']:.2f}, "
+          f"p90 {rate['p90']:.2f}, p99 {rate['p99']:.2f} deg/s over the whole file")
+    if "error" in blur:
+        print(f"blur       not predicted: {blur['error']}")
+        return
+    print(f"blur       px on the {blur['camera']} camera (largest over the image / centre), stamp at exposure "
+          f"{blur['stamp']}, f = {blur['focal_px']:.1f} px")
+    by_cycle: dict[int, dict[float, dict]] = {}
+    for r in blur["frames"]:
+        by_cycle.setdefault(r["cycle"], {})[r["exposure_ms"]] = r
+    print("  cycle " + "".join(f"{f'{b:g} ms':>14s}" for b in seq.brackets) + "   deg/s")
+    for c, rows in sorted(by_cycle.items()):
+        cells = "".join(_cell(rows.get(b)) for b in seq.brackets)
+        rates = [r["mean_rate_deg_s"] for r in rows.values()]
+        print(f"  {c:5d} {cells}   {max(rates):.2f}")
+    return None

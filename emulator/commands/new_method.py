@@ -10,6 +10,7 @@ the README's example) and ``DIR/test_<module>.py`` (pytest properties on synthet
 from __future__ import annotations
 
 import argparse
+import keyword
 import re
 from pathlib import Path
 from string import Template
@@ -82,6 +83,19 @@ def test_reset_then_same_answer():
 _CLASS_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
 
+def _shadows_a_module(module: str) -> bool:
+    """Whether ``module`` names a standard-library or installed top-level module (``numpy``, ``os``)."""
+    import importlib.util
+    import sys
+
+    if module in sys.stdlib_module_names or module in sys.builtin_module_names:
+        return True
+    try:
+        return importlib.util.find_spec(module) is not None
+    except (ImportError, ValueError):
+        return False
+
+
 def render(name: str, class_name: str | None = None) -> dict[str, str]:
     """File name -> text of a new method ``name`` (checked like a plugin's name) and its test."""
     from emulator.autoexposure.registry import check_method_name
@@ -91,9 +105,14 @@ def render(name: str, class_name: str | None = None) -> dict[str, str]:
     if not module.isidentifier() or module[0].isdigit():
         raise ExposimError(f"new-method {name!r}: the module name {module!r} is not a Python identifier; start the "
                            "name with a letter")
+    if keyword.iskeyword(module) or keyword.issoftkeyword(module) or module in ("None", "True", "False"):
+        raise ExposimError(f"new-method {name!r}: the module name {module!r} is a Python keyword; choose another NAME")
+    if _shadows_a_module(module):
+        raise ExposimError(f"new-method {name!r}: a module named {module!r} is already importable (it would shadow "
+                           "it, or be shadowed); choose another NAME")
     class_name = class_name or "".join(part[:1].upper() + part[1:] for part in re.split(r"[-_]", name) if part)
-    if not _CLASS_RE.match(class_name):
-        raise ExposimError(f"new-method: --class-name {class_name!r} is not a Python identifier")
+    if not _CLASS_RE.match(class_name) or keyword.iskeyword(class_name) or keyword.issoftkeyword(class_name):
+        raise ExposimError(f"new-method: --class-name {class_name!r} is not a Python identifier (or is a keyword)")
     values = {"name": name, "module": module, "class_name": class_name}
     return {f"{module}.py": METHOD_TEMPLATE.substitute(values),
             f"test_{module}.py": TEST_TEMPLATE.substitute(values)}

@@ -8,6 +8,8 @@ import shlex
 import sys
 from pathlib import Path
 
+from emulator.commands.progress import add_quiet, bars_enabled
+from emulator.distributed import SCHEDULER_HELP, resolve_scheduler
 from emulator.errors import ExposimError
 
 __all__ = ["register", "parse_option"]
@@ -47,12 +49,22 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--selector", choices=("higher-no-sat", "closest", "reference"), default=None,
                    help="bracket selector (default higher-no-sat)")
     p.add_argument("--response", type=Path, default=None, help="pcalib file (default: found beside the recording)")
+    p.add_argument("--frame-cache", type=Path, default=None, metavar="DIR",
+                   help="read decoded frames from this frame cache (made by 'exposim cache SEQ --frame-cache DIR'; "
+                        "default: SEQUENCE/.exposim-frames when it exists)")
     p.add_argument("--seed", type=int, default=None, help="seed of kim's Gaussian-process optimizer (default 0)")
     p.add_argument("--option", action="append", default=[], metavar="METHOD.KEY=VALUE",
                    help="a method option, e.g. zhang.percentile=0.7 or kim.window=8 (VALUE is JSON or text); repeatable")
     p.add_argument("--noise", choices=("none", "consistent"), default=None,
                    help="none (default): exact emulation (eq. 2); consistent: add the noise a capture at the "
                         "target exposure would have where the source bracket is cleaner (needs a noise model)")
+    p.add_argument("--blur", choices=("none", "consistent"), default=None,
+                   help="none (default): exact emulation; consistent: add the gyro's blur of the extra exposure time "
+                        "where the target is longer than the bracket, and record each image's excess blur in blur.csv "
+                        "(needs imu/imu.csv and a camera calibration; docs/blur.md)")
+    p.add_argument("--blur-aware", action="store_true",
+                   help="with --blur consistent and --selector higher-no-sat: take the lower bracket when the higher "
+                        "one's excess blur costs more than the lower one's noise (emulator.select.blur_aware)")
     p.add_argument("--noise-model", type=Path, default=None, metavar="FILE.json",
                    help="noise model for --noise consistent (`exposim calibrate --noise`); default: the model "
                         "a synthetic recording's exposim.json carries")
@@ -64,15 +76,18 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="dataset run: SEQUENCE is a dataset root; run every sequence under it ('all') or the named "
                         "ones (folders or trajectory .zip files, a zip named by its stem); OUTDIR gets one folder per "
                         "sequence and a dataset summary (results.json, report.md, methods.png)")
-    p.add_argument("--scheduler", default=None, metavar="serial|local|tcp://HOST:PORT",
-                   help="dataset runs: serial, local (a Dask LocalCluster sized to the machine; default) or the "
-                        "address of a running Dask scheduler; single sequences always run serially")
+    p.add_argument("--scheduler", default=None, metavar="serial|local|tcp://HOST:PORT|tls://HOST:PORT",
+                   help="dataset runs: " + SCHEDULER_HELP + ", else local (serial without the dask extra); "
+                        "single sequences always run serially")
+    p.add_argument("--scheduler-file", type=Path, default=None, metavar="PATH",
+                   help="dataset runs: the scheduler file of a running Dask cluster (dask scheduler "
+                        "--scheduler-file PATH, dask-jobqueue)")
     p.add_argument("--workers", type=int, default=None, help="dataset runs on --scheduler local: worker processes")
     p.add_argument("--group-size", type=int, default=None,
                    help="dataset runs: methods per unit of work (default: all, one unit per sequence, the methods "
                         "sharing decoded images; 1: one (sequence, method) per unit, the finest parallelism)")
     p.add_argument("--retries", type=int, default=2, help="dataset runs on Dask: retries of a failed unit (default 2)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_quiet(p)
     p.add_argument("--json", action="store_true", help="print the results summary as JSON")
     _add_plugin_arguments(p)
     p.set_defaults(func=_run)
@@ -128,7 +143,7 @@ def _command(args) -> str:
     parts = ["exposim", "run", str(args.sequence), "-o", str(args.output)]
     for flag, value in (("--methods", args.methods), ("--save", args.save), ("--mode", args.mode),
                         ("--initial-ms", args.initial_ms), ("--selector", args.selector),
-                        ("--response", args.response), ("--seed", args.seed), ("--noise", args.noise),
+                        ("--response", args.response), ("--seed", args.seed), ("--noise", args.noise), ("--blur", args.blur),
                         ("--noise-model", args.noise_model), ("--noise-seed", args.noise_seed)):
         if value is not None:
             parts += [flag, str(value)]
@@ -138,6 +153,8 @@ def _command(args) -> str:
         parts += ["--option", text]
     if args.jobs != 1:
         parts += ["--jobs", str(args.jobs)]
+    if getattr(args, "blur_aware", False):
+        parts.append("--blur-aware")
     if args.resume:
         parts.append("--resume")
     if getattr(args, "method_timeout", None) is not None:
@@ -159,19 +176,32 @@ def _check_args(args) -> None:
         raise ExposimError(f"--jobs {args.jobs}: must be >= 1")
     if args.noise_seed is not None and args.noise_seed < 0:
         raise ExposimError(f"--noise-seed {args.noise_seed}: must be >= 0")
+    from emulator.commands.argtypes import SEED_MAX
+
+    for flag, seed in (("--seed", args.seed), ("--noise-seed", args.noise_seed)):
+        if seed is not None and not 0 <= seed <= SEED_MAX:
+            raise ExposimError(f"{flag} {seed}: must be in 0..{SEED_MAX}")
+    for flag, count in (("--workers", args.workers), ("--group-size", args.group_size)):
+        if count is not None and count < 1:  # 0 would silently mean "default"
+            raise ExposimError(f"{flag} {count}: must be >= 1")
     if args.noise_model is not None and args.noise != "consistent" and not args.resume:
         raise ExposimError("--noise-model is used only with --noise consistent")
 
 
 def _run(args) -> int:
     _check_args(args)
+    if args.sequences is not None and args.frame_cache is not None:
+        raise ExposimError("--frame-cache applies to one sequence; a dataset run reads each sequence's own "
+                           "SEQUENCE/.exposim-frames")
     if args.sequences is not None:
-        if args.noise not in (None, "none") or args.method_timeout is not None or args.strict:
-            raise ExposimError("--noise, --method-timeout and --strict apply to single-sequence runs; "
+        if args.noise not in (None, "none") or args.blur not in (None, "none") or args.blur_aware \
+                or args.method_timeout is not None or args.strict:
+            raise ExposimError("--noise, --blur, --blur-aware, --method-timeout and --strict apply to single-sequence "
+                               "runs; "
                                "dataset runs (--sequences) do not take them yet")
         return _run_dataset(args)
-    if args.scheduler not in (None, "serial"):
-        raise ExposimError(f"--scheduler {args.scheduler}: a single sequence runs serially; "
+    if args.scheduler not in (None, "serial") or args.scheduler_file is not None:
+        raise ExposimError(f"--scheduler {args.scheduler or 'file'}: a single sequence runs serially; "
                            "pass --sequences all for a dataset run")
     from emulator.autoexposure import DEFAULT_RANGE_MS
     from emulator.io.runfolder import RUN_FILE, read_run_json
@@ -187,6 +217,7 @@ def _run(args) -> int:
         "selector": args.selector,
         "noise": args.noise,
         "noise_seed": args.noise_seed,
+        "blur": args.blur,
     }
     options: dict[str, dict] = {}
     for text in args.option:
@@ -203,6 +234,7 @@ def _run(args) -> int:
         "selector": DEFAULT_SELECTOR,
         "noise": "none",
         "noise_seed": 0,
+        "blur": "none",
     }
     noise_model = args.noise_model
     response_path = args.response
@@ -212,11 +244,14 @@ def _run(args) -> int:
             raise ExposimError(f"{args.output / RUN_FILE}: no run to resume (run.json missing)")
         recorded = read_run_json(args.output)
         rec_noise = recorded.get("noise") or {"mode": "none"}
-        recorded = {**recorded, "noise": rec_noise.get("mode", "none"), "noise_seed": rec_noise.get("seed", 0)}
+        recorded = {**recorded, "noise": rec_noise.get("mode", "none"), "noise_seed": rec_noise.get("seed", 0),
+                    "blur": (recorded.get("blur") or {"mode": "none"}).get("mode", "none"),
+                    "blur_spec": recorded.get("blur") or {}}
         if given["methods"] is None and recorded.get("method_specs"):
             given["methods"] = ",".join(recorded["method_specs"])  # import-path plugins by their path
         if args.method_timeout is None:
             args.method_timeout = recorded.get("method_timeout")
+        args.blur_aware = args.blur_aware or bool((recorded.get("blur_spec") or {}).get("blur_aware"))
         for key, value in given.items():
             if value is None:
                 given[key] = recorded.get(key, defaults[key])
@@ -236,20 +271,26 @@ def _run(args) -> int:
     _warn_broken_plugins()
     progress = None
     bar = None
-    if not args.no_progress:
+    if bars_enabled(args.quiet):
         from tqdm import tqdm
 
-        bar = tqdm(total=None, unit="cycle", desc="exposim run", file=sys.stderr, dynamic_ncols=True)
-
         def progress(done: int, total: int) -> None:
+            nonlocal bar
+            if bar is None:  # made at the first report, after the run's checks passed
+                bar = tqdm(total=total, unit="cycle", desc="exposim run", file=sys.stderr, dynamic_ncols=True)
             if bar.total != total:
                 bar.total = total
             bar.n = done
             bar.refresh()
 
+    source = args.sequence
+    if args.frame_cache is not None:  # a frame cache elsewhere (a read-only recording)
+        from emulator.io.borealhdr import load_sequence
+
+        source = load_sequence(args.sequence, frame_cache=args.frame_cache)
     try:
         summary = run_to_folder(
-            args.sequence,
+            source,
             cfg["methods"],
             args.output,
             save=cfg["save"],
@@ -267,11 +308,13 @@ def _run(args) -> int:
             noise_model=noise_model,
             noise_seed=cfg["noise_seed"],
             method_timeout=args.method_timeout,
+            blur=cfg["blur"],
+            blur_aware=args.blur_aware,
         )
     finally:
         if bar is not None:
             bar.close()
-    failed = {n: m["status"] for n, m in summary["methods"].items() if m.get("status", "ok") != "ok"}
+    failed = {n: m["status"] for n, m in summary["methods"].items() if m.get("status", "ok").startswith("failed")}
     rc = 1 if failed and args.strict else 0
     if args.json:
         print(json.dumps(summary, indent=1))
@@ -291,7 +334,23 @@ def _run(args) -> int:
               + (" (--strict: exit code 1)" if args.strict else ""))
         for name, why in failed.items():
             print(f"  {name:13s} {why}")
+    if (args.output / "report.html").is_file():
+        print(f"report      {args.output / 'report.html'} (open in a browser)")
     return rc
+
+
+def _check_methods_once(methods: str, run_options: dict) -> None:
+    """Build every method once with the run's options (no response: only the options are checked),
+    so that a bad ``--option`` or a plugin that cannot be built is refused before a dataset run
+    writes anything (it would otherwise fail in every unit and leave a dataset.json behind)."""
+    import warnings
+
+    from emulator.autoexposure.methodset import build_methods
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        build_methods(methods, mode=run_options.get("mode") or "paper", response=None,
+                      options=run_options.get("options"))
 
 
 def _run_dataset(args) -> int:
@@ -320,11 +379,12 @@ def _run_dataset(args) -> int:
         run_options["options"] = options
     methods = args.methods or ",".join(recorded.get("methods", [])) or "all"
     group_size = args.group_size or recorded.get("group_size")
-    scheduler = args.scheduler or "local"
+    scheduler, scheduler_file = resolve_scheduler(args.scheduler, args.scheduler_file)
+    _check_methods_once(methods, run_options)  # a bad option fails here, before dataset.json exists
 
     bar = None
     progress = None
-    if not args.no_progress:
+    if bars_enabled(args.quiet):
         from tqdm import tqdm
 
         def progress(done: int, total: int) -> None:
@@ -338,6 +398,7 @@ def _run_dataset(args) -> int:
     try:
         summary = run_dataset(args.sequence, args.output, sequences=args.sequences, methods=methods,
                               group_size=group_size, options=run_options, scheduler=scheduler,
+                              scheduler_file=scheduler_file,
                               n_workers=args.workers, retries=args.retries, resume=args.resume, progress=progress)
     finally:
         if bar is not None:
@@ -347,7 +408,7 @@ def _run_dataset(args) -> int:
     else:
         t = summary["throughput"]
         print(f"dataset run {args.output}  ({len(summary['sequences'])} sequences, {len(summary['units'])} units, "
-              f"scheduler {scheduler})")
+              f"scheduler {summary['scheduler']})")
         for name, m in summary["per_method"].items():
             mean = m["mean_exposure_ms"]
             print(f"  {name:13s} {m['cycles']:6d} cycles  mean {mean:8.3f} ms" if mean is not None
@@ -359,4 +420,9 @@ def _run_dataset(args) -> int:
         first = summary["errors"][0]
         raise ExposimError(f"{len(summary['errors'])} unit(s) failed (see {args.output / 'report.md'}); "
                            f"first: {first['unit']}: {first['error']}")
+    failed = summary.get("failed_methods") or {}
+    if failed:
+        name, why = next(iter(failed.items()))
+        raise ExposimError(f"{len(failed)} method(s) failed in every unit (see {args.output / 'report.md'}); "
+                           f"first: {name}: {why}")
     return 0

@@ -4,9 +4,11 @@ Layout (BorealHDR, also written by ``synth``)::
 
     <sequence>/camera_left/<exposure_ms>/<timestamp_ns>.png    16-bit PNG, 12-bit Bayer DN
     <sequence>/camera_right/<exposure_ms>/<timestamp_ns>.png
+    <sequence>/imu/imu.csv         optional IMU (gyro, accelerometer), :mod:`emulator.io.imu`
     <sequence>/exposim.json        optional metadata (white/black level, brackets) from synth
-    <sequence>/calibration/response.txt or pcalib*.txt, or <sequence>/../calibration/pcalib*.txt
-                                   the inverse response (pcalib format)
+    <sequence>/calibration/response.txt or pcalib*.txt, or <sequence>/../calibration/pcalib*.txt,
+    or <clone>/calibration_files/pcalib_inside1.txt   the inverse response (pcalib format);
+                                   see emulator.io.layout for the search
 
 :func:`load_sequence` scans the layout into the in-memory model of :mod:`emulator.dataset`
 (cycles grouped by timestamp); images decode lazily through :func:`read_frame`.  The scan
@@ -22,6 +24,7 @@ fallback anywhere in exposim.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 import os
@@ -37,7 +40,10 @@ import numpy as np
 from emulator.dataset import CAMERAS, Frame, Sequence, build_sequence
 from emulator.errors import DatasetError
 from emulator.io.files import parse_json_object, write_metadata
-from emulator.io.framecache import cached_frame_path, read_cached_frame, resolve_frame_cache
+from emulator.io.framecache import FrameCacheEntryError, cached_frame_path, read_cached_frame, resolve_frame_cache, \
+    write_cached_frame
+from emulator.io.imu import read_imu
+from emulator.io.layout import find_response_file
 from emulator.io.png import decode_png16, write_png16
 from emulator.response import BOREALHDR_BLACK_LEVEL, BOREALHDR_WHITE_LEVEL
 
@@ -129,8 +135,8 @@ class ZipSource:
 
     The recording is the one folder of the archive that holds ``camera_left/`` and/or
     ``camera_right/``, under whatever folder prefix (``backpack_.../camera_left/...`` or
-    ``camera_left/...`` at the top); everything else the archive carries (lidar, IMU, ...)
-    is ignored, as are ``__MACOSX/`` and hidden members.  Paths are ``<zip>/<relative
+    ``camera_left/...`` at the top); its ``imu/imu.csv`` is read (:mod:`emulator.io.imu`),
+    everything else the archive carries (lidar, ...) is ignored, as are ``__MACOSX/`` and hidden members.  Paths are ``<zip>/<relative
     path>`` (:attr:`root` is the zip file), so messages name a member as
     ``/data/backpack.zip/camera_left/8.0/123.png``.  Raises :class:`DatasetError` naming the
     zip for an unreadable (corrupt) archive, an archive without a recording, or one with
@@ -388,8 +394,10 @@ def load_sequence(
     if not per_camera:
         raise DatasetError(f"{root}: no camera_left/ or camera_right/ folder (not a BorealHDR sequence)")
     _check_sizes(source, per_camera, root)
-    return build_sequence(root, per_camera, white_level=white, black_level=black,
-                          brackets_ms=meta.get("brackets_ms", ()), metadata=meta, gaps=gaps)
+    seq = build_sequence(root, per_camera, white_level=white, black_level=black,
+                         brackets_ms=meta.get("brackets_ms", ()), metadata=meta, gaps=gaps)
+    seq.imu = read_imu(root, source)  # None (and one ImuMissingWarning) without imu/imu.csv
+    return seq
 
 
 def read_frame(frame: Frame) -> np.ndarray:
@@ -397,12 +405,20 @@ def read_frame(frame: Frame) -> np.ndarray:
 
     A frame with a decoded-frame cache entry reads it instead of the PNG (same bytes).
     """
+    bad_entry = False
     if frame.cache_path is not None:
-        img = read_cached_frame(frame.cache_path, png_path=frame.path, white_level=frame.white_level)
+        try:
+            img = read_cached_frame(frame.cache_path, png_path=frame.path, white_level=frame.white_level)
+        except FrameCacheEntryError:  # never used: decoded from the PNG and written again
+            img, bad_entry = None, True
         if img is not None:
             return img
     source = frame.source if frame.source is not None else FolderSource(frame.path.parent)
-    return decode_png16(source.read_bytes(frame.path), frame.path, white_level=frame.white_level)
+    img = decode_png16(source.read_bytes(frame.path), frame.path, white_level=frame.white_level)
+    if bad_entry:
+        with contextlib.suppress(OSError):  # a read-only cache: the PNG's pixels are used anyway
+            write_cached_frame(frame.cache_path, img)
+    return img
 
 
 # ---------------------------------------------------------------------------- writer
@@ -428,19 +444,14 @@ def write_frame(
 def find_response(sequence_path: str | os.PathLike) -> Path | None:
     """Locate the inverse-response file of a recording, or None.
 
-    Looks for ``<seq>/calibration/response.txt`` or ``pcalib*.txt`` (synthetic datasets),
-    then ``<seq>/../calibration/pcalib*.txt`` (the BorealHDR sample layout).
+    Walks up from the recording (:func:`emulator.io.layout.find_response_file`):
+    ``<seq>/calibration/response.txt`` or ``pcalib*.txt`` (synthetic datasets),
+    ``<seq>/../calibration/pcalib*.txt`` (the BorealHDR sample layout),
+    ``<clone>/calibration_files/pcalib_inside1.txt`` (a clone of the BorealHDR repository,
+    recordings under ``<clone>/data_sample/``), up to three folders up, beside a symlinked
+    zip and beside its target.
     """
-    seq = Path(sequence_path)
-    for d in (seq / "calibration", seq.parent / "calibration"):
-        if not d.is_dir():
-            continue
-        if (d / "response.txt").is_file():
-            return d / "response.txt"
-        found = sorted(d.glob("pcalib*.txt"))
-        if found:
-            return found[0]
-    return None
+    return find_response_file(sequence_path)
 
 
 def sequence_response(sequence: Sequence, path: str | os.PathLike | None = None):
@@ -455,8 +466,9 @@ def sequence_response(sequence: Sequence, path: str | os.PathLike | None = None)
     resp_path = Path(path) if path is not None else find_response(sequence.path)
     if resp_path is None:
         raise DatasetError(
-            f"{sequence.path}: no response file found (looked for calibration/response.txt or "
-            f"pcalib*.txt in the sequence and beside it); pass one explicitly"
+            f"{sequence.path}: no response file found (looked for response.txt or pcalib*.txt in calibration/ "
+            f"and calibration_files/ of the recording and of up to 3 folders above it); pass the inverse response "
+            f"with --response FILE (a pcalib*.txt of the camera, or one made by 'exposim calibrate')"
         )
     response = read_response(resp_path, white_level=max(PCALIB_TABLE_TOP, sequence.white_level),
                              black_level=sequence.black_level)

@@ -3,8 +3,9 @@
 The keys used: ``image_width``, ``image_height``, ``camera_name``, ``distortion_model``
 and the matrices ``camera_matrix`` (K, 3x3), ``distortion_coefficients`` (D, 1xN),
 ``rectification_matrix`` (R, 3x3) and ``projection_matrix`` (P, 3x4) as
-``rows/cols/data: [...]`` blocks.  A small dedicated parser (no YAML library): flow lists
-may span lines and end with a comma, ``#`` comments are ignored.  On a right camera,
+``rows/cols/data: [...]`` blocks.  Parsed with PyYAML (``yaml.safe_load``), so any YAML
+spelling of the same content reads the same: block or flow style, re-written by
+``yaml.safe_dump``, comments, multi-line lists with a trailing comma.  On a right camera,
 ``P[0, 3] = -fx' * baseline`` (ROS).  :func:`write_camera_info` writes the same layout
 with every number at full precision, so that reading it back gives the same arrays.
 """
@@ -12,7 +13,6 @@ with every number at full precision, so that reading it back gives the same arra
 from __future__ import annotations
 
 import os
-import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -60,32 +60,65 @@ class CameraInfo:
     path: Path | None = None
 
 
-def _strip_comments(text: str) -> str:
-    return "\n".join(line.split("#", 1)[0] for line in text.splitlines())
+def _load_yaml(path: Path) -> dict:
+    import yaml
+
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError:
+        raise CalibrationError(f"{path}: not a text file (ROS camera_info YAML)") from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+        raise CalibrationError(f"{path}: not valid YAML{where}: {problem}") from None
+    if not isinstance(data, dict):
+        raise CalibrationError(f"{path}: expected a YAML mapping of camera_info fields, got {type(data).__name__}")
+    return data
 
 
-def _scalar(text: str, key: str, path: Path, required: bool = True) -> str | None:
-    m = re.search(rf"^{key}\s*:\s*(.*?)\s*$", text, flags=re.MULTILINE)
-    if m is None or m.group(1) == "":
+def _scalar(data: dict, key: str, path: Path, required: bool = True) -> str | None:
+    value = data.get(key)
+    if value is None or value == "":
         if required:
             raise CalibrationError(f"{path}: missing '{key}'")
         return None
-    return m.group(1).strip().strip("'\"")
+    if isinstance(value, (dict, list)):
+        raise CalibrationError(f"{path}: '{key}' must be a single value, got a {type(value).__name__}")
+    return str(value).strip()
 
 
-def _matrix(text: str, key: str, path: Path, shape: tuple[int, int] | None) -> np.ndarray:
-    m = re.search(
-        rf"^{key}\s*:\s*\n\s*rows\s*:\s*(\d+)\s*\n\s*cols\s*:\s*(\d+)\s*\n\s*data\s*:\s*\[(.*?)\]",
-        text,
-        flags=re.MULTILINE | re.DOTALL,
-    )
-    if m is None:
-        raise CalibrationError(f"{path}: missing or malformed '{key}' (expected rows, cols, data: [...])")
-    rows, cols = int(m.group(1)), int(m.group(2))
-    items = [s.strip() for s in m.group(3).replace("\n", " ").split(",")]
+def _integer(data: dict, key: str, path: Path) -> int:
+    value = data.get(key)
+    if value is None:
+        raise CalibrationError(f"{path}: missing '{key}'")
+    if isinstance(value, bool) or not isinstance(value, (int, float, str)):
+        raise CalibrationError(f"{path}: '{key}' must be an integer, got {value!r}")
     try:
-        values = np.array([float(s) for s in items if s], dtype=np.float64)
+        number = float(value)
     except ValueError:
+        raise CalibrationError(f"{path}: '{key}' must be an integer, got {value!r}") from None
+    if not number.is_integer():
+        raise CalibrationError(f"{path}: '{key}' must be an integer, got {value!r}")
+    return int(number)
+
+
+def _matrix(data: dict, key: str, path: Path, shape: tuple[int, int] | None) -> np.ndarray:
+    block = data.get(key)
+    if not isinstance(block, dict) or not {"rows", "cols", "data"} <= set(block):
+        raise CalibrationError(f"{path}: missing or malformed '{key}' (expected rows, cols, data: [...])")
+    try:
+        rows, cols = int(block["rows"]), int(block["cols"])
+    except (TypeError, ValueError):
+        raise CalibrationError(f"{path}: '{key}' rows and cols must be integers") from None
+    values = block["data"]
+    if not isinstance(values, list):
+        raise CalibrationError(f"{path}: '{key}' data must be a list of numbers, got {values!r}")
+    try:
+        values = np.array([float(v) for v in values], dtype=np.float64)
+    except (TypeError, ValueError):
         raise CalibrationError(f"{path}: '{key}' data holds a non-number") from None
     if values.size != rows * cols:
         raise CalibrationError(f"{path}: '{key}' has {values.size} values for rows={rows} cols={cols}")
@@ -97,30 +130,29 @@ def _matrix(text: str, key: str, path: Path, shape: tuple[int, int] | None) -> n
 
 
 def read_camera_info(path: str | os.PathLike) -> CameraInfo:
-    """Read a ROS ``camera_info`` YAML file.
+    """Read a ROS ``camera_info`` YAML file (PyYAML ``safe_load``: any YAML layout, block or
+    flow style, as written by ``camera_calibration``, ``yaml.safe_dump`` or by hand).
 
     Raises
     ------
     CalibrationError
-        When the file is missing, a key is missing or a matrix is malformed, the
-        distortion model is unsupported, or R is not a rotation.
+        One line naming the file and the field: the file is missing or not YAML, a key is
+        missing or a matrix is malformed, the distortion model is unsupported, or R is not a
+        rotation.
     """
     path = Path(path)
     if not path.is_file():
         raise CalibrationError(f"{path}: calibration file does not exist")
-    text = _strip_comments(path.read_text())
-    try:
-        width = int(_scalar(text, "image_width", path))
-        height = int(_scalar(text, "image_height", path))
-    except ValueError:
-        raise CalibrationError(f"{path}: image_width and image_height must be integers") from None
+    data = _load_yaml(path)
+    width = _integer(data, "image_width", path)
+    height = _integer(data, "image_height", path)
     if width < 1 or height < 1:
         raise CalibrationError(f"{path}: image size must be positive, got {width}x{height}")
-    K = _matrix(text, "camera_matrix", path, (3, 3))
-    D = _matrix(text, "distortion_coefficients", path, None).ravel()
-    R = _matrix(text, "rectification_matrix", path, (3, 3))
-    P = _matrix(text, "projection_matrix", path, (3, 4))
-    model = (_scalar(text, "distortion_model", path, required=False) or "plumb_bob").lower()
+    K = _matrix(data, "camera_matrix", path, (3, 3))
+    D = _matrix(data, "distortion_coefficients", path, None).ravel()
+    R = _matrix(data, "rectification_matrix", path, (3, 3))
+    P = _matrix(data, "projection_matrix", path, (3, 4))
+    model = (_scalar(data, "distortion_model", path, required=False) or "plumb_bob").lower()
     if model not in DISTORTION_MODELS:
         raise CalibrationError(
             f"{path}: distortion_model {model!r} is not supported; use one of plumb_bob, rational_polynomial"
@@ -131,7 +163,7 @@ def read_camera_info(path: str | os.PathLike) -> CameraInfo:
         raise CalibrationError(f"{path}: camera_matrix must have positive focal lengths")
     if abs(np.linalg.det(R) - 1.0) > 1e-3:
         raise CalibrationError(f"{path}: rectification_matrix is not a rotation (det = {np.linalg.det(R):.6f})")
-    name = _scalar(text, "camera_name", path, required=False) or ""
+    name = _scalar(data, "camera_name", path, required=False) or ""
     return CameraInfo(width, height, K, D, R, P, model, name, path)
 
 

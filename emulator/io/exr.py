@@ -16,7 +16,7 @@ import numpy as np
 from emulator.errors import DatasetError
 from emulator.io.files import atomic_write_bytes
 
-__all__ = ["write_exr", "read_exr"]
+__all__ = ["write_exr", "read_exr", "read_exr_attributes"]
 
 
 def write_exr(
@@ -71,3 +71,18 @@ def read_exr(path: str | os.PathLike) -> np.ndarray:
             raise
         raise DatasetError(f"{path}: not a readable OpenEXR file ({exc})") from exc
     return np.ascontiguousarray(a, dtype=np.float32)
+
+
+def read_exr_attributes(path: str | os.PathLike) -> dict:
+    """The header attributes of an OpenEXR file (the render cache's key and checksum among them).
+
+    Raises :class:`DatasetError` naming the file for one that is not a readable OpenEXR file.
+    """
+    import OpenEXR
+
+    path = Path(path)
+    try:
+        # not as a context manager: its __enter__ gives an empty header in some processes
+        return dict(OpenEXR.File(str(path), header_only=True).header())
+    except (RuntimeError, OSError, ValueError) as exc:
+        raise DatasetError(f"{path}: not a readable OpenEXR file ({exc})") from exc

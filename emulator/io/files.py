@@ -34,6 +34,7 @@ import numpy as np
 from emulator.errors import DatasetError, ExposimError, OutputExistsError
 
 __all__ = [
+    "read_bytes",
     "RESULTS_FILE",
     "REPORT_FILE",
     "atomic_write_bytes",
@@ -77,10 +78,20 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes, *, overwrite: bool 
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)
         os.replace(tmp, path)
+    except OSError as exc:
+        Path(tmp).unlink(missing_ok=True)
+        raise with_path(exc, path) from None
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
     return path
+
+
+def with_path(exc: OSError, path) -> OSError:
+    """``exc`` naming ``path`` when it names no file (a write's ``No space left on device``)."""
+    if exc.filename is not None:
+        return exc
+    return type(exc)(exc.errno, exc.strerror or str(exc), os.fspath(path))
 
 
 #: Flags of a new temporary file: created, never an existing one, never through a symlink.
@@ -117,6 +128,11 @@ def make_staging_dir(parent: str | os.PathLike, prefix: str) -> Path:
 def write_text(path: str | os.PathLike, text: str, *, overwrite: bool = True) -> Path:
     """Write UTF-8 text (a markdown report, a text table) atomically."""
     return atomic_write_bytes(path, text.encode("utf-8"), overwrite=overwrite)
+
+
+def read_bytes(path: str | os.PathLike) -> bytes:
+    """The bytes of a file (a figure to embed in a report)."""
+    return Path(path).read_bytes()
 
 
 def read_text(path: str | os.PathLike, error: type[Exception] = DatasetError) -> str:
@@ -249,8 +265,12 @@ def prepare_output(folder: str | os.PathLike, *, force: bool = False) -> Path:
 # ---------------------------------------------------------------------------- figures and arrays
 def save_figure(fig, path: str | os.PathLike, *, dpi: int = 110, overwrite: bool = True) -> Path:
     """Render a matplotlib figure to PNG and write it atomically (the figure is not closed)."""
+    import warnings
+
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=dpi)
+    with warnings.catch_warnings():  # layout advice from matplotlib is no message for the user
+        warnings.simplefilter("ignore", UserWarning)
+        fig.savefig(buf, format="png", dpi=dpi)
     return atomic_write_bytes(path, buf.getvalue(), overwrite=overwrite)
 
 

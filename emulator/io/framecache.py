@@ -9,13 +9,22 @@ built no longer matches its entry, and is decoded from the PNG again).  When
 folder :data:`CACHE_DIRNAME` inside the recording), ``Frame.load`` reads the entry instead
 of the PNG: the same uint16 array, byte for byte (checked when the cache is built).
 
-Format: the ``.npy`` bytes of the decoded array (``numpy.lib.format``), compressed with
-zstandard (level 3 by default), read straight into a fresh array (no copy).
+Format (version 2): one zstandard frame (level 3 by default, with zstd's content checksum)
+holding :data:`MAGIC`, one JSON line ``{"key": ..., "crc32": ...}`` and the ``.npy`` bytes of
+the decoded array (``numpy.lib.format``), read straight into a fresh array (no copy).  The
+key is the entry's place in the cache (``camera_<side>/<exposure>/<timestamp>.<size>-<mtime_ns>``)
+and ``crc32`` that of the pixel bytes: both are checked on every read, so an entry moved or
+swapped to another frame's name, altered, truncated, or of an older format is a bad entry
+(:class:`FrameCacheEntryError`).  :func:`emulator.io.borealhdr.read_frame` then decodes the
+PNG and writes the entry again, and :func:`build_frame_cache` (``exposim cache``) rebuilds
+every bad entry it finds.
 """
 
 from __future__ import annotations
 
 import io
+import json
+import zlib
 from collections.abc import Callable
 from pathlib import Path
 
@@ -30,7 +39,18 @@ __all__ = [
     "cached_frame_path",
     "read_cached_frame",
     "resolve_frame_cache",
+    "write_cached_frame",
+    "FrameCacheEntryError",
+    "MAGIC",
 ]
+
+#: First bytes of a (version 2) cache entry, inside its zstd frame.
+MAGIC = b"EXPOSIM-FRAME-2\n"
+
+
+class FrameCacheEntryError(DatasetError):
+    """A frame cache entry is bad (corrupt, truncated, altered, another frame's, old format):
+    rebuilt from its PNG, never used."""
 
 #: Default cache folder inside a recording (load_sequence ignores dot folders).
 CACHE_DIRNAME = ".exposim-frames"
@@ -66,12 +86,28 @@ def cached_frame_path(cache_dir, sequence_dir, png_path) -> Path:
     return Path(cache_dir) / rel.parent / f"{png_path.stem}.{st.st_size}-{st.st_mtime_ns}{CACHE_SUFFIX}"
 
 
-def _encode(img: np.ndarray, level: int) -> bytes:
+def entry_key(path) -> str:
+    """The key an entry at ``path`` must hold: its last three path parts, suffix removed."""
+    parts = Path(path).parts[-3:]
+    return "/".join(parts)[: -len(CACHE_SUFFIX)] if parts[-1].endswith(CACHE_SUFFIX) else "/".join(parts)
+
+
+def _encode(img: np.ndarray, level: int, key: str) -> bytes:
     import zstandard
 
+    img = np.ascontiguousarray(img)
     buf = io.BytesIO()
-    np.lib.format.write_array(buf, np.ascontiguousarray(img), allow_pickle=False)
-    return zstandard.ZstdCompressor(level=level).compress(buf.getvalue())
+    buf.write(MAGIC)
+    buf.write(json.dumps({"key": key, "crc32": zlib.crc32(memoryview(img).cast("B"))}).encode() + b"\n")
+    np.lib.format.write_array(buf, img, allow_pickle=False)
+    return zstandard.ZstdCompressor(level=level, write_checksum=True).compress(buf.getvalue())
+
+
+def write_cached_frame(path, img: np.ndarray, *, level: int = DEFAULT_LEVEL) -> Path:
+    """Write the cache entry of a decoded frame at ``path`` (atomically; its key from ``path``)."""
+    from emulator.io.files import atomic_write_bytes
+
+    return atomic_write_bytes(path, _encode(img, level, entry_key(path)), overwrite=True)
 
 
 def read_cached_frame(path, *, png_path=None, white_level: int | None = None) -> np.ndarray | None:
@@ -90,12 +126,31 @@ def read_cached_frame(path, *, png_path=None, white_level: int | None = None) ->
     source = f" (cache of {png_path})" if png_path is not None else ""
     try:
         with fh, zstandard.ZstdDecompressor().stream_reader(fh) as reader:
+            head = reader.read(len(MAGIC))
+            if len(head) < len(MAGIC):
+                raise FrameCacheEntryError(f"{path}: truncated frame cache entry{source}; rebuild the cache")
+            if head != MAGIC:
+                raise FrameCacheEntryError(f"{path}: not a version-2 frame cache entry{source}; rebuild the cache")
+            line = b""
+            while not line.endswith(b"\n") and len(line) < 4096:
+                chunk = reader.read(1)
+                if not chunk:
+                    break
+                line += chunk
+            try:
+                meta = json.loads(line)
+            except ValueError:
+                meta = None
+            if not isinstance(meta, dict) or meta.get("key") != entry_key(path):
+                raise FrameCacheEntryError(
+                    f"{path}: frame cache entry holds {meta.get('key') if isinstance(meta, dict) else 'no key'!r}, "
+                    f"not {entry_key(path)!r} (moved or swapped){source}; rebuild the cache")
             version = np.lib.format.read_magic(reader)
             read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else \
                 np.lib.format.read_array_header_2_0
             shape, fortran, dtype = read_header(reader)
             if dtype != np.uint16 or len(shape) != 2 or fortran:
-                raise DatasetError(f"{path}: frame cache entry holds {dtype} {shape}, expected a 2-D uint16 "
+                raise FrameCacheEntryError(f"{path}: frame cache entry holds {dtype} {shape}, expected a 2-D uint16 "
                                    f"image{source}; rebuild the cache")
             img = np.empty(shape, dtype=np.uint16)
             view = memoryview(img).cast("B")
@@ -105,16 +160,22 @@ def read_cached_frame(path, *, png_path=None, white_level: int | None = None) ->
                 if not n:
                     break
                 got += n
+            extra = reader.read(1)  # reach the end of the frame: zstd checks its content checksum
+    except FrameCacheEntryError:
+        raise
     except (zstandard.ZstdError, ValueError, OSError, EOFError) as exc:
-        raise DatasetError(f"{path}: corrupt frame cache entry{source} ({exc}); rebuild the cache") from None
-    if got != img.nbytes:
-        raise DatasetError(f"{path}: truncated frame cache entry{source} ({got} of {img.nbytes} bytes); "
-                           "rebuild the cache")
+        raise FrameCacheEntryError(f"{path}: corrupt frame cache entry{source} ({exc}); rebuild the cache") from None
+    if got != img.nbytes or extra:
+        raise FrameCacheEntryError(f"{path}: truncated frame cache entry{source} ({got} of {img.nbytes} bytes); "
+                                   "rebuild the cache")
+    if zlib.crc32(memoryview(img).cast("B")) != meta.get("crc32"):
+        raise FrameCacheEntryError(f"{path}: frame cache entry fails its checksum{source}; rebuild the cache")
     if white_level is not None:
         top = int(img.max())
         if top > white_level:
-            raise DatasetError(f"{png_path or path}: maximum DN {top} exceeds white_level {white_level} "
-                               "(not 12-bit data?)")
+            from emulator.io.png import white_level_message
+
+            raise DatasetError(white_level_message(png_path or path, top, white_level))
     return img
 
 
@@ -129,7 +190,8 @@ def build_frame_cache(
     """Decode every frame of a recording once and store it in ``cache_dir`` (default
     ``<sequence>/.exposim-frames``); entries already present for the current PNG are kept.
 
-    ``verify`` reads each new entry back and compares it with the decoded PNG (byte for
+    Entries present are checked (key and checksum, :func:`read_cached_frame`) and bad ones
+    rebuilt (counted in ``written`` and ``rebuilt``).  ``verify`` reads each new entry back and compares it with the decoded PNG (byte for
     byte); a mismatch raises and removes the entry.  Entries of an older version of a PNG
     are removed.  Returns counts and sizes: ``frames``, ``written``, ``kept``, ``removed``,
     ``png_bytes``, ``cache_bytes``, ``cache_dir``.  ``progress(done, total)`` after each frame.
@@ -144,7 +206,7 @@ def build_frame_cache(
     frames = [f for cycle in seq.cycles for cam in cycle.frames.values() for f in cam.values()]
     frames.sort(key=lambda f: (f.camera, f.exposure_ms, f.timestamp_ns))
     summary = {"cache_dir": str(cache), "frames": len(frames), "written": 0, "kept": 0, "removed": 0,
-               "png_bytes": 0, "cache_bytes": 0}
+               "rebuilt": 0, "png_bytes": 0, "cache_bytes": 0}
     for i, frame in enumerate(frames, 1):
         target = cached_frame_path(cache, root, frame.path)
         summary["png_bytes"] += frame.path.stat().st_size
@@ -152,11 +214,18 @@ def build_frame_cache(
             if old != target:
                 old.unlink()
                 summary["removed"] += 1
+        bad = False
         if target.is_file():
+            try:
+                read_cached_frame(target, png_path=frame.path)
+            except FrameCacheEntryError:
+                bad = True
+        if target.is_file() and not bad:
             summary["kept"] += 1
         else:
             img = read_png16(frame.path, white_level=frame.white_level)
-            atomic_write_bytes(target, _encode(img, level), overwrite=True)
+            atomic_write_bytes(target, _encode(img, level, entry_key(target)), overwrite=True)
+            summary["rebuilt"] += bad
             if verify:
                 back = read_cached_frame(target, png_path=frame.path)
                 if back is None or back.shape != img.shape or back.tobytes() != img.tobytes():

@@ -56,6 +56,10 @@ PCALIB_ORIGIN_TOLERANCE = 0.05
 PCALIB_NEGATIVE_TOLERANCE = 0.001
 
 
+#: Largest pcalib file read, bytes (65536 samples of 25 characters fit twice over).
+MAX_PCALIB_BYTES = 4 * 2**20
+
+
 def read_pcalib(path: str | os.PathLike) -> np.ndarray:
     """The samples of g in a pcalib file, float64, unchanged.
 
@@ -65,9 +69,16 @@ def read_pcalib(path: str | os.PathLike) -> np.ndarray:
     """
     path = Path(path)
     try:
-        text = path.read_text()
+        with open(path, "rb") as fh:
+            data = fh.read(MAX_PCALIB_BYTES + 1)  # bounded: /dev/zero or a huge file never fills memory
+        if len(data) > MAX_PCALIB_BYTES:
+            raise ResponseError(f"{path}: larger than {MAX_PCALIB_BYTES // 2**20} MiB; a pcalib file holds one "
+                                "number per DN level (a 16-bit table is well under 2 MiB)")
+        text = data.decode()
     except FileNotFoundError:
         raise FileNotFoundError(f"{path}: response file not found") from None
+    except IsADirectoryError:
+        raise ResponseError(f"{path}: is a folder, not a pcalib file") from None
     except UnicodeDecodeError:
         raise ResponseError(f"{path}: not a text file (pcalib files hold whitespace-separated numbers)") from None
     tokens = text.split()

@@ -22,13 +22,43 @@ import numpy as np
 from emulator.errors import DatasetError
 from emulator.io.files import atomic_write_bytes
 
-__all__ = ["decode_png16", "read_png16", "write_png16", "write_png8", "read_image", "encode_png"]
+__all__ = ["decode_png16", "read_png16", "write_png16", "write_png8", "read_image", "encode_png", "white_level_message"]
 
 
 def _read_bytes(path: Path) -> bytes:
     if not path.is_file():
         raise FileNotFoundError(f"{path}: image not found")
     return path.read_bytes()
+
+
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+def png_structure_problem(data: bytes) -> str | None:
+    """What is wrong with a PNG's chunk structure (lengths, CRCs, IHDR first, IEND last), or None.
+
+    Checked before decoding so that a damaged file is one clear error, without the lines
+    libpng prints on stderr.  Costs one CRC pass over the file (about a millisecond per MB).
+    """
+    import struct
+    import zlib
+
+    pos, n = 8, len(data)
+    first = True
+    while pos + 12 <= n:
+        length, ctype = struct.unpack(">I4s", data[pos:pos + 8])
+        end = pos + 12 + length
+        if end > n:
+            return f"chunk {ctype.decode('latin-1')!r} runs past the end of the file"
+        if zlib.crc32(data[pos + 4:pos + 8 + length]) != struct.unpack(">I", data[end - 4:end])[0]:
+            return f"CRC error in chunk {ctype.decode('latin-1')!r}"
+        if first and ctype != b"IHDR":
+            return "first chunk is not IHDR"
+        first = False
+        if ctype == b"IEND":
+            return None
+        pos = end
+    return "no IEND chunk (truncated)"
 
 
 def decode_png16(data: bytes, name: str | os.PathLike, *, white_level: int | None = None) -> np.ndarray:
@@ -39,6 +69,9 @@ def decode_png16(data: bytes, name: str | os.PathLike, *, white_level: int | Non
     ``white_level``.
     """
     buf = np.frombuffer(data, dtype=np.uint8)
+    problem = png_structure_problem(data) if data[:8] == PNG_SIGNATURE else None
+    if problem is not None:  # refused before libpng sees it: no "libpng error:" line on stderr
+        raise DatasetError(f"{name}: cannot decode image (corrupt or truncated PNG: {problem}, {buf.size} bytes)")
     img = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED) if buf.size else None
     if img is None:
         raise DatasetError(f"{name}: cannot decode image (corrupt or truncated PNG, {buf.size} bytes)")
@@ -52,8 +85,23 @@ def decode_png16(data: bytes, name: str | os.PathLike, *, white_level: int | Non
     if white_level is not None:
         top = int(img.max())
         if top > white_level:
-            raise DatasetError(f"{name}: maximum DN {top} exceeds white_level {white_level} (not 12-bit data?)")
+            raise DatasetError(white_level_message(name, top, white_level))
     return img
+
+
+def white_level_message(name, top: int, white_level: int) -> str:
+    """Why an image's DN above the white level is refused, and the fix.
+
+    >>> white_level_message("a.png", 4095, 4094)  # doctest: +ELLIPSIS
+    'a.png: maximum DN 4095 exceeds the white level 4094 (...--white-level 4095...'
+    """
+    if top <= 4095:
+        return (f"{name}: maximum DN {top} exceeds the white level {white_level} (the default is BorealHDR's 4094, "
+                f"where its sensor saturates); for full-range 12-bit data give the camera's white level: "
+                f"--white-level 4095 (exposim calibrate) or \"white_level\": 4095 in the recording's or stack's "
+                "exposim.json")
+    return (f"{name}: maximum DN {top} exceeds 4095: not 12-bit data (exposim reads 12-bit DN in 16-bit PNGs; "
+            f"white level {white_level})")
 
 
 def read_png16(path: str | os.PathLike, *, white_level: int | None = None) -> np.ndarray:

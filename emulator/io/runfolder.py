@@ -324,7 +324,7 @@ class RunWriter:
     """
 
     def __init__(self, out_dir: str | os.PathLike, *, resume: bool = False) -> None:
-        self.path = Path(out_dir)
+        self.path = Path(os.path.abspath(out_dir))  # absolute from the start: a chdir later changes nothing
         self.resume = bool(resume)
         self.run_json: dict = {}
         self.lock: RunLock | None = None
@@ -368,12 +368,32 @@ class RunWriter:
             self.lock = None
 
     # ------------------------------------------------------------------ content
-    def start(self, run_json: dict, methods: Sequence[str], cameras: Sequence[str], save: str) -> None:
-        """Record ``run_json`` with status "running" and this writer; open every method's CSV."""
+    def start(self, run_json: dict, methods: Sequence[str], cameras: Sequence[str], save: str,
+              cycles: Sequence[int] | None = None) -> None:
+        """Record ``run_json`` with status "running" and this writer; open every method's CSV.
+
+        Resuming, each CSV is validated before anything is appended: its rows must be, in
+        order and once each, a prefix of ``cycles`` (the recording's cycle indices, less the
+        cycles the interrupted run recorded as skipped); without ``cycles``, strictly
+        increasing.  Rows from the first one that breaks this on (a missing middle row, a
+        duplicate, a row out of order, a row of another recording) are cut off and computed
+        again; ``run.json`` records what was cut under ``resume_repairs``.
+        """
         if save not in SAVE_MODES:
             raise RunFolderError(f"save must be one of {', '.join(SAVE_MODES)}, got {save!r}")
         self.save = save
+        skipped = {int(s["cycle"]) for s in (self.run_json.get("skipped_cycles") or []) if isinstance(s, dict)
+                   and isinstance(s.get("cycle"), int)}
+        expected = None if cycles is None else [int(c) for c in cycles if int(c) not in skipped]
+        repairs = []
+        if self.resume:
+            for name in methods:
+                note = _repair_prefix(self.path / name / CSV_FILE, expected)
+                if note:
+                    repairs.append(f"{name}: {note}")
         self.run_json = run_json
+        if repairs:
+            self.run_json["resume_repairs"] = list(self.run_json.get("resume_repairs", [])) + repairs
         self.update(status="running", writer=self.lock.owner if self.lock else None)
         for name in methods:
             mdir = self.path / name
@@ -404,8 +424,13 @@ class RunWriter:
     def append_row(self, method: str, row: list[str]) -> None:
         """Append one CSV row (flushed: a killed run keeps every finished row)."""
         fh, writer = self._csv[method]
-        writer.writerow(row)
-        fh.flush()
+        try:
+            writer.writerow(row)
+            fh.flush()
+        except OSError as exc:  # a full disk: name the file
+            from emulator.io.files import with_path
+
+            raise with_path(exc, self.path / method / CSV_FILE) from None
 
     def image_path(self, method: str, camera: str, timestamp_ns: int) -> Path:
         return self.path / method / IMAGES_DIR / camera / f"{int(timestamp_ns)}.png"
@@ -426,6 +451,47 @@ class RunWriter:
             lines = sorted((int(r[1]), float(r[2])) for r in rows)
             write_times(self.path / name / IMAGES_DIR / TIMES_FILE, [str(ns) for ns, _ in lines],
                         [format_timestamp_s(ns) for ns, _ in lines], [ms for _, ms in lines], overwrite=True)
+
+
+def _repair_prefix(path: Path, expected: list[int] | None) -> str | None:
+    """Cut ``path``'s rows back to the longest valid prefix (see :meth:`RunWriter.start`);
+    returns what was cut, or None when the table was valid."""
+    rows = read_csv_rows(path, repair=True)
+    keep = 0
+    why = None
+    last = None
+    for i, row in enumerate(rows):
+        try:
+            cycle = int(row[0])
+        except (ValueError, IndexError):
+            why = f"row {i + 1} has no cycle number"
+            break
+        if expected is not None:
+            if i >= len(expected) or cycle != expected[i]:
+                want = expected[i] if i < len(expected) else None
+                why = (f"row {i + 1} is cycle {cycle}, expected "
+                       f"{'no further row' if want is None else f'cycle {want}'}")
+                break
+        elif last is not None and cycle <= last:
+            why = f"row {i + 1} is cycle {cycle} after cycle {last}"
+            break
+        last = cycle
+        keep = i + 1
+    if why is None:
+        return None
+    header = read_csv_header(path)
+    tmp = path.with_name(path.name + ".repair")
+    with open(tmp, "w", newline="") as fh:
+        w = csv.writer(fh, lineterminator="\n")
+        w.writerow(header)
+        w.writerows(rows[:keep])
+    os.replace(tmp, path)
+    return f"{why}; kept the first {keep} of {len(rows)} rows, the rest is computed again"
+
+
+def read_csv_header(path: Path) -> list[str]:
+    with open(path, newline="") as fh:
+        return next(csv.reader(fh))
 
 
 # ============================================================================ the reader

@@ -170,6 +170,10 @@ class Stack:
         return self._images
 
 
+#: Largest DN of the 12-bit data a stack holds (16-bit PNGs carrying 12-bit values).
+MAX_DN_12BIT = 4095
+
+
 def read_stack(path: str | os.PathLike, *, white_level: int | None = None, black_level: int | None = None) -> Stack:
     """Read a TUM-layout stack: ``STACK/times.txt`` and ``STACK/images/<name>.png``.
 
@@ -187,6 +191,11 @@ def read_stack(path: str | os.PathLike, *, white_level: int | None = None, black
     meta = read_metadata(root / STACK_METADATA, CalibrationError)
     white = int(white_level if white_level is not None else meta.get("white_level", BOREALHDR_WHITE_LEVEL))
     black = int(black_level if black_level is not None else meta.get("black_level", BOREALHDR_BLACK_LEVEL))
+    where = "white_level" if white_level is not None else f"{root / STACK_METADATA} white_level"
+    if not 0 <= black < white <= MAX_DN_12BIT:
+        # a white level above the 12-bit range would make saturated pixels look valid to the fit
+        raise CalibrationError(f"{where} {white} (black level {black}): need 0 <= black < white <= "
+                               f"{MAX_DN_12BIT}, the 12-bit range of the data")
     entries = read_times(times, CalibrationError)
     if not entries:
         raise CalibrationError(f"{times}: lists no images")

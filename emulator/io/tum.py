@@ -30,6 +30,7 @@ from emulator.errors import TrajectoryError
 from emulator.io.files import atomic_write_bytes, format_timestamp_s
 
 __all__ = ["TumTrajectory", "rotation_to_quaternion", "format_tum_line", "write_tum", "read_tum",
+           "read_tum_comments",
            "parse_timestamp_ns"]
 
 
@@ -66,14 +67,21 @@ def format_tum_line(timestamp_ns: int, pose: np.ndarray) -> str:
 
 
 def write_tum(
-    path: str | os.PathLike, timestamps_ns: Sequence[int], poses: np.ndarray, *, overwrite: bool = True
+    path: str | os.PathLike, timestamps_ns: Sequence[int], poses: np.ndarray, *, overwrite: bool = True,
+    header: str | None = None,
 ) -> Path:
-    """Write (N, 4, 4) camera-to-world poses at integer-ns timestamps as a TUM file (atomic)."""
+    """Write (N, 4, 4) camera-to-world poses at integer-ns timestamps as a TUM file (atomic).
+
+    ``header``: comment lines written first, each prefixed with ``# `` (evo and
+    :func:`read_tum` skip lines that start with ``#``).
+    """
     poses = np.asarray(poses, dtype=np.float64)
     if poses.ndim != 3 or poses.shape[1:] != (4, 4) or poses.shape[0] != len(timestamps_ns):
         raise TrajectoryError(f"{path}: need (N, 4, 4) poses for N = {len(timestamps_ns)} timestamps, "
                               f"got {poses.shape}")
     text = "".join(format_tum_line(int(t), p) + "\n" for t, p in zip(timestamps_ns, poses))
+    if header:
+        text = "".join(f"# {line}\n" for line in header.splitlines()) + text
     return atomic_write_bytes(path, text.encode(), overwrite=overwrite)
 
 
@@ -128,6 +136,20 @@ class TumTrajectory:
             out[:, :3, :3] = Rotation.from_quat(self.quaternions_xyzw).as_matrix()
             out[:, :3, 3] = self.positions
         return out
+
+
+def read_tum_comments(path: str | os.PathLike) -> list[str]:
+    """The comment lines (``#``, prefix removed) at the top of a TUM file; [] if unreadable."""
+    out: list[str] = []
+    try:
+        with Path(path).open(encoding="utf-8-sig") as fh:
+            for line in fh:
+                if not line.startswith("#"):
+                    break
+                out.append(line[1:].strip())
+    except (OSError, UnicodeDecodeError):
+        return []
+    return out
 
 
 def read_tum(path: str | os.PathLike, *, allow_empty: bool = False) -> TumTrajectory:

@@ -32,6 +32,8 @@ from emulator.metrics.trajectory import EVO_T_MAX_DIFF_S, associate, read_trajec
 __all__ = [
     "rpe_files",
     "rpe_by_length",
+    "looks_like_estimate",
+    "ESTIMATE_HEADER",
     "DELTA_UNITS",
 ]
 
@@ -40,8 +42,8 @@ DELTA_UNITS = ("m", "f")
 
 
 def rpe_files(
-    est_path: str | Path,
     ref_path: str | Path,
+    est_path: str | Path,
     *,
     delta: float = 1,
     delta_unit: str = "f",
@@ -58,8 +60,8 @@ def rpe_files(
 
     Parameters
     ----------
-    est_path, ref_path : str or pathlib.Path
-        Estimate and reference TUM files (note the order: estimate first).
+    ref_path, est_path : str or pathlib.Path
+        Reference and estimate TUM files, in evo's order (``evo_rpe tum REF EST``).
     delta : float
         Pair spacing, in ``delta_unit``.
     delta_unit : {"f", "m"}
@@ -86,6 +88,7 @@ def rpe_files(
         raise MetricsError(f"delta must be an integer number of frames, got {delta}")
     ref = read_trajectory(ref_path)
     est = read_trajectory(est_path)
+    n_ref, n_est = int(ref.num_poses), int(est.num_poses)
     # evo_rpe: traj_ref.sync_with(traj_est, nearest_time, max_diff, offset 0), which is
     # sync.associate_trajectories(ref, est, ...), wrapped here for a clear error.
     ref, est = associate(ref, est, max_diff_s=max_diff_s, ref_name=str(ref_path), est_name=str(est_path))
@@ -115,7 +118,37 @@ def rpe_files(
         "max": stats["max"],
         "n_pairs": int(result.np_arrays["error_array"].size),
         "scale": scale,
+        "n_ref_poses": n_ref,
+        "n_est_poses": n_est,
     }
+
+
+#: First comment line of the trajectories ``bench vo`` writes (see :func:`looks_like_estimate`).
+ESTIMATE_HEADER = "# exposim bench vo estimate"
+
+
+def looks_like_estimate(path: str | Path) -> tuple[int, str | None]:
+    """How strongly a TUM file looks like an odometry estimate rather than a reference.
+
+    ``(2, why)`` for the header that ``exposim bench vo`` writes on its estimates, ``(1,
+    why)`` for a first pose that is exactly the identity (a VO starts its trajectory at the
+    origin; a lidar reference rarely does, a synthetic one may), ``(0, None)`` otherwise.
+    """
+    from emulator.io.tum import read_tum, read_tum_comments
+
+    path = Path(path)
+    comments = read_tum_comments(path)
+    if comments and ("# " + comments[0]).startswith(ESTIMATE_HEADER):
+        return 2, "it was written by exposim bench vo as an estimate"
+
+    try:
+        tum = read_tum(path)
+    except Exception:  # malformed files are reported by the RPE itself
+        return 0, None
+    q = tum.quaternions_xyzw[0]
+    if np.all(tum.positions[0] == 0) and q[0] == q[1] == q[2] == 0 and abs(q[3]) == 1:
+        return 1, "its first pose is exactly the identity, as a VO estimate starts"
+    return 0, None
 
 
 def _stats(values: np.ndarray) -> dict:
@@ -134,6 +167,7 @@ def rpe_by_length(
     *,
     align_scale: bool = True,
     rel_delta_tol: float = 0.1,
+    evo_results: list | None = None,
 ) -> dict:
     """RPE as a function of travelled distance (paper Fig. 6), through evo.
 
@@ -149,6 +183,11 @@ def rpe_by_length(
     rel_delta_tol : float
         A pair is used when its reference path length is within ``rel_delta_tol * delta``
         of ``delta``.
+    evo_results : list, optional
+        When given, receives ``(relation, delta_m, evo.core.result.Result)`` for every
+        delta with pairs, ``relation`` ``"trans"`` (metres) or ``"rot"`` (degrees): evo's
+        own result objects, with both trajectories, for
+        ``evo.tools.file_interface.save_res_file`` (``evo_res`` reads them).
 
     Returns
     -------
@@ -184,6 +223,7 @@ def rpe_by_length(
                 "(a straight or static trajectory); compute the RPE without scale alignment"
             ) from None
         scale = float(scale)
+    traj_est_name = getattr(traj_est, "name", None) or "estimate"
     ref_poses = traj_ref.poses_se3
     cumulative = geometry.accumulated_distances(traj_ref.positions_xyz)
     out = []
@@ -193,6 +233,7 @@ def rpe_by_length(
             raise MetricsError(f"deltas must be positive, got {delta}")
         entry = {"delta_m": delta, "n_pairs": 0, "trans_pct": None, "rot_deg_per_m": None}
         errors = {}
+        pending: list = []
         try:
             for relation in (metrics.PoseRelation.translation_part, metrics.PoseRelation.rotation_angle_deg):
                 metric = metrics.RPE(
@@ -200,6 +241,12 @@ def rpe_by_length(
                 )
                 metric.process_data((traj_ref, est))
                 errors[relation] = np.asarray(metric.error, dtype=np.float64)
+                if evo_results is not None:
+                    res = metric.get_result(ref_name="reference", est_name=traj_est_name)
+                    res.add_trajectory("reference", traj_ref)
+                    res.add_trajectory(traj_est_name, est)
+                    kind = "trans" if relation == metrics.PoseRelation.translation_part else "rot"
+                    pending.append((kind, delta, res))
         except filters.FilterException:  # no pair of this length
             out.append(entry)
             continue
@@ -209,6 +256,8 @@ def rpe_by_length(
         )
         length = cumulative[pairs[:, 1]] - cumulative[pairs[:, 0]]
         entry["n_pairs"] = int(pairs.shape[0])
+        if evo_results is not None:
+            evo_results.extend(pending)
         entry["trans_pct"] = _stats(errors[metrics.PoseRelation.translation_part] / length * 100.0)
         entry["rot_deg_per_m"] = _stats(errors[metrics.PoseRelation.rotation_angle_deg] / length)
         out.append(entry)

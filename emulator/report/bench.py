@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from emulator.report.figures import new_figure, save
+from emulator.report.figures import legend_outside, log_ticks_at, new_figure, plural, same_as, save
 from emulator.report.verdicts import (
     DASH_NOTE,
     matches_verdict,
@@ -31,6 +31,8 @@ __all__ = [
     "FAILED_STYLE",
     "MAX_EQUAL_ASPECT",
     "features_report",
+    "features_intervals",
+    "features_intervals_markdown",
     "features_verdicts",
     "vo_report",
     "vo_verdicts",
@@ -87,15 +89,25 @@ def plot_features(results: dict, path: str | Path) -> Path:
     b.set_ylabel("matches between consecutive images")
     b.set_title(f"(b) matches (ratio test {results['parameters']['ratio']})")
     curve = results["success_curve"]
-    for m in methods:
-        rate = curve["rate"].get(m)
-        if rate is not None:
-            c.plot(curve["taus"], 100.0 * np.asarray(rate), label=m, drawstyle="steps-post")
-    c.set_xlabel(r"$\tau_\mathrm{matches}$")
+    rates = {m: curve["rate"][m] for m in methods if curve["rate"].get(m) is not None}
+    twins = same_as(rates)
+    taus = list(curve["taus"])
+    step = taus[-1] - taus[-2] if len(taus) > 1 else 1
+    x = taus + [taus[-1] + step] if taus else taus  # the last step drawn to its end
+    for m, rate in rates.items():
+        y = 100.0 * np.append(rate, rate[-1]) if taus else []
+        if m in twins:  # drawn dashed over its twin, and named so: identical curves hide each other
+            c.plot(x, y, ls="--", label=f"{m} (= {twins[m]})", drawstyle="steps-post")
+        else:
+            c.plot(x, y, label=m, drawstyle="steps-post")
+    if taus:
+        c.set_xlim(0, x[-1])
+    c.axvline(100, color="0.6", lw=0.8, ls=":", zorder=0)  # the paper's reference threshold
+    c.set_xlabel(r"$\tau_\mathrm{matches}$ (dotted: 100, the paper's)")
     c.set_ylabel("successful runs (%)")
     c.set_ylim(-2, 102)
-    c.set_title(f"(c) success rate over {results['n_runs']} run folder(s)")
-    c.legend(fontsize="small")
+    c.set_title(f"(c) success rate over {plural(results['n_runs'], 'run folder')}")
+    legend_outside(c)
     return save(fig, path)
 
 
@@ -120,7 +132,7 @@ def rpe_figure(results: dict):
             continue
         failed = method["status"] != "success"
         style = FAILED_STYLE if failed else "-"
-        label = f"{name} (VO failed on {len(method.get('failures', []))} frames)" if failed else name
+        label = f"{name} (VO failed on {plural(len(method.get('failures', [])), 'frame')})" if failed else name
         a.plot(d, [e["trans_pct"]["median"] for e in rpe["deltas"] if e["trans_pct"]], style, marker="o", label=label)
         b.plot(d, [e["rot_deg_per_m"]["median"] for e in rpe["deltas"] if e["rot_deg_per_m"]], style, marker="o",
                label=label)
@@ -129,9 +141,10 @@ def rpe_figure(results: dict):
         ax.set_xlabel("pair length delta (m)")
         ax.set_ylabel(label)
         if drawn:
-            ax.legend(fontsize="small", title="dotted: VO failed (RPE shown anyway)"
-                      if any(m["status"] != "success" and m.get("rpe") for m in results["methods"].values())
-                      else None, title_fontsize="small")
+            if ax is b:  # one legend, outside the data, for both panels
+                legend_outside(ax, title="dotted: VO failed (RPE shown anyway)"
+                               if any(m["status"] != "success" and m.get("rpe") for m in results["methods"].values())
+                               else None, title_fontsize="small")
         else:
             ax.text(0.5, 0.5, "no RPE (no reference or every run failed)", ha="center", va="center",
                     transform=ax.transAxes)
@@ -184,7 +197,7 @@ def trajectories_figure(trajectories: dict, reference_xyz: np.ndarray | None):
     to_scale = min(span_x, span_y) > 0 and max(span_x, span_y) / min(span_x, span_y) <= MAX_EQUAL_ASPECT
     if to_scale:
         ax.set_aspect("equal", adjustable="box")
-    ax.legend(fontsize="small")
+    legend_outside(ax)
     title = ("VO trajectories (Sim(3)-aligned to the reference)" if reference_xyz is not None
              else "VO trajectories")
     ax.set_title(title + ("" if to_scale else "\naxes not to scale"))
@@ -261,6 +274,36 @@ def vo_verdicts(results: dict) -> list[str]:
     return [vo_failure_verdict(n_failed, len(methods), reasons), rpe_verdict(trans, rot, deltas, on_failed)]
 
 
+def features_intervals(results: dict) -> dict:
+    """Median matches (over consecutive pairs) and median uniformity (over images) per method with 95 %
+    circular-block-bootstrap intervals, and each method's difference from the best
+    (:func:`emulator.stats.compare_methods`; pairs and images are time series)."""
+    from emulator.stats import compare_methods
+
+    methods = list(results["methods"])
+    matches = {m: [c for run in results["runs"] for c in run["methods"].get(m, {}).get("matches", [])]
+               for m in methods}
+    uniformity = {m: [u for run in results["runs"] for u in run["methods"].get(m, {}).get("uniformity", [])]
+                  for m in methods}
+    return {"median_matches": compare_methods(matches, "median", block=True, seed=0),
+            "median_uniformity": compare_methods(uniformity, "median", block=True, seed=1)}
+
+
+def features_intervals_markdown(results: dict) -> list[str]:
+    """The tables of :func:`features_intervals` (nothing when no method has a pair)."""
+    from emulator.report.intervals import comparison_table
+
+    iv = features_intervals(results)
+    if iv["median_matches"]["best"] is None:
+        return []
+    lines = ["Methods compared with 95 % intervals (circular block bootstrap over consecutive pairs / images; "
+             "\"cannot tell apart\": the difference's interval holds 0):", ""]
+    lines += comparison_table(iv["median_matches"], "median matches", spec=".1f")
+    if iv["median_uniformity"]["best"] is not None:
+        lines += [""] + comparison_table(iv["median_uniformity"], "median uniformity (%)", spec=".1f", scale=100.0)
+    return lines
+
+
 def features_report(results: dict, figure: str) -> str:
     """Markdown report of the feature benchmark, beside the paper's Fig. 4 numbers."""
     p = results["parameters"]
@@ -287,7 +330,9 @@ def features_report(results: dict, figure: str) -> str:
             f"{_fmt(m['median_matches'], '.0f')} | {_fmt(m['min_matches'], 'd')} | "
             f"{_fmt(None if m['success_at_100'] is None else 100 * m['success_at_100'], '.0f')} |"
         )
-    lines += ["", DASH_NOTE, "", "Paper (55 trajectories, 1920x1200 images):", ""]
+    lines += ["", DASH_NOTE, ""]
+    lines += features_intervals_markdown(results)
+    lines += ["", "Paper (55 trajectories, 1920x1200 images):", ""]
     lines += [f"- {k}: {v}" for k, v in PAPER_FEATURES.items()]
     lines += ["", "## Verdicts", ""] + [f"- {v}" for v in features_verdicts(results)]
     lines += ["", f"Command: `{results.get('command') or '(library call)'}`", ""]
@@ -316,6 +361,19 @@ def vo_report(results: dict, figures: dict[str, str]) -> str:
         "",
         f"VO failed on {n_failed} of {len(results['methods'])} method run(s).",
         "",
+    ]
+    choice = results["calibration"].get("choice")
+    ext = results["calibration"].get("extrinsics")
+    if choice:
+        lines += [f"Calibration choice: {choice['reason']}"
+                  + (f" (recording date {choice['recording_date']})" if choice.get("recording_date") else "") + ".", ""]
+    if ext and ext.get("epipolar_residual_px") is not None:
+        after = ext.get("estimate", {}).get("epipolar_residual_after_px") if ext.get("refined") else None
+        lines += [f"Stereo extrinsics ({ext['mode']}): {ext['criterion']}; measured {ext['epipolar_residual_px']:.2f} px"
+                  + (f", {after:.2f} px after refinement" if after is not None else "") + f". {ext['reason']}.", ""]
+    if results.get("limitations"):
+        lines += ["## What could not be computed, and why", ""] + [f"- {n}" for n in results["limitations"]] + [""]
+    lines += [
         "| method | status | frames | tracked | failures | scale | median RPE trans. (% of delta), per pair length "
         "delta (m) | median RPE rot. (deg/m), per pair length delta (m) |",
         "| --- | --- | --- | --- | --- | --- | --- | --- |",

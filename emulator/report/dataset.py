@@ -14,8 +14,9 @@ import numpy as np
 
 from emulator.io.files import REPORT_FILE, RESULTS_FILE, write_results, write_text
 from emulator.report.figures import new_figure, save
+from emulator.report.html import write_report
 
-__all__ = ["PLOT_FILE", "per_method_table", "plot_methods", "dataset_markdown", "write_dataset_report"]
+__all__ = ["PLOT_FILE", "per_method_table", "method_intervals", "plot_methods", "dataset_markdown", "write_dataset_report"]
 
 #: The per-method, per-sequence exposure figure of a dataset run.
 PLOT_FILE = "methods.png"
@@ -43,6 +44,26 @@ def per_method_table(per_sequence: dict, methods: list[str]) -> dict:
             "method_ms_per_frame": wmean("method_ms_per_frame"),
         }
     return table
+
+
+def method_intervals(per_sequence: dict, methods: list[str]) -> dict:
+    """Per method over the sequences (the independent units): mean exposure and mean saturated fraction with
+    95 % bootstrap intervals, and each method's difference from the best (least saturated), paired by sequence
+    (:func:`emulator.stats.compare_methods`).  A sequence missing a method leaves the pairs unaligned."""
+    from emulator.stats import compare_methods
+
+    seqs = list(per_sequence)
+
+    def col(key):
+        return {m: [((per_sequence[s].get(m) or {}).get(key)) for s in seqs] for m in methods}
+
+    def arr(d):
+        return {m: [float("nan") if v is None else float(v) for v in vals] for m, vals in d.items()}
+
+    return {"definition": "bootstrap over sequences (units), 95 %",
+            "mean_exposure_ms": compare_methods(arr(col("mean_exposure_ms")), "mean", seed=0),
+            "mean_saturated_fraction": compare_methods(arr(col("mean_saturated_fraction")), "mean",
+                                                       higher_is_better=False, seed=1)}
 
 
 def plot_methods(summary: dict, path: str | os.PathLike) -> Path:
@@ -91,6 +112,13 @@ def dataset_markdown(summary: dict) -> str:
         lines.append(f"| {m} | {r['sequences']} | {r['cycles']} | {_fmt(r['mean_exposure_ms'])} | "
                      f"{_fmt(r['mean_saturated_fraction'], '.2%')} | {_fmt(r['mean_valid_fraction'], '.2%')} | "
                      f"{r['non_finite_proposals']} | {r['clamped']} | {_fmt(r['method_ms_per_frame'], '.1f')} |")
+    iv = summary.get("method_intervals")
+    if iv and len(summary["per_sequence"]) >= 2:
+        from emulator.report.intervals import comparison_table
+
+        lines += ["", f"## Methods compared over sequences ({iv['definition']})", "",
+                  "Mean saturated fraction (%) per sequence, lower is better:", ""]
+        lines += comparison_table(iv["mean_saturated_fraction"], "mean saturated (%)", spec=".2f", scale=100.0)
     lines += ["", "## Per sequence: mean target exposure (ms)", "",
               "| sequence | " + " | ".join(summary["methods"]) + " |",
               "| --- |" + " ---: |" * len(summary["methods"])]
@@ -119,15 +147,27 @@ def dataset_markdown(summary: dict) -> str:
                          f"{_fmt(p['images_per_s'])} | {_fmt(p['real_time_factor'])} |")
     if summary["errors"]:
         lines += ["", "## Failed units", ""] + [f"- {e['unit']}: {e['error']}" for e in summary["errors"]]
+    failed = summary.get("failed_methods") or {}
+    if failed:
+        lines += ["", f"## Methods that failed in every unit: {len(failed)}", ""]
+        lines += [f"- {m}: {why}" for m, why in failed.items()]
     return "\n".join(lines) + "\n"
 
 
 def write_dataset_report(out_dir: str | os.PathLike, summary: dict) -> dict:
     """Add the per-method table to ``summary`` and write ``results.json``, ``report.md``, ``methods.png``."""
     out = Path(out_dir)
-    summary = {**summary, "per_method": per_method_table(summary["per_sequence"], summary["methods"])}
+    summary = {**summary, "per_method": per_method_table(summary["per_sequence"], summary["methods"]),
+               "method_intervals": method_intervals(summary["per_sequence"], summary["methods"])}
     write_results(out / RESULTS_FILE, summary)
     if summary["per_sequence"] and summary["units"]:
         plot_methods(summary, out / PLOT_FILE)
-    write_text(out / REPORT_FILE, dataset_markdown(summary))
+    write_report(out, dataset_markdown(summary), figures=[PLOT_FILE], sheets=[_unit_pages(out, summary)])
     return summary
+
+
+def _unit_pages(out: Path, summary: dict) -> str:
+    """HTML: a link to every unit's own report.html, and the first unit's contact sheet."""
+    from emulator.report.html import run_folder_pages
+
+    return run_folder_pages(out, [(f"{u['sequence']} / {u['group']}", u["folder"]) for u in summary["units"]])

@@ -11,7 +11,7 @@ from pathlib import Path
 
 from emulator.io.files import save_figure
 
-__all__ = ["new_figure", "save"]
+__all__ = ["new_figure", "subplots", "save", "plural", "same_as", "legend_outside", "log_ticks_at"]
 
 
 def new_figure(ncols: int = 1, width: float = 5.0, height: float = 4.0, *, nrows: int = 1):
@@ -25,6 +25,73 @@ def new_figure(ncols: int = 1, width: float = 5.0, height: float = 4.0, *, nrows
     return fig, axes
 
 
+def subplots(nrows: int = 1, ncols: int = 1, *, figsize=(6.4, 4.8), **kwargs):
+    """``pyplot.subplots`` without ``pyplot``: (figure on an Agg canvas, axes as ``Figure.subplots`` gives them).
+
+    ``kwargs`` go to :meth:`matplotlib.figure.Figure.subplots` (``sharex``, ``sharey``,
+    ``squeeze``, ...); nothing touches matplotlib's global backend or figure manager.
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=figsize)
+    FigureCanvasAgg(fig)
+    return fig, fig.subplots(nrows, ncols, **kwargs)
+
+
 def save(fig, path: str | os.PathLike, *, dpi: int = 110, overwrite: bool = True) -> Path:
     """Write the figure as PNG (atomically) and return the path."""
     return save_figure(fig, path, dpi=dpi, overwrite=overwrite)
+
+
+def plural(n: int, word: str, words: str | None = None) -> str:
+    """``"1 frame"``, ``"2 frames"``, ``"0 frames"``.
+
+    >>> plural(1, "frame"), plural(3, "frame"), plural(0, "pass", "passes")
+    ('1 frame', '3 frames', '0 passes')
+    """
+    return f"{n} {word if n == 1 else (words or word + 's')}"
+
+
+def same_as(curves: dict) -> dict[str, str]:
+    """For each curve identical to an earlier one (same values, NaN equal to NaN), that earlier name.
+
+    >>> same_as({"a": [1, 2], "b": [1, 3], "c": [1, 2], "d": [1, 2]})
+    {'c': 'a', 'd': 'a'}
+    """
+    import numpy as np
+
+    seen: list[tuple[str, object]] = []
+    out = {}
+    for name, values in curves.items():
+        arr = np.asarray(values, dtype=float)
+        twin = next((n for n, v in seen if v.shape == arr.shape and np.array_equal(v, arr, equal_nan=True)), None)
+        if twin is None:
+            seen.append((name, arr))
+        else:
+            out[name] = twin
+    return out
+
+
+def legend_outside(ax, **kwargs):
+    """A legend to the right of the axes, never over the data (constrained layout makes room)."""
+    if not ax.get_legend_handles_labels()[0]:
+        return None
+    kwargs.setdefault("fontsize", "small")
+    return ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, **kwargs)
+
+
+def log_ticks_at(ax, values, *, axis: str = "y", unit: str = "") -> None:
+    """Label a log axis at ``values`` (e.g. the brackets, 1, 2, 4 ... 32 ms) instead of powers of ten.
+
+    Minor tick labels are switched off, so no labels collide.
+    """
+    from matplotlib.ticker import FixedLocator, FuncFormatter, NullFormatter
+
+    values = sorted({float(v) for v in values if v and v > 0})
+    if not values:
+        return
+    target = ax.yaxis if axis == "y" else ax.xaxis
+    target.set_major_locator(FixedLocator(values))
+    target.set_major_formatter(FuncFormatter(lambda v, _pos: f"{v:g}{unit}"))
+    target.set_minor_formatter(NullFormatter())

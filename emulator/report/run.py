@@ -12,13 +12,26 @@ from pathlib import Path
 import numpy as np
 
 from emulator.io.files import REPORT_FILE, RESULTS_FILE, write_results, write_text
+from emulator.report.html import run_contact_sheet, write_report
 from emulator.io.runfolder import read_run_json, read_tables
-from emulator.report.figures import new_figure, save
+from emulator.report.figures import legend_outside, log_ticks_at, new_figure, plural, same_as, save
 
 __all__ = ["PLOT_FILE", "summarise_run", "plot_exposure", "run_markdown", "write_run_report"]
 
 #: The exposure-against-time figure of a run.
 PLOT_FILE = "exposure.png"
+
+
+def _status(status: str, guarded, cycles) -> str:
+    """A method's status: a failure as recorded; a method that fell back in some cycles (a
+    non-finite proposal, Kim's failed GP fit: column ``guarded``) is not reported "ok"."""
+    n = int(np.sum(guarded)) if len(guarded) else 0
+    if status != "ok" or not n:
+        return status
+    first = [int(c) for c in np.asarray(cycles)[np.asarray(guarded).astype(bool)][:5]]
+    more = ", ..." if n > len(first) else ""
+    return (f"fell back in {n} of {len(guarded)} cycles (kept its exposure; cycles "
+            f"{', '.join(map(str, first))}{more})")
 
 
 def summarise_run(run_dir: str | os.PathLike, info: dict | None = None, tables: dict | None = None) -> dict:
@@ -38,7 +51,7 @@ def summarise_run(run_dir: str | os.PathLike, info: dict | None = None, tables: 
 
         brackets, counts = np.unique(t["bracket_ms"], return_counts=True) if n else (np.array([]), np.array([]))
         methods[name] = {
-            "mode": info.get("method_options", {}).get(name, {}).get("mode"),
+            "mode": _mode(info, name),
             "cycles": int(n),
             "mean_exposure_ms": stat(np.mean, target),
             "median_exposure_ms": stat(np.median, target),
@@ -51,9 +64,22 @@ def summarise_run(run_dir: str | os.PathLike, info: dict | None = None, tables: 
             "clamped": int(t["clamped"].sum()),
             "bracket_use": {f"{b:g}": int(c) for b, c in zip(brackets, counts)},
             "method_ms_per_frame": (info.get("timing") or {}).get("method_ms_per_frame", {}).get(name),
-            "status": (info.get("method_status") or {}).get(name, "ok"),
+            "status": _status((info.get("method_status") or {}).get(name, "ok"), t["guarded"], t["cycle"]),
+            "fallback_cycles": [int(c) for c in t["cycle"][t["guarded"].astype(bool)]] if n else [],
         }
+    from emulator.stats import compare_methods, statistic_interval
+
+    intervals = {
+        "definition": "per method over the run's cycles, circular block bootstrap (blocks of n^(1/3) consecutive "
+                      "cycles), 95 %",
+        "mean_exposure_ms": {n: {k: v for k, v in statistic_interval(tables[n]["target_ms"], "mean", block=True,
+                                                                     seed=[0, k_]).items() if k != "method"}
+                             for k_, n in enumerate(names)},
+        "mean_saturated_fraction": compare_methods({n: tables[n]["saturated_fraction"] for n in names}, "mean",
+                                                   higher_is_better=False, block=True, seed=1),
+    }
     return {
+        "intervals": intervals,
         "run": str(run_dir),
         "sequence": info.get("sequence"),
         "status": info.get("status"),
@@ -68,23 +94,41 @@ def summarise_run(run_dir: str | os.PathLike, info: dict | None = None, tables: 
     }
 
 
+def _mode(info: dict, name: str) -> str:
+    """The method's mode as the report shows it: paper/borealhdr, or "plugin" for a method without one."""
+    opts = info.get("method_options", {}).get(name, {})
+    if opts.get("mode") is not None:
+        return str(opts["mode"])
+    return "plugin" if opts.get("plugin") else "-"
+
+
 def plot_exposure(info: dict, tables: dict, path: str | os.PathLike) -> Path:
-    """Target exposure of every method against time (log scale), the brackets as grey lines."""
+    """Target exposure of every method against time (log scale, ticks at the brackets), the brackets as grey lines.
+
+    Methods whose exposure sequences are identical are drawn dashed on top of each other and
+    named so in the legend ("= classical-50"); the legend sits outside the data.
+    """
     fig, (ax,) = new_figure(1, 9.0, 4.5)
     t0 = min((int(t["timestamp_ns"][0]) for t in tables.values() if t["timestamp_ns"].size), default=0)
-    for b in info.get("brackets_ms", []):
+    brackets = list(info.get("brackets_ms", []))
+    for b in brackets:
         ax.axhline(b, color="0.85", lw=0.8, zorder=0)
+    twins = same_as({name: t["target_ms"] for name, t in tables.items() if t["timestamp_ns"].size})
     for name, t in tables.items():
         if not t["timestamp_ns"].size:
             continue
         x = (t["timestamp_ns"] - t0) / 1e9
-        ax.step(x, t["target_ms"], where="post", marker="o", ms=3, lw=1.3, label=name)
+        if name in twins:
+            ax.step(x, t["target_ms"], where="post", ls="--", lw=1.3, label=f"{name} (= {twins[name]})")
+        else:
+            ax.step(x, t["target_ms"], where="post", marker="o", ms=3, lw=1.3, label=name)
     ax.set_yscale("log")
+    log_ticks_at(ax, brackets)
     ax.set_xlabel("time since first bracket [s]")
-    ax.set_ylabel("exposure [ms]")
+    ax.set_ylabel("exposure [ms] (ticks: the brackets)")
     ax.set_title(f"Exposure per cycle ({info.get('mode', '')} mode, start {info.get('initial_ms')} ms)")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8, ncol=2)
+    ax.grid(True, which="major", alpha=0.3)
+    legend_outside(ax)
     return save(fig, path)
 
 
@@ -102,7 +146,8 @@ def run_markdown(info: dict, summary: dict) -> str:
         f"- mode: {info.get('mode')}, selector: {info.get('selector')} (left camera's saturation decides)",
         f"- initial exposure {info.get('initial_ms')} ms, clamp {info.get('range_ms')} ms, response `{info.get('response')}`",
         f"- images: {info.get('save')}",
-        f"- command: `{info.get('command')}`, exposim {info.get('version')}",
+        f"- command: `{info.get('command') or 'emulator.runner.run_to_folder (library call)'}`, "
+        f"exposim {info.get('version')}",
         "",
         f"![exposure against time]({PLOT_FILE})",
         "",
@@ -120,6 +165,15 @@ def run_markdown(info: dict, summary: dict) -> str:
             f"{_fmt(m['min_exposure_ms'])} | {_fmt(m['max_exposure_ms'])} | {_fmt(pct(m['mean_saturated_fraction']), '.2f')} | "
             f"{_fmt(pct(m['mean_valid_fraction']), '.2f')} | {m['non_finite_proposals']} | {_fmt(m['method_ms_per_frame'], '.1f')} |"
         )
+    iv = summary.get("intervals")
+    if iv:
+        from emulator.report.intervals import comparison_table
+
+        lines += ["", "Mean exposure per method with its 95 % interval (" + iv["definition"] + "): "
+                  + ", ".join(f"{n} {_fmt(r['estimate'])} ms [{_fmt(r['ci95'][0] if r['ci95'] else None)}, "
+                              f"{_fmt(r['ci95'][1] if r['ci95'] else None)}]" for n, r in iv["mean_exposure_ms"].items())
+                  + ".", "", "Mean saturated fraction (%), lower is better:", ""]
+        lines += comparison_table(iv["mean_saturated_fraction"], "mean saturated (%)", spec=".2f", scale=100.0)
     lines += ["", "Saturated: pixels at the white level in the emulated image; valid: pixels the emulation could "
               "reconstruct (not clipped in the bracket). \"-\": no cycle of that method (or no timing recorded)."]
     if "fixed" in summary["methods"]:
@@ -129,7 +183,11 @@ def run_markdown(info: dict, summary: dict) -> str:
             n += 1  # the reference code's counter test adjusts on N + 1 calls
         lines += ["", f"`fixed` (M_fixed) runs classical-50 for its first {n if n is not None else 'few'} frames and "
                   "then freezes its exposure: on a run that short it is identical to classical-50."]
-    failed = {n: m["status"] for n, m in summary["methods"].items() if m.get("status", "ok") != "ok"}
+    failed = {n: m["status"] for n, m in summary["methods"].items() if m.get("status", "ok").startswith("failed")}
+    fell = {n: m["status"] for n, m in summary["methods"].items() if m.get("status", "ok").startswith("fell back")}
+    if fell:
+        lines += ["", f"Methods that fell back (kept their exposure; column `guarded`): {len(fell)}"]
+        lines += [f"- {n}: {why}" for n, why in fell.items()]
     if failed:
         lines += ["", f"Failed methods: {len(failed)} (their rows stop before the cycle named)"]
         lines += [f"- {n}: {why}" for n, why in failed.items()]
@@ -161,5 +219,6 @@ def write_run_report(run_dir: str | os.PathLike) -> dict:
     summary = summarise_run(run_dir, info, tables)
     plot_exposure(info, tables, run_dir / PLOT_FILE)
     write_results(run_dir / RESULTS_FILE, summary)
-    write_text(run_dir / REPORT_FILE, run_markdown(info, summary))
+    sheet = run_contact_sheet(run_dir, info["methods"], tables, white_level=info.get("white_level"))
+    write_report(run_dir, run_markdown(info, summary), figures=[PLOT_FILE], sheets=[sheet])
     return summary

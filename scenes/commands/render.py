@@ -12,6 +12,7 @@ import math
 import sys
 from pathlib import Path
 
+from emulator.commands.progress import add_quiet, bars_enabled
 from scenes.errors import RenderError, SceneError
 
 __all__ = ["register", "parse_size", "parse_params", "frame_seed", "add_denoise_option", "add_scheduler_option"]
@@ -121,8 +122,8 @@ def register(subparsers) -> None:
     cache.add_argument("--cache", dest="cache", type=Path, default=None, help=argparse.SUPPRESS)  # old spelling
     cache.add_argument("--no-cache", action="store_true", help="do not read or write the render cache")
     p.add_argument("--force", action="store_true", help="overwrite existing output files")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.set_defaults(func=run_render)
+    add_quiet(p)
+    p.set_defaults(func=run_render, extras=("synth",))
 
 
 def _timestamps_and_poses(scene, args):
@@ -223,7 +224,7 @@ def run_render(args: argparse.Namespace) -> int:
                   width=width, height=height, spp=spp, seed=seed, fov_deg=fov,
                   cache_dir=False if folder is None else folder, variant=variant, denoise=denoise)
              for (i, cam), seed in zip(jobs, seeds)]
-    with tqdm(total=len(jobs), desc=f"render {scene.name}", unit="img", disable=args.quiet,
+    with tqdm(total=len(jobs), desc=f"render {scene.name}", unit="img", disable=not bars_enabled(args.quiet),
               file=sys.stderr) as bar:
         for (i, cam), seed, img in zip(jobs, seeds, render_many(tasks, scheduler=scheduler, progress=bar.update)):
             write_exr(out / "frames" / cam / f"{stamps_ns[i]}.exr", img, overwrite=True)

@@ -9,6 +9,8 @@ import sys
 import threading
 from pathlib import Path
 
+from emulator.commands.progress import add_quiet, bars_enabled
+
 __all__ = ["register", "stop_between_images"]
 
 
@@ -30,17 +32,21 @@ def register(subparsers) -> None:
     p.add_argument("scene", choices=sorted(SCENES), metavar="SCENE", help=f"one of: {', '.join(sorted(SCENES))}")
     p.add_argument("-o", "--output", required=True, type=Path, help="dataset folder to create")
     p.add_argument("--cycles", type=int, default=4, help="bracket sweeps to capture (default 4)")
-    p.add_argument("--size", default="160x100", help="WIDTHxHEIGHT (default 160x100)")
+    p.add_argument("--size", default="480x300",
+                   help="WIDTHxHEIGHT (default 480x300, the size the stereo VO and the AE study were measured at; "
+                   "it renders about 4x slower than 160x100, which is too small for VO; docs/real-data.md)")
     p.add_argument("--spp", type=int, default=16, help="render samples per pixel (default 16)")
-    p.add_argument("--camera", default="borealhdr", choices=("borealhdr", "linear", "gamma22", "s_curve"))
+    p.add_argument("--camera", default="borealhdr", choices=("borealhdr", "linear", "gamma22", "s_curve"),
+                   help="camera response of the synthetic camera: the BorealHDR camera's measured inverse response "
+                        "(pcalib_inside1), or a linear, gamma 2.2 or S-shaped curve (default %(default)s)")
     p.add_argument("--saturate-ms", type=float, default=DEFAULT_SATURATE_MS,
                    help="exposure at which a white surface facing the sun saturates (default %(default)s)")
     p.add_argument("--speed", type=float, default=None, help="walking speed, m/s (default 2 km/h)")
     p.add_argument("--walk", default=None, metavar="WALK",
                    help="borealhdr (default: turns like the BorealHDR backpack, median 10.7 deg/s), gentle "
                         "(0.5 deg sway, ~4 deg/s) or replay:PATH (a BorealHDR imu.csv's gyro)")
-    p.add_argument("--seed", type=int, default=0, help="scene seed (placement, textures)")
-    p.add_argument("--noise-seed", type=int, default=0, help="sensor noise seed")
+    p.add_argument("--seed", type=int, default=0, help="scene seed (placement, textures) (default %(default)s)")
+    p.add_argument("--noise-seed", type=int, default=0, help="sensor noise seed (default %(default)s)")
     p.add_argument("--param", action="append", metavar="KEY=VALUE", help="scene parameter (repeatable)")
     p.add_argument("--no-blur", action="store_true",
                    help="sample the scene at each trigger instant instead of integrating over the exposure window")
@@ -57,8 +63,8 @@ def register(subparsers) -> None:
     p.add_argument("--cache", dest="cache", type=Path, default=None, help=argparse.SUPPRESS)  # old spelling
     p.add_argument("--force", action="store_true",
                    help="replace an existing exposim dataset (refused, naming them, if it holds files synth did not write)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.set_defaults(func=_run)
+    add_quiet(p)
+    p.set_defaults(func=_run, extras=("synth",))
 
 
 register.order = 70  # place in `exposim --help`
@@ -83,9 +89,9 @@ def _run(args: argparse.Namespace) -> int:
     render_bar = None
     if scheduler is not None:
         render_bar = tqdm(total=args.cycles * 6 * (1 if args.mono else 2), desc=f"render {scene.name} (dask)",
-                          unit="img", disable=args.quiet, file=sys.stderr)
+                          unit="img", disable=not bars_enabled(args.quiet), file=sys.stderr)
     with (render_bar if render_bar is not None else contextlib.nullcontext()), tqdm(total=args.cycles * 6 * (1 if args.mono else 2), desc=f"synth {scene.name}", unit="img",
-              disable=args.quiet, file=sys.stderr) as bar, \
+              disable=not bars_enabled(args.quiet), file=sys.stderr) as bar, \
             stop_between_images("exposim synth") as check:
 
         def progress(done, total):

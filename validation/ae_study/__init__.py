@@ -1,4 +1,4 @@
-"""Synthetic AE study (issue 7): the paper's section V-D benchmarks on synthetic stereo walks.
+"""Synthetic AE study: the paper's section V-D benchmarks on synthetic stereo walks.
 
 Run::
 

@@ -8,12 +8,13 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
+from emulator.commands.progress import add_quiet, bars_enabled
 from emulator.commands import argtypes
 from emulator.errors import ExposimError
 from scenes.commands.render import add_scheduler_option
 from scenes.parallel import check_scheduler
 from validation.ae_study.config import CONFIGS
-from validation.ae_study.study import redraw, run_study
+from validation.ae_study.study import redraw, run_replicated_study, run_study
 
 __all__ = ["add_arguments", "run_from_args", "main"]
 
@@ -41,9 +42,13 @@ def add_arguments(p: argparse.ArgumentParser, *, output_option: bool = False) ->
     p.add_argument("--size", type=argtypes.size, help=f"image size WxH (default: {full.width}x{full.height})")
     p.add_argument("--spp", type=int, help=f"render samples per pixel (default: {full.spp})")
     p.add_argument("--scenes", type=argtypes.names, help=f"comma-separated scenes (default: {','.join(full.scenes)})")
+    p.add_argument("--replicates", type=int, default=1,
+                   help="run the study on this many seeds (scene, camera and render seeds +0, +1, ...): each scene "
+                        "of each is an independent walk of the findings' statistics (default 1; a verdict needs "
+                        ">= 10 walks)")
     add_scheduler_option(p)
     p.add_argument("--force", action="store_true", help="overwrite an existing results.json")
-    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    add_quiet(p, "no progress bars")
     p.add_argument("--redraw", action="store_true",
                    help="only re-evaluate the findings and rewrite report.md and the figure from OUT/results.json")
 
@@ -68,7 +73,13 @@ def run_from_args(args: argparse.Namespace, command: str) -> dict:
     if args.scenes:
         changes["scenes"] = args.scenes
     cfg = replace(CONFIGS["quick" if args.quick else "full"], **changes)
-    return run_study(args.output, cfg, force=args.force, progress=not args.no_progress, command=command,
+    replicates = getattr(args, "replicates", 1)
+    if replicates < 1:
+        raise ExposimError(f"--replicates must be >= 1, got {replicates}")
+    if replicates > 1:
+        return run_replicated_study(args.output, cfg, replicates, force=args.force, progress=bars_enabled(args.quiet),
+                                    command=command, scheduler=check_scheduler(args.scheduler))
+    return run_study(args.output, cfg, force=args.force, progress=bars_enabled(args.quiet), command=command,
                      scheduler=check_scheduler(args.scheduler))
 
 

@@ -12,7 +12,7 @@ import numpy as np
 
 from validation.ae_study.config import GRADIENT_METHODS, PAPER_NAMES, SIMILAR_RPE_RATIO
 
-__all__ = ["evaluate_findings", "findings_paragraph"]
+__all__ = ["evaluate_findings", "findings_with_evidence", "findings_paragraph"]
 
 
 def _fmt(v, spec: str = ".3g") -> str:
@@ -280,8 +280,41 @@ def evaluate_findings(summary: dict, taus=(5, 100)) -> list[dict]:
     return out
 
 
+def findings_with_evidence(summary: dict, findings: list[dict], taus=(5, 100), seed: int = 0) -> list[dict]:
+    """``findings`` (:func:`evaluate_findings`) with each one's evidence over the walks (issue 22).
+
+    The walks are the summary's scenes (each an independent walk with its seeds); per finding
+    :func:`validation.verdicts.findings.evaluate` adds ``effect`` (signed: positive is the
+    paper's claim), ``ci95`` (cluster bootstrap over walks), ``p`` and ``p_adjusted``
+    (label-permutation null, Holm across the findings), ``verdict`` (holds / contradicted /
+    undetermined / by-construction, the last not counted), ``n_walks``, ``effect_definition``
+    and ``verdict_reason``.  ``holds`` stays the point comparison of issue 7.
+    """
+    from validation.verdicts.findings import evaluate, unit_tables
+
+    units = list(summary["per_scene"].values())
+    methods = [m for m in summary["overall"]]
+    ev = {r["id"]: r for r in evaluate(unit_tables(units, methods, hi_tau=max(int(t) for t in taus)), methods,
+                                       seed=[int(seed), 22_004])}
+    out = []
+    for f in findings:
+        r = ev.get(f["id"])
+        g = dict(f)
+        if r is None:
+            g.update({"effect": None, "ci95": [None, None], "p": None, "p_adjusted": None, "verdict": "undetermined",
+                      "n_walks": len(units), "effect_definition": None, "verdict_reason": "no statistic defined"})
+        else:
+            g.update({"effect": r["effect"], "ci95": r["ci95"], "p": r["p"], "p_adjusted": r["p_adjusted"],
+                      "verdict": r["verdict"], "n_walks": r["n_walks"], "effect_definition": r["definition"],
+                      "verdict_reason": r["reason"]})
+        out.append(g)
+    return out
+
+
 def findings_paragraph(findings: list[dict]) -> str:
     """One paragraph, generated from the evaluated findings (no claim is written by hand)."""
+    if findings and "verdict" in findings[0]:
+        return _verdicts_paragraph(findings)
     held = [f for f in findings if f["holds"] is True]
     failed = [f for f in findings if f["holds"] is False]
     unknown = [f for f in findings if f["holds"] is None]
@@ -297,4 +330,25 @@ def findings_paragraph(findings: list[dict]) -> str:
     bases = sorted({f["vo_basis"] for f in findings if f.get("vo_basis")})
     if bases:
         parts.append("RPE compared as the " + "; ".join(bases) + ".")
+    return " ".join(parts)
+
+
+def _verdicts_paragraph(findings: list[dict]) -> str:
+    """The paragraph from the verdicts with evidence (by-construction findings not counted)."""
+    counted = [f for f in findings if f["verdict"] != "by-construction"]
+    by = {v: [f for f in counted if f["verdict"] == v] for v in ("holds", "contradicted", "undetermined")}
+    walks = max((f.get("n_walks") or 0 for f in counted), default=0)
+    parts = [f"Of the {len(counted)} qualitative findings of the paper's section V-D that can fail, tested over "
+             f"{walks} walks against interchangeable methods (label permutation, Holm across findings), "
+             f"{len(by['holds'])} hold, {len(by['contradicted'])} are contradicted and {len(by['undetermined'])} are "
+             f"undetermined; {len(findings) - len(counted)} hold by construction and are not counted."]
+    for v in ("holds", "contradicted"):
+        if by[v]:
+            parts.append(f"{v.capitalize()}: " + "; ".join(
+                f"{f['claim']} (effect {_fmt(f['effect'])}, 95 % interval {_fmt(f['ci95'][0])}..{_fmt(f['ci95'][1])}, "
+                f"adjusted p {_fmt(f['p_adjusted'], '.2g')})" for f in by[v]) + ".")
+    if by["undetermined"]:
+        reasons = sorted({f["verdict_reason"].split(":")[0] for f in by["undetermined"]})
+        parts.append("Undetermined (" + "; ".join(reasons) + "): "
+                     + ", ".join(f["id"] for f in by["undetermined"]) + ".")
     return " ".join(parts)

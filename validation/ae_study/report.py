@@ -35,7 +35,7 @@ def report_markdown(results: dict) -> str:
     lo, hi = taus[0], taus[-1]
     summary = results["summary"]
     lines = [
-        "# Synthetic AE study (issue 7): the paper's section V-D on synthetic stereo walks",
+        "# Synthetic AE study: the paper's section V-D on synthetic stereo walks",
         "",
         f"Scenes {', '.join(cfg['scenes'])}; {cfg['n_cycles']} bracket cycles each (1..32 ms, 22 frames/s, "
         f"{cfg['n_cycles'] * 6 / 22:.1f} s of walk at 2 km/h), {cfg['width']}x{cfg['height']} px, {cfg['spp']} spp, "
@@ -115,10 +115,17 @@ def report_markdown(results: dict) -> str:
     lines += [f"- {v}" for v in study_verdicts(results)]
     lines += ["",
               "## Which of the paper's qualitative findings hold", "", results["findings_paragraph"], "",
-              "| finding | paper | holds | measured |", "| --- | --- | --- | --- |"]
+              "| finding | paper | verdict | effect (95 % interval) | adjusted p | point comparison | measured |",
+              "| --- | --- | --- | --- | --- | --- | --- |"]
     for f in results["findings"]:
-        lines.append(f"| {f['claim']} | {f['paper']} | {_fmt(f['holds']) if f['holds'] is not None else 'undecided'} "
-                     f"| {f['detail']} |")
+        ci = f.get("ci95") or [None, None]
+        lines.append(f"| {f['claim']} | {f['paper']} | {f.get('verdict', 'n/a')} | {_fmt(f.get('effect'))} "
+                     f"({_fmt(ci[0])}..{_fmt(ci[1])}) | {_fmt(f.get('p_adjusted'), '.2g')} | "
+                     f"{_fmt(f['holds']) if f['holds'] is not None else 'undecided'} | {f['detail']} |")
+    lines += ["", "Verdict: the finding's effect (signed, positive = the paper's claim; see `effect_definition` in "
+              "results.json) against interchangeable methods (labels permuted within each walk), Holm across the "
+              "findings; undetermined with fewer than 10 walks; by-construction findings cannot fail and are not "
+              "counted. The point comparison is the single-number test, without evidence."]
     lines += ["", "## Figures", "", "![summary](ae_study_summary.png)", "",
               "![features (Fig. 4)](features/fig4_features.png)", "",
               "## Why this size and VO ratio", "", f"- symptom: {VO_CONFIGURATION_NOTE['symptom']}",

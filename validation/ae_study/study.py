@@ -9,12 +9,16 @@ from dataclasses import asdict
 from pathlib import Path
 
 from emulator.io.files import REPORT_FILE, RESULTS_FILE, prepare_output, read_results, write_results, write_text
+from emulator.report.html import run_folder_pages, write_report
 from validation.ae_study.config import CONFIGS, PAPER, VO_CONFIGURATION_NOTE, StudyConfig, StudyError, config_from_dict
-from validation.ae_study.findings import evaluate_findings, findings_paragraph
+from validation.ae_study.findings import evaluate_findings, findings_paragraph, findings_with_evidence
 from validation.ae_study.report import plot_summary, report_markdown
 from validation.ae_study.summary import summarise
 
-__all__ = ["run_study", "redraw"]
+__all__ = ["REPLICATES_DIR", "run_study", "run_replicated_study", "finish_replicated_study", "redraw"]
+
+#: Sub-folder of :func:`run_replicated_study`'s studies, one per seed.
+REPLICATES_DIR = "replicates"
 
 
 def _bar(total: int, desc: str, unit: str, enabled: bool):
@@ -109,12 +113,12 @@ def run_study(out, config: StudyConfig = CONFIGS["full"], *, force: bool = False
                                   rpe_on_failure=True, force=True, progress=progress, command=command)
         timings[f"vo_{scene_name}_s"] = time.perf_counter() - t0
     summary = summarise(cfg, features, vo, runs)
-    findings = evaluate_findings(summary, cfg.taus)
+    findings = findings_with_evidence(summary, evaluate_findings(summary, cfg.taus), cfg.taus, seed=cfg.scene_seed)
     timings["total_s"] = time.perf_counter() - t_start
     from emulator import __version__
 
     results = {
-        "study": "ae_study (issue 7)",
+        "study": "ae_study",
         "exposim_version": __version__,
         "command": command,
         "config": cfg.to_dict(),
@@ -136,7 +140,64 @@ def run_study(out, config: StudyConfig = CONFIGS["full"], *, force: bool = False
         },
     }
     plot_summary(results, out / "ae_study_summary.png")
-    write_text(out / REPORT_FILE, report_markdown(results))
+    write_report(out, report_markdown(results), sheets=[run_folder_pages(
+        out, [(s, out / "runs" / s) for s in cfg.scenes], n_sheets=len(cfg.scenes))])
+    write_results(out / RESULTS_FILE, results)
+    return results
+
+
+def run_replicated_study(out, config: StudyConfig = CONFIGS["full"], replicates: int = 1, *, force: bool = False,
+                         command: str | None = None, **kwargs) -> dict:
+    """The study on ``replicates`` seeds: replicate ``k`` adds ``k`` to the scene, camera and render seeds, so
+    each scene of each replicate is an independent walk (issue 22); the findings are judged over all walks.
+
+    Replicate ``k`` is a complete study in ``out/replicates/seed<scene_seed + k>``; ``out/results.json``
+    and ``out/report.md`` hold the findings over every walk (:func:`finish_replicated_study`).
+    ``kwargs`` go to :func:`run_study`.
+    """
+    from dataclasses import replace
+
+    if replicates < 1:
+        raise StudyError(f"replicates must be >= 1, got {replicates}")
+    out = prepare_output(out, force=force)
+    studies = []
+    for k in range(replicates):
+        cfg = replace(config, scene_seed=config.scene_seed + k, camera_seed=config.camera_seed + k,
+                      render_seed=config.render_seed + k)
+        studies.append(run_study(out / REPLICATES_DIR / f"seed{cfg.scene_seed}", cfg, force=force, command=command,
+                                 **kwargs))
+    return finish_replicated_study(out, studies, command=command)
+
+
+def finish_replicated_study(out, studies: list[dict], command: str | None = None) -> dict:
+    """``results.json`` and ``report.md`` of the findings over the walks of several studies' results."""
+    from validation.ae_study.findings import _fmt
+
+    out = Path(out)
+    per_scene = {f"{scene}/seed{st['config']['scene_seed']}": rows for st in studies
+                 for scene, rows in st["summary"]["per_scene"].items()}
+    first = studies[0]
+    pooled = {"per_scene": per_scene, "overall": first["summary"]["overall"]}
+    taus = first["config"]["taus"]
+    findings = findings_with_evidence(pooled, first["findings"], taus, seed=first["config"]["scene_seed"])
+    for f in findings:
+        f["point_comparison_of"] = f"{REPLICATES_DIR}/seed{first['config']['scene_seed']}"
+    results = {"study": "ae_study, replicated", "command": command, "config": first["config"],
+               "replicates": [f"{REPLICATES_DIR}/seed{st['config']['scene_seed']}" for st in studies],
+               "walks": list(per_scene), "n_walks": len(per_scene), "findings": findings,
+               "findings_paragraph": findings_paragraph(findings),
+               "timings": {"total_s": float(sum(st["timings"].get("total_s", 0.0) for st in studies))}}
+    lines = ["# Synthetic AE study, replicated", "",
+             f"{len(studies)} replicate(s), {len(per_scene)} walks ({', '.join(per_scene)}). Command: `{command}`", "",
+             results["findings_paragraph"], "",
+             "| finding | verdict | effect | 95 % interval | adjusted p | walks | effect definition |",
+             "| --- | --- | ---: | --- | ---: | ---: | --- |"]
+    for f in findings:
+        ci = f.get("ci95") or [None, None]
+        lines.append(f"| {f['id']} | {f['verdict']} | {_fmt(f['effect'])} | {_fmt(ci[0])}..{_fmt(ci[1])} | "
+                     f"{_fmt(f['p_adjusted'], '.2g')} | {f.get('n_walks') if f.get('n_walks') is not None else '-'} | "
+                     f"{f.get('effect_definition') or f.get('verdict_reason')} |")
+    write_report(out, "\n".join(lines) + "\n")
     write_results(out / RESULTS_FILE, results)
     return results
 
@@ -153,6 +214,12 @@ def redraw(out) -> dict:
     """
     out = Path(out)
     path = out / "results.json"
+    reps = out / REPLICATES_DIR
+    if reps.is_dir():  # a replicated study: redraw each replicate, then the findings over all walks
+        studies = [redraw(p) for p in sorted(reps.iterdir()) if (p / "results.json").is_file()]
+        if studies:
+            command = read_results(path).get("command") if path.is_file() else None
+            return finish_replicated_study(out, studies, command=command)
     if not path.is_file():
         raise StudyError(f"{path}: no study to redraw")
     results = read_results(path)
@@ -166,10 +233,13 @@ def redraw(out) -> dict:
     results["config"] = cfg.to_dict()
     results["vo_configuration_note"] = VO_CONFIGURATION_NOTE
     results["summary"] = summarise(cfg, features, vo, runs)
-    results["findings"] = evaluate_findings(results["summary"], results["config"]["taus"])
+    results["findings"] = findings_with_evidence(
+        results["summary"], evaluate_findings(results["summary"], results["config"]["taus"]),
+        results["config"]["taus"], seed=cfg.scene_seed)
     results["findings_paragraph"] = findings_paragraph(results["findings"])
     results["redrawn"] = results.get("redrawn", 0) + 1
     plot_summary(results, out / "ae_study_summary.png")
-    write_text(out / REPORT_FILE, report_markdown(results))
+    write_report(out, report_markdown(results), sheets=[run_folder_pages(
+        out, [(s, out / "runs" / s) for s in cfg.scenes], n_sheets=len(cfg.scenes))])
     write_results(path, results)
     return results

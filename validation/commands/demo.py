@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from emulator.commands.progress import add_json, add_quiet, bars_enabled, print_json
+
 __all__ = ["register"]
 
 
@@ -22,8 +24,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("-o", "--output", type=Path, default=None, help="output folder (default: a new exposim-demo-N)")
     p.add_argument("--quick", action="store_true", help="smallest configuration (for tests)")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
-    p.set_defaults(func=_demo)
+    add_quiet(p, "no progress bars")
+    add_json(p, "print the demo's results.json to stdout instead of its report")
+    p.set_defaults(func=_demo, extras=("synth",))
 
 
 register.order = 90  # place in `exposim --help`
@@ -45,7 +48,7 @@ def _demo(args) -> int:
         if bar is None:
             for old in bars.values():
                 old.close()
-            bar = bars[stage] = tqdm(total=total, desc=stage, file=sys.stderr, disable=args.quiet)
+            bar = bars[stage] = tqdm(total=total, desc=stage, file=sys.stderr, disable=not bars_enabled(args.quiet))
         bar.total = total
         bar.n = done
         bar.refresh()
@@ -56,8 +59,13 @@ def _demo(args) -> int:
     finally:
         for bar in bars.values():
             bar.close()
+    if args.json:
+        from emulator.io.files import read_results
+
+        print_json(read_results(result["output"]))
+        return 0
     print(result["report"])
     how = "reused from an earlier demo" if result["dataset_reused"] else "synthesised now, kept for the next demo"
     print(f"\nexposim demo: recording {result['dataset']} ({how})")
-    print(f"exposim demo: wrote {result['output']} in {result['total_s']:.0f} s (report.md, results.json, figures)")
+    print(f"exposim demo: wrote {result['output']} in {result['total_s']:.0f} s (report.md, report.html, results.json, figures)")
     return 0

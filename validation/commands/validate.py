@@ -16,6 +16,7 @@ import shlex
 import sys
 from pathlib import Path
 
+from emulator.commands.progress import add_json, add_quiet, bars_enabled, print_json
 from emulator.commands import argtypes
 
 __all__ = ["register"]
@@ -57,6 +58,16 @@ def _show(value) -> str:
     return "none" if value is None else str(value)
 
 
+def _config_size(name: str):
+    def lookup():
+        from validation.report import make_config
+
+        full, quick = make_config(name), make_config(name, quick=True)
+        return f"{full.width}x{full.height}", f"{quick.width}x{quick.height}"
+
+    return lookup
+
+
 def _config_default(name: str, field: str):
     def lookup():
         from validation.report import make_config
@@ -80,10 +91,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         q.add_argument("-o", "--output", type=Path, required=True, help="output folder")
         q.add_argument("--quick", action="store_true", help="reduced configuration (seconds, for tests)")
         q.add_argument("--force", action="store_true", help="overwrite an existing results.json")
-        q.add_argument("--no-progress", action="store_true", help="no progress bar")
+        add_quiet(q)
+        add_json(q)
         q.add_argument("--cache-dir", help="render cache folder (default $EXPOSIM_CACHE or ~/.cache/exposim/renders)")
-        q.add_argument("--width", type=int, help="render width (pixels)")
-        q.add_argument("--height", type=int, help="render height (pixels)")
+        q.add_argument("--size", type=argtypes.size, metavar="WxH", help="render size in pixels, WIDTHxHEIGHT")
         q.add_argument("--spp", type=int, help="render samples per pixel")
         if name in ("emulation", "selectors", "speed"):
             q.add_argument("--exposures", type=int, dest="n_exposures", help="number of ground-truth exposures")
@@ -99,12 +110,14 @@ def register(sub: argparse._SubParsersAction) -> None:
             q.add_argument("--test-scenes", type=argtypes.names, help="held-out scenes")
         if name == "motion":
             q.add_argument("--speeds", type=argtypes.floats, dest="speeds_mps", help="walking speeds, m/s")
-        q.set_defaults(func=_run, experiment=name)
+        q.set_defaults(func=_run, experiment=name, extras=("synth",))
         for action in q._actions:
-            if action.dest in _OPTION_FIELDS and action.dest != "cache_dir":
+            if action.dest == "size":
+                action.config_default = _config_size(name)
+            elif action.dest in _OPTION_FIELDS and action.dest != "cache_dir":
                 action.config_default = _config_default(name, action.dest)
     _register_ae_study(vsub)
-    from validation.live.cli import register as register_live  # issue 14: its own options and runner
+    from validation.live.cli import register as register_live  # its own options and runner
 
     register_live(vsub)
     _register_render(vsub)
@@ -125,7 +138,8 @@ def _register_render(vsub) -> None:
 
     q = vsub.add_parser("render", help=_RENDER_HELP, description=_RENDER_HELP)
     add_arguments(q, output_option=True)
-    q.set_defaults(func=_run_render, experiment="render")
+    add_json(q)
+    q.set_defaults(func=_run_render, experiment="render", extras=("synth",))
 
 
 def _run_render(args) -> int:
@@ -143,6 +157,9 @@ def _run_render(args) -> int:
                 value = "x".join(map(str, value)) if key == "size" else ",".join(map(str, value))
             words += ["--" + key.replace("_", "-"), str(value)]
     results = run_from_args(args, shlex.join(words))
+    if args.json:
+        print_json(results)
+        return 0
     print_summary(results, args.output)
     return 0
 
@@ -159,7 +176,8 @@ def _register_ae_study(vsub) -> None:
              "stereo walks, with a verdict on each of the paper's findings")
     q = vsub.add_parser("ae-study", help=help_, description=help_, formatter_class=_DefaultsFormatter)
     add_arguments(q, output_option=True)
-    q.set_defaults(func=_run_ae_study, experiment="ae-study")
+    add_json(q)
+    q.set_defaults(func=_run_ae_study, experiment="ae-study", extras=("synth",))
 
 
 def _run_ae_study(args) -> int:
@@ -175,6 +193,9 @@ def _run_ae_study(args) -> int:
     if args.scenes:
         words += ["--scenes", ",".join(args.scenes)]
     results = run_from_args(args, shlex.join(words))
+    if args.json:
+        print_json(results)
+        return 0
     print("\n".join(summary_lines(args, results)))
     return 0
 
@@ -182,11 +203,13 @@ def _run_ae_study(args) -> int:
 def _run(args) -> int:
     from validation.report import make_config, run_experiment
 
-    overrides = {k: getattr(args, k, None) for k in _OPTION_FIELDS}
+    overrides = {k: getattr(args, k, None) for k in _OPTION_FIELDS if k not in ("width", "height")}
+    size = getattr(args, "size", None)
+    overrides["width"], overrides["height"] = size if size is not None else (None, None)
     config = make_config(args.experiment, quick=args.quick, **overrides)
     bar = None
     progress = None
-    if not args.no_progress:
+    if bars_enabled(args.quiet):
         from tqdm import tqdm
 
         bar = tqdm(total=config.n_steps(), desc=f"validate {args.experiment}", unit="step", file=sys.stderr)
@@ -197,8 +220,13 @@ def _run(args) -> int:
     finally:
         if bar is not None:
             bar.close()
+    if args.json:  # the file as written (the studies round floats to 12 digits)
+        from emulator.io.files import read_results
+
+        print_json(read_results(args.output))
+        return 0
     print(_headline(args.experiment, results))
-    print(f"wrote {args.output / 'results.json'}, {args.output / 'report.md'} and {len(results['figures'])} figure(s)")
+    print(f"wrote {args.output / 'results.json'}, {args.output / 'report.md'}, {args.output / 'report.html'} and {len(results['figures'])} figure(s)")
     return 0
 
 
@@ -207,8 +235,10 @@ def _command(args, overrides: dict) -> str:
     words = ["exposim", "validate", args.experiment, "-o", str(args.output)]
     if args.quick:
         words.append("--quick")
+    if overrides.get("width") is not None:
+        words += ["--size", f"{overrides['width']}x{overrides['height']}"]
     for key, value in overrides.items():
-        if value is None or key == "cache_dir":
+        if value is None or key in ("cache_dir", "width", "height"):
             continue
         flag = {"n_exposures": "--exposures", "speeds_mps": "--speeds"}.get(key, "--" + key.replace("_", "-"))
         if isinstance(value, tuple):

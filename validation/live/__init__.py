@@ -1,4 +1,4 @@
-"""Live versus emulated closed loop (issue 14): does the offline benchmark judge AE methods as a live camera would?
+"""Live versus emulated closed loop: does the offline benchmark judge AE methods as a live camera would?
 
 Run::
 

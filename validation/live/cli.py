@@ -13,6 +13,7 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
+from emulator.commands.progress import add_json, add_quiet, bars_enabled, print_json
 from emulator.commands import argtypes
 from emulator.errors import ExposimError
 from scenes.commands.render import add_scheduler_option
@@ -24,7 +25,7 @@ __all__ = ["HELP", "DESCRIPTION", "add_arguments", "register", "build_parser", "
 
 HELP = "live versus emulated closed loop: does the emulated benchmark rank the AE methods as a live camera would?"
 DESCRIPTION = (
-    "Issue 14. On synthetic stereo walks, every AE method runs twice: emulated (the normal closed loop on the "
+    "On synthetic stereo walks, every AE method runs twice: emulated (the normal closed loop on the "
     "bracketed recording, plain and noise-consistent emulation) and live (each cycle the camera captures at the "
     "method's own exposure from the rendered radiance, at the emulator's bracket instant or at the cycle's first "
     "shot). Compares exposure trajectories, images, features/VO metrics and the methods' rankings (Kendall tau), "
@@ -55,11 +56,16 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument("--noise-repeats", type=int,
                    help=f"captures per exposure for the noise variance ratio (default {full.noise_repeats}; "
                         f"--quick {quick.noise_repeats})")
+    p.add_argument("--replicates", type=int, default=1,
+                   help="run the experiment on this many seeds (--seed, +1, ...): each scene of each is an "
+                        "independent walk of the replicated verdicts (default 1; the verdicts need >= 10 walks, "
+                        "docs/verdicts.md sizes a decision)")
     p.add_argument("--no-control", action="store_true", help="skip the re-seeded live control run")
     p.add_argument("--keep-radiance", action="store_true", help="keep the datasets' radiance EXRs (large)")
     p.add_argument("--cache-dir", help="render cache (default $EXPOSIM_CACHE or ~/.cache/exposim/renders)")
     add_scheduler_option(p)
-    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    add_quiet(p, "no progress bars")
+    add_json(p)
     p.add_argument("--redraw", action="store_true",
                    help="only recompute the verdicts and rewrite results.json, report.md and the figures of the "
                         "existing folder OUT from its raw.json")
@@ -109,6 +115,8 @@ def command_line(args, prog: str) -> str:
         elif isinstance(value, tuple):
             value = ",".join(value)
         words += ["--" + key.replace("_", "-"), str(value)]
+    if getattr(args, "replicates", 1) != 1:
+        words += ["--replicates", str(args.replicates)]
     words += [flag for flag, on in (("--no-control", args.no_control), ("--keep-radiance", args.keep_radiance)) if on]
     return shlex.join(words)
 
@@ -119,7 +127,7 @@ def run(args, prog: str = "exposim validate live") -> int:
     Raises :class:`~emulator.errors.ExposimError` for bad options or input (the caller
     prints it as one line).
     """
-    from validation.live.experiment import numbered_output, redraw, run_live_experiment
+    from validation.live.experiment import numbered_output, redraw, run_live_experiment, run_replicated
     from validation.live.report import headline
 
     def log(msg: str) -> None:
@@ -127,18 +135,29 @@ def run(args, prog: str = "exposim validate live") -> int:
 
     if args.redraw:
         results = redraw(args.output)
+        if args.json:
+            print_json(results)
+            return 0
         print(headline(results))
         return 0
     cfg = config_from_args(args)
+    if args.replicates < 1:
+        raise ExposimError(f"--replicates must be >= 1, got {args.replicates}")
     scheduler = check_scheduler(args.scheduler)
     out = numbered_output(args.output)
     if out != args.output:
         log(f"live: {args.output} exists and is not empty; writing to {out}")
-    results = run_live_experiment(out, cfg, progress=not args.no_progress, command=command_line(args, prog),
-                                  cache_dir=args.cache_dir, log=None if args.no_progress else log,
-                                  scheduler=scheduler)
+    kw = dict(progress=bars_enabled(args.quiet), command=command_line(args, prog), cache_dir=args.cache_dir,
+              log=None if args.quiet else log, scheduler=scheduler)
+    if args.replicates > 1:
+        results = run_replicated(out, cfg, args.replicates, **kw)
+    else:
+        results = run_live_experiment(out, cfg, **kw)
+    if args.json:
+        print_json(results)
+        return 0
     print(headline(results))
-    print(f"wrote {out / 'results.json'}, {out / 'report.md'} in {results['timings']['total_s'] / 60:.1f} min")
+    print(f"wrote {out / 'results.json'}, {out / 'report.md'}, {out / 'report.html'} in {results['timings']['total_s'] / 60:.1f} min")
     return 0
 
 

@@ -62,9 +62,9 @@ def image_errors(emulated, live, names, sequence, response) -> dict[str, dict]:
 def kendall_tau(live: Mapping[str, float], emulated: Mapping[str, float]) -> dict:
     """Kendall tau-b of two rankings of the same methods (:func:`scipy.stats.kendalltau`).
 
-    Methods missing on either side are left out.  When every method ties on both sides
-    the rankings agree (tau 1); when one side ties every method and the other does not,
-    tau-b is undefined (None) and ``note`` says so.  ``discordant`` lists the method pairs
+    Methods missing on either side are left out.  When every method ties on either side
+    (both sides included) tau-b is undefined (None) and ``note`` says so: two rankings
+    that do not order the methods do not agree, they say nothing.  ``discordant`` lists the method pairs
     ordered oppositely; ``tied_on_one_side_only`` counts the pairs tied on one side only (they
     lower tau-b without being discordant).
     """
@@ -82,7 +82,7 @@ def kendall_tau(live: Mapping[str, float], emulated: Mapping[str, float]) -> dic
     if len(names) < 2:
         res["note"] = "fewer than two methods with a value"
     elif np.ptp(x) == 0 and np.ptp(y) == 0:
-        res["tau"], res["note"] = 1.0, "every method ties on both sides"
+        res["note"] = "every method ties on both sides: no ranking, tau-b undefined (a tie is not agreement)"
     elif np.ptp(x) == 0 or np.ptp(y) == 0:
         res["note"] = f"every method ties on the {'live' if np.ptp(x) == 0 else 'emulated'} side only: tau-b undefined"
     else:

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from emulator.io.files import REPORT_FILE, RESULTS_FILE, first_free, read_results, to_jsonable, write_results, write_text
+from emulator.report.html import write_report
 from validation.live.compare import exposure_log2_errors, image_errors, measure_noise_variance_ratio
 from validation.live.config import (
     BRIGHTENING_PAIRS,
@@ -33,10 +34,15 @@ from validation.live.loops import DatasetRadiance, iter_emulated, iter_live, wri
 from validation.live.report import plot_metrics, plot_trajectories, report_markdown
 from validation.live.verdicts import assemble, ratio_use
 
-__all__ = ["RAW_FILE", "numbered_output", "run_live_experiment", "finish", "redraw"]
+__all__ = ["RAW_FILE", "REPLICATES_DIR", "NATIVE_RUN", "numbered_output", "run_live_experiment", "finish", "evidence",
+           "run_replicated", "finish_replicated", "redraw"]
 
 #: What :func:`redraw` recomputes the verdicts from (per-cycle comparisons, benchmark summaries).
 RAW_FILE = "raw.json"
+#: Sub-folder of :func:`run_replicated`'s experiments, one per seed.
+REPLICATES_DIR = "replicates"
+#: Run name of the native-rate live condition (``native_loop``).
+NATIVE_RUN = "live-native"
 
 
 def numbered_output(out) -> Path:
@@ -65,13 +71,20 @@ def _runs_summary(cycles, names) -> dict:
 
 def run_live_experiment(out, config: LiveConfig | None = None, *, progress: bool = True, command: str | None = None,
                         cache_dir=None, log: Callable[[str], None] | None = None,
-                        scheduler: str | None = None) -> dict:
+                        scheduler: str | None = None, native_loop: Callable | None = None) -> dict:
     """Run the experiment into ``out`` (a new or empty folder; see :func:`numbered_output`).
 
     ``config`` defaults to ``CONFIGS["full"]``.  ``scheduler`` (``"local"`` or
     ``"tcp://HOST:PORT"``) renders every shot of the walks as Dask tasks first
     (:func:`scenes.synthesize.synthesize`; the same recordings as serial).  Returns the
     content of ``results.json``.
+
+    ``native_loop``: the native-rate live condition (issue 22), a callable
+    ``native_loop(sequence, radiance, camera, methods, *, seed, noise, initial_ms, selector,
+    response)`` yielding :class:`emulator.playback.CycleStep` per cycle with images kept (a
+    camera at the recorder's frame rate with an exposure latency, the same closed loop as
+    ``exposim run``); its run is ``live-native``.  Without one that condition is reported as
+    not run (results.json ``conditions`` and ``comparisons``).
     """
     import scenes
     from emulator.io.borealhdr import load_sequence, sequence_response
@@ -94,6 +107,8 @@ def run_live_experiment(out, config: LiveConfig | None = None, *, progress: bool
     run_names = [f"emulated-{n}" for n in NOISE_OPTIONS] + [f"live-{v}" for v in VARIANTS]
     if cfg.control:
         run_names.append(f"live-{CONTROL}")
+    if native_loop is not None:
+        run_names.append(NATIVE_RUN)
     per_scene: dict = {}
     run_summaries: dict = {r: {} for r in run_names}
     ratio_input = None
@@ -143,6 +158,14 @@ def run_live_experiment(out, config: LiveConfig | None = None, *, progress: bool
                     got.append(cs)
                     bar.update(1)
             cycles[f"live-{label}"] = got
+        if native_loop is not None:
+            with _bar(len(seq.cycles), f"{tag}: live loop (native rate)", progress) as bar:
+                got = []
+                for cs in native_loop(seq, radiance, camera, names, seed=cfg.seed, noise=cfg.capture_noise,
+                                      initial_ms=cfg.initial_ms, selector=cfg.selector, response=response):
+                    got.append(cs)
+                    bar.update(1)
+            cycles[NATIVE_RUN] = got
         timings[f"live_{scene_name}_s"] = time.perf_counter() - t0
         # comparisons (images in memory), then the run folders
         comp: dict = {}
@@ -245,11 +268,12 @@ def finish(out, raw: dict) -> dict:
         nvr_up = _brightening_on_chart(out / "datasets" / cfg.scenes[0], cfg)
     results = assemble(cfg, per_scene, raw["summaries"], raw["findings"], raw["noise_variance_ratio"],
                        list(cfg.methods))
+    results.update(evidence(cfg, [raw]))
     results["noise_variance_ratio_brightening"] = {"plain": nvr_up["plain"], "consistent": nvr_up["consistent"]}
     results["noise_variance_ratio_brightening_detail"] = nvr_up
     results["emulation_ratio_use"] = ratio_use(per_scene, list(cfg.methods))
     results.update({
-        "experiment": "live versus emulated (issue 14)",
+        "experiment": "live versus emulated",
         "exposim_version": raw.get("exposim_version"),
         "command": raw.get("command"),
         "config": cfg.to_dict(),
@@ -263,15 +287,99 @@ def finish(out, raw: dict) -> dict:
         plot_trajectories(per_scene[s]["trajectories"], out / f"exposure_{s}.png", title=s)
     if cfg.metrics:
         plot_metrics(results, out / "metrics.png")
-    write_text(out / REPORT_FILE, report_markdown(results))
+    write_report(out, report_markdown(results), sheets=[_live_sheets(out, cfg.scenes[0])])
     write_results(out / RESULTS_FILE, results)
     return results
+
+
+def evidence(cfg: LiveConfig, records: list[dict], power_seeds: int = 100) -> dict:
+    """results.json's replicated verdicts (:func:`validation.live.evidence.judge_metrics`) over the walks of
+    ``records`` (one experiment, or the replicates of :func:`run_replicated`)."""
+    from validation.live.evidence import judge_metrics, walk_values
+
+    walks, tables = walk_values(records, cfg.methods)
+    out = {"walks": walks, "n_walks": len(walks)}
+    if tables:
+        out.update(judge_metrics(tables, cfg.methods, seed=cfg.seed, power=power_seeds > 0, power_seeds=power_seeds))
+        out["n_walks"] = len(walks)
+    else:
+        out.update({"metrics": {}, "reason": "no benchmark metrics in this experiment (metrics off)"})
+    return out
+
+
+def run_replicated(out, config: LiveConfig | None = None, replicates: int = 1, *, command: str | None = None,
+                   **kwargs) -> dict:
+    """The experiment on ``replicates`` seeds (``config.seed``, ``+1``, ...), each scene of each one an
+    independent walk; the verdicts over all of them.
+
+    Each replicate is a complete experiment in ``out/replicates/seed<S>`` (its own
+    results.json over its scenes); ``out/results.json`` and ``out/report.md`` hold the
+    verdicts over every walk (:func:`finish_replicated`).  ``kwargs`` go to
+    :func:`run_live_experiment`.
+    """
+    from dataclasses import replace
+
+    from emulator.errors import OutputExistsError
+
+    cfg = CONFIGS["full"] if config is None else config
+    if replicates < 1:
+        raise LiveError(f"replicates must be >= 1, got {replicates}")
+    out = Path(out)
+    if out.exists() and (not out.is_dir() or any(out.iterdir())):
+        raise OutputExistsError(f"{out}: exists and is not empty; refusing to overwrite (choose another folder)")
+    records = []
+    for k in range(replicates):
+        sub = out / REPLICATES_DIR / f"seed{cfg.seed + k}"
+        run_live_experiment(sub, replace(cfg, seed=cfg.seed + k), command=command, **kwargs)
+        records.append(read_results(sub / RAW_FILE))
+    return finish_replicated(out, records, command=command)
+
+
+def finish_replicated(out, records: list[dict], command: str | None = None, power_seeds: int = 100) -> dict:
+    """``results.json`` and ``report.md`` of the verdicts over the replicates' walks (``power_seeds``:
+    simulated studies per point of the power functions)."""
+    from validation.live.report import evidence_markdown
+
+    out = Path(out)
+    cfg = config_from_dict(records[0]["config"])
+    results = {"experiment": "live versus emulated, replicated", "command": command,
+               "config": cfg.to_dict(), "replicates": [f"{REPLICATES_DIR}/seed{r['config']['seed']}" for r in records],
+               "timings": {"total_s": float(sum((r.get("timings") or {}).get("total_s", 0.0) for r in records))}}
+    results.update(evidence(cfg, records, power_seeds=power_seeds))
+    write_report(out, "# Live versus emulated, replicated\n\n"
+                 + f"{len(records)} replicate(s) of the experiment (seeds "
+                 + ", ".join(str(r["config"]["seed"]) for r in records) + f"), {results['n_walks']} walks. "
+                 + f"Command: `{command}`\n\n" + evidence_markdown(results))
+    write_results(out / RESULTS_FILE, results)
+    return results
+
+
+def _live_sheets(out: Path, scene: str) -> str:
+    """Contact sheets of the first scene: what each method saw in every run (emulated and live)."""
+    from emulator.io.runfolder import read_run_json, read_tables
+    from emulator.report.html import run_contact_sheet
+
+    parts = []
+    folder = Path(out) / "runs" / scene
+    for run_dir in sorted(p for p in folder.glob("*") if (p / "run.json").is_file()):
+        info = read_run_json(run_dir)
+        sheet = run_contact_sheet(run_dir, info["methods"], read_tables(run_dir, info["methods"]),
+                                  white_level=info.get("white_level"))
+        parts.append(sheet.replace("What each method saw", f"{scene}, {run_dir.name}: what each method saw", 1))
+    return "\n".join(parts)
 
 
 def redraw(out) -> dict:
     """Recompute the verdicts and rewrite ``results.json``, ``report.md`` and the figures of an
     experiment folder from its ``raw.json`` (nothing is rendered, played back or measured again)."""
     path = Path(out) / RAW_FILE
+    reps = Path(out) / REPLICATES_DIR
+    if not path.is_file() and reps.is_dir():
+        records = [read_results(p / RAW_FILE) for p in sorted(reps.iterdir()) if (p / RAW_FILE).is_file()]
+        if records:
+            previous = Path(out) / RESULTS_FILE
+            command = read_results(previous).get("command") if previous.is_file() else None
+            return finish_replicated(out, records, command=command)
     if not path.is_file():
         raise LiveError(f"{path}: not found; not a finished live experiment folder")
     return finish(out, read_results(path))

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from emulator.autoexposure.isolation import call_method
 from validation.live.config import FIXED_INSTANT_BRACKET_INDEX, VARIANTS, LiveError
 
 __all__ = ["DatasetRadiance", "iter_live", "iter_emulated", "write_run_folder"]
@@ -174,7 +175,7 @@ def iter_live(
             right = images[1] if len(images) > 1 else None
             before = getattr(method, "guard_count", 0)
             with single_thread_pools(user_api="blas"):  # as emulator.playback.iter_run
-                proposed = method.next_exposure(left, target)
+                proposed = call_method(method, left, target)  # emulator.autoexposure.isolation
             proposed, clamped, bad = guard_exposure(proposed, target, (lo, hi))  # as emulator.playback.iter_run
             guarded = bad or getattr(method, "guard_count", 0) > before
             nxt = target if bad else proposed

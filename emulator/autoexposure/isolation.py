@@ -1,0 +1,236 @@
+"""Methods isolated from each other and from the run: the one way the closed loops call a method.
+
+:func:`call_method` runs ``method.next_exposure(raw, exposure_ms)`` so that nothing the
+method does can change what another method, or the run, sees:
+
+- **images**: the method gets a view of an immutable ``bytes`` buffer holding the pixels
+  (:func:`frozen`).  ``setflags(write=True)`` on it raises, and OpenCV refuses it as ``dst=``,
+  so decoded brackets and emulated images shared between methods cannot be written through
+  it.  One frozen copy per source image is shared by every method (so per-frame values such
+  as the gray image stay shared, :mod:`emulator.autoexposure._frame`).
+- **NumPy's floating-point error state** (``np.seterr``, ``np.seterrcall``) is saved before
+  the call and restored after it.
+- **working directory**: restored after the call (the run's output paths are absolute
+  anyway: :func:`absolute`).
+- **stdout and stderr**: what the method prints goes to a per-method buffer
+  (:func:`captured_output`), never to the run's output (``--json`` stays one JSON document).
+  Python-level writes only: a C library writing to file descriptor 1 is not captured.
+- **exceptions**: anything the method raises, ``SystemExit`` included (``KeyboardInterrupt``
+  aside, which stops the run), becomes :class:`~emulator.autoexposure.registry.MethodFailed`
+  with the reason; the loop records it as that method's failure and the run goes on.
+
+:func:`call_factory` does the same for building a method (a factory that exits or prints).
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import sys
+import threading
+import weakref
+from pathlib import Path
+
+import numpy as np
+
+from emulator.autoexposure._base import AutoExposureError
+from emulator.autoexposure.registry import MethodFailed
+
+__all__ = ["call_method", "call_factory", "frozen", "is_frozen", "absolute", "captured_output",
+           "MAX_CAPTURED_CHARS"]
+
+#: Characters of a method's printed output kept per method (the rest is counted, not kept).
+MAX_CAPTURED_CHARS = 65536
+
+_freeze_lock = threading.Lock()
+_frozen_by_id: dict[int, tuple] = {}
+
+
+def is_frozen(a) -> bool:
+    """Whether ``a`` is a view of an immutable ``bytes`` buffer (no flag can make it writeable)."""
+    while isinstance(a, np.ndarray):
+        a = a.base
+    if isinstance(a, memoryview):
+        a = a.obj
+    return isinstance(a, bytes)
+
+
+def _bytes_view(a: np.ndarray) -> np.ndarray:
+    data = np.ascontiguousarray(a).tobytes()
+    out = np.frombuffer(data, dtype=a.dtype).reshape(a.shape)
+    return out
+
+
+def frozen(a):
+    """A read-only copy of ``a`` whose buffer is a ``bytes`` object (the same one for the same
+    source array while it lives); ``a`` itself if it is already such a view; non-arrays pass."""
+    if not isinstance(a, np.ndarray) or is_frozen(a):
+        return a
+    key = id(a)
+    with _freeze_lock:
+        hit = _frozen_by_id.get(key)
+        if hit is not None and hit[0]() is a:
+            return hit[1]
+    out = _bytes_view(a)
+    try:
+        ref = weakref.ref(a, lambda _r, key=key: _drop(key, _r))
+    except TypeError:  # not weak-referenceable: no sharing
+        return out
+    with _freeze_lock:
+        _frozen_by_id[key] = (ref, out)
+    return out
+
+
+def _drop(key: int, ref) -> None:
+    with _freeze_lock:
+        hit = _frozen_by_id.get(key)
+        if hit is not None and hit[0] is ref:
+            del _frozen_by_id[key]
+
+
+def absolute(path) -> Path:
+    """``path`` made absolute against the working directory now (a method's ``os.chdir``
+    later cannot split a run folder)."""
+    return Path(os.path.abspath(os.fspath(path)))
+
+
+# ---------------------------------------------------------------- output capture
+_local = threading.local()
+_stream_lock = threading.Lock()
+_depth = 0
+_saved: tuple | None = None
+_outputs: dict[str, list] = {}
+
+
+class _Router(io.TextIOBase):
+    """sys.stdout / sys.stderr while methods run: a thread inside a method call writes to its
+    buffer, any other thread to the original stream."""
+
+    def __init__(self, original, which: str) -> None:
+        self.original = original
+        self.which = which
+
+    def write(self, text):
+        buf = getattr(_local, "buffer", None)
+        if buf is None:
+            return self.original.write(text)
+        buf.append(text)
+        return len(text)
+
+    def flush(self):
+        if getattr(_local, "buffer", None) is None:
+            self.original.flush()
+
+    def writable(self):
+        return True
+
+    @property
+    def encoding(self):
+        return getattr(self.original, "encoding", "utf-8")
+
+    def fileno(self):
+        return self.original.fileno()
+
+    def isatty(self):
+        return False
+
+
+def _enter_capture() -> None:
+    global _depth, _saved
+    with _stream_lock:
+        if _depth == 0:
+            _saved = (sys.stdout, sys.stderr)
+            sys.stdout = _Router(sys.stdout, "stdout")
+            sys.stderr = _Router(sys.stderr, "stderr")
+        _depth += 1
+
+
+def _leave_capture() -> None:
+    global _depth, _saved
+    with _stream_lock:
+        _depth -= 1
+        if _depth == 0 and _saved is not None:
+            out, err = _saved
+            # restore only our routers (something else may have replaced them since)
+            if isinstance(sys.stdout, _Router):
+                sys.stdout = out
+            if isinstance(sys.stderr, _Router):
+                sys.stderr = err
+            _saved = None
+
+
+def _keep_output(name: str, parts: list) -> None:
+    if not parts:
+        return
+    text = "".join(str(p) for p in parts)
+    with _stream_lock:
+        kept = _outputs.setdefault(name, ["", 0])
+        room = MAX_CAPTURED_CHARS - len(kept[0])
+        kept[0] += text[: max(room, 0)]
+        kept[1] += len(text)
+
+
+def captured_output(name: str | None = None, *, clear: bool = False):
+    """What methods printed: ``{name: (kept text, total characters)}``, or one method's pair."""
+    with _stream_lock:
+        if name is not None:
+            out = tuple(_outputs.get(name, ("", 0)))
+            if clear:
+                _outputs.pop(name, None)
+            return out
+        out = {k: tuple(v) for k, v in _outputs.items()}
+        if clear:
+            _outputs.clear()
+        return out
+
+
+# ---------------------------------------------------------------- the calls
+def _describe(exc: BaseException) -> str:
+    if isinstance(exc, SystemExit):
+        return f"called sys.exit({exc.code!r})"
+    return f"raised {type(exc).__name__}: {exc}"
+
+
+def _isolated(fn, name: str, on_error):
+    err = np.geterr()
+    errcall = np.geterrcall()
+    cwd = os.getcwd()
+    parts: list = []
+    outer = getattr(_local, "buffer", None)
+    _local.buffer = parts
+    _enter_capture()
+    try:
+        return fn()
+    except KeyboardInterrupt:
+        raise
+    except MethodFailed:
+        raise
+    except BaseException as exc:  # SystemExit and GeneratorExit included: the method fails alone
+        raise on_error(exc) from exc
+    finally:
+        _leave_capture()
+        _local.buffer = outer
+        np.seterr(**err)
+        np.seterrcall(errcall)
+        if os.getcwd() != cwd:
+            os.chdir(cwd)
+        _keep_output(name, parts)
+
+
+def call_method(method, raw, exposure_ms):
+    """``method.next_exposure(raw, exposure_ms)``, isolated (module docstring).
+
+    Raises :class:`MethodFailed` naming what the method did, for any exception but
+    ``KeyboardInterrupt``.
+    """
+    name = str(getattr(method, "name", type(method).__name__))
+    image = frozen(raw)
+    return _isolated(lambda: method.next_exposure(image, exposure_ms), name,
+                     lambda exc: MethodFailed(_describe(exc)))
+
+
+def call_factory(factory, name: str, source: str, **kwargs):
+    """``factory(**kwargs)``, isolated; any failure, ``SystemExit`` included, is an
+    :class:`AutoExposureError` naming the method and where it comes from."""
+    return _isolated(lambda: factory(**kwargs), name, lambda exc: AutoExposureError(
+        f"AE method {name!r} ({source}) could not be built: {_describe(exc)}"))

@@ -1,0 +1,540 @@
+"""Motion blur from the gyro: prediction in pixels, and blur-consistent emulation (numeric core, no file I/O).
+
+A shot of ``t`` ms integrates the scene over its exposure window.  While the camera turns
+at angular velocity omega(tau) (rad/s, camera axes: x right, y down, z forward), a static
+world point seen at pixel ``x`` at the reference instant is seen at ``H(tau) x`` with the
+infinite homography ``H(tau) = K R(tau)^T K^-1``, where ``R(tau)`` is the camera's
+orientation at ``tau`` relative to the reference (``dR/dtau = R [omega]_x``).  Translation
+is left out: at walking speed and for scenery beyond a few metres it moves a point by far
+less than a pixel within 32 ms (2 km/h x 32 ms = 1.8 cm).  Lens distortion is left out
+(pinhole K).
+
+Conventions (see ``docs/blur.md``):
+
+* **angular velocity**: anything :func:`as_angular_velocity` accepts, a callable
+  ``omega(t_s) -> (N, 3)`` rad/s in camera axes, a pair ``(t_s, omega)`` of samples
+  (linearly interpolated), or an :class:`AngularVelocity`.  Real data: the IMU through
+  :func:`gyro_in_camera` (rotated by ``R_cam_imu``); synthetic walks: their own function.
+* **timestamp convention** ``stamp``: where in its exposure window a frame's timestamp
+  lies, ``"start"``, ``"middle"`` or ``"end"`` (default; fitted on BorealHDR, docs/blur.md).
+* **blur length**: the path length, in pixels, of a point's image over the window, on a
+  3x3 grid of image points (corners, edge centres, centre); :class:`FrameBlur` keeps the
+  centre's and the largest.
+
+Blur-consistent emulation (:func:`emulate_blur_consistent`): where the target exposure
+``T`` is longer than the source bracket ``S``, the target's window is the source's plus
+extra time (placed by ``stamp``).  In linear exposure (``h = g(DN)``) the target is the
+source plus the source re-projected to each sub-instant of the extra time,
+``h_T = h_S + sum_j (w_j / S) warp_{H_j}(h_S)`` with ``sum_j w_j = T - S``, then
+``DN_T = f(h_T)``; only the source's structure is moved, not its noise
+(``structure_sigma_px``).  At rest every ``H_j`` is the identity and the result is the plain
+emulation, byte for byte.  Where ``T < S`` the source's extra blur cannot be removed;
+:func:`blur_mismatch_px` measures it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from emulator.errors import EmulationError
+
+__all__ = [
+    "STAMP_CONVENTIONS",
+    "DEFAULT_STAMP",
+    "R_CAM_IMU_FLU",
+    "BLUR_MODES",
+    "AngularVelocity",
+    "as_angular_velocity",
+    "gyro_in_camera",
+    "GyroBias",
+    "GYRO_SMOOTH_S",
+    "smooth_angular_velocity",
+    "still_gyro_bias",
+    "exposure_window_s",
+    "integrate_rotation",
+    "rotation_homography",
+    "scale_intrinsics",
+    "grid_points",
+    "blur_length_px",
+    "FrameBlur",
+    "predict_blur",
+    "blur_mismatch_px",
+    "blur_homographies",
+    "emulate_blur_consistent",
+    "STRUCTURE_SIGMA_PX",
+]
+
+#: Where a frame's timestamp lies in its exposure window.
+STAMP_CONVENTIONS = ("start", "middle", "end")
+#: The default convention: on the BorealHDR sample the image shifts between consecutive shots
+#: match the gyro best with the stamp at the end of the exposure (docs/blur.md).
+DEFAULT_STAMP = "end"
+#: Blur options of emulation: ``none`` (exact eq. 2) and ``consistent`` (add the blur of the extra time).
+BLUR_MODES = ("none", "consistent")
+#: IMU (ROS body frame: x forward, y left, z up) to camera optical frame (x right, y down,
+#: z forward): the assumed mounting, ``omega_cam = R_CAM_IMU_FLU @ omega_imu``.
+R_CAM_IMU_FLU = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
+#: Largest step of the rotation integration, s.
+_MAX_STEP_S = 0.5e-3
+#: Largest displacement between two consecutive sub-instants of blur-consistent emulation, px.
+_SUBSTEP_PX = 0.5
+#: At most this many sub-instants per extra interval.
+_MAX_SUBSTEPS = 64
+#: Below this displacement (px) a homography is the identity (the emulation stays exact).
+_REST_PX = 1e-6
+
+
+class AngularVelocity:
+    """Angular velocity over time in camera axes: ``omega(t_s) -> (N, 3)`` rad/s.
+
+    Built from samples ``(t_s, omega_rad_s)`` (linear interpolation; NaN outside the span)
+    or from a callable.  ``span_s`` is the time range covered ((-inf, inf) for a callable).
+    """
+
+    def __init__(self, t_s=None, omega_rad_s=None, *, function: Callable | None = None) -> None:
+        if function is not None:
+            self._f = function
+            self.span_s = (-math.inf, math.inf)
+            return
+        t = np.asarray(t_s, dtype=np.float64)
+        w = np.asarray(omega_rad_s, dtype=np.float64)
+        if t.ndim != 1 or w.shape != (t.size, 3) or t.size < 2:
+            raise EmulationError(f"angular velocity samples must be t_s (N,) and omega (N, 3) with N >= 2, got "
+                                 f"{t.shape} and {w.shape}")
+        if not (np.all(np.isfinite(t)) and np.all(np.isfinite(w))) or np.any(np.diff(t) <= 0):
+            raise EmulationError("angular velocity samples must be finite with strictly increasing times")
+        self._t, self._w = t, w
+        self._f = None
+        self.span_s = (float(t[0]), float(t[-1]))
+
+    def __call__(self, t_s) -> np.ndarray:
+        t = np.atleast_1d(np.asarray(t_s, dtype=np.float64))
+        if self._f is not None:
+            out = np.asarray(self._f(t), dtype=np.float64)
+            return np.broadcast_to(out, (t.size, 3)).copy() if out.shape != (t.size, 3) else out
+        out = np.stack([np.interp(t, self._t, self._w[:, i]) for i in range(3)], axis=1)
+        out[(t < self._t[0]) | (t > self._t[-1])] = np.nan
+        return out
+
+    def covers(self, t0_s: float, t1_s: float) -> bool:
+        return self.span_s[0] <= min(t0_s, t1_s) and max(t0_s, t1_s) <= self.span_s[1]
+
+
+def as_angular_velocity(source) -> AngularVelocity:
+    """An :class:`AngularVelocity` from itself, a callable ``omega(t_s)``, or a pair ``(t_s, omega)``."""
+    if isinstance(source, AngularVelocity):
+        return source
+    if callable(source):
+        return AngularVelocity(function=source)
+    try:
+        t, w = source
+    except (TypeError, ValueError):
+        raise EmulationError("angular velocity must be a callable omega(t_s), a pair (t_s, omega) or an "
+                             f"AngularVelocity, got {type(source).__name__}") from None
+    return AngularVelocity(t, w)
+
+
+@dataclass(frozen=True)
+class GyroBias:
+    """The gyro's offset, estimated where the IMU is still.
+
+    Attributes
+    ----------
+    bias_rad_s : numpy.ndarray
+        (3,) offset in the IMU's axes, rad/s (zeros when no still window was found).
+    noise_rad_s : numpy.ndarray
+        (3,) standard deviation of one sample about the offset in the still windows, rad/s
+        (NaN without any).
+    n_samples : int
+        Samples in the still windows.
+    still_s : list of (float, float)
+        The still windows, s since the first sample.
+    """
+
+    bias_rad_s: np.ndarray
+    noise_rad_s: np.ndarray
+    n_samples: int
+    still_s: list
+
+    def to_dict(self) -> dict:
+        return {"bias_deg_s": np.degrees(self.bias_rad_s).tolist(), "noise_deg_s": np.degrees(self.noise_rad_s).tolist(),
+                "n_samples": self.n_samples, "still_s": [list(w) for w in self.still_s]}
+
+
+def still_gyro_bias(timestamp_ns, gyro_rad_s, acc_m_s2, *, window_s: float = 1.0,
+                    acc_std_max_m_s2: float = 0.1) -> GyroBias:
+    """The gyro offset from the windows where the IMU is still (zero-velocity update).
+
+    The samples are cut into windows of ``window_s``; a window is still when every axis of
+    the accelerometer varies by less than ``acc_std_max_m_s2`` (standard deviation; a walk
+    shakes it by 0.5-2 m/s^2, a standing recorder by ~0.05).  The offset is the mean gyro
+    over the still windows, the noise its per-axis standard deviation about it.
+    """
+    t = (np.asarray(timestamp_ns, dtype=np.int64) - int(timestamp_ns[0])) * 1e-9
+    g = np.asarray(gyro_rad_s, dtype=np.float64)
+    a = np.asarray(acc_m_s2, dtype=np.float64)
+    idx = np.floor(t / window_s).astype(np.int64)
+    keep = np.zeros(t.size, dtype=bool)
+    windows = []
+    for w in np.unique(idx):
+        m = idx == w
+        if m.sum() >= 5 and np.all(a[m].std(axis=0) < acc_std_max_m_s2):
+            keep |= m
+            windows.append((float(w * window_s), float((w + 1) * window_s)))
+    if not keep.any():
+        return GyroBias(np.zeros(3), np.full(3, np.nan), 0, [])
+    return GyroBias(g[keep].mean(axis=0), g[keep].std(axis=0), int(keep.sum()), windows)
+
+
+#: Default width of the boxcar the gyro is smoothed with, s (docs/blur.md: the gyro's noise
+#: otherwise reads as ~1 px of blur at 32 ms on a recorder at rest; a walk's 1.5 Hz gait
+#: loses 1 % of its amplitude).
+GYRO_SMOOTH_S = 0.05
+
+
+def smooth_angular_velocity(t_s, omega, width_s: float) -> np.ndarray:
+    """``omega`` (N, 3) averaged over a centred window of ``width_s`` (boxcar; irregular samples welcome).
+
+    The window mean is the difference of the trapezoidal integral at its ends, so the
+    rotation over any interval longer than the window is kept; ends use what is inside.
+    """
+    t = np.asarray(t_s, dtype=np.float64)
+    w = np.asarray(omega, dtype=np.float64)
+    if width_s <= 0 or t.size < 2:
+        return w.copy()
+    cum = np.concatenate([np.zeros((1, 3)), np.cumsum(0.5 * (w[1:] + w[:-1]) * np.diff(t)[:, None], axis=0)])
+    lo = np.clip(t - width_s / 2, t[0], t[-1])
+    hi = np.clip(t + width_s / 2, t[0], t[-1])
+    span = (hi - lo)[:, None]
+    out = np.stack([np.interp(hi, t, cum[:, i]) - np.interp(lo, t, cum[:, i]) for i in range(3)], axis=1)
+    return np.where(span > 0, out / np.where(span > 0, span, 1.0), w)
+
+
+def gyro_in_camera(imu, R_cam_imu=R_CAM_IMU_FLU, *, origin_ns: int | None = None,
+                   bias_rad_s=None, smooth_s: float = GYRO_SMOOTH_S) -> tuple[AngularVelocity, int]:
+    """The IMU's gyro in camera axes, ``omega_cam = R_cam_imu @ (omega_imu - bias)``, over time in s.
+
+    Returns ``(omega, origin_ns)``: times are ``(timestamp_ns - origin_ns) * 1e-9``
+    (default origin: the first IMU sample), so a frame's window is
+    :func:`exposure_window_s` of ``timestamp_ns - origin_ns``.  ``bias_rad_s``: the gyro
+    offset (3,) in IMU axes to subtract (:func:`still_gyro_bias`), default none;
+    ``smooth_s``: boxcar width the gyro is averaged over (:func:`smooth_angular_velocity`;
+    0: raw samples).
+    """
+    R = np.asarray(R_cam_imu, dtype=np.float64)
+    if R.shape != (3, 3) or not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or np.linalg.det(R) <= 0:
+        raise EmulationError(f"R_cam_imu must be a 3x3 rotation matrix, got {R.tolist()}")
+    origin = int(imu.timestamp_ns[0] if origin_ns is None else origin_ns)
+    t_s = (imu.timestamp_ns - origin).astype(np.float64) * 1e-9
+    bias = np.zeros(3) if bias_rad_s is None else np.asarray(bias_rad_s, dtype=np.float64).reshape(3)
+    omega = smooth_angular_velocity(t_s, imu.gyro_rad_s - bias, float(smooth_s))
+    return AngularVelocity(t_s, omega @ R.T), origin
+
+
+def exposure_window_s(t_s: float, exposure_ms: float, stamp: str = DEFAULT_STAMP) -> tuple[float, float]:
+    """(start, end) of the exposure window, s, of a frame stamped ``t_s`` under ``stamp``.
+
+    >>> exposure_window_s(1.0, 10.0, "middle")
+    (0.995, 1.005)
+    """
+    if stamp not in STAMP_CONVENTIONS:
+        raise EmulationError(f"stamp must be one of {', '.join(STAMP_CONVENTIONS)}, got {stamp!r}")
+    e = float(exposure_ms) * 1e-3
+    start = t_s - {"start": 0.0, "middle": 0.5, "end": 1.0}[stamp] * e
+    return start, start + e
+
+
+def _so3_exp(v: np.ndarray) -> np.ndarray:
+    """Rotation matrices (N, 3, 3) for rotation vectors (N, 3) (Rodrigues)."""
+    v = np.atleast_2d(v)
+    th = np.linalg.norm(v, axis=1)
+    K = np.zeros((v.shape[0], 3, 3))
+    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
+    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = v[:, 2], -v[:, 1], v[:, 0]
+    small = th < 1e-8
+    a = np.where(small, 1.0 - th**2 / 6.0, np.sin(th) / np.where(small, 1.0, th))
+    b = np.where(small, 0.5 - th**2 / 24.0, (1.0 - np.cos(th)) / np.where(small, 1.0, th) ** 2)
+    return np.eye(3)[None] + a[:, None, None] * K + b[:, None, None] * (K @ K)
+
+
+def integrate_rotation(omega, t0_s: float, t1_s: float, *, max_step_s: float = _MAX_STEP_S
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """Orientation of the camera over ``[t0_s, t1_s]`` relative to ``t0_s``.
+
+    ``t1_s`` may be before ``t0_s`` (integrates backwards).  Midpoint rule on steps of at
+    most ``max_step_s``.  Returns ``(times (M,), R (M, 3, 3))`` with ``R[0] = I``; NaN where
+    the angular velocity is unknown.
+    """
+    omega = as_angular_velocity(omega)
+    n = max(1, int(math.ceil(abs(t1_s - t0_s) / max_step_s)))
+    times = np.linspace(t0_s, t1_s, n + 1)
+    mids = 0.5 * (times[:-1] + times[1:])
+    steps = _so3_exp(omega(mids) * np.diff(times)[:, None])
+    R = np.empty((n + 1, 3, 3))
+    R[0] = np.eye(3)
+    for k in range(n):
+        R[k + 1] = R[k] @ steps[k]
+    return times, R
+
+
+def rotation_homography(K: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """``K R^T K^-1``: pixel at the reference -> pixel when the camera has turned by ``R`` ((..., 3, 3))."""
+    K = np.asarray(K, dtype=np.float64)
+    return K @ np.swapaxes(R, -1, -2) @ np.linalg.inv(K)
+
+
+def scale_intrinsics(K: np.ndarray, from_size: tuple[int, int], to_size: tuple[int, int]) -> np.ndarray:
+    """K of a calibration made at ``from_size`` (width, height) for images of ``to_size`` (pixel-centre convention)."""
+    K = np.asarray(K, dtype=np.float64).copy()
+    sx, sy = to_size[0] / from_size[0], to_size[1] / from_size[1]
+    K[0, 0] *= sx
+    K[0, 1] *= sx
+    K[1, 1] *= sy
+    K[0, 2] = (K[0, 2] + 0.5) * sx - 0.5
+    K[1, 2] = (K[1, 2] + 0.5) * sy - 0.5
+    return K
+
+
+def grid_points(width: int, height: int) -> np.ndarray:
+    """(9, 2) pixel coordinates: the corners, edge centres and centre (centre first)."""
+    xs, ys = (0.0, (width - 1) / 2.0, width - 1.0), (0.0, (height - 1) / 2.0, height - 1.0)
+    pts = [(xs[1], ys[1])] + [(x, y) for y in ys for x in xs if (x, y) != (xs[1], ys[1])]
+    return np.array(pts, dtype=np.float64)
+
+
+def _project(H: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """(M, P, 2): points (P, 2) mapped by homographies (M, 3, 3)."""
+    ph = np.concatenate([pts, np.ones((pts.shape[0], 1))], axis=1)
+    q = np.einsum("mij,pj->mpi", H, ph)
+    return q[..., :2] / q[..., 2:3]
+
+
+def blur_length_px(K: np.ndarray, rotations: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Path length (px, (P,)) of each image point over the rotations (M, 3, 3) of a window."""
+    tracks = _project(rotation_homography(K, rotations), np.asarray(points, dtype=np.float64))
+    return np.linalg.norm(np.diff(tracks, axis=0), axis=2).sum(axis=0)
+
+
+@dataclass(frozen=True)
+class FrameBlur:
+    """Predicted blur of one frame.
+
+    Attributes
+    ----------
+    centre_px, max_px : float
+        Path length of the image centre, and the largest over the 3x3 grid, px (NaN when
+        the gyro does not cover the window).
+    rotation_deg : float
+        Angle turned over the window, degrees.
+    mean_rate_deg_s : float
+        ``rotation_deg`` over the exposure time, deg/s.
+    """
+
+    centre_px: float
+    max_px: float
+    rotation_deg: float
+    mean_rate_deg_s: float
+
+    def to_dict(self) -> dict:
+        return {"centre_px": self.centre_px, "max_px": self.max_px, "rotation_deg": self.rotation_deg,
+                "mean_rate_deg_s": self.mean_rate_deg_s}
+
+
+_NAN_BLUR = FrameBlur(math.nan, math.nan, math.nan, math.nan)
+
+
+def _window_blur(omega: AngularVelocity, K, size, t0_s, t1_s) -> FrameBlur:
+    if not omega.covers(t0_s, t1_s):
+        return _NAN_BLUR
+    _, R = integrate_rotation(omega, t0_s, t1_s)
+    if not np.all(np.isfinite(R)):
+        return _NAN_BLUR
+    lengths = blur_length_px(K, R, grid_points(*size))
+    angle = math.degrees(float(np.linalg.norm(cv2.Rodrigues(R[-1])[0])))
+    dt = abs(t1_s - t0_s)
+    return FrameBlur(float(lengths[0]), float(lengths.max()), angle, angle / dt if dt > 0 else 0.0)
+
+
+def predict_blur(omega, K: np.ndarray, size: tuple[int, int], t_s: float, exposure_ms: float,
+                 stamp: str = DEFAULT_STAMP) -> FrameBlur:
+    """Blur of a frame stamped ``t_s`` (s, on ``omega``'s clock) exposed ``exposure_ms``.
+
+    ``K``: (3, 3) intrinsics for images of ``size`` = (width, height) pixels.
+    """
+    t0, t1 = exposure_window_s(t_s, exposure_ms, stamp)
+    return _window_blur(as_angular_velocity(omega), K, size, t0, t1)
+
+
+def blur_mismatch_px(omega, K, size, t_s: float, source_ms: float, target_ms: float,
+                     stamp: str = DEFAULT_STAMP) -> float:
+    """Source blur minus the blur of a capture at ``target_ms`` at the same stamp, px (largest over the grid).
+
+    Positive: excess blur an emulated image keeps (target shorter than the source);
+    negative: blur plain emulation leaves out (target longer).
+    """
+    omega = as_angular_velocity(omega)
+    src = _window_blur(omega, K, size, *exposure_window_s(t_s, source_ms, stamp))
+    tgt = _window_blur(omega, K, size, *exposure_window_s(t_s, target_ms, stamp))
+    return src.max_px - tgt.max_px
+
+
+def blur_homographies(omega, K, size, t_s: float, source_ms: float, target_ms: float,
+                      stamp: str = DEFAULT_STAMP) -> tuple[list[np.ndarray], list[float]]:
+    """Homographies and weights (ms) of the extra exposure time of a target longer than its source.
+
+    The source image stands for the scene at its window's middle; the extra time (the
+    target window minus the source window, both placed at ``t_s`` by ``stamp``) is cut into
+    sub-instants no more than 0.5 px apart.  Returns ``([H_j], [w_j])`` with
+    ``sum(w_j) = target_ms - source_ms``; empty lists when the target is not longer.
+    Raises :class:`EmulationError` when the angular velocity does not cover the window.
+    """
+    omega = as_angular_velocity(omega)
+    if target_ms <= source_ms:
+        return [], []
+    s0, s1 = exposure_window_s(t_s, source_ms, stamp)
+    e0, e1 = exposure_window_s(t_s, target_ms, stamp)
+    if not omega.covers(e0, e1):
+        raise EmulationError(f"the angular velocity (span {omega.span_s[0]:.6g}..{omega.span_s[1]:.6g} s) does not "
+                             f"cover the exposure window {e0:.6g}..{e1:.6g} s")
+    ref = 0.5 * (s0 + s1)
+    pts = grid_points(*size)
+    Hs: list[np.ndarray] = []
+    ws: list[float] = []
+    for a, b in ((e0, s0), (s1, e1)):
+        if b - a <= 0:
+            continue
+        _, R = integrate_rotation(omega, a, b)
+        n = int(np.clip(math.ceil(blur_length_px(K, R, pts).max() / _SUBSTEP_PX), 1, _MAX_SUBSTEPS))
+        for j in range(n):
+            tau = a + (j + 0.5) * (b - a) / n
+            _, Rt = integrate_rotation(omega, ref, tau)
+            Hs.append(rotation_homography(K, Rt[-1]))
+            ws.append((b - a) * 1e3 / n)
+    return Hs, ws
+
+
+_DN_TABLES: dict = {}
+_DN_GRID = 1 << 16
+
+
+def _dn_tables(response):
+    """Decision levels of ``rint(f(h))`` and a uniform grid over h that resolves most of them."""
+    hit = _DN_TABLES.get(id(response))
+    if hit is not None and hit[0] is response:
+        return hit[1]
+    g = np.asarray(response.g[: response.white_level + 1], dtype=np.float64)
+    thr = 0.5 * (g[:-1] + g[1:])  # f is linear between knots: rint(f(h)) steps up at the mid-points
+    lo, hi = float(g[0]), float(g[-1])
+    scale = (_DN_GRID - 1) / (hi - lo)
+    edges = lo + np.arange(_DN_GRID + 1) / scale
+    d_lo = np.searchsorted(thr, edges[:-1], side="right")
+    d_hi = np.searchsorted(thr, edges[1:], side="right")
+    tables = (thr, lo, scale, d_lo, d_hi != d_lo)
+    if len(_DN_TABLES) > 8:
+        _DN_TABLES.clear()
+    _DN_TABLES[id(response)] = (response, tables)
+    return tables
+
+
+def _forward_dn(response, h: np.ndarray) -> np.ndarray:
+    """``clip(rint(f(h)), black, white)`` as uint16, through a uniform grid (3x faster than np.interp;
+    cells holding a decision level fall back to a binary search, so the result is the same)."""
+    thr, lo, scale, d_lo, ambiguous = _dn_tables(response)
+    h64 = h.astype(np.float64, copy=False)
+    cells = np.clip((h64 - lo) * scale, 0, _DN_GRID - 1).astype(np.int64)
+    dn = d_lo[cells]
+    amb = ambiguous[cells]
+    dn[amb] = np.searchsorted(thr, h64[amb], side="right")
+    return np.clip(dn, response.black_level, response.white_level).astype(np.uint16)
+
+
+def _bayer_plane_homography(H: np.ndarray, px: int, py: int) -> np.ndarray:
+    A = np.array([[2.0, 0.0, px], [0.0, 2.0, py], [0.0, 0.0, 1.0]])
+    return np.linalg.inv(A) @ H @ A
+
+
+def _is_identity(H: np.ndarray, size) -> bool:
+    pts = grid_points(*size)
+    return bool(np.abs(_project(H[None], pts)[0] - pts).max() < _REST_PX)
+
+
+#: Default Gaussian sigma (px of one Bayer plane) of the structure the blur moves (see
+#: :func:`emulate_blur_consistent`): the source's own noise is not smeared.
+STRUCTURE_SIGMA_PX = 1.0
+
+
+def emulate_blur_consistent(raw: np.ndarray, source_ms: float, target_ms: float, response,
+                            homographies, weights_ms, *, bayer: bool = True,
+                            structure_sigma_px: float = STRUCTURE_SIGMA_PX) -> tuple[np.ndarray, np.ndarray]:
+    """Emulate ``raw`` (a ``source_ms`` shot) at ``target_ms`` with the blur of the extra time.
+
+    Parameters
+    ----------
+    raw : numpy.ndarray
+        (H, W) ``uint16`` DN, RGGB Bayer mosaic (``bayer=True``: each of the four colour
+        sites is warped on its own grid) or one plane.
+    source_ms, target_ms : float
+        Exposure times, ms.
+    response : CameraResponse
+        g and f, and the clip levels.
+    homographies, weights_ms : lists
+        From :func:`blur_homographies` (full-resolution pixels); weights sum to
+        ``target_ms - source_ms``.
+    structure_sigma_px : float
+        The blur moves the source's structure, not its noise: ``h_T = (T/S) h_S +
+        sum_j (w_j/S) (warp_j(s) - s)`` with ``s`` the source smoothed by a Gaussian of this
+        sigma (px of one Bayer plane).  0: ``s = h_S`` (the warps then also average the
+        source's noise, which a live capture's noise never is: on the BorealHDR sample that
+        alone made 32 ms frames emulated from 4 ms 10 % less sharp than plain emulation).
+
+    Returns
+    -------
+    (image, valid) : (numpy.ndarray, numpy.ndarray)
+        ``uint16`` DN and the validity mask: the plain emulation's, less pixels that a
+        clipped source pixel blurs into.  Without homographies, or when they are all the
+        identity, exactly :func:`emulator.emulate.emulate`'s output.
+    """
+    from emulator.emulate import apply_lut, check_exposure
+
+    source_ms = check_exposure(source_ms, "source_ms")
+    target_ms = check_exposure(target_ms, "target_ms")
+    ratio = target_ms / source_ms
+    table, valid_table = response.lut(ratio)
+    plain = apply_lut(table, raw)
+    valid = valid_table[raw]
+    size = (raw.shape[1], raw.shape[0])
+    moving = [(H, w) for H, w in zip(homographies, weights_ms) if not _is_identity(np.asarray(H), size)]
+    if not moving:
+        return plain, valid
+    if abs(sum(weights_ms) - (target_ms - source_ms)) > 1e-6 * target_ms:
+        raise EmulationError(f"blur weights sum to {sum(weights_ms):.6g} ms, expected target - source = "
+                             f"{target_ms - source_ms:.6g} ms")
+    h = response.inverse(raw).astype(np.float32)
+    clipped = ((raw >= response.white_level) | (raw <= response.black_level)).astype(np.float32)
+    acc = h * np.float32(target_ms / source_ms)
+    touched = clipped.copy()
+    phases = [(0, 0), (1, 0), (0, 1), (1, 1)] if bayer else [(None, None)]
+    for H, w in moving:
+        H = np.asarray(H, dtype=np.float64)
+        for px, py in phases:
+            if px is None:
+                sl, Hp = (slice(None), slice(None)), H
+            else:
+                sl, Hp = (slice(py, None, 2), slice(px, None, 2)), _bayer_plane_homography(H, px, py)
+            plane = np.ascontiguousarray(h[sl])
+            if structure_sigma_px > 0:
+                plane = cv2.GaussianBlur(plane, (0, 0), float(structure_sigma_px), borderType=cv2.BORDER_REPLICATE)
+            dsize = (plane.shape[1], plane.shape[0])
+            acc[sl] += np.float32(w / source_ms) * (cv2.warpPerspective(
+                plane, Hp, dsize, flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE) - plane)
+            touched[sl] = np.maximum(touched[sl], cv2.warpPerspective(
+                np.ascontiguousarray(clipped[sl]), Hp, dsize, flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE))
+    out = _forward_dn(response, acc)
+    all_high = raw >= response.white_level
+    valid = valid & ((touched == 0) | (all_high & (out >= response.white_level)))
+    return out, valid

@@ -1,0 +1,424 @@
+"""Intervals and tests for comparing AE methods (numeric core: arrays in, numbers out, no I/O).
+
+Every number a report writes that compares methods carries an interval from here:
+
+* :func:`bootstrap_indices`, :func:`block_bootstrap_indices`: resampling plans over
+  independent units (walks, sequences, segments) or, within one run, over blocks of
+  consecutive cycles (a circular block bootstrap: a time series' neighbours are not
+  independent, so single cycles must not be resampled one by one);
+* :func:`percentile_interval`: the percentile interval of bootstrap replicates (a
+  replicate that is not finite makes the interval unbounded on its side, never dropped);
+* :func:`statistic_interval`: a statistic (mean, median) of one sample with its interval,
+  :func:`difference_interval`: the difference of a statistic between two methods on the
+  same cycles or units (paired: the same resampled indices for both);
+* :func:`compare_methods`: per method a statistic with its interval and its difference
+  from the best method with an interval (what every report table that ranks methods shows);
+* :func:`holm`: Holm's step-down adjustment of p-values;
+* :func:`tost_paired`: two one-sided t-tests of equivalence of paired differences within
+  a margin;
+* :func:`variance_components`: the two-way (unit x method) decomposition without
+  replication, vectorised over leading axes: method variance and residual variance.
+
+Randomness arrives as a seed or :class:`numpy.random.Generator`; the same seed gives the
+same interval.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+
+__all__ = [
+    "CONFIDENCE",
+    "N_RESAMPLES",
+    "rng_of",
+    "bootstrap_indices",
+    "default_block_length",
+    "block_bootstrap_indices",
+    "percentile_interval",
+    "statistic_interval",
+    "difference_interval",
+    "holm",
+    "tost_paired",
+    "variance_components",
+    "covariance_components",
+    "kendall_tau_b",
+    "compare_methods",
+]
+
+#: Confidence level of every interval in the reports.
+CONFIDENCE = 0.95
+#: Bootstrap replicates of the reports' intervals.
+N_RESAMPLES = 2000
+
+_STATISTICS: dict[str, Callable] = {
+    "mean": lambda a, axis: np.mean(a, axis=axis),
+    "median": lambda a, axis: np.median(a, axis=axis),
+}
+
+
+def rng_of(seed) -> np.random.Generator:
+    """A :class:`numpy.random.Generator` from a seed, a SeedSequence or a Generator (passed through)."""
+    if isinstance(seed, np.random.Generator):
+        return seed
+    return np.random.default_rng(seed)
+
+
+def bootstrap_indices(n_units: int, n_resamples: int, seed=0) -> np.ndarray:
+    """Indices of ``n_resamples`` resamples of ``n_units`` independent units, with replacement.
+
+    Returns
+    -------
+    numpy.ndarray
+        int64, shape (n_resamples, n_units).
+    """
+    if n_units < 1 or n_resamples < 1:
+        raise ValueError(f"n_units and n_resamples must be >= 1, got {n_units}, {n_resamples}")
+    return rng_of(seed).integers(0, n_units, size=(n_resamples, n_units))
+
+
+def default_block_length(n: int) -> int:
+    """Block length of the block bootstrap for a series of ``n``: ``round(n ** (1/3))``, at least 1.
+
+    The n^(1/3) rate is the mean-squared-error optimal order for the bias and variance
+    of a block-bootstrap variance estimate (Hall, Horowitz and Jing 1995).
+    """
+    return max(1, int(round(n ** (1.0 / 3.0))))
+
+
+def block_bootstrap_indices(n: int, n_resamples: int, seed=0, block_length: int | None = None) -> np.ndarray:
+    """Circular block bootstrap over a series of ``n`` consecutive observations.
+
+    Each resample joins blocks of ``block_length`` consecutive indices (wrapping at the
+    end) that start at uniformly drawn positions, cut to length ``n``.  Block length 1 is
+    the ordinary bootstrap.
+
+    Returns
+    -------
+    numpy.ndarray
+        int64, shape (n_resamples, n).
+    """
+    if n < 1 or n_resamples < 1:
+        raise ValueError(f"n and n_resamples must be >= 1, got {n}, {n_resamples}")
+    b = default_block_length(n) if block_length is None else int(block_length)
+    if b < 1:
+        raise ValueError(f"block_length must be >= 1, got {block_length}")
+    n_blocks = math.ceil(n / b)
+    starts = rng_of(seed).integers(0, n, size=(n_resamples, n_blocks))
+    idx = (starts[:, :, None] + np.arange(b)[None, None, :]) % n
+    return idx.reshape(n_resamples, n_blocks * b)[:, :n]
+
+
+def percentile_interval(replicates, confidence: float = CONFIDENCE, axis: int = 0, estimate=None) -> tuple:
+    """The percentile interval of bootstrap replicates along ``axis``.
+
+    With ``estimate`` (the statistic on the original sample; scalar, 1-D replicates) the
+    interval is bias-corrected (the BC percentile interval, Efron 1987): the quantiles
+    are moved by ``z0 = Phi^-1(fraction of replicates below the estimate)``, which undoes
+    a median bias of the statistic under resampling (a variance component, for one, is
+    biased upwards when resampled walks repeat).
+
+    Non-finite replicates (an undefined statistic in that resample, e.g. a ratio over a
+    zero denominator) are ordered as +inf, so they can only widen the interval: a
+    statistic undefined in more than ``(1 - confidence) / 2`` of the resamples has an
+    unbounded upper end.  NaN never comes out of a finite-or-inf input.
+
+    Returns
+    -------
+    (lo, hi) : float or arrays (the shape of ``replicates`` without ``axis``)
+    """
+    if not 0.0 < confidence < 1.0:
+        raise ValueError(f"confidence must lie in (0, 1), got {confidence}")
+    r = np.asarray(replicates, dtype=np.float64)
+    r = np.where(np.isnan(r), np.inf, r)
+    alpha = (1.0 - confidence) / 2.0
+    q = [alpha, 1.0 - alpha]
+    if estimate is not None and r.ndim == 1 and r.size and math.isfinite(float(estimate)):
+        from scipy.stats import norm
+
+        est = float(estimate)
+        frac = (np.sum(r < est) + 0.5 * np.sum(r == est)) / r.size
+        frac = min(max(frac, 0.5 / r.size), 1.0 - 0.5 / r.size)
+        z0 = norm.ppf(frac)
+        q = [float(norm.cdf(2 * z0 + norm.ppf(alpha))), float(norm.cdf(2 * z0 + norm.ppf(1.0 - alpha)))]
+    with np.errstate(invalid="ignore"):
+        lo, hi = np.quantile(r, q, axis=axis, method="linear")
+    # quantile interpolates inf - inf -> nan at a boundary: take the order statistic there
+    lo = np.where(np.isnan(lo), np.inf, lo)
+    hi = np.where(np.isnan(hi), np.inf, hi)
+    if lo.ndim == 0:
+        return float(lo), float(hi)
+    return lo, hi
+
+
+def _stat(statistic) -> Callable:
+    if callable(statistic):
+        return statistic
+    try:
+        return _STATISTICS[statistic]
+    except KeyError:
+        raise ValueError(f"statistic must be one of {', '.join(_STATISTICS)} or a callable, got {statistic!r}") \
+            from None
+
+
+def statistic_interval(x, statistic="mean", *, block: bool = False, block_length: int | None = None,
+                       confidence: float = CONFIDENCE, n_resamples: int = N_RESAMPLES, seed=0) -> dict:
+    """A statistic of one sample with its bootstrap percentile interval.
+
+    Parameters
+    ----------
+    x : array_like
+        1-D; non-finite values are left out (the count left is ``n``).
+    statistic : "mean", "median" or callable ``f(array, axis)``
+    block : bool
+        The values are a time series (per cycle or per image pair): resample blocks of
+        consecutive values (:func:`block_bootstrap_indices`); False: independent units.
+
+    Returns
+    -------
+    dict
+        ``estimate``, ``ci95`` ([lo, hi]; None when fewer than 2 values), ``n``,
+        ``method`` (how the interval was resampled).
+    """
+    a = np.asarray(x, dtype=np.float64).ravel()
+    a = a[np.isfinite(a)]
+    f = _stat(statistic)
+    how = ("circular block bootstrap" if block else "bootstrap") + f", {n_resamples} resamples"
+    if a.size == 0:
+        return {"estimate": None, "ci95": None, "n": 0, "method": how}
+    est = float(f(a, None))
+    if a.size < 2:
+        return {"estimate": est, "ci95": None, "n": int(a.size), "method": how}
+    idx = (block_bootstrap_indices(a.size, n_resamples, seed, block_length) if block
+           else bootstrap_indices(a.size, n_resamples, seed))
+    lo, hi = percentile_interval(f(a[idx], 1), confidence)
+    return {"estimate": est, "ci95": [float(lo), float(hi)], "n": int(a.size), "method": how}
+
+
+def difference_interval(a, b, statistic="mean", *, block: bool = False, block_length: int | None = None,
+                        confidence: float = CONFIDENCE, n_resamples: int = N_RESAMPLES, seed=0) -> dict:
+    """``statistic(a) - statistic(b)`` of two methods observed on the same cycles or units.
+
+    ``a`` and ``b`` are aligned (index i is the same cycle or unit); pairs where either is
+    not finite are left out, and both are resampled with the same indices (a paired
+    bootstrap: what the two methods share cancels).  ``excludes_zero`` says whether the
+    interval excludes 0 (the methods differ at this confidence).
+
+    Returns
+    -------
+    dict
+        ``estimate``, ``ci95``, ``n``, ``excludes_zero``, ``method``.
+    """
+    x = np.asarray(a, dtype=np.float64).ravel()
+    y = np.asarray(b, dtype=np.float64).ravel()
+    if x.shape != y.shape:
+        raise ValueError(f"a and b must be aligned, got shapes {x.shape} and {y.shape}")
+    ok = np.isfinite(x) & np.isfinite(y)
+    x, y = x[ok], y[ok]
+    f = _stat(statistic)
+    how = ("paired circular block bootstrap" if block else "paired bootstrap") + f", {n_resamples} resamples"
+    if x.size == 0:
+        return {"estimate": None, "ci95": None, "n": 0, "excludes_zero": None, "method": how}
+    est = float(f(x, None) - f(y, None))
+    if x.size < 2:
+        return {"estimate": est, "ci95": None, "n": int(x.size), "excludes_zero": None, "method": how}
+    idx = (block_bootstrap_indices(x.size, n_resamples, seed, block_length) if block
+           else bootstrap_indices(x.size, n_resamples, seed))
+    lo, hi = percentile_interval(f(x[idx], 1) - f(y[idx], 1), confidence)
+    return {"estimate": est, "ci95": [float(lo), float(hi)], "n": int(x.size),
+            "excludes_zero": bool(lo > 0 or hi < 0), "method": how}
+
+
+def holm(pvalues) -> np.ndarray:
+    """Holm's step-down adjusted p-values (family-wise error control, any dependence).
+
+    NaN p-values (tests that could not be run) stay NaN and do not count in the family.
+
+    Examples
+    --------
+    >>> holm([0.01, 0.04, 0.03]).round(3).tolist()
+    [0.03, 0.06, 0.06]
+    """
+    p = np.asarray(pvalues, dtype=np.float64)
+    out = np.full(p.shape, np.nan)
+    flat = p.ravel()
+    ok = np.flatnonzero(np.isfinite(flat))
+    m = ok.size
+    if m == 0:
+        return out
+    order = ok[np.argsort(flat[ok], kind="stable")]
+    adj = np.minimum(1.0, np.maximum.accumulate((m - np.arange(m)) * flat[order]))
+    res = out.ravel()
+    res[order] = adj
+    return res.reshape(p.shape)
+
+
+def tost_paired(d, margin, axis: int = 0) -> np.ndarray:
+    """p-value of two one-sided t-tests that the mean of ``d`` lies within ``(-margin, margin)``.
+
+    ``d`` holds paired differences of independent units along ``axis`` (any leading or
+    trailing axes are separate tests).  The p-value is the larger of the two one-sided
+    p-values (Schuirmann 1987): below alpha, equivalence is shown at level alpha.  With
+    fewer than 2 units, or no spread and the mean outside the margin, the test cannot
+    show equivalence (p = 1); no spread and the mean inside gives p = 0.
+    """
+    from scipy.stats import t as student_t
+
+    d = np.moveaxis(np.asarray(d, dtype=np.float64), axis, 0)
+    margin = np.asarray(margin, dtype=np.float64)
+    if np.any(margin <= 0):
+        raise ValueError(f"margin must be positive, got {margin}")
+    n = d.shape[0]
+    if n < 2:
+        return np.ones(d.shape[1:]) if d.ndim > 1 else np.float64(1.0)
+    mean = d.mean(axis=0)
+    se = d.std(axis=0, ddof=1) / math.sqrt(n)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_lo = (mean + margin) / se
+        t_hi = (mean - margin) / se
+    p = np.maximum(student_t.sf(t_lo, n - 1), student_t.cdf(t_hi, n - 1))
+    zero = se == 0
+    p = np.where(zero, np.where(np.abs(mean) < margin, 0.0, 1.0), p)
+    return p
+
+
+def variance_components(x, axis_units: int = -2, axis_methods: int = -1) -> tuple[np.ndarray, np.ndarray]:
+    """Method and residual variance of a units x methods table (two-way, no replication).
+
+    For ``x[u, m] = mu + a_u + b_m + e_um`` (units ``u`` = 1..U, methods ``m`` = 1..M):
+
+    * ``residual = sum (x - row mean - column mean + grand mean)^2 / ((U-1)(M-1))``,
+      unbiased for var(e);
+    * ``method = (MS_methods - residual) / U`` with ``MS_methods = U * sum_m (column
+      mean - grand mean)^2 / (M-1)``: unbiased for the variance of the method effects
+      b_m over the methods (ddof 1), and negative when noise alone explains the spread.
+
+    Leading axes are independent tables (e.g. bootstrap replicates).
+
+    Returns
+    -------
+    (method, residual) : numpy.ndarray
+        float64, the leading shape.
+    """
+    x = np.asarray(x, dtype=np.float64)
+    x = np.moveaxis(x, (axis_units, axis_methods), (-2, -1))
+    u, m = x.shape[-2:]
+    if u < 2 or m < 2:
+        raise ValueError(f"need at least 2 units and 2 methods, got {u} x {m}")
+    col = x.mean(axis=-2, keepdims=True)
+    row = x.mean(axis=-1, keepdims=True)
+    grand = col.mean(axis=-1, keepdims=True)
+    resid = ((x - row - col + grand) ** 2).sum(axis=(-2, -1)) / ((u - 1) * (m - 1))
+    ms_methods = u * ((col - grand) ** 2).sum(axis=(-2, -1)) / (m - 1)
+    return (ms_methods - resid) / u, resid
+
+
+def covariance_components(x, y) -> tuple[np.ndarray, np.ndarray]:
+    """Method and residual covariance of two units x methods tables observed on the same units.
+
+    The cross-product analogue of :func:`variance_components` (``covariance_components(x,
+    x)`` equals it): unbiased for the covariance over the methods of the two tables'
+    method effects when their residuals may be correlated (common random numbers).
+    """
+    x = np.asarray(x, dtype=np.float64)
+    y = np.asarray(y, dtype=np.float64)
+    if x.shape != y.shape:
+        raise ValueError(f"x and y must have the same shape, got {x.shape} and {y.shape}")
+    u, m = x.shape[-2:]
+    if u < 2 or m < 2:
+        raise ValueError(f"need at least 2 units and 2 methods, got {u} x {m}")
+
+    def parts(t):
+        col = t.mean(axis=-2, keepdims=True)
+        row = t.mean(axis=-1, keepdims=True)
+        grand = col.mean(axis=-1, keepdims=True)
+        return col - grand, t - row - col + grand
+
+    cx, rx = parts(x)
+    cy, ry = parts(y)
+    resid = (rx * ry).sum(axis=(-2, -1)) / ((u - 1) * (m - 1))
+    mcp = u * (cx * cy).sum(axis=(-2, -1)) / (m - 1)
+    return (mcp - resid) / u, resid
+
+
+def kendall_tau_b(x, y) -> np.ndarray:
+    """Kendall tau-b of the last axis of ``x`` and ``y`` (vectorised over leading axes).
+
+    Agrees with :func:`scipy.stats.kendalltau` (variant b); NaN where either side ties
+    every item (tau-b is undefined there: a tie is not agreement).
+    """
+    x = np.asarray(x, dtype=np.float64)
+    y = np.asarray(y, dtype=np.float64)
+    if x.shape != y.shape:
+        raise ValueError(f"x and y must have the same shape, got {x.shape} and {y.shape}")
+    i, j = np.triu_indices(x.shape[-1], 1)
+    sx = np.sign(x[..., i] - x[..., j])
+    sy = np.sign(y[..., i] - y[..., j])
+    n0 = i.size
+    tx = (sx == 0).sum(axis=-1)
+    ty = (sy == 0).sum(axis=-1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tau = (sx * sy).sum(axis=-1) / np.sqrt((n0 - tx) * (n0 - ty))
+    return np.where((tx == n0) | (ty == n0), np.nan, tau)
+
+
+def _resample(n: int, n_resamples: int, seed, block: bool, block_length: int | None) -> np.ndarray:
+    return (block_bootstrap_indices(n, n_resamples, seed, block_length) if block
+            else bootstrap_indices(n, n_resamples, seed))
+
+
+def compare_methods(series, statistic="median", *, higher_is_better: bool = True, block: bool = False,
+                    block_length: int | None = None, confidence: float = CONFIDENCE, n_resamples: int = N_RESAMPLES,
+                    seed=0) -> dict:
+    """Each method's statistic with its interval, and its difference from the best method with an interval.
+
+    Parameters
+    ----------
+    series : mapping of str to array_like
+        Per method, the values the statistic is taken over (per cycle, per image pair, per
+        sequence); non-finite values are left out.  Methods whose series have the same
+        length are taken as aligned (the same cycles or units): their difference is a paired
+        bootstrap; otherwise the two are resampled independently.
+    higher_is_better : bool
+        Which end of the statistic is the best method.
+    block : bool
+        Series are time series: circular block bootstrap (:func:`block_bootstrap_indices`).
+
+    Returns
+    -------
+    dict
+        ``{"best": name, "methods": {name: {estimate, ci95, n, difference_to_best: {estimate,
+        ci95, excludes_zero}}}, "method": how the intervals were resampled}``; the best
+        method's difference is None.  ``excludes_zero`` False means this data cannot tell the
+        method from the best one.
+    """
+    rng = rng_of(seed)
+    f = _stat(statistic)
+    raw = {m: np.asarray(v, dtype=np.float64).ravel() for m, v in series.items()}
+    out = {m: statistic_interval(v, f, block=block, block_length=block_length, confidence=confidence,
+                                 n_resamples=n_resamples, seed=rng) for m, v in raw.items()}
+    have = {m: r["estimate"] for m, r in out.items() if r["estimate"] is not None}
+    best = (max if higher_is_better else min)(have, key=have.get) if have else None
+    for m, r in out.items():
+        r.pop("method", None)
+        r["difference_to_best"] = None
+        if best is None or m == best or r["estimate"] is None:
+            continue
+        a, b = raw[m], raw[best]
+        if a.size == b.size:
+            d = difference_interval(a, b, f, block=block, block_length=block_length, confidence=confidence,
+                                    n_resamples=n_resamples, seed=rng)
+        else:
+            a, b = a[np.isfinite(a)], b[np.isfinite(b)]
+            d = {"estimate": float(f(a, None) - f(b, None)), "ci95": None, "excludes_zero": None}
+            if a.size >= 2 and b.size >= 2:
+                ra = f(a[_resample(a.size, n_resamples, rng, block, block_length)], 1)
+                rb = f(b[_resample(b.size, n_resamples, rng, block, block_length)], 1)
+                lo, hi = percentile_interval(ra - rb, confidence)
+                d["ci95"], d["excludes_zero"] = [float(lo), float(hi)], bool(lo > 0 or hi < 0)
+        r["difference_to_best"] = {k: d[k] for k in ("estimate", "ci95", "excludes_zero")}
+    how = ("circular block bootstrap" if block else "bootstrap") + f", {n_resamples} resamples, {confidence:.0%}"
+    return {"best": best, "statistic": statistic if isinstance(statistic, str) else "custom", "methods": out,
+            "method": how}

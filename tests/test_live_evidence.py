@@ -1,0 +1,91 @@
+"""validation.live.evidence: walk tables from benchmark summaries, the replicated verdicts, results.json's contract."""
+
+import json
+
+import numpy as np
+import pytest
+
+from validation.live.config import CONDITIONS, METHODS, METRICS, SCENES, LiveConfig
+from validation.live.evidence import walk_value, walk_values
+from validation.verdicts.simulate import Scales, simulate_tables
+
+
+def _entry(v: float) -> dict:
+    """A per-scene summary entry whose every ranked metric is ``v`` (or a function of it)."""
+    return {"median_uniformity": v, "median_matches": v, "sequence_success": {"100": v > 0},
+            "segment_success": {"100": {"rate": v}}, "vo": {"n_failed_frames": v, "rpe_trans_pct": v}}
+
+
+def _records(tables: dict, n_rep: int, scenes=SCENES) -> list[dict]:
+    """Experiment records (raw.json content) holding ``tables`` (run -> (walks, methods)) over n_rep seeds."""
+    cfg = LiveConfig(scenes=tuple(scenes), n_cycles=3).to_dict()
+    recs = []
+    for k in range(n_rep):
+        summ = {}
+        for run, t in tables.items():
+            summ[run] = {"per_scene": {s: {m: _entry(float(t[k * len(scenes) + i, j])) for j, m in enumerate(METHODS)}
+                                       for i, s in enumerate(scenes)}}
+        recs.append({"config": {**cfg, "seed": k}, "summaries": summ, "timings": {"total_s": 1.0}})
+    return recs
+
+
+def test_walk_value_paths_and_missing():
+    e = _entry(3.0)
+    assert walk_value(e, "rpe_trans_pct") == 3.0 and walk_value(e, "success_rate_tau100") == 1.0
+    assert np.isnan(walk_value({"vo": None}, "vo_failed_frames"))
+    assert np.isnan(walk_value({"median_matches": float("inf")}, "median_matches"))
+
+
+def test_walk_values_order_and_shape():
+    t = {"live-fixed-instant": np.arange(8 * 7, dtype=float).reshape(8, 7)}
+    walks, tables = walk_values(_records(t, 2), METHODS)
+    assert walks[:2] == [f"{SCENES[0]}/seed0", f"{SCENES[1]}/seed0"] and walks[4] == f"{SCENES[0]}/seed1"
+    np.testing.assert_array_equal(tables["live-fixed-instant"]["median_matches"], t["live-fixed-instant"])
+
+
+@pytest.mark.parametrize("kind,expected", [("live-draw", "agrees"), ("random", "disagrees")])
+def test_replicated_results_contract(tmp_path, kind, expected):
+    from validation.live.experiment import finish_replicated
+
+    sim = simulate_tables(kind, 40, Scales(sd_method=1.0, sd_walk_method=0.3, sd_noise=0.3), seed=7)
+    tables = {CONDITIONS["cycle-rate live"]: sim["live"][0], CONDITIONS["emulated"]: sim["emulated"][0],
+              "live-same-instant-reseeded": sim["control"][0]}
+    res = finish_replicated(tmp_path, _records(tables, 10), command="test", power_seeds=0)
+    on_disk = json.loads((tmp_path / "results.json").read_text())
+    assert on_disk["n_walks"] == 40 == res["n_walks"]
+    assert set(on_disk["metrics"]) == set(METRICS)
+    for m, r in on_disk["metrics"].items():
+        assert set(r) >= {"omega2", "omega2_ci95", "tau_live_emulated", "tau_live_live", "verdict", "reason"}
+    # every ranked metric carries the same simulated values (success: the sign only)
+    for m in ("median_matches", "median_uniformity", "rpe_trans_pct"):
+        assert on_disk["metrics"][m]["verdict"] == expected, on_disk["metrics"][m]
+    assert on_disk["conditions"]["native-rate live"]["status"] == "not run"
+    assert on_disk["comparisons"]["cycle-rate vs native-rate live"]["status"] == "not run"
+    assert on_disk["power"] == {}  # power_seeds 0: not simulated
+    assert "## Verdicts per metric" in (tmp_path / "report.md").read_text()
+
+
+def test_quick_sized_record_is_undetermined(tmp_path):
+    from validation.live.experiment import finish_replicated
+
+    sim = simulate_tables("live-draw", 4, Scales(1.0, 0.1, 0.1), seed=8)
+    tables = {CONDITIONS["cycle-rate live"]: sim["live"][0], CONDITIONS["emulated"]: sim["emulated"][0]}
+    res = finish_replicated(tmp_path, _records(tables, 1), command="test")
+    assert res["n_walks"] == 4
+    assert {r["verdict"] for r in res["metrics"].values()} == {"undetermined"}
+    assert all("fewer than 10" in r["reason"] for r in res["metrics"].values())
+
+
+@pytest.mark.slow
+def test_power_per_metric_from_the_walks(tmp_path):
+    from validation.live.experiment import finish_replicated
+
+    sim = simulate_tables("live-draw", 40, Scales(sd_method=1.0, sd_walk_method=0.3, sd_noise=0.3), seed=7)
+    tables = {CONDITIONS["cycle-rate live"]: sim["live"][0], CONDITIONS["emulated"]: sim["emulated"][0],
+              "live-same-instant-reseeded": sim["control"][0]}
+    res = finish_replicated(tmp_path, _records(tables, 10), command="test", power_seeds=10)
+    p = res["power"]["median_matches"]
+    assert p["status"] == "computed" and p["n_walks"] == 40
+    assert p["scales"]["sd_method"] == pytest.approx(1.0, rel=0.35)  # the simulated method SD, recovered
+    assert p["walks_needed_for_agrees"] is not None and p["walks_needed_for_agrees"] <= 40
+    assert "What this size can decide" in (tmp_path / "report.md").read_text()

@@ -1,0 +1,184 @@
+"""The replicated verdicts of issue 22: per-walk metric tables, omega2 per metric, three conditions.
+
+The unit is an independent walk: a scene with its trajectory, render and capture-noise
+seeds (one experiment seed; replicates add seeds).  On each walk every run (emulated,
+live at the cycle rate, live at the native rate where run, the re-seeded live control)
+shares the walk's renders, so the walk x method part of every metric is common to the
+runs (common random numbers) and cancels in their differences.
+
+* :func:`walk_values`: from the per-run benchmark summaries of one or more experiment
+  records (``raw.json``) to ``{run: {metric: (walks, methods) array}}``;
+* :func:`judge_metrics`: results.json's ``metrics`` (the verdict per metric,
+  :func:`validation.verdicts.agreement.judge`, emulated vs the reference live condition),
+  ``comparisons`` (the same on every pair of :data:`~validation.live.config.COMPARISONS`),
+  ``conditions`` (the three conditions side by side: per metric and method the walk mean
+  with a cluster-bootstrap interval) and ``power`` (per metric, from the measured variance
+  components: the smallest interaction the study detects and the walks a decision needs).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from emulator.stats import percentile_interval, rng_of
+from validation.live.config import (
+    COMPARISONS,
+    CONDITIONS,
+    CONTROL,
+    EQUIVALENCE_MARGINS,
+    METRICS,
+    REFERENCE_LIVE,
+)
+
+__all__ = ["WALK_METRICS", "walk_value", "walk_values", "condition_table", "judge_metrics"]
+
+#: Per-walk value of each ranked metric, from one method's entry of
+#: ``ae_study.summarise(...)["per_scene"][scene]`` (the walk's own figures).
+WALK_METRICS = {
+    "median_uniformity": ("median_uniformity",),
+    "median_matches": ("median_matches",),
+    "success_rate_tau100": ("sequence_success", "100"),
+    "segment_success_rate_tau100": ("segment_success", "100", "rate"),
+    "vo_failed_frames": ("vo", "n_failed_frames"),
+    "rpe_trans_pct": ("vo", "rpe_trans_pct"),
+}
+
+
+def walk_value(entry: dict, metric: str) -> float:
+    """One method's value of ``metric`` on one walk (NaN where it does not exist; True/False as 1/0)."""
+    v = entry
+    for k in WALK_METRICS[metric]:
+        v = v.get(k) if isinstance(v, dict) else None
+    if v is None:
+        return math.nan
+    v = float(v)
+    return v if math.isfinite(v) else math.nan
+
+
+def walk_values(records: list[dict], methods) -> tuple[list[str], dict[str, dict[str, np.ndarray]]]:
+    """Walk names and ``{run: {metric: (walks, methods) float array}}`` of experiment records.
+
+    ``records``: raw records (``raw.json`` content: ``config`` and ``summaries``); each
+    scene of each record is one walk, named ``<scene>/seed<seed>``.  A run missing from a
+    record gives NaN rows there.
+    """
+    names = list(methods)
+    walks, rows = [], {}
+    runs = sorted({r for rec in records for r in (rec.get("summaries") or {})})
+    for rec in records:
+        seed = rec["config"]["seed"]
+        for scene in rec["config"]["scenes"]:
+            walks.append(f"{scene}/seed{seed}")
+            for r in runs:
+                per = ((rec.get("summaries") or {}).get(r) or {}).get("per_scene", {}).get(scene, {})
+                for metric in WALK_METRICS:
+                    rows.setdefault(r, {}).setdefault(metric, []).append(
+                        [walk_value(per[m], metric) if m in per else math.nan for m in names])
+    tables = {r: {metric: np.asarray(v, dtype=np.float64).reshape(len(walks), len(names))
+                  for metric, v in per.items()} for r, per in rows.items()}
+    return walks, tables
+
+
+def condition_table(table: np.ndarray, methods, *, n_resamples: int = 1000, seed=0) -> dict:
+    """Per method: the walk mean of one metric with its cluster-bootstrap 95 % interval (walks with a value)."""
+    t = np.asarray(table, dtype=np.float64)
+    out = {}
+    rng = rng_of(seed)
+    for k, m in enumerate(methods):
+        v = t[:, k][np.isfinite(t[:, k])]
+        if v.size == 0:
+            out[m] = {"mean": None, "ci95": [None, None], "n_walks": 0}
+            continue
+        ci = [None, None]
+        if v.size >= 2:
+            lo, hi = percentile_interval(v[rng.integers(0, v.size, (n_resamples, v.size))].mean(axis=1))
+            ci = [float(lo), float(hi)]
+        out[m] = {"mean": float(v.mean()), "ci95": ci, "n_walks": int(v.size)}
+    return out
+
+
+def judge_metrics(tables: dict, methods, *, n_resamples: int = 1000, seed: int = 0, power: bool = True,
+                  power_seeds: int = 100) -> dict:
+    """results.json's ``metrics``, ``comparisons``, ``conditions``, ``power`` and ``n_walks`` from walk tables.
+
+    ``tables``: :func:`walk_values`' second item.  A comparison whose runs were not made
+    (the native-rate live loop where none was given) is ``{"status": "not run"}``.
+    """
+    from validation.verdicts.agreement import MIN_WALKS, judge
+    from validation.verdicts.power import power_summary, scales_from_tables
+
+    names = list(methods)
+    control = tables.get(f"live-{CONTROL}")
+    comparisons = {}
+    for label, (ref, other) in COMPARISONS.items():
+        if ref not in tables or other not in tables:
+            missing = [r for r in (ref, other) if r not in tables]
+            comparisons[label] = {"status": "not run", "reference": ref, "compared": other,
+                                  "reason": f"run(s) {', '.join(missing)} not made in this experiment"}
+            continue
+        per_metric = {}
+        for metric, (_, higher) in METRICS.items():
+            res = judge(tables[ref][metric], tables[other][metric],
+                        None if control is None else control[metric], methods=names,
+                        margin=EQUIVALENCE_MARGINS.get(metric), higher_is_better=higher, n_resamples=n_resamples,
+                        seed=[seed, 22_001, list(COMPARISONS).index(label), list(METRICS).index(metric)])
+            per_metric[metric] = res
+        comparisons[label] = {"status": "run", "reference": ref, "compared": other, "metrics": per_metric}
+    headline = next(iter(COMPARISONS))
+    n_walks = int(next(iter(next(iter(tables.values())).values())).shape[0]) if tables else 0
+    metrics = {}
+    if comparisons[headline]["status"] == "run":
+        for metric, res in comparisons[headline]["metrics"].items():
+            metrics[metric] = {k: res[k] for k in ("omega2", "omega2_ci95", "tau_live_emulated", "tau_live_live",
+                                                   "verdict", "reason")}
+            metrics[metric].update({k: res[k] for k in ("n_walks", "disattenuated_correlation",
+                                                        "disattenuated_correlation_ci95", "live_method_p",
+                                                        "pairs_live_significant", "pairs_equivalent",
+                                                        "pairs_reversed", "margin") if k in res})
+    conditions = {}
+    for cname, run in CONDITIONS.items():
+        if run not in tables:
+            conditions[cname] = {"run": run, "status": "not run",
+                                 "reason": "no native-rate live loop was given to this experiment"
+                                 if cname == "native-rate live" else f"run {run} not made"}
+            continue
+        conditions[cname] = {"run": run, "status": "run", "metrics": {
+            metric: condition_table(tables[run][metric], names, n_resamples=n_resamples,
+                                    seed=[seed, 22_002, list(METRICS).index(metric)]) for metric in METRICS}}
+    power_out = {}
+    ref_run = CONDITIONS[REFERENCE_LIVE]
+    for metric in METRICS:
+        if not power:
+            break
+        live = tables.get(ref_run, {}).get(metric)
+        if live is None:
+            continue
+        ok = np.all(np.isfinite(live), axis=1)
+        if control is not None:
+            ok &= np.all(np.isfinite(control[metric]), axis=1)
+        if ok.sum() < MIN_WALKS:
+            power_out[metric] = {"status": "not computed",
+                                 "reason": f"{int(ok.sum())} complete walks, fewer than {MIN_WALKS}: no variance "
+                                           "components to size the study from"}
+            continue
+        sc = scales_from_tables(live[ok])
+        same = tables.get("live-same-instant", {}).get(metric)
+        if control is not None and same is not None:
+            # run noise from two live runs that differ only in their capture-noise seeds (same-instant and its
+            # re-seeded control); the rest of the reference's residual is walk x method
+            both = ok & np.all(np.isfinite(same), axis=1)
+            if both.sum() >= 2:
+                noise = scales_from_tables(same[both], control=control[metric][both]).sd_noise
+                resid = sc.sd_noise ** 2 + sc.sd_walk_method ** 2
+                sc = type(sc)(sd_method=sc.sd_method, sd_walk_method=float(np.sqrt(max(resid - noise ** 2, 0.0))),
+                              sd_noise=float(min(noise, np.sqrt(resid))), sd_walk=sc.sd_walk)
+        if sc.sd_method <= 0:
+            power_out[metric] = {"status": "not computed", "scales": sc.__dict__,
+                                 "reason": "live shows no method effect at this size (variance component <= 0)"}
+            continue
+        power_out[metric] = {"status": "computed",
+                             **power_summary(int(ok.sum()), sc, n_seeds=power_seeds, seed=[seed, 22_003])}
+    return {"n_walks": n_walks, "reference_condition": REFERENCE_LIVE, "metrics": metrics,
+            "comparisons": comparisons, "conditions": conditions, "power": power_out}
