@@ -39,7 +39,8 @@ def test_validate_blur_quick(tmp_path):
     r = json.loads((out / "results.json").read_text())
     for key in ("reference_error_percent", "render_cost_ratio", "sharpness_error_plain_percent"):
         assert r[key] is not None and r[key] == r[key]
-    assert r["sharpness_error_consistent_percent"] is None
+    assert r["sharpness_error_consistent_percent"] is not None  # emulator.blur fed with the walk's gyro
+    assert r["consistent_hook"] == "measured"
     assert r["reference"][0]["n_subinstants"] >= 2
     assert 0 < r["render_cost_ratio"] < 10
     if default_real_imu() is not None:

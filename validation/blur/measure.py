@@ -8,7 +8,7 @@ import numpy as np
 
 from validation.common import capture, rmse_dn, to_percent
 
-__all__ = ["rate_percentiles_deg_s", "angular_rate_ratio", "fastest_instants", "reference_comparison",
+__all__ = ["consistent_from_walk", "rate_percentiles_deg_s", "angular_rate_ratio", "fastest_instants", "reference_comparison",
            "cost_comparison", "sharpness", "sharpness_comparison"]
 
 _PERCENTILES = (50, 90, 99)
@@ -162,3 +162,28 @@ def sharpness_comparison(scene, traj, t0_s: float, cfg, camera, consistent=None)
         s_cons = sharpness(consistent(src, cfg.source_ms, cfg.exposure_ms, camera.response, shot))
         out.update(emulated_consistent=s_cons, consistent_error_percent=100.0 * (s_cons - s_live) / s_live)
     return out
+
+
+def consistent_from_walk(traj, camera):
+    """The blur-consistent emulation of :mod:`emulator.blur` fed with the walk's own angular velocity.
+
+    Returns ``f(raw, source_ms, target_ms, response, shot) -> raw`` for
+    :func:`sharpness_comparison`: the gyro is :func:`scenes.walks.angular_velocity` of the
+    walk (camera axes), windows start at the trigger (``stamp="start"``, the synthetic
+    convention), K is the synthetic camera's.
+    """
+    from emulator.blur import blur_homographies, emulate_blur_consistent
+    from scenes.camera import intrinsics_matrix
+    from scenes.walks import angular_velocity
+
+    k = intrinsics_matrix(camera.width, camera.height, camera.fov_x_deg)
+    size = (camera.width, camera.height)
+
+    def omega(t_s):
+        return angular_velocity(traj, np.clip(np.atleast_1d(t_s), 0.0, traj.duration_s))
+
+    def consistent(raw, source_ms, target_ms, response, shot):
+        hs, ws = blur_homographies(omega, k, size, shot.t0_s, source_ms, target_ms, stamp="start")
+        return emulate_blur_consistent(raw, source_ms, target_ms, response, hs, ws)[0]
+
+    return consistent

@@ -16,7 +16,7 @@ def headline(r: dict) -> str:
             f"{_f(r['reference_noise_percent'])} %, without blur {_f(r['reference_no_blur_error_percent'])} %); "
             f"render cost ratio {_f(r['render_cost_ratio'])} (goal <= {r['render_cost_ratio_goal']:g}); "
             f"angular rate ratio {rate_text}; sharpness error, plain emulation "
-            f"{_f(r['sharpness_error_plain_percent'])} %")
+            f"{_f(r['sharpness_error_plain_percent'])} %, blur-consistent {_f(r['sharpness_error_consistent_percent'])} %")
 
 
 def report_markdown(r: dict) -> str:

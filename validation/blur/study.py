@@ -46,7 +46,8 @@ def run_study(config: BlurConfig, out_dir, *, command: str = "", force: bool = F
               consistent=None) -> dict:
     """Measure, write ``results.json`` and ``report.md`` into ``out_dir``; return the results.
 
-    ``consistent``: the blur-consistent emulation hook of :func:`measure.sharpness_comparison`.
+    ``consistent``: the blur-consistent emulation hook of :func:`measure.sharpness_comparison`
+    (default: :func:`measure.consistent_from_walk`, :mod:`emulator.blur` fed the walk's gyro).
     """
     import scenes
     from emulator.io.files import prepare_output, write_results, write_text
@@ -59,6 +60,11 @@ def run_study(config: BlurConfig, out_dir, *, command: str = "", force: bool = F
     traj = scene.trajectory(config.walk_s + 1.0, walk=config.walk)
     camera = make_camera("borealhdr", width=config.width, height=config.height).saturating_at(
         scene.reference_radiance, 1.0)
+    if consistent is None:
+        try:
+            consistent = measure.consistent_from_walk(traj, camera)
+        except ImportError:  # an exposim without emulator.blur: the figure stays null
+            consistent = None
     rates = measure.angular_rate_ratio(traj, config.walk_s, real_imu)
     tick(1)
     instants = measure.fastest_instants(traj, config.walk_s, config.n_instants, config.exposure_ms)
