@@ -141,6 +141,11 @@ def _quiet_stdout() -> None:
         pass
 
 
+import warnings as _warnings  # noqa: E402
+
+_default_showwarning = _warnings.showwarning
+
+
 class Terminated(KeyboardInterrupt):
     """SIGTERM (what batch schedulers send), handled like Ctrl-C: runs record "interrupted"."""
 
@@ -149,16 +154,29 @@ def _on_sigterm(signum, frame):
     raise Terminated()
 
 
+def _one_line_warning(message, category, filename, lineno, file=None, line=None):
+    """exposim's own warnings (a recording without an IMU, ...) as one ``exposim: warning:`` line,
+    without the source line Python's default format adds; other libraries' warnings as usual."""
+    if category.__module__.split(".")[0] == "emulator":
+        print(f"exposim: warning: {message}", file=file or sys.stderr)
+    else:
+        _default_showwarning(message, category, filename, lineno, file, line)
+
+
 def main(argv: list[str] | None = None) -> int:
     import signal
     import threading
+    import warnings
 
     previous = None
     if threading.current_thread() is threading.main_thread():
         previous = signal.signal(signal.SIGTERM, _on_sigterm)
+    shown = warnings.showwarning
+    warnings.showwarning = _one_line_warning
     try:
         return _main(argv)
     finally:
+        warnings.showwarning = shown
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
 
