@@ -93,7 +93,8 @@ def synthesize(
         spp at the same cost; render noise then moves with the scene within a sweep).
     imu_rate_hz : float
         Rate of the walk's gyro and accelerometer written as ``imu/imu.csv`` (IMU frame x
-        forward, y left, z up: :data:`scenes.walks.CAMERA_FROM_IMU`; 0: none).
+        forward, y left, z up: :data:`scenes.walks.CAMERA_FROM_IMU`; a static camera reads zero rates and
+        gravity; 0: none).
     denoise : str or scenes.denoise.DenoiseSettings, optional
         ``"oidn"``: low-spp render denoised by Open Image Denoise; ``"off"``: the raw
         path-traced estimate (see :func:`scenes.render`).  Default (None): ``"oidn"``, or
@@ -132,7 +133,7 @@ def synthesize(
     duration_s = n_shots / fps + 1.0
     walk_kwargs = {} if speed_mps is None else {"speed_mps": float(speed_mps)}
     traj = scene.trajectory(duration_s, walk=walk, **walk_kwargs)
-    imu = None if scene.is_static or not imu_rate_hz else _imu_of(traj, n_shots / fps + 0.1, imu_rate_hz,
+    imu = None if not imu_rate_hz else _imu_of(traj, n_shots / fps + 0.1, imu_rate_hz,
                                                                     start_time_ns)
     blur = bool(blur) and not scene.is_static
     if render_per not in ("shot", "cycle"):
