@@ -133,6 +133,9 @@ def run_live_experiment(out, config: LiveConfig | None = None, *, progress: bool
         if ratio_input is None:
             first = seq.cycles[0].frames["left"][seq.cycles[0].available(("left",))[0]].timestamp_ns
             ratio_input = (radiance(first, "left"), camera, response, model)
+        from scenes.walkshots import walk_radiance  # live shots blurred over their own windows (issue 21)
+
+        radiance = walk_radiance(ds, scene, cache_dir=cache_dir) or radiance
         common = dict(config=RunConfig(initial_ms=cfg.initial_ms, selector=cfg.selector), response=response)
         cycles: dict = {}
         t0 = time.perf_counter()

@@ -64,7 +64,8 @@ def _words(x: float) -> list[int]:
 def make_shoot(radiance: Callable[[int, str], np.ndarray], camera, cameras, *, seed: int = 0, noise: bool = True):
     """The ``shoot(timestamp_ns, camera, exposure_ms, index)`` of the live providers for a synthetic camera.
 
-    Captures ``radiance(timestamp_ns, camera)`` with :func:`synth.capture`; the noise of
+    Captures ``radiance(timestamp_ns, camera)`` with :func:`synth.capture` (an ``exposure_aware``
+    radiance is called with the exposure too, and integrates over the shot's window); the noise of
     camera ``c`` (its position in ``cameras``) at tick ``index`` and exposure ``t`` is seeded
     by ``SeedSequence([seed, 14001, index, c, bits of t])``.
     """
@@ -74,7 +75,10 @@ def make_shoot(radiance: Callable[[int, str], np.ndarray], camera, cameras, *, s
 
     def shoot(timestamp_ns: int, cam: str, exposure_ms: float, index: int) -> np.ndarray:
         rng = np.random.SeedSequence([int(seed), _LIVE_TAG, int(index), cams.index(cam), *_words(exposure_ms)])
-        return synth.capture(radiance(timestamp_ns, cam), exposure_ms, camera, seed=rng, noise=noise)
+        # an exposure-aware provider integrates over the live shot's own window
+        rad = (radiance(timestamp_ns, cam, exposure_ms) if getattr(radiance, "exposure_aware", False)
+               else radiance(timestamp_ns, cam))
+        return synth.capture(rad, exposure_ms, camera, seed=rng, noise=noise)
 
     return shoot
 
@@ -108,7 +112,9 @@ def iter_live(
         The bracketed recording of the walk: it gives the cycles, their shot timestamps,
         and (same-instant timing) the brackets the selector looks at.
     radiance : callable(timestamp_ns, camera) -> ndarray
-        The radiance each camera saw at a shot's instant (e.g. :class:`DatasetRadiance`).
+        The radiance each camera saw at a shot's instant (e.g. :class:`DatasetRadiance`); one
+        with ``exposure_aware = True`` is called ``radiance(timestamp_ns, camera, exposure_ms)``
+        and integrates over the live shot's own exposure window (:func:`scenes.walkshots.walk_radiance`).
     camera : synth.Camera
         The recording's camera (``synth.sequence.load_camera``).
     methods : names or AE method instances
