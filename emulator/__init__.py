@@ -8,19 +8,23 @@ The user verbs::
     import emulator as ex
 
     seq = ex.load_sequence("backpack_2023-09-25-15-05-03")     # a BorealHDR recording
-    img = ex.emulate(raw, 4.0, 9.5, ex.sequence_response(seq))   # one image at 9.5 ms
+    img = ex.emulate_image(raw, 4.0, 9.5, ex.sequence_response(seq))   # one image at 9.5 ms
     ms = ex.select_bracket("higher-no-sat", 9.5, {4.0: 0.0, 16.0: 0.2})
     res = ex.run(seq, "classical-50,shim", ex.RunConfig(initial_ms=4.0))   # closed loop, in memory
     ex.run_to_folder(seq, "all", "out/run", ex.RunConfig(save="png8"))    # ... written to a run folder
     m = ex.make_method("zhang", mode="paper")
 
-Submodules keep their names: ``import emulator.select as s`` gives the module (the selector
-function is :func:`select_bracket` here).  The package-level ``emulate`` is the function; its
-module is reached by ``from emulator.emulate import ...``.
+Submodules keep their names: ``import emulator.select as s`` and ``import emulator.emulate as e``
+give the modules.  Their functions are exported here under names that say what they act on:
+:func:`select_bracket` (``emulator.select.select``) and :func:`emulate_image`
+(``emulator.emulate.emulate``).  ``from emulator import emulate`` therefore gives the module
+(as ``from emulator import select`` does); the function is ``from emulator.emulate import
+emulate`` or ``emulator.emulate_image``.
 """
 
 from emulator.autoexposure import make_method
-from emulator.emulate import emulate, emulation_lut
+from emulator.emulate import emulate as emulate_image
+from emulator.emulate import emulation_lut
 from emulator.errors import DatasetError, EmulationError, ExposimError, OutputExistsError, PlaybackError, ResponseError
 from emulator.io.borealhdr import load_sequence, sequence_response
 from emulator.playback import RunConfig, iter_run, run
@@ -33,7 +37,7 @@ from emulator.version import __version__
 __all__ = [
     "load_sequence",
     "sequence_response",
-    "emulate",
+    "emulate_image",
     "emulation_lut",
     "select_bracket",
     "run",

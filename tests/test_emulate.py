@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from emulator import CameraResponse, EmulationError, emulate
+from emulator import CameraResponse, EmulationError
+from emulator.emulate import emulate
 from emulator.io.pcalib import read_response
 
 #: These tests use synthetic responses over the full 12-bit range (the BorealHDR default is 4094).

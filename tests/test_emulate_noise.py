@@ -18,7 +18,8 @@ import numpy as np
 import pytest
 from scipy.special import ndtr
 
-from emulator import CameraResponse, EmulationError, ExposimError, emulate
+from emulator import CameraResponse, EmulationError, ExposimError
+from emulator.emulate import emulate
 from emulator.io.borealhdr import load_sequence, sequence_response
 from emulator.noise import NoiseModel, NoiseModelError
 from synth import Camera, capture

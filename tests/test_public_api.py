@@ -14,12 +14,14 @@ def test_user_verbs_are_exported_and_are_the_library_functions():
     from emulator.io.borealhdr import load_sequence
     from emulator.playback import RunConfig, run
     from emulator.runner import run_to_folder
+    from emulator.emulate import emulate
     from emulator.select import select
 
     assert emulator.load_sequence is load_sequence
     assert emulator.run is run and emulator.run_to_folder is run_to_folder
     assert emulator.make_method is make_method and emulator.RunConfig is RunConfig
     assert emulator.select_bracket is select
+    assert emulator.emulate_image is emulate
     assert set(emulator.__all__) <= set(dir(emulator))
 
 
@@ -30,17 +32,22 @@ def test_no_export_shadows_a_submodule():
     import emulator.playback as p
 
     assert isinstance(p, types.ModuleType)
+    import emulator.emulate as e
+
+    assert isinstance(e, types.ModuleType) and e.__name__ == "emulator.emulate"
+    from emulator import emulate  # the module too, as ``from emulator import select``
+
+    assert emulate is e and emulator.emulate is e and callable(e.emulate)
+    from emulator import select
+
+    assert isinstance(select, types.ModuleType)
     for name in emulator.__all__:
-        if name == "emulate":  # the function; its module stays importable by ``from emulator.emulate import``
-            continue
         try:
             importlib.import_module(f"emulator.{name}")
         except ModuleNotFoundError:
             continue
         raise AssertionError(f"emulator.{name} is both an export and a submodule")
-    from emulator.emulate import apply_lut  # the module behind the function
-
-    assert callable(apply_lut) and callable(emulator.emulate)
+    assert "emulate" not in emulator.__all__ and "select" not in emulator.__all__
 
 
 def test_version_comes_from_the_package_metadata():

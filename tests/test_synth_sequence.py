@@ -16,7 +16,7 @@ from scipy.spatial.transform import Rotation
 
 import synth
 import synth.sequence
-from emulator import emulate
+from emulator.emulate import emulate
 from emulator.io.borealhdr import exposure_folder_name, load_sequence, sequence_response
 from emulator.io.png import read_png16
 from emulator.errors import OutputExistsError

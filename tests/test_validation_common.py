@@ -8,7 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from emulator import CameraResponse, emulate
+from emulator import CameraResponse
+from emulator.emulate import emulate
 from emulator.errors import ExposimError, OutputExistsError
 from emulator.io.files import prepare_output, write_results
 from emulator.io.pcalib import read_response
