@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from emulator.errors import DatasetError
+from emulator.levels import Levels
 
 __all__ = ["CAMERAS", "Frame", "Cycle", "Sequence", "build_sequence", "group_cycles"]
 
@@ -110,7 +111,7 @@ class Sequence:
     """A recording: cycles of bracket sweeps from one or two cameras.
 
     ``white_level`` and ``black_level`` are the camera's clip levels in DN (BorealHDR:
-    4094 and 0, :data:`emulator.io.borealhdr.BOREALHDR_WHITE_LEVEL`).
+    4094 and 0, :data:`emulator.io.borealhdr.BOREALHDR_LEVELS`); :attr:`levels` gives both as one value.
     """
 
     path: Path
@@ -123,6 +124,11 @@ class Sequence:
     gaps: list[str] = field(default_factory=list)
     #: The recording's IMU (:class:`emulator.io.imu.ImuData`), None without ``imu/imu.csv``.
     imu: object = field(default=None, compare=False, repr=False)
+
+    @property
+    def levels(self) -> Levels:
+        """The clip levels as one :class:`~emulator.levels.Levels` value."""
+        return Levels(self.black_level, self.white_level)
 
     def __len__(self) -> int:
         return len(self.cycles)

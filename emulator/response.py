@@ -25,17 +25,19 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from emulator.errors import ResponseError
+from emulator.levels import BOREALHDR_LEVELS, Levels
 
 __all__ = ["CameraResponse", "BOREALHDR_WHITE_LEVEL", "BOREALHDR_BLACK_LEVEL"]
 
-#: The one default white level, DN: the BorealHDR sample saturates at 4094, one below the
-#: 12-bit maximum 4095 (DESIGN.md).  Everything that needs a white level and is not given
-#: one falls back to this: the response constructors here, the readers of recordings,
-#: stacks and run folders (:mod:`emulator.io`), calibration and the synthetic camera.  A
-#: camera's own level (``exposim.json``, ``run.json``, an argument) always wins.
-BOREALHDR_WHITE_LEVEL = 4094
-#: The one default black level, DN (the BorealHDR sample's: 0).
-BOREALHDR_BLACK_LEVEL = 0
+#: The one default white level, DN (alias of ``BOREALHDR_LEVELS.white``, defined in
+#: :mod:`emulator.levels`): the BorealHDR sample saturates at 4094, one below the 12-bit
+#: maximum 4095 (DESIGN.md).  Everything that needs a white level and is not given one falls
+#: back to this: the response constructors here, the readers of recordings, stacks and run
+#: folders (:mod:`emulator.io`), calibration and the synthetic camera.  A camera's own level
+#: (``exposim.json``, ``run.json``, an argument) always wins.
+BOREALHDR_WHITE_LEVEL = BOREALHDR_LEVELS.white
+#: The one default black level, DN (alias of ``BOREALHDR_LEVELS.black``: 0).
+BOREALHDR_BLACK_LEVEL = BOREALHDR_LEVELS.black
 
 #: How many per-ratio emulation tables a response keeps (each is 8 KiB for 12 bits).
 LUT_CACHE_SIZE = 512
@@ -88,10 +90,7 @@ class CameraResponse:
                 f"{self.name}: inverse response must have white_level + 1 = {self.white_level + 1} "
                 f"samples, got shape {g.shape}"
             )
-        if not 0 <= self.black_level < self.white_level:
-            raise ResponseError(
-                f"{self.name}: need 0 <= black_level < white_level, got {self.black_level}, {self.white_level}"
-            )
+        Levels.checked(self.black_level, self.white_level, where=self.name, error=ResponseError)
         if not np.all(np.isfinite(g)):
             first = int(np.flatnonzero(~np.isfinite(g))[0])
             raise ResponseError(f"{self.name}: non-finite inverse response at DN {first}")
@@ -171,6 +170,11 @@ class CameraResponse:
         if white > self.white_level:
             raise ResponseError(f"{self.name}: cannot raise white_level above the table top {self.white_level}")
         return CameraResponse(self.g[: white + 1].copy(), white, black, self.name, self.knots)
+
+    @property
+    def levels(self) -> Levels:
+        """The clip levels as one :class:`~emulator.levels.Levels` value."""
+        return Levels(self.black_level, self.white_level)
 
     # ------------------------------------------------------------------ evaluation
     @property

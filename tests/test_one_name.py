@@ -101,6 +101,8 @@ OWNED = {
     "DEFAULT_RANGE_MS": "emulator.autoexposure._base",
     "BOREALHDR_WHITE_LEVEL": "emulator.response",
     "BOREALHDR_BLACK_LEVEL": "emulator.response",
+    "BOREALHDR_LEVELS": "emulator.levels",
+    "Levels": "emulator.levels",
 }
 
 
@@ -335,7 +337,7 @@ def test_literal_4094_only_where_the_default_is_defined():
         for node in ast.walk(tree):
             if isinstance(node, ast.Constant) and type(node.value) is int and node.value == 4094:
                 hits.append(rel.as_posix())
-    assert hits == ["emulator/response.py"]
+    assert hits == ["emulator/levels.py"]
 
 
 # ------------------------------------------------------------------- one gray8 conversion

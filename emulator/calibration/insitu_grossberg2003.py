@@ -31,7 +31,7 @@ from emulator.calibration.result import (
 )
 from emulator.calibration.solver import _blas_single_thread, _comparametric_irls, _finish, _Knots, _robust_scale
 from emulator.errors import CalibrationError
-from emulator.response import BOREALHDR_BLACK_LEVEL, BOREALHDR_WHITE_LEVEL
+from emulator.levels import BOREALHDR_LEVELS
 
 __all__ = ["comparagram_pairs", "fit_comparametric", "calibrate_from_recording"]
 
@@ -106,8 +106,8 @@ def comparagram_pairs(
 def fit_comparametric(
     pairs: list[dict],
     *,
-    white_level: int = BOREALHDR_WHITE_LEVEL,
-    black_level: int = BOREALHDR_BLACK_LEVEL,
+    white_level: int = BOREALHDR_LEVELS.white,
+    black_level: int = BOREALHDR_LEVELS.black,
     n_knots: int = 128,
     smoothness: float = 0.1,
     huber_k: float = 2.0,

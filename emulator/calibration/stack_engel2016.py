@@ -70,7 +70,7 @@ from emulator.calibration.solver import _blas_single_thread, _finish, _Knots, _r
 from emulator.errors import CalibrationError
 from emulator.io.pcalib import PCALIB_SAMPLES
 from emulator.io.stack import Stack, read_stack
-from emulator.response import BOREALHDR_BLACK_LEVEL, BOREALHDR_WHITE_LEVEL
+from emulator.levels import BOREALHDR_LEVELS
 
 __all__ = ["estimate_noise_dn", "fit_inverse_response", "calibrate_stack"]
 
@@ -78,8 +78,8 @@ __all__ = ["estimate_noise_dn", "fit_inverse_response", "calibrate_stack"]
 def estimate_noise_dn(
     raw: np.ndarray,
     *,
-    black_level: int = BOREALHDR_BLACK_LEVEL,
-    white_level: int = BOREALHDR_WHITE_LEVEL,
+    black_level: int = BOREALHDR_LEVELS.black,
+    white_level: int = BOREALHDR_LEVELS.white,
     margin: int = 8,
 ) -> float:
     """Temporal noise in DN estimated from one image (Immerkaer 1996, robust variant).
@@ -228,8 +228,8 @@ def fit_inverse_response(
     dn: np.ndarray,
     exposures_ms: SequenceType[float],
     *,
-    white_level: int = BOREALHDR_WHITE_LEVEL,
-    black_level: int = BOREALHDR_BLACK_LEVEL,
+    white_level: int = BOREALHDR_LEVELS.white,
+    black_level: int = BOREALHDR_LEVELS.black,
     margin_dn: int = 8,
     n_knots: int = PCALIB_SAMPLES,
     smoothness: float = 0.1,

@@ -17,9 +17,10 @@ without touching the scan; :class:`FolderSource` is the file system, :class:`Zip
 BorealHDR trajectory zip read in place (members are read into memory, nothing is unpacked).
 
 The camera's levels are properties of the recording: the BorealHDR sample saturates at
-:data:`BOREALHDR_WHITE_LEVEL` = 4094 DN with black level 0.  A recording's own
-``exposim.json`` (written by ``synth``) overrides them; these constants are the only
-fallback anywhere in exposim.
+:data:`BOREALHDR_LEVELS` (black 0, white 4094 DN; one :class:`~emulator.levels.Levels`
+value, defined in the leaf module :mod:`emulator.levels` so that :mod:`emulator.response`
+can default to it without an import circle).  A recording's own ``exposim.json`` (written
+by ``synth``) overrides them; these levels are the only fallback anywhere in exposim.
 """
 
 from __future__ import annotations
@@ -45,9 +46,10 @@ from emulator.io.framecache import FrameCacheEntryError, cached_frame_path, read
 from emulator.io.imu import read_imu
 from emulator.io.layout import find_response_file
 from emulator.io.png import decode_png16, write_png16
-from emulator.response import BOREALHDR_BLACK_LEVEL, BOREALHDR_WHITE_LEVEL
+from emulator.levels import BOREALHDR_LEVELS
 
 __all__ = [
+    "BOREALHDR_LEVELS",
     "CAMERA_FOLDERS",
     "METADATA_FILE",
     "FileSource",
@@ -375,8 +377,8 @@ def load_sequence(
         else:
             source = FolderSource(root)
     meta = read_recording_metadata(root, source)
-    white = int(white_level if white_level is not None else meta.get("white_level", BOREALHDR_WHITE_LEVEL))
-    black = int(black_level if black_level is not None else meta.get("black_level", BOREALHDR_BLACK_LEVEL))
+    white = int(white_level if white_level is not None else meta.get("white_level", BOREALHDR_LEVELS.white))
+    black = int(black_level if black_level is not None else meta.get("black_level", BOREALHDR_LEVELS.black))
 
     cache_dir = resolve_frame_cache(root, frame_cache) if isinstance(source, FolderSource) else None
     per_camera: dict[str, list[Frame]] = {}

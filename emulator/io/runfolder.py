@@ -49,7 +49,7 @@ from emulator.io.runcsv import (CSV_COLUMNS, CSV_FILE, EXTRA_COLUMNS, format_row
                                 tables_from_rows)
 from emulator.io.runlock import LOCK_FILE, RunLock, utc_now_iso
 from emulator.io.stack import TIMES_FILE, read_times, write_times
-from emulator.response import BOREALHDR_BLACK_LEVEL, BOREALHDR_WHITE_LEVEL
+from emulator.levels import BOREALHDR_LEVELS, Levels
 
 __all__ = [
     "RUN_FILE",
@@ -347,8 +347,13 @@ class RunFolder:
     meta: dict
     methods: dict[str, MethodRun] = field(default_factory=dict)
     sequence: Path | None = None
-    white_level: int = BOREALHDR_WHITE_LEVEL
-    black_level: int = BOREALHDR_BLACK_LEVEL
+    white_level: int = BOREALHDR_LEVELS.white
+    black_level: int = BOREALHDR_LEVELS.black
+
+    @property
+    def levels(self) -> Levels:
+        """The clip levels as one :class:`~emulator.levels.Levels` value."""
+        return Levels(self.black_level, self.white_level)
 
 
 def _level(meta: dict, key: str, default: int, run_json: Path) -> int:
@@ -469,10 +474,9 @@ def read_run_folder(
         if unknown:
             raise RunFolderError(f"{run_dir}: method(s) {unknown} not in this run; it has {listed}")
         listed = [m for m in listed if m in methods]
-    white = _level(meta, "white_level", BOREALHDR_WHITE_LEVEL, run_json)
-    black = _level(meta, "black_level", BOREALHDR_BLACK_LEVEL, run_json)
-    if not 0 <= black < white <= 65535:
-        raise RunFolderError(f"{run_json}: need 0 <= black_level < white_level <= 65535, got {black}, {white}")
+    white = _level(meta, "white_level", BOREALHDR_LEVELS.white, run_json)
+    black = _level(meta, "black_level", BOREALHDR_LEVELS.black, run_json)
+    Levels.checked(black, white, where=str(run_json), error=RunFolderError)
     return RunFolder(
         path=run_dir,
         meta=meta,

@@ -33,7 +33,7 @@ import numpy as np
 from emulator.errors import CalibrationError
 from emulator.io.files import atomic_write_bytes, read_metadata, write_metadata
 from emulator.io.png import read_png16, write_png16
-from emulator.response import BOREALHDR_BLACK_LEVEL, BOREALHDR_WHITE_LEVEL
+from emulator.levels import BOREALHDR_LEVELS, Levels
 
 __all__ = [
     "TIMES_FILE",
@@ -136,8 +136,8 @@ class Stack:
     names: list[str]
     timestamps_s: np.ndarray
     exposures_ms: np.ndarray
-    white_level: int = BOREALHDR_WHITE_LEVEL
-    black_level: int = BOREALHDR_BLACK_LEVEL
+    white_level: int = BOREALHDR_LEVELS.white
+    black_level: int = BOREALHDR_LEVELS.black
     _images: np.ndarray | None = field(default=None, repr=False)
 
     def __len__(self) -> int:
@@ -171,7 +171,7 @@ class Stack:
 
 
 #: Largest DN of the 12-bit data a stack holds (16-bit PNGs carrying 12-bit values).
-MAX_DN_12BIT = 4095
+MAX_DN_12BIT = 4095  # (the bound Levels(bit_depth=12) checks)
 
 
 def read_stack(path: str | os.PathLike, *, white_level: int | None = None, black_level: int | None = None) -> Stack:
@@ -189,13 +189,11 @@ def read_stack(path: str | os.PathLike, *, white_level: int | None = None, black
     if not times.is_file():
         raise CalibrationError(f"{root}: no {TIMES_FILE} (expected the TUM layout: times.txt and images/)")
     meta = read_metadata(root / STACK_METADATA, CalibrationError)
-    white = int(white_level if white_level is not None else meta.get("white_level", BOREALHDR_WHITE_LEVEL))
-    black = int(black_level if black_level is not None else meta.get("black_level", BOREALHDR_BLACK_LEVEL))
+    white = int(white_level if white_level is not None else meta.get("white_level", BOREALHDR_LEVELS.white))
+    black = int(black_level if black_level is not None else meta.get("black_level", BOREALHDR_LEVELS.black))
     where = "white_level" if white_level is not None else f"{root / STACK_METADATA} white_level"
-    if not 0 <= black < white <= MAX_DN_12BIT:
-        # a white level above the 12-bit range would make saturated pixels look valid to the fit
-        raise CalibrationError(f"{where} {white} (black level {black}): need 0 <= black < white <= "
-                               f"{MAX_DN_12BIT}, the 12-bit range of the data")
+    # a white level above the 12-bit range would make saturated pixels look valid to the fit
+    Levels.checked(black, white, bit_depth=12, where=where, error=CalibrationError)
     entries = read_times(times, CalibrationError)
     if not entries:
         raise CalibrationError(f"{times}: lists no images")
@@ -253,7 +251,7 @@ def write_stack(
         write_png16(root / IMAGES_DIR / f"{name}.png", img, overwrite=overwrite)
     write_times(root / TIMES_FILE, names, stamps, exposures, overwrite=overwrite)
     if white_level is not None or black_level is not None:
-        meta = {"white_level": int(white_level if white_level is not None else BOREALHDR_WHITE_LEVEL),
-                "black_level": int(black_level if black_level is not None else BOREALHDR_BLACK_LEVEL)}
+        meta = {"white_level": int(white_level if white_level is not None else BOREALHDR_LEVELS.white),
+                "black_level": int(black_level if black_level is not None else BOREALHDR_LEVELS.black)}
         write_metadata(root / STACK_METADATA, meta, overwrite=overwrite)
     return root

@@ -1,0 +1,50 @@
+"""One Levels (black, white) value; the BorealHDR defaults defined once."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+
+from emulator.errors import CalibrationError, ExposimError, ResponseError
+from emulator.levels import BOREALHDR_LEVELS, Levels
+
+
+def test_borealhdr_levels_are_the_one_default_and_the_old_names_alias_them():
+    import emulator.io.borealhdr as bh
+    import emulator.response as r
+
+    assert (BOREALHDR_LEVELS.black, BOREALHDR_LEVELS.white, BOREALHDR_LEVELS.bit_depth) == (0, 4094, 12)
+    assert bh.BOREALHDR_LEVELS is BOREALHDR_LEVELS
+    assert (r.BOREALHDR_BLACK_LEVEL, r.BOREALHDR_WHITE_LEVEL) == (0, 4094)
+    assert r.CameraResponse.linear().levels == Levels(0, 4094)
+    assert BOREALHDR_LEVELS.span_dn == 4094
+
+
+def test_levels_is_frozen_and_validated():
+    lv = Levels(64, 4095, bit_depth=12)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        lv.white = 10
+    assert Levels(0, 65535) == Levels(0.0, 65535.0)  # integral floats are ints
+    assert type(Levels(0.0, 10.0).white) is int
+    for black, white, bits, msg in [(10, 10, 16, "black_level < white_level"),
+                                    (-1, 10, 16, "black_level < white_level"),
+                                    (0, 4096, 12, "<= 4095 \\(12 bits\\)"),
+                                    (0, 65536, 16, "<= 65535"),
+                                    (0, 10.5, 16, "white_level must be an integer"),
+                                    (0, 10, 17, "bit_depth")]:
+        with pytest.raises(ExposimError, match=msg):
+            Levels(black, white, bits)
+    with pytest.raises(CalibrationError, match="^stack.json white_level: need 0 <= black_level"):
+        Levels.checked(5, 4, bit_depth=12, where="stack.json white_level", error=CalibrationError)
+    assert Levels.checked(5, 4000, bit_depth=12) == Levels(5, 4000, 12)
+
+
+def test_readers_use_levels(tmp_path):
+    from emulator.response import CameraResponse
+
+    import numpy as np
+
+    with pytest.raises(ResponseError, match="^custom: need 0 <= black_level < white_level <= 65535"):
+        CameraResponse(np.linspace(0.0, 1.0, 101), 100, 100)
+    assert CameraResponse(np.linspace(0.0, 1.0, 101), 100, 3).levels == Levels(3, 100)
