@@ -1,0 +1,63 @@
+"""What the feature and VO benchmarks share: the stated 8-bit conversion, the frames used,
+the version, the progress bar and the contact sheet of the compared images.
+
+Split out of :mod:`emulator.metrics.bench`; :mod:`emulator.metrics.vo_bench` and ``bench``
+both import from here (no circle).
+"""
+
+from __future__ import annotations
+
+from emulator.errors import MetricsError
+from emulator.io.runfolder import MethodRun
+from emulator.metrics.features import load_gray8
+
+__all__ = ["CONVERSION"]
+
+#: The 12-bit to 8-bit conversion, as stated in the results.
+CONVERSION = (
+    "gray8 = clip(round((cv2.cvtColor(raw, COLOR_BayerRG2GRAY) - black_level) * 255 / "
+    "(white_level - black_level)), 0, 255) for png16 Bayer images (emulator.gray.bayer_to_gray8); png8 images, "
+    "converted by exposim run with the same function, are used as saved"
+)
+
+
+def _version() -> str:
+    from emulator import __version__
+
+    return __version__
+
+
+def _progress(iterable, progress: bool, desc: str, total: int):
+    from tqdm import tqdm
+
+    return tqdm(iterable, desc=desc, total=total, unit="img", disable=not progress, leave=False)
+
+
+def _frames(method: MethodRun, max_frames: int | None):
+    frames = method.frames
+    if max_frames is not None:
+        if max_frames < 2:
+            raise MetricsError(f"max_frames must be at least 2, got {max_frames}")
+        frames = frames[:max_frames]
+    return frames
+
+
+def _features_sheet(run, result: dict, max_frames, n_cycles: int = 6) -> str:
+    """Contact sheet of the images a benchmark compared (first run): sampled left frames per method."""
+    from emulator.report.html import Thumb, _sample, contact_sheet, thumbnail
+
+    rows = []
+    for name, method in run.methods.items():
+        frames = _frames(method, max_frames)
+        per = {} if result is None else result["methods"].get(name, {})
+        cells = []
+        for i in _sample(len(frames), n_cycles):
+            f = frames[i]
+            gray = load_gray8(f.left, white_level=run.white_level, black_level=run.black_level)
+            exposure = "?" if f.exposure_ms is None else f"{f.exposure_ms:.2f} ms"
+            caption = f"frame {i}: {exposure}"
+            if per.get("n_keypoints"):
+                caption += f", {per['n_keypoints'][i]} keypoints"
+            cells.append(Thumb(thumbnail(gray), caption))
+        rows.append((name, cells))
+    return contact_sheet(rows, title=f"Images compared ({run.path.name}, left camera, sampled frames)")
