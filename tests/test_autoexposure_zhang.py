@@ -133,3 +133,19 @@ def test_paper_mode_converges_from_both_sides(pcalib):
     assert 6.0 < ends[0] < 16.0  # a mid exposure (gradient-rich, little saturation)
     for t in ends:
         assert 1120 < capture(t).mean() < 3300
+
+
+def test_percentile_is_named_as_the_fraction_it_is_and_the_old_name_still_works(pcalib):
+    from emulator.autoexposure import make_method
+    from emulator.autoexposure._base import AutoExposureError
+
+    new = make_method("zhang", mode="paper", percentile_fraction=0.6)
+    old = make_method("zhang", mode="paper", percentile=0.6)  # deprecated alias (--option zhang.percentile=0.6)
+    assert new.percentile_fraction == old.percentile_fraction == old.percentile == 0.6
+    assert make_method("zhang", mode="paper").percentile_fraction == 0.7
+    assert make_method("zhang", mode="borealhdr", response=pcalib).percentile_fraction == 0.8
+    assert new._options()["percentile_fraction"] == 0.6 and "percentile" not in new._options()
+    with pytest.raises(AutoExposureError, match="percentile_fraction 0.6 and its deprecated alias percentile 0.7"):
+        make_method("zhang", percentile_fraction=0.6, percentile=0.7)
+    with pytest.raises(AutoExposureError, match="percentile_fraction must be a fraction in \\(0, 1\\), got 60"):
+        make_method("zhang", percentile_fraction=60.0)

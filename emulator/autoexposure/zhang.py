@@ -191,8 +191,11 @@ class Zhang2017(AutoExposureMethod):
         The camera's response.  borealhdr mode reads its pcalib samples (``response.knots``);
         paper mode its per-DN table g.  None warns (see the module docstring).
     mode : {"paper", "borealhdr"}
+    percentile_fraction : float or None
+        p of the soft percentile, a fraction in (0, 1) (default 0.8 borealhdr, 0.7 paper).
     percentile : float or None
-        p of the soft percentile (default 0.8 borealhdr, 0.7 paper).
+        Deprecated alias of ``percentile_fraction`` (the same fraction; kept for
+        ``--option zhang.percentile=...`` and old ``run.json`` files).
     step : float or None
         borealhdr: gamma in ms per unit of m (default 1e-6); paper: the dimensionless gain
         of the ln-domain ascent (default :data:`STEP_PAPER`).
@@ -211,17 +214,24 @@ class Zhang2017(AutoExposureMethod):
         response=None,
         mode: str = "paper",
         range_ms="default",
-        percentile: float | None = None,
+        percentile_fraction: float | None = None,
         step: float | None = None,
         order: int = SINE_ORDER,
         floor_ms: float = FLOOR_MS,
         scale_step_with_size: bool = True,
+        percentile: float | None = None,
     ) -> None:
         super().__init__(mode=mode, range_ms=range_ms)
         ref = self.mode == "borealhdr"
-        self.percentile = float(percentile if percentile is not None else (PERCENTILE_REF if ref else PERCENTILE_PAPER))
-        if not 0.0 < self.percentile < 1.0:
-            raise AutoExposureError(f"percentile must lie in (0, 1), got {percentile!r}")
+        if percentile is not None:  # the old name of the same fraction
+            if percentile_fraction is not None and float(percentile_fraction) != float(percentile):
+                raise AutoExposureError(f"percentile_fraction {percentile_fraction!r} and its deprecated alias "
+                                        f"percentile {percentile!r} differ; give percentile_fraction only")
+            percentile_fraction = percentile
+        given = percentile_fraction
+        self.percentile_fraction = float(given if given is not None else (PERCENTILE_REF if ref else PERCENTILE_PAPER))
+        if not 0.0 < self.percentile_fraction < 1.0:
+            raise AutoExposureError(f"percentile_fraction must be a fraction in (0, 1), got {given!r}")
         self.step = float(step if step is not None else (STEP_REF if ref else STEP_PAPER))
         self.order = int(order)
         self.floor_ms = float(floor_ms)
@@ -310,7 +320,7 @@ class Zhang2017(AutoExposureMethod):
         if not (math.isfinite(d[0]) and math.isfinite(d[-1])):
             d[~np.isfinite(d)] = 0.0
             d.sort()
-        w = sine_weights(d.size, self.percentile, self.order, "l2")
+        w = sine_weights(d.size, self.percentile_fraction, self.order, "l2")
         return float(np.dot(w, d))
 
     def _paper_derivative(self, y: np.ndarray, t: float) -> tuple[float, float]:
@@ -321,7 +331,7 @@ class Zhang2017(AutoExposureMethod):
             d[bad] = 0.0
         bins = np.sqrt(g2).astype(np.intp)  # one Scharr unit per bin
         counts = np.bincount(bins)
-        cum_w = _cumulative_weights(d.size, self.percentile, self.order)
+        cum_w = _cumulative_weights(d.size, self.percentile_fraction, self.order)
         ends = np.cumsum(counts)
         starts = ends - counts
         occupied = counts > 0
@@ -358,10 +368,15 @@ class Zhang2017(AutoExposureMethod):
             return t_new  # the base guard returns t
         return max(t_new, self.floor_ms)
 
+    @property
+    def percentile(self) -> float:
+        """Deprecated alias of :attr:`percentile_fraction`."""
+        return self.percentile_fraction
+
     def _options(self) -> dict:
         resp = self.response
         return {
-            "percentile": self.percentile,
+            "percentile_fraction": self.percentile_fraction,
             "step": self.step,
             "order": self.order,
             "floor_ms": self.floor_ms,

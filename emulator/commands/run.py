@@ -57,7 +57,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "default: SEQUENCE/.exposim-frames when it exists)")
     p.add_argument("--seed", type=int, default=None, help="seed of kim's Gaussian-process optimizer (default 0)")
     p.add_argument("--option", action="append", default=[], metavar="METHOD.KEY=VALUE",
-                   help="a method option, e.g. zhang.percentile=0.7 or kim.window=8 (VALUE is JSON or text); repeatable")
+                   help="a method option, e.g. zhang.percentile_fraction=0.7 or kim.window=8 (VALUE is JSON or text); repeatable")
     p.add_argument("--noise", choices=("none", "consistent"), default=None,
                    help="none (default): exact emulation (eq. 2); consistent: add the noise a capture at the "
                         "target exposure would have where the source bracket is cleaner (needs a noise model)")
