@@ -331,10 +331,11 @@ def test_rpe_by_length_scale_and_errors():
     est = trajectory_from_poses(stamps, doubled)
     raw = rpe_by_length(ref, est, [1.0], align_scale=False)
     assert raw["scale"] == 1.0 and raw["path_length_m"] == pytest.approx(4.0)
-    assert raw["deltas"][0]["trans_pct"]["median"] == pytest.approx(100.0)  # twice as far: error = length
+    assert raw["deltas"][0]["trans_percent"]["median"] == pytest.approx(100.0)  # twice as far: error = length
+    assert raw["deltas"][0]["trans_pct"] == raw["deltas"][0]["trans_percent"]  # the deprecated alias
     assert raw["deltas"][0]["rot_deg_per_m"]["max"] == 0.0
     none = rpe_by_length(ref, est, [100.0], align_scale=False)
-    assert none["deltas"][0]["n_pairs"] == 0 and none["deltas"][0]["trans_pct"] is None
+    assert none["deltas"][0]["n_pairs"] == 0 and none["deltas"][0]["trans_percent"] is None
     with pytest.raises(TrajectoryError, match="straight"):  # Umeyama needs a non-degenerate path
         rpe_by_length(ref, est, [1.0], align_scale=True)
     curved = ground_truth(n)

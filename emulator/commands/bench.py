@@ -191,10 +191,11 @@ def _vo_summary(args, results) -> int:
         for name, m in results["methods"].items():
             line = f"{name}: {m['status']}, {m['n_tracked']}/{m['n_frames']} frames tracked"
             if m["rpe"]:
-                first = next((e for e in m["rpe"]["deltas"] if e["trans_pct"]), None)
+                first = next((e for e in m["rpe"]["deltas"] if e.get("trans_percent") or e.get("trans_pct")), None)
                 if first:
+                    trans = first.get("trans_percent") or first["trans_pct"]  # trans_pct: results before the rename
                     line += (
-                        f", RPE at {first['delta_m']:.2f} m: {first['trans_pct']['median']:.2f} % "
+                        f", RPE at {first['delta_m']:.2f} m: {trans['median']:.2f} % "
                         f"{first['rot_deg_per_m']['median']:.3f} deg/m"
                     )
             print(line, file=sys.stderr)

@@ -193,8 +193,9 @@ def rpe_by_length(
     -------
     dict
         ``scale`` applied to the estimate, ``path_length_m`` of the reference, and
-        ``deltas``: one entry per delta with ``delta_m``, ``n_pairs``, ``trans_pct``
-        (translation error in % of the pair's path length: median, mean, rmse, max) and
+        ``deltas``: one entry per delta with ``delta_m``, ``n_pairs``, ``trans_percent``
+        (translation error in % of the pair's path length: median, mean, rmse, max;
+        ``trans_pct`` is a deprecated alias holding the same statistics) and
         ``rot_deg_per_m`` (rotation error in degrees per metre, same statistics); the
         statistics are None when no pair has that length.
 
@@ -231,7 +232,7 @@ def rpe_by_length(
         delta = float(delta)
         if not delta > 0:
             raise MetricsError(f"deltas must be positive, got {delta}")
-        entry = {"delta_m": delta, "n_pairs": 0, "trans_pct": None, "rot_deg_per_m": None}
+        entry = {"delta_m": delta, "n_pairs": 0, "trans_percent": None, "trans_pct": None, "rot_deg_per_m": None}
         errors = {}
         pending: list = []
         try:
@@ -258,7 +259,8 @@ def rpe_by_length(
         entry["n_pairs"] = int(pairs.shape[0])
         if evo_results is not None:
             evo_results.extend(pending)
-        entry["trans_pct"] = _stats(errors[metrics.PoseRelation.translation_part] / length * 100.0)
+        entry["trans_percent"] = _stats(errors[metrics.PoseRelation.translation_part] / length * 100.0)
+        entry["trans_pct"] = entry["trans_percent"]  # deprecated alias of trans_percent (older readers)
         entry["rot_deg_per_m"] = _stats(errors[metrics.PoseRelation.rotation_angle_deg] / length)
         out.append(entry)
     return {"scale": scale, "path_length_m": float(cumulative[-1]), "deltas": out}

@@ -56,6 +56,13 @@ PAPER_VO = {
 }
 
 
+def _trans_percent(entry: dict):
+    """Translation statistics (%) of one RPE ``deltas`` entry; results written before the key
+    was ``trans_percent`` have ``trans_pct``."""
+    value = entry.get("trans_percent")
+    return entry.get("trans_pct") if value is None else value
+
+
 def _boxplot(ax, data: list, labels: list[str]) -> None:
     present = [(d, name) for d, name in zip(data, labels) if len(d)]
     if not present:
@@ -127,13 +134,14 @@ def rpe_figure(results: dict):
         rpe = method.get("rpe")
         if not rpe:
             continue
-        d = [e["delta_m"] for e in rpe["deltas"] if e["trans_pct"]]
+        d = [e["delta_m"] for e in rpe["deltas"] if _trans_percent(e)]
         if not d:
             continue
         failed = method["status"] != "success"
         style = FAILED_STYLE if failed else "-"
         label = f"{name} (VO failed on {plural(len(method.get('failures', [])), 'frame')})" if failed else name
-        a.plot(d, [e["trans_pct"]["median"] for e in rpe["deltas"] if e["trans_pct"]], style, marker="o", label=label)
+        a.plot(d, [_trans_percent(e)["median"] for e in rpe["deltas"] if _trans_percent(e)], style, marker="o",
+               label=label)
         b.plot(d, [e["rot_deg_per_m"]["median"] for e in rpe["deltas"] if e["rot_deg_per_m"]], style, marker="o",
                label=label)
         drawn = True
@@ -263,9 +271,9 @@ def vo_verdicts(results: dict) -> list[str]:
         rpe = m.get("rpe")
         if not rpe:
             continue
-        t = [e["trans_pct"]["median"] for e in rpe["deltas"] if e.get("trans_pct")]
+        t = [_trans_percent(e)["median"] for e in rpe["deltas"] if _trans_percent(e)]
         r = [e["rot_deg_per_m"]["median"] for e in rpe["deltas"] if e.get("rot_deg_per_m")]
-        deltas += [e["delta_m"] for e in rpe["deltas"] if e.get("trans_pct")]
+        deltas += [e["delta_m"] for e in rpe["deltas"] if _trans_percent(e)]
         if t:
             trans[name] = min(t)
             on_failed += m["status"] != "success"
@@ -382,7 +390,8 @@ def vo_report(results: dict, figures: dict[str, str]) -> str:
         rpe = m.get("rpe")
         if rpe:
             trans = ", ".join(
-                f"{e['delta_m']:.2f} m: {_fmt(e['trans_pct'] and e['trans_pct']['median'], '.2f')}" for e in rpe["deltas"]
+                f"{e['delta_m']:.2f} m: {_fmt(_trans_percent(e) and _trans_percent(e)['median'], '.2f')}"
+                for e in rpe["deltas"]
             )
             rot = ", ".join(
                 f"{e['delta_m']:.2f} m: {_fmt(e['rot_deg_per_m'] and e['rot_deg_per_m']['median'], '.3f')}"

@@ -72,7 +72,7 @@ def _span(lo: float, hi: float, spec: str) -> str:
     return format(lo, spec) if format(lo, spec) == format(hi, spec) else f"{lo:{spec}}..{hi:{spec}}"
 
 
-def success_verdict(tau: int, rates_pct: Mapping[str, float | None], max_matches: int | None,
+def success_verdict(tau: int, rates_percent: Mapping[str, float | None], max_matches: int | None,
                     min_matches: int | None, image_wh) -> str:
     """Verdict on the success rate at ``tau`` (rates in %, one per method), from the match counts.
 
@@ -84,7 +84,7 @@ def success_verdict(tau: int, rates_pct: Mapping[str, float | None], max_matches
     >>> success_verdict(100, {"fixed": 0.0}, 61, 3, (256, 160)).split(":")[0]
     'Success at tau = 100 is 0 % for every method, as expected'
     """
-    r = _range(rates_pct.values())
+    r = _range(rates_percent.values())
     if r is None or max_matches is None:
         return f"Success at tau = {tau}: cannot be judged, no image pair was analysed."
     lo, hi = r
@@ -134,7 +134,7 @@ def matches_verdict(median_matches: float | None, image_wh, method: str = "M_fix
             f"paper's figure is {expected:.0f}; the measurement is {shown}x that, {verdict}.")
 
 
-def uniformity_verdict(median_uniformity_pct: Mapping[str, float | None], median_keypoints: float | None,
+def uniformity_verdict(median_uniformity_percent: Mapping[str, float | None], median_keypoints: float | None,
                        grid) -> str:
     """Verdict on the median uniformity (%, one per method) against the paper's 66-67 %.
 
@@ -145,7 +145,7 @@ def uniformity_verdict(median_uniformity_pct: Mapping[str, float | None], median
     >>> "at most" in uniformity_verdict({"kim": 20.0}, 50, (20, 20))
     True
     """
-    r = _range(median_uniformity_pct.values())
+    r = _range(median_uniformity_percent.values())
     if r is None:
         return "Uniformity: cannot be judged, no image was analysed."
     lo, hi = r
@@ -167,13 +167,13 @@ def uniformity_verdict(median_uniformity_pct: Mapping[str, float | None], median
     return text + "Comparable with the paper."
 
 
-def rpe_verdict(trans_pct: Mapping[str, float | None], rot_deg_per_m: Mapping[str, float | None],
+def rpe_verdict(trans_percent: Mapping[str, float | None], rot_deg_per_m: Mapping[str, float | None],
                 deltas_m, n_on_failed_runs: int = 0) -> str:
     """Verdict on the minimal median RPE (per method) against the paper's 4.21-5.75 % and 0.07-0.09 deg/m.
 
     ``deltas_m``: the pair lengths the minima were taken over, metres.
     """
-    t, r = _range(trans_pct.values()), _range(rot_deg_per_m.values())
+    t, r = _range(trans_percent.values()), _range(rot_deg_per_m.values())
     if t is None:
         return "RPE: cannot be judged, no RPE was computed (see the reasons beside the table)."
     d = _range(deltas_m)
