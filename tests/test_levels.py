@@ -48,3 +48,21 @@ def test_readers_use_levels(tmp_path):
     with pytest.raises(ResponseError, match="^custom: need 0 <= black_level < white_level <= 65535"):
         CameraResponse(np.linspace(0.0, 1.0, 101), 100, 100)
     assert CameraResponse(np.linspace(0.0, 1.0, 101), 100, 3).levels == Levels(3, 100)
+
+
+def test_calibration_percent_names_keep_their_old_aliases():
+    import inspect
+
+    import numpy as np
+
+    from emulator.calibration.result import CalibrationResult
+    from emulator.calibration.stack_engel2016 import calibrate_stack
+    from emulator.response import CameraResponse
+
+    r = CalibrationResult(CameraResponse.linear(), np.zeros(2), np.zeros(2), "m", (0, 1), 1.0, 1.0, 2.5, np.nan,
+                          np.zeros(0), np.zeros(0), 4094, 0)
+    assert r.residual_rms_percent == r.residual_rms_pct == 2.5
+    d = r.to_dict()
+    assert d["residual_rms_percent"] == d["residual_rms_pct"] == 2.5
+    params = inspect.signature(calibrate_stack).parameters
+    assert params["static_floor_percent"].default == 1.0 and params["static_floor_pct"].default is None

@@ -181,7 +181,7 @@ def fit_comparametric(
         observed_dn=observed,
         residual_rms_dn=rms,
         residual_robust_dn=_robust_scale(r),
-        residual_rms_pct=100.0 * rms / (white - black),
+        residual_rms_percent=100.0 * rms / (white - black),
         noise_dn=float("nan"),
         samples_dn=d_hi.copy(),
         samples_g=ratio * resp.inverse(d_lo),

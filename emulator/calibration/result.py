@@ -94,8 +94,9 @@ class CalibrationResult:
     residual_rms_dn, residual_robust_dn : float
         Fit residual in DN (RMS and 1.4826 * MAD).  Stack: observed DN minus f(t * B);
         in situ: matched quantile of the longer bracket minus f(r * g(shorter)).
-    residual_rms_pct : float
-        ``residual_rms_dn`` in % of the DN range (white - black).
+    residual_rms_percent : float
+        ``residual_rms_dn`` in % of the DN range (white - black).  ``residual_rms_pct`` is a
+        deprecated alias (attribute, and a second key of :meth:`to_dict`).
     noise_dn : float
         Noise estimated from the images (stack only; NaN otherwise).
     samples_dn, samples_g : ndarray
@@ -111,13 +112,18 @@ class CalibrationResult:
     observed_dn: tuple[int, int]
     residual_rms_dn: float
     residual_robust_dn: float
-    residual_rms_pct: float
+    residual_rms_percent: float
     noise_dn: float
     samples_dn: np.ndarray
     samples_g: np.ndarray
     white_level: int
     black_level: int
     info: dict = field(default_factory=dict)
+
+    @property
+    def residual_rms_pct(self) -> float:
+        """Deprecated alias of :attr:`residual_rms_percent`."""
+        return self.residual_rms_percent
 
     def to_dict(self) -> dict:
         """JSON-ready summary (the knots included, the plot samples not)."""
@@ -129,7 +135,8 @@ class CalibrationResult:
             "observed_dn": list(self.observed_dn),
             "residual_rms_dn": self.residual_rms_dn,
             "residual_robust_dn": self.residual_robust_dn,
-            "residual_rms_pct": self.residual_rms_pct,
+            "residual_rms_percent": self.residual_rms_percent,
+            "residual_rms_pct": self.residual_rms_percent,  # deprecated alias of residual_rms_percent
             "noise_dn": None if not math.isfinite(self.noise_dn) else self.noise_dn,
             "knots_dn": self.knots_dn.tolist(),
             "knots_g": self.knots_g.tolist(),

@@ -373,7 +373,7 @@ def fit_inverse_response(
         observed_dn=observed,
         residual_rms_dn=rms,
         residual_robust_dn=robust,
-        residual_rms_pct=100.0 * rms / (white - black),
+        residual_rms_percent=100.0 * rms / (white - black),
         noise_dn=float("nan"),
         samples_dn=d_flat[pick].astype(np.float64),
         samples_g=pred_g[pick],
@@ -388,10 +388,11 @@ def calibrate_stack(
     *,
     max_pixels: int = 65536,
     static_factor: float = 5.0,
-    static_floor_pct: float = 1.0,
+    static_floor_percent: float = 1.0,
     check_static: bool = True,
     rng: np.random.Generator | int | None = 0,
     progress: Progress = None,
+    static_floor_pct: float | None = None,
     **fit_kwargs,
 ) -> CalibrationResult:
     """Recover the inverse response from a static-scene stack (TUM layout) by ALS.
@@ -403,8 +404,11 @@ def calibrate_stack(
     Raises :class:`CalibrationError` naming the stack for fewer than two distinct
     exposures, images of mixed sizes, a stack whose pixels are all clipped, and a scene that
     is not static: the RMS fit residual exceeds ``max(static_factor * noise,
-    static_floor_pct % of the range)`` (disable with ``check_static=False``).
+    static_floor_percent % of the range)`` (disable with ``check_static=False``).
+    ``static_floor_pct`` is a deprecated alias of ``static_floor_percent``.
     """
+    if static_floor_pct is not None:
+        static_floor_percent = float(static_floor_pct)
     st = stack if isinstance(stack, Stack) else read_stack(stack)
     src = str(st.path)
     distinct = np.unique(st.exposures_ms)
@@ -450,7 +454,7 @@ def calibrate_stack(
     noise_dn = float(np.nanmedian(noise_arr)) if np.isfinite(noise_arr).any() else float("nan")
     result.noise_dn = noise_dn
     span = st.white_level - st.black_level
-    limit = max(static_factor * (noise_dn if math.isfinite(noise_dn) else 0.0), static_floor_pct / 100 * span)
+    limit = max(static_factor * (noise_dn if math.isfinite(noise_dn) else 0.0), static_floor_percent / 100 * span)
     result.info.update(
         {
             "stack": src,
@@ -463,7 +467,7 @@ def calibrate_stack(
         raise CalibrationError(
             f"{src}: scene is not static: fit residual {result.residual_rms_dn:.1f} DN RMS is far above the "
             f"noise ({noise_dn:.1f} DN estimated from the images; limit {limit:.1f} DN = max({static_factor:g} x "
-            f"noise, {static_floor_pct:g} % of range)); did the camera or the scene move?"
+            f"noise, {static_floor_percent:g} % of range)); did the camera or the scene move?"
             + "".join(f"; {o['warning']}" for o in result.info["outlier_images"])
         )
     return result

@@ -186,7 +186,7 @@ def _calibrate(args) -> int:
     print(f"DN range    observed {result.observed_dn[0]}..{result.observed_dn[1]} "
           f"(extrapolated outside), levels {result.black_level}..{result.white_level}")
     noise = "" if result.noise_dn != result.noise_dn else f", noise ~{result.noise_dn:.2f} DN"
-    print(f"residual    {result.residual_rms_dn:.2f} DN RMS ({result.residual_rms_pct:.3f} % of range), "
+    print(f"residual    {result.residual_rms_dn:.2f} DN RMS ({result.residual_rms_percent:.3f} % of range), "
           f"robust {result.residual_robust_dn:.2f} DN{noise}")
     for w in info.get("warnings", []):
         print(f"warning     {w}")
