@@ -28,7 +28,7 @@ DESCRIPTION = (
     "On synthetic stereo walks, every AE method runs twice: emulated (the normal closed loop on the "
     "bracketed recording, plain and noise-consistent emulation) and live (each cycle the camera captures at the "
     "method's own exposure from the rendered radiance, at the emulator's bracket instant or at the cycle's first "
-    "shot). Compares exposure trajectories, images, features/VO metrics and the methods' rankings (Kendall tau), "
+    "shot; and natively: the AE on every frame at the recorder's 22 fps with an exposure latency, see --latency-frames). Compares exposure trajectories, images, features/VO metrics and the methods' rankings (Kendall tau), "
     "and measures the noise variance ratio. Writes results.json, report.md, exposure_<scene>.png, metrics.png.")
 
 
