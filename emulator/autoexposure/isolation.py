@@ -199,6 +199,7 @@ def _isolated(fn, name: str, on_error):
     outer = getattr(_local, "buffer", None)
     _local.buffer = parts
     _enter_capture()
+    routers = (sys.stdout, sys.stderr)
     try:
         return fn()
     except KeyboardInterrupt:
@@ -208,6 +209,11 @@ def _isolated(fn, name: str, on_error):
     except BaseException as exc:  # SystemExit and GeneratorExit included: the method fails alone
         raise on_error(exc) from exc
     finally:
+        # a method that replaced sys.stdout / sys.stderr for good gets them put back
+        if isinstance(routers[0], _Router) and sys.stdout is not routers[0]:
+            sys.stdout = routers[0]
+        if isinstance(routers[1], _Router) and sys.stderr is not routers[1]:
+            sys.stderr = routers[1]
         _leave_capture()
         _local.buffer = outer
         np.seterr(**err)
@@ -224,7 +230,12 @@ def call_method(method, raw, exposure_ms):
     ``KeyboardInterrupt``.
     """
     name = str(getattr(method, "name", type(method).__name__))
-    image = frozen(raw)
+    from emulator.autoexposure.registry import PluginMethod
+
+    # built-ins share one frozen copy (and its per-frame values); a plugin gets a private one,
+    # so that even a write through the data pointer (ctypes, __array_interface__) reaches only
+    # its own copy
+    image = _bytes_view(raw) if isinstance(method, PluginMethod) and isinstance(raw, np.ndarray) else frozen(raw)
     return _isolated(lambda: method.next_exposure(image, exposure_ms), name,
                      lambda exc: MethodFailed(_describe(exc)))
 
