@@ -389,3 +389,26 @@ class HostileAttrs(_Base):
 
     def config(self):
         sys.exit(0)
+
+
+class Interrupt(_Base):
+    """Ctrl-C arriving while the method runs, at its third call."""
+
+    name = "h-interrupt"
+
+    def __init__(self):
+        self.n = 0
+
+    def attack(self, raw):
+        self.n += 1
+        if self.n == 3:
+            raise KeyboardInterrupt
+
+
+class Sleepy(_Base):
+    """Slow enough that a signal arrives mid-run."""
+
+    name = "h-sleepy"
+
+    def attack(self, raw):
+        time.sleep(0.3)
