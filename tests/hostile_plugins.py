@@ -412,3 +412,18 @@ class Sleepy(_Base):
 
     def attack(self, raw):
         time.sleep(0.3)
+
+
+class ThreadPrinter(_Base):
+    """Prints from a background thread (a logger, a progress thread) after its call returned."""
+
+    name = "h-thread-printer"
+
+    def attack(self, raw):
+        import threading
+
+        def later():
+            time.sleep(0.02)
+            print("hostile thread output {")
+
+        threading.Thread(target=later, daemon=False).start()

@@ -104,3 +104,35 @@ def test_dataset_run_names_an_import_path_plugin_and_its_failures(dataset, tmp_p
         single = tmp_path / f"single-{name}"
         assert main(["run", str(dataset / name), "--methods", "classical-50", "-o", str(single), "-q"]) == 0
         assert table.read_bytes() == (single / "classical-50" / "exposures.csv").read_bytes()
+
+
+def _snapshot(root):
+    return {p.relative_to(root).as_posix(): (p.read_bytes() if p.is_file() else None)
+            for p in sorted(root.rglob("*")) if p.name != "run.lock"}
+
+
+def test_a_resume_while_another_process_holds_the_dataset_lock_changes_nothing(dataset, tmp_path, capsys):
+    out = tmp_path / "ds"
+    common = ["run", str(dataset), "--sequences", "all", "--scheduler", "serial", "--methods", "classical-50",
+              "-o", str(out), "-q"]
+    assert main(common) == 0
+    # a stale-looking staging folder the live run would own
+    staging = out / ".staging-live"
+    staging.mkdir()
+    (staging / "keep.txt").write_text("live")
+    before = _snapshot(out)
+    holder = subprocess.Popen([sys.executable, "-c",
+                               "import sys, time; from emulator.io.runfolder import RunLock; "
+                               f"lock = RunLock.acquire({str(out)!r}); print('held', flush=True); time.sleep(60)"],
+                              stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        capsys.readouterr()
+        assert main([*common, "--resume"]) == 1
+        err = capsys.readouterr().err.strip()
+        lines = [x for x in err.splitlines() if "warning" not in x]
+        assert len(lines) == 1 and str(out) in lines[0], err
+        assert _snapshot(out) == before
+    finally:
+        holder.kill()
+        holder.wait()
