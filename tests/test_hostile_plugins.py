@@ -131,7 +131,10 @@ def test_numpy_error_state_and_warning_filters_do_not_reach_kim(seq, kim_baselin
     out = tmp_path / "run"
     before = np.geterr()
     with warnings.catch_warnings():
+        filters = list(warnings.filters)
         assert main(["run", str(seq), "--methods", f"{MOD}:{cls},kim", "-o", str(out), "-q"]) == 0
+        # the method's process-wide settings did not outlive its call
+        assert warnings.filters == filters
     assert np.geterr() == before
     results = json.loads((out / "results.json").read_text())
     assert results["methods"]["kim"]["status"] == "ok", results["methods"]["kim"]["status"]

@@ -8,8 +8,9 @@ method does can change what another method, or the run, sees:
   so decoded brackets and emulated images shared between methods cannot be written through
   it.  One frozen copy per source image is shared by every method (so per-frame values such
   as the gray image stay shared, :mod:`emulator.autoexposure._frame`).
-- **NumPy's floating-point error state** (``np.seterr``, ``np.seterrcall``) is saved before
-  the call and restored after it.
+- **NumPy's floating-point error state** (``np.seterr``, ``np.seterrcall``) and the
+  **warning filters** (``warnings.simplefilter("error")``) are saved before the call and
+  restored after it.
 - **working directory**: restored after the call (the run's output paths are absolute
   anyway: :func:`absolute`).
 - **stdout and stderr**: what the method prints goes to a per-method buffer
@@ -28,6 +29,7 @@ import io
 import os
 import sys
 import threading
+import warnings
 import weakref
 from pathlib import Path
 
@@ -195,6 +197,7 @@ def _isolated(fn, name: str, on_error):
     err = np.geterr()
     errcall = np.geterrcall()
     cwd = os.getcwd()
+    filters = list(warnings.filters)
     parts: list = []
     outer = getattr(_local, "buffer", None)
     _local.buffer = parts
@@ -218,6 +221,9 @@ def _isolated(fn, name: str, on_error):
         _local.buffer = outer
         np.seterr(**err)
         np.seterrcall(errcall)
+        if warnings.filters != filters:  # warnings.simplefilter("error") and the like
+            warnings.filters[:] = filters
+            getattr(warnings, "_filters_mutated", lambda: None)()
         if os.getcwd() != cwd:
             os.chdir(cwd)
         _keep_output(name, parts)
