@@ -117,18 +117,23 @@ class Scene:
 
         return look_pose((self.start[0], self.start[1], height_m), self.heading_deg, pitch_deg)
 
-    def trajectory(self, duration_s: float = 30.0, *, seed: int | None = None, **kwargs):
+    def trajectory(self, duration_s: float = 30.0, *, seed: int | None = None, walk: str | None = None, **kwargs):
         """Default trajectory: a walk along the heading, or a static camera for static scenes.
 
-        Keyword arguments go to :func:`scenes.trajectory.walk`.
+        ``walk``: ``"borealhdr"`` (default: turns like the BorealHDR backpack,
+        :class:`scenes.walks.GaitWalk`), ``"gentle"`` (:func:`scenes.trajectory.walk`) or
+        ``"replay:PATH"`` (a recorded gyro); see :func:`scenes.walks.make_walk`.  Keyword
+        arguments go to the walk's builder.
         """
         from scenes import trajectory as tr
+        from scenes.walks import DEFAULT_WALK, make_walk
 
         if self.is_static:
             return tr.static(self.default_pose(), duration_s=duration_s)
         kwargs.setdefault("start", self.start)
         kwargs.setdefault("heading_deg", self.heading_deg)
-        return tr.walk(duration_s, seed=self.seed if seed is None else seed, **kwargs)
+        return make_walk(DEFAULT_WALK if walk is None else walk, duration_s,
+                         seed=self.seed if seed is None else seed, **kwargs)
 
 
 def _check_value(scene: str, key: str, value: Any, default: Any) -> Any:

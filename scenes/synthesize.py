@@ -14,6 +14,8 @@ import numpy as np
 
 from emulator.errors import ExposimError
 from scenes.denoise import effective_denoise
+from scenes.walks import CAMERA_FROM_IMU, DEFAULT_WALK
+from scenes.walkshots import WalkShots
 
 __all__ = ["synthesize", "DEFAULT_SATURATE_MS"]
 
@@ -44,6 +46,10 @@ def synthesize(
     save_radiance: bool = False,
     start_time_ns: int = 1_700_000_000_000_000_000,
     speed_mps: float | None = None,
+    walk: str | None = None,
+    blur: bool = True,
+    render_per: str = "shot",
+    imu_rate_hz: float = 100.0,
     cache_dir=None,
     variant: str | None = None,
     denoise=None,
@@ -71,6 +77,24 @@ def synthesize(
         reference radiance (white surface facing the sun) saturates at ``saturate_ms``.
     speed_mps : float, optional
         Walking speed (default: the trajectory's 2 km/h).
+    walk : str, optional
+        The walk (:func:`scenes.walks.make_walk`): ``"borealhdr"`` (default: turns like the
+        BorealHDR backpack), ``"gentle"`` or ``"replay:PATH"``.
+    blur : bool
+        Integrate every capture over its own exposure window ``[t, t + exposure]`` along the
+        walk (:class:`scenes.blur.ShotRenderer`: one render per shot and camera at the middle
+        of the longest window, warped to the sub-instants the predicted blur asks for); a
+        shot at rest is one plain render.  False: the scene at the trigger instant (no blur).
+        Static scenes never blur.
+    render_per : str
+        With ``blur``: ``"shot"`` (one render per shot and camera) or ``"cycle"`` (one render
+        per bracket sweep and camera, at the sweep's middle with a margin for the sweep's
+        motion, warped to every shot's sub-instants: a sixth of the renders, so six times the
+        spp at the same cost; render noise then moves with the scene within a sweep).
+    imu_rate_hz : float
+        Rate of the walk's gyro and accelerometer written as ``imu/imu.csv`` (IMU frame x
+        forward, y left, z up: :data:`scenes.walks.CAMERA_FROM_IMU`; a static camera reads zero rates and
+        gravity; 0: none).
     denoise : str or scenes.denoise.DenoiseSettings, optional
         ``"oidn"``: low-spp render denoised by Open Image Denoise; ``"off"``: the raw
         path-traced estimate (see :func:`scenes.render`).  Default (None): ``"oidn"``, or
@@ -108,7 +132,12 @@ def synthesize(
     n_shots = n_cycles * len(brackets_ms)
     duration_s = n_shots / fps + 1.0
     walk_kwargs = {} if speed_mps is None else {"speed_mps": float(speed_mps)}
-    traj = scene.trajectory(duration_s, **walk_kwargs)
+    traj = scene.trajectory(duration_s, walk=walk, **walk_kwargs)
+    imu = None if not imu_rate_hz else _imu_of(traj, n_shots / fps + 0.1, imu_rate_hz,
+                                                                    start_time_ns)
+    blur = bool(blur) and not scene.is_static
+    if render_per not in ("shot", "cycle"):
+        raise ExposimError(f"render_per must be 'shot' or 'cycle', got {render_per!r}")
     render_variant = variant or scenes.choose_variant()
     settings, fallback = effective_denoise(denoise)
     shot_index: dict[float, int] = {}
@@ -121,6 +150,21 @@ def synthesize(
         frame_seed = (int(render_seed) * 1_000_003 + 2 * idx + (camera_name == "right")) % (1 << 32)
         return dict(scene=scene, pose=pose, width=width, height=height, spp=spp, seed=frame_seed,
                     fov_deg=cam.fov_x_deg, cache_dir=cache_dir, variant=render_variant, denoise=settings)
+
+    shots = WalkShots(scene, traj, render=dict(width=width, height=height, spp=spp, fov_deg=cam.fov_x_deg,
+                                               cache_dir=cache_dir, variant=render_variant, denoise=settings,
+                                               render_seed=render_seed),
+                      fps=fps, n_brackets=len(brackets_ms), max_window_ms=max(list(brackets_ms) + list(gt_exposures_ms)),
+                      baseline_m=baseline, render_per=render_per)
+
+    def shot_renderer(timestamp_s: float, camera_name: str):
+        """The :class:`scenes.blur.ShotRenderer` serving one shot (or its whole cycle) and camera."""
+        return shots.renderer(shot_index.setdefault(round(timestamp_s, 9), len(shot_index)), camera_name)
+
+    def blurred_source(timestamp_s: float, camera_name: str, exposure_ms: float):
+        idx = shot_index.setdefault(round(timestamp_s, 9), len(shot_index))
+        pose = shots.poses(camera_name)(np.array([timestamp_s]))[0]
+        return shots.radiance(idx, camera_name, exposure_ms), pose
 
     prefetched: dict = {}
     if scheduler is not None:
@@ -135,12 +179,17 @@ def synthesize(
                                                                                  else ("left",))]
         jobs = []
         for t, side, idx in keys:
-            job = render_job(t, side, idx)
+            job = shot_renderer(t, side).render_job() if blur else render_job(t, side, idx)
             job["cache_dir"] = False if folder is None else folder  # explicit: a worker decides nothing
             jobs.append(job)
         for (t, side, _), image in zip(keys, render_many(jobs, scheduler=scheduler, progress=render_progress)):
-            if folder is None:  # no cache to read them back from: keep them for the capture
+            if folder is None and not blur:  # no cache to read them back from: keep them for the capture
                 prefetched[(round(t, 9), side)] = image
+
+    blurred_source.exposure_aware = True
+    blurred_source.timestamps_note = ("trigger instant of each shot = start of its exposure; every capture "
+                                      "integrates the radiance over [t, t + exposure] along the trajectory "
+                                      "(scenes.blur); poses are at the trigger instant")
 
     def source(timestamp_s: float, camera_name: str):
         idx = shot_index.setdefault(round(timestamp_s, 9), len(shot_index))
@@ -156,12 +205,19 @@ def synthesize(
         "scene_description": scene.description,
         "render": {"width": width, "height": height, "spp": spp, "render_seed": render_seed,
                    "variant": render_variant, "fov_deg": cam.fov_x_deg,
-                   "denoise": settings.key_material(), "denoise_fallback": fallback},
+                   "denoise": settings.key_material(), "denoise_fallback": fallback,
+                   "exposure_integration": f"scenes.blur (warped sub-instants of one render per {render_per})"
+                   if blur else "none (trigger instant)",
+                   "blur_shots": shots.describe() if blur else None},
         "saturate_ms": saturate_ms,
-        "trajectory": {"static": scene.is_static, "speed_mps": speed_mps},
+        "trajectory": {"static": scene.is_static, "speed_mps": speed_mps,
+                       "walk": None if scene.is_static else (walk or DEFAULT_WALK)},
+        "imu": None if imu is None else {"file": "imu/imu.csv", "rate_hz": float(imu_rate_hz),
+                                         "frame": "x forward, y left, z up (rigid with the left camera)",
+                                         "camera_from_imu": CAMERA_FROM_IMU.tolist()},
     }
     return synth.capture_sequence(
-        source,
+        blurred_source if blur else source,
         out_dir,
         cam,
         brackets_ms=tuple(brackets_ms),
@@ -178,4 +234,15 @@ def synthesize(
         progress=progress,
         start_time_ns=start_time_ns,
         source_description=description,
+        imu=imu,
     )
+
+
+def _imu_of(traj, end_s: float, rate_hz: float, start_time_ns: int):
+    """The walk's IMU samples (:func:`scenes.walks.imu_samples`) on the recording's clock."""
+    from emulator.io.imu import ImuData
+    from scenes.walks import imu_samples
+
+    t, gyro, acc = imu_samples(traj, rate_hz, t1_s=min(end_s, traj.duration_s))
+    stamps = int(start_time_ns) + np.round(t * 1e9).astype(np.int64)
+    return ImuData(timestamp_ns=stamps, gyro_rad_s=gyro, acc_m_s2=acc, ros_time_ns=stamps.copy())

@@ -53,6 +53,20 @@ def _rotation(yaw: float, pitch: float, roll: float) -> np.ndarray:
     return r
 
 
+def _rotations(yaw, pitch, roll) -> np.ndarray:
+    """:func:`_rotation` for arrays of angles (radians): float64 (N, 3, 3)."""
+    yaw, pitch, roll = np.broadcast_arrays(*(np.atleast_1d(np.asarray(a, dtype=np.float64)) for a in (yaw, pitch, roll)))
+    cy, sy, cp, sp = np.cos(yaw), np.sin(yaw), np.cos(pitch), np.sin(pitch)
+    forward = np.stack([cp * cy, cp * sy, sp], axis=-1)
+    right = np.stack([sy, -cy, np.zeros_like(sy)], axis=-1)
+    down = np.cross(forward, right)
+    r = np.stack([right, down, forward], axis=-1)
+    cr, sr = np.cos(roll), np.sin(roll)
+    z, o = np.zeros_like(cr), np.ones_like(cr)
+    spin = np.stack([np.stack([cr, -sr, z], -1), np.stack([sr, cr, z], -1), np.stack([z, z, o], -1)], axis=-2)
+    return r @ spin
+
+
 def look_pose(position, heading_deg: float, pitch_deg: float = 0.0, roll_deg: float = 0.0) -> np.ndarray:
     """4x4 camera-to-world pose at ``position`` looking along a heading.
 

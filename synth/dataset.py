@@ -51,6 +51,7 @@ MANIFEST_FILE = "exposim-files.json"
 _LAYOUT_RE = re.compile(
     r"^(?:exposim\.json"
     r"|calibration/(?:response\.txt|left\.yaml|right\.yaml)"
+    r"|imu/imu\.csv"
     r"|ground_truth/poses_(?:left|right)\.txt"
     r"|camera_(?:left|right)/[0-9.]+/\d+\.png"
     r"|ground_truth/radiance/camera_(?:left|right)/\d+\.exr"
@@ -104,7 +105,7 @@ def load_camera(sequence_path: str | os.PathLike) -> Camera:
 
 def recording_metadata(camera: Camera, shots, brackets, *, generator: str, gt_captures_kinds, fps, stereo,
                        baseline_m, seed, noise, gt_exposures, save_radiance, start_time_ns, start_bracket_index,
-                       source) -> dict:
+                       source, timestamps_note: str | None = None) -> dict:
     """The ``exposim.json`` of a recording (levels, schedule, seeds, camera, source)."""
     from emulator import __version__
 
@@ -120,7 +121,7 @@ def recording_metadata(camera: Camera, shots, brackets, *, generator: str, gt_ca
         "n_cycles": shots[-1].cycle + 1,
         "start_bracket_index": int(start_bracket_index),
         "start_time_ns": int(start_time_ns),
-        "timestamps": "trigger instant of each shot; the scene is sampled there (no motion blur)",
+        "timestamps": timestamps_note or "trigger instant of each shot; the scene is sampled there (no motion blur)",
         "seed": int(seed),
         "seeds": "bracket: SeedSequence([seed, camera (0 left, 1 right), shot]); noisy ground truth at "
                  "gt_exposures_ms[j]: SeedSequence([seed, camera, shot, 1 + j])",

@@ -12,6 +12,7 @@ ignores the rest; every file goes through :mod:`emulator.io`)::
 
     <seq>/camera_left/<exposure_ms>/<timestamp_ns>.png    16-bit PNG, raw Bayer DN
     <seq>/camera_right/<exposure_ms>/<timestamp_ns>.png   (stereo)
+    <seq>/imu/imu.csv                  the walk's gyro and accelerometer (``imu=``; scenes.synthesize)
     <seq>/exposim.json                 levels, brackets, fps, baseline, camera, seed, source, ...
     <seq>/calibration/response.txt     the exact inverse response, one sample per DN (pcalib)
     <seq>/calibration/left.yaml        ROS camera_info (right.yaml for stereo: P[0,3] = -fx * B)
@@ -187,11 +188,14 @@ def _check_pose(pose, where: str) -> np.ndarray:
 def _frame_getter(source, stereo: bool):
     """``get(shot, side) -> (radiance, pose)`` and the number of frames (None: unbounded)."""
     if callable(source):
-        return (lambda shot, side: source(shot.time_s, side)), None
+        if getattr(source, "exposure_aware", False):  # integrates over each shot's own exposure window
+            return (lambda shot, side, exposure_ms=None: source(
+                shot.time_s, side, shot.exposure_ms if exposure_ms is None else exposure_ms)), None
+        return (lambda shot, side, exposure_ms=None: source(shot.time_s, side)), None
     if isinstance(source, (list, tuple)):
         frames = source
 
-        def get(shot, side):
+        def get(shot, side, exposure_ms=None):
             item = frames[shot.index]
             if isinstance(item, dict):
                 if side not in item:
@@ -244,6 +248,7 @@ def capture_sequence(
     overwrite: bool = False,
     progress=None,
     source_description=None,
+    imu=None,
 ) -> Path:
     """Capture a bracket-cycling recording of a radiance source and write it with its ground truth.
 
@@ -251,7 +256,10 @@ def capture_sequence(
     ----------
     source : callable or list
         ``source(timestamp_s, camera) -> (radiance, pose)`` with ``timestamp_s`` the
-        seconds since the recording start (float), ``camera`` ``"left"`` or ``"right"``,
+        seconds since the recording start (float), ``camera`` ``"left"`` or ``"right"``
+        (a callable with ``exposure_aware = True`` is called as ``source(timestamp_s, camera,
+        exposure_ms)`` and returns the radiance integrated over ``[t, t + exposure]``, also for
+        each ground-truth exposure),
         ``radiance`` float32 (H, W, 3) or (H, W) in W m^-2 sr^-1 and ``pose`` a 4x4
         camera-to-world matrix (x right, y down, z forward).  Or a list with one entry per
         shot: ``(radiance, pose)``, or ``{"left": (radiance, pose), "right": (...)}`` for
@@ -297,6 +305,8 @@ def capture_sequence(
         Called as ``progress(shots_done, shots_total)`` after every shot.
     source_description : JSON-ready object or None
         Recorded in ``exposim.json``; default: ``source.describe()`` when it exists.
+    imu : emulator.io.imu.ImuData or None
+        The gyro and accelerometer of the walk, written as ``imu/imu.csv`` (BorealHDR format).
 
     Returns
     -------
@@ -375,14 +385,21 @@ def capture_sequence(
                 if save_radiance:
                     write_exr(staging / "ground_truth" / "radiance" / folder / f"{shot.timestamp_ns}.exr", radiance)
                 for j, t in enumerate(gt_exposures):
+                    gt_radiance = radiance
+                    if getattr(source, "exposure_aware", False):  # its own exposure window
+                        gt_radiance = get_frame(shot, side, t)[0]
                     for kind in GT_CAPTURES[gt_captures]:
-                        gt = capture(radiance, t, camera, noise=kind == "noisy",
+                        gt = capture(gt_radiance, t, camera, noise=kind == "noisy",
                                      seed=np.random.SeedSequence([seed, c, shot.index, 1 + j]))
                         write_png16(staging / "ground_truth" / f"captures_{kind}" / folder / exposure_folder_name(t)
                                     / f"{shot.timestamp_ns}.png", gt)
             if progress is not None:
                 progress(shot.index + 1, len(shots))
 
+        if imu is not None:
+            from emulator.io.imu import IMU_FILE, write_imu
+
+            write_imu(staging.joinpath(*IMU_FILE), imu)
         gt_dir = staging / "ground_truth"
         for side in sides:
             write_tum(gt_dir / f"poses_{side}.txt", [s.timestamp_ns for s in shots], np.stack(poses[side]),
@@ -396,7 +413,8 @@ def capture_sequence(
                                   baseline_m=baseline_m, seed=seed, noise=noise, gt_exposures=gt_exposures,
                                   save_radiance=save_radiance, start_time_ns=start_time_ns,
                                   start_bracket_index=start_bracket_index,
-                                  source=_describe(source, source_description))
+                                  source=_describe(source, source_description),
+                                  timestamps_note=getattr(source, "timestamps_note", None))
         write_recording_metadata(staging, meta)
         write_manifest(staging)
         publish(staging, out_dir, overwrite)

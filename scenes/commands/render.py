@@ -149,7 +149,9 @@ def _timestamps_and_poses(scene, args):
     if mode == "static" or (mode == "auto" and scene.is_static):
         traj = tr.static(scene.default_pose(), duration_s=duration)
     else:
-        traj = tr.walk(duration, seed=scene.seed, start=scene.start, heading_deg=scene.heading_deg)
+        from scenes.walks import DEFAULT_WALK, make_walk
+
+        traj = make_walk(DEFAULT_WALK, duration, seed=scene.seed, start=scene.start, heading_deg=scene.heading_deg)
     ts = traj.timestamps(args.rate) if args.duration > 0 else np.zeros(1)
     return ts, traj.poses(ts)
 

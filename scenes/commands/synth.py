@@ -42,9 +42,16 @@ def register(subparsers) -> None:
     p.add_argument("--saturate-ms", type=float, default=DEFAULT_SATURATE_MS,
                    help="exposure at which a white surface facing the sun saturates (default %(default)s)")
     p.add_argument("--speed", type=float, default=None, help="walking speed, m/s (default 2 km/h)")
+    p.add_argument("--walk", default=None, metavar="WALK",
+                   help="borealhdr (default: turns like the BorealHDR backpack, median 10.7 deg/s), gentle "
+                        "(0.5 deg sway, ~4 deg/s) or replay:PATH (a BorealHDR imu.csv's gyro)")
     p.add_argument("--seed", type=int, default=0, help="scene seed (placement, textures) (default %(default)s)")
     p.add_argument("--noise-seed", type=int, default=0, help="sensor noise seed (default %(default)s)")
     p.add_argument("--param", action="append", metavar="KEY=VALUE", help="scene parameter (repeatable)")
+    p.add_argument("--no-blur", action="store_true",
+                   help="sample the scene at each trigger instant instead of integrating over the exposure window")
+    p.add_argument("--render-per", choices=("shot", "cycle"), default="shot",
+                   help="one render per shot, or per bracket sweep warped to every shot (default shot)")
     p.add_argument("--mono", action="store_true", help="left camera only")
     p.add_argument("--noiseless", action="store_true", help="exact noiseless captures")
     p.add_argument("--gt-exposures", default="", help="comma-separated target exposures (ms) to capture as ground truth")
@@ -95,7 +102,8 @@ def _run(args: argparse.Namespace) -> int:
 
         path = synthesize(
             scene, args.output, n_cycles=args.cycles, width=width, height=height, spp=args.spp,
-            camera=args.camera, saturate_ms=args.saturate_ms, speed_mps=args.speed, seed=args.noise_seed,
+            camera=args.camera, saturate_ms=args.saturate_ms, speed_mps=args.speed, walk=args.walk, blur=not args.no_blur, render_per=args.render_per,
+            seed=args.noise_seed,
             stereo=not args.mono, noise=not args.noiseless, gt_exposures_ms=gt, save_radiance=args.save_radiance,
             cache_dir=args.cache, denoise=args.denoise, overwrite=args.force, progress=progress,
             scheduler=scheduler, render_progress=None if render_bar is None else render_bar.update,

@@ -1,7 +1,8 @@
 """``exposim validate emulation|selectors|motion|speed``: thin argument parsing around
 :func:`validation.report.run_experiment`; ``exposim validate ae-study`` around
 :func:`validation.ae_study.run_study`; ``exposim validate render``: the render study
-(:mod:`validation.render_study`); ``exposim validate live``: :mod:`validation.live`.
+(:mod:`validation.render_study`); ``exposim validate live``: :mod:`validation.live`;
+``exposim validate blur``: exposure-time blur (:mod:`validation.blur`).
 
 Default sizes are the full study; ``--quick`` is the reduced configuration of the tests.
 A folder that already holds a results.json is refused unless ``--force``.
@@ -120,6 +121,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     register_live(vsub)
     _register_render(vsub)
+    from validation.blur.cli import register as register_blur  # issue 21: exposure-time blur
+
+    register_blur(vsub)
 
 
 register.order = 80  # place in `exposim --help`

@@ -1,0 +1,189 @@
+"""The blur study's measurements (numpy; renders through :mod:`scenes`)."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from validation.common import capture, rmse_dn, to_percent
+
+__all__ = ["consistent_from_walk", "rate_percentiles_deg_s", "angular_rate_ratio", "fastest_instants", "reference_comparison",
+           "cost_comparison", "sharpness", "sharpness_comparison"]
+
+_PERCENTILES = (50, 90, 99)
+
+
+def rate_percentiles_deg_s(omega_rad_s: np.ndarray) -> dict:
+    """p50, p90, p99 of |omega| in deg/s of (N, 3) rates."""
+    speed = np.degrees(np.linalg.norm(np.asarray(omega_rad_s, dtype=np.float64), axis=1))
+    return {f"p{q}": float(np.percentile(speed, q)) for q in _PERCENTILES}
+
+
+def angular_rate_ratio(traj, walk_s: float, real_imu: str | None) -> dict:
+    """The walk's |omega| percentiles (100 Hz over ``walk_s``), the real gyro's and their ratios."""
+    from scenes.walks import angular_velocity, read_gyro_csv
+
+    syn = rate_percentiles_deg_s(angular_velocity(traj, np.arange(0.0, walk_s, 0.01)))
+    out = {"synthetic_deg_s": syn, "real_deg_s": None, "ratio": None, "real_imu": real_imu}
+    if real_imu is not None:
+        real = rate_percentiles_deg_s(read_gyro_csv(real_imu)[1])
+        out.update(real_deg_s=real, ratio={k: syn[k] / real[k] for k in syn})
+    return out
+
+
+def fastest_instants(traj, walk_s: float, n: int, exposure_ms: float, *, min_gap_s: float = 0.3) -> list[float]:
+    """Start times of the ``n`` exposure windows with the fastest mean turn, ``min_gap_s`` apart."""
+    from scenes.walks import angular_velocity
+
+    t = np.arange(0.5, walk_s - 1.0, 0.01)
+    speed = np.linalg.norm(angular_velocity(traj, t + 0.5e-3 * exposure_ms), axis=1)
+    chosen: list[float] = []
+    for i in np.argsort(speed)[::-1]:
+        if all(abs(t[i] - c) >= min_gap_s for c in chosen):
+            chosen.append(float(t[i]))
+        if len(chosen) == n:
+            break
+    return sorted(chosen)
+
+
+def _dn(radiance, camera, exposure_ms):
+    return capture(radiance, exposure_ms, camera, seed=0, noise=False)
+
+
+def reference_comparison(scene, traj, t0_s: float, cfg, camera) -> dict:
+    """Blurred shot (two render seeds) against a brute-force reference (two independent halves), in DN.
+
+    The reference is the mean of ``reference_subinstants`` renders per half at the midpoints
+    of the window, each at ``reference_spp``, raw; its own noise is half the RMS difference
+    of the halves.  The method's noise is the RMS difference of its two seeds over sqrt 2.
+    All in percent of the DN range, noiseless captures at ``exposure_ms``.
+    """
+    import scenes
+    from scenes.blur import render_exposure, subinstant_times_s
+
+    t1 = t0_s + 1e-3 * cfg.exposure_ms
+    kw = dict(width=cfg.width, height=cfg.height, denoise="off", cache_dir=cfg.cache_dir,
+              fov_deg=camera.fov_x_deg)
+    times = subinstant_times_s(t0_s, t1, cfg.reference_subinstants)
+    halves = []
+    for h in range(2):
+        acc = np.zeros((cfg.height, cfg.width, 3))
+        for i, t in enumerate(times):
+            acc += scenes.render(scene, traj.pose(t), spp=cfg.reference_spp, seed=cfg.seed + 1000 * (h + 1) + i, **kw)
+        halves.append(acc / len(times))
+    ref = (0.5 * (halves[0] + halves[1])).astype(np.float32)
+    methods = [render_exposure(scene, traj.poses, t0_s, t1, spp=cfg.spp, seed=cfg.seed + s, **kw) for s in (1, 2)]
+    sharp = scenes.render(scene, traj.pose(0.5 * (t0_s + t1)), spp=cfg.spp, seed=cfg.seed + 3, **kw)
+    white, black = camera.white_level, camera.black_level
+    pct = lambda v: float(to_percent(v, white, black))  # noqa: E731
+    d_ref, d_h = _dn(ref, camera, cfg.exposure_ms), [_dn(h.astype(np.float32), camera, cfg.exposure_ms) for h in halves]
+    d_m = [_dn(m[0], camera, cfg.exposure_ms) for m in methods]
+    ref_noise = pct(rmse_dn(d_h[0], d_h[1])) / 2.0
+    method_noise = pct(rmse_dn(d_m[0], d_m[1])) / np.sqrt(2.0)
+    err = pct(rmse_dn(d_m[0], d_ref))
+    expected = float(np.hypot(ref_noise, method_noise))
+    return {"t0_s": t0_s, "blur_px": methods[0][1]["blur_px"], "n_subinstants": methods[0][1]["n_subinstants"],
+            "by_subinstants": _by_subinstants(scene, traj, t0_s, cfg, kw, d_ref, camera),
+            "error_percent": err, "reference_noise_percent": ref_noise, "method_noise_percent": method_noise,
+            "expected_noise_percent": expected, "error_over_noise": err / expected if expected > 0 else None,
+            "excess_percent": float(np.sqrt(max(err * err - expected * expected, 0.0))),
+            "no_blur_error_percent": pct(rmse_dn(_dn(sharp, camera, cfg.exposure_ms), d_ref))}
+
+
+def _by_subinstants(scene, traj, t0_s, cfg, kw, d_ref, camera) -> list[dict]:
+    """Error against the reference and warp seconds for 1, 2, 4, ... sub-instants (one render, reused)."""
+    from scenes.blur import ShotRenderer
+
+    shot = ShotRenderer(scene, traj.poses, t0_s, cfg.exposure_ms, spp=cfg.spp, seed=cfg.seed + 1, **kw)
+    rows = []
+    for n in (1, 2, 4, 8, 16, 32):
+        before = shot.info["warp_s"]
+        img = shot.radiance(cfg.exposure_ms, n_subinstants_override=n)[0]
+        err = rmse_dn(_dn(img, camera, cfg.exposure_ms), d_ref)
+        rows.append({"n_subinstants": n, "error_percent": float(to_percent(err, camera.white_level,
+                                                                           camera.black_level)),
+                     "warp_s": shot.info["warp_s"] - before})
+    return rows
+
+
+def cost_comparison(scene, traj, t0_s: float, cfg, camera) -> dict:
+    """Wall-clock seconds of a blurred shot and of a shot at rest, same size and spp, no cache (medians)."""
+    import scenes
+    from scenes.blur import render_exposure
+
+    kw = dict(width=cfg.width, height=cfg.height, spp=cfg.spp, denoise=cfg.sharpness_denoise, cache_dir=False,
+              fov_deg=camera.fov_x_deg)
+    t1 = t0_s + 1e-3 * cfg.exposure_ms
+    scenes.render(scene, traj.pose(t0_s), seed=99, **kw)  # warm-up: kernels compiled
+    render_exposure(scene, traj.poses, t0_s, t1, seed=98, **kw)
+    rest, moving, info = [], [], {}
+    for r in range(cfg.timing_repeats):
+        t = time.perf_counter()
+        scenes.render(scene, traj.pose(t0_s), seed=cfg.seed + 10 + r, **kw)
+        rest.append(time.perf_counter() - t)
+        t = time.perf_counter()
+        _, info = render_exposure(scene, traj.poses, t0_s, t1, seed=cfg.seed + 20 + r, **kw)
+        moving.append(time.perf_counter() - t)
+    rest_s, moving_s = float(np.median(rest)), float(np.median(moving))
+    return {"at_rest_s": rest_s, "blurred_s": moving_s, "render_cost_ratio": moving_s / rest_s,
+            "blur_px": info.get("blur_px"), "n_subinstants": info.get("n_subinstants"),
+            "margin_px": info.get("margin_px"), "warp_s": info.get("warp_s"), "depth_s": info.get("depth_s")}
+
+
+def sharpness(raw: np.ndarray) -> float:
+    """95th percentile of the gradient magnitude over the median level, green plane of an RGGB mosaic."""
+    g = 0.5 * (raw[0::2, 1::2].astype(np.float64) + raw[1::2, 0::2].astype(np.float64))
+    gy, gx = np.gradient(g)
+    level = float(np.median(g))
+    return float(np.percentile(np.hypot(gx, gy), 95) / level) if level > 0 else float("nan")
+
+
+def sharpness_comparison(scene, traj, t0_s: float, cfg, camera, consistent=None) -> dict:
+    """Emulated ``exposure_ms`` (from the ``source_ms`` bracket of the same trigger) against live, by sharpness.
+
+    ``consistent``: optional ``f(raw, source_ms, target_ms, response, extra_radiance_fn) -> raw``
+    hook for blur-consistent emulation (issue 21, realblur side); None leaves that figure out.
+    """
+    from emulator.emulate import emulate
+    from scenes.blur import ShotRenderer
+
+    shot = ShotRenderer(scene, traj.poses, t0_s, cfg.exposure_ms, width=cfg.width, height=cfg.height,
+                        spp=cfg.spp, seed=cfg.seed + 7, denoise=cfg.sharpness_denoise, cache_dir=cfg.cache_dir,
+                        fov_deg=camera.fov_x_deg)
+    src = _dn(shot.radiance(cfg.source_ms)[0], camera, cfg.source_ms)
+    live_rad, info = shot.radiance(cfg.exposure_ms)
+    live = _dn(live_rad, camera, cfg.exposure_ms)
+    plain = emulate(src, cfg.source_ms, cfg.exposure_ms, camera.response)
+    s_live, s_plain = sharpness(live), sharpness(plain)
+    out = {"t0_s": t0_s, "blur_px": info["blur_px"], "live": s_live, "emulated_plain": s_plain,
+           "plain_error_percent": 100.0 * (s_plain - s_live) / s_live, "consistent_error_percent": None}
+    if consistent is not None:
+        s_cons = sharpness(consistent(src, cfg.source_ms, cfg.exposure_ms, camera.response, shot))
+        out.update(emulated_consistent=s_cons, consistent_error_percent=100.0 * (s_cons - s_live) / s_live)
+    return out
+
+
+def consistent_from_walk(traj, camera):
+    """The blur-consistent emulation of :mod:`emulator.blur` fed with the walk's own angular velocity.
+
+    Returns ``f(raw, source_ms, target_ms, response, shot) -> raw`` for
+    :func:`sharpness_comparison`: the gyro is :func:`scenes.walks.angular_velocity` of the
+    walk (camera axes), windows start at the trigger (``stamp="start"``, the synthetic
+    convention), K is the synthetic camera's.
+    """
+    from emulator.blur import blur_homographies, emulate_blur_consistent
+    from scenes.camera import intrinsics_matrix
+    from scenes.walks import angular_velocity
+
+    k = intrinsics_matrix(camera.width, camera.height, camera.fov_x_deg)
+    size = (camera.width, camera.height)
+
+    def omega(t_s):
+        return angular_velocity(traj, np.clip(np.atleast_1d(t_s), 0.0, traj.duration_s))
+
+    def consistent(raw, source_ms, target_ms, response, shot):
+        hs, ws = blur_homographies(omega, k, size, shot.t0_s, source_ms, target_ms, stamp="start")
+        return emulate_blur_consistent(raw, source_ms, target_ms, response, hs, ws)[0]
+
+    return consistent
