@@ -33,6 +33,7 @@ so the interrupted run can be resumed.
 from __future__ import annotations
 
 import csv
+import io
 import os
 import shutil
 import threading
