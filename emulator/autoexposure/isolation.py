@@ -236,12 +236,11 @@ def call_method(method, raw, exposure_ms):
     ``KeyboardInterrupt``.
     """
     name = str(getattr(method, "name", type(method).__name__))
-    from emulator.autoexposure.registry import PluginMethod
-
     # built-ins share one frozen copy (and its per-frame values); a plugin gets a private one,
     # so that even a write through the data pointer (ctypes, __array_interface__) reaches only
     # its own copy
-    image = _bytes_view(raw) if isinstance(method, PluginMethod) and isinstance(raw, np.ndarray) else frozen(raw)
+    private = getattr(type(method), "private_images", False)  # registry.PluginMethod: a plugin
+    image = _bytes_view(raw) if private and isinstance(raw, np.ndarray) else frozen(raw)
     return _isolated(lambda: method.next_exposure(image, exposure_ms), name,
                      lambda exc: MethodFailed(_describe(exc)))
 

@@ -264,6 +264,10 @@ class PluginMethod:
     (``guard_count``, ``last``, ...) are the plugin's.
     """
 
+    #: A plugin gets a private frozen copy of its image at every call (isolation.call_method):
+    #: even a write through the data pointer then reaches only its own copy.
+    private_images = True
+
     def __init__(self, method, name: str, source: str) -> None:
         self.method = method
         self.name = name
