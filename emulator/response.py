@@ -82,7 +82,11 @@ class CameraResponse:
     _lock: threading.Lock = field(default_factory=threading.Lock, init=False, repr=False)
 
     def __post_init__(self) -> None:
-        g = np.asarray(self.g, dtype=np.float64)
+        # private, and immutable at the buffer level (a view of a bytes object): the caller's
+        # array stays theirs, and no setflags(write=True) can change the table afterwards
+        g = np.array(self.g, dtype=np.float64, copy=True)
+        if g.ndim == 1:
+            g = np.frombuffer(g.tobytes(), dtype=np.float64)
         self.white_level = int(g.size - 1 if self.white_level is None else self.white_level)
         self.black_level = int(self.black_level)
         if g.ndim != 1 or g.size != self.white_level + 1:

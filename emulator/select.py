@@ -45,6 +45,10 @@ EQUAL_RTOL = 1e-9
 
 def saturated_fraction(raw: np.ndarray, *, white_level: int, black_level: int) -> float:
     """Fraction of pixels at or below ``black_level`` or at or above ``white_level``."""
+    for label, level in (("white_level", white_level), ("black_level", black_level)):
+        if isinstance(level, (bool, np.bool_)) or not isinstance(level, (int, np.integer, float, np.floating)) \
+                or not math.isfinite(level) or level != int(level) or level < 0:
+            raise ExposimError(f"saturated_fraction: {label} must be a whole number of DN >= 0, got {level!r}")
     if not int(white_level) > int(black_level):
         raise ExposimError(f"saturated_fraction: white_level {white_level!r} must exceed black_level {black_level!r}")
     raw = np.asarray(raw)

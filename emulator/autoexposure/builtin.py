@@ -54,6 +54,9 @@ def make_method(name: str, **options) -> AutoExposureMethod:
         return factory(**options)
     except TypeError as exc:
         raise AutoExposureError(f"{name}: bad option ({exc})") from None
+    except AutoExposureError as exc:  # a value the method refuses: say which method's option
+        text = str(exc)
+        raise AutoExposureError(text if text.startswith(f"{name}") else f"{name}: {text}") from None
 
 
 def _check_option_types(name: str, factory, options) -> None:

@@ -8,8 +8,9 @@ method does can change what another method, or the run, sees:
   so decoded brackets and emulated images shared between methods cannot be written through
   it.  One frozen copy per source image is shared by every method (so per-frame values such
   as the gray image stay shared, :mod:`emulator.autoexposure._frame`).
-- **NumPy's floating-point error state** (``np.seterr``, ``np.seterrcall``) is saved before
-  the call and restored after it.
+- **NumPy's floating-point error state** (``np.seterr``, ``np.seterrcall``) and the
+  **warning filters** (``warnings.simplefilter("error")``) are saved before the call and
+  restored after it.
 - **working directory**: restored after the call (the run's output paths are absolute
   anyway: :func:`absolute`).
 - **stdout and stderr**: what the method prints goes to a per-method buffer
@@ -28,6 +29,7 @@ import io
 import os
 import sys
 import threading
+import warnings
 import weakref
 from pathlib import Path
 
@@ -195,10 +197,12 @@ def _isolated(fn, name: str, on_error):
     err = np.geterr()
     errcall = np.geterrcall()
     cwd = os.getcwd()
+    filters = list(warnings.filters)
     parts: list = []
     outer = getattr(_local, "buffer", None)
     _local.buffer = parts
     _enter_capture()
+    routers = (sys.stdout, sys.stderr)
     try:
         return fn()
     except KeyboardInterrupt:
@@ -208,10 +212,18 @@ def _isolated(fn, name: str, on_error):
     except BaseException as exc:  # SystemExit and GeneratorExit included: the method fails alone
         raise on_error(exc) from exc
     finally:
+        # a method that replaced sys.stdout / sys.stderr for good gets them put back
+        if isinstance(routers[0], _Router) and sys.stdout is not routers[0]:
+            sys.stdout = routers[0]
+        if isinstance(routers[1], _Router) and sys.stderr is not routers[1]:
+            sys.stderr = routers[1]
         _leave_capture()
         _local.buffer = outer
         np.seterr(**err)
         np.seterrcall(errcall)
+        if warnings.filters != filters:  # warnings.simplefilter("error") and the like
+            warnings.filters[:] = filters
+            getattr(warnings, "_filters_mutated", lambda: None)()
         if os.getcwd() != cwd:
             os.chdir(cwd)
         _keep_output(name, parts)
@@ -224,7 +236,11 @@ def call_method(method, raw, exposure_ms):
     ``KeyboardInterrupt``.
     """
     name = str(getattr(method, "name", type(method).__name__))
-    image = frozen(raw)
+    # built-ins share one frozen copy (and its per-frame values); a plugin gets a private one,
+    # so that even a write through the data pointer (ctypes, __array_interface__) reaches only
+    # its own copy
+    private = getattr(type(method), "private_images", False)  # registry.PluginMethod: a plugin
+    image = _bytes_view(raw) if private and isinstance(raw, np.ndarray) else frozen(raw)
     return _isolated(lambda: method.next_exposure(image, exposure_ms), name,
                      lambda exc: MethodFailed(_describe(exc)))
 

@@ -213,7 +213,9 @@ def build_plugin(plugin: MethodPlugin, *, mode: str = "paper", response=None,
         raise AutoExposureError(f"AE method {plugin.name!r} ({plugin.value}) takes no option "
                                 f"{', '.join(map(repr, bad))}; it takes: {', '.join(takes) or 'none'}")
     kwargs = {}
-    for key, value in (("mode", mode), ("range_ms", None), ("response", response)):
+    # a plugin gets its own copy of the response: changing it (its table, levels, LUT cache)
+    # cannot change the emulation of the other methods
+    for key, value in (("mode", mode), ("range_ms", None), ("response", _private_response(response))):
         if key not in options and _names_param(factory, key):
             kwargs[key] = value
     kwargs.update(options)
@@ -229,6 +231,16 @@ def build_plugin(plugin: MethodPlugin, *, mode: str = "paper", response=None,
     return PluginMethod(method, plugin.name, plugin.value)
 
 
+def _private_response(response):
+    if response is None or not hasattr(response, "g"):
+        return response
+    import dataclasses
+
+    knots = getattr(response, "knots", None)
+    return dataclasses.replace(response, g=np.array(response.g, dtype=np.float64, copy=True),
+                               knots=None if knots is None else np.array(knots, copy=True))
+
+
 def _names_param(factory: Callable, key: str) -> bool:
     """The loop's own keywords (mode, range_ms, response) go only to factories that name them."""
     target = factory.func if isinstance(factory, functools.partial) else factory
@@ -238,6 +250,12 @@ def _names_param(factory: Callable, key: str) -> bool:
         return False
 
 
+def _describe(exc: BaseException) -> str:
+    from emulator.autoexposure.isolation import _describe as describe
+
+    return describe(exc)
+
+
 class PluginMethod:
     """A plugin method under the registered name, its results checked.
 
@@ -245,6 +263,10 @@ class PluginMethod:
     something that is not a finite positive number of milliseconds.  Other attributes
     (``guard_count``, ``last``, ...) are the plugin's.
     """
+
+    #: A plugin gets a private frozen copy of its image at every call (isolation.call_method):
+    #: even a write through the data pointer then reaches only its own copy.
+    private_images = True
 
     def __init__(self, method, name: str, source: str) -> None:
         self.method = method
@@ -275,9 +297,31 @@ class PluginMethod:
             raise MethodFailed(f"returned a non-positive exposure ({ms!r} ms)")
         return ms
 
+    @property
+    def guard_count(self) -> int:
+        """The plugin's own fallback count, read isolated: a property that raises or exits
+        fails this method alone (MethodFailed), never the run."""
+        from emulator.autoexposure.isolation import _isolated
+
+        value = _isolated(lambda: getattr(self.method, "guard_count", 0), self.name,
+                          lambda exc: MethodFailed(f"guard_count: {_describe(exc)}"))
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+            raise MethodFailed(f"guard_count is {value!r}, not an integer")
+        return int(value)
+
     def config(self) -> dict:
-        inner = getattr(self.method, "config", None)
-        cfg = dict(inner()) if callable(inner) else {}
+        from emulator.autoexposure.isolation import _isolated
+
+        inner = getattr(type(self.method), "config", None)
+        cfg = {}
+        if callable(inner):
+            try:
+                cfg = dict(_isolated(self.method.config, self.name,
+                                     lambda exc: MethodFailed(f"config(): {_describe(exc)}")))
+            except MethodFailed as exc:
+                cfg = {"config_error": str(exc)}
+            except (TypeError, ValueError) as exc:
+                cfg = {"config_error": f"config() returned no mapping: {exc}"}
         cfg["name"] = self.name
         cfg["plugin"] = self.source
         return cfg

@@ -101,6 +101,19 @@ def _progress_bar(enabled: bool):
     return progress, close
 
 
+def _check_levels(args) -> None:
+    """--white-level / --black-level only where they are used: a STACK folder (whose reader
+    checks 0 <= black < white <= 4095); a recording has its own levels in exposim.json."""
+    from emulator.errors import ExposimError
+
+    white = getattr(args, "white_level", None)
+    black = getattr(args, "black_level", None)
+    given = [f for f, v in (("--white-level", white), ("--black-level", black)) if v is not None]
+    if given and args.stack is None:
+        raise ExposimError(f"{' and '.join(given)} apply to a STACK folder only; a recording "
+                           "(--from-recording, --noise) gives its levels in its exposim.json")
+
+
 def _calibrate(args) -> int:
     from emulator.calibration import calibrate_from_recording, calibrate_stack, cross_bracket_error
     from emulator.errors import ExposimError, OutputExistsError
@@ -109,6 +122,7 @@ def _calibrate(args) -> int:
 
     if sum(x is not None for x in (args.stack, args.from_recording, args.noise)) != 1:
         raise ExposimError("give one of a STACK folder, --from-recording SEQ or --noise SEQ")
+    _check_levels(args)
     if args.noise is not None:
         return _calibrate_noise(args)
     out = args.output

@@ -33,6 +33,7 @@ so the interrupted run can be resumed.
 from __future__ import annotations
 
 import csv
+import io
 import os
 import shutil
 import threading
@@ -272,16 +273,27 @@ def _repair_prefix(path: Path, expected: list[int] | None) -> str | None:
             break
         last = cycle
         keep = i + 1
+    header = read_csv_header(path) if path.is_file() else []
     if why is None:
-        return None
-    header = read_csv_header(path)
+        # valid rows, but written otherwise than the writer writes them (CRLF line ends, an
+        # editor's quoting): put back in the writer's form, so the table equals an
+        # uninterrupted run's byte for byte
+        if not header or path.read_bytes() == _csv_bytes(header, rows):
+            return None
+        why = "rows written in another form (line ends or quoting)"
     tmp = path.with_name(path.name + ".repair")
-    with open(tmp, "w", newline="") as fh:
-        w = csv.writer(fh, lineterminator="\n")
-        w.writerow(header)
-        w.writerows(rows[:keep])
+    with open(tmp, "wb") as fh:
+        fh.write(_csv_bytes(header, rows[:keep]))
     os.replace(tmp, path)
     return f"{why}; kept the first {keep} of {len(rows)} rows, the rest is computed again"
+
+
+def _csv_bytes(header, rows) -> bytes:
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(header)
+    w.writerows(rows)
+    return buf.getvalue().encode()
 
 
 def read_csv_header(path: Path) -> list[str]:
