@@ -555,11 +555,13 @@ def test_variant_override_and_validation(monkeypatch, _restore_variant_state, tm
     # a cache hit with a forced JIT variant reads the file without probing it
     var._probed.clear()
     scene = scenes.get_scene("static_lab")
-    key, _ = scenes.render_key(scene, np.eye(4), width=4, height=2, spp=1, seed=0,
-                               fov_deg=scenes.DEFAULT_FOV_DEG, variant="llvm_ad_rgb",
-                               denoise=resolve_denoise("oidn").key_material())
+    key, material = scenes.render_key(scene, np.eye(4), width=4, height=2, spp=1, seed=0,
+                                      fov_deg=scenes.DEFAULT_FOV_DEG, variant="llvm_ad_rgb",
+                                      denoise=resolve_denoise("oidn").key_material())
     img = np.arange(24, dtype=np.float32).reshape(2, 4, 3)
-    store_entry(tmp_path / key[:2] / f"{key}.exr", img)
+    from scenes.cache import KEY_ATTRIBUTE, canonical_json  # an entry carries its key (checked on read)
+
+    store_entry(tmp_path / key[:2] / f"{key}.exr", img, {KEY_ATTRIBUTE: canonical_json(material)})
     monkeypatch.setenv("EXPOSIM_MITSUBA_VARIANT", "llvm_ad_rgb")
     monkeypatch.delenv("EXPOSIM_DENOISE", raising=False)
     hit = scenes.render(scene, np.eye(4), width=4, height=2, spp=1, seed=0, cache_dir=tmp_path)  # denoised key
