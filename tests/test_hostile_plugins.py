@@ -285,11 +285,6 @@ def test_prints_never_reach_json_output(seq, tmp_path):
     assert "printed in next_exposure" in kept and "to stderr" in kept
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "emulator/commands/run.py prints --json with print() on the process's sys.stdout, and "
-    "isolation only captures writes from the thread inside a method call: a thread the method "
-    "started prints to the real stdout after the call returns. Fix in run.py: under --json send "
-    "sys.stdout to stderr for the whole run and write the JSON document to the saved stdout."))
 def test_a_background_thread_printing_does_not_corrupt_json(seq, tmp_path):
     out = tmp_path / "run"
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(HERE), os.environ.get("PYTHONPATH", "")])}

@@ -95,7 +95,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_quiet(p)
     p.add_argument("--json", action="store_true", help="print the results summary as JSON")
     _add_plugin_arguments(p)
-    p.set_defaults(func=_run)
+    p.set_defaults(func=_run_json_safe)
 
 
 register.order = 30  # place in `exposim --help`
@@ -226,6 +226,20 @@ def _progress_bar(desc: str, unit: str):
     return bar, progress
 
 
+def _run_json_safe(args) -> int:
+    """Under ``--json`` stdout carries the JSON document alone: for the whole run ``sys.stdout`` is
+    stderr, so nothing a method or a thread it started prints can reach the document."""
+    if not args.json:
+        return _run(args)
+    stdout = sys.stdout
+    args.json_stream = stdout
+    sys.stdout = sys.stderr
+    try:
+        return _run(args)
+    finally:
+        sys.stdout = stdout
+
+
 def _run(args) -> int:
     _check_args(args)
     if args.sequences is not None and args.frame_cache is not None:
@@ -289,7 +303,7 @@ def _print_run_summary(args, summary: dict) -> int:
     failed = {n: m["status"] for n, m in summary["methods"].items() if m.get("status", "ok").startswith("failed")}
     rc = 1 if failed and args.strict else 0
     if args.json:
-        print(json.dumps(summary, indent=1))
+        print(json.dumps(summary, indent=1), file=getattr(args, "json_stream", None) or sys.stdout)
         return rc
     print(f"run folder  {args.output}")
     print(f"cycles      {summary['cycles_done']}/{summary['n_cycles']}"
@@ -361,7 +375,7 @@ def _run_dataset(args) -> int:
         if bar is not None:
             bar.close()
     if args.json:
-        print(json.dumps(summary, indent=1))
+        print(json.dumps(summary, indent=1), file=getattr(args, "json_stream", None) or sys.stdout)
     else:
         t = summary["throughput"]
         print(f"dataset run {args.output}  ({len(summary['sequences'])} sequences, {len(summary['units'])} units, "
