@@ -1,4 +1,4 @@
-"""``forest_edge``: from the shade of a dense stand out onto sunlit snow."""
+"""``forest_edge``: walking out of dense spruce shade into open sunlit snow: the extreme-range case."""
 
 from __future__ import annotations
 
@@ -12,7 +12,6 @@ from scenes.description import Material, SceneDescription, Shape
 from scenes.errors import SceneError
 from scenes.geometry import merge, prisms, quad, scatter_points
 from scenes.lighting import daylight_rgb
-
 from scenes.library.parts import (
     _CANOPY,
     _TEXTURES,

@@ -1,4 +1,4 @@
-"""``forest_summer``: the trail in summer."""
+"""``forest_summer``: sun patches and shade on a textured forest floor under a broadleaf canopy."""
 
 from __future__ import annotations
 
@@ -9,7 +9,6 @@ from scenes.base import register_scene
 from scenes.description import Material, SceneDescription
 from scenes.errors import SceneError
 from scenes.geometry import icosphere, merge, prisms, scatter_points
-
 from scenes.library.parts import (
     _CANOPY,
     _ROCKS,

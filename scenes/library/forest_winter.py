@@ -1,4 +1,4 @@
-"""``forest_winter``: a snow-covered boreal trail under a low sun."""
+"""``forest_winter``: sunlit snow under a spruce stand: bright textured snow, dark trunks and crowns, crisp shadows."""
 
 from __future__ import annotations
 
@@ -6,7 +6,6 @@ from scenes import textures as tx
 from scenes.base import register_scene
 from scenes.description import Material, SceneDescription
 from scenes.errors import SceneError
-
 from scenes.library.parts import (
     NEEDLE_ALBEDO,
     _DETAIL,

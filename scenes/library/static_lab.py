@@ -1,4 +1,4 @@
-"""``static_lab``: a static indoor chart scene for a fixed camera."""
+"""``static_lab``: a static lab, a textured patch chart of log-spaced albedos under one softbox, part in shade."""
 
 from __future__ import annotations
 
@@ -12,7 +12,6 @@ from scenes.description import Material, SceneDescription, Shape
 from scenes.errors import SceneError
 from scenes.geometry import box, icosphere, merge, quad
 from scenes.lighting import daylight_rgb
-
 from scenes.library.parts import _TEXTURES, _require, _rng
 
 __all__ = ["static_lab"]

@@ -1,4 +1,4 @@
-"""``sun_glare``: the sun's disk in view."""
+"""``sun_glare``: a low sun in view through sparse spruces, and its glint on a frozen pond ahead."""
 
 from __future__ import annotations
 
@@ -9,7 +9,6 @@ from scenes.base import register_scene
 from scenes.description import Material, SceneDescription
 from scenes.errors import SceneError
 from scenes.geometry import quad
-
 from scenes.library.parts import (
     _TEXTURES,
     _TREES,

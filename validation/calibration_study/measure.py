@@ -10,7 +10,6 @@ import numpy as np
 from emulator.calibration import response_error
 from emulator.io.pcalib import PCALIB_TABLE_TOP
 from emulator.response import CameraResponse
-
 from validation.calibration_study.config import BRACKETS_MS, DN_RANGE
 
 __all__ = ["study_radiance", "electrons_per_ms", "stack_exposures", "capture_stack", "opencv_curves", "codes_to_dn_curve", "curve_error", "code_curve_error", "emulation_check"]

@@ -8,7 +8,6 @@ import numpy as np
 
 from emulator.io.files import save_figure
 from emulator.report.figures import subplots
-
 from validation.calibration_study.config import DN_RANGE, PRESETS
 
 

@@ -19,7 +19,6 @@ from validation.common import (
     summary_stats,
     to_percent,
 )
-
 from validation.emulation.config import BOUND_TOL_DN, HARD_EXPOSURES_MS, HIST_BINS, METRICS
 
 __all__ = ["SweepResult", "sweep_static", "choose_brackets", "hard_cases"]

@@ -20,7 +20,6 @@ from validation.common import (
     summary_stats,
     to_percent,
 )
-
 from validation.emulation.config import EmulationConfig
 from validation.emulation.measure import (
     _selector_series,

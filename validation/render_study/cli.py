@@ -12,7 +12,6 @@ from emulator.commands.progress import add_quiet, bars_enabled
 from emulator.commands import argtypes
 from emulator.errors import ExposimError
 from validation.common import ValidationError
-
 from validation.render_study.config import CONFIGS, DEFAULT_REAL_SEQUENCE, RenderStudyConfig
 from validation.render_study.study import run_render_study, total_steps
 from validation.render_study.report import render_study_table

@@ -12,7 +12,6 @@ import numpy as np
 from emulator.io.files import prepare_output, write_results
 from emulator.report.html import write_report
 from validation.common import provenance, study_scene, to_percent
-
 from validation.render_study.config import (
     CONFIGS,
     RenderStudyConfig,
