@@ -89,7 +89,7 @@ def _broken(cmd: Command):
 
 def build_parser(commands: list[Command] | None = None) -> argparse.ArgumentParser:
     """The ``exposim`` parser with every registered command (see :func:`load_commands`)."""
-    from emulator import __version__
+    from emulator.version import __version__
 
     commands = load_commands() if commands is None else commands
     parser = argparse.ArgumentParser(

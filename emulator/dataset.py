@@ -12,6 +12,7 @@ demand through it.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -55,11 +56,16 @@ class Frame:
     #: Decoded-frame cache entry (:mod:`emulator.io.framecache`), read instead of the PNG when present.
     cache_path: Path | None = field(default=None, compare=False, repr=False)
 
+    #: Decodes the frame (``reader(frame) -> ndarray``): set by the reader that found it
+    #: (:func:`emulator.io.borealhdr.read_frame`), so the in-memory model imports no file format.
+    reader: Callable[["Frame"], np.ndarray] | None = field(default=None, compare=False, repr=False)
+
     def load(self) -> np.ndarray:
         """The raw image: (H, W) ``uint16`` Bayer mosaic in DN."""
-        from emulator.io.borealhdr import read_frame
-
-        return read_frame(self)
+        if self.reader is None:
+            raise DatasetError(f"{self.path}: frame has no reader (frames come from emulator.io.borealhdr."
+                               "load_sequence)")
+        return self.reader(self)
 
     @property
     def exposure_name(self) -> str:

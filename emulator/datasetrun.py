@@ -156,7 +156,8 @@ def count_images(sequence) -> int:
     return sum(max((len(f) for f in c.frames.values()), default=0) for c in sequence.cycles)
 
 
-def _unit_record(unit: Unit, folder: Path, reused: bool, wall_s: float | None = None) -> dict:
+def _unit_record(unit: Unit, folder: Path, reused: bool) -> dict:
+    """The record of a unit whose folder exists (a resumed or duplicate unit): read from it."""
     from emulator.io.files import RESULTS_FILE, read_results
     from emulator.io.runfolder import read_run_json
     from emulator.report.run import write_run_report
@@ -164,7 +165,10 @@ def _unit_record(unit: Unit, folder: Path, reused: bool, wall_s: float | None = 
     info = read_run_json(folder)
     if not (folder / RESULTS_FILE).is_file():  # killed between the rename and the report
         write_run_report(folder)
-    results = read_results(folder)
+    return _record(unit, folder, reused, info, read_results(folder), None)
+
+
+def _record(unit: Unit, folder: Path, reused: bool, info: dict, results: dict, wall_s: float | None) -> dict:
     timing = info.get("timing") or {}
     return {
         "sequence": unit.sequence,
@@ -189,25 +193,19 @@ def _is_complete(folder: Path) -> bool:
     return (folder / RUN_FILE).is_file() and read_run_json(folder).get("status") == "complete"
 
 
-def run_unit(unit: Unit, out_dir: str | os.PathLike, options: Mapping, *, fault_marker: str | None = None) -> dict:
+def run_unit(unit: Unit, out_dir: str | os.PathLike, config) -> dict:
     """Run one (sequence, method group) into ``out_dir/sequence/group`` (idempotent, atomic).
 
-    ``options`` are keyword arguments of :func:`emulator.runner.run_to_folder` (mode,
-    selector, initial_ms, range_ms, options, save, response_path, jobs).  An existing
+    ``config`` is the :class:`~emulator.playback.RunConfig` of every unit.  An existing
     complete folder is returned as is (``reused``); otherwise the run goes to a staging
     folder beside it that is renamed into place when complete; if another attempt renamed
     its folder first, this one's is discarded.  Returns the unit's record (per-method
-    results, cycles, images, loop seconds).
-
-    ``fault_marker`` is a testing aid for worker failure: when given and the file does not
-    exist, the unit creates it and kills its own process (``os._exit``) after the first
-    cycle, leaving a partial staging folder behind, as a worker that dies mid-task does.
+    results, cycles, images, loop seconds), built from what the run returned (nothing is
+    read back).
     """
     from emulator.io.borealhdr import load_sequence
-    from emulator.io.files import write_metadata
-    from emulator.io.runfolder import RUN_FILE, read_run_json
-    from emulator.runner import run_to_folder
     from emulator.report.run import write_run_report
+    from emulator.runner import write_run
 
     out_dir = Path(out_dir)
     final = out_dir / unit.sequence / unit.group
@@ -217,24 +215,14 @@ def run_unit(unit: Unit, out_dir: str | os.PathLike, options: Mapping, *, fault_
         raise DatasetRunError(f"{final}: exists but is not a complete run; remove it to recompute")
     final.parent.mkdir(parents=True, exist_ok=True)
     staging = final.parent / f".{unit.group}{_STAGING}{uuid.uuid4().hex[:12]}"
-    progress = None
-    if fault_marker is not None and not Path(fault_marker).exists():
-        def progress(done: int, total: int) -> None:
-            from emulator.io.files import write_text
-
-            write_text(fault_marker, f"killed {unit.key} after cycle {done}\n")
-            os._exit(3)
-
     t0 = time.perf_counter()
     seq = load_sequence(unit.path)
+    extra = {"n_images": count_images(seq), "n_brackets": len(seq.brackets), "dataset_unit": unit.key}
     try:
         # the closed loop runs the methods under one BLAS thread (emulator.pools): the same
         # arithmetic in this process and on any worker
-        run_to_folder(seq, list(unit.methods), staging, progress=progress, make_report=False,
-                      command=f"exposim run (dataset unit {unit.key})", **dict(options))
-        write_metadata(staging / RUN_FILE, {**read_run_json(staging), "n_images": count_images(seq),
-                                            "n_brackets": len(seq.brackets), "dataset_unit": unit.key},
-                       overwrite=True)
+        run_json, tables = write_run(seq, list(unit.methods), staging, config, run_json_extra=extra,
+                                     command=f"exposim run (dataset unit {unit.key})")
         try:
             os.rename(staging, final)
         except OSError:
@@ -245,9 +233,8 @@ def run_unit(unit: Unit, out_dir: str | os.PathLike, options: Mapping, *, fault_
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
         raise
-    write_run_report(final)
-    record = _unit_record(unit, final, reused=False, wall_s=time.perf_counter() - t0)
-    return record
+    summary = write_run_report(final, run_json, tables)
+    return _record(unit, final, False, run_json, summary, time.perf_counter() - t0)
 
 
 def remove_stale_staging(out_dir: str | os.PathLike) -> list[Path]:
@@ -336,71 +323,79 @@ def throughput(records: list[dict], wall_s: float, n_groups: int, workers: list[
 
 
 # ---------------------------------------------------------------------------- the run
-def _config(root, sequences, methods, group_size, options) -> dict:
+def _config(root, sequences, methods, group_size, config) -> dict:
+    run = {k: v for k, v in config.to_json().items() if k != "jobs"}  # results do not depend on jobs
+    run["response_path"] = config.response_path
+    run["noise_model"] = config.noise_model if isinstance(config.noise_model, str) else None
     return {
         "root": str(Path(root).resolve()),
         "sequences": {name: str(Path(p).resolve()) for name, p in sequences.items()},
         "methods": list(methods),
         "group_size": int(group_size),
-        "options": {k: (list(v) if isinstance(v, tuple) else v) for k, v in dict(options).items()},
+        "config": run,
     }
 
 
 def run_dataset(
     root: str | os.PathLike,
     out_dir: str | os.PathLike,
+    config=None,
     *,
     sequences: str = "all",
     methods="all",
     group_size: int | None = None,
-    options: Mapping | None = None,
     scheduler="serial",
     scheduler_file: str | os.PathLike | None = None,
     n_workers: int | None = None,
     retries: int = 2,
     resume: bool = False,
     progress: Callable[[int, int], None] | None = None,
-    fault_marker: str | None = None,
+    **settings,
 ) -> dict:
     """Run methods on every selected sequence under ``root`` into ``out_dir``; returns the summary.
 
-    ``options``: keyword arguments of :func:`emulator.runner.run_to_folder` for every unit
-    (mode, selector, initial_ms, range_ms, options, save, response_path, jobs).
-    ``scheduler``: ``serial`` (in this process), ``local`` (a Dask ``LocalCluster`` of
+    ``config``: the :class:`~emulator.playback.RunConfig` of every unit (keyword
+    ``settings`` override its fields, e.g. ``save="png16"``, ``noise="consistent"``,
+    ``method_timeout_s=1``).  ``scheduler``: ``serial`` (in this process), ``threads``
+    (``n_workers`` threads of this process), ``local`` (a Dask ``LocalCluster`` of
     ``n_workers`` processes, default sized to the machine), ``tcp://HOST:PORT`` or
     ``tls://HOST:PORT`` (an existing Dask cluster that sees the same paths), or an open
     :class:`distributed.Client` (used, not closed); ``scheduler_file`` instead names a
-    Dask scheduler file (see :mod:`emulator.distributed`).  Refuses an existing ``out_dir`` that
-    holds a dataset run unless ``resume`` (then the configuration must be the same; complete
-    units are kept, others computed).  A unit that fails is retried ``retries`` times;
-    units that still fail are listed under ``errors`` and the others are kept.
+    Dask scheduler file (see :mod:`emulator.distributed`).  Refuses an existing ``out_dir``
+    that holds a dataset run unless ``resume`` (then the configuration must be the same;
+    complete units are kept, others computed).  Every path runs the units through
+    :func:`emulator.distributed.run_tasks`: a unit that raises any exception becomes an
+    error row (Dask retries it ``retries`` times first), the others are kept, and the
+    bytes written are the same on every path.
     ``progress(done, total)`` after each unit.
     """
-    from emulator.io.files import read_metadata, write_metadata
     from emulator.autoexposure.methodset import parse_methods
+    from emulator.distributed import open_client, run_tasks
+    from emulator.io.files import read_metadata, write_metadata
+    from emulator.playback import RunConfig
     from emulator.report.dataset import write_dataset_report
 
     out = Path(os.path.abspath(out_dir))  # absolute: a plugin's os.chdir cannot move the output
-    options = dict(options or {})
+    cfg = RunConfig.from_kwargs(config, **settings)
     from emulator.distributed import check_scheduler, is_client
 
     if scheduler_file is not None and scheduler in ("serial", None):
         scheduler = "file"
-    if scheduler != "file":
+    if scheduler not in ("file", "threads"):
         check_scheduler(scheduler)
     scheduler_name = (f"client {scheduler.scheduler.address}" if is_client(scheduler) else
                       f"file {scheduler_file}" if scheduler == "file" else str(scheduler))
     found = discover_sequences(root, sequences)
     names = parse_methods(methods) if isinstance(methods, str) else list(methods)
     group_size = len(names) if group_size is None else int(group_size)
-    config = _config(root, found, names, group_size, options)
+    config_json = _config(root, found, names, group_size, cfg)
     units = plan_units(found, names, group_size)
     cfg_path = out / DATASET_FILE
     if cfg_path.is_file():
         if not resume:
             raise OutputExistsError(f"{out}: holds a dataset run; use --resume to continue it or another -o")
         old = read_metadata(cfg_path, DatasetRunError)
-        diff = [k for k in config if old.get(k) != to_plain(config[k])]
+        diff = [k for k in config_json if old.get(k) != to_plain(config_json[k])]
         if diff:
             raise DatasetRunError(f"{cfg_path}: --resume with a different configuration ({', '.join(diff)})")
     else:
@@ -409,13 +404,10 @@ def run_dataset(
         if resume:
             raise DatasetRunError(f"{cfg_path}: no dataset run to resume")
 
-    if scheduler == "serial":
-        ctx = contextlib.nullcontext()
-    else:
-        from emulator.distributed import open_client, run_units
-
-        ctx = open_client(scheduler, scheduler_file=None if scheduler_file is None else str(scheduler_file),
-                          n_workers=n_workers, retries=retries)
+    in_process = scheduler in ("serial", "threads")
+    ctx = contextlib.nullcontext() if in_process else open_client(
+        scheduler, scheduler_file=None if scheduler_file is None else str(scheduler_file), n_workers=n_workers,
+        retries=retries)
     from emulator.io.runfolder import RunLock
 
     out.mkdir(parents=True, exist_ok=True)
@@ -424,30 +416,20 @@ def run_dataset(
         if cfg_path.is_file():
             remove_stale_staging(out)
         else:
-            write_metadata(cfg_path, config)
+            write_metadata(cfg_path, config_json)
         if progress is not None:
             progress(0, len(units))
         t0 = time.perf_counter()
-        if client is None:
-            records, errors = [], []
-            for i, unit in enumerate(units, 1):
-                try:
-                    records.append(run_unit(unit, out, options, fault_marker=fault_marker))
-                except (ExposimError, OSError) as exc:  # a bad sequence or file: name the unit, keep the others
-                    errors.append({"unit": unit.key, "error": f"{type(exc).__name__}: {exc}"})
-                if progress is not None:
-                    progress(i, len(units))
-        else:
-            records, errors = run_units(client, units, out, options, retries=retries, progress=progress,
-                                        fault_marker=fault_marker)
+        outcomes = run_tasks(run_unit, [(u, str(out), cfg) for u in units], client=client,
+                             threads=(n_workers or 2) if scheduler == "threads" else 1, retries=retries,
+                             progress=progress, keys=[u.key for u in units])
         remove_stale_staging(out)  # attempts of units that were killed and ran again (under the lock)
+    records = [o.result for o in outcomes if o.error is None]
+    errors = [{"unit": o.key, "error": o.error} for o in outcomes if o.error is not None]
     wall_s = time.perf_counter() - t0
-    order = {u.key: i for i, u in enumerate(units)}
-    records.sort(key=lambda r: order[f"{r['sequence']}/{r['group']}"])
-    errors.sort(key=lambda e: order[e["unit"]])
     run_names = _run_names(names)
     summary = {
-        "root": config["root"],
+        "root": config_json["root"],
         "sequences": list(found),
         "methods": run_names,
         "method_specs": {n: spec for spec, n in zip(names, run_names) if n != spec},

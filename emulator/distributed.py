@@ -1,4 +1,4 @@
-"""Dask execution of dataset units (:mod:`emulator.datasetrun`): a local cluster or an existing one.
+"""One task runner (:func:`run_tasks`: serial, threads or Dask, one error policy) and the Dask clients.
 
 ``scheduler`` (see :func:`open_client`):
 
@@ -17,8 +17,8 @@
 :func:`resolve_scheduler` picks one for the command line: ``--scheduler-file``, else
 ``--scheduler``, else ``$DASK_SCHEDULER_ADDRESS``, else the caller's default.
 
-Every unit is one task (:func:`emulator.datasetrun.run_unit`), submitted with
-``retries`` (a unit that raises is run again) and ``pure=False``; a worker that dies
+Every task (e.g. a dataset unit, :func:`emulator.datasetrun.run_unit`) is submitted with
+``retries`` (a task that raises is run again) and ``pure=False``; a worker that dies
 mid-task makes the scheduler run the task again on another worker (up to its
 ``distributed.scheduler.allowed-failures``, which :func:`local_client` sets to ``retries``).
 A unit writes its run folder under a staging name and renames it when complete, so a lost
@@ -29,14 +29,17 @@ from __future__ import annotations
 
 import logging
 import os
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import as_completed as as_completed_threads
 from contextlib import contextmanager, nullcontext
+from dataclasses import dataclass
 from pathlib import Path
 
 from emulator.errors import ExposimError
 
-__all__ = ["SchedulerError", "ENV_ADDRESS", "SCHEDULER_HELP", "default_workers", "is_address", "is_client", "check_scheduler",
-           "resolve_scheduler", "local_client", "connect", "open_client", "run_units"]
+__all__ = ["SchedulerError", "ENV_ADDRESS", "SCHEDULER_HELP", "default_workers", "is_address", "is_client",
+           "check_scheduler", "resolve_scheduler", "local_client", "connect", "open_client", "run_tasks", "Outcome"]
 
 
 class SchedulerError(ExposimError):
@@ -206,35 +209,79 @@ def open_client(scheduler, *, scheduler_file: str | None = None, n_workers: int 
     raise SchedulerError(f"scheduler {scheduler!r} runs in this process; no client to open")
 
 
-def run_units(
-    client,
-    units: list,
-    out_dir: str | os.PathLike,
-    options: Mapping,
+@dataclass
+class Outcome:
+    """One task's outcome: its result, or its error as ``"Type: message"`` (never both)."""
+
+    key: str
+    result: object = None
+    error: str | None = None
+
+
+def _error_text(exc: BaseException) -> str:
+    return f"{type(exc).__name__}: {exc}"
+
+
+def _guarded(fn: Callable, args: tuple, key: str) -> Outcome:
+    try:
+        return Outcome(key, fn(*args))
+    except Exception as exc:  # any failure of a task is its row; KeyboardInterrupt still stops the run
+        return Outcome(key, error=_error_text(exc))
+
+
+def run_tasks(
+    fn: Callable,
+    arg_tuples: Sequence[tuple],
     *,
+    client=None,
+    threads: int = 1,
     retries: int = 2,
     progress: Callable[[int, int], None] | None = None,
-    fault_marker: str | None = None,
-) -> tuple[list[dict], list[dict]]:
-    """Run units as tasks of ``client``; returns (records of the units that finished, errors of those that failed)."""
-    from dask.distributed import as_completed
+    keys: Sequence[str] | None = None,
+) -> list[Outcome]:
+    """Run ``fn(*args)`` for every tuple of ``arg_tuples``: serially, on threads, or as Dask tasks.
 
-    from emulator.datasetrun import run_unit
+    One error policy on every path: a task that raises any :class:`Exception` becomes an
+    :class:`Outcome` with ``error`` (``"Type: message"``), the others go on, nothing aborts
+    silently; on Dask a failed task is first retried ``retries`` times (a worker that dies
+    mid-task is rescheduled by the scheduler), in this process it is not (a task that
+    fails here fails the same way again).  ``fn`` must be a pure function of its
+    arguments that writes only its own outputs, so the bytes written are the same on
+    every path.  Returns the outcomes in the order of ``arg_tuples``; ``progress(done,
+    total)`` after each task.  ``keys`` name the tasks (default: their index).
+    """
+    arg_tuples = [tuple(a) for a in arg_tuples]
+    keys = [str(i) for i in range(len(arg_tuples))] if keys is None else [str(k) for k in keys]
+    if len(keys) != len(arg_tuples):
+        raise ValueError("keys and arg_tuples differ in length")
+    total = len(arg_tuples)
+    outcomes: dict[int, Outcome] = {}
 
-    out = str(Path(out_dir).resolve())
-    records: list[dict] = []
-    errors: list[dict] = []
-    futures = {}
-    for unit in units:
-        fut = client.submit(run_unit, unit, out, dict(options), fault_marker=fault_marker, retries=int(retries),
-                            pure=False, key=f"exposim-unit-{unit.key}-{os.urandom(4).hex()}")
-        futures[fut] = unit
-    for i, fut in enumerate(as_completed(list(futures)), 1):
-        unit = futures[fut]
-        try:
-            records.append(fut.result())
-        except Exception as exc:  # an ExposimError of a bad sequence, KilledWorker, a crash: in the unit's row
-            errors.append({"unit": unit.key, "error": f"{type(exc).__name__}: {exc}"})
+    def done(i: int, outcome: Outcome) -> None:
+        outcomes[i] = outcome
         if progress is not None:
-            progress(i, len(units))
-    return records, errors
+            progress(len(outcomes), total)
+
+    if client is not None:
+        from dask.distributed import as_completed
+
+        futures = {}
+        for i, (args, key) in enumerate(zip(arg_tuples, keys)):
+            fut = client.submit(fn, *args, retries=int(retries), pure=False,
+                                key=f"exposim-task-{key}-{os.urandom(4).hex()}")
+            futures[fut] = i
+        for fut in as_completed(list(futures)):
+            i = futures[fut]
+            try:
+                done(i, Outcome(keys[i], fut.result()))
+            except Exception as exc:  # the task's own error, KilledWorker, a lost connection: in its row
+                done(i, Outcome(keys[i], error=_error_text(exc)))
+    elif int(threads) > 1:
+        with ThreadPoolExecutor(max_workers=int(threads), thread_name_prefix="exposim-task") as pool:
+            futures = {pool.submit(_guarded, fn, args, key): i for i, (args, key) in enumerate(zip(arg_tuples, keys))}
+            for fut in as_completed_threads(futures):
+                done(futures[fut], fut.result())
+    else:
+        for i, (args, key) in enumerate(zip(arg_tuples, keys)):
+            done(i, _guarded(fn, args, key))
+    return [outcomes[i] for i in range(total)]

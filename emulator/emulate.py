@@ -23,12 +23,12 @@ the target would have had beyond that, from a :class:`emulator.noise.NoiseModel`
 from __future__ import annotations
 
 import math
-from concurrent.futures import ThreadPoolExecutor
 
 import cv2
 import numpy as np
 
 from emulator.errors import EmulationError
+from emulator.pools import lut_pool
 from emulator.response import CameraResponse
 
 __all__ = [
@@ -48,14 +48,6 @@ NOISE_MODES = ("none", "consistent")
 _BLOCK_ROWS = 16
 #: Images with at least this many pixels are split across two threads.
 _THREAD_MIN_PIXELS = 1 << 20
-_POOL: ThreadPoolExecutor | None = None
-
-
-def _pool() -> ThreadPoolExecutor:
-    global _POOL
-    if _POOL is None:
-        _POOL = ThreadPoolExecutor(max_workers=2, thread_name_prefix="exposim-lut")
-    return _POOL
 
 
 def check_exposure(value, name: str) -> float:
@@ -141,7 +133,7 @@ def apply_lut(table: np.ndarray, raw: np.ndarray, out: np.ndarray | None = None)
 
     if raw.size >= _THREAD_MIN_PIXELS and rows >= 2 * _BLOCK_ROWS:
         half = rows // 2
-        list(_pool().map(lambda ab: work(*ab), [(0, half), (half, rows)]))
+        list(lut_pool().map(lambda ab: work(*ab), [(0, half), (half, rows)]))
     else:
         work(0, rows)
     return out
@@ -274,21 +266,21 @@ def emulate(
     ratio = float(target_ms) / float(source_ms)
     model = _check_noise_model(noise_model, response, noise, return_excess)
     if noise == "consistent":
-        from emulator.noise import check_rng, consistent_noise
+        from emulator.noise.tables import check_rng, consistent_noise
 
         out = consistent_noise(raw, out, ratio, model, check_rng(rng))
     results = [out]
     if return_mask:
         results.append(validity_mask(raw, ratio, response))
     if return_excess:
-        from emulator.noise import excess_map
+        from emulator.noise.tables import excess_map
 
         results.append(excess_map(raw, ratio, model, consistent=noise == "consistent"))
     return tuple(results) if len(results) > 1 else results[0]
 
 
 def _check_noise_model(noise_model, response: CameraResponse, noise: str, return_excess: bool):
-    from emulator.noise import NoiseModel
+    from emulator.noise.model import NoiseModel
 
     why = f'noise="{noise}"' if noise != "none" else "return_excess"
     if noise_model is None:

@@ -1,4 +1,5 @@
-"""One BLAS/OpenMP thread around arithmetic whose result must not depend on the machine.
+"""Thread pools: one BLAS/OpenMP thread around arithmetic whose result must not depend on the
+machine (:func:`single_thread_pools`), and the shared two-thread pool of the LUT gathers (:func:`lut_pool`).
 
 A multi-threaded BLAS splits a reduction over its threads and sums the parts in another
 order: ``np.dot`` of two 2.3-million-element vectors (Zhang's derivative on a BorealHDR
@@ -13,10 +14,22 @@ from __future__ import annotations
 import importlib
 import threading
 
-__all__ = ["single_thread_pools"]
+__all__ = ["single_thread_pools", "lut_pool"]
 
 _lock = threading.Lock()
 _controllers: dict = {}
+_LUT_POOL = None
+
+
+def lut_pool():
+    """The two threads that split a large image's lookup-table gather in halves (emulation, noise tables)."""
+    global _LUT_POOL
+    with _lock:
+        if _LUT_POOL is None:
+            from concurrent.futures import ThreadPoolExecutor
+
+            _LUT_POOL = ThreadPoolExecutor(max_workers=2, thread_name_prefix="exposim-lut")
+        return _LUT_POOL
 
 
 def single_thread_pools(load: tuple[str, ...] = (), user_api: str | None = None):

@@ -1,63 +1,41 @@
 """A closed-loop run written to a run folder: :func:`run_to_folder` (resume, lock).
 
-The loop itself is :mod:`emulator.playback`; the folder's layout, writer and reader are
+The loop itself is :mod:`emulator.playback`, configured by one
+:class:`~emulator.playback.RunConfig`; the folder's layout, writer and reader are
 :mod:`emulator.io.runfolder`; its plot and summaries are :mod:`emulator.report.run`.
 ``exposim run``, the dataset runner, the demo and the studies all write through here.
+
+The folder is written from memory: ``run.json`` at the start, every
+:data:`RUN_JSON_EVERY` cycles and at the end; the summary and ``times.txt`` come from the
+rows the run made (never read back); each emulated image is encoded once per (cycle,
+camera, target) and shared by the methods with the same target (hard link, else a copy
+of the bytes).
 """
 
 from __future__ import annotations
 
-import json
+import contextlib
 import os
-from collections.abc import Callable, Mapping
+import threading
+from collections import deque
+from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
 
-from emulator.autoexposure import DEFAULT_RANGE_MS
-from emulator.autoexposure.methodset import build_methods, parse_methods
-from emulator.dataset import Sequence
+from emulator.autoexposure.methodset import parse_methods
 from emulator.errors import PlaybackError
-from emulator.emulate import check_exposure
 from emulator.gray import bayer_to_gray8
-from emulator.io.borealhdr import sequence_response
-from emulator.io.runfolder import CSV_COLUMNS, CSV_FILE, RUN_FILE, SAVE_MODES, RunWriter, format_row
-from emulator.playback import (
-    DEFAULT_INITIAL_MS,
-    DEFAULT_SELECTOR,
-    METHOD_CAMERA,
-    MethodStep,
-    RunStats,
-    _check_range,
-    _check_timeout,
-    _clamp,
-    _noise_spec,
-    _resolve_sequence,
-    iter_run,
-)
-from emulator.select import SELECTORS
+from emulator.io.runfolder import CSV_COLUMNS, CSV_FILE, RUN_FILE, RunWriter, format_row, tables_from_rows
+from emulator.playback.config import CONFIG_KEYS
+from emulator.playback import METHOD_CAMERA, MethodStep, RunConfig, RunStats, closed_loop, prepare_run, \
+    resolve_sequence
 
-__all__ = ["run_to_folder", "saved_image", "resolve_noise_model"]
+__all__ = ["run_to_folder", "write_run", "saved_image", "RUN_JSON_EVERY"]
 
-
-def _canon(value) -> str:
-    return json.dumps(value, sort_keys=True, default=str)
-
-
-def _config_of(run_json: dict) -> dict:
-    out = {k: run_json.get(k) for k in ("sequence", "methods", "selector", "initial_ms", "range_ms", "save", "mode",
-                                        "options", "response", "method_timeout")}
-    out["noise"] = run_json.get("noise") or {"mode": "none"}  # run folders from before --noise: none
-    out["blur"] = run_json.get("blur") or {"mode": "none"}  # run folders from before --blur: none
-    return out
-
-
-def _same_file(a, b) -> bool:
-    """Two recorded paths (relative ones to the working directory) name one existing file."""
-    try:
-        return bool(a) and bool(b) and Path(a).is_file() and Path(a).resolve() == Path(b).resolve()
-    except OSError:
-        return False
+#: ``run.json`` is rewritten every this many cycles (and at the start and the end).
+RUN_JSON_EVERY = 10
 
 
 def saved_image(image: np.ndarray, save: str, *, white_level: int, black_level: int) -> np.ndarray:
@@ -70,241 +48,258 @@ def saved_image(image: np.ndarray, save: str, *, white_level: int, black_level: 
     raise PlaybackError(f"save must be png16 or png8 to save an image, got {save!r}")
 
 
-def resolve_noise_model(noise: str, noise_model, seq: Sequence, response):
-    """The noise model of a run: None for ``noise="none"``; a NoiseModel; a path to a noise-model
-    JSON (:func:`emulator.io.noisemodel.read_noise_model`); or, when None, the model the
-    recording's ``exposim.json`` carries (synthetic recordings). Returns (model, source)."""
-    from emulator.io.noisemodel import noise_model_from_metadata, read_noise_model
-    from emulator.noise import NoiseModel
+class _ImageSaver:
+    """Writes each step's images in the background, one encoding per (cycle, camera, target) (thread-safe).
 
-    if noise == "none":
-        return None, None
-    if isinstance(noise_model, NoiseModel):
-        return noise_model, str(noise_model.name)
-    if noise_model is not None:
-        return read_noise_model(noise_model, response), str(Path(noise_model).resolve())
-    meta_path = Path(seq.path) / "exposim.json"
-    model = noise_model_from_metadata(seq.metadata, response, source=str(meta_path))
-    if model is None:
-        raise PlaybackError(
-            f'{seq.path}: noise "{noise}" needs a noise model and the recording carries none (no camera in '
-            f"{meta_path.name}); pass --noise-model FILE.json (written by `exposim calibrate --noise`)"
-        )
-    return model, str(meta_path.resolve())
+    The first step of a (cycle, camera, target) submits its image to a small pool of encoder
+    threads (PNG encoding releases the GIL, so it overlaps the loop); the other methods with
+    that target get the same bytes (:meth:`RunWriter.share_image`) when it is written.  At
+    most ``max_pending`` writes wait at a time (their images stay in memory); :meth:`close`
+    waits for all of them and raises the first error.
+    """
+
+    def __init__(self, writer: RunWriter, save: str, white: int, black: int, *, threads: int = 2,
+                 max_pending: int = 32) -> None:
+        self.writer, self.save, self.white, self.black = writer, save, white, black
+        self._lock = threading.Lock()
+        self._done: dict = {}
+        self._pending: deque = deque()
+        self._errors: list[BaseException] = []
+        self._max_pending = int(max_pending)
+        self._pool = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="exposim-save") \
+            if save != "none" else None
+
+    def __call__(self, st: MethodStep) -> None:
+        if self._pool is None:
+            return
+        resumed = self.writer.recorded(st.method, st.cycle) is not None
+        for cam, img in (("left", st.left), ("right", st.right)):
+            if img is None:
+                continue
+            key = (st.cycle, cam, st.target_ms)
+            with self._lock:
+                first = self._done.get(key)
+                if first is None:
+                    self._done[key] = self._pool.submit(self._write, img, st.method, cam, st.timestamp_ns, resumed)
+                    self._pending.append(self._done[key])
+                    continue
+            first.add_done_callback(lambda f, m=st.method, c=cam, t=st.timestamp_ns:
+                                    self._share(f, m, c, t, resumed))
+        self._forget(st.cycle)
+        while True:
+            with self._lock:
+                oldest = self._pending.popleft() if len(self._pending) > self._max_pending else None
+            if oldest is None:
+                break
+            oldest.result()
+
+    def _write(self, img, method: str, cam: str, timestamp_ns: int, resumed: bool) -> Path:
+        dest = self.writer.image_path(method, cam, timestamp_ns)
+        if resumed and dest.exists():
+            return dest  # a resumed run's image, already there
+        data = saved_image(img, self.save, white_level=self.white, black_level=self.black)
+        return self.writer.write_image(method, cam, timestamp_ns, data)
+
+    def _share(self, first: Future, method: str, cam: str, timestamp_ns: int, resumed: bool) -> None:
+        try:
+            source = first.result()
+            dest = self.writer.image_path(method, cam, timestamp_ns)
+            if source != dest and not (resumed and dest.exists()):
+                self.writer.share_image(source, method, cam, timestamp_ns)
+        except BaseException as exc:  # raised again by close()
+            with self._lock:
+                self._errors.append(exc)
+
+    def _forget(self, cycle: int) -> None:
+        with self._lock:
+            for key in [k for k in self._done if k[0] < cycle - 1]:
+                self._done.pop(key, None)
+
+    def close(self) -> None:
+        """Wait for every write; raise the first error."""
+        if self._pool is None:
+            return
+        try:
+            for fut in list(self._pending):
+                fut.result()
+        finally:
+            self._pool.shutdown(wait=True)  # the sharing callbacks have run
+        if self._errors:
+            raise self._errors[0]
+
+
+def _new_run_json(config: RunConfig, identity: dict, seq, built, method_specs, model, model_source, command,
+                  created, blur_hook=None) -> dict:
+    from emulator.version import __version__
+
+    run_json = {
+        **identity,
+        **config.to_json(model, blur_hook),
+        "white_level": int(seq.white_level),
+        "black_level": int(seq.black_level),
+        "cameras": list(seq.cameras),
+        "brackets_ms": list(seq.brackets),
+        "method_camera": METHOD_CAMERA,
+        "selector_camera": METHOD_CAMERA,
+        "method_options": {n: m.config() if hasattr(m, "config") else {} for n, m in built.items()},
+        "method_specs": [s if isinstance(s, str) else n for s, n in zip(method_specs, built)],
+        "command": command,
+        "version": __version__,
+        "created": created,
+        "n_cycles": len(seq.cycles),
+        "status": "running",
+        "cycles_done": 0,
+        "skipped_cycles": [],
+    }
+    if model_source is not None:
+        run_json["noise_model_file"] = model_source
+    if config.start_ms != config.initial_ms:
+        run_json["initial_ms_clamped"] = config.start_ms
+        run_json.setdefault("warnings", []).append(
+            f"initial_ms {config.initial_ms:g} is outside range_ms {list(config.range_ms)}; "
+            f"clamped to {config.start_ms:g} ms")
+    return run_json
 
 
 def run_to_folder(
     sequence,
     methods="all",
     out_dir=None,
+    config: RunConfig | None = None,
     *,
-    save: str = "none",
     response=None,
-    response_path=None,
-    initial_ms: float = DEFAULT_INITIAL_MS,
-    range_ms=DEFAULT_RANGE_MS,
-    selector: str = DEFAULT_SELECTOR,
-    mode: str = "paper",
-    options: Mapping | None = None,
-    jobs: int = 1,
     resume: bool = False,
+    resume_given=None,
     progress: Callable[[int, int], None] | None = None,
     command: str | None = None,
     make_report: bool = True,
-    noise: str = "none",
-    noise_model=None,
-    noise_seed: int = 0,
-    method_timeout: float | None = None,
-    blur: str = "none",
-    blur_aware: bool = False,
+    run_json_extra: dict | None = None,
+    **settings,
 ) -> dict:
     """Run AE methods on a recording and write a run folder (:mod:`emulator.io.runfolder`).
 
-    Refuses an existing, non-empty ``out_dir`` (:class:`OutputExistsError`) unless ``resume``:
-    then the configuration comes from ``out_dir/run.json`` (arguments that differ raise
-    :class:`PlaybackError`), every method is re-run deterministically from cycle 0, rows
-    already in the CSVs are checked against the replay (a mismatch raises) and not written
-    again, missing images are written, and the run continues where it stopped.  The folder
-    is locked while the run writes it: a second run on it (``resume`` while the first is
-    alive) raises :class:`~emulator.errors.RunLockedError`; the lock of a killed run is
-    taken over.
+    ``config`` (a :class:`~emulator.playback.RunConfig`; keyword ``settings`` override its
+    fields, e.g. ``save="png16"``, ``initial_ms=...``, ``method_timeout_s=...``) is checked
+    before the folder is created.  Refuses an existing, non-empty ``out_dir``
+    (:class:`OutputExistsError`) unless ``resume``: then the recorded configuration wins
+    and what is given must equal it (:meth:`RunConfig.resumed`; ``resume_given`` names the
+    fields given explicitly, default all), every method is re-run deterministically from
+    cycle 0, rows already in the CSVs are checked against the replay (a mismatch raises)
+    and not written again, missing images are written, and the run continues where it
+    stopped.  The folder is locked while the run writes it
+    (:class:`~emulator.errors.RunLockedError` for a second writer; the lock of a killed run
+    is taken over).
 
     Returns the summary written to ``results.json`` (per-method figures, skipped cycles,
-    timing; :func:`emulator.report.run.write_run_report`).  ``progress(done, total)`` is
-    called after every cycle.  Every argument is checked before the folder is created.
-    ``initial_ms`` outside ``range_ms`` is clamped (``run.json``: ``initial_ms_clamped``).
-    ``noise``, ``noise_model`` (a NoiseModel, a noise-model JSON path, or None for the one
-    the recording's ``exposim.json`` carries), ``noise_seed``: see :func:`iter_run`; the
-    choice is recorded in ``run.json`` (``"noise"``) and a resume must repeat it.
-    called after every cycle.  A method that fails (``method_timeout``, a plugin's error or
-    bad result; see :func:`iter_run`) keeps the rows before its failure; ``run.json`` and the
-    summary record ``method_status`` (name -> ``"ok"`` or ``"failed: <reason> at cycle N"``).
+    timing with the steady-state rate apart from start-up).  ``progress(done, total)`` is
+    called after every cycle.  A method that fails (its time limit, a plugin's error or bad
+    result) keeps the rows before its failure; ``run.json`` and the summary record
+    ``method_status`` (name -> ``"ok"`` or ``"failed: <reason> at cycle N"``).
+    ``run_json_extra``: more keys for a new folder's ``run.json``.
     """
+    from emulator.report.run import summarise_run, write_run_report
+
+    run_json, tables = write_run(sequence, methods, out_dir, config, response=response, resume=resume,
+                                 resume_given=resume_given, progress=progress, command=command,
+                                 run_json_extra=run_json_extra, **settings)
+    if make_report:
+        return write_run_report(out_dir, run_json, tables)
+    return summarise_run(out_dir, run_json, tables)
+
+
+def write_run(sequence, methods, out_dir, config: RunConfig | None = None, *, response=None, resume: bool = False,
+              resume_given=None, progress=None, command=None, run_json_extra=None, **settings):
+    """The run of :func:`run_to_folder` without its report: returns ``(run_json, tables)`` from memory
+    (the final ``run.json`` and each method's columns, :func:`emulator.io.runfolder.tables_from_rows`)."""
     if out_dir is None:
         raise PlaybackError("out_dir is required")
     out = Path(os.path.abspath(out_dir))  # absolute: a method's os.chdir cannot split the folder
-    if save not in SAVE_MODES:
-        raise PlaybackError(f"save must be one of {', '.join(SAVE_MODES)}, got {save!r}")
-    seq = _resolve_sequence(sequence)
-    if response is None:
-        response = sequence_response(seq, response_path)
-    response_name = str(response_path) if response_path is not None else str(getattr(response, "name", "custom"))
-    if Path(response_name).is_file():  # absolute: a resume from another working directory finds it
-        response_name = str(Path(response_name).resolve())
+    cfg = RunConfig.from_kwargs(config, **settings)
+    seq = resolve_sequence(sequence)
     method_specs = parse_methods(methods) if isinstance(methods, str) else list(methods)
-    built = build_methods(method_specs, mode=mode, response=response, options=options)
+    stats = RunStats()
+    prep = prepare_run(seq, method_specs, cfg, response, stats=stats)
+    seq, response, built, provider, model, model_source, hook = prep
     names = list(built)
-    timeout_s = _check_timeout(method_timeout)
-    user_options = {k: {kk: vv for kk, vv in v.items()} for k, v in dict(options or {}).items()}
-    config = {
-        "sequence": str(Path(seq.path).resolve()),
-        "methods": names,
-        "selector": selector,
-        "initial_ms": float(check_exposure(initial_ms, "initial_ms")),
-        "range_ms": [float(v) for v in _check_range(range_ms)],
-        "save": save,
-        "mode": mode,
-        "options": user_options,
-        "response": response_name,
-        "method_timeout": timeout_s,
-    }
-    if selector not in SELECTORS:
-        raise PlaybackError(f"unknown selector {selector!r}; choose one of {', '.join(SELECTORS)}")
-    if isinstance(jobs, bool) or not isinstance(jobs, (int, np.integer)) or int(jobs) < 1:
-        raise PlaybackError(f"jobs must be an integer >= 1, got {jobs!r}")
-    white, black = int(seq.white_level), int(seq.black_level)
-    if response.white_level != white or response.black_level != black:
-        response = response.with_levels(white_level=white, black_level=black)
-    model, model_source = resolve_noise_model(noise, noise_model, seq, response)
-    noise_spec = _noise_spec(noise, model, noise_seed, response)
-    config["noise"] = ({"mode": "none"} if noise_spec is None else
-                       {"mode": noise, "seed": int(noise_seed),
-                        "model": {k: v for k, v in model.to_dict().items() if k != "response"}})
-    clamped_initial = _clamp(config["initial_ms"], config["range_ms"])
-    from emulator.motion import blur_hook
+    identity = {"sequence": str(Path(seq.path).resolve()), "methods": names, "response": cfg.response_name(response)}
 
-    hook = blur_hook(blur, seq, response, blur_aware=blur_aware)  # None for "none"; blur.csv, run.json "blur"
-    config["blur"] = {"mode": "none"} if hook is None else hook.describe()
-    if blur_aware and selector != "higher-no-sat":
-        raise PlaybackError(f"the blur-aware selection refines selector higher-no-sat, not {selector!r}")
-
-    with RunWriter(out, resume=resume) as writer:
+    with RunWriter(out, resume=resume, png_level=cfg.png_level) as writer:
         if resume:
             run_json = writer.run_json
-            old = _config_of(run_json)
-            diff = [k for k in config if _canon(old.get(k)) != _canon(config[k])
-                    and not (k == "response" and _same_file(old.get(k), config[k]))]
-            if diff:
-                raise PlaybackError(
-                    f"{out / RUN_FILE}: --resume with a different configuration ({', '.join(diff)}): recorded "
-                    + "; ".join(f"{k}={old.get(k)!r}" for k in diff)
-                )
+            cfg.resumed(run_json, CONFIG_KEYS if resume_given is None else resume_given, where=str(out / RUN_FILE),
+                        noise_model=model, blur_hook=hook, identity=identity)
             run_json["resumed"] = run_json.get("resumed", 0) + 1
             run_json.setdefault("resume_commands", []).append(command)
             if writer.lock.stale_owner:
                 run_json.setdefault("stale_locks", []).append(writer.lock.stale_owner)
         else:
-            from emulator import __version__
-
-            run_json = {
-                **config,
-                "white_level": white,
-                "black_level": black,
-                "cameras": list(seq.cameras),
-                "brackets_ms": list(seq.brackets),
-                "method_camera": METHOD_CAMERA,
-                "selector_camera": METHOD_CAMERA,
-                "method_options": {n: m.config() if hasattr(m, "config") else {} for n, m in built.items()},
-                "method_specs": [s if isinstance(s, str) else n for s, n in zip(method_specs, names)],
-                "command": command,
-                "version": __version__,
-                "jobs": int(jobs),
-                "created": writer.lock.owner["started"],
-                "n_cycles": len(seq.cycles),
-                "status": "running",
-                "cycles_done": 0,
-                "skipped_cycles": [],
-            }
-            if model_source is not None:
-                run_json["noise_model_file"] = model_source
-            if clamped_initial != config["initial_ms"]:
-                run_json["initial_ms_clamped"] = clamped_initial
-                run_json.setdefault("warnings", []).append(
-                    f"initial_ms {config['initial_ms']:g} is outside range_ms {config['range_ms']}; "
-                    f"clamped to {clamped_initial:g} ms")
-        run_json["jobs"] = int(jobs)
-        writer.start(run_json, names, seq.cameras, save, cycles=[c.index for c in seq.cycles])  # resume: validated
-
-        def write_images(st: MethodStep) -> None:
-            if save == "none":
-                return
-            rec = writer.recorded(st.method, st.cycle)
-            for cam, img in (("left", st.left), ("right", st.right)):
-                if img is None:
-                    continue
-                if rec is not None and writer.image_path(st.method, cam, st.timestamp_ns).exists():
-                    continue
-                data = saved_image(img, save, white_level=white, black_level=black)
-                writer.write_image(st.method, cam, st.timestamp_ns, data)
-
-        stats = RunStats()
-        skipped: list[dict] = []
-        method_status = {name: "ok" for name in names}
-        done = 0
-        status = "failed"
-        try:
-            gen = iter_run(seq, list(built.values()), initial_ms=initial_ms, range_ms=range_ms, selector=selector,
-                           response=response, jobs=jobs, emulate_right=save != "none", on_step=write_images,
-                           stats=stats, noise=noise, noise_model=model, noise_seed=noise_seed,
-                           method_timeout=timeout_s, blur=hook)
-            for cs in gen:
-                method_status.update(cs.failed)
-                if cs.skipped:
-                    skipped.append({"cycle": cs.cycle, "reason": cs.skipped, "missing": cs.missing})
-                for name in names:
-                    st = cs.steps.get(name)
-                    if st is None:
-                        continue
-                    row = format_row(st)
-                    rec = writer.recorded(name, st.cycle)
-                    if rec is not None:
-                        if rec != row:
-                            raise PlaybackError(
-                                f"{out / name / CSV_FILE}: resume replay of cycle {st.cycle} differs from the recorded "
-                                f"row ({','.join(rec[:len(CSV_COLUMNS)])} recorded, "
-                                f"{','.join(row[:len(CSV_COLUMNS)])} replayed); the folder was written by another "
-                                "configuration or version"
-                            )
-                    else:
-                        writer.append_row(name, row)
-                done += 1
-                writer.update(cycles_done=done, skipped_cycles=skipped, method_status=method_status)
-                if progress is not None:
-                    progress(done, len(seq.cycles))
-            status = "complete"
-        except KeyboardInterrupt:
-            status = "interrupted"
-            raise
-        except BaseException as exc:
-            run_json["error"] = f"{type(exc).__name__}: {exc}"
-            raise
-        finally:
-            if status == "complete":
-                run_json.pop("error", None)
-            writer.update(status=status, cycles_done=done, skipped_cycles=skipped, timing=stats.as_dict(),
-                          method_status=method_status)
+            run_json = _new_run_json(cfg, identity, seq, built, method_specs, model, model_source, command,
+                                     writer.lock.owner["started"], hook)
+            run_json.update(run_json_extra or {})
+        run_json["jobs"] = cfg.jobs
+        writer.start(run_json, names, seq.cameras, cfg.save, cycles=[c.index for c in seq.cycles])  # resume: validated
+        rows = _loop_into(writer, provider, built, cfg, stats, out, progress, len(seq.cycles))
         if hook is not None:
-            hook.write_table(out)
-        if save != "none":
-            writer.write_times(names)
+            hook.write_table(out)  # blur.csv: each emulated image's blur
+        if cfg.save != "none":
+            writer.write_times(names, rows)
         _write_method_output(out, names)  # what methods printed (isolated from the run's stdout)
-    if make_report:
-        from emulator.report.run import write_run_report
+    return writer.run_json, tables_from_rows(rows)
 
-        return write_run_report(out)
-    from emulator.report.run import summarise_run
 
-    return summarise_run(out)
+def _loop_into(writer: RunWriter, provider, built: dict, cfg: RunConfig, stats: RunStats, out: Path,
+               progress, n_cycles: int) -> dict[str, list[list[str]]]:
+    """Run the loop, appending each step's row (checked against a resumed folder's); returns the rows."""
+    names = list(built)
+    run_json = writer.run_json
+    saver = _ImageSaver(writer, cfg.save, int(run_json["white_level"]), int(run_json["black_level"]))
+    rows: dict[str, list[list[str]]] = {name: [] for name in names}
+    skipped: list[dict] = []
+    method_status = {name: "ok" for name in names}
+    done = 0
+    status = "failed"
+    try:
+        for cs in closed_loop(provider, built, cfg, want_right=cfg.save != "none", on_step=saver, stats=stats):
+            method_status.update(cs.failed)
+            if cs.skipped:
+                skipped.append({"cycle": cs.cycle, "reason": cs.skipped, "missing": cs.missing})
+            for name in names:
+                st = cs.steps.get(name)
+                if st is None:
+                    continue
+                row = format_row(st)
+                rec = writer.recorded(name, st.cycle)
+                if rec is None:
+                    writer.append_row(name, row)
+                elif rec != row:
+                    raise PlaybackError(
+                        f"{out / name / CSV_FILE}: resume replay of cycle {st.cycle} differs from the recorded "
+                        f"row ({','.join(rec[:len(CSV_COLUMNS)])} recorded, "
+                        f"{','.join(row[:len(CSV_COLUMNS)])} replayed); the folder was written by another "
+                        "configuration or version")
+                rows[name].append(row)
+            done += 1
+            if done % RUN_JSON_EVERY == 0:
+                writer.update(cycles_done=done, skipped_cycles=skipped, method_status=method_status)
+            if progress is not None:
+                progress(done, n_cycles)
+        saver.close()  # every image written before the run is complete
+        status = "complete"
+    except KeyboardInterrupt:
+        status = "interrupted"
+        raise
+    except BaseException as exc:
+        run_json["error"] = f"{type(exc).__name__}: {exc}"
+        raise
+    finally:
+        if status != "complete":
+            with contextlib.suppress(BaseException):  # the loop's own error is the one raised
+                saver.close()
+        if status == "complete":
+            run_json.pop("error", None)
+        writer.update(status=status, cycles_done=done, skipped_cycles=skipped, timing=stats.as_dict(),
+                      method_status=method_status)
+    return rows
 
 
 #: File in a method's folder holding what the method printed (stdout and stderr, in order).

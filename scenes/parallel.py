@@ -18,7 +18,6 @@ scheduler is named.
 from __future__ import annotations
 
 import contextlib
-import logging
 import re
 from collections.abc import Iterable, Iterator
 
@@ -50,6 +49,9 @@ def check_scheduler(spec: str | None) -> str | None:
 def dask_client(spec: str, *, n_workers: int | None = None):
     """A connected :class:`dask.distributed.Client` for ``spec`` (closed, with its local cluster, on exit).
 
+    The client is :func:`emulator.distributed.open_client`'s, the one way exposim opens a Dask
+    client (the same local cluster settings and address handling as dataset runs).
+
     Raises
     ------
     RenderError
@@ -58,30 +60,14 @@ def dask_client(spec: str, *, n_workers: int | None = None):
     spec = check_scheduler(spec)
     if spec is None:
         raise RenderError("dask_client needs a scheduler ('local' or tcp://HOST:PORT)")
-    from emulator.extras import require
+    from emulator.distributed import SchedulerError, open_client
 
-    require("dask", "a Dask scheduler")
-    from dask.distributed import Client, LocalCluster
-
-    cluster = None
-    try:
-        if spec == "local":
-            # dashboard on a free port (a busy 8787 only warns); worker chatter below ERROR kept quiet
-            cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
-                                   dashboard_address=":0", silence_logs=logging.ERROR)
-            client = Client(cluster)
-        else:
-            try:
-                client = Client(spec, timeout="10s")
-            except (OSError, TimeoutError) as exc:
-                raise RenderError(f"cannot reach the Dask scheduler at {spec}: {exc}") from None
+    with contextlib.ExitStack() as stack:
         try:
-            yield client
-        finally:
-            client.close()
-    finally:
-        if cluster is not None:
-            cluster.close()
+            client = stack.enter_context(open_client(spec, n_workers=n_workers))
+        except SchedulerError as exc:
+            raise RenderError(f"cannot reach the Dask scheduler at {spec}: {exc}") from None
+        yield client
 
 
 def _render_task(kwargs: dict) -> np.ndarray:

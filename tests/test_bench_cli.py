@@ -166,6 +166,7 @@ def write_feature_run(root: Path, methods=("fixed", "dark"), n=3, save="png16") 
     return root
 
 
+@pytest.mark.slow
 def test_bench_features_cli(tmp_path, capsys):
     run = write_feature_run(tmp_path / "run")
     out = tmp_path / "out"

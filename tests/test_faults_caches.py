@@ -10,8 +10,8 @@ import pytest
 from emulator.cli import main
 from emulator.io.borealhdr import load_sequence
 from emulator.io.png import read_png16
-from emulator.io.framecache import (CACHE_DIRNAME, FrameCacheEntryError, build_frame_cache, cached_frame_path,
-                                    read_cached_frame)
+from emulator.io.framecache import CACHE_DIRNAME, FrameCacheEntryError, cached_frame_path, read_cached_frame
+from emulator.tools.framecache import build_frame_cache
 from test_playback import write_static_sequence
 
 

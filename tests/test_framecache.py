@@ -9,7 +9,8 @@ import pytest
 
 from emulator.io.borealhdr import load_sequence, write_frame
 from emulator.errors import DatasetError
-from emulator.io.framecache import CACHE_DIRNAME, build_frame_cache, cached_frame_path, read_cached_frame
+from emulator.io.framecache import CACHE_DIRNAME, cached_frame_path, read_cached_frame
+from emulator.tools.framecache import build_frame_cache
 
 
 def _frames(seq):

@@ -127,7 +127,7 @@ def test_dataset_report_links_every_unit_page_and_shows_the_first_sheet(tmp_path
 
     root = make_dataset(tmp_path / "root")
     run_dataset(root, tmp_path / "out", methods="classical-50,zhang", group_size=1, scheduler="serial",
-                options={"save": "png8"})
+                save="png8")
     text = (tmp_path / "out" / HTML_REPORT_FILE).read_text()
     links = re.findall(r'<a href="([^"]+)">', text)
     assert links == [f"{s}/{m}/report.html" for s in ("seqA", "seqB") for m in ("classical-50", "zhang")]

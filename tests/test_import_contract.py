@@ -130,3 +130,126 @@ def test_relative_imports_resolve_against_the_package():
     assert imports_of("from ..errors import E\n", "emulator.io.png", False)[0] == (1, "emulator.errors")
     assert imports_of("from . import png\n", "emulator.io", True) == [(1, "emulator.io"), (1, "emulator.io.png")]
     assert imports_of("from .x import y\n", "scenes.commands.render", False)[0] == (1, "scenes.commands.x")
+
+
+# ------------------------------------------------------------------- no circles between modules
+def _is_type_checking(node) -> bool:
+    test = node.test
+    return (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or (
+        isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING")
+
+
+def runtime_imports(source: str, name: str, is_package: bool, modules) -> set[str]:
+    """The modules (of ``modules``) that ``source`` imports when it runs, lazily included.
+
+    ``from a.b import f`` imports ``a.b``; ``from a import b`` (``b`` a module) imports
+    ``a.b`` and not ``a`` itself (Python runs the parent packages first whatever is asked; that
+    is not what the code asked for).  Imports under ``if TYPE_CHECKING:`` never run and are
+    left out (annotations only).
+    """
+    package = name if is_package else name.rpartition(".")[0]
+    found: set[str] = set()
+
+    def owner(target: str) -> str | None:
+        parts = target.split(".")
+        while parts and ".".join(parts) not in modules:
+            parts.pop()
+        return ".".join(parts) or None
+
+    def visit(node) -> None:
+        if isinstance(node, ast.If) and _is_type_checking(node):
+            for child in node.orelse:
+                visit(child)
+            return
+        if isinstance(node, ast.Import):
+            found.update(filter(None, (owner(alias.name) for alias in node.names)))
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")
+                base = base[: len(base) - (node.level - 1)] if node.level > 1 else base
+                target = ".".join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module or ""
+            for alias in node.names:
+                sub = f"{target}.{alias.name}" if target else alias.name
+                found.update(filter(None, [sub if sub in modules else owner(target)]))
+        elif isinstance(node, ast.Call) and node.args and isinstance(node.args[0], ast.Constant) \
+                and isinstance(node.args[0].value, str):
+            func = node.func
+            if (func.attr if isinstance(func, ast.Attribute) else getattr(func, "id", None)) in (
+                    "import_module", "__import__"):
+                found.update(filter(None, [owner(node.args[0].value)]))
+        for child in ast.iter_child_nodes(node):
+            visit(child)
+
+    visit(ast.parse(source))
+    found.discard(name)
+    return found
+
+
+def module_graph(root: Path, layers=LAYERS) -> dict[str, set[str]]:
+    """Module -> the modules of the four packages it imports at run time (:func:`runtime_imports`)."""
+    files = {}
+    for pkg in layers:
+        for path in sorted((root / pkg).rglob("*.py")):
+            files[module_name(path, root)[0]] = path
+    return {name: runtime_imports(path.read_text(encoding="utf-8"), name, path.name == "__init__.py", files)
+            for name, path in files.items()}
+
+
+def import_cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan), each sorted."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on: set[str] = set()
+    out: list[list[str]] = []
+    counter = [0]
+
+    def visit(v: str) -> None:  # iterative enough for a few hundred modules
+        index[v] = low[v] = counter[0]
+        counter[0] += 1
+        stack.append(v)
+        on.add(v)
+        for w in sorted(graph.get(v, ())):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return sorted(out)
+
+
+def test_no_import_circles_between_modules():
+    cycles = import_cycles(module_graph(ROOT))
+    assert cycles == [], "\n".join(" <-> ".join(c) for c in cycles)
+
+
+def test_the_cycle_checker_finds_a_lazy_circle(tmp_path):
+    root = _tree(tmp_path, {
+        "emulator/a.py": "from emulator.b import f\n",
+        "emulator/b.py": "def f():\n    from emulator import a\n",
+        "emulator/c.py": "from emulator.a import g\nimport emulator.errors\nfrom emulator import d\n",
+        "emulator/d.py": "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from emulator.c import g\n",
+        "emulator/errors.py": "",
+    })
+    graph = module_graph(root)
+    assert graph["emulator.c"] == {"emulator.a", "emulator.errors", "emulator.d"}  # not the package emulator
+    assert graph["emulator.d"] == set()  # annotations only
+    assert import_cycles(graph) == [["emulator.a", "emulator.b"]]
+    (root / "emulator/b.py").write_text("def f():\n    pass\n")
+    assert import_cycles(module_graph(root)) == []

@@ -66,6 +66,7 @@ def test_in_situ_estimate_recovers_synth_camera(tmp_path, speed_m_s, tolerance):
         assert naive.gain_e_per_h < 0.5 * truth.gain_e_per_h
 
 
+@pytest.mark.slow
 def test_in_situ_estimate_on_the_real_sample(sample_seq):
     """The shared BorealHDR sample: no ground truth, so physically plausible values only.
 

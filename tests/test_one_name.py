@@ -234,8 +234,12 @@ def test_one_clamp_default_for_ae_methods_and_the_closed_loop():
     assert DEFAULT_RANGE_MS == (0.02, 50.0)
     # 22 frames/s: one shot every ~45.5 ms, so a 50 ms clamp is the shortest round bound above it
     assert 1000.0 / 22 < DEFAULT_RANGE_MS[1]
+    # the loop's clamp default lives in the one run configuration, which every run takes
+    assert inspect.signature(playback.RunConfig).parameters["range_ms"].default is DEFAULT_RANGE_MS
+    assert playback.RunConfig().range_ms == DEFAULT_RANGE_MS
     for fn in (playback.iter_run, playback.run, runner.run_to_folder):
-        assert inspect.signature(fn).parameters["range_ms"].default is DEFAULT_RANGE_MS, fn.__name__
+        assert "range_ms" not in inspect.signature(fn).parameters, fn.__name__
+        assert inspect.signature(fn).parameters["config"].default is None, fn.__name__
     for name in METHOD_NAMES:
         assert make_method(name, mode="paper").range_ms == DEFAULT_RANGE_MS, name
         assert make_method(name, mode="borealhdr").range_ms is None, name

@@ -258,6 +258,7 @@ def test_guard_exposure(answer, expected):
     assert (nxt, guarded) == (want_next, want_guard)
 
 
+@pytest.mark.slow
 def test_exposures_do_not_depend_on_the_blas_thread_count(sample_seq):
     """A multi-threaded BLAS sums np.dot in another order: before the loop ran its methods
     under one BLAS thread, Zhang's borealhdr proposals differed in the last bit between 1 and

@@ -364,6 +364,7 @@ def test_new_method_writes_the_shipped_example_and_refuses_to_overwrite(tmp_path
     assert "built-in method 'zhang'" in capsys.readouterr().err and not (tmp_path / "z").exists()
 
 
+@pytest.mark.slow
 def test_new_method_skeleton_passes_its_own_tests_and_runs(seq, tmp_path, monkeypatch):
     root, bases = seq
     out = tmp_path / "gen"
@@ -380,6 +381,7 @@ def test_new_method_skeleton_passes_its_own_tests_and_runs(seq, tmp_path, monkey
     sys.modules.pop("fast_ae", None)
 
 
+@pytest.mark.slow
 def test_an_installed_distribution_registers_a_method_by_name(seq, tmp_path):
     """A distribution on the path (its dist-info, as pip would write it) makes ``pkg-ae`` a name."""
     import subprocess

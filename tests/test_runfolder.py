@@ -83,6 +83,7 @@ def test_resume_while_the_run_is_live_is_refused(seq, tmp_path, capsys):
     assert {m: _csv(out, m) for m in METHODS.split(",")} == before
 
 
+@pytest.mark.slow
 def test_stale_lock_after_sigkill_is_taken_over_and_the_run_resumes(seq, tmp_path):
     full = tmp_path / "full"
     assert _run(seq, full) == 0

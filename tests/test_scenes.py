@@ -475,7 +475,9 @@ def test_unwritable_cache_warns_and_keeps_the_render(built, tmp_path):
 def test_exr_bytes_are_deterministic(tmp_path):
     img = np.random.default_rng(0).random((5, 7, 3), dtype=np.float32) * 1e4
     a = store_entry(tmp_path / "a.exr", img, {"note": "x"})
-    b = write_exr(tmp_path / "b.exr", img, attributes={"note": "x"})
+    from scenes.cache import SHA_ATTRIBUTE, pixels_sha256
+
+    b = write_exr(tmp_path / "b.exr", img, attributes={"note": "x", SHA_ATTRIBUTE: pixels_sha256(img)})
     assert a.read_bytes() == b.read_bytes()
     assert read_exr(a).tobytes() == img.tobytes()
     assert not list(tmp_path.glob("*.tmp"))

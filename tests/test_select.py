@@ -1,7 +1,8 @@
 import numpy as np
 import pytest
 
-from emulator import ExposimError, closest, higher_no_sat, saturated_fraction, select
+from emulator import ExposimError, closest, higher_no_sat, saturated_fraction
+from emulator.select import select
 from emulator.select import reference_rule
 
 BR = [1.0, 2.0, 4.0, 8.0, 16.0, 32.0]

@@ -13,6 +13,7 @@ import synth
 from emulator.autoexposure import make_method
 from emulator.io.borealhdr import load_sequence, sequence_response
 from emulator.errors import EmulationError
+from emulator.response import CameraResponse
 from emulator.noise import NoiseModel
 from emulator.playback import iter_run
 from synth.noise_model import noise_model_of
@@ -157,8 +158,14 @@ def test_playback_consistent_noise_seeded(tmp_path):
     darkened = [(x, p) for x, p in zip(a, plain) if x.ratio < 1.0 and x.target_ms == p.target_ms]
     assert darkened, "no darkening cycle to check"
     assert any(not np.array_equal(x.left, p.left) for x, p in darkened)
-    with pytest.raises(EmulationError, match="noise_model"):
-        next(iter_run(seq, ["classical-50"], response=resp, noise="consistent"))
+    # no model given: the one the synthetic recording carries (its camera), the same numbers
+    carried = [cs.steps["classical-50"] for cs in iter_run(seq, ["classical-50"], keep_images=True,
+                                                           emulate_right=True, response=resp, noise="consistent",
+                                                           initial_ms=3.0, selector="closest")]
+    assert all(np.array_equal(x.left, y.left) for x, y in zip(a, carried))
+    linear = CameraResponse.linear(int(seq.white_level), black_level=int(seq.black_level))
+    with pytest.raises(EmulationError, match="noise_model"):  # a model of another response
+        next(iter_run(seq, ["classical-50"], response=linear, noise="consistent", noise_model=model))
 
 
 def test_kendall_tau_cases():
@@ -224,7 +231,19 @@ def test_tiny_experiment_end_to_end(tmp_path, render_cache, monkeypatch):
     for r in on_disk["metrics"].values():
         assert r["verdict"] == "undetermined" and r["reason"]
         assert set(r) >= {"omega2", "omega2_ci95", "tau_live_emulated", "tau_live_live"}
-    assert on_disk["conditions"]["native-rate live"]["status"] == "not run"
+    # the three conditions side by side: native-rate live runs by default (22 fps, latency 1)
+    assert (on_disk["config"]["latency_frames"], on_disk["config"]["frame_rate_hz"]) == (1, 22.0)
+    for cname in ("native-rate live", "cycle-rate live", "emulated"):
+        cond = on_disk["conditions"][cname]
+        assert cond["status"] == "run" and set(cond["metrics"]) == set(METRICS)
+    for label in ("cycle-rate vs native-rate live", "emulated vs native-rate live"):
+        comp = on_disk["comparisons"][label]
+        assert comp["status"] == "run"
+        assert all(r["verdict"] == "undetermined" for r in comp["metrics"].values())
+    native = tmp_path / "out" / "runs" / "forest_winter" / "live-native" / "classical-50"
+    fixed = tmp_path / "out" / "runs" / "forest_winter" / "live-fixed-instant" / "classical-50"
+    assert len((native / "images" / "times.txt").read_text().splitlines()) == cfg.n_cycles
+    assert len(on_disk["walks"]) == 1 and (fixed / "exposures.csv").is_file()
     with pytest.raises(Exception, match="refusing to overwrite"):
         run_live_experiment(tmp_path / "out", cfg, progress=False, cache_dir=render_cache)
 
@@ -240,7 +259,8 @@ def test_exposim_validate_live_cli(tmp_path, render_cache, capsys, monkeypatch):
     assert exc.value.code == 0
     text = " ".join(capsys.readouterr().out.split())
     for opt in ("--output", "--quick", "--scenes", "--cycles", "--size", "--spp", "--seed", "--methods",
-                "--noise-repeats", "--no-control", "--keep-radiance", "--cache-dir", "--quiet", "--redraw"):
+                "--noise-repeats", "--no-control", "--keep-radiance", "--cache-dir", "--quiet", "--redraw",
+                "--latency-frames", "--frame-rate-hz", "--no-native"):
         assert opt in text, opt
     # the defaults are shown, and they are the configuration's
     full, quick = CONFIGS["full"], CONFIGS["quick"]
@@ -255,14 +275,19 @@ def test_exposim_validate_live_cli(tmp_path, render_cache, capsys, monkeypatch):
     # --quick with the tiny configuration of the end-to-end test
     args = ["validate", "live", "-o", str(out), "--quick", "--scenes", ",".join(TINY.scenes),
             "--size", f"{TINY.width}x{TINY.height}", "--spp", str(TINY.spp), "--methods", ",".join(TINY.methods),
-            "--noise-repeats", str(TINY.noise_repeats), "--cache-dir", str(render_cache), "--no-progress"]
+            "--noise-repeats", str(TINY.noise_repeats), "--cache-dir", str(render_cache), "--no-progress",
+            "--latency-frames", "2"]
     assert exposim(args) == 0
     assert "rank_kendall_tau_min" in capsys.readouterr().out
     res = json.loads((out / "results.json").read_text())
     assert all(key in res for key in REQUIRED_KEYS)
     assert set(res["noise_variance_ratio"]) == {"plain", "consistent"}
     assert all(np.isfinite(v) and v > 0 for v in res["noise_variance_ratio"].values())
-    assert res["config"] == {**TINY.to_dict(), "n_cycles": CONFIGS["quick"].n_cycles}
+    assert res["config"] == {**TINY.to_dict(), "n_cycles": CONFIGS["quick"].n_cycles, "latency_frames": 2}
+    assert res["conditions"]["native-rate live"]["status"] == "run"
+    assert all(r["verdict"] == "undetermined" for r in res["metrics"].values())
+    assert all(r["verdict"] == "undetermined"
+               for r in res["comparisons"]["emulated vs native-rate live"]["metrics"].values())
     assert res["command"].startswith(f"exposim validate live -o {out} --quick --scenes forest_winter")
     # the run folders are the ones `exposim run` writes: one writer, its lock released
     run = out / "runs" / "forest_winter" / "live-fixed-instant"

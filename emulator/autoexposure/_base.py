@@ -33,6 +33,7 @@ from emulator.autoexposure._frame import FRAME_MEMO
 from emulator.errors import ExposimError
 
 __all__ = [
+    "MethodFailed",
     "AutoExposure",
     "AutoExposureMethod",
     "AutoExposureError",
@@ -74,6 +75,11 @@ MIN_SIDE = 4
 
 class AutoExposureError(ExposimError):
     """Invalid input to an auto-exposure method (image type or shape, exposure, option)."""
+
+
+class MethodFailed(AutoExposureError):
+    """A method's call failed: it raised, returned a non-finite or non-positive exposure, or
+    took longer than the per-call limit.  The closed loop records it and drops the method."""
 
 
 @runtime_checkable

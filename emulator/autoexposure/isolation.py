@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from emulator.autoexposure._base import AutoExposureError
-from emulator.autoexposure.registry import MethodFailed
+from emulator.autoexposure._base import MethodFailed
 
 __all__ = ["call_method", "call_factory", "frozen", "is_frozen", "absolute", "captured_output",
            "MAX_CAPTURED_CHARS"]

@@ -44,7 +44,7 @@ from importlib import metadata
 
 import numpy as np
 
-from emulator.autoexposure._base import AutoExposureError
+from emulator.autoexposure._base import AutoExposureError, MethodFailed
 
 __all__ = [
     "ENTRY_POINT_GROUP",
@@ -63,11 +63,6 @@ __all__ = [
 ENTRY_POINT_GROUP = "exposim.methods"
 #: What a method name may hold: it names a folder and the NAME of ``--option NAME.KEY=VALUE``.
 NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]*$")
-
-
-class MethodFailed(AutoExposureError):
-    """A method's call failed: it raised, returned a non-finite or non-positive exposure, or
-    took longer than the per-call limit.  The closed loop records it and drops the method."""
 
 
 @dataclass
@@ -91,7 +86,7 @@ def is_import_path(text: str) -> bool:
 
 def check_method_name(name, source: str) -> str:
     """A plugin's name, checked against :data:`NAME_RE` and the built-in names."""
-    from emulator.autoexposure import METHODS
+    from emulator.autoexposure.builtin import METHODS
 
     if not isinstance(name, str) or not NAME_RE.match(name):
         raise AutoExposureError(f"AE method plugin {source}: bad method name {name!r} (letters, digits, '-' and '_' "

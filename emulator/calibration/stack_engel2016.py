@@ -130,6 +130,100 @@ def _stack_warnings(t: np.ndarray, observed: tuple[int, int], lo: int, hi: int) 
     return out
 
 
+def _checked_stack(dn, exposures_ms, white_level: int, black_level: int, margin_dn: int, source: str):
+    """The samples of :func:`fit_inverse_response` checked: ``(dn int64 of the kept pixels, valid mask,
+    exposures, distinct exposures, unclipped samples per image, low, high, table top)``."""
+    dn = np.asarray(dn)
+    if dn.ndim != 2:
+        raise CalibrationError(f"{source}: samples must be (images, pixels), got shape {dn.shape}")
+    if dn.dtype.kind not in "ui":
+        if dn.dtype.kind != "f" or not np.all(np.isfinite(dn)):
+            raise CalibrationError(f"{source}: dn must be finite digital numbers, got {dn.dtype} "
+                                   f"{'with NaN or infinity' if dn.dtype.kind == 'f' else ''}".rstrip())
+    t = np.asarray(exposures_ms, dtype=np.float64)
+    if t.shape != (dn.shape[0],):
+        raise CalibrationError(f"{source}: {dn.shape[0]} images but {t.size} exposure times")
+    if not np.all(np.isfinite(t) & (t > 0)):
+        raise CalibrationError(f"{source}: exposure times must be positive and finite")
+    distinct = np.unique(t)
+    if distinct.size < 2:
+        raise CalibrationError(
+            f"{source}: needs at least two distinct exposure times, got {distinct.size} "
+            f"({', '.join(f'{e:g}' for e in distinct)} ms)"
+        )
+    white, black = int(white_level), int(black_level)
+    top = table_top_for(white)
+    if dn.size and int(dn.max()) > top:
+        raise CalibrationError(f"{source}: DN {int(dn.max())} exceeds the {top} of a {white.bit_length()}-bit table")
+    lo, hi = black + int(margin_dn), white - int(margin_dn)
+    if hi <= lo + 1:
+        raise CalibrationError(f"{source}: margin {margin_dn} DN leaves no unclipped range in {black}..{white}")
+    valid = (dn > lo) & (dn < hi)
+    n_valid_img = valid.sum(axis=1)
+    if not valid.any():
+        raise CalibrationError(
+            f"{source}: every sampled pixel of all {dn.shape[0]} images is clipped "
+            f"(<= {lo} or >= {hi} DN): all images saturated or black"
+        )
+    # a pixel needs unclipped readings at two different exposures
+    t_max = np.where(valid, t[:, None], -np.inf).max(axis=0)
+    t_min = np.where(valid, t[:, None], np.inf).min(axis=0)
+    keep = t_max > t_min
+    if keep.sum() < 16:
+        raise CalibrationError(
+            f"{source}: only {int(keep.sum())} sampled pixel(s) are unclipped at two or more distinct "
+            f"exposures (need 16); the stack does not span the exposure range (mostly saturated or black)"
+        )
+    return dn[:, keep].astype(np.int64), valid[:, keep], t, distinct, n_valid_img, lo, hi, top
+
+
+def _per_image_rms(img_idx: np.ndarray, r: np.ndarray, n_img: int) -> np.ndarray:
+    """RMS of the residuals ``r`` of each image (NaN for an image without samples)."""
+    count = np.bincount(img_idx, minlength=n_img)
+    per_image_rms = np.sqrt(np.bincount(img_idx, r * r, n_img) / np.maximum(count, 1))
+    per_image_rms[count == 0] = np.nan
+    return per_image_rms
+
+
+def _outliers(knots, solver, d_flat, pix_idx, img_idx, t_flat, t, n_img, n_pix, scales, rms, per_image_rms, table, *,
+              black, smoothness, huber_k, max_iter, tol, init, outlier_tol, image_names) -> list[dict]:
+    """The image whose exposure time its pixels do not fit (refit without it), as :func:`fit_inverse_response`
+    records it in ``info["outlier_images"]`` (at most one)."""
+    outliers: list[dict] = []
+
+    def solve(d_sub, pix_sub, t_sub):
+        with _blas_single_thread():
+            return (_solve_varpro if solver == "varpro" else _solve_als)(
+                knots, d_sub, pix_sub, t_sub, n_pix, smoothness=smoothness, huber_k=huber_k,
+                max_iter=max_iter, tol=tol, progress=None, c0=init,
+            )
+
+    def finish(c_sub):
+        return _finish(c_sub, knots, np.ones(knots.n), "refit", black)[0]
+
+    found = outlier_image(solve, finish, d_flat, pix_idx, img_idx, t_flat, n_img, n_pix, scales, rms,
+                           tol=float(outlier_tol), min_g=OUTLIER_MIN_G * float(table[-1]))
+    if found is not None:
+        k, factor = found
+        name = image_names[k] if image_names is not None else f"image {k}"
+        fitted = float(t[k] * factor)
+        outliers.append({
+            "index": k,
+            "name": str(name),
+            "exposure_ms": float(t[k]),
+            "fitted_exposure_ms": fitted,
+            "residual_rms_dn": float(per_image_rms[k]),
+            "median_residual_rms_dn": float(np.nanmedian(per_image_rms)),
+            "warning": (
+                f"{name}: its exposure time {t[k]:g} ms does not fit the other images: its pixels fit "
+                f"{fitted:.4g} ms ({100 * (factor - 1):+.0f} %; residual {per_image_rms[k]:.3g} DN RMS against a "
+                f"median of {np.nanmedian(per_image_rms):.3g} DN over the images). Check its exposure line "
+                f"(times.txt) or remove the image, then calibrate again"
+            ),
+        })
+    return outliers
+
+
 def fit_inverse_response(
     dn: np.ndarray,
     exposures_ms: SequenceType[float],
@@ -204,49 +298,9 @@ def fit_inverse_response(
     -------
     CalibrationResult
     """
-    dn = np.asarray(dn)
-    if dn.ndim != 2:
-        raise CalibrationError(f"{source}: samples must be (images, pixels), got shape {dn.shape}")
-    if dn.dtype.kind not in "ui":
-        if dn.dtype.kind != "f" or not np.all(np.isfinite(dn)):
-            raise CalibrationError(f"{source}: dn must be finite digital numbers, got {dn.dtype} "
-                                   f"{'with NaN or infinity' if dn.dtype.kind == 'f' else ''}".rstrip())
-    t = np.asarray(exposures_ms, dtype=np.float64)
-    if t.shape != (dn.shape[0],):
-        raise CalibrationError(f"{source}: {dn.shape[0]} images but {t.size} exposure times")
-    if not np.all(np.isfinite(t) & (t > 0)):
-        raise CalibrationError(f"{source}: exposure times must be positive and finite")
-    distinct = np.unique(t)
-    if distinct.size < 2:
-        raise CalibrationError(
-            f"{source}: needs at least two distinct exposure times, got {distinct.size} "
-            f"({', '.join(f'{e:g}' for e in distinct)} ms)"
-        )
+    dn, valid, t, distinct, n_valid_img, lo, hi, top = _checked_stack(dn, exposures_ms, white_level, black_level,
+                                                                       margin_dn, source)
     white, black = int(white_level), int(black_level)
-    top = table_top_for(white)
-    if dn.size and int(dn.max()) > top:
-        raise CalibrationError(f"{source}: DN {int(dn.max())} exceeds the {top} of a {white.bit_length()}-bit table")
-    lo, hi = black + int(margin_dn), white - int(margin_dn)
-    if hi <= lo + 1:
-        raise CalibrationError(f"{source}: margin {margin_dn} DN leaves no unclipped range in {black}..{white}")
-    valid = (dn > lo) & (dn < hi)
-    n_valid_img = valid.sum(axis=1)
-    if not valid.any():
-        raise CalibrationError(
-            f"{source}: every sampled pixel of all {dn.shape[0]} images is clipped "
-            f"(<= {lo} or >= {hi} DN): all images saturated or black"
-        )
-    # a pixel needs unclipped readings at two different exposures
-    t_max = np.where(valid, t[:, None], -np.inf).max(axis=0)
-    t_min = np.where(valid, t[:, None], np.inf).min(axis=0)
-    keep = t_max > t_min
-    if keep.sum() < 16:
-        raise CalibrationError(
-            f"{source}: only {int(keep.sum())} sampled pixel(s) are unclipped at two or more distinct "
-            f"exposures (need 16); the stack does not span the exposure range (mostly saturated or black)"
-        )
-    dn = dn[:, keep].astype(np.int64)
-    valid = valid[:, keep]
     n_img, n_pix = dn.shape
     ts = t / t.max()
 
@@ -281,43 +335,13 @@ def fit_inverse_response(
     pick = gen.choice(d_flat.size, size=min(n_plot_samples, d_flat.size), replace=False)
     observed = (int(d_flat.min()), int(d_flat.max()))
     warnings = _stack_warnings(t, observed, lo, hi)
-    count = np.bincount(img_idx, minlength=n_img)
-    per_image_rms = np.sqrt(np.bincount(img_idx, r * r, n_img) / np.maximum(count, 1))
-    per_image_rms[count == 0] = np.nan
+    per_image_rms = _per_image_rms(img_idx, r, n_img)
     scales = exposure_scales(table, d_flat, pix_idx, img_idx, t_flat, w, n_img, n_pix,
                               min_g=OUTLIER_MIN_G * float(table[-1]))
-    outliers = []
-    if outlier_tol is not None:
-        def solve(d_sub, pix_sub, t_sub):
-            with _blas_single_thread():
-                return (_solve_varpro if solver == "varpro" else _solve_als)(
-                    knots, d_sub, pix_sub, t_sub, n_pix, smoothness=smoothness, huber_k=huber_k,
-                    max_iter=max_iter, tol=tol, progress=None, c0=init,
-                )
-
-        def finish(c_sub):
-            return _finish(c_sub, knots, np.ones(knots.n), "refit", black)[0]
-
-        found = outlier_image(solve, finish, d_flat, pix_idx, img_idx, t_flat, n_img, n_pix, scales, rms,
-                               tol=float(outlier_tol), min_g=OUTLIER_MIN_G * float(table[-1]))
-        if found is not None:
-            k, factor = found
-            name = image_names[k] if image_names is not None else f"image {k}"
-            fitted = float(t[k] * factor)
-            outliers.append({
-                "index": k,
-                "name": str(name),
-                "exposure_ms": float(t[k]),
-                "fitted_exposure_ms": fitted,
-                "residual_rms_dn": float(per_image_rms[k]),
-                "median_residual_rms_dn": float(np.nanmedian(per_image_rms)),
-                "warning": (
-                    f"{name}: its exposure time {t[k]:g} ms does not fit the other images: its pixels fit "
-                    f"{fitted:.4g} ms ({100 * (factor - 1):+.0f} %; residual {per_image_rms[k]:.3g} DN RMS against a "
-                    f"median of {np.nanmedian(per_image_rms):.3g} DN over the images). Check its exposure line "
-                    f"(times.txt) or remove the image, then calibrate again"
-                ),
-            })
+    outliers = [] if outlier_tol is None else _outliers(
+        knots, solver, d_flat, pix_idx, img_idx, t_flat, t, n_img, n_pix, scales, rms, per_image_rms, table,
+        black=black, smoothness=smoothness, huber_k=huber_k, max_iter=max_iter, tol=tol, init=init,
+        outlier_tol=outlier_tol, image_names=image_names)
     warnings.extend(o["warning"] for o in outliers)
     warnings.extend(origin_warnings(resp, black, source))
     info = {

@@ -41,7 +41,7 @@ register.order = 15  # after info
 def _cache(args) -> int:
     from tqdm import tqdm
 
-    from emulator.io.framecache import build_frame_cache
+    from emulator.tools.framecache import build_frame_cache
 
     if not 1 <= args.level <= 22:
         raise SystemExit(f"exposim cache: error: --level must be 1..22, got {args.level}")

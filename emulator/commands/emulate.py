@@ -83,6 +83,7 @@ def emulate_cycle(
     ``consistent`` the added blur makes it 0 where the target is longer).
     """
     from emulator.emulate import check_exposure, emulate
+    from emulator.errors import DatasetError
     from emulator.io.borealhdr import sequence_response
     from emulator.select import saturated_fraction, select
 
@@ -147,6 +148,11 @@ def emulate_cycle(
         "cameras": {},
     }
     out = {}
+    stamps = {cam: cycle.frames[cam][chosen].timestamp_ns for cam in cameras}
+    if len(set(stamps.values())) > 1:  # a stereo pair comes from one capture instant
+        other = cameras[-1]
+        raise DatasetError(f"{cycle.frames[other][chosen].path}: stereo pair mismatch, {other} timestamp "
+                           f"{stamps[other]} != {lead} timestamp {stamps[lead]} for bracket {chosen:g} ms")
     for cam in cameras:
         frame = cycle.frames[cam][chosen]
         raw = _load(cam, chosen)
@@ -165,15 +171,23 @@ def emulate_cycle(
             "saturated_fraction_source": saturated_fraction(raw, **levels),
         }
         if motion is not None:
-            size = (raw.shape[1], raw.shape[0])
-            src = motion.frame_blur(cam, frame.timestamp_ns, chosen, size).max_px
-            tgt = motion.frame_blur(cam, frame.timestamp_ns, exposure_ms, size).max_px
-            mismatch = src - tgt
-            if hook is not None and mismatch < 0:
-                mismatch = 0.0
-            info["cameras"][cam].update(source_blur_px=src, target_blur_px=tgt, blur_mismatch_px=mismatch)
+            info["cameras"][cam].update(_blur_info(motion, cam, frame.timestamp_ns, chosen, exposure_ms, raw.shape,
+                                                   consistent=hook is not None))
     info["valid_fraction"] = min(c["valid_fraction"] for c in info["cameras"].values())
     return info, out
+
+
+def _blur_info(motion, cam: str, timestamp_ns: int, source_ms: float, target_ms: float, shape, *,
+               consistent: bool) -> dict:
+    """Predicted blur of the source and of a capture at the target (px, largest over the image), and
+    their difference (0 where blur-consistent emulation added the missing blur)."""
+    size = (shape[1], shape[0])
+    src = motion.frame_blur(cam, timestamp_ns, source_ms, size).max_px
+    tgt = motion.frame_blur(cam, timestamp_ns, target_ms, size).max_px
+    mismatch = src - tgt
+    if consistent and mismatch < 0:
+        mismatch = 0.0
+    return {"source_blur_px": src, "target_blur_px": tgt, "blur_mismatch_px": mismatch}
 
 
 def _has_calibration(sequence, calibration) -> bool:

@@ -12,7 +12,7 @@ from emulator.commands.progress import add_quiet, bars_enabled
 from emulator.distributed import SCHEDULER_HELP, resolve_scheduler
 from emulator.errors import ExposimError
 
-__all__ = ["register", "parse_option"]
+__all__ = ["register", "config_from_args"]
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -39,6 +39,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("-o", "--output", type=Path, required=True, help="run folder to create (must not exist or be empty)")
     p.add_argument("--save", choices=("none", "png16", "png8"), default=None,
                    help="save emulated images: none (default), png16 (12-bit Bayer DN) or png8 (8-bit gray)")
+    p.add_argument("--png-level", type=int, default=None, metavar="0..9",
+                   help="zlib level of the saved images (default 0: stored, the fastest; 1..9 smaller files, the "
+                        "same decoded images)")
     p.add_argument("--jobs", type=int, default=1, help="threads across methods (same output for any value)")
     p.add_argument("--mode", choices=("paper", "borealhdr"), default=None,
                    help="method behaviour: paper (default, reference defects corrected) or borealhdr (reference code)")
@@ -76,13 +79,15 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="dataset run: SEQUENCE is a dataset root; run every sequence under it ('all') or the named "
                         "ones (folders or trajectory .zip files, a zip named by its stem); OUTDIR gets one folder per "
                         "sequence and a dataset summary (results.json, report.md, methods.png)")
-    p.add_argument("--scheduler", default=None, metavar="serial|local|tcp://HOST:PORT|tls://HOST:PORT",
-                   help="dataset runs: " + SCHEDULER_HELP + ", else local (serial without the dask extra); "
-                        "single sequences always run serially")
+    p.add_argument("--scheduler", default=None, metavar="serial|threads|local|tcp://HOST:PORT|tls://HOST:PORT",
+                   help="dataset runs: " + SCHEDULER_HELP + ", or threads (--workers threads of this process), else "
+                        "local (serial without the dask extra); every path gives the same bytes and the same error "
+                        "rows; single sequences always run serially")
     p.add_argument("--scheduler-file", type=Path, default=None, metavar="PATH",
                    help="dataset runs: the scheduler file of a running Dask cluster (dask scheduler "
                         "--scheduler-file PATH, dask-jobqueue)")
-    p.add_argument("--workers", type=int, default=None, help="dataset runs on --scheduler local: worker processes")
+    p.add_argument("--workers", type=int, default=None,
+                   help="dataset runs: worker processes (--scheduler local) or threads (--scheduler threads)")
     p.add_argument("--group-size", type=int, default=None,
                    help="dataset runs: methods per unit of work (default: all, one unit per sequence, the methods "
                         "sharing decoded images; 1: one (sequence, method) per unit, the finest parallelism)")
@@ -109,9 +114,10 @@ def _add_plugin_arguments(p: argparse.ArgumentParser) -> None:
              + (f"; BROKEN plugins: {'; '.join(broken)}" if broken else ""))
     action = p._option_string_actions["--methods"]  # noqa: SLF001 - argparse has no public accessor
     action.help += extra.replace("%", "%%")
-    p.add_argument("--method-timeout", type=float, default=None, metavar="S",
+    p.add_argument("--method-timeout-s", "--method-timeout", dest="method_timeout_s", type=float, default=None,
+                   metavar="S",
                    help="per-call wall-time limit of a method, s: a slower call fails the method (its rows stop, "
-                   "the others go on); default none")
+                   "the others go on); default none (--method-timeout: deprecated alias)")
     p.add_argument("--strict", action="store_true",
                    help="exit with code 1 when a method failed (default: 0, failures named in the summary)")
 
@@ -125,26 +131,14 @@ def _warn_broken_plugins() -> None:
             print(f"exposim run: warning: AE method plugin '{name}' is broken ({plugin.error})", file=sys.stderr)
 
 
-def parse_option(text: str) -> tuple[str, str, object]:
-    """``METHOD.KEY=VALUE`` -> (method, key, value); VALUE parsed as JSON when it can be."""
-    head, sep, value = text.partition("=")
-    method, dot, key = head.partition(".")
-    if not sep or not dot or not method or not key:
-        raise ExposimError(f"--option {text!r}: expected METHOD.KEY=VALUE, e.g. kim.seed=3")
-    try:
-        parsed = json.loads(value)
-    except json.JSONDecodeError:
-        parsed = value
-    return method.strip(), key.strip(), parsed
-
-
 def _command(args) -> str:
     """The command line that reproduces this run (rebuilt from the parsed arguments)."""
     parts = ["exposim", "run", str(args.sequence), "-o", str(args.output)]
     for flag, value in (("--methods", args.methods), ("--save", args.save), ("--mode", args.mode),
                         ("--initial-ms", args.initial_ms), ("--selector", args.selector),
-                        ("--response", args.response), ("--seed", args.seed), ("--noise", args.noise), ("--blur", args.blur),
-                        ("--noise-model", args.noise_model), ("--noise-seed", args.noise_seed)):
+                        ("--response", args.response), ("--seed", args.seed), ("--noise", args.noise),
+                        ("--blur", args.blur), ("--noise-model", args.noise_model), ("--noise-seed", args.noise_seed),
+                        ("--png-level", args.png_level)):
         if value is not None:
             parts += [flag, str(value)]
     if args.range_ms is not None:
@@ -157,25 +151,54 @@ def _command(args) -> str:
         parts.append("--blur-aware")
     if args.resume:
         parts.append("--resume")
-    if getattr(args, "method_timeout", None) is not None:
-        parts += ["--method-timeout", str(args.method_timeout)]
+    if getattr(args, "method_timeout_s", None) is not None:
+        parts += ["--method-timeout-s", str(args.method_timeout_s)]
     return shlex.join(parts)
 
 
-def _check_args(args) -> None:
-    """Refuse bad values by their flag before anything is read or created."""
-    import math
+#: RunConfig field -> the flag that sets it (errors name the flag).
+_FLAGS = {"initial_ms": "--initial-ms", "range_ms": "--range-ms", "jobs": "--jobs", "noise_seed": "--noise-seed",
+          "png_level": "--png-level", "blur": "--blur", "blur_aware": "--blur-aware",
+          "method_timeout_s": "--method-timeout-s", "selector": "--selector", "mode": "--mode", "save": "--save",
+          "noise": "--noise"}
 
-    if args.initial_ms is not None and not (math.isfinite(args.initial_ms) and args.initial_ms > 0):
-        raise ExposimError(f"--initial-ms {args.initial_ms!r}: must be a finite, positive number of ms")
-    if args.range_ms is not None:
-        lo, hi = args.range_ms
-        if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo <= hi):
-            raise ExposimError(f"--range-ms {lo!r} {hi!r}: need finite 0 < LOW <= HIGH (ms)")
-    if args.jobs < 1:
-        raise ExposimError(f"--jobs {args.jobs}: must be >= 1")
-    if args.noise_seed is not None and args.noise_seed < 0:
-        raise ExposimError(f"--noise-seed {args.noise_seed}: must be >= 0")
+
+def _given(args) -> dict:
+    """The run settings given on the command line (None: not given)."""
+    from emulator.playback import parse_options
+
+    options = parse_options(args.option)
+    if args.seed is not None:
+        options.setdefault("kim", {})["seed"] = args.seed
+    return {"initial_ms": args.initial_ms, "range_ms": tuple(args.range_ms) if args.range_ms else None,
+            "selector": args.selector, "mode": args.mode, "options": options or None, "jobs": args.jobs,
+            "save": args.save, "noise": args.noise, "noise_model": args.noise_model, "noise_seed": args.noise_seed,
+            "method_timeout_s": args.method_timeout_s,
+            "response_path": str(args.response) if args.response is not None else None,
+            "png_level": args.png_level, "blur": args.blur, "blur_aware": True if args.blur_aware else None}
+
+
+def config_from_args(args, base=None):
+    """The :class:`~emulator.playback.RunConfig` of the command line over ``base`` (a recorded one, on
+    ``--resume``); a bad value is refused by RunConfig, named here by its flag."""
+    from emulator.errors import PlaybackError
+    from emulator.playback import RunConfig
+
+    given = _given(args)
+    try:
+        return RunConfig.from_kwargs(base, **given)
+    except PlaybackError as exc:
+        field = str(exc).split(" ", 1)[0]
+        flag = _FLAGS.get(field)
+        if flag is None:
+            raise
+        value = given.get(field)
+        shown = " ".join(str(v) for v in value) if isinstance(value, tuple) else str(value)
+        raise ExposimError(f"{flag} {shown}: {exc}") from None
+
+
+def _check_args(args) -> None:
+    """What only the command line can get wrong (the values are RunConfig's to check)."""
     from emulator.commands.argtypes import SEED_MAX
 
     for flag, seed in (("--seed", args.seed), ("--noise-seed", args.noise_seed)):
@@ -188,85 +211,50 @@ def _check_args(args) -> None:
         raise ExposimError("--noise-model is used only with --noise consistent")
 
 
+def _progress_bar(desc: str, unit: str):
+    """A tqdm bar on stderr and the one progress callback ``progress(done, total)`` that drives it."""
+    from tqdm import tqdm
+
+    bar = tqdm(total=None, unit=unit, desc=desc, file=sys.stderr, dynamic_ncols=True)
+
+    def progress(done: int, total: int) -> None:
+        if bar.total != total:
+            bar.total = total
+        bar.n = done
+        bar.refresh()
+
+    return bar, progress
+
+
 def _run(args) -> int:
     _check_args(args)
     if args.sequences is not None and args.frame_cache is not None:
         raise ExposimError("--frame-cache applies to one sequence; a dataset run reads each sequence's own "
                            "SEQUENCE/.exposim-frames")
     if args.sequences is not None:
-        if args.noise not in (None, "none") or args.blur not in (None, "none") or args.blur_aware \
-                or args.method_timeout is not None or args.strict:
-            raise ExposimError("--noise, --blur, --blur-aware, --method-timeout and --strict apply to single-sequence "
-                               "runs; "
-                               "dataset runs (--sequences) do not take them yet")
         return _run_dataset(args)
     if args.scheduler not in (None, "serial") or args.scheduler_file is not None:
         raise ExposimError(f"--scheduler {args.scheduler or 'file'}: a single sequence runs serially; "
                            "pass --sequences all for a dataset run")
-    from emulator.autoexposure import DEFAULT_RANGE_MS
     from emulator.io.runfolder import RUN_FILE, read_run_json
-    from emulator.playback import DEFAULT_INITIAL_MS, DEFAULT_SELECTOR
+    from emulator.playback import RunConfig
     from emulator.runner import run_to_folder
 
-    given = {
-        "methods": args.methods,
-        "save": args.save,
-        "mode": args.mode,
-        "initial_ms": args.initial_ms,
-        "range_ms": args.range_ms,
-        "selector": args.selector,
-        "noise": args.noise,
-        "noise_seed": args.noise_seed,
-        "blur": args.blur,
-    }
-    options: dict[str, dict] = {}
-    for text in args.option:
-        method, key, value = parse_option(text)
-        options.setdefault(method, {})[key] = value
-    if args.seed is not None:
-        options.setdefault("kim", {})["seed"] = args.seed
-    defaults = {
-        "methods": "all",
-        "save": "none",
-        "mode": "paper",
-        "initial_ms": DEFAULT_INITIAL_MS,
-        "range_ms": list(DEFAULT_RANGE_MS),
-        "selector": DEFAULT_SELECTOR,
-        "noise": "none",
-        "noise_seed": 0,
-        "blur": "none",
-    }
-    noise_model = args.noise_model
-    response_path = args.response
+    methods = args.methods
+    base = None
     if args.resume:
-        # The recorded configuration wins; arguments given explicitly must agree with it.
+        # The one resume rule (RunConfig.resumed): the recorded configuration wins, values given must equal it.
         if not (args.output / RUN_FILE).is_file():
             raise ExposimError(f"{args.output / RUN_FILE}: no run to resume (run.json missing)")
         recorded = read_run_json(args.output)
-        rec_noise = recorded.get("noise") or {"mode": "none"}
-        recorded = {**recorded, "noise": rec_noise.get("mode", "none"), "noise_seed": rec_noise.get("seed", 0),
-                    "blur": (recorded.get("blur") or {"mode": "none"}).get("mode", "none"),
-                    "blur_spec": recorded.get("blur") or {}}
-        if given["methods"] is None and recorded.get("method_specs"):
-            given["methods"] = ",".join(recorded["method_specs"])  # import-path plugins by their path
-        if args.method_timeout is None:
-            args.method_timeout = recorded.get("method_timeout")
-        args.blur_aware = args.blur_aware or bool((recorded.get("blur_spec") or {}).get("blur_aware"))
-        for key, value in given.items():
-            if value is None:
-                given[key] = recorded.get(key, defaults[key])
-        source = recorded.get("noise_model_file")
-        if noise_model is None and source and Path(source).name != "exposim.json" and Path(source).is_file():
-            noise_model = Path(source)
-        if not options:
-            options = recorded.get("options") or {}
-        if response_path is None and recorded.get("response") and Path(recorded["response"]).is_file():
-            response_path = Path(recorded["response"])
-    cfg = {k: (defaults[k] if v is None else v) for k, v in given.items()}
-    low, high = cfg["range_ms"]
-    if not low <= cfg["initial_ms"] <= high:
-        print(f"exposim run: warning: --initial-ms {cfg['initial_ms']:g} is outside --range-ms {low:g} {high:g}; "
-              f"clamped to {min(max(cfg['initial_ms'], low), high):g} ms (recorded in run.json)", file=sys.stderr)
+        base = RunConfig.from_json(recorded)
+        if methods is None and recorded.get("method_specs"):
+            methods = ",".join(recorded["method_specs"])  # import-path plugins by their path
+    config = config_from_args(args, base)
+    if config.start_ms != config.initial_ms:
+        low, high = config.range_ms
+        print(f"exposim run: warning: --initial-ms {config.initial_ms:g} is outside --range-ms {low:g} {high:g}; "
+              f"clamped to {config.start_ms:g} ms (recorded in run.json)", file=sys.stderr)
 
     _warn_broken_plugins()
     progress = None
@@ -289,31 +277,15 @@ def _run(args) -> int:
 
         source = load_sequence(args.sequence, frame_cache=args.frame_cache)
     try:
-        summary = run_to_folder(
-            source,
-            cfg["methods"],
-            args.output,
-            save=cfg["save"],
-            response_path=response_path,
-            initial_ms=cfg["initial_ms"],
-            range_ms=tuple(cfg["range_ms"]),
-            selector=cfg["selector"],
-            mode=cfg["mode"],
-            options=options,
-            jobs=args.jobs,
-            resume=args.resume,
-            progress=progress,
-            command=_command(args),
-            noise=cfg["noise"],
-            noise_model=noise_model,
-            noise_seed=cfg["noise_seed"],
-            method_timeout=args.method_timeout,
-            blur=cfg["blur"],
-            blur_aware=args.blur_aware,
-        )
+        summary = run_to_folder(source, methods or "all", args.output, config, resume=args.resume,
+                                progress=progress, command=_command(args))
     finally:
         if bar is not None:
             bar.close()
+    return _print_run_summary(args, summary)
+
+
+def _print_run_summary(args, summary: dict) -> int:
     failed = {n: m["status"] for n, m in summary["methods"].items() if m.get("status", "ok").startswith("failed")}
     rc = 1 if failed and args.strict else 0
     if args.json:
@@ -328,7 +300,9 @@ def _run(args) -> int:
               f"sat {m['mean_saturated_fraction']:.2%}" if mean is not None else f"  {name:13s} no cycle")
     timing = summary.get("timing") or {}
     if timing.get("cycles_per_s"):
-        print(f"speed       {timing['cycles_per_s']:.2f} cycles/s")
+        steady = timing.get("steady_cycles_per_s")
+        print(f"speed       {timing['cycles_per_s']:.2f} cycles/s"
+              + (f" ({steady:.2f} after start-up, {timing['startup_s']:.2f} s)" if steady else ""))
     if failed:
         print(f"FAILED      {len(failed)} of {len(summary['methods'])} method(s); the others' results are complete"
               + (" (--strict: exit code 1)" if args.strict else ""))
@@ -357,48 +331,31 @@ def _run_dataset(args) -> int:
     """``exposim run ROOT --sequences ...``: every (sequence, method group) unit, then the dataset summary."""
     from emulator.datasetrun import DATASET_FILE, run_dataset
     from emulator.io.files import read_metadata
+    from emulator.playback import RunConfig
 
     recorded = read_metadata(args.output / DATASET_FILE) if args.resume else {}
-    rec_opts = recorded.get("options", {})
-    options: dict = dict(rec_opts.get("options") or {})
-    for text in args.option:
-        method, key, value = parse_option(text)
-        options.setdefault(method, {})[key] = value
-    if args.seed is not None:
-        options.setdefault("kim", {})["seed"] = args.seed
-    run_options = {}
-    for key, value in (("mode", args.mode), ("selector", args.selector), ("initial_ms", args.initial_ms),
-                       ("range_ms", args.range_ms), ("save", args.save), ("response_path", args.response)):
-        if value is not None:
-            run_options[key] = str(value) if key == "response_path" else value
-        elif key in rec_opts:
-            run_options[key] = rec_opts[key]
-    if args.jobs != 1 or "jobs" in rec_opts:
-        run_options["jobs"] = args.jobs if args.jobs != 1 else rec_opts["jobs"]
-    if options:
-        run_options["options"] = options
+    base = RunConfig.from_json(recorded["config"]) if recorded.get("config") else None
+    config = config_from_args(args, base)
     methods = args.methods or ",".join(recorded.get("methods", [])) or "all"
     group_size = args.group_size or recorded.get("group_size")
-    scheduler, scheduler_file = resolve_scheduler(args.scheduler, args.scheduler_file)
-    _check_methods_once(methods, run_options)  # a bad option fails here, before dataset.json exists
+    scheduler, scheduler_file = (("threads", None) if args.scheduler == "threads" and args.scheduler_file is None
+                                 else resolve_scheduler(args.scheduler, args.scheduler_file))
+    _check_methods_once(methods, {"mode": config.mode, "options": config.options})  # before dataset.json exists
 
     bar = None
     progress = None
     if bars_enabled(args.quiet):
-        from tqdm import tqdm
-
         def progress(done: int, total: int) -> None:
-            nonlocal bar
+            nonlocal bar, drive
             if bar is None:  # made at the first report, after the run's checks passed
-                bar = tqdm(total=total, unit="unit", desc="exposim run (sequence, methods)", file=sys.stderr,
-                           dynamic_ncols=True)
-            bar.n = done
-            bar.refresh()
+                bar, drive = _progress_bar("exposim run (sequence, methods)", "unit")
+            drive(done, total)
+
+        drive = None
 
     try:
-        summary = run_dataset(args.sequence, args.output, sequences=args.sequences, methods=methods,
-                              group_size=group_size, options=run_options, scheduler=scheduler,
-                              scheduler_file=scheduler_file,
+        summary = run_dataset(args.sequence, args.output, config, sequences=args.sequences, methods=methods,
+                              group_size=group_size, scheduler=scheduler, scheduler_file=scheduler_file,
                               n_workers=args.workers, retries=args.retries, resume=args.resume, progress=progress)
     finally:
         if bar is not None:
@@ -425,4 +382,9 @@ def _run_dataset(args) -> int:
         name, why = next(iter(failed.items()))
         raise ExposimError(f"{len(failed)} method(s) failed in every unit (see {args.output / 'report.md'}); "
                            f"first: {name}: {why}")
+    failed_units = [f"{seq}/{m}" for seq, per in summary["per_sequence"].items() for m, fig in per.items()
+                    if str(fig.get("status", "ok")).startswith("failed")]
+    if failed_units and args.strict:
+        print(f"FAILED      {', '.join(failed_units)} (--strict: exit code 1)")
+        return 1
     return 0

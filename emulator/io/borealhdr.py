@@ -340,7 +340,7 @@ def _scan_camera(source: FileSource, cam_dir: Path, camera: str, white_level: in
             m = _TIMESTAMP_RE.match(f.name)
             if not m:
                 raise DatasetError(f"{f}: unexpected file name (expected <timestamp_ns>.png)")
-            frames.append(Frame(camera, exposure_ms, int(m.group(1)), f, white_level, source))
+            frames.append(Frame(camera, exposure_ms, int(m.group(1)), f, white_level, source, reader=read_frame))
     if not frames:
         raise DatasetError(f"{cam_dir}: camera folder holds no images")
     return frames

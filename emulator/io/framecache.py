@@ -1,7 +1,7 @@
 """Decoded-frame cache: each 16-bit PNG of a recording stored once as a zstd-compressed ``.npy``.
 
 Decoding a 1920 x 1200 16-bit PNG costs ~30-40 ms on the project machine, and the closed
-loop decodes the same brackets on every run over a sequence.  :func:`build_frame_cache`
+loop decodes the same brackets on every run over a sequence.  :func:`emulator.tools.framecache.build_frame_cache`
 decodes every frame once and writes ``<cache>/camera_<side>/<exposure>/<timestamp>.<size>-<mtime_ns>.npy.zst``
 (the PNG's byte size and modification time in the name: a PNG replaced after the cache was
 built no longer matches its entry, and is decoded from the PNG again).  When
@@ -16,7 +16,7 @@ key is the entry's place in the cache (``camera_<side>/<exposure>/<timestamp>.<s
 and ``crc32`` that of the pixel bytes: both are checked on every read, so an entry moved or
 swapped to another frame's name, altered, truncated, or of an older format is a bad entry
 (:class:`FrameCacheEntryError`).  :func:`emulator.io.borealhdr.read_frame` then decodes the
-PNG and writes the entry again, and :func:`build_frame_cache` (``exposim cache``) rebuilds
+PNG and writes the entry again, and :func:`emulator.tools.framecache.build_frame_cache` (``exposim cache``) rebuilds
 every bad entry it finds.
 """
 
@@ -25,7 +25,6 @@ from __future__ import annotations
 import io
 import json
 import zlib
-from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -33,9 +32,9 @@ import numpy as np
 from emulator.errors import DatasetError
 
 __all__ = [
+    "encode_entry",
     "CACHE_DIRNAME",
     "CACHE_SUFFIX",
-    "build_frame_cache",
     "cached_frame_path",
     "read_cached_frame",
     "resolve_frame_cache",
@@ -56,7 +55,7 @@ class FrameCacheEntryError(DatasetError):
 CACHE_DIRNAME = ".exposim-frames"
 #: Suffix of a cache entry.
 CACHE_SUFFIX = ".npy.zst"
-#: zstandard level of :func:`build_frame_cache` (decoding speed barely depends on it).
+#: zstandard level of :func:`emulator.tools.framecache.build_frame_cache` (decoding speed barely depends on it).
 DEFAULT_LEVEL = 3
 
 
@@ -92,7 +91,7 @@ def entry_key(path) -> str:
     return "/".join(parts)[: -len(CACHE_SUFFIX)] if parts[-1].endswith(CACHE_SUFFIX) else "/".join(parts)
 
 
-def _encode(img: np.ndarray, level: int, key: str) -> bytes:
+def encode_entry(img: np.ndarray, level: int, key: str) -> bytes:
     import zstandard
 
     img = np.ascontiguousarray(img)
@@ -107,7 +106,7 @@ def write_cached_frame(path, img: np.ndarray, *, level: int = DEFAULT_LEVEL) -> 
     """Write the cache entry of a decoded frame at ``path`` (atomically; its key from ``path``)."""
     from emulator.io.files import atomic_write_bytes
 
-    return atomic_write_bytes(path, _encode(img, level, entry_key(path)), overwrite=True)
+    return atomic_write_bytes(path, encode_entry(img, level, entry_key(path)), overwrite=True)
 
 
 def read_cached_frame(path, *, png_path=None, white_level: int | None = None) -> np.ndarray | None:
@@ -178,62 +177,4 @@ def read_cached_frame(path, *, png_path=None, white_level: int | None = None) ->
             raise DatasetError(white_level_message(png_path or path, top, white_level))
     return img
 
-
-def build_frame_cache(
-    sequence_dir,
-    cache_dir=None,
-    *,
-    level: int = DEFAULT_LEVEL,
-    verify: bool = True,
-    progress: Callable[[int, int], None] | None = None,
-) -> dict:
-    """Decode every frame of a recording once and store it in ``cache_dir`` (default
-    ``<sequence>/.exposim-frames``); entries already present for the current PNG are kept.
-
-    Entries present are checked (key and checksum, :func:`read_cached_frame`) and bad ones
-    rebuilt (counted in ``written`` and ``rebuilt``).  ``verify`` reads each new entry back and compares it with the decoded PNG (byte for
-    byte); a mismatch raises and removes the entry.  Entries of an older version of a PNG
-    are removed.  Returns counts and sizes: ``frames``, ``written``, ``kept``, ``removed``,
-    ``png_bytes``, ``cache_bytes``, ``cache_dir``.  ``progress(done, total)`` after each frame.
-    """
-    from emulator.io.borealhdr import load_sequence
-    from emulator.io.files import atomic_write_bytes
-    from emulator.io.png import read_png16
-
-    root = Path(sequence_dir)
-    seq = load_sequence(root, frame_cache=False)
-    cache = Path(cache_dir) if cache_dir is not None else root / CACHE_DIRNAME
-    frames = [f for cycle in seq.cycles for cam in cycle.frames.values() for f in cam.values()]
-    frames.sort(key=lambda f: (f.camera, f.exposure_ms, f.timestamp_ns))
-    summary = {"cache_dir": str(cache), "frames": len(frames), "written": 0, "kept": 0, "removed": 0,
-               "rebuilt": 0, "png_bytes": 0, "cache_bytes": 0}
-    for i, frame in enumerate(frames, 1):
-        target = cached_frame_path(cache, root, frame.path)
-        summary["png_bytes"] += frame.path.stat().st_size
-        for old in target.parent.glob(f"{frame.path.stem}.*{CACHE_SUFFIX}") if target.parent.is_dir() else ():
-            if old != target:
-                old.unlink()
-                summary["removed"] += 1
-        bad = False
-        if target.is_file():
-            try:
-                read_cached_frame(target, png_path=frame.path)
-            except FrameCacheEntryError:
-                bad = True
-        if target.is_file() and not bad:
-            summary["kept"] += 1
-        else:
-            img = read_png16(frame.path, white_level=frame.white_level)
-            atomic_write_bytes(target, _encode(img, level, entry_key(target)), overwrite=True)
-            summary["rebuilt"] += bad
-            if verify:
-                back = read_cached_frame(target, png_path=frame.path)
-                if back is None or back.shape != img.shape or back.tobytes() != img.tobytes():
-                    target.unlink(missing_ok=True)
-                    raise DatasetError(f"{target}: cache entry does not read back as {frame.path}")
-            summary["written"] += 1
-        summary["cache_bytes"] += target.stat().st_size
-        if progress is not None:
-            progress(i, len(frames))
-    return summary
 

@@ -154,12 +154,10 @@ _warn_lock = threading.Lock()
 
 def find_imu(root: str | os.PathLike, source=None) -> Path | None:
     """The recording's ``imu/imu.csv`` if its source has one, else None."""
-    from emulator.io.borealhdr import FolderSource
-
     root = Path(root)
-    source = source or FolderSource(root)
     path = root.joinpath(*IMU_FILE)
-    return path if source.is_file(path) else None
+    found = source.is_file(path) if source is not None else path.is_file()  # no source: the file system
+    return path if found else None
 
 
 def read_imu(root: str | os.PathLike, source=None, *, warn: bool = True) -> ImuData | None:
@@ -180,11 +178,7 @@ def read_imu(root: str | os.PathLike, source=None, *, warn: bool = True) -> ImuD
                 warnings.warn(f"{root}: no imu/imu.csv; blur cannot be predicted from a gyro for this recording",
                               ImuMissingWarning, stacklevel=2)
         return None
-    if source is None:
-        from emulator.io.borealhdr import FolderSource
-
-        source = FolderSource(root)
-    return parse_imu(source.read_bytes(path), path)
+    return parse_imu(path.read_bytes() if source is None else source.read_bytes(path), path)
 
 
 def write_imu(path: str | os.PathLike, imu: ImuData, *, overwrite: bool = False) -> Path:

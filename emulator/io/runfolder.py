@@ -32,25 +32,22 @@ so the interrupted run can be resumed.
 
 from __future__ import annotations
 
-import contextlib
 import csv
-import datetime as _dt
-import errno
-import fcntl
-import io
-import json
-import math
 import os
-import socket
+import shutil
+import threading
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from emulator.errors import OutputExistsError, RunFolderError, RunLockedError
+from emulator.errors import OutputExistsError, RunFolderError
 from emulator.io.files import format_timestamp_s, read_metadata, write_metadata
 from emulator.io.png import write_png8, write_png16
+from emulator.io.runcsv import (CSV_COLUMNS, CSV_FILE, EXTRA_COLUMNS, format_row, read_csv_rows, read_tables,
+                                tables_from_rows)
+from emulator.io.runlock import LOCK_FILE, RunLock, utc_now_iso
 from emulator.io.stack import TIMES_FILE, read_times, write_times
 from emulator.response import BOREALHDR_BLACK_LEVEL, BOREALHDR_WHITE_LEVEL
 
@@ -68,6 +65,7 @@ __all__ = [
     "read_run_json",
     "read_csv_rows",
     "read_tables",
+    "tables_from_rows",
     "RunFrame",
     "MethodRun",
     "RunFolder",
@@ -75,103 +73,9 @@ __all__ = [
 ]
 
 RUN_FILE = "run.json"
-LOCK_FILE = "run.lock"
-CSV_FILE = "exposures.csv"
 IMAGES_DIR = "images"
-#: Fixed leading columns of ``<method>/exposures.csv`` (the contract).
-CSV_COLUMNS = ("cycle", "timestamp_ns", "target_ms", "bracket_ms", "ratio", "saturated_fraction", "valid_fraction")
-#: Columns appended after the contract's: the proposal, guards, and per-camera figures.
-EXTRA_COLUMNS = (
-    "next_ms",
-    "proposed_ms",
-    "guarded",
-    "clamped",
-    "bracket_saturated_fraction",
-    "saturated_fraction_right",
-    "valid_fraction_right",
-    "missing_left_ms",
-    "missing_right_ms",
-)
 #: What a run saves of its emulated images.
 SAVE_MODES = ("none", "png16", "png8")
-_INT_COLUMNS = frozenset({"cycle", "timestamp_ns", "guarded", "clamped"})
-_LIST_COLUMNS = frozenset({"missing_left_ms", "missing_right_ms"})
-
-
-def _now() -> str:
-    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
-
-
-# ============================================================================ CSV rows
-def format_row(step) -> list[str]:
-    """The CSV row of a step: every column of :data:`CSV_COLUMNS` + :data:`EXTRA_COLUMNS`.
-
-    ``step`` has an attribute per column.  Integers and flags as integers, floats at full
-    precision (``repr``), None as an empty cell, exposure lists as ``;``-joined ``%g``.
-    """
-    out = []
-    for col in CSV_COLUMNS + EXTRA_COLUMNS:
-        v = getattr(step, col)
-        if v is None:
-            out.append("")
-        elif col in _INT_COLUMNS:
-            out.append(str(int(v)))
-        elif col in _LIST_COLUMNS:
-            out.append(";".join(f"{x:g}" for x in v))
-        else:
-            out.append(repr(float(v)))
-    return out
-
-
-def read_csv_rows(path: str | os.PathLike, *, repair: bool = False) -> list[list[str]]:
-    """Rows of an ``exposures.csv`` after its header (checked); ``[]`` for a missing file.
-
-    A torn last line (a run killed mid-write) is ignored, and cut off the file when
-    ``repair`` (the writer resuming it).
-    """
-    path = Path(path)
-    if not path.is_file():
-        return []
-    data = path.read_bytes()
-    if data and not data.endswith(b"\n"):
-        cut = data.rfind(b"\n") + 1
-        if repair:
-            with open(path, "r+b") as fh:
-                fh.truncate(cut)
-        data = data[:cut]
-    rows = list(csv.reader(io.StringIO(data.decode())))
-    if not rows:
-        return []
-    header = tuple(rows[0])
-    if header[: len(CSV_COLUMNS)] != CSV_COLUMNS:
-        raise RunFolderError(f"{path}: unexpected header {','.join(header)}")
-    return rows[1:]
-
-
-def read_tables(run_dir: str | os.PathLike, methods: Iterable[str]) -> dict[str, dict[str, np.ndarray]]:
-    """Each method's ``exposures.csv`` as columns: int64 for counters and flags, float64 else.
-
-    Empty cells read as 0 (integers) or NaN (floats); exposure-list columns are left out.
-    """
-    run_dir = Path(run_dir)
-    tables = {}
-    for name in methods:
-        path = run_dir / name / CSV_FILE
-        if not path.is_file():
-            raise RunFolderError(f"{path}: missing; not a complete run folder")
-        with open(path, newline="") as fh:
-            rows = list(csv.DictReader(fh))
-        cols = {}
-        for col in CSV_COLUMNS + EXTRA_COLUMNS:
-            if col in _LIST_COLUMNS:
-                continue
-            vals = [r.get(col) or "" for r in rows]
-            if col in _INT_COLUMNS:
-                cols[col] = np.array([int(v) if v else 0 for v in vals], dtype=np.int64)
-            else:
-                cols[col] = np.array([float(v) if v else math.nan for v in vals], dtype=np.float64)
-        tables[name] = cols
-    return tables
 
 
 def read_run_json(run_dir: str | os.PathLike) -> dict:
@@ -181,129 +85,6 @@ def read_run_json(run_dir: str | os.PathLike) -> dict:
     if not path.is_file():
         raise RunFolderError(f"{run_dir}: not a run folder ({RUN_FILE} missing); expected the output of `exposim run`")
     return read_metadata(path, RunFolderError)
-
-
-# ============================================================================ the lock
-def _pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:  # exists, owned by someone else
-        return True
-    return True
-
-
-def _describe(owner: dict) -> str:
-    return (f"pid {owner.get('pid', '?')} on {owner.get('host', '?')}"
-            + (f", since {owner['started']}" if owner.get("started") else ""))
-
-
-class RunLock:
-    """Exclusive lock on a run folder (see the module docstring).
-
-    Use :meth:`acquire`; :meth:`release` (or the context manager) removes ``run.lock``.
-    ``stale_owner`` is the owner of a stale lock that was taken over, else None.
-    """
-
-    def __init__(self, path: Path, fd: int, owner: dict, stale_owner: dict | None) -> None:
-        self.path = path
-        self._fd = fd
-        self.owner = owner
-        self.stale_owner = stale_owner
-
-    @classmethod
-    def acquire(cls, run_dir: str | os.PathLike) -> "RunLock":
-        """Take the lock of ``run_dir`` or raise :class:`RunLockedError` naming the live holder."""
-        run_dir = Path(run_dir)
-        path = run_dir / LOCK_FILE
-        owner = {"pid": os.getpid(), "host": socket.gethostname(), "started": _now()}
-        tmp = run_dir / f".{LOCK_FILE}.{os.getpid()}.tmp"
-        tmp.write_text(json.dumps(owner) + "\n")
-        stale = None
-        try:
-            for _ in range(5):
-                try:
-                    os.link(tmp, path)  # atomic: fails if a lock exists; the content is complete
-                except FileExistsError:
-                    pass
-                fd = cls._open(path)
-                if fd is None:
-                    continue  # removed meanwhile: try again
-                try:
-                    fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-                except OSError as exc:
-                    held = cls._read_owner(fd)
-                    os.close(fd)
-                    if exc.errno in (errno.EAGAIN, errno.EACCES, errno.EWOULDBLOCK):
-                        raise RunLockedError(
-                            f"{run_dir}: the run folder is being written by another process ({_describe(held)}); "
-                            "wait for it to finish or stop it, then --resume"
-                        ) from None
-                    raise
-                if not cls._same_file(fd, path):  # replaced or removed between open and flock
-                    os.close(fd)
-                    continue
-                held = cls._read_owner(fd)
-                if held == owner:
-                    return cls(path, fd, owner, stale)
-                # A lock file whose flock is free: its writer is gone, unless a live process on
-                # this host owns it (it has just created it and not yet locked it).
-                same_host = held.get("host") == owner["host"]
-                pid = held.get("pid")
-                if same_host and isinstance(pid, int) and pid != os.getpid() and _pid_alive(pid):
-                    os.close(fd)
-                    raise RunLockedError(
-                        f"{run_dir}: the run folder is being written by another process ({_describe(held)}); "
-                        "wait for it to finish or stop it, then --resume"
-                    )
-                stale = held
-                os.replace(tmp, path)  # take over: our owner record, atomically
-                tmp.write_text(json.dumps(owner) + "\n")
-                os.close(fd)
-            raise RunLockedError(f"{path}: could not take the lock (it keeps changing); try again")
-        finally:
-            tmp.unlink(missing_ok=True)
-
-    @staticmethod
-    def _open(path: Path) -> int | None:
-        try:
-            return os.open(path, os.O_RDWR)
-        except FileNotFoundError:
-            return None
-
-    @staticmethod
-    def _same_file(fd: int, path: Path) -> bool:
-        try:
-            a, b = os.fstat(fd), os.stat(path)
-        except FileNotFoundError:
-            return False
-        return (a.st_dev, a.st_ino) == (b.st_dev, b.st_ino)
-
-    @staticmethod
-    def _read_owner(fd: int) -> dict:
-        try:
-            data = os.pread(fd, 4096, 0)
-            owner = json.loads(data.decode() or "{}")
-        except (OSError, ValueError):
-            return {}
-        return owner if isinstance(owner, dict) else {}
-
-    def release(self) -> None:
-        """Remove ``run.lock`` (if it is still ours) and drop the lock."""
-        if self._fd is None:
-            return
-        with contextlib.suppress(OSError):
-            if self._same_file(self._fd, self.path):
-                self.path.unlink()
-        os.close(self._fd)
-        self._fd = None
-
-    def __enter__(self) -> "RunLock":
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.release()
 
 
 # ============================================================================ the writer
@@ -323,8 +104,9 @@ class RunWriter:
     configuration and opens the CSVs, reading the rows already there (:meth:`recorded`).
     """
 
-    def __init__(self, out_dir: str | os.PathLike, *, resume: bool = False) -> None:
+    def __init__(self, out_dir: str | os.PathLike, *, resume: bool = False, png_level: int = 1) -> None:
         self.path = Path(os.path.abspath(out_dir))  # absolute from the start: a chdir later changes nothing
+        self.png_level = int(png_level)  # zlib level of the saved images (emulator.io.png.encode_png)
         self.resume = bool(resume)
         self.run_json: dict = {}
         self.lock: RunLock | None = None
@@ -414,7 +196,7 @@ class RunWriter:
 
     def update(self, **fields) -> None:
         """Set fields of ``run.json`` (and the time of the update) and write it atomically."""
-        self.run_json.update(fields, updated=_now())
+        self.run_json.update(fields, updated=utc_now_iso())
         write_metadata(self.path / RUN_FILE, self.run_json, overwrite=True)
 
     def recorded(self, method: str, cycle: int) -> list[str] | None:
@@ -439,16 +221,29 @@ class RunWriter:
         """Write one emulated image as the run saves them (``uint16`` for png16, ``uint8`` grey for png8)."""
         path = self.image_path(method, camera, timestamp_ns)
         if self.save == "png16":
-            return write_png16(path, image, overwrite=True)
+            return write_png16(path, image, overwrite=True, level=self.png_level)
         if self.save == "png8":
-            return write_png8(path, image, overwrite=True)
+            return write_png8(path, image, overwrite=True, level=self.png_level)
         raise RunFolderError(f"{self.path}: this run saves no images (save = {self.save!r})")
 
-    def write_times(self, methods: Iterable[str]) -> None:
-        """Write each method's ``images/times.txt`` from its CSV (sorted by time)."""
+    def share_image(self, source: Path, method: str, camera: str, timestamp_ns: int) -> Path:
+        """Give ``method`` the image already written at ``source`` (same bytes): a hard link where
+        the file system allows, else a copy; atomic."""
+        dest = self.image_path(method, camera, timestamp_ns)
+        tmp = dest.with_name(f".{dest.name}.{os.getpid()}.{threading.get_ident()}.tmp")
+        try:
+            os.link(source, tmp)
+        except OSError:
+            shutil.copyfile(source, tmp)
+        os.replace(tmp, dest)
+        return dest
+
+    def write_times(self, methods: Iterable[str], rows: dict | None = None) -> None:
+        """Write each method's ``images/times.txt`` (sorted by time) from its CSV rows: ``rows[name]``
+        when given (the run's rows in memory), else read from the CSV."""
         for name in methods:
-            rows = read_csv_rows(self.path / name / CSV_FILE)
-            lines = sorted((int(r[1]), float(r[2])) for r in rows)
+            rows_of = rows[name] if rows is not None else read_csv_rows(self.path / name / CSV_FILE)
+            lines = sorted((int(r[1]), float(r[2])) for r in rows_of)
             write_times(self.path / name / IMAGES_DIR / TIMES_FILE, [str(ns) for ns, _ in lines],
                         [format_timestamp_s(ns) for ns, _ in lines], [ms for _, ms in lines], overwrite=True)
 

@@ -10,18 +10,14 @@ sigma-clipped variance (:func:`robust_variance`); :func:`_fit` fits
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
-
 import cv2
 import numpy as np
 
+from emulator.noise.groups import BracketGroup
 from emulator.noise.model import PHASES
 from emulator.response import CameraResponse
 
-if TYPE_CHECKING:
-    from emulator.noise.insitu import BracketGroup
-
-__all__ = ["robust_variance"]
+__all__ = ["robust_variance", "per_phase_fits", "per_group_fits"]
 
 # ---------------------------------------------------------------------------- in-situ estimation
 #: The high-pass applied to difference images (separable second difference, [1, -2, 1] in
@@ -239,3 +235,40 @@ def _fit_bins(cols: dict, mask=None, *, motion_term: bool):
         extra = np.column_stack([(grp == k) * cols["signal2"][m] for k in np.unique(grp)])
     return _fit(cols["x_shot"][m], cols["x_read"][m], cols["variance"][m], cols["quantisation"][m], cols["n"][m],
                 extra=extra)
+
+
+def per_phase_fits(cols: dict, names, gain: float, read: float, motion_term: bool):
+    """Gain and read noise fitted per Bayer phase: ``(per_channel, phase gains, phase read noises)``;
+    a phase with fewer than 3 bins takes the pooled values."""
+    per_channel = {}
+    phase_gain, phase_read = [], []
+    for p, nm in enumerate(names):
+        m = cols["phase"] == p
+        if np.count_nonzero(m) < 3:
+            per_channel[nm] = {"n_bins": int(np.count_nonzero(m))}
+            phase_gain.append(gain)
+            phase_read.append(read)
+            continue
+        a_p, b_p, c_p, _ = _fit_bins(cols, m, motion_term=motion_term)
+        gp, rp, sgp, srp = _gain_read(a_p, b_p, c_p)
+        per_channel[nm] = {"gain_e_per_h": gp, "read_noise_e": rp, "gain_std": sgp, "read_noise_std": srp,
+                           "n_bins": int(np.count_nonzero(m))}
+        phase_gain.append(gp if math.isfinite(gp) else gain)
+        phase_read.append(rp if math.isfinite(rp) else read)
+    return per_channel, phase_gain, phase_read
+
+
+def per_group_fits(groups, cols: dict, shifts, motion_term: bool) -> list[dict]:
+    """Each group's own fit (where it has 3 bins or more), its shifts and pixel counts."""
+    per_group = []
+    for i, gr in enumerate(groups):
+        m = cols["group"] == i
+        entry = {"label": gr.label, "exposures_ms": [float(t) for t in gr.exposures_ms],
+                 "shift_px": [[2 * a, 2 * b_] for a, b_ in shifts[i]], "n_bins": int(np.count_nonzero(m)),
+                 "n_pixels": int(cols["n"][m].sum())}
+        if np.count_nonzero(m) >= 3:
+            a_i, b_i, c_i, _ = _fit_bins(cols, m, motion_term=motion_term)
+            gi, ri, sgi, sri = _gain_read(a_i, b_i, c_i)
+            entry.update(gain_e_per_h=gi, read_noise_e=ri, gain_std=sgi, read_noise_std=sri)
+        per_group.append(entry)
+    return per_group

@@ -336,10 +336,10 @@ def consistent_noise(raw: np.ndarray, plain: np.ndarray, ratio: float, model: No
             out[sl] = block
 
     if raw.size >= _THREAD_MIN_PIXELS and height >= 2 * rows:
-        from emulator.emulate import _pool
+        from emulator.pools import lut_pool
 
         half = height // 2
-        list(_pool().map(lambda ab: work(*ab), [(0, half), (half, height)]))
+        list(lut_pool().map(lambda ab: work(*ab), [(0, half), (half, height)]))
     else:
         work(0, height)
     return out

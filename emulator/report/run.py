@@ -207,15 +207,16 @@ def run_markdown(info: dict, summary: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_run_report(run_dir: str | os.PathLike) -> dict:
-    """(Re)write ``results.json``, ``exposure.png`` and ``report.md`` of a run folder from its CSVs.
+def write_run_report(run_dir: str | os.PathLike, info: dict | None = None, tables: dict | None = None) -> dict:
+    """(Re)write ``results.json``, ``exposure.png`` and ``report.md`` of a run folder.
 
     Returns the results dictionary.  Needs no recomputation: everything comes from
-    ``run.json`` and the per-method CSVs.
+    ``run.json`` and the per-method CSVs, or from ``info`` and ``tables`` when the run
+    passes them from memory (:func:`emulator.io.runfolder.tables_from_rows`).
     """
     run_dir = Path(run_dir)
-    info = read_run_json(run_dir)
-    tables = read_tables(run_dir, info["methods"])
+    info = read_run_json(run_dir) if info is None else info
+    tables = read_tables(run_dir, info["methods"]) if tables is None else tables
     summary = summarise_run(run_dir, info, tables)
     plot_exposure(info, tables, run_dir / PLOT_FILE)
     write_results(run_dir / RESULTS_FILE, summary)

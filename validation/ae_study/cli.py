@@ -16,6 +16,9 @@ from scenes.parallel import check_scheduler
 from validation.ae_study.config import CONFIGS
 from validation.ae_study.study import redraw, run_replicated_study, run_study
 
+#: The one-paragraph description of ``python -m validation.ae_study --help``.
+DESCRIPTION = "Synthetic AE study (issue 7): the paper's section V-D benchmarks on synthetic stereo walks."
+
 __all__ = ["add_arguments", "run_from_args", "main"]
 
 
@@ -94,9 +97,7 @@ def summary_lines(args: argparse.Namespace, results: dict) -> list[str]:
 
 def main(argv=None) -> int:
     """``python -m validation.ae_study``: rc 0, or 1 with one line on stderr for a known error."""
-    from validation import ae_study
-
-    p = argparse.ArgumentParser(prog="python -m validation.ae_study", description=ae_study.__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(prog="python -m validation.ae_study", description=DESCRIPTION)
     add_arguments(p)
     args = p.parse_args(argv)
     command = "python -m validation.ae_study " + " ".join(shlex.quote(a) for a in (sys.argv[1:] if argv is None else argv))

@@ -70,6 +70,7 @@ def run_study(out, config: StudyConfig = CONFIGS["full"], *, force: bool = False
     from emulator.metrics.bench import bench_features, bench_vo
     from emulator.metrics.features import DEFAULT_TAUS
     from emulator.metrics.vo import VOParameters
+    from emulator.playback import RunConfig
     from emulator.runner import run_to_folder
     from scenes.synthesize import synthesize
 
@@ -95,7 +96,7 @@ def run_study(out, config: StudyConfig = CONFIGS["full"], *, force: bool = False
         seq = load_sequence(ds)
         with _bar(len(seq), f"[{k + 1}/{len(cfg.scenes)}] closed loop {scene_name}, 7 methods", "cycle",
                   progress) as bar:
-            runs[scene_name] = run_to_folder(seq, "all", run_dir, save="png16", initial_ms=cfg.initial_ms,
+            runs[scene_name] = run_to_folder(seq, "all", run_dir, RunConfig(save="png16", initial_ms=cfg.initial_ms),
                                              progress=_callback(bar), command=command)
         timings[f"closed_loop_{scene_name}_s"] = time.perf_counter() - t0
         run_dirs[scene_name] = run_dir

@@ -28,6 +28,11 @@ For every scene (default ``forest_winter``, ``sun_glare``, ``forest_edge``, ``fo
 
    A control, ``same-instant-reseeded``, repeats the same-instant live loop with other
    capture-noise seeds: how far two live runs of the same walk disagree.
+
+   The native-rate live loop (:func:`~validation.live.native.native_rate_loop`, run
+   ``live-native``): the camera runs its AE on every frame at the recorder's 22 fps with an
+   exposure latency (default 1 frame), shots timestamped at mid-exposure; the frame at each
+   cycle's first shot is benchmarked.
 4. **Comparison** per method, noise option and timing variant: exposure trajectories
    (|log2(emulated_ms / live_ms)| per cycle, cycle 0 excluded since both start at
    ``initial_ms``), left images (RMSE in % of the DN range over the emulation's valid
@@ -64,6 +69,7 @@ _HOMES = {
                      "LiveError"), "validation.live.config"),
     **dict.fromkeys(("finish", "numbered_output", "redraw", "run_live_experiment"), "validation.live.experiment"),
     **dict.fromkeys(("DatasetRadiance", "iter_emulated", "iter_live", "write_run_folder"), "validation.live.loops"),
+    "native_rate_loop": "validation.live.native",
 }
 
 __all__ = [
@@ -79,6 +85,7 @@ __all__ = [
     "DatasetRadiance",
     "iter_live",
     "iter_emulated",
+    "native_rate_loop",
     "write_run_folder",
     "exposure_log2_errors",
     "image_errors",

@@ -28,7 +28,7 @@ DESCRIPTION = (
     "On synthetic stereo walks, every AE method runs twice: emulated (the normal closed loop on the "
     "bracketed recording, plain and noise-consistent emulation) and live (each cycle the camera captures at the "
     "method's own exposure from the rendered radiance, at the emulator's bracket instant or at the cycle's first "
-    "shot). Compares exposure trajectories, images, features/VO metrics and the methods' rankings (Kendall tau), "
+    "shot; and natively: the AE on every frame at the recorder's 22 fps with an exposure latency, see --latency-frames). Compares exposure trajectories, images, features/VO metrics and the methods' rankings (Kendall tau), "
     "and measures the noise variance ratio. Writes results.json, report.md, exposure_<scene>.png, metrics.png.")
 
 
@@ -61,6 +61,14 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
                         "independent walk of the replicated verdicts (default 1; the verdicts need >= 10 walks, "
                         "docs/verdicts.md sizes a decision)")
     p.add_argument("--no-control", action="store_true", help="skip the re-seeded live control run")
+    p.add_argument("--latency-frames", type=int,
+                   help="exposure latency of the native-rate live camera, frames: a proposal made after frame k is "
+                        f"used from frame k + 1 + latency (default {full.latency_frames})")
+    p.add_argument("--frame-rate-hz", type=float,
+                   help="frame rate of the native-rate live camera (default the recorder's "
+                        f"{full.frame_rate_hz:g}; its frames must start on the recorder's shots, e.g. 11)")
+    p.add_argument("--no-native", action="store_true",
+                   help="skip the native-rate live condition (reported as not run)")
     p.add_argument("--keep-radiance", action="store_true", help="keep the datasets' radiance EXRs (large)")
     p.add_argument("--cache-dir", help="render cache (default $EXPOSIM_CACHE or ~/.cache/exposim/renders)")
     add_scheduler_option(p)
@@ -91,13 +99,15 @@ def config_from_args(args) -> LiveConfig:
         changes["n_cycles"] = args.cycles
     if args.size is not None:
         changes["width"], changes["height"] = args.size
-    for key in ("spp", "seed", "scenes", "methods", "noise_repeats"):
+    for key in ("spp", "seed", "scenes", "methods", "noise_repeats", "latency_frames", "frame_rate_hz"):
         if getattr(args, key) is not None:
             changes[key] = getattr(args, key)
     if args.no_control:
         changes["control"] = False
     if args.keep_radiance:
         changes["keep_radiance"] = True
+    if getattr(args, "no_native", False):
+        changes["native"] = False
     return replace(CONFIGS["quick" if args.quick else "full"], **changes)
 
 
@@ -106,8 +116,9 @@ def command_line(args, prog: str) -> str:
     words = shlex.split(prog) + ["-o", str(args.output)]
     if args.quick:
         words.append("--quick")
-    for key in ("scenes", "cycles", "size", "spp", "seed", "methods", "noise_repeats"):
-        value = getattr(args, key)
+    for key in ("scenes", "cycles", "size", "spp", "seed", "methods", "noise_repeats", "latency_frames",
+                "frame_rate_hz"):
+        value = getattr(args, key, None)
         if value is None:
             continue
         if key == "size":
@@ -117,7 +128,8 @@ def command_line(args, prog: str) -> str:
         words += ["--" + key.replace("_", "-"), str(value)]
     if getattr(args, "replicates", 1) != 1:
         words += ["--replicates", str(args.replicates)]
-    words += [flag for flag, on in (("--no-control", args.no_control), ("--keep-radiance", args.keep_radiance)) if on]
+    words += [flag for flag, on in (("--no-control", args.no_control), ("--keep-radiance", args.keep_radiance),
+                                    ("--no-native", getattr(args, "no_native", False))) if on]
     return shlex.join(words)
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, fields
 
@@ -134,6 +135,12 @@ class LiveConfig:
         Run the feature and VO benchmarks (False: exposure and image comparison only).
     keep_radiance : bool
         Keep the datasets' radiance EXRs (large) after the live loops.
+    native : bool
+        Run the native-rate live condition (:func:`validation.live.native.native_rate_loop`).
+    latency_frames : int
+        Its exposure latency in frames (a proposal made after frame k is used from frame k + 1 + latency).
+    frame_rate_hz : float
+        Its frame rate (the recorder's 22 fps, or a rate whose frames start on the recorder's shots).
     """
 
     scenes: tuple[str, ...] = SCENES
@@ -153,6 +160,9 @@ class LiveConfig:
     control: bool = True
     metrics: bool = True
     keep_radiance: bool = False
+    native: bool = True
+    latency_frames: int = 1
+    frame_rate_hz: float = 22.0
 
     def __post_init__(self) -> None:
         import scenes
@@ -183,6 +193,11 @@ class LiveConfig:
             raise LiveError(f"unknown selector {self.selector!r}; choose one of {', '.join(SELECTORS)}")
         if self.noise_repeats < 3:
             raise LiveError(f"noise_repeats must be >= 3, got {self.noise_repeats}")
+        if isinstance(self.latency_frames, bool) or not isinstance(self.latency_frames, int) or self.latency_frames < 0:
+            raise LiveError(f"latency_frames must be an integer >= 0, got {self.latency_frames!r}")
+        if not (isinstance(self.frame_rate_hz, (int, float)) and math.isfinite(self.frame_rate_hz)
+                and self.frame_rate_hz > 0):
+            raise LiveError(f"frame_rate_hz must be finite and positive, got {self.frame_rate_hz!r}")
 
     @property
     def duration_s(self) -> float:

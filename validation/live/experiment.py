@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from emulator.playback import RunConfig
 from emulator.io.files import REPORT_FILE, RESULTS_FILE, first_free, read_results, to_jsonable, write_results, write_text
 from emulator.report.html import write_report
 from validation.live.compare import exposure_log2_errors, image_errors, measure_noise_variance_ratio
@@ -83,8 +84,10 @@ def run_live_experiment(out, config: LiveConfig | None = None, *, progress: bool
     ``native_loop(sequence, radiance, camera, methods, *, seed, noise, initial_ms, selector,
     response)`` yielding :class:`emulator.playback.CycleStep` per cycle with images kept (a
     camera at the recorder's frame rate with an exposure latency, the same closed loop as
-    ``exposim run``); its run is ``live-native``.  Without one that condition is reported as
-    not run (results.json ``conditions`` and ``comparisons``).
+    ``exposim run``); its run is ``live-native``.  Default (None):
+    :func:`validation.live.native.native_rate_loop` at ``config.frame_rate_hz`` with
+    ``config.latency_frames``, when ``config.native`` (else that condition is reported as
+    not run in results.json ``conditions`` and ``comparisons``).
     """
     import scenes
     from emulator.io.borealhdr import load_sequence, sequence_response
@@ -107,6 +110,12 @@ def run_live_experiment(out, config: LiveConfig | None = None, *, progress: bool
     run_names = [f"emulated-{n}" for n in NOISE_OPTIONS] + [f"live-{v}" for v in VARIANTS]
     if cfg.control:
         run_names.append(f"live-{CONTROL}")
+    if native_loop is None and cfg.native:
+        from functools import partial
+
+        from validation.live.native import native_rate_loop
+
+        native_loop = partial(native_rate_loop, latency_frames=cfg.latency_frames, frame_rate_hz=cfg.frame_rate_hz)
     if native_loop is not None:
         run_names.append(NATIVE_RUN)
     per_scene: dict = {}
@@ -135,7 +144,7 @@ def run_live_experiment(out, config: LiveConfig | None = None, *, progress: bool
         from scenes.walkshots import walk_radiance  # live shots blurred over their own windows (issue 21)
 
         radiance = walk_radiance(ds, scene, cache_dir=cache_dir) or radiance
-        common = dict(initial_ms=cfg.initial_ms, selector=cfg.selector, response=response)
+        common = dict(config=RunConfig(initial_ms=cfg.initial_ms, selector=cfg.selector), response=response)
         cycles: dict = {}
         t0 = time.perf_counter()
         for opt, mode in NOISE_OPTIONS.items():

@@ -16,10 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
-from emulator.autoexposure.isolation import call_method
 from validation.live.config import FIXED_INSTANT_BRACKET_INDEX, VARIANTS, LiveError
 
-__all__ = ["DatasetRadiance", "iter_live", "iter_emulated", "write_run_folder"]
+__all__ = ["DatasetRadiance", "make_shoot", "iter_live", "iter_emulated", "write_run_folder"]
 
 #: Seed-sequence tag of the live captures.
 _LIVE_TAG = 14_001
@@ -62,6 +61,28 @@ def _words(x: float) -> list[int]:
     return np.array([float(x)], dtype=np.float64).view(np.uint32).tolist()
 
 
+def make_shoot(radiance: Callable[[int, str], np.ndarray], camera, cameras, *, seed: int = 0, noise: bool = True):
+    """The ``shoot(timestamp_ns, camera, exposure_ms, index)`` of the live providers for a synthetic camera.
+
+    Captures ``radiance(timestamp_ns, camera)`` with :func:`synth.capture` (an ``exposure_aware``
+    radiance is called with the exposure too, and integrates over the shot's window); the noise of
+    camera ``c`` (its position in ``cameras``) at tick ``index`` and exposure ``t`` is seeded
+    by ``SeedSequence([seed, 14001, index, c, bits of t])``.
+    """
+    import synth
+
+    cams = tuple(cameras)
+
+    def shoot(timestamp_ns: int, cam: str, exposure_ms: float, index: int) -> np.ndarray:
+        rng = np.random.SeedSequence([int(seed), _LIVE_TAG, int(index), cams.index(cam), *_words(exposure_ms)])
+        # an exposure-aware provider integrates over the live shot's own window
+        rad = (radiance(timestamp_ns, cam, exposure_ms) if getattr(radiance, "exposure_aware", False)
+               else radiance(timestamp_ns, cam))
+        return synth.capture(rad, exposure_ms, camera, seed=rng, noise=noise)
+
+    return shoot
+
+
 def iter_live(
     sequence,
     radiance: Callable[[int, str], np.ndarray],
@@ -70,14 +91,20 @@ def iter_live(
     *,
     timing: str = "same-instant",
     response=None,
-    initial_ms: float = 4.0,
+    initial_ms: float | None = None,
     range_ms=None,
-    selector: str = "higher-no-sat",
-    mode: str = "paper",
+    selector: str | None = None,
+    mode: str | None = None,
     noise: bool = True,
     seed: int = 0,
+    config=None,
 ) -> Iterator:
-    """The live closed loop: each cycle, each method's camera captures at its own exposure.
+    """The live closed loop at the cycle rate: each cycle, each method's camera captures at its own exposure.
+
+    The one closed loop (:func:`emulator.playback.closed_loop`) over a
+    :class:`emulator.playback.LiveCycleProvider`: the same initial-exposure clamp, guard,
+    clamp, time limit and method failures as the emulated loop.  For a camera at its own
+    frame rate, use :class:`emulator.playback.LiveRateProvider` with :func:`make_shoot`.
 
     Parameters
     ----------
@@ -96,7 +123,8 @@ def iter_live(
         Capture at the timestamp of the bracket the emulator would select for the live
         target, or at the cycle's first shot.
     response, initial_ms, range_ms, selector, mode
-        As in :func:`emulator.playback.iter_run` (the response goes to methods that take it).
+        As in :func:`emulator.playback.iter_run` (the response goes to methods that take it);
+        ``config`` (a :class:`emulator.playback.RunConfig`) gives them all at once.
     noise : bool
         Sensor noise in the live captures.
     seed : int
@@ -112,94 +140,36 @@ def iter_live(
         (``left``/``right``); ``bracket_ms`` is the bracket whose instant was used,
         ``ratio`` 1, ``valid_fraction`` 1.
     """
-    import synth
-    from emulator.dataset import CAMERAS
-    from emulator.io.borealhdr import load_sequence, sequence_response
     from emulator.autoexposure.methodset import build_methods
-    from emulator.playback import DEFAULT_RANGE_MS, CycleStep, MethodStep, guard_exposure
-    from emulator.pools import single_thread_pools
-    from emulator.select import saturated_fraction, select
+    from emulator.dataset import CAMERAS
+    from emulator.playback import LiveCycleProvider, RunConfig, closed_loop, resolve_sequence
 
     if timing not in VARIANTS:
         raise LiveError(f"timing must be one of {', '.join(VARIANTS)}, got {timing!r}")
-    seq = sequence if hasattr(sequence, "cycles") else load_sequence(sequence)
-    if response is None:
-        response = sequence_response(seq)
-    lo, hi = (float(v) for v in (DEFAULT_RANGE_MS if range_ms is None else range_ms))
-    if not 0 < lo <= hi:
-        raise LiveError(f"range_ms must satisfy 0 < low <= high, got {range_ms!r}")
+    seq = resolve_sequence(sequence)
+    cfg = RunConfig.from_kwargs(config, initial_ms=initial_ms, range_ms=range_ms, selector=selector, mode=mode)
+    response = cfg.response_for(seq, response)
     white, black = int(seq.white_level), int(seq.black_level)
     if (camera.white_level, camera.black_level) != (white, black):
         raise LiveError(f"camera levels {camera.black_level}..{camera.white_level} differ from the recording's "
                         f"{black}..{white}")
-    built = build_methods(methods, mode=mode, response=response)
+    built = build_methods(methods, mode=cfg.mode, response=response, options=cfg.options)
     cams = tuple(c for c in CAMERAS if c in seq.cameras)
-    targets = {name: float(initial_ms) for name in built}
-    for cycle in seq.cycles:
-        avail = cycle.available(cams)
-        if not avail:
-            yield CycleStep(cycle.index, {}, {c: cycle.missing(c) for c in cams}, skipped="no bracket present")
-            continue
-        raws: dict = {}
-
-        def bracket_raw(e, cycle=cycle, raws=raws):
-            if e not in raws:
-                raws[e] = cycle.frames[cams[0]][e].load()
-            return raws[e]
-
-        first = cycle.frames[cams[0]][avail[FIXED_INSTANT_BRACKET_INDEX]].timestamp_ns
-        captures: dict = {}
-        steps = {}
-        for name, method in built.items():
-            target = targets[name]
-            if timing == "same-instant":
-                sats = {e: (lambda e=e: saturated_fraction(bracket_raw(e), white_level=white, black_level=black))
-                        for e in avail}
-                key = select(selector, target, sats, white_level=white, black_level=black)
-                ts = int(cycle.frames[cams[0]][key].timestamp_ns)
-            else:
-                key = avail[FIXED_INSTANT_BRACKET_INDEX]
-                ts = int(first)
-            images = []
-            for c, cam in enumerate(cams):
-                ck = (ts, cam, target)
-                if ck not in captures:
-                    rng = np.random.SeedSequence([int(seed), _LIVE_TAG, int(cycle.index), c, *_words(target)])
-                    # an exposure-aware provider integrates over the live shot's own window [t, t + target]
-                    rad = radiance(ts, cam, target) if getattr(radiance, "exposure_aware", False) else radiance(ts, cam)
-                    img = synth.capture(rad, target, camera, seed=rng, noise=noise)
-                    img.setflags(write=False)
-                    captures[ck] = img
-                images.append(captures[ck])
-            left = images[0]
-            right = images[1] if len(images) > 1 else None
-            before = getattr(method, "guard_count", 0)
-            with single_thread_pools(user_api="blas"):  # as emulator.playback.iter_run
-                proposed = call_method(method, left, target)  # emulator.autoexposure.isolation
-            proposed, clamped, bad = guard_exposure(proposed, target, (lo, hi))  # as emulator.playback.iter_run
-            guarded = bad or getattr(method, "guard_count", 0) > before
-            nxt = target if bad else proposed
-            sat = saturated_fraction(left, white_level=white, black_level=black)
-            sat_r = None if right is None else saturated_fraction(right, white_level=white, black_level=black)
-            steps[name] = MethodStep(
-                method=name, cycle=cycle.index, timestamp_ns=ts, target_ms=target, bracket_ms=float(key), ratio=1.0,
-                saturated_fraction=sat, valid_fraction=1.0, next_ms=clamped, proposed_ms=proposed,
-                guarded=bool(guarded), clamped=clamped != nxt, bracket_saturated_fraction=sat,
-                saturated_fraction_right=sat_r, valid_fraction_right=None if right is None else 1.0,
-                left=left, right=right)
-        for name, st in steps.items():
-            targets[name] = st.next_ms
-        yield CycleStep(cycle.index, steps, {c: cycle.missing(c) for c in cams})
+    shoot = make_shoot(radiance, camera, cams, seed=seed, noise=noise)
+    provider = LiveCycleProvider(seq, shoot, cfg, instant="selected" if timing == "same-instant" else "fixed",
+                                 fixed_bracket_index=FIXED_INSTANT_BRACKET_INDEX, cameras=cams)
+    return closed_loop(provider, built, cfg, want_right=True, keep_images=True)
 
 
 def iter_emulated(sequence, methods, *, noise: str = "none", noise_model=None, seed: int = 0, response=None,
-                  initial_ms: float = 4.0, range_ms=None, selector: str = "higher-no-sat", mode: str = "paper"):
+                  initial_ms: float | None = None, range_ms=None, selector: str | None = None, mode: str | None = None,
+                  config=None):
     """The normal closed loop (:func:`emulator.playback.iter_run`), both images emulated and kept."""
-    from emulator.playback import DEFAULT_RANGE_MS, iter_run
+    from emulator.playback import iter_run
 
-    return iter_run(sequence, methods, initial_ms=initial_ms, range_ms=DEFAULT_RANGE_MS if range_ms is None else
-                    range_ms, selector=selector, response=response, mode=mode, emulate_right=True, keep_images=True,
-                    noise=noise, noise_model=noise_model, noise_seed=seed)
+    return iter_run(sequence, methods, config, initial_ms=initial_ms, range_ms=range_ms, selector=selector,
+                    response=response, mode=mode, emulate_right=True, keep_images=True, noise=noise,
+                    noise_model=noise_model, noise_seed=seed)
 
 
 def write_run_folder(folder, sequence_path, cycles, names, *, white_level: int, black_level: int,

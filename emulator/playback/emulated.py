@@ -1,0 +1,228 @@
+"""The emulated image provider: a recording's brackets emulated at each method's target (offline).
+
+:class:`EmulatedProvider` yields one tick per cycle (one sweep of the brackets).  A tick's
+:meth:`~EmulatedTick.shot` selects a bracket for the target (once per target, among the
+brackets present for every camera; the first camera's saturation decides), emulates the
+first camera's image (and the second's when asked) and checks that the stereo pair comes
+from one capture instant.  A cycle's images are decoded at most once and only when some
+method needs them; from each bracket's histogram the saturated and valid fractions of any
+emulation follow without touching the pixels again; each ratio's lookup table is built
+once (cached on the response) and methods with the same target share one emulated image.
+Every image handed out is read-only.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import cv2
+import numpy as np
+
+from emulator.dataset import CAMERAS
+from emulator.emulate import apply_lut
+from emulator.errors import DatasetError
+from emulator.playback.config import RunConfig
+from emulator.playback.loop import Shot
+from emulator.playback.records import RunStats
+from emulator.select import select
+
+__all__ = ["EmulatedProvider", "EmulatedTick", "METHOD_CAMERA"]
+
+#: Camera whose emulated image the methods read and whose saturation selects the bracket.
+METHOD_CAMERA = "left"
+
+
+class _CycleImages:
+    """Decoded brackets of one cycle, each decoded at most once (thread-safe), with histograms."""
+
+    def __init__(self, cycle, white_level: int, black_level: int, stats: RunStats, noise=None,
+                 shapes: dict | None = None, blur=None) -> None:
+        self.cycle = cycle
+        self.shapes = shapes  # the run's image size, shared by every cycle: a frame of another size is refused
+        self.white = white_level
+        self.black = black_level
+        self.stats = stats
+        self.noise = noise  # None, or (NoiseModel, seed) for noise-consistent emulation
+        self.blur = blur  # None, or a hook .apply(cycle, camera, exposure_ms, ratio, raw, out) -> out (blur-consistent)
+        self._lock = threading.Lock()
+        self._locks: dict = {}
+        self._data: dict = {}
+
+    def get(self, camera: str, exposure_ms: float) -> tuple[np.ndarray, np.ndarray]:
+        key = (camera, exposure_ms)
+        with self._lock:
+            lock = self._locks.setdefault(key, threading.Lock())
+        with lock:
+            hit = self._data.get(key)
+            if hit is not None:
+                return hit
+            frame = self.cycle.frames[camera][exposure_ms]
+            t0 = time.perf_counter()
+            raw = frame.load()
+            if self.shapes is not None:
+                first = self.shapes.setdefault("shape", (raw.shape, frame.path))
+                if raw.shape != first[0]:
+                    raise DatasetError(
+                        f"{frame.path}: image is {raw.shape[1]}x{raw.shape[0]} pixels, but {first[1]} of the same "
+                        f"recording is {first[0][1]}x{first[0][0]}; every image of a recording must have one size"
+                    )
+            t1 = time.perf_counter()
+            hist = cv2.calcHist([raw], [0], None, [self.white + 1], [0, self.white + 1]).ravel().astype(np.int64)
+            t2 = time.perf_counter()
+            self.stats.add("decode_s", t1 - t0)
+            self.stats.add("histogram_s", t2 - t1, 0)
+            raw.setflags(write=False)
+            hist.setflags(write=False)
+            self._data[key] = (raw, hist)
+            return raw, hist
+
+    def emulated(self, camera: str, exposure_ms: float, ratio: float, table: np.ndarray, stats: RunStats) -> np.ndarray:
+        """The bracket emulated at ``ratio`` (read-only; shared by methods with the same target)."""
+        key = (camera, exposure_ms, ratio)
+        with self._lock:
+            lock = self._locks.setdefault(key, threading.Lock())
+        with lock:
+            hit = self._data.get(key)
+            if hit is not None:
+                return hit
+            raw, _ = self.get(camera, exposure_ms)
+            if ratio == 1.0:
+                out = raw
+            else:
+                t0 = time.perf_counter()
+                out = apply_lut(table, raw)
+                if self.blur is not None:
+                    out = self.blur.apply(self.cycle, camera, exposure_ms, ratio, raw, out)
+                if self.noise is not None:
+                    out = self._add_noise(camera, exposure_ms, ratio, raw, out)
+                stats.add("emulate_s", time.perf_counter() - t0)
+                out.setflags(write=False)
+            self._data[key] = out
+            return out
+
+    def _add_noise(self, camera: str, exposure_ms: float, ratio: float, raw: np.ndarray, plain: np.ndarray):
+        """Noise-consistent emulation (``emulator.emulate``, ``noise="consistent"``), seeded by
+        (seed, cycle, camera, bracket, ratio): independent of threads and of which method asks."""
+        from emulator.noise import consistent_noise
+
+        model, seed = self.noise
+        words = np.array([exposure_ms, ratio], dtype=np.float64).view(np.uint32).tolist()
+        rng = np.random.default_rng(np.random.SeedSequence([int(seed), int(self.cycle.index),
+                                                            CAMERAS.index(camera), *words]))
+        return consistent_noise(raw, plain, ratio, model, rng)
+
+    def saturated(self, camera: str, exposure_ms: float) -> float:
+        _, hist = self.get(camera, exposure_ms)
+        n = int(hist[: self.black + 1].sum() + hist[self.white :].sum())
+        return n / float(hist.sum())
+
+
+def _fractions(hist: np.ndarray, table: np.ndarray, valid: np.ndarray, white: int, black: int) -> tuple[float, float]:
+    """(saturated fraction of the emulated image, valid fraction) from the source histogram."""
+    n = float(hist.sum())
+    tab = table[: hist.size]
+    clipped = (tab >= white) | (tab <= black)
+    return float(hist[clipped].sum()) / n, float(hist[valid[: hist.size]].sum()) / n
+
+
+class EmulatedTick:
+    """One cycle of an :class:`EmulatedProvider` (see :meth:`shot`)."""
+
+    def __init__(self, provider: "EmulatedProvider", cycle, shapes: dict) -> None:
+        p = provider
+        self.provider = p
+        self.cycle = cycle
+        self.index = cycle.index
+        self.missing = {c: cycle.missing(c) for c in p.cameras}
+        avail = cycle.available(p.cameras)
+        self.skipped = None if avail else "no bracket present for every camera"
+        self.images = _CycleImages(cycle, p.white, p.black, p.stats, p.noise, shapes, p.blur)
+        lead = p.cameras[0]
+        self.brackets = {e: (lambda e=e: self.images.saturated(lead, e)) for e in avail}
+
+    def select(self, target_ms: float) -> float:
+        """The bracket of ``target_ms`` (the blur hook's choice when it selects, ``--blur-aware``)."""
+        p = self.provider
+        kw = {"white_level": p.white, "black_level": p.black}
+        if p.blur is None:
+            return select(p.selector, target_ms, self.brackets, **kw)
+        return p.blur.select(p.selector, self.cycle, p.cameras[0], target_ms, self.brackets, kw)
+
+    def shot(self, target_ms: float, want_right: bool = False) -> Shot:
+        """The shot of ``target_ms``: the selected bracket emulated (first camera; second when asked)."""
+        p = self.provider
+        lead, other = p.cameras[0], (p.cameras[1] if len(p.cameras) > 1 else None)
+        key = self.select(target_ms)
+        frame = self.cycle.frames[lead][key]
+        _, hist = self.images.get(lead, key)
+        ratio = target_ms / key
+        table, valid = p.response.lut(ratio)  # thread-safe, cached per ratio
+        left = self.images.emulated(lead, key, ratio, table, p.stats)
+        sat, val = _fractions(hist, table, valid, p.white, p.black)
+        shot = Shot(timestamp_ns=int(frame.timestamp_ns), exposure_ms=float(target_ms), bracket_ms=float(key),
+                    ratio=float(ratio), left=left, saturated_fraction=sat, valid_fraction=val,
+                    bracket_saturated_fraction=self.images.saturated(lead, key),
+                    missing_left_ms=tuple(self.missing.get(lead, ())),
+                    missing_right_ms=tuple(self.missing.get(other, ())) if other else ())
+        if other is not None:
+            rframe = self.cycle.frames[other][key]
+            if rframe.timestamp_ns != frame.timestamp_ns:
+                raise DatasetError(
+                    f"{rframe.path}: stereo pair mismatch, {other} timestamp {rframe.timestamp_ns} != "
+                    f"{lead} timestamp {frame.timestamp_ns} for bracket {key} ms"
+                )
+            _, rhist = self.images.get(other, key)
+            shot.saturated_fraction_right, shot.valid_fraction_right = _fractions(rhist, table, valid, p.white,
+                                                                                    p.black)
+            if want_right:
+                shot.right = self.images.emulated(other, key, ratio, table, p.stats)
+        return shot
+
+
+class EmulatedProvider:
+    """A recording's cycles as ticks whose shots are emulated from the brackets.
+
+    Parameters
+    ----------
+    sequence : emulator.dataset.Sequence
+    config : RunConfig
+        Its selector is used; its noise settings are resolved by the caller into ``noise``.
+    response : CameraResponse
+        At the recording's levels (:meth:`RunConfig.response_for`).
+    cameras : tuple of str or None
+        Cameras to emulate, the first read by methods and deciding the bracket (default:
+        the recording's, left first).
+    noise : None or (NoiseModel, seed)
+        Noise-consistent emulation, each image seeded by (seed, cycle, camera, bracket, ratio).
+    blur : None or hook
+        Blur-consistent emulation: ``blur.apply(cycle, camera, bracket_ms, ratio, raw, emulated) -> image``,
+        once per emulated image, before the noise.
+    cycles : iterable of int or None
+        The cycle indices to visit (default all).
+    """
+
+    latency_ticks = 0
+
+    def __init__(self, sequence, config: RunConfig, response, *, cameras=None, noise=None, stats: RunStats | None = None,
+                 cycles=None, blur=None) -> None:
+        self.sequence = sequence
+        self.selector = config.selector
+        self.response = response
+        self.white, self.black = int(sequence.white_level), int(sequence.black_level)
+        if cameras is None:
+            cams = tuple(c for c in CAMERAS if c in sequence.cameras)
+            if METHOD_CAMERA in cams:
+                cams = (METHOD_CAMERA,) + tuple(c for c in cams if c != METHOD_CAMERA)
+            cameras = cams
+        self.cameras = tuple(cameras)
+        self.noise = noise
+        self.blur = blur
+        self.stats = stats if stats is not None else RunStats()
+        self._cycles = None if cycles is None else list(cycles)
+
+    def ticks(self):
+        shapes: dict = {}
+        cycles = self.sequence.cycles if self._cycles is None else [self.sequence[i] for i in self._cycles]
+        for cycle in cycles:
+            yield EmulatedTick(self, cycle, shapes)
