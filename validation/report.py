@@ -1,9 +1,10 @@
 """Writing the validation experiments: results.json, arrays.npz, PNG figures and report.md.
 
-The only module of :mod:`validation` that plots (matplotlib's ``Figure`` API on an Agg
-canvas: no ``pyplot``, so a notebook's backend is left alone)
-and assembles an output folder (through :mod:`emulator.io.files`); the
-experiment modules return dicts and arrays.  :func:`run_experiment` is what
+Plots with matplotlib's ``Figure`` API on an Agg canvas (no ``pyplot``, so a notebook's
+backend is left alone) and assembles an output folder (through :mod:`emulator.io.files`);
+the experiment modules return dicts and arrays.  The emulation study's figures and
+``report.md`` live in its package (:mod:`validation.emulation.report`), those of the
+selector, motion and speed studies here.  :func:`run_experiment` is what
 ``exposim validate`` calls.
 """
 
