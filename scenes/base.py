@@ -28,7 +28,7 @@ SCENES: dict[str, Callable[..., "Scene"]] = {}
 
 # Modules whose source decides the pixels of a render; their hash is part of the
 # render cache key, so editing a scene invalidates its cached renders.
-_PIXEL_MODULES = ("textures.py", "geometry.py", "lighting.py", "description.py", "library.py", "_mitsuba.py",
+_PIXEL_MODULES = ("textures.py", "geometry.py", "lighting.py", "description.py", "library", "_mitsuba.py",
                   "camera.py")
 
 
@@ -38,8 +38,10 @@ def code_fingerprint() -> str:
     h = hashlib.sha256()
     here = Path(__file__).resolve().parent
     for name in _PIXEL_MODULES:
-        h.update(name.encode())
-        h.update((here / name).read_bytes())
+        paths = sorted((here / name).glob("*.py")) if (here / name).is_dir() else [here / name]
+        for path in paths:
+            h.update(path.relative_to(here).as_posix().encode())
+            h.update(path.read_bytes())
     return h.hexdigest()[:16]
 
 

@@ -140,82 +140,24 @@ def synthesize(
         raise ExposimError(f"render_per must be 'shot' or 'cycle', got {render_per!r}")
     render_variant = variant or scenes.choose_variant()
     settings, fallback = effective_denoise(denoise)
-    shot_index: dict[float, int] = {}
-
-    def render_job(timestamp_s: float, camera_name: str, idx: int) -> dict:
-        """The :func:`scenes.render` arguments of one shot (serial and Dask paths alike)."""
-        pose = traj.pose(timestamp_s)
-        if camera_name == "right":
-            pose = tr.stereo_right(pose, baseline)
-        frame_seed = (int(render_seed) * 1_000_003 + 2 * idx + (camera_name == "right")) % (1 << 32)
-        return dict(scene=scene, pose=pose, width=width, height=height, spp=spp, seed=frame_seed,
-                    fov_deg=cam.fov_x_deg, cache_dir=cache_dir, variant=render_variant, denoise=settings)
-
     shots = WalkShots(scene, traj, render=dict(width=width, height=height, spp=spp, fov_deg=cam.fov_x_deg,
                                                cache_dir=cache_dir, variant=render_variant, denoise=settings,
                                                render_seed=render_seed),
                       fps=fps, n_brackets=len(brackets_ms), max_window_ms=max(list(brackets_ms) + list(gt_exposures_ms)),
                       baseline_m=baseline, render_per=render_per)
-
-    def shot_renderer(timestamp_s: float, camera_name: str):
-        """The :class:`scenes.blur.ShotRenderer` serving one shot (or its whole cycle) and camera."""
-        return shots.renderer(shot_index.setdefault(round(timestamp_s, 9), len(shot_index)), camera_name)
-
-    def blurred_source(timestamp_s: float, camera_name: str, exposure_ms: float):
-        idx = shot_index.setdefault(round(timestamp_s, 9), len(shot_index))
-        pose = shots.poses(camera_name)(np.array([timestamp_s]))[0]
-        return shots.radiance(idx, camera_name, exposure_ms), pose
-
-    prefetched: dict = {}
+    source, blurred_source, render_job, shot_renderer, prefetched = _providers(
+        scene, traj, shots, baseline_m=baseline, render_seed=render_seed,
+        render=dict(width=width, height=height, spp=spp, fov_deg=cam.fov_x_deg, cache_dir=cache_dir,
+                    variant=render_variant, denoise=settings))
     if scheduler is not None:
-        from scenes.cache import resolve_cache_dir
-        from scenes.parallel import check_scheduler, render_many
-        from synth.sequence import shot_schedule
-
-        check_scheduler(scheduler)
-        folder = resolve_cache_dir(cache_dir)
-        shots = shot_schedule(n_shots, brackets_ms=brackets_ms, fps=fps, start_time_ns=start_time_ns)
-        keys = [(s.time_s, side, s.index) for s in shots for side in (("left", "right") if stereo
-                                                                                 else ("left",))]
-        jobs = []
-        for t, side, idx in keys:
-            job = shot_renderer(t, side).render_job() if blur else render_job(t, side, idx)
-            job["cache_dir"] = False if folder is None else folder  # explicit: a worker decides nothing
-            jobs.append(job)
-        for (t, side, _), image in zip(keys, render_many(jobs, scheduler=scheduler, progress=render_progress)):
-            if folder is None and not blur:  # no cache to read them back from: keep them for the capture
-                prefetched[(round(t, 9), side)] = image
-
-    blurred_source.exposure_aware = True
-    blurred_source.timestamps_note = ("trigger instant of each shot = start of its exposure; every capture "
-                                      "integrates the radiance over [t, t + exposure] along the trajectory "
-                                      "(scenes.blur); poses are at the trigger instant")
-
-    def source(timestamp_s: float, camera_name: str):
-        idx = shot_index.setdefault(round(timestamp_s, 9), len(shot_index))
-        job = render_job(timestamp_s, camera_name, idx)
-        radiance = prefetched.pop((round(timestamp_s, 9), camera_name), None)
-        if radiance is None:
-            radiance = scenes.render(**job)
-        return radiance, np.asarray(job["pose"], dtype=np.float64)
-
-    description = {
-        "generator": "scenes.synthesize",
-        "scene": scene.key_material(),
-        "scene_description": scene.description,
-        "render": {"width": width, "height": height, "spp": spp, "render_seed": render_seed,
-                   "variant": render_variant, "fov_deg": cam.fov_x_deg,
-                   "denoise": settings.key_material(), "denoise_fallback": fallback,
-                   "exposure_integration": f"scenes.blur (warped sub-instants of one render per {render_per})"
-                   if blur else "none (trigger instant)",
-                   "blur_shots": shots.describe() if blur else None},
-        "saturate_ms": saturate_ms,
-        "trajectory": {"static": scene.is_static, "speed_mps": speed_mps,
-                       "walk": None if scene.is_static else (walk or DEFAULT_WALK)},
-        "imu": None if imu is None else {"file": "imu/imu.csv", "rate_hz": float(imu_rate_hz),
-                                         "frame": "x forward, y left, z up (rigid with the left camera)",
-                                         "camera_from_imu": CAMERA_FROM_IMU.tolist()},
-    }
+        job_of = (lambda t, side, idx: shot_renderer(t, side).render_job()) if blur else render_job
+        _prefetch(job_of, prefetched, keep=not blur, scheduler=scheduler, cache_dir=cache_dir, n_shots=n_shots,
+                  brackets_ms=brackets_ms, fps=fps, start_time_ns=start_time_ns, stereo=stereo,
+                  progress=render_progress)
+    description = _description(scene, cam, shots, width=width, height=height, spp=spp, render_seed=render_seed,
+                               variant=render_variant, denoise=settings, fallback=fallback, blur=blur,
+                               render_per=render_per, saturate_ms=saturate_ms, speed_mps=speed_mps, walk=walk,
+                               imu=imu, imu_rate_hz=imu_rate_hz)
     return synth.capture_sequence(
         blurred_source if blur else source,
         out_dir,
@@ -236,6 +178,115 @@ def synthesize(
         source_description=description,
         imu=imu,
     )
+
+
+def _providers(scene, traj, shots: WalkShots, *, baseline_m: float, render_seed: int, render: dict):
+    """The radiance providers of one synthesis and what serves them.
+
+    Returns ``(source, blurred_source, render_job, shot_renderer, prefetched)``: ``source``
+    renders the scene at a shot's trigger instant (or takes the shot's image from
+    ``prefetched``, keyed by rounded timestamp and camera); ``blurred_source`` integrates
+    over the shot's exposure window (:class:`scenes.walkshots.WalkShots`);
+    ``render_job(t, camera, index)`` is the :func:`scenes.render` arguments of one shot and
+    ``shot_renderer(t, camera)`` the :class:`scenes.blur.ShotRenderer` of a blurred one.
+    Shots are numbered in the order they are first asked for.
+    """
+    import scenes
+    from scenes import trajectory as tr
+
+    shot_index: dict[float, int] = {}
+    prefetched: dict = {}
+
+    def render_job(timestamp_s: float, camera_name: str, idx: int) -> dict:
+        """The :func:`scenes.render` arguments of one shot (serial and Dask paths alike)."""
+        pose = traj.pose(timestamp_s)
+        if camera_name == "right":
+            pose = tr.stereo_right(pose, baseline_m)
+        frame_seed = (int(render_seed) * 1_000_003 + 2 * idx + (camera_name == "right")) % (1 << 32)
+        return dict(scene=scene, pose=pose, width=render["width"], height=render["height"], spp=render["spp"],
+                    seed=frame_seed, fov_deg=render["fov_deg"], cache_dir=render["cache_dir"],
+                    variant=render["variant"], denoise=render["denoise"])
+
+    def shot_renderer(timestamp_s: float, camera_name: str):
+        """The :class:`scenes.blur.ShotRenderer` serving one shot (or its whole cycle) and camera."""
+        return shots.renderer(shot_index.setdefault(round(timestamp_s, 9), len(shot_index)), camera_name)
+
+    def blurred_source(timestamp_s: float, camera_name: str, exposure_ms: float):
+        idx = shot_index.setdefault(round(timestamp_s, 9), len(shot_index))
+        pose = shots.poses(camera_name)(np.array([timestamp_s]))[0]
+        return shots.radiance(idx, camera_name, exposure_ms), pose
+
+    blurred_source.exposure_aware = True
+    blurred_source.timestamps_note = ("trigger instant of each shot = start of its exposure; every capture "
+                                      "integrates the radiance over [t, t + exposure] along the trajectory "
+                                      "(scenes.blur); poses are at the trigger instant")
+
+    def source(timestamp_s: float, camera_name: str):
+        idx = shot_index.setdefault(round(timestamp_s, 9), len(shot_index))
+        job = render_job(timestamp_s, camera_name, idx)
+        radiance = prefetched.pop((round(timestamp_s, 9), camera_name), None)
+        if radiance is None:
+            radiance = scenes.render(**job)
+        return radiance, np.asarray(job["pose"], dtype=np.float64)
+
+    return source, blurred_source, render_job, shot_renderer, prefetched
+
+
+def _prefetch(job_of, prefetched: dict, *, keep: bool, scheduler: str, cache_dir, n_shots: int, brackets_ms,
+              fps: float, start_time_ns: int, stereo: bool, progress) -> None:
+    """Render every shot first as a Dask task (:func:`scenes.parallel.render_many`).
+
+    ``job_of(t, camera, index)`` gives a shot's render arguments.  The renders land in the
+    cache; without a cache folder and with ``keep``, they go into ``prefetched`` for the
+    capture to take.
+    """
+    from scenes.cache import resolve_cache_dir
+    from scenes.parallel import check_scheduler, render_many
+    from synth.sequence import shot_schedule
+
+    check_scheduler(scheduler)
+    folder = resolve_cache_dir(cache_dir)
+    schedule = shot_schedule(n_shots, brackets_ms=brackets_ms, fps=fps, start_time_ns=start_time_ns)
+    keys = [(s.time_s, side, s.index) for s in schedule for side in (("left", "right") if stereo
+                                                                      else ("left",))]
+    jobs = []
+    for t, side, idx in keys:
+        job = job_of(t, side, idx)
+        job["cache_dir"] = False if folder is None else folder  # explicit: a worker decides nothing
+        jobs.append(job)
+    for (t, side, _), image in zip(keys, render_many(jobs, scheduler=scheduler, progress=progress)):
+        if folder is None and keep:  # no cache to read them back from: keep them for the capture
+            prefetched[(round(t, 9), side)] = image
+
+
+def _description(scene, cam, shots: WalkShots, *, width: int, height: int, spp: int, render_seed: int, variant: str,
+                 denoise, fallback, blur: bool, render_per: str, saturate_ms: float, speed_mps, walk, imu,
+                 imu_rate_hz: float) -> dict:
+    """The dataset's source description (``exposim.json``): scene, render settings, trajectory, IMU."""
+    return {
+        "generator": "scenes.synthesize",
+        "scene": scene.key_material(),
+        "scene_description": scene.description,
+        "render": {"width": width, "height": height, "spp": spp, "render_seed": render_seed,
+                   "variant": variant, "fov_deg": cam.fov_x_deg,
+                   "denoise": denoise.key_material(), "denoise_fallback": fallback,
+                   "exposure_integration": f"scenes.blur (warped sub-instants of one render per {render_per})"
+                   if blur else "none (trigger instant)",
+                   "blur_shots": shots.describe() if blur else None},
+        "saturate_ms": saturate_ms,
+        "trajectory": {"static": scene.is_static, "speed_mps": speed_mps,
+                       "walk": None if scene.is_static else (walk or DEFAULT_WALK)},
+        "imu": _imu_description(imu, imu_rate_hz),
+    }
+
+
+def _imu_description(imu, rate_hz: float) -> dict | None:
+    """The ``imu`` entry of the dataset's description (None: no IMU written)."""
+    if imu is None:
+        return None
+    return {"file": "imu/imu.csv", "rate_hz": float(rate_hz),
+            "frame": "x forward, y left, z up (rigid with the left camera)",
+            "camera_from_imu": CAMERA_FROM_IMU.tolist()}
 
 
 def _imu_of(traj, end_s: float, rate_hz: float, start_time_ns: int):

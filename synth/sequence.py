@@ -362,52 +362,19 @@ def capture_sequence(
             left_pose = None
             for c, side in enumerate(sides):
                 where = f"shot {shot.index} ({side} camera, t = {shot.time_s:.6f} s)"
-                item = get_frame(shot, side)
-                try:
-                    radiance, pose = item
-                except (TypeError, ValueError):
-                    raise SourceError(
-                        f"{where}: the source must return (radiance, pose), got {type(item).__name__}"
-                    ) from None
-                pose = _check_pose(pose, where)
+                radiance, pose = _source_frame(get_frame, shot, side, where)
                 if side == "left":
                     left_pose = pose
                 else:
                     _check_rig(left_pose, pose, baseline_m, where)
                 poses[side].append(pose)
-                try:
-                    raw = capture(radiance, shot.exposure_ms, camera,
-                                  seed=np.random.SeedSequence([seed, c, shot.index]), noise=noise)
-                except RadianceError as exc:
-                    raise RadianceError(f"{where}: {exc}") from None
-                write_frame(staging, side, shot.exposure_ms, shot.timestamp_ns, raw)
-                folder = CAMERA_FOLDERS[side]
-                if save_radiance:
-                    write_exr(staging / "ground_truth" / "radiance" / folder / f"{shot.timestamp_ns}.exr", radiance)
-                for j, t in enumerate(gt_exposures):
-                    gt_radiance = radiance
-                    if getattr(source, "exposure_aware", False):  # its own exposure window
-                        gt_radiance = get_frame(shot, side, t)[0]
-                    for kind in GT_CAPTURES[gt_captures]:
-                        gt = capture(gt_radiance, t, camera, noise=kind == "noisy",
-                                     seed=np.random.SeedSequence([seed, c, shot.index, 1 + j]))
-                        write_png16(staging / "ground_truth" / f"captures_{kind}" / folder / exposure_folder_name(t)
-                                    / f"{shot.timestamp_ns}.png", gt)
+                _write_shot(staging, shot, side, c, radiance, where, camera=camera, seed=seed, noise=noise,
+                            save_radiance=save_radiance, gt_exposures=gt_exposures, gt_kinds=GT_CAPTURES[gt_captures],
+                            gt_radiance=get_frame if getattr(source, "exposure_aware", False) else None)
             if progress is not None:
                 progress(shot.index + 1, len(shots))
 
-        if imu is not None:
-            from emulator.io.imu import IMU_FILE, write_imu
-
-            write_imu(staging.joinpath(*IMU_FILE), imu)
-        gt_dir = staging / "ground_truth"
-        for side in sides:
-            write_tum(gt_dir / f"poses_{side}.txt", [s.timestamp_ns for s in shots], np.stack(poses[side]),
-                      overwrite=False)
-        calib = staging / "calibration"
-        write_pcalib(calib / "response.txt", response_table(camera.response, camera.white_level))
-        for side in sides:
-            write_camera_info(calib / f"{side}.yaml", camera_info(camera, side, baseline_m if stereo else 0.0))
+        _write_ground_truth(staging, camera, shots, poses, imu=imu, baseline_m=baseline_m if stereo else 0.0)
         meta = recording_metadata(camera, shots, brackets, generator=GENERATOR,
                                   gt_captures_kinds=GT_CAPTURES[gt_captures], fps=fps, stereo=stereo,
                                   baseline_m=baseline_m, seed=seed, noise=noise, gt_exposures=gt_exposures,
@@ -422,6 +389,60 @@ def capture_sequence(
         shutil.rmtree(staging, ignore_errors=True)
         raise
     return out_dir
+
+
+def _source_frame(get_frame, shot, side: str, where: str) -> tuple:
+    """The ``(radiance, pose)`` of one shot and camera from the source, the pose checked."""
+    item = get_frame(shot, side)
+    try:
+        radiance, pose = item
+    except (TypeError, ValueError):
+        raise SourceError(
+            f"{where}: the source must return (radiance, pose), got {type(item).__name__}"
+        ) from None
+    return radiance, _check_pose(pose, where)
+
+
+def _write_shot(staging: Path, shot, side: str, c: int, radiance, where: str, *, camera: Camera, seed: int,
+                noise: bool, save_radiance: bool, gt_exposures: tuple, gt_kinds, gt_radiance) -> None:
+    """Capture and write one shot of camera ``side`` (index ``c``), its radiance and its ground-truth captures.
+
+    ``gt_radiance``: None (the ground truth sees the shot's radiance) or the exposure-aware
+    frame getter, asked for each ground-truth exposure's own window.
+    """
+    try:
+        raw = capture(radiance, shot.exposure_ms, camera,
+                      seed=np.random.SeedSequence([seed, c, shot.index]), noise=noise)
+    except RadianceError as exc:
+        raise RadianceError(f"{where}: {exc}") from None
+    write_frame(staging, side, shot.exposure_ms, shot.timestamp_ns, raw)
+    folder = CAMERA_FOLDERS[side]
+    if save_radiance:
+        write_exr(staging / "ground_truth" / "radiance" / folder / f"{shot.timestamp_ns}.exr", radiance)
+    for j, t in enumerate(gt_exposures):
+        gt_rad = radiance if gt_radiance is None else gt_radiance(shot, side, t)[0]  # its own exposure window
+        for kind in gt_kinds:
+            gt = capture(gt_rad, t, camera, noise=kind == "noisy",
+                         seed=np.random.SeedSequence([seed, c, shot.index, 1 + j]))
+            write_png16(staging / "ground_truth" / f"captures_{kind}" / folder / exposure_folder_name(t)
+                        / f"{shot.timestamp_ns}.png", gt)
+
+
+def _write_ground_truth(staging: Path, camera: Camera, shots, poses: dict, *, imu, baseline_m: float) -> None:
+    """The IMU, the ground-truth poses and the calibration (response table, camera info) of a recording."""
+    sides = tuple(poses)
+    if imu is not None:
+        from emulator.io.imu import IMU_FILE, write_imu
+
+        write_imu(staging.joinpath(*IMU_FILE), imu)
+    gt_dir = staging / "ground_truth"
+    for side in sides:
+        write_tum(gt_dir / f"poses_{side}.txt", [s.timestamp_ns for s in shots], np.stack(poses[side]),
+                  overwrite=False)
+    calib = staging / "calibration"
+    write_pcalib(calib / "response.txt", response_table(camera.response, camera.white_level))
+    for side in sides:
+        write_camera_info(calib / f"{side}.yaml", camera_info(camera, side, baseline_m))
 
 
 def _check_rig(left: np.ndarray, right: np.ndarray, baseline_m: float, where: str) -> None:

@@ -90,3 +90,19 @@ def test_dask_synth_equals_serial_synth(tmp_path, monkeypatch, cluster):
     assert _tree(tmp_path / "dask") == _tree(tmp_path / "serial")
     cache = _tree(tmp_path / "cache-dask")
     assert len(cache) == 6 and cache == _tree(tmp_path / "cache-serial")
+
+
+def test_dask_synth_with_blur_equals_serial_synth(tmp_path, monkeypatch, cluster):
+    """A moving scene with exposure-time blur: the Dask prefetch renders each shot's blur renders
+    (once per shot and camera) and the dataset has the serial bytes."""
+    from scenes.synthesize import synthesize
+
+    monkeypatch.setenv("EXPOSIM_DENOISE", "off")
+    kwargs = dict(n_cycles=1, width=24, height=16, spp=2, stereo=True, blur=True, gt_exposures_ms=(3.0,))
+    synthesize("forest_winter", tmp_path / "serial", cache_dir=tmp_path / "cache-serial", **kwargs)
+    before = _tasks_done(cluster)
+    synthesize("forest_winter", tmp_path / "dask", cache_dir=tmp_path / "cache-dask",
+               scheduler=cluster.scheduler_address, **kwargs)
+    assert _tasks_done(cluster) - before == 12  # six shots, two cameras
+    assert _tree(tmp_path / "dask") == _tree(tmp_path / "serial")
+    assert _tree(tmp_path / "cache-dask") == _tree(tmp_path / "cache-serial")

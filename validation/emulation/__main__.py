@@ -1,0 +1,7 @@
+"""``python -m validation.emulation``."""
+
+import sys
+
+from validation.emulation.cli import main
+
+sys.exit(main())
