@@ -61,6 +61,21 @@ def _words(x: float) -> list[int]:
     return np.array([float(x)], dtype=np.float64).view(np.uint32).tolist()
 
 
+def live_setup(sequence, camera, config, response, **kwargs):
+    """The recording, its :class:`RunConfig` and the response of a live loop (cycle-rate or
+    native-rate); the synthetic camera's levels must be the recording's."""
+    from emulator.playback import RunConfig, resolve_sequence
+
+    seq = resolve_sequence(sequence)
+    cfg = RunConfig.from_kwargs(config, **kwargs)
+    response = cfg.response_for(seq, response)
+    white, black = int(seq.white_level), int(seq.black_level)
+    if (camera.white_level, camera.black_level) != (white, black):
+        raise LiveError(f"camera levels {camera.black_level}..{camera.white_level} differ from the recording's "
+                        f"{black}..{white}")
+    return seq, cfg, response
+
+
 def make_shoot(radiance: Callable[[int, str], np.ndarray], camera, cameras, *, seed: int = 0, noise: bool = True):
     """The ``shoot(timestamp_ns, camera, exposure_ms, index)`` of the live providers for a synthetic camera.
 
@@ -142,17 +157,12 @@ def iter_live(
     """
     from emulator.autoexposure.methodset import build_methods
     from emulator.dataset import CAMERAS
-    from emulator.playback import LiveCycleProvider, RunConfig, closed_loop, resolve_sequence
+    from emulator.playback import LiveCycleProvider, closed_loop
 
     if timing not in VARIANTS:
         raise LiveError(f"timing must be one of {', '.join(VARIANTS)}, got {timing!r}")
-    seq = resolve_sequence(sequence)
-    cfg = RunConfig.from_kwargs(config, initial_ms=initial_ms, range_ms=range_ms, selector=selector, mode=mode)
-    response = cfg.response_for(seq, response)
-    white, black = int(seq.white_level), int(seq.black_level)
-    if (camera.white_level, camera.black_level) != (white, black):
-        raise LiveError(f"camera levels {camera.black_level}..{camera.white_level} differ from the recording's "
-                        f"{black}..{white}")
+    seq, cfg, response = live_setup(sequence, camera, config, response, initial_ms=initial_ms, range_ms=range_ms,
+                                    selector=selector, mode=mode)
     built = build_methods(methods, mode=cfg.mode, response=response, options=cfg.options)
     cams = tuple(c for c in CAMERAS if c in seq.cameras)
     shoot = make_shoot(radiance, camera, cams, seed=seed, noise=noise)

@@ -122,8 +122,8 @@ def native_rate_loop(sequence, radiance: Callable, camera, methods, *, seed: int
     from emulator.autoexposure.methodset import build_methods
     from emulator.dataset import CAMERAS
     from emulator.errors import PlaybackError
-    from emulator.playback import LiveRateProvider, RunConfig, closed_loop, resolve_sequence
-    from validation.live.loops import make_shoot
+    from emulator.playback import LiveRateProvider, closed_loop
+    from validation.live.loops import live_setup, make_shoot
 
     if isinstance(latency_frames, bool) or not isinstance(latency_frames, (int, np.integer)) or latency_frames < 0:
         raise LiveError(f"latency_frames must be an integer >= 0, got {latency_frames!r}")
@@ -133,13 +133,8 @@ def native_rate_loop(sequence, radiance: Callable, camera, methods, *, seed: int
         raise LiveError(f"frame_rate_hz must be a number, got {frame_rate_hz!r}") from None
     if not (np.isfinite(rate) and rate > 0):
         raise LiveError(f"frame_rate_hz must be finite and positive, got {frame_rate_hz!r}")
-    seq = resolve_sequence(sequence)
-    cfg = RunConfig.from_kwargs(config, initial_ms=initial_ms, range_ms=range_ms, selector=selector, mode=mode)
-    response = cfg.response_for(seq, response)
-    white, black = int(seq.white_level), int(seq.black_level)
-    if (camera.white_level, camera.black_level) != (white, black):
-        raise LiveError(f"camera levels {camera.black_level}..{camera.white_level} differ from the recording's "
-                        f"{black}..{white}")
+    seq, cfg, response = live_setup(sequence, camera, config, response, initial_ms=initial_ms, range_ms=range_ms,
+                                    selector=selector, mode=mode)
     cams = tuple(c for c in CAMERAS if c in seq.cameras)
     shots_ns = shot_timestamps(seq, cams[0])
     if not shots_ns:
@@ -149,8 +144,9 @@ def native_rate_loop(sequence, radiance: Callable, camera, methods, *, seed: int
     built = build_methods(methods, mode=cfg.mode, response=response, options=cfg.options)
     shoot = window_start_shoot(make_shoot(radiance, camera, cams, seed=seed, noise=noise), shots_ns)
     try:
-        provider = LiveRateProvider(shoot, n_frames=n_frames, white_level=white, black_level=black, start_ns=start_ns,
-                                    frame_rate_hz=rate, latency_frames=int(latency_frames), cameras=cams)
+        provider = LiveRateProvider(shoot, n_frames=n_frames, white_level=int(seq.white_level),
+                                    black_level=int(seq.black_level), start_ns=start_ns, frame_rate_hz=rate,
+                                    latency_frames=int(latency_frames), cameras=cams)
     except PlaybackError as exc:
         raise LiveError(str(exc)) from None
     off = [k for k in range(n_frames)
