@@ -49,57 +49,58 @@ class _CycleImages:
         self._locks: dict = {}
         self._data: dict = {}
 
-    def get(self, camera: str, exposure_ms: float) -> tuple[np.ndarray, np.ndarray]:
-        key = (camera, exposure_ms)
+    def _memo(self, key: tuple, compute):
+        """``compute()`` once per key for the cycle, whichever thread asks first (one lock per key)."""
         with self._lock:
             lock = self._locks.setdefault(key, threading.Lock())
         with lock:
             hit = self._data.get(key)
-            if hit is not None:
-                return hit
-            frame = self.cycle.frames[camera][exposure_ms]
-            t0 = time.perf_counter()
-            raw = frame.load()
-            if self.shapes is not None:
-                first = self.shapes.setdefault("shape", (raw.shape, frame.path))
-                if raw.shape != first[0]:
-                    raise DatasetError(
-                        f"{frame.path}: image is {raw.shape[1]}x{raw.shape[0]} pixels, but {first[1]} of the same "
-                        f"recording is {first[0][1]}x{first[0][0]}; every image of a recording must have one size"
-                    )
-            t1 = time.perf_counter()
-            hist = cv2.calcHist([raw], [0], None, [self.white + 1], [0, self.white + 1]).ravel().astype(np.int64)
-            t2 = time.perf_counter()
-            self.stats.add("decode_s", t1 - t0)
-            self.stats.add("histogram_s", t2 - t1, 0)
-            raw.setflags(write=False)
-            hist.setflags(write=False)
-            self._data[key] = (raw, hist)
-            return raw, hist
+            if hit is None:
+                hit = self._data[key] = compute()
+            return hit
+
+    def get(self, camera: str, exposure_ms: float) -> tuple[np.ndarray, np.ndarray]:
+        return self._memo((camera, exposure_ms), lambda: self._decode(camera, exposure_ms))
+
+    def _decode(self, camera: str, exposure_ms: float) -> tuple[np.ndarray, np.ndarray]:
+        frame = self.cycle.frames[camera][exposure_ms]
+        t0 = time.perf_counter()
+        raw = frame.load()
+        if self.shapes is not None:
+            first = self.shapes.setdefault("shape", (raw.shape, frame.path))
+            if raw.shape != first[0]:
+                raise DatasetError(
+                    f"{frame.path}: image is {raw.shape[1]}x{raw.shape[0]} pixels, but {first[1]} of the same "
+                    f"recording is {first[0][1]}x{first[0][0]}; every image of a recording must have one size"
+                )
+        t1 = time.perf_counter()
+        hist = cv2.calcHist([raw], [0], None, [self.white + 1], [0, self.white + 1]).ravel().astype(np.int64)
+        t2 = time.perf_counter()
+        self.stats.add("decode_s", t1 - t0)
+        self.stats.add("histogram_s", t2 - t1, 0)
+        raw.setflags(write=False)
+        hist.setflags(write=False)
+        return raw, hist
 
     def emulated(self, camera: str, exposure_ms: float, ratio: float, table: np.ndarray, stats: RunStats) -> np.ndarray:
         """The bracket emulated at ``ratio`` (read-only; shared by methods with the same target)."""
-        key = (camera, exposure_ms, ratio)
-        with self._lock:
-            lock = self._locks.setdefault(key, threading.Lock())
-        with lock:
-            hit = self._data.get(key)
-            if hit is not None:
-                return hit
-            raw, _ = self.get(camera, exposure_ms)
-            if ratio == 1.0:
-                out = raw
-            else:
-                t0 = time.perf_counter()
-                out = apply_lut(table, raw)
-                if self.blur is not None:
-                    out = self.blur.apply(self.cycle, camera, exposure_ms, ratio, raw, out)
-                if self.noise is not None:
-                    out = self._add_noise(camera, exposure_ms, ratio, raw, out)
-                stats.add("emulate_s", time.perf_counter() - t0)
-                out.setflags(write=False)
-            self._data[key] = out
-            return out
+        return self._memo((camera, exposure_ms, ratio),
+                          lambda: self._emulate(camera, exposure_ms, ratio, table, stats))
+
+    def _emulate(self, camera: str, exposure_ms: float, ratio: float, table: np.ndarray,
+                 stats: RunStats) -> np.ndarray:
+        raw, _ = self.get(camera, exposure_ms)
+        if ratio == 1.0:
+            return raw
+        t0 = time.perf_counter()
+        out = apply_lut(table, raw)
+        if self.blur is not None:
+            out = self.blur.apply(self.cycle, camera, exposure_ms, ratio, raw, out)
+        if self.noise is not None:
+            out = self._add_noise(camera, exposure_ms, ratio, raw, out)
+        stats.add("emulate_s", time.perf_counter() - t0)
+        out.setflags(write=False)
+        return out
 
     def _add_noise(self, camera: str, exposure_ms: float, ratio: float, raw: np.ndarray, plain: np.ndarray):
         """Noise-consistent emulation (``emulator.emulate``, ``noise="consistent"``), seeded by
