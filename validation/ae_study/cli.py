@@ -17,7 +17,7 @@ from validation.ae_study.config import CONFIGS
 from validation.ae_study.study import redraw, run_replicated_study, run_study
 
 #: The one-paragraph description of ``python -m validation.ae_study --help``.
-DESCRIPTION = "Synthetic AE study (issue 7): the paper's section V-D benchmarks on synthetic stereo walks."
+DESCRIPTION = "Synthetic AE study: the paper's section V-D benchmarks on synthetic stereo walks."
 
 __all__ = ["add_arguments", "run_from_args", "main"]
 

@@ -328,10 +328,10 @@ def headline(results: dict) -> str:
     line = f"verdicts over {results.get('n_walks', 0)} walks: {verdicts or 'none'}"
     if "goals" not in results:  # a replicated experiment: the verdicts only
         return line
-    return line + "\n" + _headline_issue14(results)
+    return line + "\n" + _headline_point_figures(results)
 
 
-def _headline_issue14(results: dict) -> str:
+def _headline_point_figures(results: dict) -> str:
     g = results["goals"]
     return (f"rank_kendall_tau_min {fmt(results['rank_kendall_tau_min'], '.3f')} ({results['headline_noise']}; goal "
           f">= {GOAL_TAU_MIN}: {fmt(g['rank_kendall_tau_min_ge_0.9'])}), exposure_log2_error_median "
