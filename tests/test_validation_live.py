@@ -304,20 +304,85 @@ def test_exposim_validate_live_cli(tmp_path, render_cache, capsys, monkeypatch):
 
 
 
-def test_scheduler_reaches_the_renders_and_a_bad_one_creates_nothing(tmp_path, stop_at_synthesize, capsys):
+def test_scheduler_runs_the_walks_and_a_bad_one_creates_nothing(tmp_path, monkeypatch, capsys):
+    import emulator.distributed
+
+    seen = {}
+
+    def no_cluster(scheduler, **kwargs):
+        seen.update(kwargs, scheduler=scheduler)
+        raise SynthesizeCalled
+
+    monkeypatch.setattr(emulator.distributed, "open_client", no_cluster)
     with pytest.raises(SynthesizeCalled):
         main(["-o", str(tmp_path / "run"), "--quick", "--no-progress", "--scheduler", "tcp://10.0.0.1:8786"])
-    assert stop_at_synthesize["scheduler"] == "tcp://10.0.0.1:8786"
+    assert seen == {"scheduler": "tcp://10.0.0.1:8786", "n_workers": None, "retries": 1}
+    with pytest.raises(SynthesizeCalled):
+        main(["-o", str(tmp_path / "run2"), "--quick", "--no-progress", "--scheduler", "local", "--workers", "3"])
+    assert seen["scheduler"] == "local" and seen["n_workers"] == 3
     assert main(["-o", str(tmp_path / "bad"), "--quick", "--scheduler", "cluster9"]) == 1
-    assert "--scheduler must be 'local' or tcp://HOST:PORT, got 'cluster9'" in capsys.readouterr().err
+    assert "unknown scheduler 'cluster9'" in capsys.readouterr().err
     assert not (tmp_path / "bad").exists()
 
 
-def test_replicates_run_each_seed_into_its_own_folder(tmp_path, stop_at_synthesize, capsys):
-    with pytest.raises(SynthesizeCalled):
-        main(["-o", str(tmp_path / "rep"), "--quick", "--no-progress", "--replicates", "2", "--seed", "7"])
-    # the first replicate got as far as rendering, with its own seed, in its own folder
-    assert stop_at_synthesize["seed"] == 7
-    assert (tmp_path / "rep" / "replicates" / "seed7").is_dir()
+def test_replicates_run_every_walk_and_failed_walks_are_reported(tmp_path, stop_at_synthesize, capsys):
+    """Each walk is a task with its own error row: every walk gets as far as rendering, with its own
+    seed, into its own replicate folder; when all fail, one line names them and nothing is judged."""
+    assert main(["-o", str(tmp_path / "rep"), "--quick", "--no-progress", "--replicates", "2", "--seed", "7",
+                 "--scenes", "forest_winter,sun_glare"]) == 1
+    err = capsys.readouterr().err
+    assert "every walk failed" in err and len(err.strip().splitlines()) == 1
+    assert stop_at_synthesize["seed"] == 8  # the last walk: sun_glare, seed 8
+    for seed in (7, 8):
+        raw = json.loads((tmp_path / "rep" / "replicates" / f"seed{seed}" / "raw.json").read_text())
+        assert [f["walk"] for f in raw["failed_walks"]] == [f"forest_winter/seed{seed}", f"sun_glare/seed{seed}"]
+        assert all(f["error"] == "SynthesizeCalled: " for f in raw["failed_walks"]) and raw["per_scene"] == {}
+    # --resume runs the failed walks again; another configuration is refused
+    assert main(["-o", str(tmp_path / "rep"), "--quick", "--no-progress", "--replicates", "2", "--seed", "7",
+                 "--scenes", "forest_winter,sun_glare", "--resume"]) == 1
+    assert "every walk failed" in capsys.readouterr().err
+    assert main(["-o", str(tmp_path / "rep"), "--quick", "--no-progress", "--replicates", "3", "--seed", "7",
+                 "--scenes", "forest_winter,sun_glare", "--resume"]) == 1
+    assert "holds a study of another configuration (differs in replicates)" in capsys.readouterr().err
     assert main(["-o", str(tmp_path / "bad"), "--quick", "--replicates", "0"]) == 1
     assert "--replicates must be >= 1, got 0" in capsys.readouterr().err
+
+
+def _without_timings(path):
+    d = json.loads(path.read_text())
+    d.pop("timings", None)
+    return d
+
+
+@pytest.mark.render
+@pytest.mark.slow
+def test_walks_as_dask_tasks_same_bytes_and_resume(tmp_path, render_cache, monkeypatch):
+    """Each walk is one task: serial and a 2-worker local Dask cluster write the same raw.json and
+    results.json (timings aside); a resumed study recomputes only the walk whose record is gone."""
+    pytest.importorskip("distributed")
+    monkeypatch.setenv("EXPOSIM_DENOISE", "off")
+    from validation.live.experiment import run_replicated
+
+    kw = dict(progress=False, cache_dir=render_cache, native_loop=None)
+    run_replicated(tmp_path / "serial", TINY, 2, scheduler="serial", **kw)
+    run_replicated(tmp_path / "dask", TINY, 2, scheduler="local", n_workers=2, **kw)
+    for rel in ("replicates/seed0/raw.json", "replicates/seed1/raw.json", "replicates/seed1/results.json",
+                "results.json"):
+        a, b = _without_timings(tmp_path / "serial" / rel), _without_timings(tmp_path / "dask" / rel)
+        assert a == b, rel
+    for rel in ("replicates/seed0/walks/forest_winter.json", "replicates/seed1/vo/forest_winter/live-native/fixed.txt"):
+        a = (tmp_path / "serial" / rel).read_text().replace(str(tmp_path / "serial"), str(tmp_path / "dask"))
+        b = (tmp_path / "dask" / rel).read_text()
+        if rel.endswith(".json"):  # the records name their folders
+            a, b = (json.loads(x) for x in (a, b))
+            a.pop("timings"), b.pop("timings")
+        assert a == b, rel
+    # resume: only seed 1's walk runs again (its record and raw.json are gone), seed 0's is read back
+    rep = tmp_path / "serial" / "replicates"
+    before0 = (rep / "seed0" / "walks" / "forest_winter.json").stat().st_mtime_ns
+    (rep / "seed1" / "walks" / "forest_winter.json").unlink()
+    (rep / "seed1" / "raw.json").unlink()
+    res = run_replicated(tmp_path / "serial", TINY, 2, scheduler="serial", resume=True, **kw)
+    assert (rep / "seed0" / "walks" / "forest_winter.json").stat().st_mtime_ns == before0
+    assert (rep / "seed1" / "walks" / "forest_winter.json").is_file() and res["n_walks"] == 2
+    assert _without_timings(rep / "seed1" / "raw.json") == _without_timings(tmp_path / "dask" / "replicates/seed1/raw.json")

@@ -54,6 +54,7 @@ __all__ = [
     "REFINE_THRESHOLD_FRACTION",
     "NO_REFERENCE_NOTE",
     "evo_result_path",
+    "pool_feature_runs",
 ]
 
 
@@ -156,31 +157,11 @@ def bench_features(
             "black_level": run.black_level,
             "methods": per_method,
         })
-    names: list[str] = []
-    for r in run_results:
-        names += [m for m in r["methods"] if m not in names]
     if taus is None:  # to where every curve has reached 0, so the success verdicts are not trivially true
         taus = tau_grid(max((r["methods"][m].get("min_matches") or 0 for r in run_results for m in r["methods"]),
                             default=0))
     taus = [int(t) for t in taus]
-    summary, rates = {}, {}
-    for name in names:
-        seqs = [r["methods"][name] for r in run_results if name in r["methods"]]
-        uniformity = [u for s in seqs for u in s["uniformity"]]
-        matches = [c for s in seqs for c in s["matches"]]
-        with_pairs = [s["matches"] for s in seqs if s["matches"]]
-        curve = success_curve(with_pairs, taus) if with_pairs else None
-        rates[name] = None if curve is None else [float(v) for v in curve]
-        summary[name] = {
-            "n_runs": len(seqs),
-            "n_runs_with_pairs": len(with_pairs),
-            "n_images": sum(s["n_images"] for s in seqs),
-            "median_uniformity": float(np.median(uniformity)) if uniformity else None,
-            "median_matches": float(np.median(matches)) if matches else None,
-            "quartiles_matches": [float(q) for q in np.percentile(matches, [25, 75])] if matches else None,
-            "min_matches": int(min(matches)) if matches else None,
-            "success_at_100": float(success_curve(with_pairs, [100])[0]) if with_pairs else None,
-        }
+    summary, rates = pool_feature_runs(run_results, taus)
     results = {
         "benchmark": "features",
         "exposim_version": _version(),
@@ -201,3 +182,36 @@ def bench_features(
                  sheets=[sheet])
     write_results(out / RESULTS_FILE, results)
     return results
+
+
+def pool_feature_runs(run_results: Sequence[dict], taus: Sequence[int]) -> tuple[dict, dict]:
+    """Per method, the figures pooled over runs, and the success curve at ``taus``.
+
+    ``run_results``: the ``runs`` entries of :func:`bench_features` (one per run folder),
+    possibly from several calls (the live study benchmarks each walk on its own and pools
+    them here).  Returns ``(methods, rates)``: ``results["methods"]`` and
+    ``results["success_curve"]["rate"]``.
+    """
+    names: list[str] = []
+    for r in run_results:
+        names += [m for m in r["methods"] if m not in names]
+    taus = [int(t) for t in taus]
+    summary, rates = {}, {}
+    for name in names:
+        seqs = [r["methods"][name] for r in run_results if name in r["methods"]]
+        uniformity = [u for s in seqs for u in s["uniformity"]]
+        matches = [c for s in seqs for c in s["matches"]]
+        with_pairs = [s["matches"] for s in seqs if s["matches"]]
+        curve = success_curve(with_pairs, taus) if with_pairs else None
+        rates[name] = None if curve is None else [float(v) for v in curve]
+        summary[name] = {
+            "n_runs": len(seqs),
+            "n_runs_with_pairs": len(with_pairs),
+            "n_images": sum(s["n_images"] for s in seqs),
+            "median_uniformity": float(np.median(uniformity)) if uniformity else None,
+            "median_matches": float(np.median(matches)) if matches else None,
+            "quartiles_matches": [float(q) for q in np.percentile(matches, [25, 75])] if matches else None,
+            "min_matches": int(min(matches)) if matches else None,
+            "success_at_100": float(success_curve(with_pairs, [100])[0]) if with_pairs else None,
+        }
+    return summary, rates

@@ -10,14 +10,14 @@ from __future__ import annotations
 import argparse
 import shlex
 import sys
+import time
 from dataclasses import replace
 from pathlib import Path
 
 from emulator.commands.progress import add_json, add_quiet, bars_enabled, print_json
 from emulator.commands import argtypes
+from emulator.distributed import check_scheduler
 from emulator.errors import ExposimError
-from scenes.commands.render import add_scheduler_option
-from scenes.parallel import check_scheduler
 from validation.live.config import CONFIG_CHANGES, CONFIGS, DEFAULTS, LiveConfig
 
 __all__ = ["HELP", "DESCRIPTION", "add_arguments", "register", "build_parser", "config_from_args", "command_line",
@@ -71,7 +71,15 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
                    help="skip the native-rate live condition (reported as not run)")
     p.add_argument("--keep-radiance", action="store_true", help="keep the datasets' radiance EXRs (large)")
     p.add_argument("--cache-dir", help="render cache (default $EXPOSIM_CACHE or ~/.cache/exposim/renders)")
-    add_scheduler_option(p)
+    p.add_argument("--scheduler", default=None, metavar="serial|local|tcp://HOST:PORT",
+                   help="where the walks run, each walk (scene x seed, all its conditions) one task: 'serial' (this "
+                        "process, the default), 'local' (a Dask LocalCluster, --workers processes) or the address "
+                        "of a running Dask scheduler (tcp://HOST:PORT or tls://HOST:PORT; its workers must see OUT "
+                        "and the render cache under the same paths); the same results on every path")
+    p.add_argument("--workers", type=int, help="worker processes of --scheduler local (default: the CPUs)")
+    p.add_argument("--resume", action="store_true",
+                   help="finish the study already in OUT (same options): walks whose record exists "
+                        "(walks/<scene>.json) are not run again, failed ones are")
     add_quiet(p, "no progress bars")
     add_json(p)
     p.add_argument("--redraw", action="store_true",
@@ -155,21 +163,30 @@ def run(args, prog: str = "exposim validate live") -> int:
     cfg = config_from_args(args)
     if args.replicates < 1:
         raise ExposimError(f"--replicates must be >= 1, got {args.replicates}")
-    scheduler = check_scheduler(args.scheduler)
-    out = numbered_output(args.output)
+    scheduler = None if args.scheduler is None else check_scheduler(args.scheduler)
+    if args.workers is not None and args.workers < 1:
+        raise ExposimError(f"--workers must be >= 1, got {args.workers}")
+    out = args.output if args.resume else numbered_output(args.output)
     if out != args.output:
         log(f"live: {args.output} exists and is not empty; writing to {out}")
+    t0 = time.perf_counter()
     kw = dict(progress=bars_enabled(args.quiet), command=command_line(args, prog), cache_dir=args.cache_dir,
-              log=None if args.quiet else log, scheduler=scheduler)
+              log=None if args.quiet else log, scheduler=scheduler, n_workers=args.workers, resume=args.resume)
     if args.replicates > 1:
         results = run_replicated(out, cfg, args.replicates, **kw)
     else:
         results = run_live_experiment(out, cfg, **kw)
+    failed = results.get("failed_walks") or []
     if args.json:
         print_json(results)
-        return 0
-    print(headline(results))
-    print(f"wrote {out / 'results.json'}, {out / 'report.md'}, {out / 'report.html'} in {results['timings']['total_s'] / 60:.1f} min")
+    else:
+        print(headline(results))
+        print(f"wrote {out / 'results.json'}, {out / 'report.md'}, {out / 'report.html'} in "
+              f"{(time.perf_counter() - t0) / 60:.1f} min")
+    if failed:
+        log(f"live: {len(failed)} walk(s) failed ({'; '.join(f['walk'] + ': ' + f['error'] for f in failed)}); the "
+            f"verdicts are over the others; rerun with --resume to retry them")
+        return 1
     return 0
 
 

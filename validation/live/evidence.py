@@ -70,6 +70,8 @@ def walk_values(records: list[dict], methods) -> tuple[list[str], dict[str, dict
     for rec in records:
         seed = rec["config"]["seed"]
         for scene in rec["config"]["scenes"]:
+            if "per_scene" in rec and scene not in rec["per_scene"]:
+                continue  # a walk that failed (listed in the record's failed_walks)
             walks.append(f"{scene}/seed{seed}")
             for r in runs:
                 per = ((rec.get("summaries") or {}).get(r) or {}).get("per_scene", {}).get(scene, {})

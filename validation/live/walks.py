@@ -1,0 +1,271 @@
+"""One walk of the live study as one task (issue 22): record, loops, comparisons, benchmarks.
+
+The unit of the study is an independent walk (a scene with its trajectory, render and
+capture-noise seeds).  :func:`run_walk` does everything one walk needs, in its own folders
+of the experiment (``datasets/<scene>``, ``runs/<scene>/<run>``, ``features/<scene>/<run>``,
+``vo/<scene>/<run>``), and writes what the verdicts need as ``walks/<scene>.json``
+(:func:`walk_record_path`): the per-cycle comparisons, the trajectories, the closed-loop
+summaries, the feature benchmark's per-run entries, the VO benchmarks and the noise
+variance ratios.  It is a pure function of its arguments (every draw seeded from the
+configuration), so :func:`run_walks` can run the walks serially, on a local Dask cluster
+or on a scheduler's workers (:func:`emulator.distributed.run_tasks`, one error policy: a
+walk that raises becomes an error row, the others go on) and the records are the same
+bytes on every path.  A walk whose record exists is not run again (resume).
+"""
+
+from __future__ import annotations
+
+import shutil
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from emulator.io.files import read_results, to_jsonable, write_results
+from validation.live.config import BRIGHTENING_PAIRS, CONTROL, NOISE_OPTIONS, VARIANTS, LiveConfig, config_from_dict
+
+__all__ = ["WALKS_DIR", "NATIVE_RUN", "run_names", "walk_record_path", "walk_name", "run_walk", "run_walks"]
+
+#: Sub-folder of an experiment with one record per finished walk.
+WALKS_DIR = "walks"
+#: Run name of the native-rate live condition.
+NATIVE_RUN = "live-native"
+#: The folders of one walk inside its experiment (cleared before a walk is run again).
+WALK_FOLDERS = ("datasets", "runs", "features", "vo")
+
+
+def run_names(cfg: LiveConfig, native: bool) -> list[str]:
+    """The runs of every walk: emulated (plain, consistent), live (same-, fixed-instant), control, native."""
+    names = [f"emulated-{n}" for n in NOISE_OPTIONS] + [f"live-{v}" for v in VARIANTS]
+    if cfg.control:
+        names.append(f"live-{CONTROL}")
+    if native:
+        names.append(NATIVE_RUN)
+    return names
+
+
+def walk_record_path(experiment, scene: str) -> Path:
+    """``<experiment>/walks/<scene>.json``: the record of a finished walk."""
+    return Path(experiment) / WALKS_DIR / f"{scene}.json"
+
+
+def walk_name(scene: str, seed: int) -> str:
+    """The walk's name in results.json (``<scene>/seed<seed>``)."""
+    return f"{scene}/seed{int(seed)}"
+
+
+def _bar(total: int, desc: str, enabled: bool):
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=desc, disable=not enabled, file=sys.stderr, leave=False)
+
+
+def _runs_summary(cycles, names) -> dict:
+    out = {}
+    for name in names:
+        t = [cs.steps[name].target_ms for cs in cycles if name in cs.steps]
+        s = [cs.steps[name].saturated_fraction for cs in cycles if name in cs.steps]
+        out[name] = {"median_exposure_ms": float(np.median(t)) if t else None,
+                     "mean_saturated_fraction": float(np.mean(s)) if s else None}
+    return {"methods": out}
+
+
+def _collect(iterator, n: int, desc: str, progress: bool) -> list:
+    got = []
+    with _bar(n, desc, progress) as bar:
+        for cs in iterator:
+            got.append(cs)
+            bar.update(1)
+    return got
+
+
+def _loops(cfg: LiveConfig, seq, radiance, camera, model, response, native_loop, tag: str, progress: bool,
+           timings: dict, scene: str) -> dict:
+    """Every run of the walk: {run name: [CycleStep with images]}."""
+    from emulator.playback import RunConfig
+    from validation.live.loops import iter_emulated, iter_live
+
+    names = list(cfg.methods)
+    common = dict(config=RunConfig(initial_ms=cfg.initial_ms, selector=cfg.selector), response=response)
+    cycles: dict = {}
+    t0 = time.perf_counter()
+    for opt, mode in NOISE_OPTIONS.items():
+        cycles[f"emulated-{opt}"] = _collect(
+            iter_emulated(seq, names, noise=mode, noise_model=model, seed=cfg.seed, **common), len(seq.cycles),
+            f"{tag}: emulated loop ({opt})", progress)
+    timings[f"emulated_{scene}_s"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    live_runs = [(v, v, cfg.seed) for v in VARIANTS]
+    if cfg.control:
+        live_runs.append((CONTROL, "same-instant", cfg.seed + 1))
+    for label, timing, seed in live_runs:
+        cycles[f"live-{label}"] = _collect(
+            iter_live(seq, radiance, camera, names, timing=timing, noise=cfg.capture_noise, seed=seed, **common),
+            len(seq.cycles), f"{tag}: live loop ({label})", progress)
+    if native_loop is not None:
+        cycles[NATIVE_RUN] = _collect(
+            native_loop(seq, radiance, camera, names, seed=cfg.seed, noise=cfg.capture_noise,
+                        initial_ms=cfg.initial_ms, selector=cfg.selector, response=response),
+            len(seq.cycles), f"{tag}: live loop (native rate)", progress)
+    timings[f"live_{scene}_s"] = time.perf_counter() - t0
+    return cycles
+
+
+def _comparisons(cfg: LiveConfig, cycles: dict, seq, response) -> dict:
+    from validation.live.compare import exposure_log2_errors, image_errors
+
+    names = list(cfg.methods)
+    comp: dict = {}
+    for opt in NOISE_OPTIONS:
+        for v in VARIANTS + ((CONTROL,) if cfg.control else ()):
+            emu, lv = cycles[f"emulated-{opt}"], cycles[f"live-{v}"]
+            err = exposure_log2_errors(emu, lv, names)
+            img = image_errors(emu, lv, names, seq, response)
+            comp[f"{opt}/{v}"] = {m: {"exposure_log2_error": err[m], **img[m]} for m in names}
+    if cfg.control:
+        err = exposure_log2_errors(cycles["live-same-instant"], cycles[f"live-{CONTROL}"], names)
+        comp["live/control"] = {m: {"exposure_log2_error": err[m]} for m in names}
+    return comp
+
+
+def _benchmarks(cfg: LiveConfig, exp: Path, scene: str, runs: list[str], progress: bool, command, timings) -> dict:
+    """The feature bench's per-run entry and the VO bench of each run of this walk."""
+    from emulator.metrics.bench import bench_features, bench_vo
+    from emulator.metrics.features import DEFAULT_TAUS
+    from emulator.metrics.vo import VOParameters
+
+    taus = sorted(set(int(t) for t in DEFAULT_TAUS) | set(int(t) for t in cfg.taus))
+    params = VOParameters(ratio=cfg.vo_ratio, seed=cfg.seed)
+    features, vo = {}, {}
+    t0 = time.perf_counter()
+    for r in runs:
+        run_dir = exp / "runs" / scene / r
+        feats = bench_features([run_dir], exp / "features" / scene / r, taus=taus, seed=cfg.seed, progress=progress,
+                               command=command)
+        features[r] = feats["runs"][0]
+        vo[r] = bench_vo(run_dir, exp / "vo" / scene / r, parameters=params, rpe_on_failure=True, progress=progress,
+                         command=command)
+    timings[f"metrics_{scene}_s"] = time.perf_counter() - t0
+    return {"features": features, "vo": vo, "feature_taus": taus}
+
+
+def run_walk(config: dict, scene_name: str, experiment: str, cache_dir=None, native_loop: Callable | None = None,
+             command: str | None = None, progress: bool = False, log: Callable[[str], None] | None = None) -> dict:
+    """Run one walk (``scene_name`` at ``config``'s seed) into ``experiment``; write and return its record.
+
+    ``config``: :meth:`LiveConfig.to_dict` (plain data, so the call can travel to a Dask
+    worker).  Folders of an earlier, unfinished attempt at this walk are removed first.
+    Returns ``{"walk", "seconds"}``; the record itself is ``walks/<scene>.json``.
+    """
+    import scenes
+    from emulator.io.borealhdr import load_sequence, sequence_response
+    from emulator.noise import NoiseModel
+    from scenes.synthesize import synthesize
+    from scenes.walkshots import walk_radiance
+    from synth.noise_model import noise_model_of
+    from synth.sequence import load_camera
+    from validation.live.compare import measure_noise_variance_ratio
+    from validation.live.loops import DatasetRadiance, write_run_folder
+
+    cfg = config_from_dict(config)
+    exp = Path(experiment)
+    say = log or (lambda msg: None)
+    for folder in WALK_FOLDERS:
+        shutil.rmtree(exp / folder / scene_name, ignore_errors=True)
+    t_start = time.perf_counter()
+    timings: dict[str, float] = {}
+    tag = walk_name(scene_name, cfg.seed)
+    scene = scenes.get_scene(scene_name, seed=cfg.seed, **cfg.scene_parameters(scene_name))
+    ds = exp / "datasets" / scene_name
+    with _bar(cfg.n_cycles * 6, f"{tag}: render + record", progress) as bar:
+        synthesize(scene, ds, n_cycles=cfg.n_cycles, width=cfg.width, height=cfg.height, spp=cfg.spp, stereo=True,
+                   seed=cfg.seed, render_seed=cfg.seed, noise=cfg.capture_noise, save_radiance=True,
+                   cache_dir=cache_dir, progress=lambda d, n: bar.update(d - bar.n))
+    timings[f"record_{scene_name}_s"] = time.perf_counter() - t_start
+    say(f"{tag}: recorded {cfg.n_cycles} cycles in {timings[f'record_{scene_name}_s']:.0f} s")
+    seq = load_sequence(ds)
+    response = sequence_response(seq)
+    camera = load_camera(ds)
+    synth_model = noise_model_of(camera)
+    model = NoiseModel(response, synth_model.gain_e_per_h, synth_model.read_noise_e, synth_model.name)
+    frames = DatasetRadiance(ds)
+    first = seq.cycles[0].frames["left"][seq.cycles[0].available(("left",))[0]].timestamp_ns
+    ratio_input = (frames(first, "left"), camera, response, model)
+    radiance = walk_radiance(ds, scene, cache_dir=cache_dir) or frames  # live shots blurred over their windows
+    cycles = _loops(cfg, seq, radiance, camera, model, response, native_loop, tag, progress, timings, scene_name)
+    runs = list(cycles)
+    comp = _comparisons(cfg, cycles, seq, response)
+    names = list(cfg.methods)
+    summaries = {}
+    for r in runs:
+        write_run_folder(exp / "runs" / scene_name / r, ds, cycles[r], names, white_level=seq.white_level,
+                         black_level=seq.black_level, description={"run": r, "scene": scene_name})
+        summaries[r] = _runs_summary(cycles[r], names)
+    trajectories = {r: {m: {"timestamp_ns": [cs.steps[m].timestamp_ns for cs in cycles[r] if m in cs.steps],
+                            "target_ms": [cs.steps[m].target_ms for cs in cycles[r] if m in cs.steps],
+                            "bracket_ms": [cs.steps[m].bracket_ms for cs in cycles[r] if m in cs.steps]}
+                        for m in names} for r in runs}
+    del cycles
+    t0 = time.perf_counter()
+    nvr = measure_noise_variance_ratio(*ratio_input, repeats=cfg.noise_repeats, seed=cfg.seed)
+    nvr_up = measure_noise_variance_ratio(*ratio_input, repeats=cfg.noise_repeats, seed=cfg.seed,
+                                          pairs=BRIGHTENING_PAIRS)
+    nvr["input"] = nvr_up["input"] = f"first left radiance of {scene_name}"
+    timings[f"noise_ratio_{scene_name}_s"] = time.perf_counter() - t0
+    if not cfg.keep_radiance:
+        shutil.rmtree(ds / "ground_truth" / "radiance", ignore_errors=True)
+    bench = _benchmarks(cfg, exp, scene_name, runs, progress, command, timings) if cfg.metrics else None
+    timings[f"walk_{scene_name}_s"] = time.perf_counter() - t_start
+    record = {"walk": tag, "scene": scene_name, "config": cfg.to_dict(), "runs": runs,
+              "render_variant": scenes.choose_variant(), "comparison": comp, "trajectories": trajectories,
+              "run_summaries": summaries, "benchmarks": bench, "noise_variance_ratio": nvr,
+              "noise_variance_ratio_brightening": nvr_up, "timings": timings}
+    write_results(walk_record_path(exp, scene_name), to_jsonable(record))
+    say(f"{tag}: done in {timings[f'walk_{scene_name}_s'] / 60:.1f} min")
+    return {"walk": tag, "seconds": timings[f"walk_{scene_name}_s"]}
+
+
+def run_walks(experiments: list[tuple[Path, LiveConfig]], *, scheduler=None, n_workers: int | None = None,
+              cache_dir=None, native_loop: Callable | None = None, command: str | None = None,
+              progress: bool = True, log: Callable[[str], None] | None = None) -> dict:
+    """Run every walk of ``experiments`` whose record does not exist yet, as one batch of tasks.
+
+    ``scheduler``: None or ``"serial"`` (this process, one walk after the other), ``"local"``
+    (a local Dask cluster, ``n_workers`` processes), a ``tcp://``/``tls://`` address or a
+    :class:`distributed.Client` (:func:`emulator.distributed.open_client`); on Dask the
+    workers must see ``experiments`` and ``cache_dir`` under the same paths.  Returns
+    ``{(experiment, scene): error text}`` of the walks that failed (empty when all ran).
+    """
+    from emulator.distributed import open_client, run_tasks
+
+    todo = [(exp, cfg, s) for exp, cfg in experiments for s in cfg.scenes
+            if not walk_record_path(exp, s).is_file()]
+    if not todo:
+        return {}
+    serial = scheduler in (None, "serial")
+    args = [(cfg.to_dict(), s, str(exp), None if cache_dir is None else str(cache_dir), native_loop, command,
+             progress and serial, log if serial else None) for exp, cfg, s in todo]
+    keys = [walk_name(s, cfg.seed) for _, cfg, s in todo]
+    with _bar(len(todo), "walks", progress and not serial) as bar:
+        def tick(done: int, total: int) -> None:
+            bar.update(done - bar.n)
+
+        if serial:
+            outcomes = run_tasks(run_walk, args, keys=keys, progress=tick)
+        else:
+            with open_client(scheduler, n_workers=n_workers, retries=1) as client:
+                outcomes = run_tasks(run_walk, args, client=client, retries=1, keys=keys, progress=tick)
+    failed = {}
+    for (exp, _, s), o in zip(todo, outcomes):
+        if o.error is not None:
+            failed[(Path(exp), s)] = o.error
+            if log is not None:
+                log(f"{o.key}: FAILED ({o.error})")
+    return failed
+
+
+def read_walk(experiment, scene: str) -> dict:
+    """The record :func:`run_walk` wrote."""
+    return read_results(walk_record_path(experiment, scene))
