@@ -13,6 +13,9 @@ Every number a report writes that compares methods carries an interval from here
   same cycles or units (paired: the same resampled indices for both);
 * :func:`compare_methods`: per method a statistic with its interval and its difference
   from the best method with an interval (what every report table that ranks methods shows);
+* :func:`compare_methods_by_segment`: the same when each value belongs to a segment of a
+  time series (an RPE pose pair and the stretch of the run it starts in): a circular block
+  bootstrap over the segments, methods on the same segments resampled together (paired);
 * :func:`holm`: Holm's step-down adjustment of p-values;
 * :func:`tost_paired`: two one-sided t-tests of equivalence of paired differences within
   a margin;
@@ -46,6 +49,7 @@ __all__ = [
     "covariance_components",
     "kendall_tau_b",
     "compare_methods",
+    "compare_methods_by_segment",
 ]
 
 #: Confidence level of every interval in the reports.
@@ -420,5 +424,61 @@ def compare_methods(series, statistic="median", *, higher_is_better: bool = True
                 d["ci95"], d["excludes_zero"] = [float(lo), float(hi)], bool(lo > 0 or hi < 0)
         r["difference_to_best"] = {k: d[k] for k in ("estimate", "ci95", "excludes_zero")}
     how = ("circular block bootstrap" if block else "bootstrap") + f", {n_resamples} resamples, {confidence:.0%}"
+    return {"best": best, "statistic": statistic if isinstance(statistic, str) else "custom", "methods": out,
+            "method": how}
+
+
+def compare_methods_by_segment(values, segments, statistic="median", *, higher_is_better: bool = False,
+                               block_length: int | None = None, confidence: float = CONFIDENCE,
+                               n_resamples: int = N_RESAMPLES, seed=0) -> dict:
+    """:func:`compare_methods` for values grouped in ordered segments of a time series.
+
+    ``values[m]`` and ``segments[m]`` are aligned 1-D arrays per method: each value (e.g.
+    one RPE pose pair's error) and the integer label of the segment it belongs to (the
+    stretch of the run where the pair starts); labels order the segments in time.  A
+    resample draws the segments by a circular block bootstrap (:func:`block_bootstrap_indices`,
+    block length ``n_segments ** (1/3)`` unless given) and takes the statistic over every
+    value of the drawn segments, so values that share a segment (and neighbouring
+    segments) are never treated as independent.  Methods observed on the same segments
+    are resampled with the same draws (their difference is paired); others independently.
+
+    Returns the structure of :func:`compare_methods`, each method with ``n`` (values) and
+    ``n_segments``; ``ci95`` is None with fewer than 2 segments.
+    """
+    rng = rng_of(seed)
+    f = _stat(statistic)
+    plans: dict[tuple, np.ndarray] = {}
+    out, reps = {}, {}
+    for m in values:
+        v = np.asarray(values[m], dtype=np.float64).ravel()
+        g = np.asarray(segments[m]).ravel()
+        if v.shape != g.shape:
+            raise ValueError(f"{m}: values and segments must be aligned, got {v.shape} and {g.shape}")
+        ok = np.isfinite(v)
+        v, g = v[ok], g[ok]
+        units = tuple(int(u) for u in np.unique(g))
+        r = {"estimate": None if v.size == 0 else float(f(v, None)), "ci95": None, "n": int(v.size),
+             "n_segments": len(units)}
+        if len(units) >= 2:
+            if units not in plans:
+                plans[units] = block_bootstrap_indices(len(units), n_resamples, rng, block_length)
+            groups = [v[g == u] for u in units]
+            reps[m] = np.array([f(np.concatenate([groups[i] for i in row]), None) for row in plans[units]])
+            lo, hi = percentile_interval(reps[m], confidence)
+            r["ci95"] = [float(lo), float(hi)]
+        out[m] = r
+    have = {m: r["estimate"] for m, r in out.items() if r["estimate"] is not None}
+    best = (max if higher_is_better else min)(have, key=have.get) if have else None
+    for m, r in out.items():
+        r["difference_to_best"] = None
+        if best is None or m == best or r["estimate"] is None:
+            continue
+        d = {"estimate": r["estimate"] - out[best]["estimate"], "ci95": None, "excludes_zero": None}
+        if m in reps and best in reps:
+            lo, hi = percentile_interval(reps[m] - reps[best], confidence)
+            d["ci95"], d["excludes_zero"] = [float(lo), float(hi)], bool(lo > 0 or hi < 0)
+        r["difference_to_best"] = d
+    how = (f"circular block bootstrap over segments, {n_resamples} resamples, {confidence:.0%}; methods on the "
+           "same segments resampled together")
     return {"best": best, "statistic": statistic if isinstance(statistic, str) else "custom", "methods": out,
             "method": how}

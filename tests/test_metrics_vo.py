@@ -334,6 +334,10 @@ def test_rpe_by_length_scale_and_errors():
     assert raw["deltas"][0]["trans_percent"]["median"] == pytest.approx(100.0)  # twice as far: error = length
     assert raw["deltas"][0]["trans_pct"] == raw["deltas"][0]["trans_percent"]  # the deprecated alias
     assert raw["deltas"][0]["rot_deg_per_m"]["max"] == 0.0
+    pairs = raw["deltas"][0]["pairs"]  # every pair's errors, for intervals: the statistics are theirs
+    assert len(pairs["trans_percent"]) == raw["deltas"][0]["n_pairs"] == len(pairs["first_index"])
+    assert np.median(pairs["trans_percent"]) == raw["deltas"][0]["trans_percent"]["median"]
+    assert all(b - a == 10 for a, b in zip(pairs["first_index"], pairs["second_index"]))  # 1 m of 0.1 m steps
     none = rpe_by_length(ref, est, [100.0], align_scale=False)
     assert none["deltas"][0]["n_pairs"] == 0 and none["deltas"][0]["trans_percent"] is None
     with pytest.raises(TrajectoryError, match="straight"):  # Umeyama needs a non-degenerate path
@@ -371,6 +375,13 @@ def test_bench_vo_on_synthetic_run(synthetic, tmp_path):
         assert entry["n_pairs"] > 0
         assert entry["trans_pct"]["median"] < 1.0
         assert entry["rot_deg_per_m"]["median"] < 0.5
+    # each method's median RPE at each length with a block-bootstrap interval over segments of the run
+    for k, iv in enumerate(results["rpe_intervals"]):
+        assert iv["delta_m"] == m["rpe"]["deltas"][k]["delta_m"]
+        for name, r in iv["methods"].items():
+            assert r["estimate"] == results["methods"][name]["rpe"]["deltas"][k]["trans_percent"]["median"]
+            assert r["ci95"] is None or r["ci95"][0] <= r["estimate"] <= r["ci95"][1]
+    assert "Methods compared with 95 % intervals" in (tmp_path / "out" / "report.md").read_text()
     est = read_trajectory(tmp_path / "out" / "fixed.txt")
     assert est.num_poses == 3
     for name in ("results.json", "report.md", "fig6_rpe.png", "trajectories.png"):

@@ -143,3 +143,27 @@ def test_compare_methods_best_difference_and_unaligned():
     ca = stats.compare_methods({"a": series["a"], "c": series["c"]}, "mean", seed=1)
     d = ca["methods"]["c"]["difference_to_best"]
     assert d["ci95"][1] - d["ci95"][0] > 1.0 and d["excludes_zero"] is False
+
+
+def test_compare_methods_by_segment_is_a_cluster_bootstrap_and_pairs_methods():
+    from emulator.stats import compare_methods_by_segment, statistic_interval
+
+    rng = np.random.default_rng(5)
+    units = rng.normal(size=20)
+    values = np.repeat(units, 50)  # 50 values per segment, all alike: 20 units, not 1000
+    segments = np.repeat(np.arange(20), 50)
+    res = compare_methods_by_segment({"a": values, "b": values + 0.25, "c": values[:500]},
+                                     {"a": segments, "b": segments, "c": segments[:500]}, "median",
+                                     block_length=1, n_resamples=500, seed=3)
+    ref = statistic_interval(units, "median", n_resamples=500, seed=3)  # the same draws over the 20 units
+    a = res["methods"]["a"]
+    assert a["estimate"] == ref["estimate"] and a["ci95"] == ref["ci95"]
+    assert (a["n"], a["n_segments"], res["best"]) == (1000, 20, "a")
+    # b = a + 0.25 on the same segments: paired, so the difference is 0.25 in every resample
+    d = res["methods"]["b"]["difference_to_best"]
+    assert d["estimate"] == pytest.approx(0.25) and d["ci95"] == pytest.approx([0.25, 0.25]) and d["excludes_zero"]
+    # c is on other segments (10 of them): resampled on its own, an interval that holds its difference
+    c = res["methods"]["c"]
+    assert c["n_segments"] == 10 and c["difference_to_best"]["ci95"][0] < c["difference_to_best"]["estimate"]
+    one = compare_methods_by_segment({"a": [1.0, 2.0]}, {"a": [0, 0]})
+    assert one["methods"]["a"]["ci95"] is None and one["methods"]["a"]["estimate"] == 1.5

@@ -35,6 +35,7 @@ __all__ = [
     "looks_like_estimate",
     "ESTIMATE_HEADER",
     "DELTA_UNITS",
+    "pair_segments",
 ]
 
 #: Delta units of :func:`rpe_files`: metres of travelled path or frames.
@@ -151,6 +152,24 @@ def looks_like_estimate(path: str | Path) -> tuple[int, str | None]:
     return 0, None
 
 
+def pair_segments(first_index, second_index) -> np.ndarray:
+    """The segment of each RPE pose pair: the stretch of the run it starts in.
+
+    Segments are consecutive runs of start poses as long as the median pair (in poses), so
+    a pair overlaps at most its own and the next segment; the segments are the units of
+    the RPE's block bootstrap (:func:`emulator.stats.compare_methods_by_segment`).
+
+    >>> pair_segments([0, 1, 2, 3, 4, 5], [3, 4, 5, 6, 7, 8]).tolist()
+    [0, 0, 0, 1, 1, 1]
+    """
+    a = np.asarray(first_index, dtype=np.int64)
+    b = np.asarray(second_index, dtype=np.int64)
+    if a.size == 0:
+        return a
+    span = max(1, int(np.median(b - a)))
+    return a // span
+
+
 def _stats(values: np.ndarray) -> dict:
     return {
         "median": float(np.median(values)),
@@ -197,7 +216,9 @@ def rpe_by_length(
         (translation error in % of the pair's path length: median, mean, rmse, max;
         ``trans_pct`` is a deprecated alias holding the same statistics) and
         ``rot_deg_per_m`` (rotation error in degrees per metre, same statistics); the
-        statistics are None when no pair has that length.
+        statistics are None when no pair has that length; ``pairs`` (where there are
+        pairs): every pair's pose indices ``first_index``, ``second_index`` and its
+        ``trans_percent`` and ``rot_deg_per_m`` (for intervals, :func:`pair_segments`).
 
     Raises
     ------
@@ -259,8 +280,13 @@ def rpe_by_length(
         entry["n_pairs"] = int(pairs.shape[0])
         if evo_results is not None:
             evo_results.extend(pending)
-        entry["trans_percent"] = _stats(errors[metrics.PoseRelation.translation_part] / length * 100.0)
+        trans = errors[metrics.PoseRelation.translation_part] / length * 100.0
+        rot = errors[metrics.PoseRelation.rotation_angle_deg] / length
+        entry["trans_percent"] = _stats(trans)
         entry["trans_pct"] = entry["trans_percent"]  # deprecated alias of trans_percent (older readers)
-        entry["rot_deg_per_m"] = _stats(errors[metrics.PoseRelation.rotation_angle_deg] / length)
+        entry["rot_deg_per_m"] = _stats(rot)
+        # every pair's errors, for intervals over segments of the run (pair_segments)
+        entry["pairs"] = {"first_index": pairs[:, 0].tolist(), "second_index": pairs[:, 1].tolist(),
+                          "trans_percent": trans.tolist(), "rot_deg_per_m": rot.tolist()}
         out.append(entry)
     return {"scale": scale, "path_length_m": float(cumulative[-1]), "deltas": out}

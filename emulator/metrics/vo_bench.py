@@ -41,6 +41,7 @@ __all__ = [
     "REFINE_THRESHOLD_FRACTION",
     "NO_REFERENCE_NOTE",
     "evo_result_path",
+    "rpe_intervals",
 ]
 
 #: What happens when the VO loses track, as stated in the results.
@@ -262,6 +263,31 @@ def _vo_method(name, frames, run, rect, parameters, out, progress, ref_traj, ref
     return entry, _aligned_for_plot(est_s, ref_s), ref_s
 
 
+def rpe_intervals(method_results: dict, *, seed: int = 0) -> list[dict]:
+    """Per RPE pair length: each method's median translation RPE (% of the length) with a 95 % interval
+    and its difference from the best (lowest) with an interval, by a circular block bootstrap over
+    segments of the run (:func:`emulator.metrics.rpe.pair_segments`,
+    :func:`emulator.stats.compare_methods_by_segment`; methods on the same reference pairs paired).
+    Methods without an RPE at that length are left out; a length no method has is left out."""
+    from emulator.metrics.rpe import pair_segments
+    from emulator.stats import compare_methods_by_segment
+
+    by_delta: dict[float, dict] = {}
+    for name, entry in method_results.items():
+        for d in (entry.get("rpe") or {}).get("deltas", []):
+            p = d.get("pairs")
+            if p and p["trans_percent"]:
+                by_delta.setdefault(float(d["delta_m"]), {})[name] = p
+    out = []
+    for k, (delta, pairs) in enumerate(sorted(by_delta.items())):
+        cmp = compare_methods_by_segment({m: p["trans_percent"] for m, p in pairs.items()},
+                                         {m: pair_segments(p["first_index"], p["second_index"])
+                                          for m, p in pairs.items()},
+                                         "median", higher_is_better=False, seed=[seed, k])
+        out.append({"delta_m": delta, **cmp})
+    return out
+
+
 def _note_failures(method_results: dict, has_reference: bool, limitations: list[str]) -> None:
     """Add the limitation that names the method runs where the VO lost track, if any."""
     failed = {n: e for n, e in method_results.items() if e["status"] != "success"}
@@ -422,6 +448,7 @@ def bench_vo(
         "n_runs": len(method_results),
         "n_failed": sum(1 for m in method_results.values() if m["status"] != "success"),
         "methods": method_results,
+        "rpe_intervals": rpe_intervals(method_results, seed=parameters.seed),
         "figures": {"fig6": "fig6_rpe.png", "trajectories": "trajectories.png"},
         "report": "report.md",
     }

@@ -312,6 +312,24 @@ def features_intervals_markdown(results: dict) -> list[str]:
     return lines
 
 
+def vo_intervals_markdown(results: dict) -> list[str]:
+    """Per pair length, the methods' median translation RPE with 95 % intervals and the difference from the
+    best (results ``rpe_intervals``, :func:`emulator.metrics.vo_bench.rpe_intervals`); nothing without them."""
+    from emulator.report.intervals import comparison_table
+
+    iv = results.get("rpe_intervals") or []
+    if not iv:
+        return []
+    lines = ["", "Methods compared with 95 % intervals (median translation RPE, % of the pair length; circular "
+             "block bootstrap over segments of the run as long as a pair, methods on the same pairs resampled "
+             "together; \"cannot tell apart\": the difference's interval holds 0):"]
+    for d in iv:
+        n_seg = max((r["n_segments"] for r in d["methods"].values()), default=0)
+        lines += ["", f"Pair length {d['delta_m']:.2f} m ({n_seg} segments):", ""]
+        lines += comparison_table(d, "median RPE trans. (%)", spec=".2f")
+    return lines
+
+
 def features_report(results: dict, figure: str) -> str:
     """Markdown report of the feature benchmark, beside the paper's Fig. 4 numbers."""
     p = results["parameters"]
@@ -406,6 +424,7 @@ def vo_report(results: dict, figures: dict[str, str]) -> str:
             f"| {name} | {m['status']} | {m['n_frames']} | {m['n_tracked']} | "
             f"{len(m['failures'])}{' (' + ', '.join(reasons) + ')' if reasons else ''} | {scale} | {trans} | {rot} |"
         )
+    lines += vo_intervals_markdown(results)
     lines += ["", DASH_NOTE + " In fig6_rpe.png a dotted line is a method whose VO failed on some frames "
               "(RPE computed anyway); its legend entry says so.", ""]
     for title, fig in figures.items():
