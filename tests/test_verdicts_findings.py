@@ -101,6 +101,16 @@ def test_replicated_study_judges_over_all_walks(tmp_path):
     f = res["findings"][0]
     assert f["id"] == "fixed_most_matches" and f["verdict"] == "holds" and f["effect"] > 15
     assert (tmp_path / "report.md").read_text().count("fixed_most_matches") == 1
+    # every method comparison carries an interval over walks: fixed is the best in matches, by ~20 matches
+    iv = res["method_intervals"]["median_matches"]
+    assert iv["best"] == "fixed"
+    for m in METHODS[1:]:
+        d = iv["methods"][m]["difference_to_best"]
+        assert d["ci95"][0] <= d["estimate"] <= d["ci95"][1] < -15 and d["excludes_zero"]
+    u = res["method_intervals"]["median_uniformity"]["methods"]  # all 0.3: no difference, a zero-width interval
+    assert all(r["estimate"] == pytest.approx(0.3) and r["ci95"] == pytest.approx([0.3, 0.3]) for r in u.values())
+    assert res["method_intervals"]["rpe_trans_pct"]["best"] is None  # no VO: nothing to compare
+    assert "Methods compared over the 12 walk(s)" in (tmp_path / "report.md").read_text()
 
 
 def test_a_study_without_the_claimed_methods_is_undetermined():

@@ -20,12 +20,59 @@ from emulator.report.verdicts import (
 from validation.ae_study.config import PAPER, PAPER_NAMES, VO_CONFIGURATION_NOTE
 from validation.ae_study.findings import _fmt
 
-__all__ = ["report_markdown", "plot_summary", "study_verdicts"]
+__all__ = ["report_markdown", "plot_summary", "study_verdicts", "WALK_COMPARISONS", "method_intervals",
+           "method_intervals_markdown"]
+
+#: Per-walk figures compared across methods over walks: name -> (key path in a per-scene entry, label,
+#: higher is better, display scale).
+WALK_COMPARISONS = {
+    "median_uniformity": (("median_uniformity",), "median uniformity (%)", True, 100.0),
+    "median_matches": (("median_matches",), "median matches", True, 1.0),
+    "vo_failed_frames": (("vo", "n_failed_frames"), "VO failed frames", False, 1.0),
+    "rpe_trans_pct": (("vo", "rpe_trans_pct"), "RPE trans. (%, minimal median)", False, 1.0),
+}
 
 
 def _paper_cell(key: str, method: str, spec: str = "") -> str:
     v = PAPER.get(key, {}).get(method) if isinstance(PAPER.get(key), dict) else None
     return "" if v is None else f" ({v}{spec})"
+
+
+def method_intervals(per_scene: dict, seed: int = 0) -> dict:
+    """Per figure of :data:`WALK_COMPARISONS`: each method's mean over the walks (``per_scene``: walk -> method
+    -> entry of :func:`~validation.ae_study.summary.summarise`) with a 95 % bootstrap interval over walks,
+    and its difference from the best with a paired bootstrap over walks (:func:`emulator.stats.compare_methods`)."""
+    from emulator.stats import compare_methods
+
+    methods = [m for rows in per_scene.values() for m in rows]
+    methods = list(dict.fromkeys(methods))
+    out = {}
+    for k, (name, (path, _, higher, _)) in enumerate(WALK_COMPARISONS.items()):
+        series = {}
+        for m in methods:
+            vals = []
+            for rows in per_scene.values():
+                v = rows.get(m)
+                for key in path:
+                    v = v.get(key) if isinstance(v, dict) else None
+                vals.append(np.nan if v is None else float(v))
+            series[m] = vals
+        out[name] = compare_methods(series, "mean", higher_is_better=higher, seed=[seed, k])
+    return out
+
+
+def method_intervals_markdown(per_scene: dict, seed: int = 0) -> list[str]:
+    """The tables of :func:`method_intervals` (the unit is the walk)."""
+    from emulator.report.intervals import comparison_table
+
+    iv = method_intervals(per_scene, seed)
+    lines = [f"Methods compared over the {len(per_scene)} walk(s) with 95 % intervals (mean over walks, bootstrap "
+             "over walks, differences paired by walk; \"cannot tell apart\": the difference's interval holds 0; "
+             "one walk gives no interval):"]
+    for name, (_, label, _, scale) in WALK_COMPARISONS.items():
+        if iv[name]["best"] is not None:
+            lines += [""] + comparison_table(iv[name], label, spec=".3g", scale=scale)
+    return lines
 
 
 def report_markdown(results: dict) -> str:
@@ -110,7 +157,9 @@ def report_markdown(results: dict) -> str:
             f"{o['vo_failed_runs']} of {o['n_sequences']} | {o['vo_failed_frames']} | "
             f"{_fmt(o['rpe_trans_pct_mean_over_scenes'], '.2f')}{_paper_cell('rpe_trans_pct', name)} | "
             f"{_fmt(o['rpe_rot_deg_per_m_mean_over_scenes'], '.3f')}{_paper_cell('rpe_rot_deg_per_m', name)} |")
-    lines += ["", dash_note("n/a"), "", f"Paper: VO failed on {PAPER['vo_failed_runs']}.", "",
+    lines += ["", dash_note("n/a") + " These are point figures pooled over the scenes; the intervals follow.", ""]
+    lines += method_intervals_markdown(summary["per_scene"])
+    lines += ["", f"Paper: VO failed on {PAPER['vo_failed_runs']}.", "",
               _tau_note(summary, int(hi)), "", "## Verdicts beside the paper's numbers", ""]
     lines += [f"- {v}" for v in study_verdicts(results)]
     lines += ["",

@@ -198,6 +198,10 @@ def finish_replicated_study(out, studies: list[dict], command: str | None = None
         lines.append(f"| {f['id']} | {f['verdict']} | {_fmt(f['effect'])} | {_fmt(ci[0])}..{_fmt(ci[1])} | "
                      f"{_fmt(f['p_adjusted'], '.2g')} | {f.get('n_walks') if f.get('n_walks') is not None else '-'} | "
                      f"{f.get('effect_definition') or f.get('verdict_reason')} |")
+    from validation.ae_study.report import method_intervals, method_intervals_markdown
+
+    results["method_intervals"] = method_intervals(per_scene)
+    lines += [""] + method_intervals_markdown(per_scene)
     write_report(out, "\n".join(lines) + "\n")
     write_results(out / RESULTS_FILE, results)
     return results
