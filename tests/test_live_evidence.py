@@ -89,3 +89,19 @@ def test_power_per_metric_from_the_walks(tmp_path):
     assert p["scales"]["sd_method"] == pytest.approx(1.0, rel=0.35)  # the simulated method SD, recovered
     assert p["walks_needed_for_agrees"] is not None and p["walks_needed_for_agrees"] <= 40
     assert "What this size can decide" in (tmp_path / "report.md").read_text()
+
+
+def test_headline_is_the_verdict_with_its_interval_and_tau_is_secondary():
+    from validation.live.report import headline
+
+    res = {"n_walks": 52, "reference_condition": "cycle-rate live", "metrics": {
+        "median_matches": {"verdict": "agrees", "omega2": 0.04, "omega2_ci95": [0.0, 0.15],
+                           "tau_live_emulated": 0.81, "tau_live_live": 0.9, "tau_live_live_ci95": [0.62, 1.0]},
+        "rpe_trans_pct": {"verdict": "undetermined", "omega2": 0.7, "omega2_ci95": [0.1, None],
+                          "tau_live_emulated": None, "tau_live_live": None}}}
+    lines = headline(res).splitlines()
+    assert lines[0] == "verdicts over 52 walks, emulated vs cycle-rate live (agrees: omega2's 95 % upper end <= 0.2):"
+    assert lines[1] == "  median_matches: agrees, omega2 0.04 [0, 0.15]"
+    assert lines[2] == "  rpe_trans_pct: undetermined, omega2 0.7 [0.1, inf]"
+    assert lines[3].startswith("secondary, not a verdict:") and "median_matches 0.81 vs 0.90 [0.62, 1.00]" in lines[3]
+    assert len(lines) == 4 and "0.9:" not in headline(res)

@@ -137,6 +137,8 @@ def judge_metrics(tables: dict, methods, *, n_resamples: int = 1000, seed: int =
                                                    "verdict", "reason")}
             metrics[metric].update({k: res[k] for k in ("n_walks", "disattenuated_correlation",
                                                         "disattenuated_correlation_ci95", "live_method_p",
+                                                        "tau_live_emulated_ci95", "tau_live_live_ci95",
+                                                        "tau_emulated_below_control_fraction",
                                                         "pairs_live_significant", "pairs_equivalent",
                                                         "pairs_reversed", "margin") if k in res})
     conditions = {}

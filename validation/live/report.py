@@ -174,7 +174,7 @@ def report_markdown(results: dict) -> str:
     if "metrics" in results:
         lines += [evidence_markdown(results)]
     lines += [
-        "## Verdict (single comparisons, no intervals)",
+        "## Point figures (single comparisons, no intervals; the verdicts are above)",
         "",
     ]
     tau_min = results["rank_kendall_tau_min"]
@@ -182,10 +182,11 @@ def report_markdown(results: dict) -> str:
     verdict = []
     if tau_min is not None:
         verdict.append(
-            f"The emulated benchmark ranks the methods as the live camera does with Kendall tau >= "
-            f"{fmt(tau_min, '.2f')} on every metric (worst timing variant, {best} emulation; plain "
-            f"{fmt(tmb.get('plain'), '.2f')}, consistent {fmt(tmb.get('consistent'), '.2f')}). Goal tau_min >= "
-            f"{GOAL_TAU_MIN}: {'met' if goals['rank_kendall_tau_min_ge_0.9'] else 'NOT met'}.")
+            f"Secondary, not a verdict: the smallest Kendall tau of the methods' values live vs emulated over the "
+            f"metrics is {fmt(tau_min, '.2f')} (worst timing variant, {best} emulation; plain "
+            f"{fmt(tmb.get('plain'), '.2f')}, consistent {fmt(tmb.get('consistent'), '.2f')}); read it against the "
+            f"live-vs-live control below, not against issue 14's goal of {GOAL_TAU_MIN}, which an emulator that is "
+            "one more live draw does not reach at this noise (docs/verdicts.md).")
     verdict.append(
         f"Same-instant exposure trajectories differ by a median |log2| of {fmt(results['exposure_log2_error_median'])} "
         f"(max {fmt(results['exposure_log2_error_max'])}); goal <= {GOAL_EXPOSURE_LOG2_MEDIAN}: "
@@ -221,7 +222,7 @@ def report_markdown(results: dict) -> str:
             f"{fmt(up['plain'], '.2f')} times the live noise variance, with either option.")
     lines += [" ".join(verdict), ""]
     if results["rank_kendall_tau_detail"]:
-        lines += ["## Ranking agreement (Kendall tau-b, live vs emulated)", "",
+        lines += ["## Ranking agreement (Kendall tau-b, live vs emulated; secondary, no interval)", "",
                   "| metric | " + " | ".join(results["rank_kendall_tau_detail"]) + " |",
                   "| --- | " + " | ".join("---:" for _ in results["rank_kendall_tau_detail"]) + " |"]
         for metric in METRICS:
@@ -239,7 +240,8 @@ def report_markdown(results: dict) -> str:
                 cells.append(fmt(r["tau"], ".2f") + extra)
             lines.append(f"| {metric} | " + " | ".join(cells) + " |")
         lines += ["", "`live/control`: two live same-instant runs with different capture-noise seeds.", ""]
-        lines += ["## Metric values", "", "| metric | method | " + " | ".join(results["metric_values"]) + " |",
+        lines += ["## Metric values (point figures pooled over this experiment's walks; intervals over walks are in "
+                  "the three-condition table above)", "", "| metric | method | " + " | ".join(results["metric_values"]) + " |",
                   "| --- | --- | " + " | ".join("---:" for _ in results["metric_values"]) + " |"]
         for metric in METRICS:
             for m in cfg["methods"]:
@@ -323,19 +325,30 @@ def report_markdown(results: dict) -> str:
 
 
 def headline(results: dict) -> str:
-    """One line of the headline figures and goals (what the command prints)."""
-    verdicts = ", ".join(f"{m} {r['verdict']}" for m, r in (results.get("metrics") or {}).items())
-    line = f"verdicts over {results.get('n_walks', 0)} walks: {verdicts or 'none'}"
-    if "goals" not in results:  # a replicated experiment: the verdicts only
-        return line
-    return line + "\n" + _headline_point_figures(results)
+    """What the command prints: per metric the verdict with omega2 and its 95 % interval (the headline),
+    then, labelled secondary, Kendall tau(live, emulated) against tau(live, live) of the control."""
+    from validation.verdicts.agreement import OMEGA2_MAX
+
+    metrics = results.get("metrics") or {}
+    lines = [f"verdicts over {results.get('n_walks', 0)} walks, emulated vs {results.get('reference_condition')} "
+             f"(agrees: omega2's 95 % upper end <= {OMEGA2_MAX}):"]
+    lines += [f"  {m}: {r['verdict']}, omega2 {fmt(r['omega2'], '.3g')} {_ci(r['omega2_ci95'])}"
+              for m, r in metrics.items()] or ["  none (no benchmark metrics)"]
+    taus = [f"{m} {fmt(r['tau_live_emulated'], '.2f')} vs {fmt(r['tau_live_live'], '.2f')} "
+            f"{_ci(r.get('tau_live_live_ci95'), '.2f')}" for m, r in metrics.items()
+            if r.get("tau_live_emulated") is not None or r.get("tau_live_live") is not None]
+    if taus:
+        lines.append("secondary, not a verdict: Kendall tau(live, emulated) vs tau(live, live) of the re-seeded "
+                     "control [its 95 % interval]: " + "; ".join(taus))
+    if "goals" in results:  # one experiment: its point figures, no interval
+        lines.append(_headline_point_figures(results))
+    return "\n".join(lines)
 
 
 def _headline_point_figures(results: dict) -> str:
     g = results["goals"]
-    return (f"rank_kendall_tau_min {fmt(results['rank_kendall_tau_min'], '.3f')} ({results['headline_noise']}; goal "
-          f">= {GOAL_TAU_MIN}: {fmt(g['rank_kendall_tau_min_ge_0.9'])}), exposure_log2_error_median "
-          f"{fmt(results['exposure_log2_error_median'], '.4f')} (goal <= {GOAL_EXPOSURE_LOG2_MEDIAN}: "
-          f"{fmt(g['exposure_log2_error_median_le_0.05_same_instant'])}), noise_variance_ratio plain "
-          f"{fmt(results['noise_variance_ratio']['plain'], '.3f')} consistent "
-          f"{fmt(results['noise_variance_ratio']['consistent'], '.3f')}")
+    return (f"point figures (no interval): exposure_log2_error_median "
+            f"{fmt(results['exposure_log2_error_median'], '.4f')} (goal <= {GOAL_EXPOSURE_LOG2_MEDIAN}: "
+            f"{fmt(g['exposure_log2_error_median_le_0.05_same_instant'])}), noise_variance_ratio plain "
+            f"{fmt(results['noise_variance_ratio']['plain'], '.3f')} consistent "
+            f"{fmt(results['noise_variance_ratio']['consistent'], '.3f')}")
