@@ -32,7 +32,7 @@ from validation.live.config import (
     REFERENCE_LIVE,
 )
 
-__all__ = ["WALK_METRICS", "walk_value", "walk_values", "condition_table", "judge_metrics"]
+__all__ = ["WALK_METRICS", "walk_value", "walk_values", "condition_table", "metric_scales", "judge_metrics"]
 
 #: Per-walk value of each ranked metric, from one method's entry of
 #: ``ae_study.summarise(...)["per_scene"][scene]`` (the walk's own figures).
@@ -101,6 +101,41 @@ def condition_table(table: np.ndarray, methods, *, n_resamples: int = 1000, seed
     return out
 
 
+def metric_scales(tables: dict, metric: str, *, min_walks: int = 2):
+    """``(Scales, complete walks, None)`` of one metric measured on a study's walk tables, or ``(None, n, reason)``.
+
+    The reference live condition's table gives the method SD and its residual; the run
+    noise comes from the two live runs that differ only in their capture-noise seeds
+    (same-instant and its re-seeded control: their difference's residual is twice the run
+    noise variance), and the rest of the reference's residual is walk x method.  Without a
+    control all of the residual counts as noise (conservative).
+    """
+    from validation.verdicts.power import scales_from_tables
+
+    live = tables.get(CONDITIONS[REFERENCE_LIVE], {}).get(metric)
+    if live is None:
+        return None, 0, f"run {CONDITIONS[REFERENCE_LIVE]} not in this study"
+    control = tables.get(f"live-{CONTROL}", {}).get(metric)
+    ok = np.all(np.isfinite(live), axis=1)
+    if control is not None:
+        ok &= np.all(np.isfinite(control), axis=1)
+    n = int(ok.sum())
+    if n < min_walks:
+        return None, n, f"{n} complete walks, fewer than {min_walks}: no variance components to size the study from"
+    sc = scales_from_tables(live[ok])
+    same = tables.get("live-same-instant", {}).get(metric)
+    if control is not None and same is not None:
+        both = ok & np.all(np.isfinite(same), axis=1)
+        if both.sum() >= 2:
+            noise = scales_from_tables(same[both], control=control[both]).sd_noise
+            resid = sc.sd_noise ** 2 + sc.sd_walk_method ** 2
+            sc = type(sc)(sd_method=sc.sd_method, sd_walk_method=float(np.sqrt(max(resid - noise ** 2, 0.0))),
+                          sd_noise=float(min(noise, np.sqrt(resid))), sd_walk=sc.sd_walk)
+    if sc.sd_method <= 0:
+        return None, n, "live shows no method effect at this size (variance component <= 0)"
+    return sc, n, None
+
+
 def judge_metrics(tables: dict, methods, *, n_resamples: int = 1000, seed: int = 0, power: bool = True,
                   power_seeds: int = 100) -> dict:
     """results.json's ``metrics``, ``comparisons``, ``conditions``, ``power`` and ``n_walks`` from walk tables.
@@ -109,7 +144,7 @@ def judge_metrics(tables: dict, methods, *, n_resamples: int = 1000, seed: int =
     (the native-rate live loop where none was given) is ``{"status": "not run"}``.
     """
     from validation.verdicts.agreement import MIN_WALKS, judge
-    from validation.verdicts.power import power_summary, scales_from_tables
+    from validation.verdicts.power import power_summary
 
     names = list(methods)
     control = tables.get(f"live-{CONTROL}")
@@ -152,37 +187,13 @@ def judge_metrics(tables: dict, methods, *, n_resamples: int = 1000, seed: int =
             metric: condition_table(tables[run][metric], names, n_resamples=n_resamples,
                                     seed=[seed, 22_002, list(METRICS).index(metric)]) for metric in METRICS}}
     power_out = {}
-    ref_run = CONDITIONS[REFERENCE_LIVE]
     for metric in METRICS:
-        if not power:
+        if not power or CONDITIONS[REFERENCE_LIVE] not in tables:
             break
-        live = tables.get(ref_run, {}).get(metric)
-        if live is None:
+        sc, n, reason = metric_scales(tables, metric, min_walks=MIN_WALKS)
+        if sc is None:
+            power_out[metric] = {"status": "not computed", "reason": reason}
             continue
-        ok = np.all(np.isfinite(live), axis=1)
-        if control is not None:
-            ok &= np.all(np.isfinite(control[metric]), axis=1)
-        if ok.sum() < MIN_WALKS:
-            power_out[metric] = {"status": "not computed",
-                                 "reason": f"{int(ok.sum())} complete walks, fewer than {MIN_WALKS}: no variance "
-                                           "components to size the study from"}
-            continue
-        sc = scales_from_tables(live[ok])
-        same = tables.get("live-same-instant", {}).get(metric)
-        if control is not None and same is not None:
-            # run noise from two live runs that differ only in their capture-noise seeds (same-instant and its
-            # re-seeded control); the rest of the reference's residual is walk x method
-            both = ok & np.all(np.isfinite(same), axis=1)
-            if both.sum() >= 2:
-                noise = scales_from_tables(same[both], control=control[metric][both]).sd_noise
-                resid = sc.sd_noise ** 2 + sc.sd_walk_method ** 2
-                sc = type(sc)(sd_method=sc.sd_method, sd_walk_method=float(np.sqrt(max(resid - noise ** 2, 0.0))),
-                              sd_noise=float(min(noise, np.sqrt(resid))), sd_walk=sc.sd_walk)
-        if sc.sd_method <= 0:
-            power_out[metric] = {"status": "not computed", "scales": sc.__dict__,
-                                 "reason": "live shows no method effect at this size (variance component <= 0)"}
-            continue
-        power_out[metric] = {"status": "computed",
-                             **power_summary(int(ok.sum()), sc, n_seeds=power_seeds, seed=[seed, 22_003])}
+        power_out[metric] = {"status": "computed", **power_summary(n, sc, n_seeds=power_seeds, seed=[seed, 22_003])}
     return {"n_walks": n_walks, "reference_condition": REFERENCE_LIVE, "metrics": metrics,
             "comparisons": comparisons, "conditions": conditions, "power": power_out}
