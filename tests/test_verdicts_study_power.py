@@ -39,6 +39,7 @@ def test_paper_sized_effect_in_the_studys_residual_sds(tmp_path):
     assert row["effect_study_units"] == pytest.approx(0.65 * 2.0 / ((4.21 + 5.75 + 5.1) / 3))
     assert row["effect_noise_sd"] == pytest.approx(row["effect_study_units"] / sd)
     assert 0.0 <= row["power_at_size"] <= 1.0 and row["n_walks_power"] == 12
+    assert row["effect_noise_sd_by_method_sd"] == 0.0  # no method effect here: the other transfer gives 0
     # a live study folder: the walks of one run, from each replicate's raw.json
     for seed in (0, 1):
         units = _units(rpe[6 * seed:6 * seed + 6])

@@ -18,7 +18,9 @@ variance components measured on them (not the pilot's):
 How the paper's effect is moved into the study's units (:data:`TRANSFER`): RPE scales with
 the walk (a 6 m synthetic walk is not a 1 km trajectory), so its effect is taken relative
 to the level (paper effect / mean of the paper's reported values, times the study's mean);
-success rates are fractions in both, so their effect is taken as it is.
+success rates are fractions in both, so their effect is taken as it is.  The table also
+shows, for comparison only, the other transfer docs/verdicts.md used before: the effect in
+the paper's method SDs (over its reported methods) times the study's method SD.
 """
 
 from __future__ import annotations
@@ -62,6 +64,7 @@ def paper_effects() -> dict[str, dict]:
         values = np.array([reported[m] for m in methods], dtype=np.float64) * unit
         effect = float(f(values, methods))
         out[fid] = {"metric": metric, "paper_effect": effect, "paper_level": float(values.mean()),
+                    "paper_method_sd": float(values.std(ddof=1)),
                     "paper_methods": methods, "transfer": how, "definition": definition}
     return out
 
@@ -126,7 +129,8 @@ def paper_sized_power(units: list[dict], *, n_walks: int | None = None, n_seeds:
     out = {}
     for k, (fid, pe) in enumerate(PAPER_EFFECTS.items()):
         sc = finding_scales(tables[pe["metric"]])
-        row = {**pe, **sc, "effect_study_units": None, "effect_noise_sd": None, "power_at_size": None,
+        row = {**pe, **sc, "effect_study_units": None, "effect_noise_sd": None, "effect_noise_sd_by_method_sd": None,
+               "power_at_size": None,
                "walks_for_80_percent": None}
         if not sc["sd_residual"]:
             row["reason"] = (f"{sc['n_walks']} walk(s) with a {pe['metric']} value for every method: "
@@ -136,7 +140,10 @@ def paper_sized_power(units: list[dict], *, n_walks: int | None = None, n_seeds:
         eff = pe["paper_effect"] * (sc["level"] / pe["paper_level"] if pe["transfer"] == "relative" else 1.0)
         d = abs(eff) / sc["sd_residual"]
         size = int(n_walks or sc["n_walks"])
-        row.update(effect_study_units=eff, effect_noise_sd=d, n_walks_power=size,
+        # the other transfer, for comparison only: the effect in the paper's method SDs times the study's
+        by_sd = (abs(pe["paper_effect"]) / pe["paper_method_sd"] * sc["sd_method"] / sc["sd_residual"]
+                 if pe["paper_method_sd"] > 0 else None)
+        row.update(effect_study_units=eff, effect_noise_sd=d, effect_noise_sd_by_method_sd=by_sd, n_walks_power=size,
                    power_at_size=finding_power(fid, d, size, n_seeds=n_seeds, seed=[seed, k, size],
                                                n_permutations=n_permutations))
         for w in candidates:
@@ -193,15 +200,16 @@ def markdown(result: dict) -> str:
         lines.append("")
     lines += ["## Paper-sized findings (per-walk residual measured on the study's walks)", "",
               "| finding | paper effect (its units) | transfer | study level | effect in study units | per-walk "
-              "residual SD | effect / residual SD | power at size | walks for 80 % |",
-              "| --- | ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
+              "residual SD | effect / residual SD | (by method SD) | power at size | walks for 80 % |",
+              "| --- | ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
     for fid, r in result["findings"].items():
         if r["effect_noise_sd"] is None:
-            lines.append(f"| {fid} | {_fmt(r['paper_effect'])} | {r['transfer']} | | | | | | {r.get('reason', '')} |")
+            lines.append(f"| {fid} | {_fmt(r['paper_effect'])} | {r['transfer']} | | | | | | | {r.get('reason', '')} |")
             continue
         lines.append(f"| {fid} | {_fmt(r['paper_effect'])} | {r['transfer']} | {_fmt(r['level'])} | "
                      f"{_fmt(r['effect_study_units'])} | {_fmt(r['sd_residual'])} | {_fmt(r['effect_noise_sd'], '.2f')}"
-                     f" | {100 * r['power_at_size']:.0f} % ({r['n_walks_power']} walks) | "
+                     f" | {_fmt(r['effect_noise_sd_by_method_sd'], '.2f')} | {100 * r['power_at_size']:.0f} % "
+                     f"({r['n_walks_power']} walks) | "
                      f"{r['walks_for_80_percent'] or '> 240'} |")
     return "\n".join(lines) + "\n"
 
