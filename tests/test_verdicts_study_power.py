@@ -11,7 +11,8 @@ METHODS = ("fixed", "classical-30", "classical-50", "classical-70", "shim", "zha
 
 
 def test_paper_effects_are_the_findings_on_the_papers_numbers():
-    e = {fid: (round(r["paper_effect"], 6), round(r["paper_level"], 6), r["transfer"]) for fid, r in PAPER_EFFECTS.items()}
+    e = {fid: (round(r["paper_effect"], 6), round(r["paper_level"], 6), r["transfer"])
+         for fid, r in PAPER_EFFECTS.items()}
     assert e == {
         "rpe_trans_worst_kim": (0.65, round((4.21 + 5.75 + 5.1) / 3, 6), "relative"),  # 5.75 - 5.1
         "rpe_trans_best_50": (0.89, round((4.21 + 5.75 + 5.1) / 3, 6), "relative"),  # 5.1 - 4.21

@@ -55,7 +55,9 @@ Modules: :mod:`~validation.live.config` (the configuration), :mod:`~validation.l
 (live and emulated loops, run folders), :mod:`~validation.live.compare` (per-cycle
 comparisons, Kendall tau, noise variance ratio), :mod:`~validation.live.verdicts` (the
 numbers of results.json, flip causes), :mod:`~validation.live.report` (figures, report.md),
-:mod:`~validation.live.experiment` (the run, :func:`redraw`), :mod:`~validation.live.cli`.
+:mod:`~validation.live.walks` (one walk as one task: serial, local Dask cluster or a scheduler
+address; resume), :mod:`~validation.live.experiment` (the study, each seed's ``raw.json``,
+:func:`redraw`), :mod:`~validation.live.cli`.
 """
 
 import importlib
@@ -70,6 +72,7 @@ _HOMES = {
     **dict.fromkeys(("finish", "numbered_output", "redraw", "run_live_experiment"), "validation.live.experiment"),
     **dict.fromkeys(("DatasetRadiance", "iter_emulated", "iter_live", "write_run_folder"), "validation.live.loops"),
     "native_rate_loop": "validation.live.native",
+    **dict.fromkeys(("run_walk", "run_walks"), "validation.live.walks"),
 }
 
 __all__ = [
@@ -95,6 +98,8 @@ __all__ = [
     "finish",
     "redraw",
     "numbered_output",
+    "run_walk",
+    "run_walks",
     "main",
 ]
 

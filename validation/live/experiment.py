@@ -3,7 +3,8 @@
 :func:`run_live_experiment` (one seed) and :func:`run_replicated` (several) run every walk
 as one task (:mod:`validation.live.walks`: record, emulated and live loops, comparisons,
 run folders, benchmarks, noise variance ratio; serial, local Dask cluster or a scheduler
-address), pool each seed's walks into its ``raw.json`` (:func:`assemble_raw`); :func:`finish` turns that record into ``results.json``, ``report.md``
+address), pool each seed's walks into its ``raw.json`` (:func:`assemble_raw`); :func:`finish`
+turns that record into ``results.json``, ``report.md``
 and the figures (:func:`redraw` does it again from ``raw.json`` alone).  All files go
 through :mod:`emulator.io`.
 """

@@ -26,7 +26,7 @@ import numpy as np
 from emulator.io.files import read_results, to_jsonable, write_results
 from validation.live.config import BRIGHTENING_PAIRS, CONTROL, NOISE_OPTIONS, VARIANTS, LiveConfig, config_from_dict
 
-__all__ = ["WALKS_DIR", "NATIVE_RUN", "run_names", "walk_record_path", "walk_name", "run_walk", "run_walks"]
+__all__ = ["WALKS_DIR", "NATIVE_RUN", "walk_record_path", "walk_name", "run_walk", "run_walks", "read_walk"]
 
 #: Sub-folder of an experiment with one record per finished walk.
 WALKS_DIR = "walks"
@@ -34,16 +34,6 @@ WALKS_DIR = "walks"
 NATIVE_RUN = "live-native"
 #: The folders of one walk inside its experiment (cleared before a walk is run again).
 WALK_FOLDERS = ("datasets", "runs", "features", "vo")
-
-
-def run_names(cfg: LiveConfig, native: bool) -> list[str]:
-    """The runs of every walk: emulated (plain, consistent), live (same-, fixed-instant), control, native."""
-    names = [f"emulated-{n}" for n in NOISE_OPTIONS] + [f"live-{v}" for v in VARIANTS]
-    if cfg.control:
-        names.append(f"live-{CONTROL}")
-    if native:
-        names.append(NATIVE_RUN)
-    return names
 
 
 def walk_record_path(experiment, scene: str) -> Path:
