@@ -20,6 +20,7 @@ from synth.noise_model import noise_model_of
 from synth.procedural import hdr_chart
 from synth.sequence import BASELINE_M, load_camera
 from validation.common import quantisation_bound
+from validation.live.config import config_from_dict
 from validation.live import (
     METRICS,
     CONFIGS,
@@ -389,3 +390,15 @@ def test_walks_as_dask_tasks_same_bytes_and_resume(tmp_path, render_cache, monke
     assert (rep / "seed1" / "walks" / "forest_winter.json").is_file() and res["n_walks"] == 2
     again = _without_timings(rep / "seed1" / "raw.json")
     assert again == _without_timings(tmp_path / "dask" / "replicates" / "seed1" / "raw.json")
+
+
+def test_render_per_reaches_the_recorder_and_a_bad_value_is_refused(tmp_path, stop_at_synthesize, capsys):
+    # the walk fails at the stand-in (an error row, exit code 1) after the option reached the recorder
+    assert main(["-o", str(tmp_path / "run"), "--quick", "--no-progress", "--render-per", "cycle",
+                 "--scenes", "forest_winter"]) == 1
+    assert stop_at_synthesize["render_per"] == "cycle"
+    assert LiveConfig(render_per="cycle").to_dict()["renders"] == 40 * 2 * len(LiveConfig().scenes)
+    assert config_from_dict({"render_per": "cycle"}).render_per == "cycle"
+    assert config_from_dict({}).render_per == "shot"  # records from before the option
+    with pytest.raises(Exception, match="render_per must be 'shot' or 'cycle', got 'frame'"):
+        LiveConfig(render_per="frame")

@@ -172,7 +172,7 @@ def run_walk(config: dict, scene_name: str, experiment: str, cache_dir=None, nat
     with _bar(cfg.n_cycles * 6, f"{tag}: render + record", progress) as bar:
         synthesize(scene, ds, n_cycles=cfg.n_cycles, width=cfg.width, height=cfg.height, spp=cfg.spp, stereo=True,
                    seed=cfg.seed, render_seed=cfg.seed, noise=cfg.capture_noise, save_radiance=True,
-                   cache_dir=cache_dir, progress=lambda d, n: bar.update(d - bar.n))
+                   render_per=cfg.render_per, cache_dir=cache_dir, progress=lambda d, n: bar.update(d - bar.n))
     timings[f"record_{scene_name}_s"] = time.perf_counter() - t_start
     say(f"{tag}: recorded {cfg.n_cycles} cycles in {timings[f'record_{scene_name}_s']:.0f} s")
     seq = load_sequence(ds)
