@@ -402,3 +402,33 @@ def test_render_per_reaches_the_recorder_and_a_bad_value_is_refused(tmp_path, st
     assert config_from_dict({}).render_per == "shot"  # records from before the option
     with pytest.raises(Exception, match="render_per must be 'shot' or 'cycle', got 'frame'"):
         LiveConfig(render_per="frame")
+
+
+@pytest.mark.render
+@pytest.mark.slow
+def test_a_failed_walk_is_an_error_row_and_the_others_are_judged(tmp_path, render_cache, monkeypatch, capsys):
+    monkeypatch.setenv("EXPOSIM_DENOISE", "off")
+    import validation.live.walks as walks
+
+    real = walks.run_walk
+
+    def fails_on_seed_1(config, *args, **kwargs):
+        if config["seed"] == 1:
+            raise RuntimeError("disk full")
+        return real(config, *args, **kwargs)
+
+    monkeypatch.setattr(walks, "run_walk", fails_on_seed_1)
+    args = ["-o", str(tmp_path / "rep"), "--quick", "--scenes", "forest_winter", "--size", "64x40", "--spp", "2",
+            "--methods", "fixed,classical-50", "--noise-repeats", "4", "--replicates", "2", "--no-progress",
+            "--cache-dir", str(render_cache)]
+    assert main(args) == 1
+    err = capsys.readouterr().err
+    assert "1 walk(s) failed (forest_winter/seed1: RuntimeError: disk full)" in err and "--resume" in err
+    res = json.loads((tmp_path / "rep" / "results.json").read_text())
+    assert res["failed_walks"] == [{"walk": "forest_winter/seed1", "error": "RuntimeError: disk full"}]
+    assert res["walks"] == ["forest_winter/seed0"] and res["n_walks"] == 1
+    assert "Failed walk (not judged" in (tmp_path / "rep" / "report.md").read_text()
+    monkeypatch.setattr(walks, "run_walk", real)  # resumed: only the failed walk runs, and then all are judged
+    assert main(args + ["--resume"]) == 0
+    res = json.loads((tmp_path / "rep" / "results.json").read_text())
+    assert res["failed_walks"] == [] and res["n_walks"] == 2

@@ -126,7 +126,8 @@ def run_study(experiments: list[tuple[Path, LiveConfig]], *, command: str | None
     """Every walk of ``experiments`` (folder, configuration) as one batch of tasks
     (:func:`validation.live.walks.run_walks`), then each experiment's ``raw.json`` and
     verdicts (:func:`finish`).  An experiment whose ``raw.json`` exists without failed walks
-    is read, not run again.  Returns the experiments' raw records (those with at least one walk)."""
+    is read, not run again.  Returns the experiments' raw records (one whose walks all failed
+    has an empty ``per_scene`` and its ``failed_walks``)."""
     from validation.live.walks import run_walks
 
     done, todo = {}, []
@@ -145,7 +146,7 @@ def run_study(experiments: list[tuple[Path, LiveConfig]], *, command: str | None
         if raw["per_scene"]:
             finish(exp, raw)
         done[exp] = raw
-    return [done[exp] for exp, _ in experiments if done[exp]["per_scene"]]
+    return [done[exp] for exp, _ in experiments]
 
 
 def run_live_experiment(out, config: LiveConfig | None = None, *, progress: bool = True, command: str | None = None,
@@ -177,8 +178,8 @@ def run_live_experiment(out, config: LiveConfig | None = None, *, progress: bool
     _check_output(out, resume, {"config": cfg.to_dict(), "replicates": 1})
     records = run_study([(out, cfg)], command=command, cache_dir=cache_dir, log=log, scheduler=scheduler,
                         n_workers=n_workers, native_loop=native_loop, progress=progress)
-    raw = read_results(out / RAW_FILE)
-    if not records:
+    raw = records[0]
+    if not raw["per_scene"]:
         raise LiveError("every walk failed: " + "; ".join(f"{f['walk']}: {f['error']}" for f in raw["failed_walks"]))
     return read_results(out / RESULTS_FILE)
 
@@ -282,7 +283,7 @@ def run_replicated(out, config: LiveConfig | None = None, replicates: int = 1, *
     experiments = [(out / REPLICATES_DIR / f"seed{cfg.seed + k}", replace(cfg, seed=cfg.seed + k))
                    for k in range(replicates)]
     records = run_study(experiments, command=command, **kwargs)
-    if not records:
+    if not any(r["per_scene"] for r in records):
         raise LiveError("every walk failed; see the failed_walks of " + ", ".join(
             str(e / RAW_FILE) for e, _ in experiments))
     return finish_replicated(out, records, command=command, wall_s=time.perf_counter() - t0)
@@ -295,17 +296,24 @@ def finish_replicated(out, records: list[dict], command: str | None = None, powe
     from validation.live.report import evidence_markdown
 
     out = Path(out)
+    failed = [f for r in records for f in r.get("failed_walks", [])]
+    records = [r for r in records if r.get("per_scene", True)]  # a replicate whose every walk failed: failed only
+    if not records:
+        raise LiveError(f"{out}: no walk of the study ran (" + "; ".join(f"{f['walk']}: {f['error']}" for f in failed)
+                        + ")")
     cfg = config_from_dict(records[0]["config"])
     results = {"experiment": "live versus emulated, replicated", "command": command,
                "config": cfg.to_dict(), "replicates": [f"{REPLICATES_DIR}/seed{r['config']['seed']}" for r in records],
                "timings": {"total_s": float(sum((r.get("timings") or {}).get("total_s", 0.0) for r in records)),
                            **({} if wall_s is None else {"wall_s": float(wall_s)})},
-               "failed_walks": [f for r in records for f in r.get("failed_walks", [])]}
+               "failed_walks": failed}
     results.update(evidence(cfg, records, power_seeds=power_seeds))
     write_report(out, "# Live versus emulated, replicated\n\n"
                  + f"{len(records)} replicate(s) of the experiment (seeds "
                  + ", ".join(str(r["config"]["seed"]) for r in records) + f"), {results['n_walks']} walks. "
-                 + f"Command: `{command}`\n\n" + evidence_markdown(results))
+                 + f"Command: `{command}`\n\n"
+                 + "".join(f"Failed walk (not judged; `--resume` runs it again): {f['walk']}: {f['error']}\n\n"
+                           for f in results["failed_walks"]) + evidence_markdown(results))
     write_results(out / RESULTS_FILE, results)
     return results
 
@@ -338,5 +346,8 @@ def redraw(out) -> dict:
             return finish_replicated(out, records, command=command)
     if not path.is_file():
         raise LiveError(f"{path}: not found; not a finished live experiment folder")
-    return finish(out, read_results(path))
+    raw = read_results(path)
+    if "per_scene" in raw and not raw["per_scene"]:
+        raise LiveError(f"{path}: every walk failed; nothing to judge (--resume runs them again)")
+    return finish(out, raw)
 

@@ -171,6 +171,10 @@ def report_markdown(results: dict) -> str:
         f"Command: `{results.get('command')}`",
         "",
     ]
+    failed = results.get("failed_walks") or []
+    if failed:
+        lines += [f"**{len(failed)} walk(s) failed** and are not judged: "
+                  + "; ".join(f"{f['walk']}: {f['error']}" for f in failed) + " (`--resume` runs them again).", ""]
     if "metrics" in results:
         lines += [evidence_markdown(results)]
     lines += [
@@ -260,7 +264,7 @@ def report_markdown(results: dict) -> str:
     for m in cfg["methods"]:
         lines.append(f"| {m} | " + " | ".join(fmt(results["exposure"][k]["methods"][m]["median"])
                                              for k in results["exposure"]) + " |")
-    lines += [""] + [f"![{s}](exposure_{s}.png)" for s in cfg["scenes"]] + [""]
+    lines += [""] + [f"![{s}](exposure_{s}.png)" for s in results["files"]["exposure_figures"]] + [""]
     if results["findings_flips"]:
         lines += ["## Paper findings that flip (live vs emulated)", ""]
         for key, fl in results["findings_flips"].items():
