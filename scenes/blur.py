@@ -38,6 +38,7 @@ __all__ = [
     "SUBINSTANTS_PER_PX",
     "MAX_SUBINSTANTS",
     "NEAR_DEPTH_M",
+    "INTERPOLATIONS",
     "exposure_window_s",
     "predicted_blur_px",
     "n_subinstants",
@@ -53,6 +54,8 @@ SUBINSTANTS_PER_PX = 2.0
 MAX_SUBINSTANTS = 96
 #: Depth of the nearest surface assumed by the blur prediction, m.
 NEAR_DEPTH_M = 1.0
+#: Resamplers of the warps: name -> OpenCV interpolation flag.
+INTERPOLATIONS = {"linear": "INTER_LINEAR", "cubic": "INTER_CUBIC", "lanczos4": "INTER_LANCZOS4"}
 #: Blur (px) below which a shot is one sub-instant.
 _AT_REST_PX = 0.25
 _GRID = np.linspace(0.0, 1.0, 5)
@@ -173,7 +176,10 @@ class ShotRenderer:
     def __init__(self, scene, pose_at, t0_s: float, max_exposure_ms: float, *, width: int, height: int,
                  spp: int, seed: int = 0, fov_deg: float = DEFAULT_FOV_DEG, cache_dir=None, variant=None,
                  denoise=None, samples_per_px: float = SUBINSTANTS_PER_PX, near_depth_m: float = NEAR_DEPTH_M,
-                 anchor_s: float | None = None):
+                 anchor_s: float | None = None, interpolation: str = "linear"):
+        if interpolation not in INTERPOLATIONS:
+            raise RenderError(f"interpolation must be one of {', '.join(INTERPOLATIONS)}, got {interpolation!r}")
+        self.interpolation = interpolation
         if not (math.isfinite(t0_s) and math.isfinite(max_exposure_ms) and max_exposure_ms >= 0):
             raise RenderError(f"need a finite t0_s and max_exposure_ms >= 0, got {t0_s!r}, {max_exposure_ms!r}")
         self.scene, self.pose_at, self.t0_s = scene, pose_at, float(t0_s)
@@ -243,9 +249,15 @@ class ShotRenderer:
         self._src = (src, inv_depth, anchor, k_src)
 
     def radiance(self, exposure_ms: float, *, start_s: float | None = None,
-                 n_subinstants_override: int | None = None) -> tuple[np.ndarray, dict]:
+                 n_subinstants_override: int | None = None, interpolation: str | None = None) -> tuple[np.ndarray, dict]:
         """Mean radiance over ``[start, start + exposure_ms]`` (``start`` default ``t0_s``; the window
-        must lie in ``[t0_s, t0_s + max_exposure_ms]``): float32 (H, W, 3), and ``{blur_px, n_subinstants}``."""
+        must lie in ``[t0_s, t0_s + max_exposure_ms]``): float32 (H, W, 3), and ``{blur_px, n_subinstants}``.
+        ``interpolation`` (default the renderer's) names the resampler of the warps (:data:`INTERPOLATIONS`)."""
+        import cv2
+
+        interpolation = self.interpolation if interpolation is None else interpolation
+        if interpolation not in INTERPOLATIONS:
+            raise RenderError(f"interpolation must be one of {', '.join(INTERPOLATIONS)}, got {interpolation!r}")
         exposure_ms = float(exposure_ms)
         start = self.t0_s if start_s is None else float(start_s)
         t1 = start + 1e-3 * exposure_ms
@@ -265,9 +277,13 @@ class ShotRenderer:
         t = time.perf_counter()
         acc = np.zeros((self.height, self.width, src.shape[2]), dtype=np.float64)
         for pose in np.asarray(self.pose_at(subinstant_times_s(start, t1, n)), dtype=np.float64):
-            acc += warp_to_pose(src, inv_depth, anchor, k_src, pose, k_dst, self.width, self.height)
+            acc += warp_to_pose(src, inv_depth, anchor, k_src, pose, k_dst, self.width, self.height,
+                                interpolation=getattr(cv2, INTERPOLATIONS[interpolation]))
         self.info["warp_s"] += time.perf_counter() - t
-        return (acc / n).astype(np.float32), {"blur_px": blur, "n_subinstants": n}
+        out = (acc / n).astype(np.float32)
+        if interpolation != "linear":  # the cubic and Lanczos kernels overshoot below zero at edges
+            np.maximum(out, 0.0, out=out)
+        return out, {"blur_px": blur, "n_subinstants": n}
 
 
 def render_exposure(scene, pose_at, t0_s: float, t1_s: float, **kwargs) -> tuple[np.ndarray, dict]:
