@@ -113,9 +113,13 @@ def bench_walk(out: Path, scene_name: str, ds: Path, runs: dict, cfg, seed: int)
                         if m in feats["runs"][0]["methods"]}
                   for key in {v[1] for v in METRICS.values() if v[1]}}
         out_runs[r] = {"summary": {m: _entry(per.get(m)) for m in names}, "frames": frames,
-                       "median_exposure_ms": {m: float(np.median([cs.steps[m].target_ms for cs in cycles
-                                                                  if m in cs.steps] or [np.nan])) for m in names}}
+                       "median_exposure_ms": {m: _median_or_none([cs.steps[m].target_ms for cs in cycles
+                                                                  if m in cs.steps]) for m in names}}
     return out_runs
+
+
+def _median_or_none(values) -> float | None:
+    return float(np.median(values)) if len(values) else None
 
 
 def write_run_folder_for(folder: Path, ds: Path, cycles, names, seq) -> Path:
@@ -198,6 +202,7 @@ def run_versus(out: Path, cfg, *, tick=None) -> dict:
     import shutil
 
     import scenes
+    from emulator.io.files import write_results
 
     tick = tick or (lambda n: None)
     walks = []
@@ -213,6 +218,7 @@ def run_versus(out: Path, cfg, *, tick=None) -> dict:
             shutil.rmtree(base / "runs", ignore_errors=True)  # images: large, and the benchmarks have read them
             tick(1)
         walks.append(rec)
+        write_results(Path(out) / "versus" / f"seed{seed}" / "walk.json", rec, float_digits=12)  # kept as it comes
     return {"walks": walks, "table": compare(walks, cfg.versus_methods, seed=cfg.seed),
             "settings": {"runs": list(RUNS), "scene_blur": list(SCENE_BLUR), "live_timing": "same-instant",
                          "recording": "render_per=cycle, one render per sweep and camera shared by both recordings",
