@@ -181,7 +181,10 @@ class ShotRenderer:
     def __init__(self, scene, pose_at, t0_s: float, max_exposure_ms: float, *, width: int, height: int,
                  spp: int, seed: int = 0, fov_deg: float = DEFAULT_FOV_DEG, cache_dir=None, variant=None,
                  denoise=None, samples_per_px: float = SUBINSTANTS_PER_PX, near_depth_m: float = NEAR_DEPTH_M,
-                 anchor_s: float | None = None, interpolation: str = "linear"):
+                 anchor_s: float | None = None, interpolation: str = "linear", supersample: int = 1):
+        if isinstance(supersample, bool) or not isinstance(supersample, int) or supersample < 1:
+            raise RenderError(f"supersample must be an integer >= 1, got {supersample!r}")
+        self.supersample = supersample
         if interpolation not in INTERPOLATIONS:
             raise RenderError(f"interpolation must be one of {', '.join(INTERPOLATIONS)}, got {interpolation!r}")
         self.interpolation = interpolation
@@ -226,8 +229,10 @@ class ShotRenderer:
         margin = self.margin_px()
         fx = intrinsics(self.width, self.height, self.fov_deg)[0]
         ws, hs = self.width + 2 * margin, self.height + 2 * margin
-        return dict(scene=self.scene, pose=anchor, width=ws, height=hs,
-                    fov_deg=math.degrees(2.0 * math.atan(0.5 * ws / fx)), **self.render_args)
+        ss = self.supersample  # ss x ss pixels per output pixel, the same samples per output pixel in all
+        args = {**self.render_args, "spp": max(1, int(round(self.render_args["spp"] / (ss * ss))))}
+        return dict(scene=self.scene, pose=anchor, width=ss * ws, height=ss * hs,
+                    fov_deg=math.degrees(2.0 * math.atan(0.5 * ws / fx)), **args)
 
     def _prepare(self) -> None:
         from scenes.render import render_depth, render_with_info
@@ -242,8 +247,8 @@ class ShotRenderer:
         if self.at_rest:
             self._src = (src, None, anchor, None)
             return
-        self.info["margin_px"] = (ws - self.width) // 2
-        fx = intrinsics(self.width, self.height, self.fov_deg)[0]
+        self.info["margin_px"] = (ws // self.supersample - self.width) // 2
+        fx = self.supersample * intrinsics(self.width, self.height, self.fov_deg)[0]
         t = time.perf_counter()
         k_src = np.array([[fx, 0, (ws - 1) / 2.0], [0, fx, (hs - 1) / 2.0], [0, 0, 1.0]])
         dist = render_depth(self.scene, anchor, width=ws, height=hs, fov_deg=fov_src, spp=1,
@@ -277,15 +282,19 @@ class ShotRenderer:
             return src, {"blur_px": blur, "n_subinstants": 1}
         n = (n_subinstants(blur, self.samples_per_px) if n_subinstants_override is None
              else int(n_subinstants_override))
-        fx = k_src[0, 0]
-        k_dst = np.array([[fx, 0, (self.width - 1) / 2.0], [0, fx, (self.height - 1) / 2.0], [0, 0, 1.0]])
+        fx, ss = k_src[0, 0], self.supersample
+        wd, hd = ss * self.width, ss * self.height
+        k_dst = np.array([[fx, 0, (wd - 1) / 2.0], [0, fx, (hd - 1) / 2.0], [0, 0, 1.0]])
         t = time.perf_counter()
-        acc = np.zeros((self.height, self.width, src.shape[2]), dtype=np.float64)
+        acc = np.zeros((hd, wd, src.shape[2]), dtype=np.float64)
         for pose in np.asarray(self.pose_at(subinstant_times_s(start, t1, n)), dtype=np.float64):
-            acc += warp_to_pose(src, inv_depth, anchor, k_src, pose, k_dst, self.width, self.height,
+            acc += warp_to_pose(src, inv_depth, anchor, k_src, pose, k_dst, wd, hd,
                                 interpolation=getattr(cv2, INTERPOLATIONS[interpolation]))
-        self.info["warp_s"] += time.perf_counter() - t
         out = (acc / n).astype(np.float32)
+        if ss > 1:  # the mean of each ss x ss block: the output pixel's area
+            out = cv2.resize(out, (self.width, self.height), interpolation=cv2.INTER_AREA).reshape(
+                self.height, self.width, -1)
+        self.info["warp_s"] += time.perf_counter() - t
         if interpolation != "linear":  # the cubic and Lanczos kernels overshoot below zero at edges
             np.maximum(out, 0.0, out=out)
         return out, {"blur_px": blur, "n_subinstants": n}

@@ -196,3 +196,23 @@ def test_sharp_twin_shares_the_renders_and_samples_the_trigger_instant(tmp_path)
                                   read_exr(sharp / "ground_truth" / "radiance" / "camera_left" / f"{last}.exr"))
     blurred_32 = read_exr(blurred / "ground_truth" / "radiance" / "camera_left" / f"{last}.exr")
     assert not np.array_equal(blurred_32, live(last, "left", 32.0))
+
+
+@pytest.mark.render
+def test_a_supersampled_shot_spends_the_same_samples_and_keeps_the_level(tmp_path):
+    import scenes
+
+    scene = scenes.get_scene("forest_summer")
+    traj = scene.trajectory(3.0)
+    kw = dict(width=48, height=30, spp=8, seed=1, cache_dir=tmp_path, denoise="off")
+    plain = blur.ShotRenderer(scene, traj.poses, 1.0, 32.0, **kw)
+    fine = blur.ShotRenderer(scene, traj.poses, 1.0, 32.0, supersample=2, **kw)
+    job, job2 = plain.render_job(), fine.render_job()
+    assert (job2["width"], job2["height"]) == (2 * job["width"], 2 * job["height"])
+    assert job2["spp"] == 2 and job2["fov_deg"] == pytest.approx(job["fov_deg"], rel=1e-12)  # 4x pixels, spp / 4
+    a, b = plain.radiance(32.0)[0], fine.radiance(32.0)[0]
+    assert b.shape == a.shape == (30, 48, 3) and fine.info["margin_px"] == plain.info["margin_px"]
+    # the same scene through the same window: the mean level agrees to the render noise of the two
+    assert abs(float(b.mean()) / float(a.mean()) - 1) < 0.05
+    with pytest.raises(RenderError, match="supersample"):
+        blur.ShotRenderer(scene, traj.poses, 1.0, 32.0, supersample=0, **kw)

@@ -112,17 +112,17 @@ def _by_interpolation(scene, traj, t0_s, cfg, kw, d_ref, ref_noise, camera) -> l
     """Error against the reference, its noise and the ratio, per resampler of the warps (the same two renders)."""
     from scenes.blur import INTERPOLATIONS, ShotRenderer
 
-    shots = [ShotRenderer(scene, traj.poses, t0_s, cfg.exposure_ms, spp=cfg.spp, seed=cfg.seed + s, **kw)
-             for s in (1, 2)]
     pct = lambda v: float(to_percent(v, camera.white_level, camera.black_level))  # noqa: E731
     rows = []
-    for name in INTERPOLATIONS:
+    for name, ss in [(n, 1) for n in INTERPOLATIONS] + [("linear", 2)]:
+        shots = [ShotRenderer(scene, traj.poses, t0_s, cfg.exposure_ms, spp=cfg.spp, seed=cfg.seed + s,
+                              supersample=ss, **kw) for s in (1, 2)]
         before = shots[0].info["warp_s"]
         d = [_dn(sh.radiance(cfg.exposure_ms, interpolation=name)[0], camera, cfg.exposure_ms) for sh in shots]
         warp_s = shots[0].info["warp_s"] - before
         err, noise = pct(rmse_dn(d[0], d_ref)), pct(rmse_dn(d[0], d[1])) / np.sqrt(2.0)
         expected = float(np.hypot(ref_noise, noise))
-        rows.append({"interpolation": name, "error_percent": err, "method_noise_percent": noise,
+        rows.append({"interpolation": name if ss == 1 else f"{name}, supersampled {ss}x{ss}", "error_percent": err, "method_noise_percent": noise,
                      "expected_noise_percent": expected, "error_over_noise": err / expected if expected > 0 else None,
                      "warp_s": warp_s})
     return rows
