@@ -123,8 +123,8 @@ def _by_interpolation(scene, traj, t0_s, cfg, kw, d_ref, ref_noise, camera) -> l
         err, noise = pct(rmse_dn(d[0], d_ref)), pct(rmse_dn(d[0], d[1])) / np.sqrt(2.0)
         expected = float(np.hypot(ref_noise, noise))
         rows.append({"interpolation": name if ss == 1 else f"{name}, supersampled {ss}x{ss}", "error_percent": err,
-                     "method_noise_percent": noise, "expected_noise_percent": expected, "error_over_noise": err / expected if expected > 0 else None,
-                     "warp_s": warp_s})
+                     "method_noise_percent": noise, "expected_noise_percent": expected,
+                     "error_over_noise": err / expected if expected > 0 else None, "warp_s": warp_s})
     return rows
 
 
