@@ -259,7 +259,8 @@ class ShotRenderer:
         self._src = (src, inv_depth, anchor, k_src)
 
     def radiance(self, exposure_ms: float, *, start_s: float | None = None,
-                 n_subinstants_override: int | None = None, interpolation: str | None = None) -> tuple[np.ndarray, dict]:
+                 n_subinstants_override: int | None = None,
+                 interpolation: str | None = None) -> tuple[np.ndarray, dict]:
         """Mean radiance over ``[start, start + exposure_ms]`` (``start`` default ``t0_s``; the window
         must lie in ``[t0_s, t0_s + max_exposure_ms]``): float32 (H, W, 3), and ``{blur_px, n_subinstants}``.
         ``interpolation`` (default the renderer's) names the resampler of the warps (:data:`INTERPOLATIONS`)."""

@@ -41,7 +41,8 @@ def main(argv=None) -> int:
     p.add_argument("--still-px", type=float, default=2.5)
     p.add_argument("--boot", type=int, default=200)
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--walk", default="borealhdr", help="walk preset; replay:ZERO_GYRO.csv with --speed-mps 1e-9: at rest")
+    p.add_argument("--walk", default="borealhdr",
+                   help="walk preset; replay:ZERO_GYRO.csv with --speed-mps 1e-9: at rest")
     p.add_argument("--speed-mps", type=float, default=None)
     p.add_argument("--tag", default="", help="name suffix of the synthesised dataset")
     a = p.parse_args(argv)
@@ -57,7 +58,8 @@ def main(argv=None) -> int:
     ds = a.out / f"{a.scene}-{a.size}-{a.cycles}c-{a.spp}spp-{a.render_per}-seed{a.seed}{a.tag}"
     if not (ds / "exposim.json").is_file():
         synthesize(a.scene, ds, n_cycles=a.cycles, width=w, height=h, spp=a.spp, stereo=False, seed=a.seed,
-                   render_seed=a.seed, walk=a.walk, speed_mps=a.speed_mps, blur=True, render_per=a.render_per, denoise="oidn-fast")
+                   render_seed=a.seed, walk=a.walk, speed_mps=a.speed_mps, blur=True, render_per=a.render_per,
+                   denoise="oidn-fast")
     seq = load_sequence(ds)
     resp = sequence_response(seq)
     truth = noise_model_of(load_camera(ds)).gain_e_per_h
