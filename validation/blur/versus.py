@@ -23,8 +23,9 @@ Per walk (a scene with the realistic ``borealhdr`` walk and its own seed; walks 
 Differences are emulated minus live, per method and metric: over walks (bootstrap, with at
 least two walks) and, for the per-frame features, over frames (paired circular block
 bootstrap, pooled over walks, with at least :data:`MIN_FRAMES` pairs).  A difference whose 95 %
-interval lies inside the metric's equivalence margin (:data:`validation.live.config.EQUIVALENCE_MARGINS`) ``agrees``; one
-whose interval lies wholly beyond it ``disagrees``; anything else is ``undetermined``.
+interval lies inside the metric's equivalence margin
+(:data:`validation.live.config.EQUIVALENCE_MARGINS`) ``agrees``; one whose interval lies
+wholly beyond it ``disagrees``; anything else is ``undetermined``.
 """
 
 from __future__ import annotations
