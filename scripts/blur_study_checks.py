@@ -5,6 +5,7 @@
     python scripts/blur_study_checks.py reference OUT.json        # reference error per resampler, fastest instant
     python scripts/blur_study_checks.py cost OUT.json             # CPU-second render cost, fastest + median rate
     python scripts/blur_study_checks.py versus OUT_DIR            # the live-versus-emulated table alone
+    python scripts/blur_study_checks.py table OUT_DIR             # that table from the walks finished so far
 
 All at the full configuration of :class:`validation.blur.config.BlurConfig` (480x300) and with
 the study's own functions (:mod:`validation.blur.measure`, :mod:`validation.blur.versus`).
@@ -140,6 +141,25 @@ def versus(out_dir: str) -> dict:
     return r
 
 
+def table(out_dir: str) -> dict:
+    """The table of :func:`validation.blur.versus.compare` over ``OUT_DIR/versus/seed*/walk.json``."""
+    from pathlib import Path
+
+    from emulator.io.files import read_results
+    from validation.blur.config import BlurConfig
+    from validation.blur.report import versus_markdown
+    from validation.blur.versus import RUNS, SCENE_BLUR, compare
+
+    cfg = BlurConfig()
+    walks = [read_results(p) for p in sorted(Path(out_dir).glob("versus/seed*/walk.json"))]
+    r = {"walks": walks, "table": compare(walks, cfg.versus_methods, seed=cfg.seed),
+         "settings": {"runs": list(RUNS), "scene_blur": list(SCENE_BLUR), "live_timing": "same-instant"}}
+    _write(os.path.join(out_dir, "table.json"), r)
+    with open(os.path.join(out_dir, "table.md"), "w") as f:
+        f.write("\n".join(versus_markdown(r)) + "\n")
+    return r
+
+
 def _write(path: str, obj) -> None:
     from emulator.io.files import write_results
 
@@ -149,7 +169,8 @@ def _write(path: str, obj) -> None:
 def main(argv) -> int:
     what, args = argv[1], argv[2:]
     jobs = {"sharpness": lambda: sharpness(args[0]), "variants": lambda: variants([float(a) for a in args]),
-            "reference": lambda: reference(args[0]), "cost": lambda: cost(args[0]), "versus": lambda: versus(args[0])}
+            "reference": lambda: reference(args[0]), "cost": lambda: cost(args[0]), "versus": lambda: versus(args[0]),
+            "table": lambda: table(args[0])}
     if what not in jobs:
         print(__doc__, file=sys.stderr)
         return 2
