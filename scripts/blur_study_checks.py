@@ -3,7 +3,7 @@
     python scripts/blur_study_checks.py sharpness OUT.json        # 4 fastest + 4 median-rate instants
     python scripts/blur_study_checks.py variants T0 [T0 ...]      # consistent emulation: smoothing x resampler
     python scripts/blur_study_checks.py reference OUT.json        # reference error per resampler, fastest instant
-    python scripts/blur_study_checks.py cost OUT.json             # CPU-second render cost, fastest + median rate
+    python scripts/blur_study_checks.py cost OUT.json [REPEATS]   # CPU-second render cost, fastest + median rate
     python scripts/blur_study_checks.py versus OUT_DIR            # the live-versus-emulated table alone
     python scripts/blur_study_checks.py table OUT_DIR             # that table from the walks finished so far
 
@@ -111,10 +111,13 @@ def reference(out_path: str) -> dict:
     return out
 
 
-def cost(out_path: str) -> dict:
+def cost(out_path: str, repeats: int = 3) -> dict:
+    from dataclasses import replace
+
     from validation.blur import measure
 
     cfg, scene, traj, camera = _setup()
+    cfg = replace(cfg, timing_repeats=int(repeats))
     t0 = measure.fastest_instants(traj, cfg.walk_s, 1, cfg.exposure_ms)[0]
     tm = measure.median_rate_instant(traj, cfg.walk_s, cfg.exposure_ms)
     out = {"fastest": measure.cost_comparison(scene, traj, t0, cfg, camera),
@@ -169,7 +172,7 @@ def _write(path: str, obj) -> None:
 def main(argv) -> int:
     what, args = argv[1], argv[2:]
     jobs = {"sharpness": lambda: sharpness(args[0]), "variants": lambda: variants([float(a) for a in args]),
-            "reference": lambda: reference(args[0]), "cost": lambda: cost(args[0]), "versus": lambda: versus(args[0]),
+            "reference": lambda: reference(args[0]), "cost": lambda: cost(args[0], *args[1:2]), "versus": lambda: versus(args[0]),
             "table": lambda: table(args[0])}
     if what not in jobs:
         print(__doc__, file=sys.stderr)
