@@ -38,6 +38,7 @@ __all__ = [
     "SUBINSTANTS_PER_PX",
     "MAX_SUBINSTANTS",
     "NEAR_DEPTH_M",
+    "INTERPOLATIONS",
     "exposure_window_s",
     "predicted_blur_px",
     "n_subinstants",
@@ -53,6 +54,8 @@ SUBINSTANTS_PER_PX = 2.0
 MAX_SUBINSTANTS = 96
 #: Depth of the nearest surface assumed by the blur prediction, m.
 NEAR_DEPTH_M = 1.0
+#: Resamplers of the warps: name -> OpenCV interpolation flag.
+INTERPOLATIONS = {"linear": "INTER_LINEAR", "cubic": "INTER_CUBIC", "lanczos4": "INTER_LANCZOS4"}
 #: Blur (px) below which a shot is one sub-instant.
 _AT_REST_PX = 0.25
 _GRID = np.linspace(0.0, 1.0, 5)
@@ -141,19 +144,24 @@ def warp_to_pose(radiance: np.ndarray, inv_depth: np.ndarray, pose_src: np.ndarr
     interpolation = cv2.INTER_LINEAR if interpolation is None else interpolation
     r_sd = pose_src[:3, :3].T @ pose_dst[:3, :3]
     t_sd = pose_src[:3, :3].T @ (pose_dst[:3, 3] - pose_src[:3, 3])
-    u, v = np.meshgrid(np.arange(width, dtype=np.float64), np.arange(height, dtype=np.float64))
-    rays = np.stack([(u - k_dst[0, 2]) / k_dst[0, 0], (v - k_dst[1, 2]) / k_dst[1, 1], np.ones_like(u)], axis=-1)
-    rot = rays @ r_sd.T  # (H, W, 3): R_sd r_d
-    q = np.zeros((height, width))
+    # per-component float32 arithmetic (R_sd r_d, one row of the rotation at a time): a third of
+    # the CPU of (H, W, 3) float64 matrix products, maps exact to float32 rounding as before
+    xn = ((np.arange(width) - k_dst[0, 2]) / k_dst[0, 0]).astype(np.float32)[None, :]
+    yn = ((np.arange(height) - k_dst[1, 2]) / k_dst[1, 1]).astype(np.float32)[:, None]
+    rx, ry, rz = (np.float32(r[0]) * xn + np.float32(r[1]) * yn + np.float32(r[2]) for r in r_sd)
+    t = t_sd.astype(np.float32)
+    moving = bool(np.any(t_sd))
+    fx, cx, fy, cy = (np.float32(v) for v in (k_src[0, 0], k_src[0, 2], k_src[1, 1], k_src[1, 2]))
+    q = None
     for it in range(iterations + 1):
-        p = rot + q[..., None] * t_sd
-        z = np.where(p[..., 2] > 1e-9, p[..., 2], 1e-9)
-        map_x = (k_src[0, 0] * p[..., 0] / z + k_src[0, 2]).astype(np.float32)
-        map_y = (k_src[1, 1] * p[..., 1] / z + k_src[1, 2]).astype(np.float32)
-        if it == iterations or not np.any(t_sd):
+        px, py, pz = (rx, ry, rz) if q is None else (rx + q * t[0], ry + q * t[1], rz + q * t[2])
+        inv_z = 1.0 / np.maximum(pz, np.float32(1e-9))
+        map_x = fx * px * inv_z + cx
+        map_y = fy * py * inv_z + cy
+        if it == iterations or not moving:
             break
         q_s = cv2.remap(inv_depth, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-        q = q_s * rot[..., 2] / np.maximum(1.0 - t_sd[2] * q_s, 1e-6)
+        q = q_s * rz / np.maximum(1.0 - t[2] * q_s, np.float32(1e-6))
     out = cv2.remap(np.ascontiguousarray(radiance, dtype=np.float32), map_x, map_y, interpolation,
                     borderMode=cv2.BORDER_REPLICATE)
     return out.reshape(height, width, -1)
@@ -173,7 +181,13 @@ class ShotRenderer:
     def __init__(self, scene, pose_at, t0_s: float, max_exposure_ms: float, *, width: int, height: int,
                  spp: int, seed: int = 0, fov_deg: float = DEFAULT_FOV_DEG, cache_dir=None, variant=None,
                  denoise=None, samples_per_px: float = SUBINSTANTS_PER_PX, near_depth_m: float = NEAR_DEPTH_M,
-                 anchor_s: float | None = None):
+                 anchor_s: float | None = None, interpolation: str = "linear", supersample: int = 1):
+        if isinstance(supersample, bool) or not isinstance(supersample, int) or supersample < 1:
+            raise RenderError(f"supersample must be an integer >= 1, got {supersample!r}")
+        self.supersample = supersample
+        if interpolation not in INTERPOLATIONS:
+            raise RenderError(f"interpolation must be one of {', '.join(INTERPOLATIONS)}, got {interpolation!r}")
+        self.interpolation = interpolation
         if not (math.isfinite(t0_s) and math.isfinite(max_exposure_ms) and max_exposure_ms >= 0):
             raise RenderError(f"need a finite t0_s and max_exposure_ms >= 0, got {t0_s!r}, {max_exposure_ms!r}")
         self.scene, self.pose_at, self.t0_s = scene, pose_at, float(t0_s)
@@ -215,8 +229,10 @@ class ShotRenderer:
         margin = self.margin_px()
         fx = intrinsics(self.width, self.height, self.fov_deg)[0]
         ws, hs = self.width + 2 * margin, self.height + 2 * margin
-        return dict(scene=self.scene, pose=anchor, width=ws, height=hs,
-                    fov_deg=math.degrees(2.0 * math.atan(0.5 * ws / fx)), **self.render_args)
+        ss = self.supersample  # ss x ss pixels per output pixel, the same samples per output pixel in all
+        args = {**self.render_args, "spp": max(1, int(round(self.render_args["spp"] / (ss * ss))))}
+        return dict(scene=self.scene, pose=anchor, width=ss * ws, height=ss * hs,
+                    fov_deg=math.degrees(2.0 * math.atan(0.5 * ws / fx)), **args)
 
     def _prepare(self) -> None:
         from scenes.render import render_depth, render_with_info
@@ -231,8 +247,8 @@ class ShotRenderer:
         if self.at_rest:
             self._src = (src, None, anchor, None)
             return
-        self.info["margin_px"] = (ws - self.width) // 2
-        fx = intrinsics(self.width, self.height, self.fov_deg)[0]
+        self.info["margin_px"] = (ws // self.supersample - self.width) // 2
+        fx = self.supersample * intrinsics(self.width, self.height, self.fov_deg)[0]
         t = time.perf_counter()
         k_src = np.array([[fx, 0, (ws - 1) / 2.0], [0, fx, (hs - 1) / 2.0], [0, 0, 1.0]])
         dist = render_depth(self.scene, anchor, width=ws, height=hs, fov_deg=fov_src, spp=1,
@@ -243,9 +259,16 @@ class ShotRenderer:
         self._src = (src, inv_depth, anchor, k_src)
 
     def radiance(self, exposure_ms: float, *, start_s: float | None = None,
-                 n_subinstants_override: int | None = None) -> tuple[np.ndarray, dict]:
+                 n_subinstants_override: int | None = None,
+                 interpolation: str | None = None) -> tuple[np.ndarray, dict]:
         """Mean radiance over ``[start, start + exposure_ms]`` (``start`` default ``t0_s``; the window
-        must lie in ``[t0_s, t0_s + max_exposure_ms]``): float32 (H, W, 3), and ``{blur_px, n_subinstants}``."""
+        must lie in ``[t0_s, t0_s + max_exposure_ms]``): float32 (H, W, 3), and ``{blur_px, n_subinstants}``.
+        ``interpolation`` (default the renderer's) names the resampler of the warps (:data:`INTERPOLATIONS`)."""
+        import cv2
+
+        interpolation = self.interpolation if interpolation is None else interpolation
+        if interpolation not in INTERPOLATIONS:
+            raise RenderError(f"interpolation must be one of {', '.join(INTERPOLATIONS)}, got {interpolation!r}")
         exposure_ms = float(exposure_ms)
         start = self.t0_s if start_s is None else float(start_s)
         t1 = start + 1e-3 * exposure_ms
@@ -260,14 +283,22 @@ class ShotRenderer:
             return src, {"blur_px": blur, "n_subinstants": 1}
         n = (n_subinstants(blur, self.samples_per_px) if n_subinstants_override is None
              else int(n_subinstants_override))
-        fx = k_src[0, 0]
-        k_dst = np.array([[fx, 0, (self.width - 1) / 2.0], [0, fx, (self.height - 1) / 2.0], [0, 0, 1.0]])
+        fx, ss = k_src[0, 0], self.supersample
+        wd, hd = ss * self.width, ss * self.height
+        k_dst = np.array([[fx, 0, (wd - 1) / 2.0], [0, fx, (hd - 1) / 2.0], [0, 0, 1.0]])
         t = time.perf_counter()
-        acc = np.zeros((self.height, self.width, src.shape[2]), dtype=np.float64)
+        acc = np.zeros((hd, wd, src.shape[2]), dtype=np.float64)
         for pose in np.asarray(self.pose_at(subinstant_times_s(start, t1, n)), dtype=np.float64):
-            acc += warp_to_pose(src, inv_depth, anchor, k_src, pose, k_dst, self.width, self.height)
+            acc += warp_to_pose(src, inv_depth, anchor, k_src, pose, k_dst, wd, hd,
+                                interpolation=getattr(cv2, INTERPOLATIONS[interpolation]))
+        out = (acc / n).astype(np.float32)
+        if ss > 1:  # the mean of each ss x ss block: the output pixel's area
+            out = cv2.resize(out, (self.width, self.height), interpolation=cv2.INTER_AREA).reshape(
+                self.height, self.width, -1)
         self.info["warp_s"] += time.perf_counter() - t
-        return (acc / n).astype(np.float32), {"blur_px": blur, "n_subinstants": n}
+        if interpolation != "linear":  # the cubic and Lanczos kernels overshoot below zero at edges
+            np.maximum(out, 0.0, out=out)
+        return out, {"blur_px": blur, "n_subinstants": n}
 
 
 def render_exposure(scene, pose_at, t0_s: float, t1_s: float, **kwargs) -> tuple[np.ndarray, dict]:

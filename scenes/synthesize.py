@@ -49,6 +49,7 @@ def synthesize(
     walk: str | None = None,
     blur: bool = True,
     render_per: str = "shot",
+    integrate: bool = True,
     imu_rate_hz: float = 100.0,
     cache_dir=None,
     variant: str | None = None,
@@ -91,6 +92,9 @@ def synthesize(
         per bracket sweep and camera, at the sweep's middle with a margin for the sweep's
         motion, warped to every shot's sub-instants: a sixth of the renders, so six times the
         spp at the same cost; render noise then moves with the scene within a sweep).
+    integrate : bool
+        With ``blur``: False samples every shot at its trigger instant from the same warped
+        renders (no exposure-time blur, same render noise: the sharp twin of a blurred walk).
     imu_rate_hz : float
         Rate of the walk's gyro and accelerometer written as ``imu/imu.csv`` (IMU frame x
         forward, y left, z up: :data:`scenes.walks.CAMERA_FROM_IMU`; a static camera reads zero rates and
@@ -144,7 +148,7 @@ def synthesize(
                                                cache_dir=cache_dir, variant=render_variant, denoise=settings,
                                                render_seed=render_seed),
                       fps=fps, n_brackets=len(brackets_ms), max_window_ms=max(list(brackets_ms) + list(gt_exposures_ms)),
-                      baseline_m=baseline, render_per=render_per)
+                      baseline_m=baseline, render_per=render_per, integrate=integrate)
     source, blurred_source, render_job, shot_renderer, prefetched = _providers(
         scene, traj, shots, baseline_m=baseline, render_seed=render_seed,
         render=dict(width=width, height=height, spp=spp, fov_deg=cam.fov_x_deg, cache_dir=cache_dir,
@@ -220,6 +224,9 @@ def _providers(scene, traj, shots: WalkShots, *, baseline_m: float, render_seed:
     blurred_source.timestamps_note = ("trigger instant of each shot = start of its exposure; every capture "
                                       "integrates the radiance over [t, t + exposure] along the trajectory "
                                       "(scenes.blur); poses are at the trigger instant")
+    if not shots.integrate:
+        blurred_source.timestamps_note = ("trigger instant of each shot; the scene is sampled there (no motion "
+                                          "blur), warped from the walk's renders (scenes.blur)")
 
     def source(timestamp_s: float, camera_name: str):
         idx = shot_index.setdefault(round(timestamp_s, 9), len(shot_index))
@@ -270,8 +277,10 @@ def _description(scene, cam, shots: WalkShots, *, width: int, height: int, spp: 
         "render": {"width": width, "height": height, "spp": spp, "render_seed": render_seed,
                    "variant": variant, "fov_deg": cam.fov_x_deg,
                    "denoise": denoise.key_material(), "denoise_fallback": fallback,
-                   "exposure_integration": f"scenes.blur (warped sub-instants of one render per {render_per})"
-                   if blur else "none (trigger instant)",
+                   "exposure_integration": ("none (trigger instant)" if not blur else
+                                            f"scenes.blur (warped sub-instants of one render per {render_per})"
+                                            if shots.integrate else
+                                            f"none (trigger instant, warped from one render per {render_per})"),
                    "blur_shots": shots.describe() if blur else None},
         "saturate_ms": saturate_ms,
         "trajectory": {"static": scene.is_static, "speed_mps": speed_mps,

@@ -42,15 +42,19 @@ class WalkShots:
         Stereo baseline of the right camera.
     render_per : str
         ``"shot"`` or ``"cycle"`` (one render per sweep, warped to its shots).
+    integrate : bool
+        True: a shot integrates over its exposure window.  False: every shot is the scene at
+        its trigger instant, warped from the same renders (a window of 0 ms): the sharp twin of
+        a blurred walk, which shares its render noise (validation.blur's live-versus-emulated table).
     """
 
     def __init__(self, scene, traj, *, render: dict, fps: float, n_brackets: int, max_window_ms: float,
-                 baseline_m: float, render_per: str = "shot"):
+                 baseline_m: float, render_per: str = "shot", integrate: bool = True):
         if render_per not in ("shot", "cycle"):
             raise SceneError(f"render_per must be 'shot' or 'cycle', got {render_per!r}")
         self.scene, self.traj, self.render = scene, traj, dict(render)
         self.fps, self.n_brackets, self.max_window_ms = float(fps), int(n_brackets), float(max_window_ms)
-        self.baseline_m, self.render_per = float(baseline_m), render_per
+        self.baseline_m, self.render_per, self.integrate = float(baseline_m), render_per, bool(integrate)
         self._renderers: collections.OrderedDict = collections.OrderedDict()
 
     def seed(self, index: int, camera: str) -> int:
@@ -87,8 +91,11 @@ class WalkShots:
         return self._renderers[key]
 
     def radiance(self, index: int, camera: str, exposure_ms: float) -> np.ndarray:
-        """float32 (H, W, 3) radiance of shot ``index`` integrated over its ``exposure_ms`` window."""
+        """float32 (H, W, 3) radiance of shot ``index`` integrated over its ``exposure_ms`` window
+        (at its trigger instant without ``integrate``)."""
         t0 = shot_time_s(index, self.fps)
+        if not self.integrate:
+            exposure_ms = 0.0
         shot = self.renderer(index, camera)
         if t0 + 1e-3 * float(exposure_ms) > shot.t0_s + 1e-3 * shot.max_exposure_ms + 1e-9:
             shot = self._make(index, camera, float(exposure_ms))  # longer than the renders were sized for
@@ -96,7 +103,7 @@ class WalkShots:
 
     def describe(self) -> dict:
         return {"render_per": self.render_per, "max_window_ms": self.max_window_ms, "fps": self.fps,
-                "n_brackets": self.n_brackets, "baseline_m": self.baseline_m}
+                "n_brackets": self.n_brackets, "baseline_m": self.baseline_m, "integrate": self.integrate}
 
 
 def walk_radiance(dataset, scene, *, cache_dir=None):
@@ -126,7 +133,8 @@ def walk_radiance(dataset, scene, *, cache_dir=None):
                                                fov_deg=render["fov_deg"], variant=render["variant"], denoise=settings,
                                                render_seed=render["render_seed"], cache_dir=cache_dir),
                       fps=blur["fps"], n_brackets=blur["n_brackets"], max_window_ms=blur["max_window_ms"],
-                      baseline_m=blur["baseline_m"], render_per=blur["render_per"])
+                      baseline_m=blur["baseline_m"], render_per=blur["render_per"],
+                      integrate=bool(blur.get("integrate", True)))
     start_ns = int(meta["start_time_ns"])
 
     def radiance(timestamp_ns: int, camera: str, exposure_ms: float) -> np.ndarray:

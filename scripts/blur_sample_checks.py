@@ -11,6 +11,9 @@ rest       per emulated image: RMS change of --blur consistent against plain emu
            2005 e- in situ and 10 500 e- synth preset)
 sharpness  real 32 ms frame against 32 ms emulated from 4/8/16 ms, plain and consistent (p95 of the
            green-plane gradient over the median level, as issue 21)
+imu        the IMU-to-camera rotation from the image shifts: the axis fit of ``stamp`` turned into the
+           camera x and y axes in IMU coordinates, their angles to the assumed ROS convention and,
+           by Monte Carlo over the fit's standard errors, the 95 % interval of each angle
 noise      in-situ noise fit: pooled, per exposure stratum, per Bayer phase, formal and bootstrap SE,
            all groups and still groups only
 """
@@ -88,6 +91,42 @@ def _axis_fit(seq, pairs):
     return {"fitted_px_per_rad": A.T.tolist(), "fitted_se_px_per_rad": se.tolist(), "assumed_px_per_rad": M.tolist(),
             "rms_residual_fitted_px": float(np.sqrt(np.mean((Y - X @ A) ** 2))),
             "rms_residual_assumed_px": float(np.sqrt(np.mean((Y - X @ M.T) ** 2)))}
+
+
+def imu_rotation(seq, resp, draws: int = 2000, seed: int = 0):
+    """Camera x and y axes in IMU coordinates from the image shifts (roll about the optical axis moves
+    the centre by nothing, so it is not seen: the third axis follows from the two by orthogonality)."""
+    from emulator.blur import R_CAM_IMU_FLU
+
+    fit = stamp(seq, resp)["axis_fit"]
+    A, se = np.array(fit["fitted_px_per_rad"]), np.array(fit["fitted_se_px_per_rad"])
+    f = float(recording_motion(seq).K("left")[0][0, 0])
+    rng = np.random.default_rng(seed)
+
+    def axes(a):  # shift x = -f (y_cam . theta), shift y = f (x_cam . theta): the assumed map of _axis_fit
+        return a[1] / f, -a[0] / f
+
+    def angle_deg(u, v):
+        return float(np.degrees(np.arccos(np.clip(abs(u @ v) / np.linalg.norm(u) / np.linalg.norm(v), -1, 1))))
+
+    x_true, y_true = R_CAM_IMU_FLU[0], R_CAM_IMU_FLU[1]
+    out = {"axis_fit": fit, "focal_px": f}
+    x_fit, y_fit = axes(A)
+    out["x_cam_in_imu"] = (x_fit / np.linalg.norm(x_fit)).tolist()
+    out["y_cam_in_imu"] = (y_fit / np.linalg.norm(y_fit)).tolist()
+    out["scale_x"], out["scale_y"] = float(np.linalg.norm(x_fit)), float(np.linalg.norm(y_fit))  # 1 when f is right
+    out["angle_to_assumed_deg"] = {"x": angle_deg(x_fit, x_true), "y": angle_deg(y_fit, y_true)}
+    sims = {"x": [], "y": []}
+    for _ in range(draws):
+        xs, ys = axes(A + rng.standard_normal(A.shape) * se)
+        sims["x"].append(angle_deg(xs, x_true))
+        sims["y"].append(angle_deg(ys, y_true))
+    out["angle_to_assumed_p95_deg"] = {k: float(np.percentile(v, 95)) for k, v in sims.items()}
+    out["angle_spread_p95_deg"] = {  # how far the estimate itself wanders: the resolution of this sample
+        k: float(np.percentile([angle_deg(a, b) for a, b in zip(
+            [axes(A + rng.standard_normal(A.shape) * se)[i] for _ in range(draws)], [v] * draws)], 95))
+        for k, v, i in (("x", x_fit, 0), ("y", y_fit, 1))}
+    return out
 
 
 def seq_w(seq):
@@ -186,7 +225,7 @@ def main(argv):
     what = argv[2] if len(argv) > 2 else "all"
     seq = load_sequence(path)
     resp = sequence_response(seq)
-    jobs = {"stamp": stamp, "rest": rest, "sharpness": sharpness, "noise": noise}
+    jobs = {"stamp": stamp, "rest": rest, "sharpness": sharpness, "noise": noise, "imu": imu_rotation}
     todo = list(jobs) if what == "all" else [what]
     print(json.dumps({k: jobs[k](seq, resp) for k in todo}, indent=1, default=float))
 

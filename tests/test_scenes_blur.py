@@ -165,3 +165,54 @@ def test_live_radiance_rebuilds_the_brackets_and_integrates_other_exposures(tmp_
     assert len(list(cache.rglob("*.exr"))) == n_renders  # the writer's renders, nothing new
     assert walk_radiance(synthesize(scene, tmp_path / "sharp", n_cycles=1, width=32, height=20, spp=1,
                                     denoise="off", cache_dir=cache, blur=False, stereo=False), scene) is None
+
+
+@pytest.mark.render
+def test_sharp_twin_shares_the_renders_and_samples_the_trigger_instant(tmp_path):
+    import json
+
+    from emulator.io.exr import read_exr
+    from scenes.synthesize import synthesize
+    from scenes.walkshots import walk_radiance
+
+    import scenes
+
+    scene = scenes.get_scene("forest_summer")
+    cache = tmp_path / "cache"
+    kw = dict(n_cycles=1, width=32, height=20, spp=1, denoise="off", cache_dir=cache, stereo=False,
+              render_per="cycle", save_radiance=True)
+    blurred = synthesize(scene, tmp_path / "blurred", **kw)
+    n_renders = len(list(cache.rglob("*.exr")))
+    sharp = synthesize(scene, tmp_path / "sharp", integrate=False, **kw)
+    assert len(list(cache.rglob("*.exr"))) == n_renders  # the blurred walk's render, nothing new
+    meta = json.loads((sharp / "exposim.json").read_text())
+    assert meta["source"]["render"]["blur_shots"]["integrate"] is False
+    assert meta["timestamps"].startswith("trigger instant of each shot; the scene is sampled there")
+    live = walk_radiance(sharp, scene, cache_dir=cache)
+    stamps = sorted(int(p.stem) for p in (sharp / "ground_truth" / "radiance" / "camera_left").glob("*.exr"))
+    last = stamps[-1]  # the 32 ms shot: its window moves, its trigger instant does not
+    np.testing.assert_array_equal(live(last, "left", 1.0), live(last, "left", 32.0))
+    np.testing.assert_array_equal(live(last, "left", 32.0),
+                                  read_exr(sharp / "ground_truth" / "radiance" / "camera_left" / f"{last}.exr"))
+    blurred_32 = read_exr(blurred / "ground_truth" / "radiance" / "camera_left" / f"{last}.exr")
+    assert not np.array_equal(blurred_32, live(last, "left", 32.0))
+
+
+@pytest.mark.render
+def test_a_supersampled_shot_spends_the_same_samples_and_keeps_the_level(tmp_path):
+    import scenes
+
+    scene = scenes.get_scene("forest_summer")
+    traj = scene.trajectory(3.0)
+    kw = dict(width=48, height=30, spp=8, seed=1, cache_dir=tmp_path, denoise="off")
+    plain = blur.ShotRenderer(scene, traj.poses, 1.0, 32.0, **kw)
+    fine = blur.ShotRenderer(scene, traj.poses, 1.0, 32.0, supersample=2, **kw)
+    job, job2 = plain.render_job(), fine.render_job()
+    assert (job2["width"], job2["height"]) == (2 * job["width"], 2 * job["height"])
+    assert job2["spp"] == 2 and job2["fov_deg"] == pytest.approx(job["fov_deg"], rel=1e-12)  # 4x pixels, spp / 4
+    a, b = plain.radiance(32.0)[0], fine.radiance(32.0)[0]
+    assert b.shape == a.shape == (30, 48, 3) and fine.info["margin_px"] == plain.info["margin_px"]
+    # the same scene through the same window: the mean level agrees to the render noise of the two
+    assert abs(float(b.mean()) / float(a.mean()) - 1) < 0.05
+    with pytest.raises(RenderError, match="supersample"):
+        blur.ShotRenderer(scene, traj.poses, 1.0, 32.0, supersample=0, **kw)

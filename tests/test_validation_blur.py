@@ -47,3 +47,52 @@ def test_validate_blur_quick(tmp_path):
         assert set(r["angular_rate_ratio"]) == {"p50", "p90", "p99"}
         assert all(0.7 < v < 1.3 for v in r["angular_rate_ratio"].values())  # 30 s of walk: looser than 200 s
     assert (out / "report.md").read_text().startswith("# Exposure-time blur")
+    v = r["live_versus_emulated"]  # the quick table: one walk, both recordings, two emulated runs
+    assert len(v["walks"]) == 1 and set(v["walks"][0]["by_blur"]) == {"blurred", "sharp"}
+    for key, rows in v["table"].items():
+        for row in rows.values():
+            assert row["median_matches"]["verdict"] == "undetermined"  # 2 frame pairs: fewer than MIN_FRAMES
+            assert row["vo_failed_frames"]["verdict"] == "undetermined"  # one walk cannot decide a per-walk metric
+    assert "Live against emulated" in (out / "report.md").read_text()
+
+
+def test_versus_verdicts_follow_the_margin():
+    from validation.blur.versus import _verdict
+
+    assert _verdict([-0.5, 0.5], 1.0) == "agrees"
+    assert _verdict([1.5, 3.0], 1.0) == "disagrees"
+    assert _verdict([-3.0, -1.01], 1.0) == "disagrees"
+    assert _verdict([0.5, 1.5], 1.0) == "undetermined"
+    assert _verdict(None, 1.0) == "undetermined"
+
+
+def test_versus_compare_differences_and_bases():
+    import numpy as np
+
+    from validation.blur.versus import METRICS, RUNS, compare
+
+    def bench(offset):  # one recording's bench_walk result: live, and emulated runs shifted by ``offset``
+        out = {}
+        for run in RUNS:
+            shift = 0.0 if run == "live" else offset
+            out[run] = {"summary": {"m": {"median_matches": 40.0 + shift, "median_uniformity": 0.5,
+                                          "vo_failed_frames": 1.0, "rpe_trans_pct": None}},
+                        "frames": {"matches": {"m": list(np.arange(20.0) + shift)},
+                                   "uniformity": {"m": [0.5] * 21}}}
+        return out
+
+    one = [{"walk": "w0", "by_blur": {"blurred": bench(10.0), "sharp": bench(0.0)}}]
+    t = compare(one, ["m"])
+    cell = t["blurred/emulated-plain"]["m"]["median_matches"]
+    assert cell["per_walk"]["estimate"] == 10.0 and cell["per_walk"]["ci95"] is None  # one walk: no interval
+    assert cell["basis"] == "frames" and cell["per_frame"]["estimate"] == 10.0
+    assert cell["per_frame"]["ci95"] == [10.0, 10.0] and cell["verdict"] == "disagrees"  # margin 5 matches
+    assert t["sharp/emulated-plain"]["m"]["median_matches"]["verdict"] == "agrees"
+    assert t["sharp/emulated-plain"]["m"]["vo_failed_frames"]["verdict"] == "undetermined"  # one walk
+    assert t["sharp/emulated-plain"]["m"]["rpe_trans_pct"]["per_walk"]["n"] == 0
+    two = one + [{"walk": "w1", "by_blur": {"blurred": bench(12.0), "sharp": bench(0.0)}}]
+    cell = compare(two, ["m"])["blurred/emulated-consistent"]["m"]["median_matches"]
+    assert cell["basis"] == "walks" and cell["per_walk"]["estimate"] == 11.0
+    assert 10.0 <= cell["per_walk"]["ci95"][0] <= cell["per_walk"]["ci95"][1] <= 12.0
+    assert set(t) == {f"{b}/{r}" for b in ("blurred", "sharp") for r in RUNS[1:]}
+    assert set(METRICS) == set(t["sharp/emulated-plain"]["m"])

@@ -28,6 +28,11 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument("--size", type=argtypes.size, help=f"WxH (default {full.width}x{full.height})")
     p.add_argument("--spp", type=int, help=f"samples per pixel of the blurred shots (default {full.spp})")
     p.add_argument("--instants", type=int, help=f"shot instants compared (default {full.n_instants})")
+    p.add_argument("--versus-walks", type=int,
+                   help=f"walks of the live-against-emulated table (default {full.versus_walks}, quick "
+                        f"{quick.versus_walks}; 0: not measured)")
+    p.add_argument("--versus-cycles", type=int,
+                   help=f"bracket sweeps per walk of that table (default {full.versus_cycles})")
     p.add_argument("--real-imu", help="the real gyro, a BorealHDR imu.csv (default: the shared sample's)")
     p.add_argument("--cache-dir", help="render cache (default $EXPOSIM_CACHE or ~/.cache/exposim/renders)")
     return p
@@ -43,6 +48,7 @@ def config_from_args(args) -> BlurConfig:
     cfg = BlurConfig.quick() if args.quick else BlurConfig()
     changes = {k: v for k, v in (("scene", args.scene), ("walk", args.walk), ("spp", args.spp),
                                  ("n_instants", args.instants), ("real_imu", args.real_imu),
+                                 ("versus_walks", args.versus_walks), ("versus_cycles", args.versus_cycles),
                                  ("cache_dir", args.cache_dir)) if v is not None}
     if args.size is not None:
         changes.update(width=args.size[0], height=args.size[1])
@@ -55,7 +61,8 @@ def run_from_args(args) -> int:
 
     words = ["exposim", "validate", "blur", "-o", str(args.output)] + (["--quick"] if args.quick else [])
     for flag, v in (("--scene", args.scene), ("--walk", args.walk), ("--spp", args.spp),
-                    ("--instants", args.instants)):
+                    ("--instants", args.instants), ("--versus-walks", args.versus_walks),
+                    ("--versus-cycles", args.versus_cycles)):
         if v is not None:
             words += [flag, str(v)]
     if args.size is not None:

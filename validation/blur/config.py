@@ -53,6 +53,13 @@ class BlurConfig:
         Denoiser of the sharpness renders.
     real_imu : str or None
         The real gyro (BorealHDR ``imu.csv``); None: the shared sample's when present.
+    versus_walks, versus_cycles, versus_spp : int
+        Live against emulated (:mod:`validation.blur.versus`): walks (seeds from ``seed``),
+        bracket sweeps per walk, samples per pixel of its renders (0 walks: not measured).
+    versus_methods : tuple of str
+        AE methods of that table.
+    versus_initial_ms, versus_vo_ratio : float
+        Their initial exposure, and the Lowe ratio of the stereo VO.
     """
 
     scene: str = "forest_summer"
@@ -71,11 +78,18 @@ class BlurConfig:
     seed: int = 0
     real_imu: str | None = None
     cache_dir: str | None = None
+    versus_walks: int = 3
+    versus_cycles: int = 12
+    versus_spp: int = 4
+    versus_methods: tuple = ("fixed", "classical-30", "classical-50", "classical-70", "shim", "zhang", "kim")
+    versus_initial_ms: float = 4.0
+    versus_vo_ratio: float = 0.9
 
     @classmethod
     def quick(cls, **overrides) -> "BlurConfig":
         base = dict(width=64, height=40, spp=4, reference_subinstants=8, reference_spp=4, n_instants=1,
-                    walk_s=30.0, timing_repeats=1, sharpness_denoise="off")
+                    walk_s=30.0, timing_repeats=1, sharpness_denoise="off", versus_walks=1, versus_cycles=3,
+                    versus_spp=2, versus_methods=("fixed", "classical-50"))
         base.update(overrides)
         return cls(**base)
 
@@ -88,8 +102,19 @@ class BlurConfig:
         if not 0 < self.source_ms < self.exposure_ms <= 1000.0 / 22.0:
             raise ValidationError(f"blur study: need 0 < source_ms < exposure_ms <= 45.45 ms, got "
                                   f"{self.source_ms!r}, {self.exposure_ms!r}")
+        if isinstance(self.versus_walks, bool) or not isinstance(self.versus_walks, int) or self.versus_walks < 0:
+            raise ValidationError(f"blur study: versus_walks must be an integer >= 0, got {self.versus_walks!r}")
+        for name in ("versus_cycles", "versus_spp"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < (3 if name == "versus_cycles" else 1):
+                raise ValidationError(f"blur study: {name} must be an integer >= "
+                                      f"{3 if name == 'versus_cycles' else 1}, got {v!r}")
+        if not self.versus_methods:
+            raise ValidationError("blur study: versus_methods needs at least one AE method")
         if not self.walk_s >= 5.0:
             raise ValidationError(f"blur study: walk_s must be >= 5 s, got {self.walk_s!r}")
 
     def as_dict(self) -> dict:
-        return dataclasses.asdict(self)
+        d = dataclasses.asdict(self)
+        d["versus_methods"] = list(self.versus_methods)
+        return d

@@ -85,6 +85,7 @@ def reference_comparison(scene, traj, t0_s: float, cfg, camera) -> dict:
     expected = float(np.hypot(ref_noise, method_noise))
     return {"t0_s": t0_s, "blur_px": methods[0][1]["blur_px"], "n_subinstants": methods[0][1]["n_subinstants"],
             "by_subinstants": _by_subinstants(scene, traj, t0_s, cfg, kw, d_ref, camera),
+            "by_interpolation": _by_interpolation(scene, traj, t0_s, cfg, kw, d_ref, ref_noise, camera),
             "error_percent": err, "reference_noise_percent": ref_noise, "method_noise_percent": method_noise,
             "expected_noise_percent": expected, "error_over_noise": err / expected if expected > 0 else None,
             "excess_percent": float(np.sqrt(max(err * err - expected * expected, 0.0))),
@@ -107,8 +108,52 @@ def _by_subinstants(scene, traj, t0_s, cfg, kw, d_ref, camera) -> list[dict]:
     return rows
 
 
+def _by_interpolation(scene, traj, t0_s, cfg, kw, d_ref, ref_noise, camera) -> list[dict]:
+    """Error against the reference, its noise and the ratio, per resampler of the warps (the same two renders)."""
+    from scenes.blur import INTERPOLATIONS, ShotRenderer
+
+    pct = lambda v: float(to_percent(v, camera.white_level, camera.black_level))  # noqa: E731
+    rows = []
+    for name, ss in [(n, 1) for n in INTERPOLATIONS] + [("linear", 2)]:
+        shots = [ShotRenderer(scene, traj.poses, t0_s, cfg.exposure_ms, spp=cfg.spp, seed=cfg.seed + s,
+                              supersample=ss, **kw) for s in (1, 2)]
+        before = shots[0].info["warp_s"]
+        d = [_dn(sh.radiance(cfg.exposure_ms, interpolation=name)[0], camera, cfg.exposure_ms) for sh in shots]
+        warp_s = shots[0].info["warp_s"] - before
+        err, noise = pct(rmse_dn(d[0], d_ref)), pct(rmse_dn(d[0], d[1])) / np.sqrt(2.0)
+        expected = float(np.hypot(ref_noise, noise))
+        rows.append({"interpolation": name if ss == 1 else f"{name}, supersampled {ss}x{ss}", "error_percent": err,
+                     "method_noise_percent": noise, "expected_noise_percent": expected,
+                     "error_over_noise": err / expected if expected > 0 else None, "warp_s": warp_s})
+    return rows
+
+
+def _cpu_s() -> float:
+    """CPU seconds of this process (all its threads) and its waited-for children, user + system."""
+    import resource
+
+    me, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime
+
+
+def median_rate_instant(traj, walk_s: float, exposure_ms: float) -> float:
+    """Start time of an exposure window whose mean turn rate is the walk's median."""
+    from scenes.walks import angular_velocity
+
+    t = np.arange(0.5, walk_s - 1.0, 0.01)
+    speed = np.linalg.norm(angular_velocity(traj, t + 0.5e-3 * exposure_ms), axis=1)
+    return float(t[np.argmin(np.abs(speed - np.median(speed)))])
+
+
 def cost_comparison(scene, traj, t0_s: float, cfg, camera) -> dict:
-    """Wall-clock seconds of a blurred shot and of a shot at rest, same size and spp, no cache (medians)."""
+    """CPU and wall-clock seconds of a blurred shot and of a shot at rest, same size and spp, no cache (medians).
+
+    ``render_cost_ratio`` is the ratio of CPU seconds (this process's threads and children,
+    :func:`resource.getrusage`): on a machine shared with other jobs, wall time measures the
+    other jobs as much as the render.  The wall-clock ratio and the load average are kept beside it.
+    """
+    import os
+
     import scenes
     from scenes.blur import render_exposure
 
@@ -117,16 +162,23 @@ def cost_comparison(scene, traj, t0_s: float, cfg, camera) -> dict:
     t1 = t0_s + 1e-3 * cfg.exposure_ms
     scenes.render(scene, traj.pose(t0_s), seed=99, **kw)  # warm-up: kernels compiled
     render_exposure(scene, traj.poses, t0_s, t1, seed=98, **kw)
-    rest, moving, info = [], [], {}
+    rest, moving, rest_cpu, moving_cpu, info = [], [], [], [], {}
+    load = [os.getloadavg()[0]]
     for r in range(cfg.timing_repeats):
-        t = time.perf_counter()
+        t, c = time.perf_counter(), _cpu_s()
         scenes.render(scene, traj.pose(t0_s), seed=cfg.seed + 10 + r, **kw)
         rest.append(time.perf_counter() - t)
-        t = time.perf_counter()
+        rest_cpu.append(_cpu_s() - c)
+        t, c = time.perf_counter(), _cpu_s()
         _, info = render_exposure(scene, traj.poses, t0_s, t1, seed=cfg.seed + 20 + r, **kw)
         moving.append(time.perf_counter() - t)
+        moving_cpu.append(_cpu_s() - c)
+    load.append(os.getloadavg()[0])
     rest_s, moving_s = float(np.median(rest)), float(np.median(moving))
-    return {"at_rest_s": rest_s, "blurred_s": moving_s, "render_cost_ratio": moving_s / rest_s,
+    rest_c, moving_c = float(np.median(rest_cpu)), float(np.median(moving_cpu))
+    return {"t0_s": t0_s, "at_rest_s": rest_s, "blurred_s": moving_s, "at_rest_cpu_s": rest_c, "blurred_cpu_s": moving_c,
+            "render_cost_ratio": moving_c / rest_c, "render_cost_ratio_wall": moving_s / rest_s,
+            "load_average_1min": load,
             "blur_px": info.get("blur_px"), "n_subinstants": info.get("n_subinstants"),
             "margin_px": info.get("margin_px"), "warp_s": info.get("warp_s"), "depth_s": info.get("depth_s")}
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-__all__ = ["report_markdown", "headline"]
+__all__ = ["report_markdown", "headline", "versus_markdown"]
 
 
 def _f(v, spec=".3g") -> str:
@@ -39,11 +39,25 @@ def report_markdown(r: dict) -> str:
     for row in r["reference"]:
         lines.append(f"| {row['t0_s']:.2f} | " + " | ".join(
             f"{_f(x['error_percent'])} % / {1e3 * x['warp_s']:.1f} ms" for x in row["by_subinstants"]) + " |")
-    c = r["cost"]
-    lines += ["", "## Cost", "", f"At rest {_f(c['at_rest_s'])} s, blurred {_f(c['blurred_s'])} s "
-              f"({c['n_subinstants']} sub-instants, {c['margin_px']} px margin, warps {_f(c['warp_s'])} s, depth "
-              f"{_f(c['depth_s'])} s): ratio {_f(c['render_cost_ratio'])}.", "",
-              "## Angular rate (deg/s)", ""]
+    if r["reference"][0].get("by_interpolation"):
+        lines += ["", "### Resampler of the warps (the same two renders)", "",
+                  "| t0 (s) | resampler | error | method noise | error / noise | warps (s) |",
+                  "| --- | --- | --- | --- | --- | --- |"]
+        for row in r["reference"]:
+            for x in row["by_interpolation"]:
+                lines.append(f"| {row['t0_s']:.2f} | {x['interpolation']} | {_f(x['error_percent'])} | "
+                             f"{_f(x['method_noise_percent'])} | {_f(x['error_over_noise'])} | {_f(x['warp_s'])} |")
+    lines += ["", "## Cost (CPU seconds of this process and its children; wall seconds beside)", ""]
+    for label, key in (("fastest turn", "cost"), ("median turn rate", "cost_median_rate")):
+        c = r.get(key)
+        if c is None:
+            continue
+        lines.append(f"- {label} (t0 {_f(c.get('t0_s'))} s): at rest {_f(c.get('at_rest_cpu_s'))} CPU s "
+                     f"({_f(c['at_rest_s'])} s wall), blurred {_f(c.get('blurred_cpu_s'))} CPU s "
+                     f"({_f(c['blurred_s'])} s wall; {c['n_subinstants']} sub-instants, {c['margin_px']} px margin, "
+                     f"warps {_f(c['warp_s'])} s, depth {_f(c['depth_s'])} s): ratio {_f(c['render_cost_ratio'])} "
+                     f"(wall {_f(c.get('render_cost_ratio_wall'))}; load {c.get('load_average_1min')})")
+    lines += ["", "## Angular rate (deg/s)", ""]
     a = r["angular_rate"]
     for name, key in (("synthetic", "synthetic_deg_s"), ("real", "real_deg_s")):
         vals = a.get(key)
@@ -55,5 +69,32 @@ def report_markdown(r: dict) -> str:
         lines.append(f"| {row['t0_s']:.2f} | {_f(row['blur_px'])} | {_f(row['live'])} | "
                      f"{_f(row['emulated_plain'])} | {_f(row['plain_error_percent'])} | "
                      f"{_f(row['consistent_error_percent'])} |")
+    lines += versus_markdown(r.get("live_versus_emulated"))
     lines += ["", f"Command: `{r['provenance']['experiment']}`", ""]
     return "\n".join(lines)
+
+
+def _diff(cell: dict) -> str:
+    d = cell["per_walk"] if cell.get("basis") == "walks" else cell.get("per_frame") or cell["per_walk"]
+    if d is None or d.get("estimate") is None:
+        return f"n/a ({cell['verdict']})"
+    ci = d.get("ci95")
+    ci_text = "" if ci is None else f" [{ci[0]:.3g}, {ci[1]:.3g}]"
+    return f"{d['estimate']:+.3g}{ci_text} {cell['verdict']}"
+
+
+def versus_markdown(v: dict | None) -> list[str]:
+    """The live-against-emulated table: emulated minus live, 95 % interval, verdict."""
+    if not v:
+        return []
+    table = v["table"]
+    metrics = list(next(iter(next(iter(table.values())).values())))
+    lines = ["", "## Live against emulated, with blur and without (emulated minus live)", "",
+             f"{len(v['walks'])} walk(s); live timing {v['settings']['live_timing']}; intervals over walks where "
+             "there are two or more, else (features) over frames; verdicts against the live study's "
+             "equivalence margins.", "",
+             "| recording / run | method | " + " | ".join(metrics) + " |", "| --- | --- |" + " --- |" * len(metrics)]
+    for key, rows in table.items():
+        for m, row in rows.items():
+            lines.append(f"| {key} | {m} | " + " | ".join(_diff(row[k]) for k in metrics) + " |")
+    return lines

@@ -23,7 +23,7 @@ def _median(rows, key):
     return float(np.median(vals)) if vals else None
 
 
-def summarise(rows_ref, cost, rates, rows_sharp) -> dict:
+def summarise(rows_ref, cost, rates, rows_sharp, cost_median=None) -> dict:
     """The headline figures of results.json from the per-instant rows."""
     ratio = rates.get("ratio")
     return {
@@ -31,7 +31,12 @@ def summarise(rows_ref, cost, rates, rows_sharp) -> dict:
         "reference_noise_percent": _median(rows_ref, "expected_noise_percent"),
         "reference_error_over_noise": _median(rows_ref, "error_over_noise"),
         "reference_no_blur_error_percent": _median(rows_ref, "no_blur_error_percent"),
+        "reference_error_over_noise_by_interpolation": {
+            name: _median([x for row in rows_ref for x in row.get("by_interpolation", [])
+                           if x["interpolation"] == name], "error_over_noise")
+            for name in dict.fromkeys(x["interpolation"] for row in rows_ref for x in row.get("by_interpolation", []))},
         "render_cost_ratio": cost["render_cost_ratio"],
+        "render_cost_ratio_median_rate": None if cost_median is None else cost_median["render_cost_ratio"],
         "render_cost_ratio_goal": RENDER_COST_RATIO_GOAL,
         "angular_rate_ratio": ratio,
         "angular_rate_within_goal": (None if ratio is None else
@@ -74,17 +79,26 @@ def run_study(config: BlurConfig, out_dir, *, command: str = "", force: bool = F
         rows_sharp.append(measure.sharpness_comparison(scene, traj, t0, config, camera, consistent))
         tick(1)
     cost = measure.cost_comparison(scene, traj, instants[0], config, camera)
+    cost_median = measure.cost_comparison(
+        scene, traj, measure.median_rate_instant(traj, config.walk_s, config.exposure_ms), config, camera)
     tick(1)
+    versus_result = None
+    if config.versus_walks > 0:
+        from validation.blur.versus import run_versus
+
+        versus_result = run_versus(out, config, tick=tick)
     results = {
-        **summarise(rows_ref, cost, rates, rows_sharp),
+        **summarise(rows_ref, cost, rates, rows_sharp, cost_median),
         "consistent_hook": "validation.blur.run_study(consistent=f): f(raw, source_ms, target_ms, response, "
                            "shot_renderer) -> raw; not measured here (the realblur side's emulation)"
                            if consistent is None else "measured",
         "instants_s": instants,
         "reference": rows_ref,
         "cost": cost,
+        "cost_median_rate": cost_median,
         "angular_rate": rates,
         "sharpness": rows_sharp,
+        "live_versus_emulated": versus_result,
         "machine": {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),
                     "variant": scenes.choose_variant()},
         "provenance": provenance(command, config.as_dict()),

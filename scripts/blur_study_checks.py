@@ -1,0 +1,185 @@
+"""Measurements behind docs/motion.md (2026-11-25) that go beyond one ``exposim validate blur`` run.
+
+    python scripts/blur_study_checks.py sharpness OUT.json        # 4 fastest + 4 median-rate instants
+    python scripts/blur_study_checks.py variants T0 [T0 ...]      # consistent emulation: smoothing x resampler
+    python scripts/blur_study_checks.py reference OUT.json        # reference error per resampler, fastest instant
+    python scripts/blur_study_checks.py cost OUT.json [REPEATS]   # CPU-second render cost, fastest + median rate
+    python scripts/blur_study_checks.py versus OUT_DIR            # the live-versus-emulated table alone
+    python scripts/blur_study_checks.py table OUT_DIR             # that table from the walks finished so far
+
+All at the full configuration of :class:`validation.blur.config.BlurConfig` (480x300) and with
+the study's own functions (:mod:`validation.blur.measure`, :mod:`validation.blur.versus`).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import resource
+import sys
+import time
+
+import numpy as np
+
+
+def _setup():
+    import scenes
+    from validation.blur.config import BlurConfig
+    from validation.common import make_camera
+
+    cfg = BlurConfig()
+    scene = scenes.get_scene(cfg.scene, seed=cfg.seed)
+    traj = scene.trajectory(cfg.walk_s + 1.0, walk=cfg.walk)
+    camera = make_camera("borealhdr", width=cfg.width, height=cfg.height).saturating_at(scene.reference_radiance, 1.0)
+    return cfg, scene, traj, camera
+
+
+def _consistent(traj, camera, sigma: float, resample: str = "linear"):
+    from emulator.blur import blur_homographies, emulate_blur_consistent
+    from scenes.camera import intrinsics_matrix
+    from scenes.walks import angular_velocity
+
+    k = intrinsics_matrix(camera.width, camera.height, camera.fov_x_deg)
+
+    def omega(t_s):
+        return angular_velocity(traj, np.clip(np.atleast_1d(t_s), 0.0, traj.duration_s))
+
+    def consistent(raw, source_ms, target_ms, response, shot):
+        hs, ws = blur_homographies(omega, k, (camera.width, camera.height), shot.t0_s, source_ms, target_ms,
+                                   stamp="start")
+        return emulate_blur_consistent(raw, source_ms, target_ms, response, hs, ws, structure_sigma_px=sigma,
+                                       resample=resample)[0]
+
+    return consistent
+
+
+def _median_instants(traj, walk_s: float, exposure_ms: float, n: int = 4, gap_s: float = 5.0) -> list[float]:
+    from scenes.walks import angular_velocity
+
+    t = np.arange(0.5, walk_s - 1.0, 0.01)
+    speed = np.linalg.norm(angular_velocity(traj, t + 0.5e-3 * exposure_ms), axis=1)
+    chosen: list[float] = []
+    for i in np.argsort(np.abs(speed - np.median(speed))):
+        if all(abs(t[i] - c) >= gap_s for c in chosen):
+            chosen.append(float(t[i]))
+        if len(chosen) == n:
+            break
+    return sorted(chosen)
+
+
+def sharpness(out_path: str) -> dict:
+    from validation.blur import measure
+
+    cfg, scene, traj, camera = _setup()
+    rows = []
+    for kind, instants in (("fastest", measure.fastest_instants(traj, cfg.walk_s, 4, cfg.exposure_ms)),
+                           ("median", _median_instants(traj, cfg.walk_s, cfg.exposure_ms))):
+        for t0 in instants:
+            r = measure.sharpness_comparison(scene, traj, t0, cfg, camera, _consistent(traj, camera, 1.0))
+            r0 = measure.sharpness_comparison(scene, traj, t0, cfg, camera, _consistent(traj, camera, 0.0))
+            r.update(kind=kind, consistent_sigma0_error_percent=r0["consistent_error_percent"])
+            rows.append(r)
+    out = {"rows": rows, "load": os.getloadavg()}
+    _write(out_path, out)
+    return out
+
+
+def variants(t0s) -> list[dict]:
+    from validation.blur import measure
+
+    cfg, scene, traj, camera = _setup()
+    rows = []
+    for t0 in t0s:
+        row = {"t0_s": t0}
+        for sigma in (0.0, 0.5, 1.0):
+            for rs in ("linear", "cubic"):
+                r = measure.sharpness_comparison(scene, traj, t0, cfg, camera, _consistent(traj, camera, sigma, rs))
+                row[f"sigma{sigma:g}-{rs}"] = r["consistent_error_percent"]
+        row["plain"] = r["plain_error_percent"]
+        rows.append(row)
+        print(json.dumps(row), flush=True)
+    return rows
+
+
+def reference(out_path: str) -> dict:
+    from validation.blur import measure
+
+    cfg, scene, traj, camera = _setup()
+    t0 = measure.fastest_instants(traj, cfg.walk_s, 1, cfg.exposure_ms)[0]
+    out = {"t0_s": t0, "reference": measure.reference_comparison(scene, traj, t0, cfg, camera), "load": os.getloadavg()}
+    _write(out_path, out)
+    return out
+
+
+def cost(out_path: str, repeats: int = 3) -> dict:
+    from dataclasses import replace
+
+    from validation.blur import measure
+
+    cfg, scene, traj, camera = _setup()
+    cfg = replace(cfg, timing_repeats=int(repeats))
+    t0 = measure.fastest_instants(traj, cfg.walk_s, 1, cfg.exposure_ms)[0]
+    tm = measure.median_rate_instant(traj, cfg.walk_s, cfg.exposure_ms)
+    out = {"fastest": measure.cost_comparison(scene, traj, t0, cfg, camera),
+           "median_rate": measure.cost_comparison(scene, traj, tm, cfg, camera)}
+    _write(out_path, out)
+    return out
+
+
+def versus(out_dir: str) -> dict:
+    from validation.blur.config import BlurConfig
+    from validation.blur.report import versus_markdown
+    from validation.blur.versus import run_versus
+
+    cfg = BlurConfig()
+    t, load0 = time.time(), os.getloadavg()
+    r = run_versus(out_dir, cfg)
+    ru = resource.getrusage(resource.RUSAGE_SELF)
+    r["timing"] = {"wall_s": time.time() - t, "cpu_s": ru.ru_utime + ru.ru_stime, "load_start": load0,
+                   "load_end": os.getloadavg()}
+    r["config"] = cfg.as_dict()
+    _write(os.path.join(out_dir, "versus.json"), r)
+    with open(os.path.join(out_dir, "versus.md"), "w") as f:
+        f.write("\n".join(versus_markdown(r)) + "\n")
+    return r
+
+
+def table(out_dir: str) -> dict:
+    """The table of :func:`validation.blur.versus.compare` over ``OUT_DIR/versus/seed*/walk.json``."""
+    from pathlib import Path
+
+    from emulator.io.files import read_results
+    from validation.blur.config import BlurConfig
+    from validation.blur.report import versus_markdown
+    from validation.blur.versus import RUNS, SCENE_BLUR, compare
+
+    cfg = BlurConfig()
+    walks = [read_results(p) for p in sorted(Path(out_dir).glob("versus/seed*/walk.json"))]
+    r = {"walks": walks, "table": compare(walks, cfg.versus_methods, seed=cfg.seed),
+         "settings": {"runs": list(RUNS), "scene_blur": list(SCENE_BLUR), "live_timing": "same-instant"}}
+    _write(os.path.join(out_dir, "table.json"), r)
+    with open(os.path.join(out_dir, "table.md"), "w") as f:
+        f.write("\n".join(versus_markdown(r)) + "\n")
+    return r
+
+
+def _write(path: str, obj) -> None:
+    from emulator.io.files import write_results
+
+    write_results(path, obj, float_digits=12)
+
+
+def main(argv) -> int:
+    what, args = argv[1], argv[2:]
+    jobs = {"sharpness": lambda: sharpness(args[0]), "variants": lambda: variants([float(a) for a in args]),
+            "reference": lambda: reference(args[0]), "cost": lambda: cost(args[0], *args[1:2]), "versus": lambda: versus(args[0]),
+            "table": lambda: table(args[0])}
+    if what not in jobs:
+        print(__doc__, file=sys.stderr)
+        return 2
+    jobs[what]()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main(sys.argv))
