@@ -13,11 +13,13 @@ method does can change what another method, or the run, sees:
   (``private_images``) gets a private ``bytes`` copy on every call, so that even a write
   through the data pointer (ctypes, ``__array_interface__``) or up the ``.base`` chain
   reaches only its own copy.
-- **NumPy's floating-point error state** (``np.seterr``, ``np.seterrcall``) and the
-  **warning filters** (``warnings.simplefilter("error")``) are saved before the call and
-  restored after it.
-- **working directory**: restored after the call (the run's output paths are absolute
-  anyway: :func:`absolute`).
+- **NumPy's floating-point error state** (``np.seterr``, ``np.seterrcall``; per thread) is
+  saved before the call and restored after it.
+- the **warning filters** (``warnings.simplefilter("error")``) and the **working directory**
+  are process-wide: they are saved when a call starts while no other is running and restored
+  when the last of the overlapping calls ends (with ``--jobs 1``: around every call), so that
+  one method's call cannot reset the filters another sets for itself meanwhile.  The run's
+  output paths are absolute anyway (:func:`absolute`).
 - **stdout and stderr**: what the method prints goes to a per-method buffer
   (:func:`captured_output`), never to the run's output (``--json`` stays one JSON document).
   Python-level writes only: a C library writing to file descriptor 1 is not captured.
@@ -167,26 +169,36 @@ class _Router(io.TextIOBase):
 
 
 def _enter_capture() -> None:
+    """Start a window of method calls (calls on other threads overlap): at its start the
+    process-wide state is saved (streams routed, warning filters, working directory)."""
     global _depth, _saved
     with _stream_lock:
         if _depth == 0:
-            _saved = (sys.stdout, sys.stderr)
+            _saved = (sys.stdout, sys.stderr, list(warnings.filters), os.getcwd())
             sys.stdout = _Router(sys.stdout, "stdout")
             sys.stderr = _Router(sys.stderr, "stderr")
         _depth += 1
 
 
 def _leave_capture() -> None:
+    """End a call; the last call of a window puts the process-wide state back.  Restoring only
+    then keeps one method's call from resetting the filters that a method running beside it
+    set for itself (Kim's ``warnings.catch_warnings``) under ``--jobs 2``."""
     global _depth, _saved
     with _stream_lock:
         _depth -= 1
         if _depth == 0 and _saved is not None:
-            out, err = _saved
+            out, err, filters, cwd = _saved
             # restore only our routers (something else may have replaced them since)
             if isinstance(sys.stdout, _Router):
                 sys.stdout = out
             if isinstance(sys.stderr, _Router):
                 sys.stderr = err
+            if warnings.filters != filters:  # warnings.simplefilter("error") and the like
+                warnings.filters[:] = filters
+                getattr(warnings, "_filters_mutated", lambda: None)()
+            if os.getcwd() != cwd:
+                os.chdir(cwd)
             _saved = None
 
 
@@ -223,10 +235,8 @@ def _describe(exc: BaseException) -> str:
 
 
 def _isolated(fn, name: str, on_error):
-    err = np.geterr()
+    err = np.geterr()  # NumPy's error state is per thread
     errcall = np.geterrcall()
-    cwd = os.getcwd()
-    filters = list(warnings.filters)
     parts: list = []
     outer = getattr(_local, "buffer", None)
     _local.buffer = parts
@@ -246,15 +256,10 @@ def _isolated(fn, name: str, on_error):
             sys.stdout = routers[0]
         if isinstance(routers[1], _Router) and sys.stderr is not routers[1]:
             sys.stderr = routers[1]
-        _leave_capture()
+        _leave_capture()  # warning filters and working directory: when the last overlapping call ends
         _local.buffer = outer
         np.seterr(**err)
         np.seterrcall(errcall)
-        if warnings.filters != filters:  # warnings.simplefilter("error") and the like
-            warnings.filters[:] = filters
-            getattr(warnings, "_filters_mutated", lambda: None)()
-        if os.getcwd() != cwd:
-            os.chdir(cwd)
         _keep_output(name, parts)
 
 
