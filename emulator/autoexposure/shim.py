@@ -130,7 +130,7 @@ def gamma_metrics_ref(y: np.ndarray, gammas=GAMMAS, *, delta=DELTA, lam=LAMBDA, 
 
     Returns (M as float64 array, flat as bool array).  Requires max(y) > min(y).
     Per row block and gamma: one ``cv2.LUT`` (the normalised image to the power g), two
-    Sobel passes to uint8, and one 25-bin histogram of the code ``5 Gx + Gy``.
+    Sobel passes to uint8, and one 5x5 joint histogram of (Gx, Gy).
     """
     lo, hi = int(y.min()), int(y.max())
     # (DN - lo) / (hi - lo) in float64 as REF computes it per pixel; DN below lo never occur.
@@ -148,8 +148,8 @@ def gamma_metrics_ref(y: np.ndarray, gammas=GAMMAS, *, delta=DELTA, lam=LAMBDA, 
             # and saturate negatives to 0 (checked in the tests).
             gx = cv2.Sobel(img, cv2.CV_8U, 1, 0, ksize=3)
             gy = cv2.Sobel(img, cv2.CV_8U, 0, 1, ksize=3)
-            code = cv2.scaleAdd(gx[s0:s1], 5.0, gy[s0:s1])  # 5 Gx + Gy, exact on 0..4
-            counts[j] += cv2.calcHist([code], [0], None, [25], [0, 25]).ravel()
+            # the 5x5 joint histogram of (Gx, Gy), flattened: bin 5 Gx + Gy
+            counts[j] += cv2.calcHist([gx[s0:s1], gy[s0:s1]], [0, 1], None, [5, 5], [0, 5, 0, 5]).ravel()
     counts = counts.reshape(len(gammas), 5, 5)
     metrics = np.zeros(len(gammas))
     flat = np.zeros(len(gammas), dtype=bool)
