@@ -20,6 +20,7 @@ from synth.noise_model import noise_model_of
 from synth.procedural import hdr_chart
 from synth.sequence import BASELINE_M, load_camera
 from validation.common import quantisation_bound
+from validation.live.config import config_from_dict
 from validation.live import (
     METRICS,
     CONFIGS,
@@ -321,3 +322,14 @@ def test_replicates_run_each_seed_into_its_own_folder(tmp_path, stop_at_synthesi
     assert (tmp_path / "rep" / "replicates" / "seed7").is_dir()
     assert main(["-o", str(tmp_path / "bad"), "--quick", "--replicates", "0"]) == 1
     assert "--replicates must be >= 1, got 0" in capsys.readouterr().err
+
+
+def test_render_per_reaches_the_recorder_and_a_bad_value_is_refused(tmp_path, stop_at_synthesize, capsys):
+    with pytest.raises(SynthesizeCalled):
+        main(["-o", str(tmp_path / "run"), "--quick", "--no-progress", "--render-per", "cycle"])
+    assert stop_at_synthesize["render_per"] == "cycle"
+    assert LiveConfig(render_per="cycle").to_dict()["renders"] == 40 * 2 * len(LiveConfig().scenes)
+    assert config_from_dict({"render_per": "cycle"}).render_per == "cycle"
+    assert config_from_dict({}).render_per == "shot"  # records from before the option
+    with pytest.raises(Exception, match="render_per must be 'shot' or 'cycle', got 'frame'"):
+        LiveConfig(render_per="frame")

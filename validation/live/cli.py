@@ -69,6 +69,9 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
                         f"{full.frame_rate_hz:g}; its frames must start on the recorder's shots, e.g. 11)")
     p.add_argument("--no-native", action="store_true",
                    help="skip the native-rate live condition (reported as not run)")
+    p.add_argument("--render-per", choices=("shot", "cycle"),
+                   help="one render per shot and camera, or one per bracket sweep and camera warped with depth "
+                        f"to every shot (a sixth of the renders) (default {full.render_per})")
     p.add_argument("--keep-radiance", action="store_true", help="keep the datasets' radiance EXRs (large)")
     p.add_argument("--cache-dir", help="render cache (default $EXPOSIM_CACHE or ~/.cache/exposim/renders)")
     add_scheduler_option(p)
@@ -99,8 +102,9 @@ def config_from_args(args) -> LiveConfig:
         changes["n_cycles"] = args.cycles
     if args.size is not None:
         changes["width"], changes["height"] = args.size
-    for key in ("spp", "seed", "scenes", "methods", "noise_repeats", "latency_frames", "frame_rate_hz"):
-        if getattr(args, key) is not None:
+    for key in ("spp", "seed", "scenes", "methods", "noise_repeats", "latency_frames", "frame_rate_hz",
+                "render_per"):
+        if getattr(args, key, None) is not None:
             changes[key] = getattr(args, key)
     if args.no_control:
         changes["control"] = False
@@ -117,7 +121,7 @@ def command_line(args, prog: str) -> str:
     if args.quick:
         words.append("--quick")
     for key in ("scenes", "cycles", "size", "spp", "seed", "methods", "noise_repeats", "latency_frames",
-                "frame_rate_hz"):
+                "frame_rate_hz", "render_per"):
         value = getattr(args, key, None)
         if value is None:
             continue

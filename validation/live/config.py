@@ -141,6 +141,10 @@ class LiveConfig:
         Its exposure latency in frames (a proposal made after frame k is used from frame k + 1 + latency).
     frame_rate_hz : float
         Its frame rate (the recorder's 22 fps, or a rate whose frames start on the recorder's shots).
+    render_per : str
+        ``"shot"`` (one render per shot and camera) or ``"cycle"`` (one render per bracket sweep
+        and camera, warped with depth to every shot's exposure window: a sixth of the renders;
+        :func:`scenes.synthesize.synthesize`).
     """
 
     scenes: tuple[str, ...] = SCENES
@@ -163,6 +167,7 @@ class LiveConfig:
     native: bool = True
     latency_frames: int = 1
     frame_rate_hz: float = 22.0
+    render_per: str = "shot"
 
     def __post_init__(self) -> None:
         import scenes
@@ -198,6 +203,8 @@ class LiveConfig:
         if not (isinstance(self.frame_rate_hz, (int, float)) and math.isfinite(self.frame_rate_hz)
                 and self.frame_rate_hz > 0):
             raise LiveError(f"frame_rate_hz must be finite and positive, got {self.frame_rate_hz!r}")
+        if self.render_per not in ("shot", "cycle"):
+            raise LiveError(f"render_per must be 'shot' or 'cycle', got {self.render_per!r}")
 
     @property
     def duration_s(self) -> float:
@@ -215,7 +222,7 @@ class LiveConfig:
         d = asdict(self)
         d["scenes"], d["methods"], d["taus"] = list(self.scenes), list(self.methods), [int(t) for t in self.taus]
         d["scene_parameters"] = {s: self.scene_parameters(s) for s in self.scenes}
-        d["renders"] = self.n_cycles * 12 * len(self.scenes)
+        d["renders"] = self.n_cycles * (12 if self.render_per == "shot" else 2) * len(self.scenes)
         d["fixed_instant"] = "timestamp of the cycle's first shot (bracket index 0, the 1 ms bracket)"
         return d
 

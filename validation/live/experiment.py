@@ -129,6 +129,7 @@ def run_live_experiment(out, config: LiveConfig | None = None, *, progress: bool
         with _bar(cfg.n_cycles * 6, f"{tag}: render + record", progress) as bar:
             synthesize(scene, ds, n_cycles=cfg.n_cycles, width=cfg.width, height=cfg.height, spp=cfg.spp, stereo=True,
                        seed=cfg.seed, render_seed=cfg.seed, noise=cfg.capture_noise, save_radiance=True,
+                       render_per=cfg.render_per,
                        cache_dir=cache_dir, progress=lambda d, n: bar.update(d - bar.n), scheduler=scheduler)
         timings[f"record_{scene_name}_s"] = time.perf_counter() - t0
         say(f"{tag}: recorded {cfg.n_cycles} cycles in {timings[f'record_{scene_name}_s']:.0f} s")
