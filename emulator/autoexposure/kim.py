@@ -165,8 +165,9 @@ def metric_ref(y: np.ndarray, *, alpha=ACTIVATION_ALPHA, tau=ACTIVATION_TAU,
 
     Every per-pixel quantity of REF depends on the pixel only through its Y_8 bin (except Q),
     so E = sum_b W_b Q_b + mean(Q) sum_b n_b A_b M_b W_b over the 256 bins, with Q_b the exact
-    integer sum of Q over bin b.  The 256-term arithmetic runs in 30-digit decimal (exp and ln
-    correctly rounded by :mod:`decimal`), so E is the exact value of REF's formula rounded once
+    integer sum of Q over bin b (:mod:`emulator.autoexposure._kim_exact`).  The 256-term arithmetic
+    runs in 30-digit decimal (exp by :mod:`decimal`, ln from float64's log and one Newton step),
+    so E is the exact value of REF's formula rounded once
     to float64: the same bits on every machine, BLAS and thread count.  Why it matters: GP-MI
     turns last-bit differences of E into different exposures (on a replay of the shared sample,
     a 1e-16 relative change of one frame's E moves cycle 10 from 9.099 to 9.168 ms), so any
