@@ -346,3 +346,70 @@ def test_trajectory_does_not_depend_on_the_blas_thread_count(sample_seq, tmp_pat
         csv[n] = (out / "kim" / "exposures.csv").read_bytes()
     assert csv[1] == csv[2]
     assert csv[1].count(b"\n") == 5  # header + the sample's 4 cycles
+
+
+def _metric_from_bins_50_digits(counts, q_bin, s, alpha=16.0, tau=4.0, threshold=0.6):
+    """REF's metric from per-bin counts and Q sums, evaluated directly in 50-digit decimal
+    (Decimal.ln, no shortcuts), rounded once to float64: the reference of the fast path."""
+    import decimal
+
+    with decimal.localcontext(decimal.Context(prec=50, Emax=999999, Emin=-999999)):
+        D = decimal.Decimal
+        n = D(s)
+        occ = [b for b in range(256) if counts[b] > 0]
+        h = {b: -(D(counts[b]) / n) * ((D(counts[b]) / n).ln() / D(2).ln()) for b in occ}
+        mu = sum(D(counts[b]) * h[b] for b in occ) / n
+        var = sum(D(counts[b]) * (h[b] - mu) ** 2 for b in occ) / n
+        lo, hi = min(h.values()), max(h.values())
+        if not var > 0 or hi == lo:
+            return math.nan
+        e = {b: ((h[b] - mu) ** 2 / (2 * var)).exp() for b in occ}
+        total = sum(D(counts[b]) * e[b] for b in occ)
+        gated = sum(D(counts[b]) * (2 / (1 + (-D(alpha) * ((h[b] - lo) / (hi - lo)) + D(tau)).exp()) - 1) * e[b] / total
+                    for b in occ if (h[b] - lo) / (hi - lo) < D(threshold))
+        weighted = sum(e[b] / total * D(q_bin[b]) for b in occ)
+        return float(weighted + D(sum(q_bin)) / n * gated)
+
+
+def test_metric_ref_fast_exact_path_equals_50_digit_reference():
+    """The fast path (blocked per-bin sums, one-pass Sobel pair, float-seeded Newton logarithms in
+    30 digits) gives the bits of the direct 50-digit evaluation: on adversarial histograms (a
+    dominant bin with single-pixel bins, heavy tails, two bins, every bin) and on images whose Q
+    wraps mod 65536, of odd sizes."""
+    from emulator.autoexposure.kim import _bin_sums, _metric_ref_bins, _sobel_16u, _sobel_16u_xy, _y8
+
+    rng = np.random.default_rng(23)
+    cases = []
+    for i in range(60):
+        counts = np.zeros(256, dtype=np.int64)
+        kind = i % 5
+        k = {0: 2, 1: 256, 2: int(rng.integers(3, 200)), 3: int(rng.integers(3, 60)), 4: int(rng.integers(3, 60))}[kind]
+        bins = rng.choice(256, k, replace=False)
+        if kind == 3:
+            counts[bins] = 1
+            counts[bins[0]] = 2_300_000  # one dominant bin, the others single pixels
+        elif kind == 4:
+            counts[bins] = (rng.pareto(0.8, k) * 50).astype(np.int64) + 1
+        else:
+            counts[bins] = rng.integers(1, 40_000, k)
+        q_bin = [int(c) * int(rng.integers(0, 65536)) for c in counts]
+        cases.append((counts.tolist(), q_bin, int(counts.sum())))
+    finite = 0
+    for counts, q_bin, s in cases:
+        fast = _metric_ref_bins(counts, q_bin, s, 16.0, 4.0, 0.6)
+        ref = _metric_from_bins_50_digits(counts, q_bin, s)
+        assert (math.isnan(fast) and math.isnan(ref)) or fast == ref, (counts, q_bin)
+        finite += not math.isnan(fast)
+    assert finite >= 50
+    for h, w in [(3, 3), (7, 5), (61, 97), (200, 333)]:
+        y = rng.integers(0, 4096, (h, w), dtype=np.uint16)
+        y8 = _y8(y)
+        gx, gy = _sobel_16u_xy(y8)
+        assert np.array_equal(gx, _sobel_16u(y8, 1, 0)) and np.array_equal(gy, _sobel_16u(y8, 0, 1))
+        q = gx * gx + gy * gy  # uint16, wrapping
+        exact = [0] * 256
+        for b, v in zip(y8.ravel().tolist(), q.ravel().tolist()):
+            exact[b] += v
+        assert _bin_sums(y8, q) == exact
+        counts = np.bincount(y8.ravel(), minlength=256).tolist()
+        assert metric_ref(y) == _metric_from_bins_50_digits(counts, exact, y.size)

@@ -6,7 +6,8 @@ demosaic it again.  :data:`FRAME_MEMO` memoises such quantities by the identity 
 input array, for arrays that cannot change: read-only, owning their data or viewing only
 read-only arrays.  A writeable array is never memoised (its content may change between
 calls), so calling a method on a scratch buffer behaves exactly as before.  Values are
-views of immutable ``bytes`` buffers, which no method can make writeable.
+read-only views of read-only arrays the memo owns (no copy): ``setflags(write=True)`` on a
+value raises, so a method cannot change it for the others by accident.
 
 The entry keeps a reference to the input array, so its ``id`` cannot be reused by another
 array while the entry lives; values are returned read-only.  Thread-safe (the playback runs
@@ -59,9 +60,12 @@ class FrameMemo:
                 return entry[1]
         value = compute()
         if isinstance(value, np.ndarray):
-            # a view of an immutable bytes buffer: a method cannot make it writeable again and
-            # change it for the others (emulator.autoexposure.isolation)
-            value = np.frombuffer(np.ascontiguousarray(value).tobytes(), dtype=value.dtype).reshape(value.shape)
+            # a read-only view of a read-only array: the view cannot be made writeable again
+            # (emulator.autoexposure.isolation.readonly_view, without the import circle)
+            if value.base is not None:  # a view of something a caller may hold: own it
+                value = value.copy()
+            value.setflags(write=False)
+            value = value.view()
         with self._lock:
             self.misses += 1
             self._data[k] = (frame, value)

@@ -3,16 +3,23 @@
 :func:`call_method` runs ``method.next_exposure(raw, exposure_ms)`` so that nothing the
 method does can change what another method, or the run, sees:
 
-- **images**: the method gets a view of an immutable ``bytes`` buffer holding the pixels
-  (:func:`frozen`).  ``setflags(write=True)`` on it raises, and OpenCV refuses it as ``dst=``,
-  so decoded brackets and emulated images shared between methods cannot be written through
-  it.  One frozen copy per source image is shared by every method (so per-frame values such
-  as the gray image stay shared, :mod:`emulator.autoexposure._frame`).
-- **NumPy's floating-point error state** (``np.seterr``, ``np.seterrcall``) and the
-  **warning filters** (``warnings.simplefilter("error")``) are saved before the call and
-  restored after it.
-- **working directory**: restored after the call (the run's output paths are absolute
-  anyway: :func:`absolute`).
+- **images**: a built-in method gets a read-only view whose ``setflags(write=True)`` raises
+  and which OpenCV refuses as ``dst=``, so decoded brackets and emulated images shared
+  between methods cannot be written through it.  The closed loops hand out such views of
+  the arrays they own (:func:`readonly_view`; no copy, the same view for every method, so
+  per-frame values such as the gray image stay shared, :mod:`emulator.autoexposure._frame`);
+  any other input (a writeable array, an array owning its data) is replaced by a view of an
+  immutable ``bytes`` copy (:func:`frozen`, one per source array).  A plugin
+  (``private_images``) gets a private ``bytes`` copy on every call, so that even a write
+  through the data pointer (ctypes, ``__array_interface__``) or up the ``.base`` chain
+  reaches only its own copy.
+- **NumPy's floating-point error state** (``np.seterr``, ``np.seterrcall``; per thread) is
+  saved before the call and restored after it.
+- the **warning filters** (``warnings.simplefilter("error")``) and the **working directory**
+  are process-wide: they are saved when a call starts while no other is running and restored
+  when the last of the overlapping calls ends (with ``--jobs 1``: around every call), so that
+  one method's call cannot reset the filters another sets for itself meanwhile.  The run's
+  output paths are absolute anyway (:func:`absolute`).
 - **stdout and stderr**: what the method prints goes to a per-method buffer
   (:func:`captured_output`), never to the run's output (``--json`` stays one JSON document).
   Python-level writes only: a C library writing to file descriptor 1 is not captured.
@@ -38,8 +45,8 @@ import numpy as np
 from emulator.autoexposure._base import AutoExposureError
 from emulator.autoexposure._base import MethodFailed
 
-__all__ = ["call_method", "call_factory", "frozen", "is_frozen", "absolute", "captured_output",
-           "MAX_CAPTURED_CHARS"]
+__all__ = ["call_method", "call_factory", "frozen", "is_frozen", "readonly_view", "is_readonly_view",
+           "absolute", "captured_output", "MAX_CAPTURED_CHARS"]
 
 #: Characters of a method's printed output kept per method (the rest is counted, not kept).
 MAX_CAPTURED_CHARS = 65536
@@ -51,6 +58,30 @@ _frozen_by_id: dict[int, tuple] = {}
 def is_frozen(a) -> bool:
     """Whether ``a`` is a view of an immutable ``bytes`` buffer (no flag can make it writeable)."""
     while isinstance(a, np.ndarray):
+        a = a.base
+    if isinstance(a, memoryview):
+        a = a.obj
+    return isinstance(a, bytes)
+
+
+def readonly_view(a: np.ndarray) -> np.ndarray:
+    """``a`` made read-only and a read-only view of it returned (no copy): the view's
+    ``setflags(write=True)`` raises while ``a`` stays read-only.  For arrays the loop owns
+    and hands to built-in methods (:func:`is_readonly_view`)."""
+    a.setflags(write=False)
+    return a.view()
+
+
+def is_readonly_view(a) -> bool:
+    """Whether ``a`` is a read-only view over read-only arrays (or an immutable buffer): no flag
+    set on ``a`` itself can make it writeable (what :func:`readonly_view` returns)."""
+    if not isinstance(a, np.ndarray) or a.flags.writeable or a.base is None:
+        return False
+    while isinstance(a, np.ndarray):
+        if a.flags.writeable:
+            return False
+        if a.base is None:
+            return True
         a = a.base
     if isinstance(a, memoryview):
         a = a.obj
@@ -138,26 +169,36 @@ class _Router(io.TextIOBase):
 
 
 def _enter_capture() -> None:
+    """Start a window of method calls (calls on other threads overlap): at its start the
+    process-wide state is saved (streams routed, warning filters, working directory)."""
     global _depth, _saved
     with _stream_lock:
         if _depth == 0:
-            _saved = (sys.stdout, sys.stderr)
+            _saved = (sys.stdout, sys.stderr, list(warnings.filters), os.getcwd())
             sys.stdout = _Router(sys.stdout, "stdout")
             sys.stderr = _Router(sys.stderr, "stderr")
         _depth += 1
 
 
 def _leave_capture() -> None:
+    """End a call; the last call of a window puts the process-wide state back.  Restoring only
+    then keeps one method's call from resetting the filters that a method running beside it
+    set for itself (Kim's ``warnings.catch_warnings``) under ``--jobs 2``."""
     global _depth, _saved
     with _stream_lock:
         _depth -= 1
         if _depth == 0 and _saved is not None:
-            out, err = _saved
+            out, err, filters, cwd = _saved
             # restore only our routers (something else may have replaced them since)
             if isinstance(sys.stdout, _Router):
                 sys.stdout = out
             if isinstance(sys.stderr, _Router):
                 sys.stderr = err
+            if warnings.filters != filters:  # warnings.simplefilter("error") and the like
+                warnings.filters[:] = filters
+                getattr(warnings, "_filters_mutated", lambda: None)()
+            if os.getcwd() != cwd:
+                os.chdir(cwd)
             _saved = None
 
 
@@ -194,10 +235,8 @@ def _describe(exc: BaseException) -> str:
 
 
 def _isolated(fn, name: str, on_error):
-    err = np.geterr()
+    err = np.geterr()  # NumPy's error state is per thread
     errcall = np.geterrcall()
-    cwd = os.getcwd()
-    filters = list(warnings.filters)
     parts: list = []
     outer = getattr(_local, "buffer", None)
     _local.buffer = parts
@@ -217,15 +256,10 @@ def _isolated(fn, name: str, on_error):
             sys.stdout = routers[0]
         if isinstance(routers[1], _Router) and sys.stderr is not routers[1]:
             sys.stderr = routers[1]
-        _leave_capture()
+        _leave_capture()  # warning filters and working directory: when the last overlapping call ends
         _local.buffer = outer
         np.seterr(**err)
         np.seterrcall(errcall)
-        if warnings.filters != filters:  # warnings.simplefilter("error") and the like
-            warnings.filters[:] = filters
-            getattr(warnings, "_filters_mutated", lambda: None)()
-        if os.getcwd() != cwd:
-            os.chdir(cwd)
         _keep_output(name, parts)
 
 
@@ -236,11 +270,14 @@ def call_method(method, raw, exposure_ms):
     ``KeyboardInterrupt``.
     """
     name = str(getattr(method, "name", type(method).__name__))
-    # built-ins share one frozen copy (and its per-frame values); a plugin gets a private one,
-    # so that even a write through the data pointer (ctypes, __array_interface__) reaches only
-    # its own copy
+    # built-ins share the loop's read-only view (or one frozen copy of anything else) and its
+    # per-frame values; a plugin gets a private copy, so that even a write through the data
+    # pointer (ctypes, __array_interface__) reaches only its own copy
     private = getattr(type(method), "private_images", False)  # registry.PluginMethod: a plugin
-    image = _bytes_view(raw) if private and isinstance(raw, np.ndarray) else frozen(raw)
+    if private and isinstance(raw, np.ndarray):
+        image = _bytes_view(raw)
+    else:
+        image = raw if is_readonly_view(raw) else frozen(raw)
     return _isolated(lambda: method.next_exposure(image, exposure_ms), name,
                      lambda exc: MethodFailed(_describe(exc)))
 

@@ -41,7 +41,6 @@ points all miss gives the jump every time, where REF, with fresh draws, usually 
 
 from __future__ import annotations
 
-import decimal
 import math
 import warnings
 
@@ -49,6 +48,7 @@ import cv2
 import numpy as np
 
 from emulator.autoexposure._base import MAX_DN, AutoExposureError, AutoExposureMethod, check_seed
+from emulator.autoexposure._kim_exact import _bin_sums, _metric_ref_bins
 from emulator.pools import single_thread_pools
 
 __all__ = [
@@ -120,9 +120,6 @@ LOCAL_ENTROPY_SIZE = 3
 #: advanced by every fit, as REF's global state; borealhdr default) or "per-fit" (every fit
 #: draws from a fresh RandomState(seed); paper default).
 RESTART_SEEDINGS = ("stream", "per-fit")
-#: Decimal digits of the 256-bin arithmetic of :func:`metric_ref` (float64 has 17; 30 keeps
-#: the result correctly rounded but for values within 1e-13 ulp of a rounding boundary).
-_DECIMAL_DIGITS = 30
 
 
 def softmax_weights(q: np.ndarray, counts: np.ndarray | None = None) -> np.ndarray:
@@ -151,14 +148,26 @@ def _sobel_16u(img8: np.ndarray, dx: int, dy: int) -> np.ndarray:
     return g.view(np.uint16)
 
 
+def _sobel_16u_xy(img8: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(_sobel_16u(img8, 1, 0), _sobel_16u(img8, 0, 1))`` in one pass: ``cv2.spatialGradient``
+    is the 3x3 Sobel pair with the same default border (checked in the tests)."""
+    if img8.shape[0] < 3 or img8.shape[1] < 3:  # spatialGradient's border needs 3 pixels
+        return _sobel_16u(img8, 1, 0), _sobel_16u(img8, 0, 1)
+    gx, gy = cv2.spatialGradient(img8, ksize=3, borderType=cv2.BORDER_DEFAULT)
+    np.maximum(gx, 0, out=gx)
+    np.maximum(gy, 0, out=gy)
+    return gx.view(np.uint16), gy.view(np.uint16)
+
+
 def metric_ref(y: np.ndarray, *, alpha=ACTIVATION_ALPHA, tau=ACTIVATION_TAU,
                threshold=ENTROPY_THRESHOLD) -> float:
     """REF's metric E of a gray image (uint16 DN), correctly rounded; NaN where REF divides by zero.
 
     Every per-pixel quantity of REF depends on the pixel only through its Y_8 bin (except Q),
     so E = sum_b W_b Q_b + mean(Q) sum_b n_b A_b M_b W_b over the 256 bins, with Q_b the exact
-    integer sum of Q over bin b.  The 256-term arithmetic runs in 30-digit decimal (exp and ln
-    correctly rounded by :mod:`decimal`), so E is the exact value of REF's formula rounded once
+    integer sum of Q over bin b (:mod:`emulator.autoexposure._kim_exact`).  The 256-term arithmetic
+    runs in 30-digit decimal (exp by :mod:`decimal`, ln from float64's log and one Newton step),
+    so E is the exact value of REF's formula rounded once
     to float64: the same bits on every machine, BLAS and thread count.  Why it matters: GP-MI
     turns last-bit differences of E into different exposures (on a replay of the shared sample,
     a 1e-16 relative change of one frame's E moves cycle 10 from 9.099 to 9.168 ms), so any
@@ -167,45 +176,15 @@ def metric_ref(y: np.ndarray, *, alpha=ACTIVATION_ALPHA, tau=ACTIVATION_TAU,
     """
     y8 = _y8(y)
     s = y8.size
-    hist = cv2.calcHist([y8], [0], None, [256], [0, 256]).ravel()
-    gx = _sobel_16u(y8, 1, 0)
-    gy = _sobel_16u(y8, 0, 1)
-    q_img = gx * gx  # uint16: wraps mod 65536 like REF
-    q_img += gy * gy
-    # per-bin sums of Q: integers below 2**53, so exact in float64 whatever the summation order
-    q_bin = np.bincount(y8.ravel(), weights=q_img.ravel(), minlength=256)
-    return _metric_ref_bins([int(c) for c in hist], [int(q) for q in q_bin], s, alpha, tau, threshold)
-
-
-def _metric_ref_bins(counts: list, q_bin: list, s: int, alpha, tau, threshold) -> float:
-    """REF's metric from the Y_8 histogram and per-bin Q sums, in exact-enough decimal arithmetic."""
-    with decimal.localcontext(decimal.Context(prec=_DECIMAL_DIGITS, Emax=999999, Emin=-999999)):
-        D = decimal.Decimal
-        n = D(s)
-        occ = [b for b in range(256) if counts[b] > 0]
-        ln2 = D(2).ln()
-        h = {b: -(D(counts[b]) / n) * ((D(counts[b]) / n).ln() / ln2) for b in occ}
-        mu = sum(D(counts[b]) * h[b] for b in occ) / n
-        var = sum(D(counts[b]) * (h[b] - mu) ** 2 for b in occ) / n
-        h_lo, h_hi = min(h.values()), max(h.values())
-        if not var > 0 or h_hi == h_lo:
-            return math.nan
-        # REF's weights exp(+(H - mu)^2 / (2 sigma^2)) / sum: the 1/sigma factor cancels
-        e = {b: ((h[b] - mu) ** 2 / (2 * var)).exp() for b in occ}
-        total = sum(D(counts[b]) * e[b] for b in occ)
-        q_sum = sum(D(q) for q in q_bin)
-        thr = D(repr(float(threshold)))
-        a, t = D(repr(float(alpha))), D(repr(float(tau)))
-        gated = D(0)
-        weighted = D(0)
-        for b in occ:
-            w = e[b] / total
-            weighted += w * D(q_bin[b])
-            h_norm = (h[b] - h_lo) / (h_hi - h_lo)
-            if h_norm < thr:
-                act = 2 / (1 + (-a * h_norm + t).exp()) - 1
-                gated += D(counts[b]) * act * w
-        return float(weighted + q_sum / n * gated)
+    if s < 1 << 24:  # calcHist's float32 counts are exact
+        counts = cv2.calcHist([y8], [0], None, [256], [0, 256]).ravel().astype(np.int64).tolist()
+    else:
+        counts = np.bincount(y8.ravel(), minlength=256).tolist()
+    gx, gy = _sobel_16u_xy(y8)
+    q_img = np.multiply(gx, gx, out=gx)  # uint16: wraps mod 65536 like REF
+    q_img += np.multiply(gy, gy, out=gy)
+    q_bin = _bin_sums(y8, q_img)
+    return _metric_ref_bins(counts, q_bin, s, alpha, tau, threshold)
 
 
 def local_entropy(img8: np.ndarray, size: int = LOCAL_ENTROPY_SIZE) -> np.ndarray:

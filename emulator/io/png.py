@@ -43,14 +43,16 @@ def png_structure_problem(data: bytes) -> str | None:
     import struct
     import zlib
 
+    view = memoryview(data)  # slices without copies
+    unpack, crc32 = struct.unpack_from, zlib.crc32
     pos, n = 8, len(data)
     first = True
     while pos + 12 <= n:
-        length, ctype = struct.unpack(">I4s", data[pos:pos + 8])
+        length, ctype = unpack(">I4s", data, pos)
         end = pos + 12 + length
         if end > n:
             return f"chunk {ctype.decode('latin-1')!r} runs past the end of the file"
-        if zlib.crc32(data[pos + 4:pos + 8 + length]) != struct.unpack(">I", data[end - 4:end])[0]:
+        if crc32(view[pos + 4:pos + 8 + length]) != unpack(">I", data, end - 4)[0]:
             return f"CRC error in chunk {ctype.decode('latin-1')!r}"
         if first and ctype != b"IHDR":
             return "first chunk is not IHDR"

@@ -8,7 +8,9 @@ from one capture instant.  A cycle's images are decoded at most once and only wh
 method needs them; from each bracket's histogram the saturated and valid fractions of any
 emulation follow without touching the pixels again; each ratio's lookup table is built
 once (cached on the response) and methods with the same target share one emulated image.
-Every image handed out is read-only.
+Every image handed out is a read-only view of an array the provider owns
+(:func:`~emulator.autoexposure.isolation.readonly_view`), which built-in methods read without
+a copy.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ import time
 import cv2
 import numpy as np
 
+from emulator.autoexposure.isolation import readonly_view
 from emulator.dataset import CAMERAS
 from emulator.emulate import apply_lut
 from emulator.errors import DatasetError
@@ -78,9 +81,8 @@ class _CycleImages:
         t2 = time.perf_counter()
         self.stats.add("decode_s", t1 - t0)
         self.stats.add("histogram_s", t2 - t1, 0)
-        raw.setflags(write=False)
         hist.setflags(write=False)
-        return raw, hist
+        return readonly_view(raw), hist
 
     def emulated(self, camera: str, exposure_ms: float, ratio: float, table: np.ndarray, stats: RunStats) -> np.ndarray:
         """The bracket emulated at ``ratio`` (read-only; shared by methods with the same target)."""
@@ -99,8 +101,7 @@ class _CycleImages:
         if self.noise is not None:
             out = self._add_noise(camera, exposure_ms, ratio, raw, out)
         stats.add("emulate_s", time.perf_counter() - t0)
-        out.setflags(write=False)
-        return out
+        return readonly_view(out)
 
     def _add_noise(self, camera: str, exposure_ms: float, ratio: float, raw: np.ndarray, plain: np.ndarray):
         """Noise-consistent emulation (``emulator.emulate``, ``noise="consistent"``), seeded by
@@ -138,9 +139,12 @@ class EmulatedTick:
         self.missing = {c: cycle.missing(c) for c in p.cameras}
         avail = cycle.available(p.cameras)
         self.skipped = None if avail else "no bracket present for every camera"
-        self.images = _CycleImages(cycle, p.white, p.black, p.stats, p.noise, shapes, p.blur)
+        self.images = images = _CycleImages(cycle, p.white, p.black, p.stats, p.noise, shapes, p.blur)
         lead = p.cameras[0]
-        self.brackets = {e: (lambda e=e: self.images.saturated(lead, e)) for e in avail}
+        # the closures hold the images, not the tick: no reference cycle, so a cycle's decoded
+        # and emulated images are freed as soon as the loop drops the tick (a cycle through
+        # ``self`` kept them until the garbage collector ran: ~30 MB per cycle, fresh pages)
+        self.brackets = {e: (lambda e=e: images.saturated(lead, e)) for e in avail}
 
     def select(self, target_ms: float) -> float:
         """The bracket of ``target_ms`` (the blur hook's choice when it selects, ``--blur-aware``)."""

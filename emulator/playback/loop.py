@@ -89,6 +89,7 @@ def closed_loop(
         raise ValueError(f"latency_ticks must be >= 0, got {latency}")
     pending = {name: deque([config.start_ms] * (latency + 1)) for name in methods}
     failed: dict[str, str] = {}
+    last_s: dict[str, float] = {}  # each method's last call, wall seconds (the pool's order)
 
     def step_one(name: str, tick) -> MethodStep | MethodFailed:
         target = pending[name][0]
@@ -99,6 +100,7 @@ def closed_loop(
         except MethodFailed as exc:
             return exc
         stats.add_method(name, answer.elapsed_s)
+        last_s[name] = answer.elapsed_s
         st = MethodStep(
             method=name, cycle=tick.index, timestamp_ns=int(shot.timestamp_ns), target_ms=float(shot.exposure_ms),
             bracket_ms=float(shot.bracket_ms), ratio=float(shot.ratio), saturated_fraction=shot.saturated_fraction,
@@ -128,7 +130,11 @@ def closed_loop(
                 if pool is None:
                     results = [step_one(name, tick) for name in names]
                 else:
-                    results = list(pool.map(step_one, names, [tick] * len(names)))
+                    # longest first (by each method's last call): the slow methods start at once and
+                    # the cheap ones fill the other threads, so the tick ends sooner; results by name
+                    order = sorted(names, key=lambda name: -last_s.get(name, 0.0))
+                    futures = {name: pool.submit(step_one, name, tick) for name in order}
+                    results = [futures[name].result() for name in names]
             now_failed = {}
             steps = {}
             for name, st in zip(names, results):
