@@ -27,13 +27,16 @@ __all__ = ["FrameMemo", "FRAME_MEMO", "is_immutable"]
 
 
 def is_immutable(a) -> bool:
-    """Whether the array's pixels cannot change: read-only all along its chain of bases."""
+    """Whether the array's pixels cannot change: read-only all along its chain of bases, which
+    ends in a base-less array or a ``bytes`` buffer (directly or through a ``memoryview``)."""
     while isinstance(a, np.ndarray):
         if a.flags.writeable:
             return False
         if a.base is None:
             return True
         a = a.base
+    if isinstance(a, memoryview):
+        a = a.obj
     return isinstance(a, bytes)
 
 

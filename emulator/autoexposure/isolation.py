@@ -44,6 +44,7 @@ import numpy as np
 
 from emulator.autoexposure._base import AutoExposureError
 from emulator.autoexposure._base import MethodFailed
+from emulator.autoexposure._frame import is_immutable
 
 __all__ = ["call_method", "call_factory", "frozen", "is_frozen", "readonly_view", "is_readonly_view",
            "absolute", "captured_output", "MAX_CAPTURED_CHARS"]
@@ -75,17 +76,7 @@ def readonly_view(a: np.ndarray) -> np.ndarray:
 def is_readonly_view(a) -> bool:
     """Whether ``a`` is a read-only view over read-only arrays (or an immutable buffer): no flag
     set on ``a`` itself can make it writeable (what :func:`readonly_view` returns)."""
-    if not isinstance(a, np.ndarray) or a.flags.writeable or a.base is None:
-        return False
-    while isinstance(a, np.ndarray):
-        if a.flags.writeable:
-            return False
-        if a.base is None:
-            return True
-        a = a.base
-    if isinstance(a, memoryview):
-        a = a.obj
-    return isinstance(a, bytes)
+    return isinstance(a, np.ndarray) and a.base is not None and is_immutable(a)
 
 
 def _bytes_view(a: np.ndarray) -> np.ndarray:
