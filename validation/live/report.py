@@ -189,7 +189,7 @@ def report_markdown(results: dict) -> str:
             f"Secondary, not a verdict: the smallest Kendall tau of the methods' values live vs emulated over the "
             f"metrics is {fmt(tau_min, '.2f')} (worst timing variant, {best} emulation; plain "
             f"{fmt(tmb.get('plain'), '.2f')}, consistent {fmt(tmb.get('consistent'), '.2f')}); read it against the "
-            f"live-vs-live control below, not against issue 14's goal of {GOAL_TAU_MIN}, which an emulator that is "
+            f"live-vs-live control below, not against the earlier goal of {GOAL_TAU_MIN}, which an emulator that is "
             "one more live draw does not reach at this noise (docs/verdicts.md).")
     verdict.append(
         f"Same-instant exposure trajectories differ by a median |log2| of {fmt(results['exposure_log2_error_median'])} "
