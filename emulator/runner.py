@@ -111,8 +111,10 @@ class _ImageSaver:
                 self._errors.append(exc)
 
     def _forget(self, cycle: int) -> None:
+        # methods may be up to a few cycles apart (the loop's ``ticks_ahead``): keep a cycle's
+        # first writes until every method is surely past it, so each image is encoded once
         with self._lock:
-            for key in [k for k in self._done if k[0] < cycle - 1]:
+            for key in [k for k in self._done if k[0] < cycle - 4]:
                 self._done.pop(key, None)
 
     def close(self) -> None:

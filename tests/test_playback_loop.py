@@ -276,3 +276,101 @@ def test_png_level_changes_bytes_not_images():
             assert np.array_equal(cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED), img)
     with pytest.raises(DatasetError, match="PNG level must be an integer 0..9"):
         encode_png(img, level=-1)
+
+
+# ------------------------------------------------------------------ the loop's schedule
+class _Tick:
+    def __init__(self, provider, index, skipped):
+        self.provider, self.index, self.skipped, self.missing = provider, index, skipped, {}
+
+    def shot(self, target_ms, want_right=False):
+        from emulator.playback.loop import Shot
+
+        p = self.provider
+        with p.lock:
+            p.shots.append((self.index, p.yielded))
+        if self.index == p.bad_tick:
+            raise DatasetError(f"tick {self.index}: corrupt image")
+        return Shot(timestamp_ns=self.index, exposure_ms=target_ms, bracket_ms=target_ms, ratio=1.0,
+                    left=np.full((4, 4), self.index, np.uint16), saturated_fraction=0.0, valid_fraction=1.0,
+                    bracket_saturated_fraction=0.0)
+
+
+class _Provider:
+    """Ticks 0..n-1 (``skip`` skipped); logs each shot's tick and how many ticks had been yielded."""
+
+    cameras = ("left",)
+    latency_ticks = 0
+
+    def __init__(self, n, skip=(), ahead=2, bad_tick=None):
+        import threading
+
+        self.n, self.skip, self.ticks_ahead, self.bad_tick = n, set(skip), ahead, bad_tick
+        self.lock = threading.Lock()
+        self.shots, self.yielded = [], 0
+
+    def ticks(self):
+        for i in range(self.n):
+            yield _Tick(self, i, "skipped" if i in self.skip else None)
+
+
+class _Paced:
+    """Proposes ``exposure * factor`` after ``sleep_s``; fails (MethodFailed) or raises at a tick."""
+
+    def __init__(self, factor, sleep_s=0.0, fail_at=None, raise_at=None):
+        self.factor, self.sleep_s, self.fail_at, self.raise_at = factor, sleep_s, fail_at, raise_at
+        self.name = "paced"
+
+    def reset(self):
+        pass
+
+    def next_exposure(self, raw, exposure_ms):
+        import time
+
+        time.sleep(self.sleep_s)
+        tick = int(raw[0, 0])
+        if tick == self.fail_at:
+            raise MethodFailed(f"gave up at {tick}")
+        if tick == self.raise_at:
+            raise KeyError(f"bug at {tick}")
+        return exposure_ms * self.factor
+
+
+def _schedule_run(jobs, ahead=2, bad_tick=None):
+    provider = _Provider(12, skip=(4, 5), ahead=ahead, bad_tick=bad_tick)
+    methods = {"slow": _Paced(1.1, sleep_s=0.02), "fast": _Paced(0.9), "quits": _Paced(1.2, fail_at=7),
+               "buggy": _Paced(1.05, raise_at=10)}
+    cycles, error = [], None
+    try:
+        for cs in closed_loop(provider, methods, RunConfig(initial_ms=4.0, range_ms=(0.5, 40.0), jobs=jobs)):
+            cycles.append((cs.cycle, cs.skipped, {n: (st.target_ms, st.next_ms) for n, st in cs.steps.items()},
+                           dict(cs.failed)))
+            provider.yielded += 1
+    except DatasetError as exc:
+        error = str(exc)
+    return cycles, error, provider
+
+
+@pytest.mark.parametrize("bad_tick", [None, 9])
+def test_methods_run_ahead_of_the_slowest_yet_give_one_jobs_steps_and_errors(bad_tick):
+    """With jobs > 1 a method goes on to its next tick without waiting for the slowest (up to the
+    provider's ticks_ahead), but ticks are yielded in order with exactly one job's steps, failures
+    and, for an exception that is not MethodFailed, the same ticks yielded before it is raised."""
+    one, err_one, _ = _schedule_run(1, bad_tick=bad_tick)
+    two, err_two, provider = _schedule_run(2, bad_tick=bad_tick)
+    assert two == one and err_two == err_one
+    assert [c[0] for c in one] == (list(range(12)) if bad_tick is None else list(range(9)))
+    assert one[4][1] == one[5][1] == "skipped" and one[7][3] == {"quits": "failed: gave up at 7 at cycle 7"}
+    assert "quits" not in one[8][2] and one[3][2]["slow"] == pytest.approx((4.0 * 1.1 ** 3, 4.0 * 1.1 ** 4))
+    assert err_one == (None if bad_tick is None else "tick 9: corrupt image")
+    if bad_tick is None:  # a method's own exception is its failure (the plugin wrapper), not the run's
+        assert set(one[10][3]) == {"buggy"} and "buggy" not in one[11][2]
+    # a shot of tick k was taken while k - yielded ticks were still unfinished ahead of it: at most 1 + ahead
+    lead = [tick - yielded for tick, yielded in provider.shots]
+    assert max(lead) <= 2 and max(lead) >= 1  # the fast methods did run ahead, within the window
+
+
+def test_a_provider_without_ticks_ahead_keeps_every_tick_a_barrier():
+    two, _, provider = _schedule_run(2, ahead=0)
+    assert two == _schedule_run(1)[0]
+    assert all(tick == yielded for tick, yielded in provider.shots)

@@ -208,6 +208,10 @@ class EmulatedProvider:
     """
 
     latency_ticks = 0
+    #: A method may run this many cycles ahead of the slowest (:func:`~emulator.playback.loop.closed_loop`
+    #: with ``jobs > 1``): a cycle's images are decoded on demand and memoised per tick, so ticks are
+    #: independent.  Each tick in flight keeps its decoded images (up to ~55 MB at 1920x1200).
+    ticks_ahead = 2
 
     def __init__(self, sequence, config: RunConfig, response, *, cameras=None, noise=None, stats: RunStats | None = None,
                  cycles=None, blur=None) -> None:

@@ -12,6 +12,9 @@ Provider protocol (duck-typed)::
 
     provider.cameras         tuple of camera names; the first is the one methods read
     provider.latency_ticks   int >= 0: a proposal made at tick k is used from tick k + 1 + latency
+    provider.ticks_ahead     int >= 0, optional (default 0): how far a method may run ahead of
+                             the oldest unfinished tick (its ticks' shot() must then be safe to
+                             call on several ticks at once)
     provider.ticks()         iterator of ticks; a tick has
         .index               int (the cycle, or the frame index)
         .missing             {camera: [exposure_ms, ...]} brackets missing in this tick
@@ -23,9 +26,12 @@ For each tick the loop hands every method that has not failed the shot at its cu
 exposure, asks it through :func:`emulator.playback.seam.call_method` (the one call site),
 and records a :class:`MethodStep`.  A method that fails (raises
 :class:`~emulator.autoexposure.registry.MethodFailed`, including a call over the time
-limit) gets no step from that tick on and is named in :attr:`CycleStep.failed`.  Methods of
-a tick run on ``config.jobs`` threads under one BLAS thread each (:mod:`emulator.pools`), so
-results depend neither on ``jobs`` nor on the machine's cores.
+limit) gets no step from that tick on and is named in :attr:`CycleStep.failed`.  Methods
+run on ``config.jobs`` threads under one BLAS thread each (:mod:`emulator.pools`); with
+more than one job a method may run up to ``provider.ticks_ahead`` ticks (default 0) ahead of
+the oldest tick not yet yielded instead of waiting for the slowest method at every tick.
+Ticks are yielded in order either way, so results depend neither on ``jobs`` nor on the
+machine's cores.
 """
 
 from __future__ import annotations
@@ -33,7 +39,7 @@ from __future__ import annotations
 import time
 from collections import deque
 from collections.abc import Callable, Iterator, Mapping
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 from dataclasses import dataclass
 
 import numpy as np
@@ -117,7 +123,31 @@ def closed_loop(
             st.left = st.right = None
         return st
 
-    pool = ThreadPoolExecutor(max_workers=config.jobs, thread_name_prefix="exposim-run") if config.jobs > 1 else None
+    if config.jobs <= 1:
+        yield from _serial_ticks(provider, methods, step_one, failed, pending, stats)
+    else:
+        yield from _pipelined_ticks(provider, methods, step_one, failed, pending, last_s, stats, config.jobs)
+
+
+def _advance(pending: dict | None, failed: dict, names, results, index: int):
+    """Record one tick's results (in ``names`` order): steps, the methods that failed in it, and
+    (unless ``pending`` is None) each stepped method's next proposal."""
+    now_failed = {}
+    steps = {}
+    for name, st in zip(names, results):
+        if isinstance(st, MethodFailed):
+            now_failed[name] = f"failed: {st} at cycle {index}"
+        else:
+            if pending is not None:
+                pending[name].popleft()
+                pending[name].append(st.next_ms)
+            steps[name] = st
+    failed.update(now_failed)
+    return steps, now_failed
+
+
+def _serial_ticks(provider, methods, step_one, failed, pending, stats) -> Iterator[CycleStep]:
+    """One job: every method of a tick in turn, tick after tick."""
     start = time.perf_counter()
     try:
         for tick in provider.ticks():
@@ -127,24 +157,8 @@ def closed_loop(
                 continue
             names = [name for name in methods if name not in failed]
             with single_thread_pools(user_api="blas"):  # results independent of the machine's cores
-                if pool is None:
-                    results = [step_one(name, tick) for name in names]
-                else:
-                    # longest first (by each method's last call): the slow methods start at once and
-                    # the cheap ones fill the other threads, so the tick ends sooner; results by name
-                    order = sorted(names, key=lambda name: -last_s.get(name, 0.0))
-                    futures = {name: pool.submit(step_one, name, tick) for name in order}
-                    results = [futures[name].result() for name in names]
-            now_failed = {}
-            steps = {}
-            for name, st in zip(names, results):
-                if isinstance(st, MethodFailed):
-                    now_failed[name] = f"failed: {st} at cycle {tick.index}"
-                else:
-                    pending[name].popleft()
-                    pending[name].append(st.next_ms)
-                    steps[name] = st
-            failed.update(now_failed)
+                results = [step_one(name, tick) for name in names]
+            steps, now_failed = _advance(pending, failed, names, results, tick.index)
             stats.cycles += 1
             stats.wall_s = time.perf_counter() - start
             if stats.startup_s is None:
@@ -152,5 +166,113 @@ def closed_loop(
             yield CycleStep(tick.index, steps, tick.missing, failed=now_failed)
     finally:
         stats.wall_s = time.perf_counter() - start
-        if pool is not None:
-            pool.shutdown(wait=True)
+
+
+def _pipelined_ticks(provider, methods, step_one, failed, pending, last_s, stats, jobs: int) -> Iterator[CycleStep]:
+    """``jobs`` threads; each method goes on to its next tick as soon as its own step is done.
+
+    Methods are independent closed loops that share only the provider's images, so a method
+    need not wait for the slowest one at every tick: it may run up to
+    ``provider.ticks_ahead`` ticks ahead of the oldest tick not yet yielded (0: every tick
+    is a barrier, as a provider whose ticks must be visited in order needs).  Ticks are still
+    yielded in order, each once all its methods are done, and a method's steps are the same
+    whatever the schedule (its inputs depend only on its own proposals), so the results are
+    those of one job.  Ready steps are dispatched oldest tick first, then the slowest method
+    first (by its last call), so the slow methods start at once and the cheap ones fill the
+    other threads, including the tail of a tick.  An exception other than
+    :class:`MethodFailed` is raised when its tick would be yielded (the first method's, in
+    method order), as one job raises it.
+    """
+    ahead = max(0, int(getattr(provider, "ticks_ahead", 0)))
+    order = {name: i for i, name in enumerate(methods)}
+    source = iter(provider.ticks())
+    ticks: list = []  # by position; None once yielded
+    exhausted = False
+
+    def tick_at(p: int):
+        nonlocal exhausted
+        while len(ticks) <= p and not exhausted:
+            try:
+                ticks.append(next(source))
+            except StopIteration:
+                exhausted = True
+        return ticks[p] if p < len(ticks) else None
+
+    position = {name: 0 for name in methods}  # each method's next tick
+    stopped: set[str] = set()  # failed or raised: no further ticks
+    results: dict[int, dict] = {}  # position -> {name: MethodStep | MethodFailed | BaseException}
+    waiting: set[str] = set()  # methods whose next tick is beyond the window
+    ready: set[str] = set()
+    inflight: dict = {}
+    oldest = 0
+
+    def place(name: str) -> None:
+        """Move ``name`` past skipped ticks and put it in ``ready`` or ``waiting`` (or nowhere: done)."""
+        while True:
+            tick = tick_at(position[name])
+            if tick is None:
+                return
+            if not tick.skipped:
+                break
+            position[name] += 1
+        (ready if position[name] <= oldest + ahead else waiting).add(name)
+
+    def complete(p: int) -> bool:
+        return all(name in stopped or position[name] > p for name in methods)
+
+    pool = ThreadPoolExecutor(max_workers=jobs, thread_name_prefix="exposim-run")
+    start = time.perf_counter()
+    try:
+        with single_thread_pools(user_api="blas"):  # results independent of the machine's cores
+            for name in methods:
+                place(name)
+            while True:
+                tick = tick_at(oldest)
+                while tick is not None and complete(oldest):
+                    res = results.pop(oldest, {})
+                    errors = [res[name] for name in methods if isinstance(res.get(name), BaseException)
+                              and not isinstance(res[name], MethodFailed)]
+                    if errors:
+                        raise errors[0]
+                    stats.cycles += 1
+                    if tick.skipped:
+                        cs = CycleStep(tick.index, {}, tick.missing, skipped=tick.skipped)
+                    else:
+                        names = [name for name in methods if name in res]
+                        steps, now_failed = _advance(None, failed, names, [res[n] for n in names], tick.index)
+                        stats.wall_s = time.perf_counter() - start
+                        if stats.startup_s is None:
+                            stats.startup_s = stats.wall_s
+                        cs = CycleStep(tick.index, steps, tick.missing, failed=now_failed)
+                    ticks[oldest] = None  # its images are freed once the consumer drops the step
+                    oldest += 1
+                    for name in [n for n in waiting if position[n] <= oldest + ahead]:
+                        waiting.discard(name)
+                        ready.add(name)
+                    yield cs
+                    tick = tick_at(oldest)
+                if tick is None:
+                    return
+                while ready and len(inflight) < jobs:
+                    name = min(ready, key=lambda n: (position[n], -last_s.get(n, 0.0), order[n]))
+                    ready.discard(name)
+                    p = position[name]
+                    inflight[pool.submit(step_one, name, ticks[p])] = (name, p)
+                if not inflight:  # pragma: no cover - a scheduling bug, not a user error
+                    raise RuntimeError(f"closed loop stalled at tick {oldest}")
+                done, _ = wait(inflight, return_when=FIRST_COMPLETED)
+                for fut in done:
+                    name, p = inflight.pop(fut)
+                    exc = fut.exception()
+                    st = exc if exc is not None else fut.result()
+                    results.setdefault(p, {})[name] = st
+                    position[name] = p + 1
+                    if isinstance(st, BaseException):
+                        stopped.add(name)
+                        continue
+                    pending[name].popleft()
+                    pending[name].append(st.next_ms)
+                    place(name)
+    finally:
+        stats.wall_s = time.perf_counter() - start
+        pool.shutdown(wait=True, cancel_futures=True)
