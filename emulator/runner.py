@@ -59,8 +59,9 @@ class _ImageSaver:
     """
 
     def __init__(self, writer: RunWriter, save: str, white: int, black: int, *, threads: int = 2,
-                 max_pending: int = 32) -> None:
+                 max_pending: int = 32, keep_cycles: int = 2) -> None:
         self.writer, self.save, self.white, self.black = writer, save, white, black
+        self._keep_cycles = int(keep_cycles)  # cycles whose first writes are kept for other methods to share
         self._lock = threading.Lock()
         self._done: dict = {}
         self._pending: deque = deque()
@@ -111,10 +112,8 @@ class _ImageSaver:
                 self._errors.append(exc)
 
     def _forget(self, cycle: int) -> None:
-        # methods may be up to a few cycles apart (the loop's ``ticks_ahead``): keep a cycle's
-        # first writes until every method is surely past it, so each image is encoded once
         with self._lock:
-            for key in [k for k in self._done if k[0] < cycle - 4]:
+            for key in [k for k in self._done if k[0] <= cycle - self._keep_cycles]:
                 self._done.pop(key, None)
 
     def close(self) -> None:
@@ -254,7 +253,10 @@ def _loop_into(writer: RunWriter, provider, built: dict, cfg: RunConfig, stats: 
     """Run the loop, appending each step's row (checked against a resumed folder's); returns the rows."""
     names = list(built)
     run_json = writer.run_json
-    saver = _ImageSaver(writer, cfg.save, int(run_json["white_level"]), int(run_json["black_level"]))
+    # methods may be up to the provider's ticks_ahead cycles apart (emulator.playback.loop): a cycle's
+    # first writes are kept until every method is past it, so each image is encoded once
+    saver = _ImageSaver(writer, cfg.save, int(run_json["white_level"]), int(run_json["black_level"]),
+                        keep_cycles=int(getattr(provider, "ticks_ahead", 0)) + 3)
     rows: dict[str, list[list[str]]] = {name: [] for name in names}
     skipped: list[dict] = []
     method_status = {name: "ok" for name in names}

@@ -96,14 +96,24 @@ def test_a_shot_at_rest_is_one_plain_render(tmp_path):
     np.testing.assert_array_equal(image, scenes.render(scene, pose, **kw))
 
 
-@pytest.mark.render
-def test_a_moving_shot_blurs_along_the_walk(tmp_path):
+def _walk_shots(tmp_path, spp: int):
+    """forest_summer's 3 s walk, and a maker of its 32 ms shot at 1 s (48x30, seed 1, no denoiser)."""
     import scenes
 
     scene = scenes.get_scene("forest_summer")
     traj = scene.trajectory(3.0)
-    kw = dict(width=48, height=30, spp=4, seed=1, cache_dir=tmp_path, denoise="off")
-    shot = blur.ShotRenderer(scene, traj.poses, 1.0, 32.0, **kw)
+
+    def shot(**extra):
+        return blur.ShotRenderer(scene, traj.poses, 1.0, 32.0, width=48, height=30, spp=spp, seed=1,
+                                 cache_dir=tmp_path, denoise="off", **extra)
+
+    return traj, shot
+
+
+@pytest.mark.render
+def test_a_moving_shot_blurs_along_the_walk(tmp_path):
+    traj, make_shot = _walk_shots(tmp_path, spp=4)
+    shot = make_shot()
     long_, info = shot.radiance(32.0)
     short, info_short = shot.radiance(1.0)
     assert not shot.at_rest and shot.info["margin_px"] == shot.margin_px()
@@ -200,13 +210,9 @@ def test_sharp_twin_shares_the_renders_and_samples_the_trigger_instant(tmp_path)
 
 @pytest.mark.render
 def test_a_supersampled_shot_spends_the_same_samples_and_keeps_the_level(tmp_path):
-    import scenes
-
-    scene = scenes.get_scene("forest_summer")
-    traj = scene.trajectory(3.0)
-    kw = dict(width=48, height=30, spp=8, seed=1, cache_dir=tmp_path, denoise="off")
-    plain = blur.ShotRenderer(scene, traj.poses, 1.0, 32.0, **kw)
-    fine = blur.ShotRenderer(scene, traj.poses, 1.0, 32.0, supersample=2, **kw)
+    _, make_shot = _walk_shots(tmp_path, spp=8)
+    plain = make_shot()
+    fine = make_shot(supersample=2)
     job, job2 = plain.render_job(), fine.render_job()
     assert (job2["width"], job2["height"]) == (2 * job["width"], 2 * job["height"])
     assert job2["spp"] == 2 and job2["fov_deg"] == pytest.approx(job["fov_deg"], rel=1e-12)  # 4x pixels, spp / 4
@@ -215,4 +221,4 @@ def test_a_supersampled_shot_spends_the_same_samples_and_keeps_the_level(tmp_pat
     # the same scene through the same window: the mean level agrees to the render noise of the two
     assert abs(float(b.mean()) / float(a.mean()) - 1) < 0.05
     with pytest.raises(RenderError, match="supersample"):
-        blur.ShotRenderer(scene, traj.poses, 1.0, 32.0, supersample=0, **kw)
+        make_shot(supersample=0)

@@ -107,6 +107,9 @@ def closed_loop(
             return exc
         stats.add_method(name, answer.elapsed_s)
         last_s[name] = answer.elapsed_s
+        # this method's next proposal; only its own next step reads it, and that step starts after this one
+        pending[name].popleft()
+        pending[name].append(answer.next_ms)
         st = MethodStep(
             method=name, cycle=tick.index, timestamp_ns=int(shot.timestamp_ns), target_ms=float(shot.exposure_ms),
             bracket_ms=float(shot.bracket_ms), ratio=float(shot.ratio), saturated_fraction=shot.saturated_fraction,
@@ -124,29 +127,25 @@ def closed_loop(
         return st
 
     if config.jobs <= 1:
-        yield from _serial_ticks(provider, methods, step_one, failed, pending, stats)
+        yield from _serial_ticks(provider, methods, step_one, failed, stats)
     else:
-        yield from _pipelined_ticks(provider, methods, step_one, failed, pending, last_s, stats, config.jobs)
+        yield from _pipelined_ticks(provider, methods, step_one, failed, last_s, stats, config.jobs)
 
 
-def _advance(pending: dict | None, failed: dict, names, results, index: int):
-    """Record one tick's results (in ``names`` order): steps, the methods that failed in it, and
-    (unless ``pending`` is None) each stepped method's next proposal."""
+def _advance(failed: dict, names, results, index: int):
+    """Record one tick's results (in ``names`` order): its steps and the methods that failed in it."""
     now_failed = {}
     steps = {}
     for name, st in zip(names, results):
         if isinstance(st, MethodFailed):
             now_failed[name] = f"failed: {st} at cycle {index}"
         else:
-            if pending is not None:
-                pending[name].popleft()
-                pending[name].append(st.next_ms)
             steps[name] = st
     failed.update(now_failed)
     return steps, now_failed
 
 
-def _serial_ticks(provider, methods, step_one, failed, pending, stats) -> Iterator[CycleStep]:
+def _serial_ticks(provider, methods, step_one, failed, stats) -> Iterator[CycleStep]:
     """One job: every method of a tick in turn, tick after tick."""
     start = time.perf_counter()
     try:
@@ -158,7 +157,7 @@ def _serial_ticks(provider, methods, step_one, failed, pending, stats) -> Iterat
             names = [name for name in methods if name not in failed]
             with single_thread_pools(user_api="blas"):  # results independent of the machine's cores
                 results = [step_one(name, tick) for name in names]
-            steps, now_failed = _advance(pending, failed, names, results, tick.index)
+            steps, now_failed = _advance(failed, names, results, tick.index)
             stats.cycles += 1
             stats.wall_s = time.perf_counter() - start
             if stats.startup_s is None:
@@ -168,7 +167,7 @@ def _serial_ticks(provider, methods, step_one, failed, pending, stats) -> Iterat
         stats.wall_s = time.perf_counter() - start
 
 
-def _pipelined_ticks(provider, methods, step_one, failed, pending, last_s, stats, jobs: int) -> Iterator[CycleStep]:
+def _pipelined_ticks(provider, methods, step_one, failed, last_s, stats, jobs: int) -> Iterator[CycleStep]:
     """``jobs`` threads; each method goes on to its next tick as soon as its own step is done.
 
     Methods are independent closed loops that share only the provider's images, so a method
@@ -239,7 +238,7 @@ def _pipelined_ticks(provider, methods, step_one, failed, pending, last_s, stats
                         cs = CycleStep(tick.index, {}, tick.missing, skipped=tick.skipped)
                     else:
                         names = [name for name in methods if name in res]
-                        steps, now_failed = _advance(None, failed, names, [res[n] for n in names], tick.index)
+                        steps, now_failed = _advance(failed, names, [res[n] for n in names], tick.index)
                         stats.wall_s = time.perf_counter() - start
                         if stats.startup_s is None:
                             stats.startup_s = stats.wall_s
@@ -269,10 +268,8 @@ def _pipelined_ticks(provider, methods, step_one, failed, pending, last_s, stats
                     position[name] = p + 1
                     if isinstance(st, BaseException):
                         stopped.add(name)
-                        continue
-                    pending[name].popleft()
-                    pending[name].append(st.next_ms)
-                    place(name)
+                    else:
+                        place(name)
     finally:
         stats.wall_s = time.perf_counter() - start
         pool.shutdown(wait=True, cancel_futures=True)
