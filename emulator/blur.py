@@ -74,6 +74,8 @@ __all__ = [
     "predict_blur",
     "blur_mismatch_px",
     "blur_homographies",
+    "PLACEMENTS",
+    "DEFAULT_PLACEMENT",
     "emulate_blur_consistent",
     "STRUCTURE_SIGMA_PX",
 ]
@@ -85,6 +87,9 @@ STAMP_CONVENTIONS = ("start", "middle", "end")
 DEFAULT_STAMP = "end"
 #: Blur options of emulation: ``none`` (exact eq. 2) and ``consistent`` (add the blur of the extra time).
 BLUR_MODES = ("none", "consistent")
+#: Where blur-consistent emulation places the moved copies of the source (:func:`blur_homographies`).
+PLACEMENTS = ("tiled", "uniform")
+DEFAULT_PLACEMENT = "tiled"
 #: Largest step of the rotation integration, s.
 _MAX_STEP_S = 0.5e-3
 #: Largest displacement between two consecutive sub-instants of blur-consistent emulation, px.
@@ -243,15 +248,29 @@ def blur_mismatch_px(omega, K, size, t_s: float, source_ms: float, target_ms: fl
 
 
 def blur_homographies(omega, K, size, t_s: float, source_ms: float, target_ms: float,
-                      stamp: str = DEFAULT_STAMP) -> tuple[list[np.ndarray], list[float]]:
+                      stamp: str = DEFAULT_STAMP, placement: str = DEFAULT_PLACEMENT
+                      ) -> tuple[list[np.ndarray], list[float]]:
     """Homographies and weights (ms) of the extra exposure time of a target longer than its source.
 
-    The source image stands for the scene at its window's middle; the extra time (the
-    target window minus the source window, both placed at ``t_s`` by ``stamp``) is cut into
-    sub-instants no more than 0.5 px apart.  Returns ``([H_j], [w_j])`` with
-    ``sum(w_j) = target_ms - source_ms``; empty lists when the target is not longer.
-    Raises :class:`EmulationError` when the angular velocity does not cover the window.
+    The source image stands for the scene over its own window, centred on the window's middle.
+    The extra time (the target window minus the source window, both placed at ``t_s`` by
+    ``stamp``) is made of copies of the source, each moved to a part of the extra time:
+
+    * ``placement="tiled"`` (default): copies a whole source window apart, tiling the extra
+      time; a last part shorter than the source gets one copy of that duration at its middle.
+      The source already carries the blur of its own window, so ``k`` copies tile ``k`` windows:
+      exact for a constant angular velocity.  A source under ``T / 64`` falls back to
+      ``"uniform"`` (its own blur is then too short to matter).
+    * ``placement="uniform"``: sub-instants no more than 0.5 px apart, as if the source were
+      sharp; every copy adds the source's own blur again, so the blur is too long by up to
+      one source window (the over-correction measured in docs/motion.md).
+
+    Returns ``([H_j], [w_j])`` with ``sum(w_j) = target_ms - source_ms``; empty lists when the
+    target is not longer.  Raises :class:`EmulationError` when the angular velocity does not
+    cover the window or ``placement`` is unknown.
     """
+    if placement not in PLACEMENTS:
+        raise EmulationError(f"placement must be one of {', '.join(PLACEMENTS)}, got {placement!r}")
     omega = as_angular_velocity(omega)
     if target_ms <= source_ms:
         return [], []
@@ -261,19 +280,35 @@ def blur_homographies(omega, K, size, t_s: float, source_ms: float, target_ms: f
         raise EmulationError(f"the angular velocity (span {omega.span_s[0]:.6g}..{omega.span_s[1]:.6g} s) does not "
                              f"cover the exposure window {e0:.6g}..{e1:.6g} s")
     ref = 0.5 * (s0 + s1)
+    span = s1 - s0
+    if placement == "tiled" and (target_ms - source_ms) / source_ms > _MAX_SUBSTEPS:
+        placement = "uniform"
     pts = grid_points(*size)
-    Hs: list[np.ndarray] = []
+    taus: list[float] = []
     ws: list[float] = []
-    for a, b in ((e0, s0), (s1, e1)):
-        if b - a <= 0:
+    for a, b, sign in ((s0, e0, -1.0), (s1, e1, 1.0)):  # from the source's edge outwards
+        length = sign * (b - a)
+        if length <= 0:
             continue
-        _, R = integrate_rotation(omega, a, b)
-        n = int(np.clip(math.ceil(blur_length_px(K, R, pts).max() / _SUBSTEP_PX), 1, _MAX_SUBSTEPS))
-        for j in range(n):
-            tau = a + (j + 0.5) * (b - a) / n
-            _, Rt = integrate_rotation(omega, ref, tau)
-            Hs.append(rotation_homography(K, Rt[-1]))
-            ws.append((b - a) * 1e3 / n)
+        if placement == "tiled":
+            full = int(math.floor(length / span + 1e-9))
+            for k in range(1, full + 1):
+                taus.append(ref + sign * k * span)
+                ws.append(span * 1e3)
+            rest = length - full * span
+            if rest > 1e-9 * span:
+                taus.append(a + sign * (full * span + 0.5 * rest))
+                ws.append(rest * 1e3)
+        else:
+            _, R = integrate_rotation(omega, min(a, b), max(a, b))
+            n = int(np.clip(math.ceil(blur_length_px(K, R, pts).max() / _SUBSTEP_PX), 1, _MAX_SUBSTEPS))
+            for j in range(n):
+                taus.append(min(a, b) + (j + 0.5) * length / n)
+                ws.append(length * 1e3 / n)
+    Hs = []
+    for tau in taus:
+        _, Rt = integrate_rotation(omega, ref, tau)
+        Hs.append(rotation_homography(K, Rt[-1]))
     return Hs, ws
 
 
@@ -327,12 +362,86 @@ def _is_identity(H: np.ndarray, size) -> bool:
 STRUCTURE_SIGMA_PX = 1.0
 #: Resamplers of :func:`emulate_blur_consistent`'s warps: name -> OpenCV flag.
 _RESAMPLE = {"linear": "INTER_LINEAR", "cubic": "INTER_CUBIC"}
+#: How the structure the blur moves is told from the noise it must not smear (:func:`structure_of`).
+STRUCTURE_FILTERS = ("wiener", "gaussian")
+_NOISE_BINS = 16
+#: The Wiener filter subtracts this many times the measured noise variance.  Chosen on the BorealHDR
+#: sample at rest: with 3, --blur consistent changes every emulated image by less than 0.92 of its own
+#: noise even at the synth preset's 10 500 e- (0.40 at the in-situ 2005 e-); with 2 it was 1.05
+#: (scripts/blur_sample_checks.py rest, docs/blur.md).
+_WIENER_OVERSUBTRACT = 3.0
+
+
+def _gaussian_weights(sigma: float) -> np.ndarray:
+    k = cv2.getGaussianKernel(2 * int(math.ceil(4.0 * sigma)) + 1, sigma)
+    return (k @ k.T).astype(np.float64)
+
+
+def structure_of(plane: np.ndarray, sigma_px: float | None = None, method: str = "wiener",
+                 noise_var=None) -> np.ndarray:
+    """The structure of one (Bayer) plane in linear exposure: what blur moves, without the noise.
+
+    ``"gaussian"``: the plane smoothed by a Gaussian of ``sigma_px``; it drops fine structure with
+    the noise.  ``"wiener"`` (an adaptive Wiener filter, Lee 1980): ``mu + k (x - mu)`` with ``mu``
+    and ``v`` the local mean and variance over that Gaussian window and
+    ``k = max(0, 1 - 3 n / v)``, ``n`` the noise variance at the level ``mu`` (three times: flat noisy
+    regions become ``mu``, so their noise is not moved, while edges and texture well above the
+    noise stay and are moved).
+
+    ``noise_var``: ``n`` in the plane's units, a number or a function of ``mu``; None measures it
+    on the plane itself: in 16 bins of ``mu``, the robust (MAD) variance of the finest diagonal
+    Haar detail (:func:`_plane_noise_var`).  Texture at the pixel scale raises that measure, so on a noiseless plane give ``noise_var=0``
+    (the plane is returned as it is).
+    """
+    sigma_px = STRUCTURE_SIGMA_PX if sigma_px is None else float(sigma_px)
+    if method not in STRUCTURE_FILTERS:
+        raise EmulationError(f"structure must be one of {', '.join(STRUCTURE_FILTERS)}, got {method!r}")
+    if sigma_px <= 0 or (method == "wiener" and noise_var is not None and not callable(noise_var)
+                         and float(noise_var) == 0.0):
+        return plane
+    mu = cv2.GaussianBlur(plane, (0, 0), sigma_px, borderType=cv2.BORDER_REPLICATE)
+    if method == "gaussian":
+        return mu
+    var_gain = 1.0 - float(np.sum(_gaussian_weights(sigma_px) ** 2))  # E[local variance] / var(x), white noise
+    resid = plane - mu
+    if noise_var is None:
+        n = _plane_noise_var(plane, mu)
+    elif callable(noise_var):
+        n = np.asarray(noise_var(mu), dtype=np.float32)
+    else:
+        n = np.float32(noise_var)
+    var = np.maximum(cv2.GaussianBlur(plane * plane, (0, 0), sigma_px, borderType=cv2.BORDER_REPLICATE) - mu * mu, 0)
+    k = np.clip(1.0 - _WIENER_OVERSUBTRACT * var_gain * n / np.maximum(var, 1e-30), 0.0, 1.0)
+    return (mu + k * resid).astype(plane.dtype, copy=False)
+
+
+def _plane_noise_var(plane: np.ndarray, mu: np.ndarray) -> np.ndarray:
+    """Noise variance per pixel: the MAD of the finest diagonal Haar detail
+    ``(x[i,j] - x[i,j+1] - x[i+1,j] + x[i+1,j+1]) / 2`` (variance = the noise's for white noise; zero on
+    any plane linear in x and y, so smooth shading does not count) in 16 bins of the local mean."""
+    d = 0.5 * np.abs(plane[:-1, :-1] - plane[:-1, 1:] - plane[1:, :-1] + plane[1:, 1:]).ravel()
+    level = mu[:-1, :-1].ravel()
+    if d.size < 16:
+        return np.zeros_like(mu)
+    edges = np.unique(np.quantile(level, np.linspace(0.0, 1.0, _NOISE_BINS + 1)))
+    which = np.clip(np.searchsorted(edges, level, side="right") - 1, 0, max(edges.size - 2, 0))
+    centres, noise = [], []
+    for b in range(max(edges.size - 1, 1)):
+        sel = which == b
+        if np.count_nonzero(sel) < 16:
+            continue
+        centres.append(float(np.median(level[sel])))
+        noise.append((1.4826 * float(np.median(d[sel]))) ** 2)
+    if not centres:
+        return np.zeros_like(mu)
+    return np.interp(mu, centres, noise).astype(np.float32)
 
 
 def emulate_blur_consistent(raw: np.ndarray, source_ms: float, target_ms: float, response,
                             homographies, weights_ms, *, bayer: bool = True,
                             structure_sigma_px: float = STRUCTURE_SIGMA_PX,
-                            resample: str = "linear") -> tuple[np.ndarray, np.ndarray]:
+                            resample: str = "linear", structure: str = "wiener",
+                            noise_var=None) -> tuple[np.ndarray, np.ndarray]:
     """Emulate ``raw`` (a ``source_ms`` shot) at ``target_ms`` with the blur of the extra time.
 
     Parameters
@@ -347,12 +456,16 @@ def emulate_blur_consistent(raw: np.ndarray, source_ms: float, target_ms: float,
     homographies, weights_ms : lists
         From :func:`blur_homographies` (full-resolution pixels); weights sum to
         ``target_ms - source_ms``.
-    structure_sigma_px : float
+    structure_sigma_px, structure, noise_var
         The blur moves the source's structure, not its noise: ``h_T = (T/S) h_S +
-        sum_j (w_j/S) (warp_j(s) - s)`` with ``s`` the source smoothed by a Gaussian of this
-        sigma (px of one Bayer plane).  0: ``s = h_S`` (the warps then also average the
-        source's noise, which a live capture's noise never is: on the BorealHDR sample that
-        alone made 32 ms frames emulated from 4 ms 10 % less sharp than plain emulation).
+        sum_j (w_j/S) (warp_j(s) - s)`` with ``s`` the structure of the source
+        (:func:`structure_of`: by default an adaptive Wiener filter over a Gaussian window of
+        ``structure_sigma_px`` px of one Bayer plane, with the noise variance ``noise_var``
+        measured on the image when None; ``structure="gaussian"`` smooths everything, the
+        form before tiled copies).  ``structure_sigma_px=0`` or ``noise_var=0``: ``s = h_S``,
+        exact for a noiseless source; on a noisy one the warps then also average its noise,
+        which a live capture's noise never is (on the BorealHDR sample at rest that made
+        32 ms frames emulated from 8 ms up to 1.6x their noise away from plain emulation).
     resample : {"linear", "cubic"}
         Interpolation of the warps (each Bayer plane on its own grid); bilinear at fractional
         offsets also low-passes the plane, which the blur it models does not do.
@@ -386,22 +499,25 @@ def emulate_blur_consistent(raw: np.ndarray, source_ms: float, target_ms: float,
     clipped = ((raw >= response.white_level) | (raw <= response.black_level)).astype(np.float32)
     acc = h * np.float32(target_ms / source_ms)
     touched = clipped.copy()
+    if structure not in STRUCTURE_FILTERS:
+        raise EmulationError(f"structure must be one of {', '.join(STRUCTURE_FILTERS)}, got {structure!r}")
     phases = [(0, 0), (1, 0), (0, 1), (1, 1)] if bayer else [(None, None)]
+    sites = []  # (slice, offset, the structure the blur moves, the clipped mask), once per colour site
+    for px, py in phases:
+        sl = (slice(None), slice(None)) if px is None else (slice(py, None, 2), slice(px, None, 2))
+        plane = np.ascontiguousarray(h[sl])
+        if structure_sigma_px > 0:
+            plane = structure_of(plane, structure_sigma_px, structure, noise_var)
+        sites.append((sl, px, py, plane, np.ascontiguousarray(clipped[sl])))
     for H, w in moving:
         H = np.asarray(H, dtype=np.float64)
-        for px, py in phases:
-            if px is None:
-                sl, Hp = (slice(None), slice(None)), H
-            else:
-                sl, Hp = (slice(py, None, 2), slice(px, None, 2)), _bayer_plane_homography(H, px, py)
-            plane = np.ascontiguousarray(h[sl])
-            if structure_sigma_px > 0:
-                plane = cv2.GaussianBlur(plane, (0, 0), float(structure_sigma_px), borderType=cv2.BORDER_REPLICATE)
+        for sl, px, py, plane, clip_site in sites:
+            Hp = H if px is None else _bayer_plane_homography(H, px, py)
             dsize = (plane.shape[1], plane.shape[0])
             acc[sl] += np.float32(w / source_ms) * (cv2.warpPerspective(
                 plane, Hp, dsize, flags=flag, borderMode=cv2.BORDER_REPLICATE) - plane)
             touched[sl] = np.maximum(touched[sl], cv2.warpPerspective(
-                np.ascontiguousarray(clipped[sl]), Hp, dsize, flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE))
+                clip_site, Hp, dsize, flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE))
     out = _forward_dn(response, acc)
     all_high = raw >= response.white_level
     valid = valid & ((touched == 0) | (all_high & (out >= response.white_level)))

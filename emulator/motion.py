@@ -20,6 +20,7 @@ import numpy as np
 
 from emulator.blur import (
     BLUR_MODES,
+    DEFAULT_PLACEMENT,
     DEFAULT_STAMP,
     R_CAM_IMU_FLU,
     STAMP_CONVENTIONS,
@@ -199,6 +200,7 @@ class BlurHook:
         """What ``run.json`` records under ``"blur"``."""
         m = self.motion
         return {"mode": "consistent", "blur_aware": bool(self.blur_aware), "stamp": m.stamp,
+                "placement": DEFAULT_PLACEMENT,
                 "R_cam_imu": m.R_cam_imu.tolist(),
                 "gyro_bias": None if m.bias is None else m.bias.to_dict(),
                 "focal_px": {cam: float(K[0, 0]) for cam, (K, _) in m.intrinsics.items()}}

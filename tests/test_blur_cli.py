@@ -69,6 +69,7 @@ def test_run_blur_consistent_records_and_resumes(sample_seq, tmp_path, capsys):
     assert main(base + ["-o", str(blurred), "--blur", "consistent"]) == 0
     rj = json.loads((blurred / "run.json").read_text())
     assert rj["blur"]["mode"] == "consistent" and rj["blur"]["stamp"] == "end"
+    assert rj["blur"]["placement"] == "tiled"
     assert json.loads((plain / "run.json").read_text())["blur"] == {"mode": "none"}
     assert not (plain / "blur.csv").exists()
     rows = read_blur_table(blurred)
@@ -86,6 +87,13 @@ def test_run_blur_consistent_records_and_resumes(sample_seq, tmp_path, capsys):
                 assert (int(row["cycle"]), float(row["bracket_ms"]), float(row["target_ms"])) in keys
     # a resume must repeat the choice
     assert main(base + ["-o", str(blurred), "--resume", "--blur", "none"]) == 1
+    assert "blur" in capsys.readouterr().err
+    assert main(base + ["-o", str(blurred), "--resume", "--blur", "consistent"]) == 0
+    capsys.readouterr()
+    # a folder written before tiled copies (no "placement": uniform sub-instants) is not resumed by this code
+    rj["blur"].pop("placement")
+    (blurred / "run.json").write_text(json.dumps(rj))
+    assert main(base + ["-o", str(blurred), "--resume", "--blur", "consistent"]) == 1
     assert "blur" in capsys.readouterr().err
 
 

@@ -370,7 +370,9 @@ class RunConfig:
         theirs = dict(recorded)
         theirs.setdefault("method_timeout_s", theirs.get("method_timeout"))
         theirs["noise"] = theirs.get("noise") or {"mode": "none"}
-        theirs["blur"] = theirs.get("blur") or {"mode": "none"}
+        theirs["blur"] = dict(theirs.get("blur") or {"mode": "none"})
+        if theirs["blur"].get("mode") == "consistent":  # folders from before tiled copies: uniform sub-instants
+            theirs["blur"].setdefault("placement", "uniform")
         given = set(given)
         diff = []
         for key in CONFIG_KEYS:
@@ -378,7 +380,7 @@ class RunConfig:
                 continue
             a, b = mine.get(key), theirs.get(key)
             if key in ("noise", "blur"):  # the figures of a model or hook only where both sides have them
-                a, b = ({k: v for k, v in (x or {}).items() if k in ("mode", "seed", "blur_aware") or k in (y or {})}
+                a, b = ({k: v for k, v in (x or {}).items() if k in ("mode", "seed", "blur_aware", "placement") or k in (y or {})}
                         for x, y in ((a, b), (b, a)))
             if _plain(a) != _plain(b):
                 diff.append(key)

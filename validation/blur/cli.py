@@ -26,6 +26,9 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument("--scene", help=f"walkable scene (default {full.scene})")
     p.add_argument("--walk", help=f"walk preset (default {full.walk})")
     p.add_argument("--size", type=argtypes.size, help=f"WxH (default {full.width}x{full.height})")
+    p.add_argument("--sharpness-size", type=argtypes.size,
+                   help=f"WxH of the sharpness comparison (default {full.sharpness_width}x{full.sharpness_height}, "
+                        "the BorealHDR camera's)")
     p.add_argument("--spp", type=int, help=f"samples per pixel of the blurred shots (default {full.spp})")
     p.add_argument("--instants", type=int, help=f"shot instants compared (default {full.n_instants})")
     p.add_argument("--versus-walks", type=int,
@@ -52,6 +55,8 @@ def config_from_args(args) -> BlurConfig:
                                  ("cache_dir", args.cache_dir)) if v is not None}
     if args.size is not None:
         changes.update(width=args.size[0], height=args.size[1])
+    if getattr(args, "sharpness_size", None) is not None:
+        changes.update(sharpness_width=args.sharpness_size[0], sharpness_height=args.sharpness_size[1])
     return replace(cfg, **changes)
 
 

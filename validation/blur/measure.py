@@ -194,25 +194,39 @@ def sharpness(raw: np.ndarray) -> float:
 def sharpness_comparison(scene, traj, t0_s: float, cfg, camera, consistent=None) -> dict:
     """Emulated ``exposure_ms`` (from the ``source_ms`` bracket of the same trigger) against live, by sharpness.
 
+    At ``camera``'s size (the study passes one at ``cfg.sharpness_width`` x ``sharpness_height``);
+    noiseless captures of one render, so that the two differ by the blur alone.  Beside the
+    sharpness error, the RMS DN difference from the live frame over the pixels neither clips
+    (``rms_plain_dn``, ``rms_consistent_dn``).
+
     ``consistent``: optional ``f(raw, source_ms, target_ms, response, extra_radiance_fn) -> raw``
     hook for blur-consistent emulation (issue 21, realblur side); None leaves that figure out.
     """
     from emulator.emulate import emulate
     from scenes.blur import ShotRenderer
 
-    shot = ShotRenderer(scene, traj.poses, t0_s, cfg.exposure_ms, width=cfg.width, height=cfg.height,
+    shot = ShotRenderer(scene, traj.poses, t0_s, cfg.exposure_ms, width=camera.width, height=camera.height,
                         spp=cfg.spp, seed=cfg.seed + 7, denoise=cfg.sharpness_denoise, cache_dir=cfg.cache_dir,
                         fov_deg=camera.fov_x_deg)
     src = _dn(shot.radiance(cfg.source_ms)[0], camera, cfg.source_ms)
     live_rad, info = shot.radiance(cfg.exposure_ms)
     live = _dn(live_rad, camera, cfg.exposure_ms)
-    plain = emulate(src, cfg.source_ms, cfg.exposure_ms, camera.response)
+    plain, valid = emulate(src, cfg.source_ms, cfg.exposure_ms, camera.response, return_mask=True)
+    white = camera.response.white_level
+    keep = valid & (live < white) & (plain < white)
+
+    def rms(img):
+        return float(np.sqrt(np.mean((img[keep].astype(np.float64) - live[keep]) ** 2))) if keep.any() else None
+
     s_live, s_plain = sharpness(live), sharpness(plain)
-    out = {"t0_s": t0_s, "blur_px": info["blur_px"], "live": s_live, "emulated_plain": s_plain,
-           "plain_error_percent": 100.0 * (s_plain - s_live) / s_live, "consistent_error_percent": None}
+    out = {"t0_s": t0_s, "size": [camera.width, camera.height], "blur_px": info["blur_px"], "live": s_live,
+           "emulated_plain": s_plain, "plain_error_percent": 100.0 * (s_plain - s_live) / s_live,
+           "consistent_error_percent": None, "rms_plain_dn": rms(plain), "rms_consistent_dn": None}
     if consistent is not None:
-        s_cons = sharpness(consistent(src, cfg.source_ms, cfg.exposure_ms, camera.response, shot))
-        out.update(emulated_consistent=s_cons, consistent_error_percent=100.0 * (s_cons - s_live) / s_live)
+        cons = consistent(src, cfg.source_ms, cfg.exposure_ms, camera.response, shot)
+        s_cons = sharpness(cons)
+        out.update(emulated_consistent=s_cons, consistent_error_percent=100.0 * (s_cons - s_live) / s_live,
+                   rms_consistent_dn=rms(cons))
     return out
 
 
@@ -222,7 +236,9 @@ def consistent_from_walk(traj, camera):
     Returns ``f(raw, source_ms, target_ms, response, shot) -> raw`` for
     :func:`sharpness_comparison`: the gyro is :func:`scenes.walks.angular_velocity` of the
     walk (camera axes), windows start at the trigger (``stamp="start"``, the synthetic
-    convention), K is the synthetic camera's.
+    convention), K is the synthetic camera's.  Everything else is the default of
+    :func:`emulator.blur.emulate_blur_consistent` (tiled copies; the noise measured on the image,
+    which on these noiseless captures finds little, so nearly all of the source is moved).
     """
     from emulator.blur import blur_homographies, emulate_blur_consistent
     from scenes.camera import intrinsics_matrix

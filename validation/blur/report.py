@@ -16,7 +16,9 @@ def headline(r: dict) -> str:
             f"{_f(r['reference_noise_percent'])} %, without blur {_f(r['reference_no_blur_error_percent'])} %); "
             f"render cost ratio {_f(r['render_cost_ratio'])} (goal <= {r['render_cost_ratio_goal']:g}); "
             f"angular rate ratio {rate_text}; sharpness error, plain emulation "
-            f"{_f(r['sharpness_error_plain_percent'])} %, blur-consistent {_f(r['sharpness_error_consistent_percent'])} %")
+            f"{_f(r['sharpness_error_plain_percent'])} %, blur-consistent {_f(r['sharpness_error_consistent_percent'])} %"
+            f"; consistent over plain: |sharpness error| {_f(r.get('sharpness_abs_error_ratio'))}, RMS image error "
+            f"{_f(r.get('image_rms_error_ratio'))} (goal <= {_f(r.get('consistent_halves_error_goal'))})")
 
 
 def report_markdown(r: dict) -> str:
@@ -62,13 +64,16 @@ def report_markdown(r: dict) -> str:
     for name, key in (("synthetic", "synthetic_deg_s"), ("real", "real_deg_s")):
         vals = a.get(key)
         lines.append(f"- {name}: " + ("n/a" if vals is None else ", ".join(f"{k} {v:.2f}" for k, v in vals.items())))
-    lines += ["", "## Sharpness: emulated against live (p95 gradient / median, green plane)", "",
-              "| t0 (s) | blur (px) | live | emulated (plain) | error % | consistent error % |",
-              "| --- | --- | --- | --- | --- | --- |"]
+    size = (f"{cfg['sharpness_width']}x{cfg['sharpness_height']}" if "sharpness_width" in cfg
+            else f"{cfg['width']}x{cfg['height']}")
+    lines += ["", f"## Sharpness: emulated against live (p95 gradient / median, green plane; {size})", "",
+              "| t0 (s) | blur (px) | live | emulated (plain) | error % | consistent error % | RMS DN, plain | "
+              "RMS DN, consistent |", "| --- | --- | --- | --- | --- | --- | --- | --- |"]
     for row in r["sharpness"]:
         lines.append(f"| {row['t0_s']:.2f} | {_f(row['blur_px'])} | {_f(row['live'])} | "
                      f"{_f(row['emulated_plain'])} | {_f(row['plain_error_percent'])} | "
-                     f"{_f(row['consistent_error_percent'])} |")
+                     f"{_f(row['consistent_error_percent'])} | {_f(row.get('rms_plain_dn'))} | "
+                     f"{_f(row.get('rms_consistent_dn'))} |")
     lines += versus_markdown(r.get("live_versus_emulated"))
     lines += ["", f"Command: `{r['provenance']['experiment']}`", ""]
     return "\n".join(lines)
