@@ -259,8 +259,9 @@ def blur_homographies(omega, K, size, t_s: float, source_ms: float, target_ms: f
     * ``placement="tiled"`` (default): copies a whole source window apart, tiling the extra
       time; a last part shorter than the source gets one copy of that duration at its middle.
       The source already carries the blur of its own window, so ``k`` copies tile ``k`` windows:
-      exact for a constant angular velocity.  A source under ``T / 64`` falls back to
-      ``"uniform"`` (its own blur is then too short to matter).
+      exact for a constant angular velocity.  Where the copies would be closer than 0.5 px (a
+      source blurred by less than that: at rest, or a short source), the part takes the
+      ``"uniform"`` sub-instants instead, which are then fewer and err by under 0.25 px.
     * ``placement="uniform"``: sub-instants no more than 0.5 px apart, as if the source were
       sharp; every copy adds the source's own blur again, so the blur is too long by up to
       one source window (the over-correction measured in docs/motion.md).
@@ -281,8 +282,6 @@ def blur_homographies(omega, K, size, t_s: float, source_ms: float, target_ms: f
                              f"cover the exposure window {e0:.6g}..{e1:.6g} s")
     ref = 0.5 * (s0 + s1)
     span = s1 - s0
-    if placement == "tiled" and (target_ms - source_ms) / source_ms > _MAX_SUBSTEPS:
-        placement = "uniform"
     pts = grid_points(*size)
     taus: list[float] = []
     ws: list[float] = []
@@ -290,18 +289,21 @@ def blur_homographies(omega, K, size, t_s: float, source_ms: float, target_ms: f
         length = sign * (b - a)
         if length <= 0:
             continue
-        if placement == "tiled":
-            full = int(math.floor(length / span + 1e-9))
+        _, R = integrate_rotation(omega, min(a, b), max(a, b))
+        n_uniform = int(np.clip(math.ceil(blur_length_px(K, R, pts).max() / _SUBSTEP_PX), 1, _MAX_SUBSTEPS))
+        full = int(math.floor(length / span + 1e-9))
+        rest = length - full * span
+        if placement == "tiled" and full + (rest > 1e-9 * span) <= n_uniform:
+            # copies a source window apart are at least _SUBSTEP_PX apart: tile; closer (a source blur
+            # under half a pixel), sub-instants _SUBSTEP_PX apart are as good and fewer
             for k in range(1, full + 1):
                 taus.append(ref + sign * k * span)
                 ws.append(span * 1e3)
-            rest = length - full * span
             if rest > 1e-9 * span:
                 taus.append(a + sign * (full * span + 0.5 * rest))
                 ws.append(rest * 1e3)
         else:
-            _, R = integrate_rotation(omega, min(a, b), max(a, b))
-            n = int(np.clip(math.ceil(blur_length_px(K, R, pts).max() / _SUBSTEP_PX), 1, _MAX_SUBSTEPS))
+            n = n_uniform
             for j in range(n):
                 taus.append(min(a, b) + (j + 0.5) * length / n)
                 ws.append(length * 1e3 / n)
@@ -416,25 +418,23 @@ def structure_of(plane: np.ndarray, sigma_px: float | None = None, method: str =
 
 
 def _plane_noise_var(plane: np.ndarray, mu: np.ndarray) -> np.ndarray:
-    """Noise variance per pixel: the MAD of the finest diagonal Haar detail
+    """Noise variance per pixel: the MAD of the finest diagonal Haar detail of each 2x2 block
     ``(x[i,j] - x[i,j+1] - x[i+1,j] + x[i+1,j+1]) / 2`` (variance = the noise's for white noise; zero on
     any plane linear in x and y, so smooth shading does not count) in 16 bins of the local mean."""
-    d = 0.5 * np.abs(plane[:-1, :-1] - plane[:-1, 1:] - plane[1:, :-1] + plane[1:, 1:]).ravel()
-    level = mu[:-1, :-1].ravel()
+    h2, w2 = (plane.shape[0] // 2) * 2, (plane.shape[1] // 2) * 2
+    x = plane[:h2, :w2]
+    d = 0.5 * np.abs(x[0::2, 0::2] - x[0::2, 1::2] - x[1::2, 0::2] + x[1::2, 1::2]).ravel()
+    level = mu[:h2:2, :w2:2].ravel()
     if d.size < 16:
         return np.zeros_like(mu)
-    edges = np.unique(np.quantile(level, np.linspace(0.0, 1.0, _NOISE_BINS + 1)))
-    which = np.clip(np.searchsorted(edges, level, side="right") - 1, 0, max(edges.size - 2, 0))
+    order = np.argsort(level, kind="stable")  # 16 bins of equal count
     centres, noise = [], []
-    for b in range(max(edges.size - 1, 1)):
-        sel = which == b
-        if np.count_nonzero(sel) < 16:
-            continue
-        centres.append(float(np.median(level[sel])))
-        noise.append((1.4826 * float(np.median(d[sel]))) ** 2)
-    if not centres:
-        return np.zeros_like(mu)
-    return np.interp(mu, centres, noise).astype(np.float32)
+    for part in np.array_split(order, min(_NOISE_BINS, d.size // 16)):
+        centres.append(float(np.median(level[part])))
+        noise.append((1.4826 * float(np.median(d[part]))) ** 2)
+    xs, inv = np.unique(centres, return_inverse=True)  # bins of one level (a clipped plane): one point
+    ys = np.bincount(inv, weights=noise) / np.bincount(inv)
+    return np.interp(mu, xs, ys).astype(np.float32)
 
 
 def emulate_blur_consistent(raw: np.ndarray, source_ms: float, target_ms: float, response,

@@ -6,6 +6,7 @@
     python scripts/blur_study_checks.py cost OUT.json [REPEATS]   # CPU-second render cost, fastest + median rate
     python scripts/blur_study_checks.py versus OUT_DIR            # the live-versus-emulated table alone
     python scripts/blur_study_checks.py table OUT_DIR             # that table from the walks finished so far
+    python scripts/blur_study_checks.py consistent OUT.json [WxH ...]  # forms of consistent emulation, per size
 
 All at the full configuration of :class:`validation.blur.config.BlurConfig` (480x300) and with
 the study's own functions (:mod:`validation.blur.measure`, :mod:`validation.blur.versus`).
@@ -144,6 +145,83 @@ def versus(out_dir: str) -> dict:
     return r
 
 
+#: The forms of blur-consistent emulation compared by ``consistent``: (name, placement, structure, kwargs).
+FORMS = (("default", "tiled", "wiener", {}),
+         ("noiseless", "tiled", "wiener", {"noise_var": 0.0}),
+         ("before", "uniform", "gaussian", {}),
+         ("uniform-noiseless", "uniform", "wiener", {"noise_var": 0.0}))
+
+
+def consistent(out_path: str, sizes) -> dict:
+    """Plain and blur-consistent emulation against live, by sharpness and RMS DN, at each size.
+
+    The 8 instants of ``sharpness`` (4 fastest, 4 at the median turn rate); 32 ms live against
+    32 ms emulated from the 8 ms window of the same render (noiseless captures).  Forms: the
+    default (tiled copies, Wiener structure with the noise measured on the image), the same with
+    the known noise (none), the form before tiled copies (uniform sub-instants, 1-px Gaussian
+    structure), and uniform sub-instants with the known noise.
+    """
+    from dataclasses import replace
+
+    from emulator.blur import blur_homographies, emulate_blur_consistent
+    from emulator.emulate import emulate
+    from scenes.blur import ShotRenderer
+    from scenes.camera import intrinsics_matrix
+    from scenes.walks import angular_velocity
+    from validation.blur import measure
+    from validation.common import make_camera
+
+    cfg0, scene, traj, _ = _setup()
+    cfg0 = replace(cfg0, cache_dir=os.environ.get("EXPOSIM_CACHE"))
+
+    def omega(t_s):
+        return angular_velocity(traj, np.clip(np.atleast_1d(t_s), 0.0, traj.duration_s))
+
+    instants = [("fastest", t) for t in measure.fastest_instants(traj, cfg0.walk_s, 4, cfg0.exposure_ms)]
+    instants += [("median", t) for t in _median_instants(traj, cfg0.walk_s, cfg0.exposure_ms)]
+    rows = []
+    for size in sizes:
+        w, h = (int(v) for v in size.split("x"))
+        camera = make_camera("borealhdr", width=w, height=h).saturating_at(scene.reference_radiance, 1.0)
+        k = intrinsics_matrix(w, h, camera.fov_x_deg)
+        resp = camera.response
+        for kind, t0 in instants:
+            shot = ShotRenderer(scene, traj.poses, t0, cfg0.exposure_ms, width=w, height=h, spp=cfg0.spp,
+                                seed=cfg0.seed + 7, denoise=cfg0.sharpness_denoise, cache_dir=cfg0.cache_dir,
+                                fov_deg=camera.fov_x_deg)
+            src = measure._dn(shot.radiance(cfg0.source_ms)[0], camera, cfg0.source_ms)
+            live_rad, info = shot.radiance(cfg0.exposure_ms)
+            live = measure._dn(live_rad, camera, cfg0.exposure_ms)
+            plain, valid = emulate(src, cfg0.source_ms, cfg0.exposure_ms, resp, return_mask=True)
+            keep = valid & (live < resp.white_level) & (plain < resp.white_level)
+            s_live = measure.sharpness(live)
+
+            def score(img):
+                return (100.0 * (measure.sharpness(img) - s_live) / s_live,
+                        float(np.sqrt(np.mean((img[keep].astype(np.float64) - live[keep]) ** 2))))
+
+            row = {"size": size, "kind": kind, "t0_s": t0, "blur_px": info["blur_px"]}
+            row["plain_error_percent"], row["plain_rms_dn"] = score(plain)
+            for name, placement, structure, kw in FORMS:
+                hs, ws = blur_homographies(omega, k, (w, h), t0, cfg0.source_ms, cfg0.exposure_ms, stamp="start",
+                                           placement=placement)
+                img = emulate_blur_consistent(src, cfg0.source_ms, cfg0.exposure_ms, resp, hs, ws,
+                                              structure=structure, **kw)[0]
+                row[f"{name}_error_percent"], row[f"{name}_rms_dn"] = score(img)
+            rows.append(row)
+            print(json.dumps(row), flush=True)
+    summary = {}
+    for size in sizes:
+        for kind in ("fastest", "median", "all"):
+            sel = [r for r in rows if r["size"] == size and kind in ("all", r["kind"])]
+            summary[f"{size} {kind}"] = {
+                key: float(np.median([abs(r[key]) for r in sel]))
+                for key in sel[0] if key.endswith(("_error_percent", "_rms_dn"))}
+    out = {"rows": rows, "median_abs": summary, "load": os.getloadavg()}
+    _write(out_path, out)
+    return out
+
+
 def table(out_dir: str) -> dict:
     """The table of :func:`validation.blur.versus.compare` over ``OUT_DIR/versus/seed*/walk.json``."""
     from pathlib import Path
@@ -173,7 +251,7 @@ def main(argv) -> int:
     what, args = argv[1], argv[2:]
     jobs = {"sharpness": lambda: sharpness(args[0]), "variants": lambda: variants([float(a) for a in args]),
             "reference": lambda: reference(args[0]), "cost": lambda: cost(args[0], *args[1:2]), "versus": lambda: versus(args[0]),
-            "table": lambda: table(args[0])}
+            "table": lambda: table(args[0]), "consistent": lambda: consistent(args[0], args[1:] or ["480x300"])}
     if what not in jobs:
         print(__doc__, file=sys.stderr)
         return 2

@@ -130,13 +130,13 @@ def test_tiled_copies_of_a_blurred_source_give_the_target_window_exactly(source_
         assert err["tiled"] <= err["uniform"] + 1e-9, err
 
 
-def test_placement_is_checked_and_a_short_source_falls_back_to_uniform():
+def test_placement_is_checked_and_a_source_blurred_under_half_a_pixel_takes_sub_instants():
     with pytest.raises(EmulationError, match="placement"):
         blur_homographies(yaw(1.0), K, SIZE, 0.0, 1.0, 9.0, "start", placement="comb")
-    # 1 ms to 100 ms: 99 source windows, more than the 64 copies allowed: uniform sub-instants
+    # 1 ms to 100 ms at 0.6 deg/s: copies 0.005 px apart; sub-instants 0.5 px apart are fewer
     a = blur_homographies(yaw(0.01), K, SIZE, 0.0, 1.0, 100.0, "start")
     b = blur_homographies(yaw(0.01), K, SIZE, 0.0, 1.0, 100.0, "start", placement="uniform")
-    assert len(a[0]) == len(b[0]) and all(np.array_equal(x, y) for x, y in zip(a[0], b[0]))
+    assert 1 <= len(a[0]) <= 2 and len(a[0]) == len(b[0]) and all(np.array_equal(x, y) for x, y in zip(a[0], b[0]))
 
 
 def test_at_rest_the_emulation_is_exact():
