@@ -78,6 +78,8 @@ __all__ = [
     "DEFAULT_PLACEMENT",
     "emulate_blur_consistent",
     "STRUCTURE_SIGMA_PX",
+    "STRUCTURE_FILTERS",
+    "structure_of",
 ]
 
 #: Where a frame's timestamp lies in its exposure window.
@@ -259,7 +261,8 @@ def blur_homographies(omega, K, size, t_s: float, source_ms: float, target_ms: f
     * ``placement="tiled"`` (default): copies a whole source window apart, tiling the extra
       time; a last part shorter than the source gets one copy of that duration at its middle.
       The source already carries the blur of its own window, so ``k`` copies tile ``k`` windows:
-      exact for a constant angular velocity.  Where the copies would be closer than 0.5 px (a
+      exact for a constant angular velocity where each side's extra time is a whole number of
+      source windows (with ``stamp="middle"`` at twice the source, half a window a side, never).  Where the copies would be closer than 0.5 px (a
       source blurred by less than that: at rest, or a short source), the part takes the
       ``"uniform"`` sub-instants instead, which are then fewer and err by under 0.25 px.
     * ``placement="uniform"``: sub-instants no more than 0.5 px apart, as if the source were
@@ -272,6 +275,9 @@ def blur_homographies(omega, K, size, t_s: float, source_ms: float, target_ms: f
     """
     if placement not in PLACEMENTS:
         raise EmulationError(f"placement must be one of {', '.join(PLACEMENTS)}, got {placement!r}")
+    for name, v in (("source_ms", source_ms), ("target_ms", target_ms)):
+        if not (isinstance(v, (int, float, np.floating, np.integer)) and math.isfinite(v) and v > 0):
+            raise EmulationError(f"{name} must be a finite exposure > 0 ms, got {v!r}")
     omega = as_angular_velocity(omega)
     if target_ms <= source_ms:
         return [], []
@@ -290,10 +296,11 @@ def blur_homographies(omega, K, size, t_s: float, source_ms: float, target_ms: f
         if length <= 0:
             continue
         _, R = integrate_rotation(omega, min(a, b), max(a, b))
-        n_uniform = int(np.clip(math.ceil(blur_length_px(K, R, pts).max() / _SUBSTEP_PX), 1, _MAX_SUBSTEPS))
+        n_steps = max(1, math.ceil(blur_length_px(K, R, pts).max() / _SUBSTEP_PX))  # sub-instants 0.5 px apart
+        n_uniform = min(n_steps, _MAX_SUBSTEPS)
         full = int(math.floor(length / span + 1e-9))
         rest = length - full * span
-        if placement == "tiled" and full + (rest > 1e-9 * span) <= n_uniform:
+        if placement == "tiled" and full + (rest > 1e-9 * span) <= n_steps:
             # copies a source window apart are at least _SUBSTEP_PX apart: tile; closer (a source blur
             # under half a pixel), sub-instants _SUBSTEP_PX apart are as good and fewer
             for k in range(1, full + 1):
@@ -359,8 +366,8 @@ def _is_identity(H: np.ndarray, size) -> bool:
     return bool(np.abs(_project(H[None], pts)[0] - pts).max() < _REST_PX)
 
 
-#: Default Gaussian sigma (px of one Bayer plane) of the structure the blur moves (see
-#: :func:`emulate_blur_consistent`): the source's own noise is not smeared.
+#: Window (Gaussian sigma, px of one Bayer plane) of the structure the blur moves (see
+#: :func:`structure_of`): the source's own noise is not smeared.
 STRUCTURE_SIGMA_PX = 1.0
 #: Resamplers of :func:`emulate_blur_consistent`'s warps: name -> OpenCV flag.
 _RESAMPLE = {"linear": "INTER_LINEAR", "cubic": "INTER_CUBIC"}
@@ -380,22 +387,32 @@ def _gaussian_weights(sigma: float) -> np.ndarray:
 
 
 def structure_of(plane: np.ndarray, sigma_px: float | None = None, method: str = "wiener",
-                 noise_var=None) -> np.ndarray:
+                 noise_var=None, exclude: np.ndarray | None = None) -> np.ndarray:
     """The structure of one (Bayer) plane in linear exposure: what blur moves, without the noise.
 
     ``"gaussian"``: the plane smoothed by a Gaussian of ``sigma_px``; it drops fine structure with
     the noise.  ``"wiener"`` (an adaptive Wiener filter, Lee 1980): ``mu + k (x - mu)`` with ``mu``
     and ``v`` the local mean and variance over that Gaussian window and
-    ``k = max(0, 1 - 3 n / v)``, ``n`` the noise variance at the level ``mu`` (three times: flat noisy
+    ``k = max(0, 1 - 3 c n / v)``, ``n`` the noise variance at the level ``mu`` and ``c = 1 - sum w^2``
+    (about 0.92: the share of white noise's variance that a local variance over the window ``w``
+    sees; three times: flat noisy
     regions become ``mu``, so their noise is not moved, while edges and texture well above the
     noise stay and are moved).
 
     ``noise_var``: ``n`` in the plane's units, a number or a function of ``mu``; None measures it
     on the plane itself: in 16 bins of ``mu``, the robust (MAD) variance of the finest diagonal
-    Haar detail (:func:`_plane_noise_var`).  Texture at the pixel scale raises that measure, so on a noiseless plane give ``noise_var=0``
-    (the plane is returned as it is).
+    Haar detail (:func:`_plane_noise_var`), leaving out the blocks ``exclude`` (a boolean mask of
+    the plane, e.g. its clipped pixels, whose zero detail is not a noise level).  Texture at the
+    pixel scale raises that measure, so on a noiseless plane give ``noise_var=0`` (the plane is
+    returned as it is).  Integer planes are taken as float32.
     """
     sigma_px = STRUCTURE_SIGMA_PX if sigma_px is None else float(sigma_px)
+    if noise_var is not None and not callable(noise_var):
+        nv = float(noise_var)
+        if not (math.isfinite(nv) and nv >= 0):
+            raise EmulationError(f"noise_var must be a finite variance >= 0, got {noise_var!r}")
+    if not np.issubdtype(plane.dtype, np.floating):
+        plane = plane.astype(np.float32)
     if method not in STRUCTURE_FILTERS:
         raise EmulationError(f"structure must be one of {', '.join(STRUCTURE_FILTERS)}, got {method!r}")
     if sigma_px <= 0 or (method == "wiener" and noise_var is not None and not callable(noise_var)
@@ -407,7 +424,7 @@ def structure_of(plane: np.ndarray, sigma_px: float | None = None, method: str =
     var_gain = 1.0 - float(np.sum(_gaussian_weights(sigma_px) ** 2))  # E[local variance] / var(x), white noise
     resid = plane - mu
     if noise_var is None:
-        n = _plane_noise_var(plane, mu)
+        n = _plane_noise_var(plane, mu, exclude)
     elif callable(noise_var):
         n = np.asarray(noise_var(mu), dtype=np.float32)
     else:
@@ -417,7 +434,7 @@ def structure_of(plane: np.ndarray, sigma_px: float | None = None, method: str =
     return (mu + k * resid).astype(plane.dtype, copy=False)
 
 
-def _plane_noise_var(plane: np.ndarray, mu: np.ndarray) -> np.ndarray:
+def _plane_noise_var(plane: np.ndarray, mu: np.ndarray, exclude: np.ndarray | None = None) -> np.ndarray:
     """Noise variance per pixel: the MAD of the finest diagonal Haar detail of each 2x2 block
     ``(x[i,j] - x[i,j+1] - x[i+1,j] + x[i+1,j+1]) / 2`` (variance = the noise's for white noise; zero on
     any plane linear in x and y, so smooth shading does not count) in 16 bins of the local mean."""
@@ -425,6 +442,10 @@ def _plane_noise_var(plane: np.ndarray, mu: np.ndarray) -> np.ndarray:
     x = plane[:h2, :w2]
     d = 0.5 * np.abs(x[0::2, 0::2] - x[0::2, 1::2] - x[1::2, 0::2] + x[1::2, 1::2]).ravel()
     level = mu[:h2:2, :w2:2].ravel()
+    if exclude is not None:
+        e = np.asarray(exclude, dtype=bool)[:h2, :w2]
+        keep = ~(e[0::2, 0::2] | e[0::2, 1::2] | e[1::2, 0::2] | e[1::2, 1::2]).ravel()
+        d, level = d[keep], level[keep]
     if d.size < 16:
         return np.zeros_like(mu)
     order = np.argsort(level, kind="stable")  # 16 bins of equal count
@@ -462,7 +483,8 @@ def emulate_blur_consistent(raw: np.ndarray, source_ms: float, target_ms: float,
         (:func:`structure_of`: by default an adaptive Wiener filter over a Gaussian window of
         ``structure_sigma_px`` px of one Bayer plane, with the noise variance ``noise_var``
         measured on the image when None; ``structure="gaussian"`` smooths everything, the
-        form before tiled copies).  ``structure_sigma_px=0`` or ``noise_var=0``: ``s = h_S``,
+        form before tiled copies).  ``structure_sigma_px=0``, or ``noise_var=0`` with the Wiener
+        filter (the Gaussian form ignores ``noise_var``): ``s = h_S``,
         exact for a noiseless source; on a noisy one the warps then also average its noise,
         which a live capture's noise never is (on the BorealHDR sample at rest that made
         32 ms frames emulated from 8 ms up to 1.6x their noise away from plain emulation).
@@ -481,6 +503,10 @@ def emulate_blur_consistent(raw: np.ndarray, source_ms: float, target_ms: float,
 
     source_ms = check_exposure(source_ms, "source_ms")
     target_ms = check_exposure(target_ms, "target_ms")
+    if resample not in _RESAMPLE:
+        raise EmulationError(f"resample must be one of {', '.join(_RESAMPLE)}, got {resample!r}")
+    if structure not in STRUCTURE_FILTERS:
+        raise EmulationError(f"structure must be one of {', '.join(STRUCTURE_FILTERS)}, got {structure!r}")
     ratio = target_ms / source_ms
     table, valid_table = response.lut(ratio)
     plain = apply_lut(table, raw)
@@ -492,22 +518,18 @@ def emulate_blur_consistent(raw: np.ndarray, source_ms: float, target_ms: float,
     if abs(sum(weights_ms) - (target_ms - source_ms)) > 1e-6 * target_ms:
         raise EmulationError(f"blur weights sum to {sum(weights_ms):.6g} ms, expected target - source = "
                              f"{target_ms - source_ms:.6g} ms")
-    if resample not in _RESAMPLE:
-        raise EmulationError(f"resample must be one of {', '.join(_RESAMPLE)}, got {resample!r}")
     flag = getattr(cv2, _RESAMPLE[resample])
     h = response.inverse(raw).astype(np.float32)
     clipped = ((raw >= response.white_level) | (raw <= response.black_level)).astype(np.float32)
     acc = h * np.float32(target_ms / source_ms)
     touched = clipped.copy()
-    if structure not in STRUCTURE_FILTERS:
-        raise EmulationError(f"structure must be one of {', '.join(STRUCTURE_FILTERS)}, got {structure!r}")
     phases = [(0, 0), (1, 0), (0, 1), (1, 1)] if bayer else [(None, None)]
     sites = []  # (slice, offset, the structure the blur moves, the clipped mask), once per colour site
     for px, py in phases:
         sl = (slice(None), slice(None)) if px is None else (slice(py, None, 2), slice(px, None, 2))
         plane = np.ascontiguousarray(h[sl])
         if structure_sigma_px > 0:
-            plane = structure_of(plane, structure_sigma_px, structure, noise_var)
+            plane = structure_of(plane, structure_sigma_px, structure, noise_var, exclude=clipped[sl] > 0)
         sites.append((sl, px, py, plane, np.ascontiguousarray(clipped[sl])))
     for H, w in moving:
         H = np.asarray(H, dtype=np.float64)

@@ -8,8 +8,10 @@
     python scripts/blur_study_checks.py table OUT_DIR             # that table from the walks finished so far
     python scripts/blur_study_checks.py consistent OUT.json [WxH ...]  # forms of consistent emulation, per size
 
-All at the full configuration of :class:`validation.blur.config.BlurConfig` (480x300) and with
-the study's own functions (:mod:`validation.blur.measure`, :mod:`validation.blur.versus`).
+At the full configuration of :class:`validation.blur.config.BlurConfig`, at 480x300 except
+``consistent`` (its sizes), with the study's own functions (:mod:`validation.blur.measure`,
+:mod:`validation.blur.versus`).  ``sharpness`` and ``variants`` reproduce the 2026-11-25 figures:
+they use the form of consistent emulation of that day (uniform sub-instants, Gaussian structure).
 """
 
 from __future__ import annotations
@@ -47,9 +49,9 @@ def _consistent(traj, camera, sigma: float, resample: str = "linear"):
 
     def consistent(raw, source_ms, target_ms, response, shot):
         hs, ws = blur_homographies(omega, k, (camera.width, camera.height), shot.t0_s, source_ms, target_ms,
-                                   stamp="start")
+                                   stamp="start", placement="uniform")
         return emulate_blur_consistent(raw, source_ms, target_ms, response, hs, ws, structure_sigma_px=sigma,
-                                       resample=resample)[0]
+                                       resample=resample, structure="gaussian")[0]
 
     return consistent
 
@@ -197,8 +199,8 @@ def consistent(out_path: str, sizes) -> dict:
             s_live = measure.sharpness(live)
 
             def score(img):
-                return (100.0 * (measure.sharpness(img) - s_live) / s_live,
-                        float(np.sqrt(np.mean((img[keep].astype(np.float64) - live[keep]) ** 2))))
+                rms = float(np.sqrt(np.mean((img[keep].astype(np.float64) - live[keep]) ** 2))) if keep.any() else None
+                return 100.0 * (measure.sharpness(img) - s_live) / s_live, rms
 
             row = {"size": size, "kind": kind, "t0_s": t0, "blur_px": info["blur_px"]}
             row["plain_error_percent"], row["plain_rms_dn"] = score(plain)
@@ -215,7 +217,7 @@ def consistent(out_path: str, sizes) -> dict:
         for kind in ("fastest", "median", "all"):
             sel = [r for r in rows if r["size"] == size and kind in ("all", r["kind"])]
             summary[f"{size} {kind}"] = {
-                key: float(np.median([abs(r[key]) for r in sel]))
+                key: float(np.median([abs(r[key]) for r in sel if r[key] is not None]))
                 for key in sel[0] if key.endswith(("_error_percent", "_rms_dn"))}
     out = {"rows": rows, "median_abs": summary, "load": os.getloadavg()}
     _write(out_path, out)

@@ -93,31 +93,35 @@ def test_a_point_becomes_a_line_of_known_length():
     assert abs(row.sum() - 1000 - 8000) <= 0.5 * (line.size + 2)
 
 
-def _moving_point_source(px_per_ms: float, source_ms: float, x_end: float = 100.5) -> np.ndarray:
-    """A point at the centre row whose image moves left at ``px_per_ms`` during a ``source_ms`` shot
-    (stamp at the start): a line from ``x_end - px_per_ms * source_ms`` to ``x_end`` (pixel edges),
-    100 DN per pixel it crosses whole (linear response)."""
+def _moving_point_source(px_per_ms: float, exposure_ms: float, stamp: str = "start") -> np.ndarray:
+    """A point at the centre row whose image moves left at ``px_per_ms``, shot for ``exposure_ms``
+    with the stamp at t = 0: its line (pixel edges) runs from 100.5 - v T to 100.5 when the window
+    starts at the stamp, from 100.5 to 100.5 + v T when it ends there; 100 DN per pixel it crosses
+    whole (linear response)."""
     raw = np.zeros((SIZE[1], SIZE[0]), dtype=np.uint16)
-    x0 = int(round(x_end - px_per_ms * source_ms + 0.5))
-    raw[50, x0:int(round(x_end + 0.5))] = 100
+    length = px_per_ms * exposure_ms
+    x0, x1 = (100.5 - length, 100.5) if stamp == "start" else (100.5, 100.5 + length)
+    raw[50, int(round(x0 + 0.5)):int(round(x1 + 0.5))] = 100
     return raw
 
 
+@pytest.mark.parametrize("stamp", ["start", "end"])
 @pytest.mark.parametrize("source_ms, target_ms", [(1.0, 9.0), (2.0, 16.0), (4.0, 8.0), (4.0, 10.0)])
-def test_tiled_copies_of_a_blurred_source_give_the_target_window_exactly(source_ms, target_ms):
+def test_tiled_copies_of_a_blurred_source_give_the_target_window_exactly(source_ms, target_ms, stamp):
     """A source carries the blur of its own window: a point moving 4 px/ms is a line of 4 px per ms
     of source.  Tiled copies, one source window apart, give the live target's line (the same point
     over the target window): within 1 % (L1, up to the tan() of the yaw and one rounding) when the
-    target is a whole number of source windows.  Uniform placement (the source taken as sharp)
-    adds the source's own blur again and misses by 5-25 %; a remaining part shorter than the
-    source (4 -> 10 ms) is one copy either way."""
+    target is a whole number of source windows, with the extra time after the source (stamp at the
+    start) or before it (stamp at the end, the default).  Uniform placement (the source taken as
+    sharp) adds the source's own blur again and misses by 5-25 %; where a part shorter than the
+    source remains (4 -> 10 ms), tiles do no worse than sub-instants."""
     resp = CameraResponse.linear(4095)
     rate = 4.0 / (F_PX * 1e-3)
-    raw = _moving_point_source(4.0, source_ms)
-    live = _moving_point_source(4.0, target_ms)[50].astype(np.float64)
+    raw = _moving_point_source(4.0, source_ms, stamp)
+    live = _moving_point_source(4.0, target_ms, stamp)[50].astype(np.float64)
     err = {}
     for placement in ("tiled", "uniform"):
-        Hs, ws = blur_homographies(yaw(rate), K, SIZE, 0.0, source_ms, target_ms, "start", placement=placement)
+        Hs, ws = blur_homographies(yaw(rate), K, SIZE, 0.0, source_ms, target_ms, stamp, placement=placement)
         assert abs(sum(ws) - (target_ms - source_ms)) < 1e-12
         out = emulate_blur_consistent(raw, source_ms, target_ms, resp, Hs, ws, bayer=False, structure_sigma_px=0)[0]
         assert out[:49].max() == 0 and out[52:].max() == 0 and max(out[49].max(), out[51].max()) <= 1
@@ -128,6 +132,17 @@ def test_tiled_copies_of_a_blurred_source_give_the_target_window_exactly(source_
         assert err["tiled"] <= 0.01 and err["uniform"] >= 5 * err["tiled"] and err["uniform"] >= 0.05, err
     else:
         assert err["tiled"] <= err["uniform"] + 1e-9, err
+
+
+def test_tiles_stay_tiles_beyond_64_copies_and_bad_exposures_are_refused():
+    """1 -> 100 ms at 2 px/ms: 99 copies 2 px apart (sub-instants, capped at 64, would add the
+    source's blur again); a zero or non-finite source is an EmulationError, not a ZeroDivisionError."""
+    rate = 2.0 / (F_PX * 1e-3)
+    Hs, ws = blur_homographies(yaw(rate), K, (2001, 101), 0.0, 1.0, 100.0, "start")
+    assert len(Hs) == 99 and all(w == pytest.approx(1.0) for w in ws)
+    for bad in (0.0, -1.0, float("nan"), float("inf")):
+        with pytest.raises(EmulationError, match="source_ms"):
+            blur_homographies(yaw(rate), K, SIZE, 0.0, bad, 8.0, "start")
 
 
 def test_placement_is_checked_and_a_source_blurred_under_half_a_pixel_takes_sub_instants():
@@ -304,6 +319,38 @@ def test_structure_of_a_noiseless_plane_is_the_plane():
     assert structure_of(plane, 0.0) is plane
     with pytest.raises(EmulationError, match="structure"):
         structure_of(plane, 1.0, "median")
+    with pytest.raises(EmulationError, match="noise_var"):
+        structure_of(plane, 1.0, noise_var=float("nan"))
+    # an integer plane is taken as float (no wrap-around in x - mu or x^2)
+    ints = (1000 + np.random.default_rng(4).normal(0, 20, (40, 50))).astype(np.uint16)
+    s = structure_of(ints, 1.0)
+    assert s.dtype == np.float32 and 900 < float(s.min()) and float(s.max()) < 1100
+    # a bad form or resampler is refused even when nothing moves
+    still = [np.eye(3)]
+    with pytest.raises(EmulationError, match="structure"):
+        emulate_blur_consistent(ints, 2.0, 4.0, CameraResponse.linear(4095), still, [2.0], structure="median")
+    with pytest.raises(EmulationError, match="resample"):
+        emulate_blur_consistent(ints, 2.0, 4.0, CameraResponse.linear(4095), still, [2.0], resample="area")
+
+
+def test_clipped_blocks_do_not_lower_the_measured_noise():
+    """A noisy ramp (variance = level) 38 % clipped at 2500: without the clipped mask the bin next
+    to the clipped part mixes in blocks of zero detail and the noise just below the clip level is
+    measured about 20 % low; with it, within 5 %."""
+    from emulator.blur import _plane_noise_var
+
+    rng = np.random.default_rng(5)
+    ramp = np.tile(np.linspace(100.0, 4000.0, 400), (200, 1))
+    noisy = ramp + rng.normal(0.0, 1.0, ramp.shape) * np.sqrt(ramp)
+    clipped = noisy >= 2500.0
+    plane = np.minimum(noisy, 2500.0).astype(np.float32)
+    mu = cv2.GaussianBlur(plane, (0, 0), 1.0, borderType=cv2.BORDER_REPLICATE)
+    near = (ramp > 2300) & (ramp < 2420)
+    truth = float(np.mean(ramp[near]))
+    blind = float(np.median(_plane_noise_var(plane, mu)[near]))
+    masked = float(np.median(_plane_noise_var(plane, mu, clipped)[near]))
+    assert abs(masked / truth - 1.0) < 0.05, (masked, truth)
+    assert blind < 0.85 * truth, (blind, truth)
 
 
 def test_wiener_structure_flattens_noise_and_keeps_an_edge():

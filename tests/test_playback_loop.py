@@ -110,6 +110,15 @@ def test_run_json_round_trip_and_the_one_resume_rule(tmp_path):
         cfg.resumed(recorded, identity={"methods": ["kim", "shim"]})
     # a field not given is not compared
     assert cfg.replace(selector="higher-no-sat").resumed(recorded, given=("mode",)).selector == "closest"
+    # blur-consistent folders record the placement of the copies, with or without a hook (dataset.json);
+    # one from before tiled copies (no placement: uniform sub-instants) is not resumed by this version
+    blurred = cfg.replace(blur="consistent")
+    rec_blur = {**blurred.to_json(), "sequence": "/s"}
+    assert rec_blur["blur"] == {"mode": "consistent", "placement": "tiled"}
+    assert blurred.resumed(rec_blur).blur == "consistent"
+    with pytest.raises(PlaybackError, match=r"different configuration \(blur\)"):
+        blurred.resumed({**rec_blur, "blur": {"mode": "consistent"}})
+    assert cfg.resumed({**recorded, "blur": {"mode": "none"}}) == cfg  # --blur none still resumes
     # the response: two paths naming one file agree
     f = tmp_path / "pcalib.txt"
     f.write_text("x")

@@ -305,6 +305,8 @@ class RunConfig:
     def to_json(self, noise_model=None, blur_hook=None) -> dict:
         """The configuration keys of ``run.json`` (``noise`` holds the model's figures when given,
         ``blur`` the hook's description)."""
+        from emulator.blur import DEFAULT_PLACEMENT
+
         if self.noise == "none":
             noise = {"mode": "none"}
         else:
@@ -323,7 +325,8 @@ class RunConfig:
             "jobs": self.jobs,
             "png_level": self.png_level,
             "blur": (blur_hook.describe() if blur_hook is not None else
-                     {"mode": self.blur, **({"blur_aware": True} if self.blur_aware else {})}),
+                     {"mode": self.blur, **({"placement": DEFAULT_PLACEMENT} if self.blur == "consistent" else {}),
+                      **({"blur_aware": True} if self.blur_aware else {})}),
         })
 
     @classmethod

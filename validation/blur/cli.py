@@ -25,7 +25,9 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument("--force", action="store_true", help="overwrite an existing results.json")
     p.add_argument("--scene", help=f"walkable scene (default {full.scene})")
     p.add_argument("--walk", help=f"walk preset (default {full.walk})")
-    p.add_argument("--size", type=argtypes.size, help=f"WxH (default {full.width}x{full.height})")
+    p.add_argument("--size", type=argtypes.size,
+                   help=f"WxH of the reference comparison and the render cost (default {full.width}x{full.height}; "
+                        "the sharpness comparison has its own --sharpness-size)")
     p.add_argument("--sharpness-size", type=argtypes.size,
                    help=f"WxH of the sharpness comparison (default {full.sharpness_width}x{full.sharpness_height}, "
                         "the BorealHDR camera's)")
@@ -72,6 +74,8 @@ def run_from_args(args) -> int:
             words += [flag, str(v)]
     if args.size is not None:
         words += ["--size", f"{args.size[0]}x{args.size[1]}"]
+    if getattr(args, "sharpness_size", None) is not None:
+        words += ["--sharpness-size", f"{args.sharpness_size[0]}x{args.sharpness_size[1]}"]
     results = run_study(config_from_args(args), args.output, command=shlex.join(words), force=args.force)
     print(headline(results))
     print(f"wrote {args.output / 'results.json'} and {args.output / 'report.md'}")
