@@ -16,6 +16,9 @@ def test_config_refuses_bad_sizes():
         BlurConfig.quick(source_ms=40.0)
     with pytest.raises(ValidationError, match="spp"):
         BlurConfig.quick(spp=0)
+    with pytest.raises(ValidationError, match="sharpness_width"):
+        BlurConfig(sharpness_width=0)
+    assert (BlurConfig().sharpness_width, BlurConfig().sharpness_height) == (1920, 1200)  # the BorealHDR camera
 
 
 def test_sharpness_of_a_ramp_is_exact():
@@ -40,6 +43,12 @@ def test_validate_blur_quick(tmp_path):
     for key in ("reference_error_percent", "render_cost_ratio", "sharpness_error_plain_percent"):
         assert r[key] is not None and r[key] == r[key]
     assert r["sharpness_error_consistent_percent"] is not None  # emulator.blur fed with the walk's gyro
+    row = r["sharpness"][0]
+    assert row["size"] == [64, 40] and row["rms_plain_dn"] > 0 and row["rms_consistent_dn"] > 0
+    assert r["image_rms_error_ratio"] == pytest.approx(row["rms_consistent_dn"] / row["rms_plain_dn"])
+    assert r["sharpness_abs_error_ratio"] == pytest.approx(
+        abs(row["consistent_error_percent"]) / abs(row["plain_error_percent"]))
+    assert r["consistent_halves_error_goal"] == 0.5
     assert r["consistent_hook"] == "measured"
     assert r["reference"][0]["n_subinstants"] >= 2
     assert 0 < r["render_cost_ratio"] < 10
