@@ -337,7 +337,7 @@ def test_clipped_blocks_do_not_lower_the_measured_noise():
     """A noisy ramp (variance = level) 38 % clipped at 2500: without the clipped mask the bin next
     to the clipped part mixes in blocks of zero detail and the noise just below the clip level is
     measured about 20 % low; with it, within 5 %."""
-    from emulator.blur import _plane_noise_var
+    from emulator.structure import _plane_noise_var
 
     rng = np.random.default_rng(5)
     ramp = np.tile(np.linspace(100.0, 4000.0, 400), (200, 1))
@@ -358,7 +358,7 @@ def test_wiener_structure_flattens_noise_and_keeps_an_edge():
     the structure is flat to 0.35 sigma.  A step of 100 sigma beside it stays a step: the pixels
     next to it are within 3 sigma of the true levels, where a Gaussian of the same window is
     more than 10 sigma off."""
-    from emulator.blur import _plane_noise_var
+    from emulator.structure import _plane_noise_var
 
     rng = np.random.default_rng(7)
     sigma = 5.0
