@@ -5,7 +5,7 @@ from validation.blur.config import BlurConfig
 from validation.blur.versus import run_versus
 from emulator.io.files import write_results
 seed = int(sys.argv[2])
-cfg = replace(BlurConfig(), seed=seed, versus_walks=1, width=960, height=600, cache_dir="/tmp/s21/cache960")
+cfg = replace(BlurConfig(), seed=seed, versus_walks=1, width=960, height=600, cache_dir=os.environ.get("EXPOSIM_CACHE"))
 t = time.time(); load0 = os.getloadavg()
 r = run_versus(sys.argv[1], cfg)
 ru = resource.getrusage(resource.RUSAGE_SELF)
