@@ -263,22 +263,24 @@ def blur_homographies(omega, K, size, t_s: float, source_ms: float, target_ms: f
       time; a last part shorter than the source gets one copy of that duration at its middle.
       The source already carries the blur of its own window, so ``k`` copies tile ``k`` windows:
       exact for a constant angular velocity where each side's extra time is a whole number of
-      source windows (with ``stamp="middle"`` at twice the source, half a window a side, never).  Where the copies would be closer than 0.5 px (a
-      source blurred by less than that: at rest, or a short source), the part takes the
-      ``"uniform"`` sub-instants instead, which are then fewer and err by under 0.25 px.
+      source windows (with ``stamp="middle"`` at twice the source, half a window a side, never).
+      Where the copies would be closer than 0.5 px (a source blurred by less than that: at rest,
+      or a short source), the part takes the ``"uniform"`` sub-instants instead, which are then
+      fewer and err by under 0.25 px.
     * ``placement="uniform"``: sub-instants no more than 0.5 px apart, as if the source were
       sharp; every copy adds the source's own blur again, so the blur is too long by up to
       one source window (the over-correction measured in docs/motion.md).
 
     Returns ``([H_j], [w_j])`` with ``sum(w_j) = target_ms - source_ms``; empty lists when the
     target is not longer.  Raises :class:`EmulationError` when the angular velocity does not
-    cover the window or ``placement`` is unknown.
+    cover the window, an exposure is not a finite positive number or ``placement`` is unknown.
     """
     if placement not in PLACEMENTS:
         raise EmulationError(f"placement must be one of {', '.join(PLACEMENTS)}, got {placement!r}")
-    for name, v in (("source_ms", source_ms), ("target_ms", target_ms)):
-        if not (isinstance(v, (int, float, np.floating, np.integer)) and math.isfinite(v) and v > 0):
-            raise EmulationError(f"{name} must be a finite exposure > 0 ms, got {v!r}")
+    from emulator.emulate import check_exposure
+
+    source_ms = check_exposure(source_ms, "source_ms")
+    target_ms = check_exposure(target_ms, "target_ms")
     omega = as_angular_velocity(omega)
     if target_ms <= source_ms:
         return [], []
@@ -298,7 +300,6 @@ def blur_homographies(omega, K, size, t_s: float, source_ms: float, target_ms: f
             continue
         _, R = integrate_rotation(omega, min(a, b), max(a, b))
         n_steps = max(1, math.ceil(blur_length_px(K, R, pts).max() / _SUBSTEP_PX))  # sub-instants 0.5 px apart
-        n_uniform = min(n_steps, _MAX_SUBSTEPS)
         full = int(math.floor(length / span + 1e-9))
         rest = length - full * span
         if placement == "tiled" and full + (rest > 1e-9 * span) <= n_steps:
@@ -311,7 +312,7 @@ def blur_homographies(omega, K, size, t_s: float, source_ms: float, target_ms: f
                 taus.append(a + sign * (full * span + 0.5 * rest))
                 ws.append(rest * 1e3)
         else:
-            n = n_uniform
+            n = min(n_steps, _MAX_SUBSTEPS)
             for j in range(n):
                 taus.append(min(a, b) + (j + 0.5) * length / n)
                 ws.append(length * 1e3 / n)

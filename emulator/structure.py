@@ -42,11 +42,10 @@ def structure_of(plane: np.ndarray, sigma_px: float | None = None, method: str =
     ``"gaussian"``: the plane smoothed by a Gaussian of ``sigma_px``; it drops fine structure with
     the noise.  ``"wiener"`` (an adaptive Wiener filter, Lee 1980): ``mu + k (x - mu)`` with ``mu``
     and ``v`` the local mean and variance over that Gaussian window and
-    ``k = max(0, 1 - 3 c n / v)``, ``n`` the noise variance at the level ``mu`` and ``c = 1 - sum w^2``
-    (about 0.92: the share of white noise's variance that a local variance over the window ``w``
-    sees; three times: flat noisy
-    regions become ``mu``, so their noise is not moved, while edges and texture well above the
-    noise stay and are moved).
+    ``k = max(0, 1 - 3 c n / v)``, ``n`` the noise variance at the level ``mu`` and
+    ``c = 1 - sum w^2`` (about 0.92: the share of white noise's variance that a local variance
+    over the window ``w`` sees).  Three times the noise: flat noisy regions become ``mu``, so
+    their noise is not moved, while edges and texture well above the noise stay and are moved.
 
     ``noise_var``: ``n`` in the plane's units, a number or a function of ``mu``; None measures it
     on the plane itself: in 16 bins of ``mu``, the robust (MAD) variance of the finest diagonal
@@ -56,28 +55,28 @@ def structure_of(plane: np.ndarray, sigma_px: float | None = None, method: str =
     returned as it is).  Integer planes are taken as float32.
     """
     sigma_px = STRUCTURE_SIGMA_PX if sigma_px is None else float(sigma_px)
+    given = None  # a noise variance given as a number
     if noise_var is not None and not callable(noise_var):
-        nv = float(noise_var)
-        if not (math.isfinite(nv) and nv >= 0):
+        given = float(noise_var)
+        if not (math.isfinite(given) and given >= 0):
             raise EmulationError(f"noise_var must be a finite variance >= 0, got {noise_var!r}")
     if not np.issubdtype(plane.dtype, np.floating):
         plane = plane.astype(np.float32)
     if method not in STRUCTURE_FILTERS:
         raise EmulationError(f"structure must be one of {', '.join(STRUCTURE_FILTERS)}, got {method!r}")
-    if sigma_px <= 0 or (method == "wiener" and noise_var is not None and not callable(noise_var)
-                         and float(noise_var) == 0.0):
+    if sigma_px <= 0 or (method == "wiener" and given == 0.0):
         return plane
     mu = cv2.GaussianBlur(plane, (0, 0), sigma_px, borderType=cv2.BORDER_REPLICATE)
     if method == "gaussian":
         return mu
     var_gain = 1.0 - float(np.sum(_gaussian_weights(sigma_px) ** 2))  # E[local variance] / var(x), white noise
     resid = plane - mu
-    if noise_var is None:
-        n = _plane_noise_var(plane, mu, exclude)
+    if given is not None:
+        n = np.float32(given)
     elif callable(noise_var):
         n = np.asarray(noise_var(mu), dtype=np.float32)
     else:
-        n = np.float32(noise_var)
+        n = _plane_noise_var(plane, mu, exclude)
     var = np.maximum(cv2.GaussianBlur(plane * plane, (0, 0), sigma_px, borderType=cv2.BORDER_REPLICATE) - mu * mu, 0)
     k = np.clip(1.0 - _WIENER_OVERSUBTRACT * var_gain * n / np.maximum(var, 1e-30), 0.0, 1.0)
     return (mu + k * resid).astype(plane.dtype, copy=False)

@@ -38,22 +38,11 @@ def _setup():
 
 
 def _consistent(traj, camera, sigma: float, resample: str = "linear"):
-    from emulator.blur import blur_homographies, emulate_blur_consistent
-    from scenes.camera import intrinsics_matrix
-    from scenes.walks import angular_velocity
+    """Consistent emulation in the form of 2026-11-25 (uniform sub-instants, Gaussian structure)."""
+    from validation.blur import measure
 
-    k = intrinsics_matrix(camera.width, camera.height, camera.fov_x_deg)
-
-    def omega(t_s):
-        return angular_velocity(traj, np.clip(np.atleast_1d(t_s), 0.0, traj.duration_s))
-
-    def consistent(raw, source_ms, target_ms, response, shot):
-        hs, ws = blur_homographies(omega, k, (camera.width, camera.height), shot.t0_s, source_ms, target_ms,
-                                   stamp="start", placement="uniform")
-        return emulate_blur_consistent(raw, source_ms, target_ms, response, hs, ws, structure_sigma_px=sigma,
-                                       resample=resample, structure="gaussian")[0]
-
-    return consistent
+    return measure.consistent_from_walk(traj, camera, placement="uniform", structure_sigma_px=sigma,
+                                        resample=resample, structure="gaussian")
 
 
 def _median_instants(traj, walk_s: float, exposure_ms: float, n: int = 4, gap_s: float = 5.0) -> list[float]:
@@ -165,51 +154,30 @@ def consistent(out_path: str, sizes) -> dict:
     """
     from dataclasses import replace
 
-    from emulator.blur import blur_homographies, emulate_blur_consistent
     from emulator.emulate import emulate
-    from scenes.blur import ShotRenderer
-    from scenes.camera import intrinsics_matrix
-    from scenes.walks import angular_velocity
     from validation.blur import measure
     from validation.common import make_camera
 
     cfg0, scene, traj, _ = _setup()
     cfg0 = replace(cfg0, cache_dir=os.environ.get("EXPOSIM_CACHE"))
-
-    def omega(t_s):
-        return angular_velocity(traj, np.clip(np.atleast_1d(t_s), 0.0, traj.duration_s))
-
     instants = [("fastest", t) for t in measure.fastest_instants(traj, cfg0.walk_s, 4, cfg0.exposure_ms)]
     instants += [("median", t) for t in _median_instants(traj, cfg0.walk_s, cfg0.exposure_ms)]
     rows = []
     for size in sizes:
         w, h = (int(v) for v in size.split("x"))
         camera = make_camera("borealhdr", width=w, height=h).saturating_at(scene.reference_radiance, 1.0)
-        k = intrinsics_matrix(w, h, camera.fov_x_deg)
         resp = camera.response
+        hooks = {name: measure.consistent_from_walk(traj, camera, placement=placement, structure=structure, **kw)
+                 for name, placement, structure, kw in FORMS}
         for kind, t0 in instants:
-            shot = ShotRenderer(scene, traj.poses, t0, cfg0.exposure_ms, width=w, height=h, spp=cfg0.spp,
-                                seed=cfg0.seed + 7, denoise=cfg0.sharpness_denoise, cache_dir=cfg0.cache_dir,
-                                fov_deg=camera.fov_x_deg)
-            src = measure._dn(shot.radiance(cfg0.source_ms)[0], camera, cfg0.source_ms)
-            live_rad, info = shot.radiance(cfg0.exposure_ms)
-            live = measure._dn(live_rad, camera, cfg0.exposure_ms)
+            shot, src, live, info = measure.source_and_live(scene, traj, t0, cfg0, camera)
             plain, valid = emulate(src, cfg0.source_ms, cfg0.exposure_ms, resp, return_mask=True)
-            keep = valid & (live < resp.white_level) & (plain < resp.white_level)
-            s_live = measure.sharpness(live)
-
-            def score(img):
-                rms = float(np.sqrt(np.mean((img[keep].astype(np.float64) - live[keep]) ** 2))) if keep.any() else None
-                return 100.0 * (measure.sharpness(img) - s_live) / s_live, rms
-
+            score = measure.against_live(live, plain, valid, resp.white_level)
             row = {"size": size, "kind": kind, "t0_s": t0, "blur_px": info["blur_px"]}
-            row["plain_error_percent"], row["plain_rms_dn"] = score(plain)
-            for name, placement, structure, kw in FORMS:
-                hs, ws = blur_homographies(omega, k, (w, h), t0, cfg0.source_ms, cfg0.exposure_ms, stamp="start",
-                                           placement=placement)
-                img = emulate_blur_consistent(src, cfg0.source_ms, cfg0.exposure_ms, resp, hs, ws,
-                                              structure=structure, **kw)[0]
-                row[f"{name}_error_percent"], row[f"{name}_rms_dn"] = score(img)
+            row["plain_error_percent"], row["plain_rms_dn"] = score(plain)[1:]
+            for name, hook in hooks.items():
+                img = hook(src, cfg0.source_ms, cfg0.exposure_ms, resp, shot)
+                row[f"{name}_error_percent"], row[f"{name}_rms_dn"] = score(img)[1:]
             rows.append(row)
             print(json.dumps(row), flush=True)
     summary = {}

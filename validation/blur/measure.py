@@ -9,7 +9,7 @@ import numpy as np
 from validation.common import capture, rmse_dn, to_percent
 
 __all__ = ["consistent_from_walk", "rate_percentiles_deg_s", "angular_rate_ratio", "fastest_instants", "reference_comparison",
-           "cost_comparison", "sharpness", "sharpness_comparison"]
+           "cost_comparison", "sharpness", "sharpness_comparison", "source_and_live", "against_live", "walk_omega"]
 
 _PERCENTILES = (50, 90, 99)
 
@@ -191,6 +191,40 @@ def sharpness(raw: np.ndarray) -> float:
     return float(np.percentile(np.hypot(gx, gy), 95) / level) if level > 0 else float("nan")
 
 
+def source_and_live(scene, traj, t0_s: float, cfg, camera):
+    """One render of the shot at ``t0_s`` (a :class:`scenes.blur.ShotRenderer` at ``camera``'s size),
+    captured noiseless over its ``source_ms`` window and its ``exposure_ms`` window.
+
+    Returns ``(shot, source DN, live DN, info)``, ``info`` that of the live window.
+    """
+    from scenes.blur import ShotRenderer
+
+    shot = ShotRenderer(scene, traj.poses, t0_s, cfg.exposure_ms, width=camera.width, height=camera.height,
+                        spp=cfg.spp, seed=cfg.seed + 7, denoise=cfg.sharpness_denoise, cache_dir=cfg.cache_dir,
+                        fov_deg=camera.fov_x_deg)
+    src = _dn(shot.radiance(cfg.source_ms)[0], camera, cfg.source_ms)
+    live_rad, info = shot.radiance(cfg.exposure_ms)
+    return shot, src, _dn(live_rad, camera, cfg.exposure_ms), info
+
+
+def against_live(live: np.ndarray, plain: np.ndarray, valid: np.ndarray, white: int):
+    """``score(img) -> (sharpness, error %, RMS DN)`` of an emulated image against ``live``.
+
+    The error is the sharpness's relative to live's; the RMS DN difference is taken over the
+    pixels that the plain emulation ``plain`` keeps valid and that neither it nor live clips
+    (None when there are none).
+    """
+    keep = valid & (live < white) & (plain < white)
+    s_live = sharpness(live)
+
+    def score(img: np.ndarray):
+        s = sharpness(img)
+        rms = float(np.sqrt(np.mean((img[keep].astype(np.float64) - live[keep]) ** 2))) if keep.any() else None
+        return s, 100.0 * (s - s_live) / s_live, rms
+
+    return score
+
+
 def sharpness_comparison(scene, traj, t0_s: float, cfg, camera, consistent=None) -> dict:
     """Emulated ``exposure_ms`` (from the ``source_ms`` bracket of the same trigger) against live, by sharpness.
 
@@ -203,55 +237,53 @@ def sharpness_comparison(scene, traj, t0_s: float, cfg, camera, consistent=None)
     hook for blur-consistent emulation (issue 21, realblur side); None leaves that figure out.
     """
     from emulator.emulate import emulate
-    from scenes.blur import ShotRenderer
 
-    shot = ShotRenderer(scene, traj.poses, t0_s, cfg.exposure_ms, width=camera.width, height=camera.height,
-                        spp=cfg.spp, seed=cfg.seed + 7, denoise=cfg.sharpness_denoise, cache_dir=cfg.cache_dir,
-                        fov_deg=camera.fov_x_deg)
-    src = _dn(shot.radiance(cfg.source_ms)[0], camera, cfg.source_ms)
-    live_rad, info = shot.radiance(cfg.exposure_ms)
-    live = _dn(live_rad, camera, cfg.exposure_ms)
+    shot, src, live, info = source_and_live(scene, traj, t0_s, cfg, camera)
     plain, valid = emulate(src, cfg.source_ms, cfg.exposure_ms, camera.response, return_mask=True)
-    white = camera.response.white_level
-    keep = valid & (live < white) & (plain < white)
-
-    def rms(img):
-        return float(np.sqrt(np.mean((img[keep].astype(np.float64) - live[keep]) ** 2))) if keep.any() else None
-
-    s_live, s_plain = sharpness(live), sharpness(plain)
-    out = {"t0_s": t0_s, "size": [camera.width, camera.height], "blur_px": info["blur_px"], "live": s_live,
-           "emulated_plain": s_plain, "plain_error_percent": 100.0 * (s_plain - s_live) / s_live,
-           "consistent_error_percent": None, "rms_plain_dn": rms(plain), "rms_consistent_dn": None}
+    score = against_live(live, plain, valid, camera.response.white_level)
+    s_plain, err_plain, rms_plain = score(plain)
+    out = {"t0_s": t0_s, "size": [camera.width, camera.height], "blur_px": info["blur_px"], "live": sharpness(live),
+           "emulated_plain": s_plain, "plain_error_percent": err_plain,
+           "consistent_error_percent": None, "rms_plain_dn": rms_plain, "rms_consistent_dn": None}
     if consistent is not None:
-        cons = consistent(src, cfg.source_ms, cfg.exposure_ms, camera.response, shot)
-        s_cons = sharpness(cons)
-        out.update(emulated_consistent=s_cons, consistent_error_percent=100.0 * (s_cons - s_live) / s_live,
-                   rms_consistent_dn=rms(cons))
+        s_cons, err_cons, rms_cons = score(consistent(src, cfg.source_ms, cfg.exposure_ms, camera.response, shot))
+        out.update(emulated_consistent=s_cons, consistent_error_percent=err_cons, rms_consistent_dn=rms_cons)
     return out
 
 
-def consistent_from_walk(traj, camera):
-    """The blur-consistent emulation of :mod:`emulator.blur` fed with the walk's own angular velocity.
-
-    Returns ``f(raw, source_ms, target_ms, response, shot) -> raw`` for
-    :func:`sharpness_comparison`: the gyro is :func:`scenes.walks.angular_velocity` of the
-    walk (camera axes), windows start at the trigger (``stamp="start"``, the synthetic
-    convention), K is the synthetic camera's.  Everything else is the default of
-    :func:`emulator.blur.emulate_blur_consistent` (tiled copies; the noise measured on the image,
-    which on these noiseless captures finds little, so nearly all of the source is moved).
-    """
-    from emulator.blur import blur_homographies, emulate_blur_consistent
-    from scenes.camera import intrinsics_matrix
+def walk_omega(traj):
+    """The walk's angular velocity as :mod:`emulator.blur` takes it: ``omega(t_s) -> (N, 3)`` rad/s in
+    camera axes (:func:`scenes.walks.angular_velocity`), times clamped to the walk."""
     from scenes.walks import angular_velocity
-
-    k = intrinsics_matrix(camera.width, camera.height, camera.fov_x_deg)
-    size = (camera.width, camera.height)
 
     def omega(t_s):
         return angular_velocity(traj, np.clip(np.atleast_1d(t_s), 0.0, traj.duration_s))
 
+    return omega
+
+
+def consistent_from_walk(traj, camera, *, placement: str | None = None, **emulate_kw):
+    """The blur-consistent emulation of :mod:`emulator.blur` fed with the walk's own angular velocity.
+
+    Returns ``f(raw, source_ms, target_ms, response, shot) -> raw`` for
+    :func:`sharpness_comparison`: the gyro is :func:`walk_omega` of the walk, windows start at
+    the trigger (``stamp="start"``, the synthetic convention), K is the synthetic camera's.
+    ``placement`` (:func:`emulator.blur.blur_homographies`) and ``emulate_kw``
+    (:func:`emulator.blur.emulate_blur_consistent`'s keywords) default to the emulator's defaults:
+    tiled copies and the noise measured on the image, which on these noiseless captures finds
+    little, so nearly all of the source is moved.
+    """
+    from emulator.blur import DEFAULT_PLACEMENT, blur_homographies, emulate_blur_consistent
+    from scenes.camera import intrinsics_matrix
+
+    k = intrinsics_matrix(camera.width, camera.height, camera.fov_x_deg)
+    size = (camera.width, camera.height)
+    omega = walk_omega(traj)
+    placement = DEFAULT_PLACEMENT if placement is None else placement
+
     def consistent(raw, source_ms, target_ms, response, shot):
-        hs, ws = blur_homographies(omega, k, size, shot.t0_s, source_ms, target_ms, stamp="start")
-        return emulate_blur_consistent(raw, source_ms, target_ms, response, hs, ws)[0]
+        hs, ws = blur_homographies(omega, k, size, shot.t0_s, source_ms, target_ms, stamp="start",
+                                   placement=placement)
+        return emulate_blur_consistent(raw, source_ms, target_ms, response, hs, ws, **emulate_kw)[0]
 
     return consistent
