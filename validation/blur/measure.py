@@ -234,7 +234,7 @@ def sharpness_comparison(scene, traj, t0_s: float, cfg, camera, consistent=None)
     (``rms_plain_dn``, ``rms_consistent_dn``).
 
     ``consistent``: optional ``f(raw, source_ms, target_ms, response, extra_radiance_fn) -> raw``
-    hook for blur-consistent emulation (issue 21, realblur side); None leaves that figure out.
+    hook for blur-consistent emulation (:func:`consistent_from_walk`); None leaves that figure out.
     """
     from emulator.emulate import emulate
 
