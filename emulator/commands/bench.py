@@ -213,9 +213,10 @@ def _vo_summary(args, results) -> int:
 def _rpe(args: argparse.Namespace) -> int:
     from emulator.metrics.rpe import looks_like_estimate, rpe_files
 
-    # The order is evo's (REF EST); it was EST REF before, and swapping the two
-    # changes the numbers, so say which file is which and flag a likely swap.
-    (ref_score, ref_why), (est_score, _) = looks_like_estimate(args.ref), looks_like_estimate(args.est)
+    # The order is evo's (REF EST); swapping the two changes the numbers, so say which
+    # file is which and flag a likely swap.
+    ref_why = looks_like_estimate(args.ref)
+    swapped = ref_why is not None and looks_like_estimate(args.est) is None
     # evo may print notices on stdout (e.g. when it creates its settings file); keep
     # stdout for the result only.
     with contextlib.redirect_stdout(sys.stderr):
@@ -229,9 +230,9 @@ def _rpe(args: argparse.Namespace) -> int:
         )
     print(f"reference: {args.ref} ({stats['n_ref_poses']} poses); estimate: {args.est} "
           f"({stats['n_est_poses']} poses) (order REF EST, as evo_rpe)", file=sys.stderr)
-    if ref_score > est_score:
-        print(f"warning: the reference {args.ref} looks like an estimate ({ref_why}); the order is REF EST as in "
-              "evo_rpe (earlier exposim builds took EST REF): swap the files if they are the wrong way round",
+    if swapped:
+        print(f"warning: the reference {args.ref} looks like an estimate ({ref_why}) and the estimate {args.est} "
+              "does not; the order is REF EST as in evo_rpe: swap the files if they are the wrong way round",
               file=sys.stderr)
     if args.json:
         print(json.dumps({"rmse": stats["rmse"], "mean": stats["mean"], "median": stats["median"]}))
@@ -328,8 +329,8 @@ def register(subparsers) -> None:
         help="translation RPE of two TUM files, REF then EST, as evo_rpe computes it",
         description="Translation RPE of EST against REF through evo's library, arguments in evo's order; equals "
         "`evo_rpe tum REF EST --pose_relation trans_part --delta D --delta_unit U [--correct_scale]`. "
-        "(Earlier exposim builds took EST REF.) Which file is the reference is printed on stderr, with a "
-        "warning when REF looks like an estimate (written by bench vo, or starting exactly at the identity).",
+        "Which file is the reference is printed on stderr, with a warning when REF is a trajectory written by "
+        "`exposim bench vo` and EST is not.",
     )
     r.add_argument("ref", metavar="REF.txt", help="reference trajectory (TUM), first as in evo_rpe")
     r.add_argument("est", metavar="EST.txt", help="estimated trajectory (TUM)")

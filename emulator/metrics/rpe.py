@@ -128,28 +128,19 @@ def rpe_files(
 ESTIMATE_HEADER = "# exposim bench vo estimate"
 
 
-def looks_like_estimate(path: str | Path) -> tuple[int, str | None]:
-    """How strongly a TUM file looks like an odometry estimate rather than a reference.
+def looks_like_estimate(path: str | Path) -> str | None:
+    """Why a TUM file is an odometry estimate rather than a reference, or None.
 
-    ``(2, why)`` for the header that ``exposim bench vo`` writes on its estimates, ``(1,
-    why)`` for a first pose that is exactly the identity (a VO starts its trajectory at the
-    origin; a lidar reference rarely does, a synthetic one may), ``(0, None)`` otherwise.
+    Only the header that ``exposim bench vo`` writes on its estimates counts: a first pose
+    at exactly the identity is no evidence, since a synthetic or re-based reference starts
+    there as often as a VO estimate does.
     """
-    from emulator.io.tum import read_tum, read_tum_comments
+    from emulator.io.tum import read_tum_comments
 
-    path = Path(path)
-    comments = read_tum_comments(path)
+    comments = read_tum_comments(Path(path))
     if comments and ("# " + comments[0]).startswith(ESTIMATE_HEADER):
-        return 2, "it was written by exposim bench vo as an estimate"
-
-    try:
-        tum = read_tum(path)
-    except Exception:  # malformed files are reported by the RPE itself
-        return 0, None
-    q = tum.quaternions_xyzw[0]
-    if np.all(tum.positions[0] == 0) and q[0] == q[1] == q[2] == 0 and abs(q[3]) == 1:
-        return 1, "its first pose is exactly the identity, as a VO estimate starts"
-    return 0, None
+        return "it was written by exposim bench vo as an estimate"
+    return None
 
 
 def pair_segments(first_index, second_index) -> np.ndarray:
