@@ -81,6 +81,20 @@ def test_help_has_no_issue_numbers_one_size_option_and_explained_options():
     assert "--width" not in options(LEAVES[("exposim", "validate", "emulation")])
 
 
+def test_help_names_no_module_path_nor_internal_constant():
+    """Help speaks to the user: what an option does, not where it lives in the code."""
+    for words, parser in LEAVES.items():
+        text = " ".join(parser.format_help().split())
+        assert not re.search(r"\b(emulator|validation|scenes|synth)\.[a-z_]+", text), (words, text)
+        assert "RATIO_TEST" not in text and "earlier exposim" not in text.lower(), words
+    for words in (("exposim", "run"), ("exposim", "emulate")):
+        action = options(LEAVES[words])["--blur-aware"]
+        text = " ".join(action.help.split())
+        assert "take the shorter one when the longer one's extra motion blur (predicted from the gyro) costs more " \
+               "than the shorter one's extra noise" in text, words
+        assert "one pixel of blur weighs as much as twice the relative noise of a capture at the target" in text
+
+
 def test_bars_only_on_a_terminal(tmp_path):
     class Stream:
         def __init__(self, tty):
@@ -176,7 +190,7 @@ def test_one_ratio_threshold_for_features_and_vo():
     assert _RATIO_TEST == RATIO_TEST == VOParameters().ratio
     for words in (("exposim", "bench", "features"), ("exposim", "bench", "vo")):
         action = options(LEAVES[words])["--ratio"]
-        assert action.default is None and f"default {RATIO_TEST}, the library's RATIO_TEST" in action.help
+        assert action.default is None and f"default {RATIO_TEST}, the same for features and VO" in action.help
 
 
 def test_a_plugin_shows_as_plugin_not_none_in_the_run_report(tmp_path, monkeypatch):

@@ -368,3 +368,19 @@ def test_synthetic_recording_carries_its_noise_model(tmp_path):
     assert info["noise_model_file"] == str((root / "exposim.json").resolve())
     assert info["noise"]["model"]["name"] == "synth:lab"
     assert main(["run", str(root), "-o", str(out), "--no-progress", "--resume"]) == 0
+
+
+def test_summary_labels_the_proposal_after_the_last_frame(seq, tmp_path, capsys):
+    """The printed exposure beside the mean is the proposal made after the last frame, and says so."""
+    out = tmp_path / "run"
+    assert main(["run", str(seq), "--methods", "classical-50", "-o", str(out), "--no-progress"]) == 0
+    printed = capsys.readouterr().out
+    results = json.loads((out / "results.json").read_text())
+    m = results["methods"]["classical-50"]
+    import csv
+
+    with (out / "classical-50" / "exposures.csv").open() as fh:
+        last_next = float(list(csv.DictReader(fh))[-1]["next_ms"])
+    assert m["final_exposure_ms"] == last_next
+    line = next(ln for ln in printed.splitlines() if ln.strip().startswith("classical-50"))
+    assert f"next (after last frame) {last_next:8.3f} ms" in line and "final" not in line

@@ -257,7 +257,7 @@ def _help(parser: argparse.ArgumentParser):
 
 def _common_sift(p: argparse.ArgumentParser) -> None:
     p.add_argument("--ratio", type=float, default=None,
-                   help=f"Lowe ratio test threshold (default {_RATIO_TEST}, the library's RATIO_TEST, for features and VO)")
+                   help=f"Lowe ratio test threshold (default {_RATIO_TEST}, the same for features and VO)")
     p.add_argument("--n-features", type=int, default=0, help="SIFT keypoints kept per image, 0 = all (default)")
     p.add_argument("--matcher", choices=("flann", "bf"), default="flann",
                    help="nearest neighbours: kd-trees (default) or exact brute force")

@@ -31,8 +31,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--selector", choices=("higher-no-sat", "closest", "reference"), default="higher-no-sat",
                    help="bracket selector, decided on the first camera's saturation (default higher-no-sat)")
     p.add_argument("--blur-aware", action="store_true",
-                   help="with higher-no-sat: take the lower bracket when the higher one's excess blur (from the "
-                        "gyro) costs more than the lower one's noise (emulator.select.blur_aware; docs/blur.md)")
+                   help="with higher-no-sat: of the two brackets around the target, take the shorter one when "
+                        "the longer one's extra motion blur (predicted from the gyro) costs more than the shorter "
+                        "one's extra noise; one pixel of blur weighs as much as twice the relative noise of a "
+                        "capture at the target (docs/blur.md)")
     p.add_argument("--response", type=Path, help="pcalib file (default: found beside the recording)")
     p.add_argument("--from-ms", type=float, default=None, metavar="E",
                    help="emulate from the bracket of E ms (must be in the cycle) instead of the selector's choice")

@@ -66,8 +66,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "where the target is longer than the bracket, and record each image's excess blur in blur.csv "
                         "(needs imu/imu.csv and a camera calibration; docs/blur.md)")
     p.add_argument("--blur-aware", action="store_true",
-                   help="with --blur consistent and --selector higher-no-sat: take the lower bracket when the higher "
-                        "one's excess blur costs more than the lower one's noise (emulator.select.blur_aware)")
+                   help="with --blur consistent and --selector higher-no-sat: of the two brackets around the "
+                        "target, take the shorter one when the longer one's extra motion blur (predicted from the "
+                        "gyro) costs more than the shorter one's extra noise; one pixel of blur weighs as much as "
+                        "twice the relative noise of a capture at the target (docs/blur.md)")
     p.add_argument("--noise-model", type=Path, default=None, metavar="FILE.json",
                    help="noise model for --noise consistent (`exposim calibrate --noise`); default: the model "
                         "a synthetic recording's exposim.json carries")
@@ -310,7 +312,7 @@ def _print_run_summary(args, summary: dict) -> int:
           + (f" ({len(summary['skipped_cycles'])} skipped)" if summary["skipped_cycles"] else ""))
     for name, m in summary["methods"].items():
         mean = m["mean_exposure_ms"]
-        print(f"  {name:13s} mean {mean:8.3f} ms  final {m['final_exposure_ms']:8.3f} ms  "
+        print(f"  {name:13s} mean {mean:8.3f} ms  next (after last frame) {m['final_exposure_ms']:8.3f} ms  "
               f"sat {m['mean_saturated_fraction']:.2%}" if mean is not None else f"  {name:13s} no cycle")
     timing = summary.get("timing") or {}
     if timing.get("cycles_per_s"):
