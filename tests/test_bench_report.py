@@ -184,7 +184,7 @@ def test_run_report_units_dashes_and_fixed(mode, adjusted):
     assert "| mean saturated (%) | mean valid (%) |" in table[0]
     assert "| 1.25 | 98.00 | 0 | - |" in table[2]  # fractions shown in percent, no timing: "-"
     assert '"-": no cycle of that method (or no timing recorded)' in after[1]
-    assert f"`fixed` (M_fixed) runs classical-50 for its first {adjusted} frames and then freezes" in md
+    assert f"`fixed` runs classical-50 for its first {adjusted} frames and then freezes" in md
 
 
 def test_features_report_compares_methods_with_intervals():
@@ -197,3 +197,96 @@ def test_features_report_compares_methods_with_intervals():
     md = report.features_report(res, "fig4.png")
     assert "| method | median matches | 95 % interval | difference from the best (fixed) |" in md
     assert "| kim | 21.0 |" in md and "| differs |" in md
+
+
+# ----------------------------------------------------------------------------- Fig. 4 (c)
+
+
+def _legend_texts(ax) -> list[str]:
+    legend = ax.get_legend()
+    return [t.get_text() for t in legend.get_texts()] if legend else []
+
+
+def test_fig4c_over_one_run_shows_each_methods_weakest_pair():
+    res = _features_results({"fixed": [4100, 4033], "shim": [3900, 3833], "zhang": [3864, 3990], "kim": [84, 190]})
+    fig = report.features_figure(res)
+    c = fig.axes[2]
+    heights = [round(p.get_height()) for p in c.patches]
+    assert heights == [4033, 3833, 3864, 84]
+    assert [t.get_text() for t in c.get_xticklabels()] == ["fixed", "shim", "zhang", "kim"]
+    written = sorted(t.get_text() for t in c.texts)
+    assert written == ["3833", "3864", "4033", "84"]
+    assert _legend_texts(c) == [] and "weakest pair" in c.get_title()
+
+
+def _two_runs(first: dict, second: dict) -> dict:
+    """A features results.json over two runs, with the success curve at coarse taus."""
+    from emulator.metrics.features import success_curve
+
+    a, b = _features_results(first), _features_results(second)
+    res = dict(a, runs=a["runs"] + b["runs"], n_runs=2)
+    taus = list(range(0, 5000, 500))
+    res["success_curve"] = {"taus": taus, "rate": {m: success_curve([first[m], second[m]], taus).tolist()
+                                                   for m in first}}
+    return res
+
+
+def test_fig4c_tags_methods_equal_only_when_their_weakest_pairs_are_equal():
+    # zhang's weakest pairs (3864, 2000) differ from shim's (3833, 2000) but fall in the same
+    # 500-match tau steps: the curves coincide on the grid, the methods are not equal
+    res = _two_runs({"shim": [3833, 3900], "zhang": [3864, 4000], "classical-30": [3833, 3950]},
+                    {"shim": [2000], "zhang": [2000], "classical-30": [2000]})
+    assert report.weakest_pairs(res) == {"shim": [3833, 2000], "zhang": [3864, 2000], "classical-30": [3833, 2000]}
+    legend = _legend_texts(report.features_figure(res).axes[2])
+    assert legend == ["shim", "zhang (hides shim's curve)", "classical-30 (= shim)"]
+    # curves that differ on the grid: no tag at all
+    res = _two_runs({"shim": [3833], "zhang": [600]}, {"shim": [2000], "zhang": [2000]})
+    assert _legend_texts(report.features_figure(res).axes[2]) == ["shim", "zhang"]
+
+
+# ----------------------------------------------------------------------------- exposure plot and run report
+
+
+def _exposure_tables(series: dict) -> dict:
+    return {name: {"timestamp_ns": np.arange(len(v), dtype=np.int64) * 274_000_000, "target_ms": np.array(v, float)}
+            for name, v in series.items()}
+
+
+def _tick_labels(ax) -> list[str]:
+    lo, hi = ax.get_ylim()
+    return [ax.yaxis.get_major_formatter()(t, 0) for t in ax.get_yticks() if lo <= t <= hi]
+
+
+@pytest.mark.parametrize("low, expected_lowest", [(0.5, "0.5"), (0.6, "0.5"), (0.26, "0.25"), (1.3, "1")])
+def test_exposure_axis_is_labelled_down_to_the_datas_minimum(low, expected_lowest):
+    from emulator.report.run import exposure_figure
+
+    info = {"brackets_ms": [1, 2, 4, 8, 16, 32], "mode": "paper", "initial_ms": 4.0}
+    fig = exposure_figure(info, _exposure_tables({"classical-50": [4, 6, 8], "kim": [4, low, 20]}))
+    ax = fig.axes[0]
+    labels = _tick_labels(ax)
+    assert labels[0] == expected_lowest and float(labels[0]) <= low  # a labelled tick at or below the minimum
+    assert labels[-5:] == ["2", "4", "8", "16", "32"][-5:]
+    assert ax.get_ylim()[0] < float(expected_lowest)  # the lowest tick is inside the axis
+
+
+def test_exposure_legend_tags_only_identical_sequences():
+    from emulator.report.run import exposure_figure
+
+    info = {"brackets_ms": [1, 2, 4], "mode": "paper", "initial_ms": 4.0}
+    fig = exposure_figure(info, _exposure_tables({"fixed": [4, 6, 8], "classical-50": [4, 6, 8],
+                                                  "classical-30": [4, 6, 8.000001]}))
+    assert [t.get_text() for t in fig.axes[0].get_legend().get_texts()] == [
+        "fixed", "classical-50 (= fixed)", "classical-30"]
+    title = fig.axes[0].get_title()
+    assert "the paper's methods with the published code's defects corrected" in title and "paper mode" not in title
+
+
+def test_run_report_names_mode_and_selector_in_words():
+    from emulator.report.run import run_markdown
+
+    info = {"sequence": "/data/seq", "mode": "paper", "selector": "higher-no-sat", "method_options": {}}
+    md = run_markdown(info, {"methods": {}})
+    assert ("- methods: the paper's methods with the published code's defects corrected (`--mode paper`)" in md)
+    assert "- brackets chosen by the paper's bracket selector (higher bracket unless saturated)" in md
+    assert "M_fixed" not in md and "paper mode" not in md and "emulator." not in md

@@ -255,7 +255,7 @@ def test_fixed_is_explained_in_help_readme_and_report(clean_run):
     assert f"`fixed` (runs `classical-50` for its first {n} frames, {n + 1} with `--mode borealhdr`, then freezes" \
         in readme
     report = (clean_run / "report.md").read_text()
-    assert f"`fixed` (M_fixed) runs classical-50 for its first {n} frames and then freezes its exposure" in report
+    assert f"`fixed` runs classical-50 for its first {n} frames and then freezes its exposure" in report
 
 
 # ---------------------------------------------------------------------------- run --noise (issue 14)

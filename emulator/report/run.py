@@ -15,8 +15,9 @@ from emulator.io.files import REPORT_FILE, RESULTS_FILE, write_results, write_te
 from emulator.report.html import run_contact_sheet, write_report
 from emulator.io.runfolder import read_run_json, read_tables
 from emulator.report.figures import legend_outside, log_ticks_at, new_figure, plural, same_as, save
+from emulator.report.words import mode_words, selector_words
 
-__all__ = ["PLOT_FILE", "summarise_run", "plot_exposure", "run_markdown", "write_run_report"]
+__all__ = ["PLOT_FILE", "summarise_run", "exposure_figure", "plot_exposure", "run_markdown", "write_run_report"]
 
 #: The exposure-against-time figure of a run.
 PLOT_FILE = "exposure.png"
@@ -102,12 +103,8 @@ def _mode(info: dict, name: str) -> str:
     return "plugin" if opts.get("plugin") else "-"
 
 
-def plot_exposure(info: dict, tables: dict, path: str | os.PathLike) -> Path:
-    """Target exposure of every method against time (log scale, ticks at the brackets), the brackets as grey lines.
-
-    Methods whose exposure sequences are identical are drawn dashed on top of each other and
-    named so in the legend ("= classical-50"); the legend sits outside the data.
-    """
+def exposure_figure(info: dict, tables: dict):
+    """The figure of :func:`plot_exposure` (a matplotlib Figure with one axes)."""
     fig, (ax,) = new_figure(1, 9.0, 4.5)
     t0 = min((int(t["timestamp_ns"][0]) for t in tables.values() if t["timestamp_ns"].size), default=0)
     brackets = list(info.get("brackets_ms", []))
@@ -123,13 +120,24 @@ def plot_exposure(info: dict, tables: dict, path: str | os.PathLike) -> Path:
         else:
             ax.step(x, t["target_ms"], where="post", marker="o", ms=3, lw=1.3, label=name)
     ax.set_yscale("log")
-    log_ticks_at(ax, brackets)
+    log_ticks_at(ax, brackets, data=[float(np.min(t["target_ms"])) for t in tables.values() if t["target_ms"].size])
     ax.set_xlabel("time since first bracket [s]")
-    ax.set_ylabel("exposure [ms] (ticks: the brackets)")
-    ax.set_title(f"Exposure per cycle ({info.get('mode', '')} mode, start {info.get('initial_ms')} ms)")
+    ax.set_ylabel("exposure [ms] (ticks: the brackets, halved below)")
+    ax.set_title(f"Exposure per cycle, start {info.get('initial_ms')} ms\n"
+                 f"{mode_words(info.get('mode', ''))}", fontsize="medium")
     ax.grid(True, which="major", alpha=0.3)
     legend_outside(ax)
-    return save(fig, path)
+    return fig
+
+
+def plot_exposure(info: dict, tables: dict, path: str | os.PathLike) -> Path:
+    """Target exposure of every method against time (log scale, ticks at the brackets and, where
+    a method goes below the shortest one, at its halvings), the brackets as grey lines.
+
+    Methods whose exposure sequences are identical (every value equal) are drawn dashed on top
+    of each other and named so in the legend ("= classical-50"); the legend sits outside the data.
+    """
+    return save(exposure_figure(info, tables), path)
 
 
 def _fmt(v, spec=".3g"):
@@ -143,10 +151,12 @@ def run_markdown(info: dict, summary: dict) -> str:
         "",
         f"- sequence: `{info.get('sequence')}`",
         f"- status: {info.get('status')}, cycles {info.get('cycles_done')}/{info.get('n_cycles')}",
-        f"- mode: {info.get('mode')}, selector: {info.get('selector')} (left camera's saturation decides)",
+        f"- methods: {mode_words(info.get('mode'))} (`--mode {info.get('mode')}`)",
+        f"- brackets chosen by {selector_words(info.get('selector'))} (`--selector {info.get('selector')}`; the left "
+        "camera's saturation decides for both)",
         f"- initial exposure {info.get('initial_ms')} ms, clamp {info.get('range_ms')} ms, response `{info.get('response')}`",
         f"- images: {info.get('save')}",
-        f"- command: `{info.get('command') or 'emulator.runner.run_to_folder (library call)'}`, "
+        f"- command: `{info.get('command') or '(library call)'}`, "
         f"exposim {info.get('version')}",
         "",
         f"![exposure against time]({PLOT_FILE})",
@@ -181,7 +191,7 @@ def run_markdown(info: dict, summary: dict) -> str:
         n = opts.get("n_auto_frames")
         if n is not None and opts.get("mode") == "borealhdr":
             n += 1  # the reference code's counter test adjusts on N + 1 calls
-        lines += ["", f"`fixed` (M_fixed) runs classical-50 for its first {n if n is not None else 'few'} frames and "
+        lines += ["", f"`fixed` runs classical-50 for its first {n if n is not None else 'few'} frames and "
                   "then freezes its exposure: on a run that short it is identical to classical-50."]
     failed = {n: m["status"] for n, m in summary["methods"].items() if m.get("status", "ok").startswith("failed")}
     fell = {n: m["status"] for n, m in summary["methods"].items() if m.get("status", "ok").startswith("fell back")}
