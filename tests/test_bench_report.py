@@ -290,3 +290,55 @@ def test_run_report_names_mode_and_selector_in_words():
     assert ("- methods: the paper's methods with the published code's defects corrected (`--mode paper`)" in md)
     assert "- brackets chosen by the paper's bracket selector (higher bracket unless saturated)" in md
     assert "M_fixed" not in md and "paper mode" not in md and "emulator." not in md
+
+
+# ----------------------------------------------------------------------------- VO report wording
+
+
+def test_vo_report_speaks_of_the_extrinsics_in_sentences():
+    res = _vo_results()
+    res["calibration"]["extrinsics"] = {
+        "mode": "auto", "epipolar_residual_px": 0.1432, "refined": False,
+        "reason": "the given calibration fits the images",
+        "criterion": "median epipolar distance of left-right SIFT matches > 1 px"}
+    md = report.vo_report(res, {})
+    assert ("Stereo extrinsics (auto): the given calibration fits the images. Measured 0.14 px. Refinement rule: "
+            "median epipolar distance of left-right SIFT matches > 1 px.") in md
+    assert "px. the" not in md
+    res["calibration"]["extrinsics"].update(epipolar_residual_px=17.2, refined=True,
+                                            estimate={"epipolar_residual_after_px": 0.324},
+                                            reason="re-estimated, as the residual exceeds 1 px")
+    md = report.vo_report(res, {})
+    assert ("Stereo extrinsics (auto): re-estimated, as the residual exceeds 1 px. Measured 17.20 px, 0.32 px "
+            "after refinement. Refinement rule:") in md
+
+
+def test_vo_report_gives_no_recording_date_to_a_synthetic_recording(tmp_path):
+    from emulator.io.borealhdr import write_recording_metadata
+    from emulator.io.layout import CalibrationChoice
+    from emulator.metrics.vo_bench import _choice_record
+
+    # synth's timestamps start at 1.7e18 ns, which decodes to 2023-11-14: not a recording date
+    choice = CalibrationChoice(tmp_path / "calibration", "the recording's own calibration/ folder", "2023-11-14",
+                               "first timestamp 1700000000000000000 ns (UTC)")
+    real = _choice_record(choice, tmp_path)
+    assert real["recording_date"] == "2023-11-14" and "synthetic" not in real
+    write_recording_metadata(tmp_path, {"generator": {"name": "exposim.synth.capture_sequence", "version": "0"}})
+    synthetic = _choice_record(choice, tmp_path)
+    assert synthetic["recording_date"] is None and synthetic["synthetic"] is True
+    res = _vo_results()
+    res["calibration"]["choice"] = synthetic
+    md = report.vo_report(res, {})
+    assert ("Calibration choice: the recording's own calibration/ folder (a synthetic recording, written by "
+            "exposim synth: it has no recording date).") in md
+    assert "2023-11-14" not in md
+    res["calibration"]["choice"] = real
+    assert "(recording date 2023-11-14)." in report.vo_report(res, {})
+
+
+def test_paper_figures_name_methods_as_the_command_line_does():
+    names = " ".join(list(report.PAPER_FEATURES) + list(report.PAPER_VO))
+    assert "M_" not in names
+    assert "worst (classical-30, classical-70, kim)" in names and "best (classical-50)" in names
+    md = report.features_report(_features_results({"fixed": [61, 40, 55], "kim": [30, 12]}), "fig4.png")
+    assert "M_fixed" not in md and "Median matches of fixed:" in md and "emulator." not in md

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from emulator.cli import main
-from emulator.metrics.bench import NO_REFERENCE_NOTE, REFINE_THRESHOLD_FRACTION, bench_vo, evo_result_path
+from emulator.metrics.bench import no_reference_note, REFINE_THRESHOLD_FRACTION, bench_vo, evo_result_path
 from emulator.metrics.vo import VOParameters
 
 from conftest import SAMPLE_SEQ
@@ -110,7 +110,10 @@ def test_no_reference_is_said_once_in_words(parallel, tmp_path, capsys):
     assert err.count("RPE not computed: no reference trajectory") == 1
     assert "lidar" in err and "--reference" in err
     results = json.loads((tmp_path / "out" / "results.json").read_text())
-    assert results["limitations"] == [NO_REFERENCE_NOTE]
+    assert results["limitations"] == [no_reference_note(seq)]
+    # the note names the recording actually used, not the shared sample
+    assert "The recording seq has none (no ground_truth/poses_left.txt in it" in results["limitations"][0]
+    assert "shared BorealHDR sample" not in err and "shared BorealHDR sample" not in results["limitations"][0]
     report = (tmp_path / "out" / "report.md").read_text()
     assert "## What could not be computed, and why" in report and "lidar_poses.txt" in report
     assert not (tmp_path / "out" / "evo").exists()

@@ -32,7 +32,7 @@ from emulator.metrics.features import (
 from emulator.metrics.vo_bench import (  # re-exported: the VO benchmark lives in emulator.metrics.vo_bench
     DEFAULT_DELTA_FRACTIONS,
     FAILURE_POLICY,
-    NO_REFERENCE_NOTE,
+    no_reference_note,
     REFERENCE_MAX_DIFF_S,
     REFINE_PAIRS,
     REFINE_THRESHOLD_FRACTION,
@@ -52,7 +52,7 @@ __all__ = [
     "SYNTHETIC_REFERENCE",
     "REFINE_PAIRS",
     "REFINE_THRESHOLD_FRACTION",
-    "NO_REFERENCE_NOTE",
+    "no_reference_note",
     "evo_result_path",
     "pool_feature_runs",
 ]

@@ -16,8 +16,8 @@ __all__ = ["CONVERSION"]
 #: The 12-bit to 8-bit conversion, as stated in the results.
 CONVERSION = (
     "gray8 = clip(round((cv2.cvtColor(raw, COLOR_BayerRG2GRAY) - black_level) * 255 / "
-    "(white_level - black_level)), 0, 255) for png16 Bayer images (emulator.gray.bayer_to_gray8); png8 images, "
-    "converted by exposim run with the same function, are used as saved"
+    "(white_level - black_level)), 0, 255) for png16 Bayer images; png8 images, "
+    "converted by exposim run with the same formula, are used as saved"
 )
 
 

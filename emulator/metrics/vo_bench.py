@@ -5,6 +5,7 @@ reference, results, figures and report.  :func:`bench_vo` is what ``exposim benc
 
 from __future__ import annotations
 
+import contextlib
 import copy
 from collections.abc import Sequence
 from dataclasses import asdict
@@ -12,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from emulator.errors import CalibrationError, MetricsError, RunFolderError, TrajectoryError
+from emulator.errors import CalibrationError, ExposimError, MetricsError, RunFolderError, TrajectoryError
 from emulator.io.files import RESULTS_FILE, prepare_output, write_results
 from emulator.io.runfolder import RunFolder, read_run_folder
 from emulator.io.tum import write_tum
@@ -39,7 +40,7 @@ __all__ = [
     "SYNTHETIC_REFERENCE",
     "REFINE_PAIRS",
     "REFINE_THRESHOLD_FRACTION",
-    "NO_REFERENCE_NOTE",
+    "no_reference_note",
     "evo_result_path",
     "rpe_intervals",
 ]
@@ -67,16 +68,32 @@ REFINE_PAIRS = 2
 #: (``VOParameters.max_row_diff_px``): beyond it, most true matches fall outside the
 #: stereo row check and the VO loses its depth points.
 REFINE_THRESHOLD_FRACTION = 0.5
-#: What the benchmark says when there is no reference trajectory.
-NO_REFERENCE_NOTE = (
-    "RPE not computed: no reference trajectory. The run's recording has none (the shared BorealHDR sample holds the "
-    "camera images and the IMU, the upstream repository's data_sample adds lidar scans and GNSS; neither has a pose "
-    "file). BorealHDR's "
-    "reference trajectories are computed from the 3-D lidar and the IMU by a lidar-inertial SLAM based on "
-    "libpointmatcher; exported as a TUM file of the left camera's poses (camera-to-world, "
-    "OpenCV axes; what exposim's examples call lidar_poses.txt) it is given with --reference FILE. Without it the "
-    "VO's tracking statistics and trajectories are still computed."
-)
+def no_reference_note(sequence: str | Path | None) -> str:
+    """What the benchmark says when there is no reference trajectory, naming the recording used."""
+    name = f"The recording {Path(sequence).name}" if sequence is not None else "The run's recording"
+    return (
+        f"RPE not computed: no reference trajectory. {name} has none (no {SYNTHETIC_REFERENCE.as_posix()} in it, "
+        "and no --reference FILE was given). BorealHDR's "
+        "reference trajectories are computed from the 3-D lidar and the IMU by a lidar-inertial SLAM based on "
+        "libpointmatcher; exported as a TUM file of the left camera's poses (camera-to-world, "
+        "OpenCV axes; what exposim's examples call lidar_poses.txt) it is given with --reference FILE. Without it the "
+        "VO's tracking statistics and trajectories are still computed."
+    )
+
+
+def _choice_record(choice, sequence) -> dict:
+    """The calibration choice as results.json keeps it; a synthetic recording (written by exposim
+    synth) has no recording date, whatever its timestamps decode to, and is marked ``synthetic``."""
+    from emulator.io.borealhdr import read_recording_metadata
+
+    record = choice.to_dict()
+    generator = {}
+    if sequence is not None and Path(sequence).is_dir():
+        with contextlib.suppress(ExposimError):
+            generator = read_recording_metadata(sequence).get("generator") or {}
+    if isinstance(generator, dict) and str(generator.get("name", "")).startswith("exposim"):
+        record.update(recording_date=None, date_source="", synthetic=True)
+    return record
 
 
 def _reference_path(run: RunFolder, reference: str | Path | None) -> tuple[Path | None, str]:
@@ -109,7 +126,7 @@ def evo_result_path(out: Path, relation: str, delta_m: float, method: str) -> Pa
 def _refine(calib, frames, run: RunFolder, mode, parameters: VOParameters, limitations: list[str]):
     """The calibration to rectify with, and the record of the extrinsics decision."""
     if mode in (0, "0", "never", None):
-        return calib, {"mode": "never", "refined": False, "reason": "refinement disabled (refine_extrinsics=0)"}
+        return calib, {"mode": "never", "refined": False, "reason": "refinement disabled (--refine-extrinsics 0)"}
     auto = mode == "auto"
     if not auto:
         try:
@@ -154,8 +171,8 @@ def _refine(calib, frames, run: RunFolder, mode, parameters: VOParameters, limit
                            f"could not be refined ({exc}); stereo depth will be poor.")
         return calib, record
     record.update(refined=True, estimate=est.to_dict(),
-                  reason=(f"residual {residual:.2f} px > {threshold:g} px: re-estimated" if auto
-                          else "refinement asked for"))
+                  reason=(f"re-estimated, as the residual exceeds {threshold:g} px" if auto
+                          else f"re-estimated, as asked (--refine-extrinsics {n_pairs})"))
     return calib.with_extrinsics(est.R, est.T), record
 
 
@@ -180,7 +197,7 @@ def _reference_and_deltas(ref_path, run, selected, max_diff_s, deltas_m, delta_f
     """The reference trajectory (None without one; checked to overlap every method's images) and the
     RPE pair lengths, m."""
     if ref_path is None:
-        limitations.append(NO_REFERENCE_NOTE)
+        limitations.append(no_reference_note(run.sequence))
         return None, None
     ref_traj = read_trajectory(ref_path)
     for name, frames in selected.items():  # fail now, not after the VO: overlap check
@@ -426,7 +443,7 @@ def bench_vo(
             "method": "cv2.stereoRectify from K, D of both cameras, R = R_r^T R_l, T = -R_r^T [b, 0, 0], alpha 0"
             + ("; R (pitch, roll) and the baseline direction re-estimated from left-right matches (yaw and "
                "baseline length as calibrated)" if extrinsics else ""),
-            "choice": choice.to_dict(),
+            "choice": _choice_record(choice, run.sequence),
             "extrinsics": extrinsics_record,
             "refined_extrinsics": extrinsics,
         },

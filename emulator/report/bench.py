@@ -12,7 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from emulator.report.figures import legend_outside, log_ticks_at, new_figure, plural, same_as, save
+from emulator.report.features_plot import features_figure, plot_features, weakest_pairs
+from emulator.report.figures import legend_outside, new_figure, plural, save
 from emulator.report.verdicts import (
     DASH_NOTE,
     matches_verdict,
@@ -37,6 +38,7 @@ __all__ = [
     "features_intervals_markdown",
     "features_verdicts",
     "vo_report",
+    "extrinsics_sentence",
     "vo_verdicts",
     "PAPER_FEATURES",
     "PAPER_VO",
@@ -44,17 +46,17 @@ __all__ = [
 
 #: The paper's Fig. 4 numbers (section V-D-1), for the report.
 PAPER_FEATURES = {
-    "median matches of M_fixed": 674,
-    "success rate at tau = 100, best (M_fixed)": "44 %",
-    "success rate at tau = 100, worst (M_30%, M_70%, M_Kim)": "20 %",
+    "median matches of fixed": 674,
+    "success rate at tau = 100, best (fixed)": "44 %",
+    "success rate at tau = 100, worst (classical-30, classical-70, kim)": "20 %",
 }
 #: The paper's Fig. 6 numbers (section V-D-2), for the report.
 PAPER_VO = {
     "VO failures": "11 of 55 trajectories (20 %)",
-    "minimal translation error, best (M_50%)": "4.21 %",
-    "minimal translation error, worst (M_Kim)": "5.75 %",
-    "minimal rotation error, best (M_Zhang, M_50%)": "0.07 deg/m",
-    "M_fixed": "5.1 % and 0.09 deg/m",
+    "minimal translation error, best (classical-50)": "4.21 %",
+    "minimal translation error, worst (kim)": "5.75 %",
+    "minimal rotation error, best (zhang, classical-50)": "0.07 deg/m",
+    "fixed": "5.1 % and 0.09 deg/m",
 }
 
 
@@ -63,113 +65,6 @@ def _trans_percent(entry: dict):
     was ``trans_percent`` have ``trans_pct``."""
     value = entry.get("trans_percent")
     return entry.get("trans_pct") if value is None else value
-
-
-def _boxplot(ax, data: list, labels: list[str]) -> None:
-    present = [(d, name) for d, name in zip(data, labels) if len(d)]
-    if not present:
-        ax.text(0.5, 0.5, "no data", ha="center", va="center", transform=ax.transAxes)
-        return
-    values, names = zip(*present)
-    ax.boxplot(values, tick_labels=names, showfliers=True)
-    ax.tick_params(axis="x", labelrotation=30)
-
-
-def weakest_pairs(results: dict) -> dict[str, list[int]]:
-    """Per method, the match count of its weakest consecutive pair in each run that has a pair
-    (what the success rate is made of: a run succeeds for every tau up to it), in run order."""
-    out = {}
-    for m in results["methods"]:
-        per_run = [min(run["methods"][m]["matches"]) for run in results["runs"]
-                   if run["methods"].get(m, {}).get("matches")]
-        if per_run:
-            out[m] = per_run
-    return out
-
-
-def _success_bars(c, weakest: dict[str, list[int]], methods: list[str]) -> None:
-    """Panel (c) over one run: a run's success rate is 100 % up to its weakest pair and 0 beyond,
-    so each method's weakest pair is drawn as a bar, its count written on it."""
-    names = [m for m in methods if m in weakest]
-    values = [weakest[m][0] for m in names]
-    bars = c.bar(range(len(names)), values, color=[f"C{methods.index(m) % 10}" for m in names])
-    c.bar_label(bars, labels=[str(v) for v in values], fontsize="small", padding=2)
-    c.set_xticks(range(len(names)), names, rotation=30)
-    c.axhline(100, color="0.6", lw=0.8, ls=":", zorder=0)  # the paper's reference threshold
-    c.set_ylabel("matches of the weakest consecutive pair")
-    c.set_ylim(0, 1.12 * max(values + [100]))
-    c.set_title("(c) weakest pair: the run succeeds for every\n"
-                r"$\tau_\mathrm{matches}$ up to it (dotted: 100, the paper's)", fontsize="medium")
-
-
-def _success_curves(c, results: dict, weakest: dict[str, list[int]], methods: list[str]) -> None:
-    """Panel (c) over several runs: the success rate against tau.  A curve identical to an earlier
-    one on the tau grid is drawn dashed over it; it is named equal ("= name") only when the two
-    methods' weakest pairs are equal run for run (so the curves are equal at every tau), else
-    "hides name's curve" (equal on the grid only)."""
-    curve = results["success_curve"]
-    rates = {m: curve["rate"][m] for m in methods if curve["rate"].get(m) is not None}
-    on_grid = same_as(rates)
-    equal = same_as({m: weakest[m] for m in rates if m in weakest})
-    taus = list(curve["taus"])
-    step = taus[-1] - taus[-2] if len(taus) > 1 else 1
-    x = taus + [taus[-1] + step] if taus else taus  # the last step drawn to its end
-    for m, rate in rates.items():
-        y = 100.0 * np.append(rate, rate[-1]) if taus else []
-        if m in on_grid:  # drawn dashed over its twin: identical curves hide each other
-            tag = f"= {on_grid[m]}" if equal.get(m) == on_grid[m] else f"hides {on_grid[m]}'s curve"
-            c.plot(x, y, ls="--", label=f"{m} ({tag})", drawstyle="steps-post")
-        else:
-            c.plot(x, y, label=m, drawstyle="steps-post")
-    if taus:
-        c.set_xlim(0, x[-1])
-    c.axvline(100, color="0.6", lw=0.8, ls=":", zorder=0)  # the paper's reference threshold
-    c.set_xlabel(r"$\tau_\mathrm{matches}$ (dotted: 100, the paper's)")
-    c.set_ylabel("successful runs (%)")
-    c.set_ylim(-2, 102)
-    c.set_title(f"(c) success rate over {plural(results['n_runs'], 'run folder')}")
-    legend_outside(c)
-
-
-def features_figure(results: dict):
-    """The figure of :func:`plot_features` (a matplotlib Figure with three axes)."""
-    methods = list(results["methods"])
-    uniformity = [[100.0 * u for run in results["runs"] for u in run["methods"].get(m, {}).get("uniformity", [])]
-                  for m in methods]
-    matches = [[c for run in results["runs"] for c in run["methods"].get(m, {}).get("matches", [])] for m in methods]
-    fig, (a, b, c) = new_figure(3)
-    _boxplot(a, uniformity, methods)
-    a.set_ylabel("grid cells with a keypoint (%)")
-    rows, cols = results["parameters"]["grid"]
-    a.set_title(f"(a) uniformity, {rows}x{cols} grid")
-    _boxplot(b, matches, methods)
-    b.set_ylabel("matches between consecutive images")
-    b.set_title(f"(b) matches (ratio test {results['parameters']['ratio']})")
-    weakest = weakest_pairs(results)
-    if not weakest:
-        c.text(0.5, 0.5, "no data", ha="center", va="center", transform=c.transAxes)
-        c.set_title("(c) success rate")
-    elif len(results["runs"]) == 1:
-        _success_bars(c, weakest, methods)
-    else:
-        _success_curves(c, results, weakest, methods)
-    return fig
-
-
-def plot_features(results: dict, path: str | Path) -> Path:
-    """Paper Fig. 4: (a) uniformity, (b) matches per pair, (c) success rate against tau.
-
-    Over one run folder the success rate of a method is a step from 100 % to 0 at its weakest
-    pair, so panel (c) shows each method's weakest pair instead.
-
-    Parameters
-    ----------
-    results : dict
-        The ``results.json`` of the feature benchmark.
-    path : str or pathlib.Path
-        PNG to write.
-    """
-    return save(features_figure(results), path)
 
 
 #: Line style of a method whose VO failed on some frames (its RPE is drawn, dotted, and named so in the legend).
@@ -307,7 +202,7 @@ def features_verdicts(results: dict) -> list[str]:
     rates = {k: None if m["success_at_100"] is None else 100 * m["success_at_100"] for k, m in methods.items()}
     return [
         uniformity_verdict(uni, facts["median_keypoints"], results["parameters"]["grid"]),
-        matches_verdict(med.get(name), facts["image_wh"], "M_fixed" if name == "fixed" else name),
+        matches_verdict(med.get(name), facts["image_wh"], name),
         success_verdict(100, rates, facts["max_matches"], facts["min_matches"], facts["image_wh"]),
     ]
 
@@ -419,6 +314,20 @@ def features_report(results: dict, figure: str) -> str:
     return "\n".join(lines)
 
 
+def extrinsics_sentence(ext: dict) -> str:
+    """The stereo-extrinsics check of ``results["calibration"]["extrinsics"]`` in words: the
+    decision, the measurement and the rule, each a sentence.
+
+    >>> extrinsics_sentence({"mode": "auto", "epipolar_residual_px": 0.14, "refined": False,
+    ...                      "reason": "the given calibration fits the images", "criterion": "residual > 1 px"})
+    'Stereo extrinsics (auto): the given calibration fits the images. Measured 0.14 px. Refinement rule: residual > 1 px.'
+    """
+    after = ext.get("estimate", {}).get("epipolar_residual_after_px") if ext.get("refined") else None
+    return (f"Stereo extrinsics ({ext['mode']}): {ext['reason']}. Measured {ext['epipolar_residual_px']:.2f} px"
+            + (f", {after:.2f} px after refinement" if after is not None else "")
+            + f". Refinement rule: {ext['criterion']}.")
+
+
 def vo_report(results: dict, figures: dict[str, str]) -> str:
     """Markdown report of the stereo VO benchmark, beside the paper's Fig. 6 numbers."""
     p = results["parameters"]
@@ -445,12 +354,12 @@ def vo_report(results: dict, figures: dict[str, str]) -> str:
     choice = results["calibration"].get("choice")
     ext = results["calibration"].get("extrinsics")
     if choice:
-        lines += [f"Calibration choice: {choice['reason']}"
-                  + (f" (recording date {choice['recording_date']})" if choice.get("recording_date") else "") + ".", ""]
+        when = (" (a synthetic recording, written by exposim synth: it has no recording date)"
+                if choice.get("synthetic") else
+                f" (recording date {choice['recording_date']})" if choice.get("recording_date") else "")
+        lines += [f"Calibration choice: {choice['reason']}{when}.", ""]
     if ext and ext.get("epipolar_residual_px") is not None:
-        after = ext.get("estimate", {}).get("epipolar_residual_after_px") if ext.get("refined") else None
-        lines += [f"Stereo extrinsics ({ext['mode']}): {ext['criterion']}; measured {ext['epipolar_residual_px']:.2f} px"
-                  + (f", {after:.2f} px after refinement" if after is not None else "") + f". {ext['reason']}.", ""]
+        lines += [extrinsics_sentence(ext), ""]
     if results.get("limitations"):
         lines += ["## What could not be computed, and why", ""] + [f"- {n}" for n in results["limitations"]] + [""]
     lines += [

@@ -17,7 +17,7 @@ import base64
 import html
 import os
 import re
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -247,16 +247,19 @@ def _figures(folder: Path, names: Iterable[str] | None) -> dict[str, str]:
     return {name: png_data_uri(read_bytes(folder / name)) for name in names if (folder / name).is_file()}
 
 
-def write_report(folder: str | os.PathLike, markdown: str, *, figures: Iterable[str] | None = None,
+def write_report(folder: str | os.PathLike, markdown: str, *,
+                 figures: Iterable[str] | Mapping[str, str] | None = None,
                  sheets: Sequence[str] = (), title: str | None = None) -> tuple[Path, Path]:
     """Write ``report.md`` and the self-contained ``report.html`` of ``folder``; returns both paths.
 
-    ``figures``: PNG files of ``folder`` to embed (default: every ``*.png`` in it); those the
-    markdown shows with ``![...](name)`` appear there, the others after the text under
-    "Figures".  ``sheets``: HTML of contact sheets (:func:`contact_sheet`), placed after
-    the first section of the text.
+    ``figures``: PNG files of ``folder`` to embed (default: every ``*.png`` in it), or a mapping
+    of those files to their captions; those the markdown shows with ``![...](name)`` appear
+    there, the others after the text under "Figures", captioned (by the file name when no
+    caption is given).  ``sheets``: HTML of contact sheets (:func:`contact_sheet`), placed
+    after the first section of the text.
     """
     folder = Path(folder)
+    captions = dict(figures) if isinstance(figures, Mapping) else {}
     md_path = write_text(folder / REPORT_FILE, markdown)
     shown = list(dict.fromkeys(re.findall(r"!\[[^\]]*\]\(([^)\s]+)\)", markdown)))
     uris = _figures(folder, None if figures is None else [*figures, *shown])
@@ -269,8 +272,8 @@ def write_report(folder: str | os.PathLike, markdown: str, *, figures: Iterable[
         body = body + "\n" + sheet_html if cut < 0 else body[:cut] + sheet_html + "\n" + body[cut:]
     if rest:
         body += "\n<h2>Figures</h2>\n" + "\n".join(
-            f'<figure><img src="{uris[name]}" alt="{html.escape(name)}"><figcaption>{html.escape(name)}</figcaption>'
-            "</figure>" for name in rest)
+            f'<figure><img src="{uris[name]}" alt="{html.escape(captions.get(name, name))}"><figcaption>'
+            f"{html.escape(captions.get(name, name))}</figcaption></figure>" for name in rest)
     if title is None:
         m = re.search(r"^#\s+(.*)$", markdown, re.MULTILINE)
         title = m.group(1).strip() if m else folder.name

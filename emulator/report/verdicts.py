@@ -95,7 +95,7 @@ def success_verdict(tau: int, rates_percent: Mapping[str, float | None], max_mat
                 f"is {_span(lo, hi, '.0f')} %, which cannot be (no pair reaches tau)")
         return (f"Success at tau = {tau} {head}: no consecutive pair of these {_size(image_wh)} images reached "
                 f"{tau} matches (at most {max_matches}), while the paper's {_size(PAPER_IMAGE_WH)} images "
-                f"({area:.0f}x the pixels) gave M_fixed a median of {PAPER_MEDIAN_MATCHES_FIXED} matches; "
+                f"({area:.0f}x the pixels) gave fixed a median of {PAPER_MEDIAN_MATCHES_FIXED} matches; "
                 f"the paper's tau = 100 success rates ({paper}) are not comparable at this size.")
     text = f"Success at tau = {tau} is {_span(lo, hi, '.0f')} % (paper at tau = 100: {paper}). "
     if tau != 100:
@@ -109,7 +109,7 @@ def success_verdict(tau: int, rates_percent: Mapping[str, float | None], max_mat
     return text + "Overlaps the paper's range."
 
 
-def matches_verdict(median_matches: float | None, image_wh, method: str = "M_fixed") -> str:
+def matches_verdict(median_matches: float | None, image_wh, method: str = "fixed") -> str:
     """Verdict on the median matches of ``method`` against the paper's 674, scaled by image area.
 
     Examples
