@@ -82,6 +82,20 @@ def test_sheet_and_report_files(tmp_path):
     assert _sample(10, 4) == [0, 3, 6, 9]
 
 
+def test_figures_after_the_text_carry_their_captions_not_their_paths(tmp_path):
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "sub" / "fig.png").write_bytes(_png(5, 5, 200))
+    (tmp_path / "other.png").write_bytes(_png(5, 5, 20))
+    _, page = write_report(tmp_path, "# T\n\ntext\n", figures={"sub/fig.png": "Matches per method",
+                                                               "other.png": "Exposure per cycle"})
+    text = page.read_text()
+    assert re.findall(r"<figcaption>([^<]*)</figcaption>", text) == ["Matches per method", "Exposure per cycle"]
+    assert 'alt="Matches per method"' in text and "sub/fig.png" not in text
+    # without a caption the file name is all there is
+    _, page = write_report(tmp_path, "# T\n\ntext\n", figures=["other.png"])
+    assert re.findall(r"<figcaption>([^<]*)</figcaption>", page.read_text()) == ["other.png"]
+
+
 @pytest.fixture(scope="module")
 def run_dir(tmp_path_factory):
     root = tmp_path_factory.mktemp("html") / "seq"
