@@ -275,7 +275,7 @@ def vo_intervals_markdown(results: dict) -> list[str]:
     for d in iv:
         n_seg = max((r["n_segments"] for r in d["methods"].values()), default=0)
         lines += ["", f"Pair length {d['delta_m']:.2f} m ({n_seg} segments):", ""]
-        lines += comparison_table(d, "median RPE trans. (%)", spec=".2f")
+        lines += comparison_table(d, "median translation error (% of the pair length)", spec=".2f")
     return lines
 
 
@@ -363,8 +363,9 @@ def vo_report(results: dict, figures: dict[str, str]) -> str:
     if results.get("limitations"):
         lines += ["## What could not be computed, and why", ""] + [f"- {n}" for n in results["limitations"]] + [""]
     lines += [
-        "| method | status | frames | tracked | failures | scale | median RPE trans. (% of delta), per pair length "
-        "delta (m) | median RPE rot. (deg/m), per pair length delta (m) |",
+        "| method | status | frames | tracked | failures | scale | relative pose error, translation: median over "
+        "pose pairs (% of the pair length), per pair length (m) | relative pose error, rotation: median over pose "
+        "pairs (deg/m), per pair length (m) |",
         "| --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for name, m in results["methods"].items():
@@ -388,7 +389,7 @@ def vo_report(results: dict, figures: dict[str, str]) -> str:
             f"{len(m['failures'])}{' (' + ', '.join(reasons) + ')' if reasons else ''} | {scale} | {trans} | {rot} |"
         )
     lines += vo_intervals_markdown(results)
-    lines += ["", DASH_NOTE + " In fig6_rpe.png a dotted line is a method whose VO failed on some frames "
+    lines += ["", DASH_NOTE + " In the relative pose error figure a dotted line is a method whose VO failed on some frames "
               "(RPE computed anyway); its legend entry says so.", ""]
     for title, fig in figures.items():
         lines += [f"![{title}]({fig})", ""]
