@@ -68,6 +68,8 @@ REFINE_PAIRS = 2
 #: (``VOParameters.max_row_diff_px``): beyond it, most true matches fall outside the
 #: stereo row check and the VO loses its depth points.
 REFINE_THRESHOLD_FRACTION = 0.5
+
+
 def no_reference_note(sequence: str | Path | None) -> str:
     """What the benchmark says when there is no reference trajectory, naming the recording used."""
     name = f"The recording {Path(sequence).name}" if sequence is not None else "The run's recording"
