@@ -73,6 +73,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "a synthetic recording's exposim.json carries")
     p.add_argument("--noise-seed", type=int, default=None,
                    help="seed of the added noise (default 0); the same seed gives the same bytes")
+    p.add_argument("--skip-partial", action="store_true",
+                   help="leave out every cycle missing a bracket on either camera (default: use the brackets that are "
+                        "there; partial cycles and upward ratios above 8 are flagged in the report either way)")
     p.add_argument("--resume", action="store_true",
                    help="continue an interrupted run in OUTDIR (its run.json gives the configuration)")
     p.add_argument("--sequences", default=None, metavar="all|NAME,...",
@@ -149,6 +152,8 @@ def _command(args) -> str:
         parts += ["--jobs", str(args.jobs)]
     if getattr(args, "blur_aware", False):
         parts.append("--blur-aware")
+    if getattr(args, "skip_partial", False):
+        parts.append("--skip-partial")
     if args.resume:
         parts.append("--resume")
     if getattr(args, "method_timeout_s", None) is not None:
@@ -160,7 +165,7 @@ def _command(args) -> str:
 _FLAGS = {"initial_ms": "--initial-ms", "range_ms": "--range-ms", "jobs": "--jobs", "noise_seed": "--noise-seed",
           "png_level": "--png-level", "blur": "--blur", "blur_aware": "--blur-aware",
           "method_timeout_s": "--method-timeout-s", "selector": "--selector", "mode": "--mode", "save": "--save",
-          "noise": "--noise"}
+          "noise": "--noise", "skip_partial": "--skip-partial"}
 
 
 def _given(args) -> dict:
@@ -175,7 +180,8 @@ def _given(args) -> dict:
             "save": args.save, "noise": args.noise, "noise_model": args.noise_model, "noise_seed": args.noise_seed,
             "method_timeout_s": args.method_timeout_s,
             "response_path": str(args.response) if args.response is not None else None,
-            "png_level": args.png_level, "blur": args.blur, "blur_aware": True if args.blur_aware else None}
+            "png_level": args.png_level, "blur": args.blur, "blur_aware": True if args.blur_aware else None,
+            "skip_partial": True if getattr(args, "skip_partial", False) else None}
 
 
 def config_from_args(args, base=None):
@@ -312,6 +318,7 @@ def _print_run_summary(args, summary: dict) -> int:
         mean = m["mean_exposure_ms"]
         print(f"  {name:13s} mean {mean:8.3f} ms  final {m['final_exposure_ms']:8.3f} ms  "
               f"sat {m['mean_saturated_fraction']:.2%}" if mean is not None else f"  {name:13s} no cycle")
+    _print_flags(summary.get("flags"))
     timing = summary.get("timing") or {}
     if timing.get("cycles_per_s"):
         steady = timing.get("steady_cycles_per_s")
@@ -325,6 +332,22 @@ def _print_run_summary(args, summary: dict) -> int:
     if (args.output / "report.html").is_file():
         print(f"report      {args.output / 'report.html'} (open in a browser)")
     return rc
+
+
+def _print_flags(flags: dict | None) -> None:
+    """The report's flags in one or two lines (nothing when nothing was flagged)."""
+    if flags is None:
+        return
+    partial = flags["partial_cycles"]
+    if partial:
+        skipped = flags["partial_cycles_skipped"]
+        print(f"partial     {len(partial)} cycle(s) missing brackets ({', '.join(str(p['cycle']) for p in partial)})"
+              + (f", {skipped} left out (--skip-partial)" if skipped else ", used (--skip-partial leaves them out)"))
+    above = {n: m for n, m in flags["methods"].items() if m["cycles_above_ratio_bound"]}
+    if above:
+        print(f"ratio > {flags['upward_ratio_bound']:g}   " + ", ".join(
+            f"{n}: {m['cycles_above_ratio_bound']} cycle(s), largest {m['worst_upward_ratio']:.3g}"
+            for n, m in above.items()))
 
 
 def _check_methods_once(methods: str, run_options: dict) -> None:
