@@ -216,7 +216,7 @@ def write_run(sequence, methods, out_dir, config: RunConfig | None = None, *, re
         raise PlaybackError("out_dir is required")
     out = Path(os.path.abspath(out_dir))  # absolute: a method's os.chdir cannot split the folder
     cfg = RunConfig.from_kwargs(config, **settings)
-    seq = resolve_sequence(sequence)
+    seq = resolve_sequence(sequence, imu_warning=cfg.blur != "none")  # the IMU is read only for blur
     method_specs = parse_methods(methods) if isinstance(methods, str) else list(methods)
     stats = RunStats()
     prep = prepare_run(seq, method_specs, cfg, response, stats=stats)

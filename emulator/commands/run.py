@@ -295,7 +295,7 @@ def _run(args) -> int:
     if args.frame_cache is not None:  # a frame cache elsewhere (a read-only recording)
         from emulator.io.borealhdr import load_sequence
 
-        source = load_sequence(args.sequence, frame_cache=args.frame_cache)
+        source = load_sequence(args.sequence, frame_cache=args.frame_cache, imu_warning=config.blur != "none")
     try:
         summary = run_to_folder(source, methods or "all", args.output, config, resume=args.resume,
                                 progress=progress, command=_command(args))

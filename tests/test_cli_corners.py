@@ -1,0 +1,56 @@
+"""Small corners of the command line on real layouts: the IMU warning of ``run``, ``run`` on a
+dataset root, ``info``'s response and calibration, the ``new-method`` hint."""
+
+from __future__ import annotations
+
+import json
+import warnings
+
+import pytest
+
+from emulator.cli import main
+from emulator.io.imu import ImuMissingWarning
+from test_playback import write_static_sequence
+
+
+@pytest.fixture(scope="module")
+def seq(tmp_path_factory):
+    root, _ = write_static_sequence(tmp_path_factory.mktemp("corners") / "seq", n_cycles=2, shape=(32, 48))
+    return root
+
+
+def _run_warnings(args, capsys) -> tuple[int, list[str], str]:
+    """(exit code, IMU warning lines on stderr, stderr) of ``exposim ARGS``."""
+    import emulator.io.imu as imu
+
+    imu._warned.clear()  # the warning is given once per recording and process
+    capsys.readouterr()
+    with warnings.catch_warnings():
+        warnings.simplefilter("default", ImuMissingWarning)
+        rc = main(args)
+    err = capsys.readouterr().err
+    return rc, [ln for ln in err.splitlines() if "no imu/imu.csv" in ln], err
+
+
+def test_run_without_blur_does_not_warn_about_the_imu(seq, tmp_path, capsys):
+    rc, imu_warnings, err = _run_warnings(["run", str(seq), "--methods", "classical-50", "-o", str(tmp_path / "r"),
+                                           "--no-progress"], capsys)
+    assert rc == 0 and imu_warnings == [] and "imu" not in err
+
+
+def test_run_with_blur_says_the_imu_is_missing(seq, tmp_path, capsys):
+    rc, imu_warnings, err = _run_warnings(["run", str(seq), "--methods", "classical-50", "-o", str(tmp_path / "r"),
+                                           "--blur", "consistent", "--no-progress"], capsys)
+    assert rc == 1 and "--blur consistent needs the recording's gyro (imu/imu.csv)" in err
+    assert len(imu_warnings) == 1 and "no imu/imu.csv" in imu_warnings[0]
+
+
+def test_dataset_run_without_blur_does_not_warn_about_the_imu(seq, tmp_path, capsys):
+    import shutil
+
+    root = tmp_path / "root"
+    shutil.copytree(seq, root / "a")
+    rc, imu_warnings, _ = _run_warnings(["run", str(root), "--sequences", "all", "--scheduler", "serial",
+                                         "--methods", "classical-50", "-o", str(tmp_path / "d"), "--no-progress"],
+                                        capsys)
+    assert rc == 0 and imu_warnings == []
