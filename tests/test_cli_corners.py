@@ -54,3 +54,20 @@ def test_dataset_run_without_blur_does_not_warn_about_the_imu(seq, tmp_path, cap
                                          "--methods", "classical-50", "-o", str(tmp_path / "d"), "--no-progress"],
                                         capsys)
     assert rc == 0 and imu_warnings == []
+
+
+def test_run_on_a_dataset_root_names_sequences(seq, tmp_path, capsys):
+    import shutil
+
+    root = tmp_path / "root"
+    for name in ("walk_a", "walk_b"):
+        shutil.copytree(seq, root / name)
+    (root / "calibration").mkdir()  # not a recording: not counted
+    assert main(["run", str(root), "--methods", "classical-50", "-o", str(tmp_path / "r"), "--no-progress"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err == (f"exposim run: error: {root}: a folder of 2 recording(s) (walk_a, walk_b), not one recording; "
+                   "pass --sequences all (or --sequences NAME,...) to run them, or give the recording's own folder")
+    assert not (tmp_path / "r").exists()
+    # a folder that is neither keeps the recording's own error
+    assert main(["run", str(root / "calibration"), "-o", str(tmp_path / "r"), "--no-progress"]) == 1
+    assert "no camera_left/ or camera_right/ folder" in capsys.readouterr().err

@@ -253,6 +253,7 @@ def _run(args) -> int:
                            "SEQUENCE/.exposim-frames")
     if args.sequences is not None:
         return _run_dataset(args)
+    _refuse_dataset_root(args.sequence)
     if args.scheduler not in (None, "serial") or args.scheduler_file is not None:
         raise ExposimError(f"--scheduler {args.scheduler or 'file'}: a single sequence runs serially; "
                            "pass --sequences all for a dataset run")
@@ -303,6 +304,23 @@ def _run(args) -> int:
         if bar is not None:
             bar.close()
     return _print_run_summary(args, summary)
+
+
+def _refuse_dataset_root(path: Path) -> None:
+    """A folder of recordings given as one recording: say which recordings and how to run them."""
+    from emulator.datasetrun import discover_sequences
+    from emulator.io.borealhdr import is_recording
+
+    if not path.is_dir() or is_recording(path):
+        return
+    try:
+        found = discover_sequences(path, "all")
+    except Exception:  # noqa: BLE001 - not a dataset root either: the recording's own error follows
+        return
+    names = list(found)
+    shown = ", ".join(names[:5]) + (f", ... ({len(names)} in all)" if len(names) > 5 else "")
+    raise ExposimError(f"{path}: a folder of {len(names)} recording(s) ({shown}), not one recording; pass "
+                       f"--sequences all (or --sequences NAME,...) to run them, or give the recording's own folder")
 
 
 def _print_run_summary(args, summary: dict) -> int:
