@@ -4,6 +4,7 @@ dataset root, ``info``'s response and calibration, the ``new-method`` hint."""
 from __future__ import annotations
 
 import json
+import sys
 import warnings
 
 import pytest
@@ -71,3 +72,29 @@ def test_run_on_a_dataset_root_names_sequences(seq, tmp_path, capsys):
     # a folder that is neither keeps the recording's own error
     assert main(["run", str(root / "calibration"), "-o", str(tmp_path / "r"), "--no-progress"]) == 1
     assert "no camera_left/ or camera_right/ folder" in capsys.readouterr().err
+
+
+def test_new_method_hint_says_how_to_get_pytest(tmp_path, capsys, monkeypatch):
+    """The hint runs pytest, which the 'test' extra installs and 'all' does not: without pytest it says so."""
+    assert main(["new-method", "my-ae", "--class-name", "MyAE", "-o", str(tmp_path / "a")]) == 0
+    out = capsys.readouterr().out
+    assert "pip install" not in out and f"try it:  cd {tmp_path / 'a'} && python -m pytest -q test_my_ae.py" in out
+    monkeypatch.setitem(sys.modules, "pytest", None)  # as when pytest is not installed (find_spec gives None)
+    try:
+        rc = main(["new-method", "my-ae", "--class-name", "MyAE", "-o", str(tmp_path / "b")])
+    finally:
+        monkeypatch.undo()
+    out = capsys.readouterr().out.splitlines()
+    assert rc == 0
+    assert out[-2] == "pytest is not installed (the 'all' extra does not bring it): pip install 'exposim[test]'"
+    assert out[-1].startswith(f"try it:  cd {tmp_path / 'b'} && python -m pytest -q test_my_ae.py")
+
+
+def test_the_test_extra_brings_pytest_and_all_does_not():
+    import tomllib
+    from pathlib import Path
+
+    optional = tomllib.loads((Path(__file__).resolve().parents[1] / "pyproject.toml").read_text())["project"][
+        "optional-dependencies"]
+    assert any(d.startswith("pytest") for d in optional["test"])
+    assert not any("test" in d or "pytest" in d for d in optional["all"])
