@@ -98,3 +98,31 @@ def test_the_test_extra_brings_pytest_and_all_does_not():
         "optional-dependencies"]
     assert any(d.startswith("pytest") for d in optional["test"])
     assert not any("test" in d or "pytest" in d for d in optional["all"])
+
+
+def test_info_names_the_response_and_the_calibration(sample_seq, capsys):
+    calib = sample_seq.parent / "calibration"
+    assert main(["info", str(sample_seq)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert f"response   {(calib / 'pcalib_inside1.txt').resolve()}" in lines
+    assert (f"calibration {(calib / 'september_2023').resolve()} (named for the recording's month "
+            f"(name {sample_seq.name}))") in lines
+    assert main(["info", str(sample_seq), "--json", "--calibration", str(calib / "april_2023")]) == 0
+    desc = json.loads(capsys.readouterr().out)
+    assert desc["response"] == str((calib / "pcalib_inside1.txt").resolve())
+    assert desc["calibration"] == {"folder": str((calib / "april_2023").resolve()), "reason": "given (--calibration)"}
+
+
+def test_info_says_when_nothing_is_found(seq, tmp_path, capsys):
+    import shutil
+
+    bare = tmp_path / "bare"
+    shutil.copytree(seq, bare)
+    shutil.rmtree(bare / "calibration")
+    assert main(["info", str(bare), "--json"]) == 0
+    desc = json.loads(capsys.readouterr().out)
+    assert desc["response"] is None and desc["calibration"]["folder"] is None
+    assert "no stereo calibration" in desc["calibration"]["reason"]
+    assert main(["info", str(bare)]) == 0
+    out = capsys.readouterr().out
+    assert "response   none found (exposim run needs --response FILE)" in out and "calibration none: " in out
