@@ -253,10 +253,10 @@ def _run(args) -> int:
                            "SEQUENCE/.exposim-frames")
     if args.sequences is not None:
         return _run_dataset(args)
-    _refuse_dataset_root(args.sequence)
     if args.scheduler not in (None, "serial") or args.scheduler_file is not None:
         raise ExposimError(f"--scheduler {args.scheduler or 'file'}: a single sequence runs serially; "
                            "pass --sequences all for a dataset run")
+    _refuse_dataset_root(args.sequence)
     from emulator.io.runfolder import RUN_FILE, read_run_json
     from emulator.playback import RunConfig
     from emulator.runner import run_to_folder
