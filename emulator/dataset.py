@@ -21,7 +21,7 @@ import numpy as np
 from emulator.errors import DatasetError
 from emulator.levels import Levels
 
-__all__ = ["CAMERAS", "Frame", "Cycle", "Sequence", "build_sequence", "group_cycles"]
+__all__ = ["CAMERAS", "Frame", "Cycle", "Sequence", "build_sequence", "group_cycles", "missing_text"]
 
 #: Camera names of a stereo rig, the method (and selector) camera first.
 CAMERAS = ("left", "right")
@@ -93,6 +93,11 @@ class Cycle:
     @property
     def partial(self) -> bool:
         return any(self.missing(c) for c in self.frames) or len(self.frames) == 0
+
+    def missing_by_camera(self, cameras=None) -> dict[str, list[float]]:
+        """``{camera: [exposure_ms, ...]}`` of the brackets missing, cameras with none left out."""
+        cams = self.frames if cameras is None else cameras
+        return {cam: self.missing(cam) for cam in cams if self.missing(cam)}
 
     def stereo_exposures(self) -> list[float]:
         """Exposures present for both cameras (with one timestamp each)."""
@@ -258,8 +263,12 @@ def build_sequence(
             cycles[index_of[fr.timestamp_ns]].frames[cam][fr.exposure_ms] = fr
     for c in cycles:
         for cam in per_camera:
-            miss = c.missing(cam)
-            if miss:
-                gaps.append(f"cycle {c.index}: {cam} missing {', '.join(f'{m:g}' for m in miss)} ms")
+            if c.missing(cam):
+                gaps.append(f"cycle {c.index}: {missing_text({cam: c.missing(cam)})}")
     return Sequence(Path(path), cycles, tuple(per_camera), brackets, int(white_level), int(black_level),
                     dict(metadata or {}), gaps)
+
+
+def missing_text(missing: dict) -> str:
+    """``{camera: [exposure_ms, ...]}`` in words: ``left missing 1 ms; right missing 1, 2, 4 ms``."""
+    return "; ".join(f"{cam} missing {', '.join(f'{float(m):g}' for m in ms)} ms" for cam, ms in missing.items() if ms)

@@ -216,7 +216,7 @@ def run_unit(unit: Unit, out_dir: str | os.PathLike, config) -> dict:
     final.parent.mkdir(parents=True, exist_ok=True)
     staging = final.parent / f".{unit.group}{_STAGING}{uuid.uuid4().hex[:12]}"
     t0 = time.perf_counter()
-    seq = load_sequence(unit.path)
+    seq = load_sequence(unit.path, imu_warning=config.blur != "none")  # the IMU is read only for blur
     extra = {"n_images": count_images(seq), "n_brackets": len(seq.brackets), "dataset_unit": unit.key}
     try:
         # the closed loop runs the methods under one BLAS thread (emulator.pools): the same

@@ -39,10 +39,16 @@ __all__ = [
     "check_exposure",
     "check_raw",
     "NOISE_MODES",
+    "UPWARD_RATIO_FLAG",
 ]
 
 #: Noise options of :func:`emulate`.
 NOISE_MODES = ("none", "consistent")
+
+#: Upward ratios above this are flagged in a run's report: at k = 8 one source DN becomes an 8 DN
+#: step (error about k/2 = 4 DN) and the shot noise is sqrt(8) = 2.8 times a capture's at the target;
+#: a complete sweep of brackets a factor 2 apart never needs more than 2 (docs/commands.md, Reports).
+UPWARD_RATIO_FLAG = 8.0
 
 #: Rows per gather block: the index conversion of a block stays in the CPU cache.
 _BLOCK_ROWS = 16

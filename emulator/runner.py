@@ -216,7 +216,7 @@ def write_run(sequence, methods, out_dir, config: RunConfig | None = None, *, re
         raise PlaybackError("out_dir is required")
     out = Path(os.path.abspath(out_dir))  # absolute: a method's os.chdir cannot split the folder
     cfg = RunConfig.from_kwargs(config, **settings)
-    seq = resolve_sequence(sequence)
+    seq = resolve_sequence(sequence, imu_warning=cfg.blur != "none")  # the IMU is read only for blur
     method_specs = parse_methods(methods) if isinstance(methods, str) else list(methods)
     stats = RunStats()
     prep = prepare_run(seq, method_specs, cfg, response, stats=stats)
@@ -238,6 +238,10 @@ def write_run(sequence, methods, out_dir, config: RunConfig | None = None, *, re
                                      writer.lock.owner["started"], hook)
             run_json.update(run_json_extra or {})
         run_json["jobs"] = cfg.jobs
+        partial = [{"cycle": c.index, "missing": c.missing_by_camera(seq.cameras)} for c in seq.cycles
+                   if c.missing_by_camera(seq.cameras)]
+        if partial:  # flagged in the report (emulator.report.run); absent when every cycle is complete
+            run_json["partial_cycles"] = partial
         writer.start(run_json, names, seq.cameras, cfg.save, cycles=[c.index for c in seq.cycles])  # resume: validated
         rows = _loop_into(writer, provider, built, cfg, stats, out, progress, len(seq.cycles))
         if hook is not None:

@@ -122,3 +122,54 @@ def test_never_overwrites_and_leaves_nothing_on_failure(run, tmp_path, capsys):
                         str(tmp_path / "y"), "--no-calibration")
     assert code == 1 and victim.name in err
     assert not (tmp_path / "y").exists() and not list(tmp_path.glob(".y.partial*"))
+
+
+@pytest.fixture(scope="module")
+def sample_run(sample_seq, tmp_path_factory):
+    out = tmp_path_factory.mktemp("export_sample") / "run"
+    assert main(["run", str(sample_seq), "--methods", "shim", "--save", "png16", "-o", str(out), "-q"]) == 0
+    return out
+
+
+def test_export_writes_the_extrinsics_bench_vo_would_refine(sample_run, tmp_path, capsys):
+    """On the shared sample the september_2023 files leave ~17 px of epipolar residual: export refines the
+    pose with bench vo's code, writes it as the rectification (R, P) of both cameras and says so."""
+    from emulator.io.export import EXPORT_FILE
+    from emulator.io.runfolder import read_run_folder
+    from emulator.metrics.stereo import load_stereo_calibration
+    from emulator.metrics.vo_bench import check_extrinsics
+
+    out = tmp_path / "tum"
+    code, _, err = _cli(capsys, "export", str(sample_run), "--method", "shim", "--format", "tum", "-o", str(out))
+    assert code == 0, err
+    meta = json.loads((out / EXPORT_FILE).read_text())["calibration_written"]
+    ext = meta["extrinsics"]
+    assert meta["written"] == "refined" and meta["folder"].endswith("september_2023") and ext["refined"] is True
+    before, after = ext["epipolar_residual_px"], ext["estimate"]["epipolar_residual_after_px"]
+    assert before > ext["threshold_px"] == 1.0 and after < 1.0
+    line = [ln for ln in err.splitlines() if ln.startswith("calibration: ")]
+    assert len(line) == 1 and f"epipolar residual {before:.2f} px -> {after:.2f} px" in line[0]
+    # the files read back as the refined pose, and the images fit them
+    written = load_stereo_calibration(out / "calibration")
+    np.testing.assert_allclose(written.R, np.array(ext["estimate"]["R"]), atol=1e-9)
+    np.testing.assert_allclose(written.T, np.array(ext["estimate"]["T_m"]), atol=1e-9)
+    given = load_stereo_calibration(meta["folder"])
+    np.testing.assert_array_equal(written.left.K, given.left.K)
+    np.testing.assert_array_equal(written.right.D, given.right.D)
+    run = read_run_folder(sample_run, ["shim"])
+    _, again = check_extrinsics(written, run.methods["shim"].frames, run)
+    assert again["refined"] is False and again["epipolar_residual_px"] < 1.0
+
+
+def test_export_as_given_when_asked(sample_run, tmp_path, capsys):
+    from emulator.io.camera_info import format_camera_info
+    from emulator.metrics.stereo import load_stereo_calibration
+
+    out = tmp_path / "given"
+    code, _, err = _cli(capsys, "export", str(sample_run), "--method", "shim", "--format", "tum", "-o", str(out),
+                        "--refine-extrinsics", "0")
+    assert code == 0, err
+    meta = json.loads((out / "export.json").read_text())["calibration_written"]
+    assert meta["written"] == "given" and "written as given (--refine-extrinsics 0: not checked)" in err
+    given = load_stereo_calibration(meta["folder"])
+    assert (out / "calibration" / "right.yaml").read_text() == format_camera_info(given.right)

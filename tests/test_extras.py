@@ -47,7 +47,9 @@ def test_shim_really_hides_the_module(tmp_path):
 
 
 @pytest.mark.parametrize("argv", [["synth", "forest_winter", "-o", "out"], ["render", "forest_winter", "-o", "out"],
-                                  ["demo", "-o", "out", "--quick"], ["validate", "emulation", "-o", "out", "--quick"]])
+                                  ["demo", "-o", "out", "--quick"], ["validate", "emulation", "-o", "out", "--quick"],
+                                  ["validate", "live", "-o", "out", "--quick"],
+                                  ["validate", "blur", "-o", "out", "--quick"]])
 def test_synthetic_commands_without_the_extra_fail_in_one_line_naming_it(tmp_path, argv):
     got = exposim_without(tmp_path, SYNTH_AND_DASK, *argv)
     assert got.returncode == 1
@@ -56,6 +58,33 @@ def test_synthetic_commands_without_the_extra_fail_in_one_line_naming_it(tmp_pat
     assert lines[0] == (f"exposim {argv[0]}: error: the 'synth' extra is not installed (no module mitsuba): "
                         "pip install 'exposim[synth]'")
     assert not (tmp_path / "out").exists()  # refused before any output
+
+
+def _leaf_commands(parser, words=()):
+    """(words, parser) of every command that runs something (sub-commands of sub-commands too)."""
+    import argparse
+
+    subs = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    if not subs:
+        yield words, parser
+        return
+    for name, child in subs[0].choices.items():
+        yield from _leaf_commands(child, (*words, name))
+
+
+def test_every_command_of_the_synthetic_layer_declares_the_synth_extra():
+    """A command whose code lives in synth, scenes or validation renders or reads renders: the
+    dispatcher must check the 'synth' extra before it runs (one line, no output), not the walk."""
+    from emulator.cli import build_parser
+
+    checked = []
+    for words, parser in _leaf_commands(build_parser()):
+        func = parser.get_default("func")
+        module = getattr(func, "__module__", "") or ""
+        if module.split(".", 1)[0] in ("synth", "scenes", "validation"):
+            assert "synth" in (parser.get_default("extras") or ()), " ".join(words)
+            checked.append(" ".join(words))
+    assert {"validate live", "validate blur", "demo", "render", "synth"} <= set(checked)
 
 
 def test_real_data_commands_run_without_the_extras(tmp_path, sample_seq):

@@ -43,6 +43,7 @@ def _info(args) -> int:
         seq = load_sequence(args.sequence, frame_cache=args.frame_cache)
     desc = seq.describe()
     desc["imu"], desc["blur"] = _motion(seq, args)
+    desc["response"], desc["calibration"] = _found_files(seq, args.calibration)
     if args.json:
         print(json.dumps(desc, indent=1))
         return 0
@@ -50,6 +51,9 @@ def _info(args) -> int:
     print(f"cameras    {', '.join(seq.cameras)}")
     print(f"brackets   {', '.join(f'{b:g}' for b in seq.brackets)} ms")
     print(f"levels     black {seq.black_level}, white {seq.white_level}")
+    print(f"response   {desc['response'] or 'none found (exposim run needs --response FILE)'}")
+    cal = desc["calibration"]
+    print(f"calibration {cal['folder']} ({cal['reason']})" if cal["folder"] else f"calibration none: {cal['reason']}")
     print(f"cycles     {len(seq)} ({len(seq) - len(seq.partial_cycles)} complete, partial: {seq.partial_cycles or 'none'})")
     for c in desc["cycles"]:
         cams = "  ".join(f"{cam}: {len(c.get(cam, {}))}/{len(seq.brackets)}" for cam in seq.cameras)
@@ -60,6 +64,23 @@ def _info(args) -> int:
             print(f"  {g}")
     _print_blur(seq, desc["imu"], desc["blur"])
     return 0
+
+
+def _found_files(seq, calibration) -> tuple[str | None, dict]:
+    """(the response file a run would use, the stereo calibration bench vo and export would use, and why)."""
+    from emulator.errors import CalibrationError
+    from emulator.io.borealhdr import find_response
+    from emulator.metrics.stereo_calibration import choose_calibration
+
+    response = find_response(seq.path)
+    try:
+        choice = choose_calibration(seq.path, calibration, seq.cycles[0].timestamp_ns if seq.cycles else None)
+        cal = {"folder": str(Path(choice.folder).resolve()), "reason": choice.reason}
+    except CalibrationError as exc:
+        if calibration is not None:
+            raise
+        cal = {"folder": None, "reason": str(exc)}
+    return (str(Path(response).resolve()) if response is not None else None), cal
 
 
 def _motion(seq, args) -> tuple[dict | None, dict | None]:

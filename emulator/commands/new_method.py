@@ -151,6 +151,18 @@ def _new_method(args) -> int:
         print(f"wrote {out / fname}")
     module = next(iter(files))[:-3]
     cls = args.class_name or files[next(iter(files))].split("class ", 1)[1].split(":", 1)[0]
+    if not _has_pytest():
+        print("pytest is not installed (the 'all' extra does not bring it): pip install 'exposim[test]'")
     print(f"try it:  cd {out} && python -m pytest -q test_{module}.py && "
           f"PYTHONPATH=. exposim run SEQ --methods all,{module}:{cls} -o RUN")
     return 0
+
+
+def _has_pytest() -> bool:
+    """Whether ``python -m pytest`` can run the test skeleton (pytest comes with the ``test`` extra)."""
+    import importlib.util
+
+    try:
+        return importlib.util.find_spec("pytest") is not None
+    except (ImportError, ValueError):
+        return False

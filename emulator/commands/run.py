@@ -75,6 +75,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "a synthetic recording's exposim.json carries")
     p.add_argument("--noise-seed", type=int, default=None,
                    help="seed of the added noise (default 0); the same seed gives the same bytes")
+    p.add_argument("--skip-partial", action="store_true",
+                   help="leave out every cycle missing a bracket on either camera (default: use the brackets that are "
+                        "there; partial cycles and upward ratios above 8 are flagged in the report either way)")
     p.add_argument("--resume", action="store_true",
                    help="continue an interrupted run in OUTDIR (its run.json gives the configuration)")
     p.add_argument("--sequences", default=None, metavar="all|NAME,...",
@@ -151,6 +154,8 @@ def _command(args) -> str:
         parts += ["--jobs", str(args.jobs)]
     if getattr(args, "blur_aware", False):
         parts.append("--blur-aware")
+    if getattr(args, "skip_partial", False):
+        parts.append("--skip-partial")
     if args.resume:
         parts.append("--resume")
     if getattr(args, "method_timeout_s", None) is not None:
@@ -162,7 +167,7 @@ def _command(args) -> str:
 _FLAGS = {"initial_ms": "--initial-ms", "range_ms": "--range-ms", "jobs": "--jobs", "noise_seed": "--noise-seed",
           "png_level": "--png-level", "blur": "--blur", "blur_aware": "--blur-aware",
           "method_timeout_s": "--method-timeout-s", "selector": "--selector", "mode": "--mode", "save": "--save",
-          "noise": "--noise"}
+          "noise": "--noise", "skip_partial": "--skip-partial"}
 
 
 def _given(args) -> dict:
@@ -177,7 +182,8 @@ def _given(args) -> dict:
             "save": args.save, "noise": args.noise, "noise_model": args.noise_model, "noise_seed": args.noise_seed,
             "method_timeout_s": args.method_timeout_s,
             "response_path": str(args.response) if args.response is not None else None,
-            "png_level": args.png_level, "blur": args.blur, "blur_aware": True if args.blur_aware else None}
+            "png_level": args.png_level, "blur": args.blur, "blur_aware": True if args.blur_aware else None,
+            "skip_partial": True if getattr(args, "skip_partial", False) else None}
 
 
 def config_from_args(args, base=None):
@@ -252,6 +258,7 @@ def _run(args) -> int:
     if args.scheduler not in (None, "serial") or args.scheduler_file is not None:
         raise ExposimError(f"--scheduler {args.scheduler or 'file'}: a single sequence runs serially; "
                            "pass --sequences all for a dataset run")
+    _refuse_dataset_root(args.sequence)
     from emulator.io.runfolder import RUN_FILE, read_run_json
     from emulator.playback import RunConfig
     from emulator.runner import run_to_folder
@@ -291,7 +298,7 @@ def _run(args) -> int:
     if args.frame_cache is not None:  # a frame cache elsewhere (a read-only recording)
         from emulator.io.borealhdr import load_sequence
 
-        source = load_sequence(args.sequence, frame_cache=args.frame_cache)
+        source = load_sequence(args.sequence, frame_cache=args.frame_cache, imu_warning=config.blur != "none")
     try:
         summary = run_to_folder(source, methods or "all", args.output, config, resume=args.resume,
                                 progress=progress, command=_command(args))
@@ -299,6 +306,23 @@ def _run(args) -> int:
         if bar is not None:
             bar.close()
     return _print_run_summary(args, summary)
+
+
+def _refuse_dataset_root(path: Path) -> None:
+    """A folder of recordings given as one recording: say which recordings and how to run them."""
+    from emulator.datasetrun import discover_sequences
+    from emulator.io.borealhdr import is_recording
+
+    if not path.is_dir() or is_recording(path):
+        return
+    try:
+        found = discover_sequences(path, "all")
+    except Exception:  # noqa: BLE001 - not a dataset root either: the recording's own error follows
+        return
+    names = list(found)
+    shown = ", ".join(names[:5]) + (f", ... ({len(names)} in all)" if len(names) > 5 else "")
+    raise ExposimError(f"{path}: a folder of {len(names)} recording(s) ({shown}), not one recording; pass "
+                       f"--sequences all (or --sequences NAME,...) to run them, or give the recording's own folder")
 
 
 def _print_run_summary(args, summary: dict) -> int:
@@ -314,6 +338,7 @@ def _print_run_summary(args, summary: dict) -> int:
         mean = m["mean_exposure_ms"]
         print(f"  {name:13s} mean {mean:8.3f} ms  next (after last frame) {m['final_exposure_ms']:8.3f} ms  "
               f"sat {m['mean_saturated_fraction']:.2%}" if mean is not None else f"  {name:13s} no cycle")
+    _print_flags(summary.get("flags"))
     timing = summary.get("timing") or {}
     if timing.get("cycles_per_s"):
         steady = timing.get("steady_cycles_per_s")
@@ -327,6 +352,22 @@ def _print_run_summary(args, summary: dict) -> int:
     if (args.output / "report.html").is_file():
         print(f"report      {args.output / 'report.html'} (open in a browser)")
     return rc
+
+
+def _print_flags(flags: dict | None) -> None:
+    """The report's flags in one or two lines (nothing when nothing was flagged)."""
+    if flags is None:
+        return
+    partial = flags["partial_cycles"]
+    if partial:
+        skipped = flags["partial_cycles_skipped"]
+        print(f"partial     {len(partial)} cycle(s) missing brackets ({', '.join(str(p['cycle']) for p in partial)})"
+              + (f", {skipped} left out (--skip-partial)" if skipped else ", used (--skip-partial leaves them out)"))
+    above = {n: m for n, m in flags["methods"].items() if m["cycles_above_ratio_bound"]}
+    if above:
+        print(f"ratio > {flags['upward_ratio_bound']:g}   " + ", ".join(
+            f"{n}: {m['cycles_above_ratio_bound']} cycle(s), largest {m['worst_upward_ratio']:.3g}"
+            for n, m in above.items()))
 
 
 def _check_methods_once(methods: str, run_options: dict) -> None:

@@ -355,6 +355,7 @@ def load_sequence(
     black_level: int | None = None,
     source: FileSource | None = None,
     frame_cache=None,
+    imu_warning: bool = True,
 ) -> Sequence:
     """Read a recording in the BorealHDR layout into cycles (images decode lazily).
 
@@ -366,7 +367,9 @@ def load_sequence(
     replaces the file system (default: :class:`ZipSource` when ``path`` is a file (a
     trajectory zip), else :class:`FolderSource` of ``path``).  ``frame_cache``:
     a decoded-frame cache folder (:mod:`emulator.io.framecache`), ``False`` for none, or
-    None to use ``<sequence>/.exposim-frames`` when it exists (folders only).
+    None to use ``<sequence>/.exposim-frames`` when it exists (folders only).  ``imu_warning``:
+    warn (once, :class:`~emulator.io.imu.ImuMissingWarning`) when there is no ``imu/imu.csv``;
+    False for a reader that does not need the IMU (a run without ``blur="consistent"``).
     """
     root = Path(path)
     if source is None:
@@ -398,7 +401,7 @@ def load_sequence(
     _check_sizes(source, per_camera, root)
     seq = build_sequence(root, per_camera, white_level=white, black_level=black,
                          brackets_ms=meta.get("brackets_ms", ()), metadata=meta, gaps=gaps)
-    seq.imu = read_imu(root, source)  # None (and one ImuMissingWarning) without imu/imu.csv
+    seq.imu = read_imu(root, source, warn=imu_warning)  # None (and one ImuMissingWarning) without imu/imu.csv
     return seq
 
 

@@ -23,15 +23,17 @@ Pixels: a ``--save png8`` run is exported as saved (8-bit grey, ROS ``mono8``); 
 ``mono8=True`` as 8-bit grey by the fixed scale of :func:`emulator.gray.bayer_to_gray8`
 (what the feature and VO benchmarks see; most SLAM front ends expect 8 bits).
 
-The calibration files (``left.yaml``, ``right.yaml``) are copied to ``calibration/`` in
-every layout when known.  They hold the calibration as given; the extrinsics refinement of
-``bench vo`` is not applied to them.  An existing output folder is never written into: the
+The calibration files (``left.yaml``, ``right.yaml``) are written to ``calibration/`` in
+every layout when known: as given, or, where ``exposim export`` refined the extrinsics with
+``bench vo``'s check, with the rectification (R, P) of the refined pose.  ``export.json``
+records what was exported and which calibration (the caller's ``metadata``).  An existing output folder is never written into: the
 export goes to a temporary sibling folder renamed to the output at the end, so a failed
 export leaves nothing behind.
 """
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 from pathlib import Path
@@ -46,7 +48,7 @@ from emulator.io.files import atomic_write_bytes
 from emulator.io.png import encode_png, read_image
 from emulator.io.runfolder import MethodRun, RunFolder
 
-__all__ = ["EXPORT_FORMATS", "CAMERA_TOPICS", "export_method", "frame_pixels"]
+__all__ = ["EXPORT_FORMATS", "EXPORT_FILE", "CAMERA_TOPICS", "export_method", "frame_pixels"]
 
 #: Formats of :func:`export_method`.
 EXPORT_FORMATS = ("euroc", "tum", "rosbag2")
@@ -189,8 +191,12 @@ def _export_rosbag2(method, run, bag: Path, cameras, calib, mono8: bool) -> dict
                              + [f"{CAMERA_TOPICS[c][1]}/camera_info" for c in info_conn])}
 
 
+#: The export's metadata file, in the output folder.
+EXPORT_FILE = "export.json"
+
+
 def export_method(run: RunFolder, method: str, out_dir: str | os.PathLike, fmt: str, *, calibration=None,
-                  mono8: bool = False) -> dict:
+                  mono8: bool = False, metadata: dict | None = None) -> dict:
     """Export one method's images of a run folder (module docstring for the layouts).
 
     Parameters
@@ -207,6 +213,8 @@ def export_method(run: RunFolder, method: str, out_dir: str | os.PathLike, fmt: 
         ``camera_info``; None writes no calibration.
     mono8 : bool
         Export png16 runs as 8-bit grey (default: 16-bit grey in DN).
+    metadata : dict, optional
+        More keys for ``export.json`` (e.g. ``calibration``: which one was written and why).
 
     Returns
     -------
@@ -242,10 +250,13 @@ def export_method(run: RunFolder, method: str, out_dir: str | os.PathLike, fmt: 
         if calibration is not None:
             for cam, info in (("left", calibration.left), ("right", calibration.right)):
                 _write(tmp / "calibration" / f"{cam}.yaml", format_camera_info(info).encode())
+        result = {"format": fmt, "method": method, "cameras": list(cameras), "output": str(out),
+                  "calibration": None if calibration is None else str(calibration.left.path.parent), **summary}
+        _write(tmp / EXPORT_FILE, (json.dumps({"run": str(run.path), **result, **(metadata or {}),
+                                               "output": str(out)}, indent=1) + "\n").encode())
         if out.exists():
             out.rmdir()  # an empty folder: nothing is overwritten
         tmp.rename(out)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
-    return {"format": fmt, "method": method, "cameras": list(cameras), "output": str(out),
-            "calibration": None if calibration is None else str(calibration.left.path.parent), **summary}
+    return {**result, **(metadata or {})}

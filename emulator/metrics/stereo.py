@@ -26,6 +26,7 @@ row tolerance, and records the measurement and the decision in its results.
 from __future__ import annotations
 
 from collections.abc import Iterable
+import dataclasses
 from dataclasses import dataclass, field
 
 import cv2
@@ -53,6 +54,7 @@ __all__ = [
     "estimate_stereo_extrinsics",
     "StereoRectification",
     "stereo_rectification",
+    "rectified_camera_infos",
     "rotation_angle_deg",
 ]
 
@@ -343,18 +345,7 @@ def stereo_rectification(
         raise MetricsError(f"scale must lie in (0, 1], got {scale}")
     size = calibration.image_size
     out_size = (max(1, round(size[0] * scale)), max(1, round(size[1] * scale)))
-    R1, R2, P1, P2, *_ = cv2.stereoRectify(
-        calibration.left.K,
-        calibration.left.D,
-        calibration.right.K,
-        calibration.right.D,
-        size,
-        calibration.R,
-        calibration.T.reshape(3, 1),
-        flags=cv2.CALIB_ZERO_DISPARITY,
-        alpha=alpha,
-        newImageSize=out_size,
-    )
+    R1, R2, P1, P2 = _stereo_rectify(calibration, alpha, out_size)
     maps = (
         cv2.initUndistortRectifyMap(calibration.left.K, calibration.left.D, R1, P1, out_size, cv2.CV_16SC2),
         cv2.initUndistortRectifyMap(calibration.right.K, calibration.right.D, R2, P2, out_size, cv2.CV_16SC2),
@@ -365,3 +356,33 @@ def stereo_rectification(
     return StereoRectification(
         K=P1[:3, :3].copy(), baseline_m=baseline, R1=R1.copy(), size=out_size, input_size=size, _maps=maps
     )
+
+
+def _stereo_rectify(calibration: StereoCalibration, alpha: float, out_size: tuple[int, int]):
+    """``R1, R2, P1, P2`` of ``cv2.stereoRectify`` (zero disparity at infinity)."""
+    R1, R2, P1, P2, *_ = cv2.stereoRectify(
+        calibration.left.K,
+        calibration.left.D,
+        calibration.right.K,
+        calibration.right.D,
+        calibration.image_size,
+        calibration.R,
+        calibration.T.reshape(3, 1),
+        flags=cv2.CALIB_ZERO_DISPARITY,
+        alpha=alpha,
+        newImageSize=out_size,
+    )
+    return R1, R2, P1, P2
+
+
+def rectified_camera_infos(calibration: StereoCalibration):
+    """The rig as two ROS ``camera_info`` records whose ``R`` and ``P`` are the rectification of its
+    relative pose (:func:`stereo_rectification`'s, alpha 0, full size); K and D as calibrated.
+
+    Reading them back (:func:`~emulator.metrics.stereo_calibration.load_stereo_calibration`) gives
+    this rig's R and T, so a refined pose (:meth:`StereoCalibration.with_extrinsics`) is written
+    this way.
+    """
+    R1, R2, P1, P2 = _stereo_rectify(calibration, 0.0, calibration.image_size)
+    return (dataclasses.replace(calibration.left, R=R1.copy(), P=P1.copy()),
+            dataclasses.replace(calibration.right, R=R2.copy(), P=P2.copy()))

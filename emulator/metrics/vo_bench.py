@@ -34,6 +34,7 @@ from emulator.report.html import write_report
 
 __all__ = [
     "bench_vo",
+    "check_extrinsics",
     "FAILURE_POLICY",
     "DEFAULT_DELTA_FRACTIONS",
     "REFERENCE_MAX_DIFF_S",
@@ -123,6 +124,21 @@ def evo_result_path(out: Path, relation: str, delta_m: float, method: str) -> Pa
     ``evo/rpe_<relation>_<delta>m/<method>.zip`` (``evo_res evo/rpe_trans_1.00m/*.zip``
     compares the methods at one pair length)."""
     return out / "evo" / f"rpe_{relation}_{delta_m:.2f}m" / f"{method}.zip"
+
+
+def check_extrinsics(calib, frames, run: RunFolder, mode="auto", parameters: VOParameters | None = None):
+    """``bench vo``'s extrinsics check and refinement (the same code): ``(calibration, record)``.
+
+    ``frames``: a method's run frames (stereo pairs); ``mode``: ``"auto"``, 0 or a number of
+    pairs.  ``record`` holds ``epipolar_residual_px``, ``refined``, ``reason`` and, when
+    refined, ``estimate`` (with ``epipolar_residual_after_px``); ``limitations`` when refinement
+    was needed and failed.
+    """
+    limitations: list[str] = []
+    calib, record = _refine(calib, frames, run, mode, parameters or VOParameters(), limitations)
+    if limitations:
+        record["limitations"] = limitations
+    return calib, record
 
 
 def _refine(calib, frames, run: RunFolder, mode, parameters: VOParameters, limitations: list[str]):

@@ -44,7 +44,8 @@ DEFAULT_INITIAL_MS = 4.0
 DEFAULT_SELECTOR = "higher-no-sat"
 MODES = ("paper", "borealhdr")
 #: Keys of ``run.json`` that are the configuration (a resume compares these).
-CONFIG_KEYS = ("selector", "initial_ms", "range_ms", "save", "mode", "options", "method_timeout_s", "noise", "blur")
+CONFIG_KEYS = ("selector", "initial_ms", "range_ms", "save", "mode", "options", "method_timeout_s", "noise", "blur",
+               "skip_partial")
 
 
 def parse_option(text: str) -> tuple[str, str, object]:
@@ -131,6 +132,10 @@ class RunConfig:
     png_level : int
         zlib level of the saved images, 0..9 (default 0: stored, the fastest to write and read;
         the decoded images are the same for any level, :func:`emulator.io.png.encode_png`).
+    skip_partial : bool
+        Leave out every cycle missing a bracket on either camera (``--skip-partial``; skipped
+        cycles are listed with what was missing).  ``run.json`` records ``"skip_partial": true``
+        when set (absent: false, as in folders from before the setting).
     """
 
     initial_ms: float = DEFAULT_INITIAL_MS
@@ -148,6 +153,7 @@ class RunConfig:
     png_level: int = 0
     blur: str = "none"
     blur_aware: bool = False
+    skip_partial: bool = False
 
     def __post_init__(self) -> None:
         from emulator.select import SELECTORS
@@ -206,6 +212,9 @@ class RunConfig:
         if self.blur_aware and self.selector != "higher-no-sat":
             raise PlaybackError(f"blur_aware: the blur-aware selection refines selector higher-no-sat, not "
                                 f"{self.selector!r}")
+        if not isinstance(self.skip_partial, (bool, np.bool_)):
+            raise PlaybackError(f"skip_partial must be true or false, got {self.skip_partial!r}")
+        put(self, "skip_partial", bool(self.skip_partial))
         if isinstance(self.noise_model, Path):
             put(self, "noise_model", str(self.noise_model))
 
@@ -327,6 +336,7 @@ class RunConfig:
             "blur": (blur_hook.describe() if blur_hook is not None else
                      {"mode": self.blur, **({"placement": DEFAULT_PLACEMENT} if self.blur == "consistent" else {}),
                       **({"blur_aware": True} if self.blur_aware else {})}),
+            **({"skip_partial": True} if self.skip_partial else {}),
         })
 
     @classmethod
@@ -354,6 +364,7 @@ class RunConfig:
             png_level=int(run_json.get("png_level", 1)),  # folders from before the setting: level 1
             blur=(run_json.get("blur") or {}).get("mode", "none"),  # folders from before --blur: none
             blur_aware=bool((run_json.get("blur") or {}).get("blur_aware", False)),
+            skip_partial=bool(run_json.get("skip_partial", False)),
         )
 
     def resumed(self, recorded: Mapping, given: Iterable[str] = CONFIG_KEYS, *, where: str = "run.json",

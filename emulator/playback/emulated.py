@@ -22,7 +22,7 @@ import cv2
 import numpy as np
 
 from emulator.autoexposure.isolation import readonly_view
-from emulator.dataset import CAMERAS
+from emulator.dataset import CAMERAS, missing_text
 from emulator.emulate import apply_lut
 from emulator.errors import DatasetError
 from emulator.playback.config import RunConfig
@@ -139,6 +139,8 @@ class EmulatedTick:
         self.missing = {c: cycle.missing(c) for c in p.cameras}
         avail = cycle.available(p.cameras)
         self.skipped = None if avail else "no bracket present for every camera"
+        if self.skipped is None and p.skip_partial and any(self.missing.values()):
+            self.skipped = "partial cycle left out (--skip-partial): " + missing_text(self.missing)
         self.images = images = _CycleImages(cycle, p.white, p.black, p.stats, p.noise, shapes, p.blur)
         lead = p.cameras[0]
         # the closures hold the images, not the tick: no reference cycle, so a cycle's decoded
@@ -227,6 +229,7 @@ class EmulatedProvider:
         self.cameras = tuple(cameras)
         self.noise = noise
         self.blur = blur
+        self.skip_partial = bool(getattr(config, "skip_partial", False))
         self.stats = stats if stats is not None else RunStats()
         self._cycles = None if cycles is None else list(cycles)
 

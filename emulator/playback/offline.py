@@ -19,11 +19,12 @@ from emulator.playback.records import CycleStep, MethodStep, RunResult, RunStats
 __all__ = ["iter_run", "run", "prepare_run", "Prepared", "resolve_sequence"]
 
 
-def resolve_sequence(sequence) -> Sequence:
-    """A loaded :class:`~emulator.dataset.Sequence`, or the recording at this path."""
+def resolve_sequence(sequence, *, imu_warning: bool = True) -> Sequence:
+    """A loaded :class:`~emulator.dataset.Sequence`, or the recording at this path (``imu_warning``:
+    :func:`~emulator.io.borealhdr.load_sequence`'s)."""
     from emulator.io.borealhdr import load_sequence
 
-    return sequence if isinstance(sequence, Sequence) else load_sequence(sequence)
+    return sequence if isinstance(sequence, Sequence) else load_sequence(sequence, imu_warning=imu_warning)
 
 
 class Prepared(NamedTuple):
@@ -45,7 +46,7 @@ def prepare_run(sequence, methods, config: RunConfig, response=None, *, stats: R
     model, the blur hook (``blur``, else ``config``'s), and the emulated provider."""
     from emulator.autoexposure.methodset import build_methods
 
-    seq = resolve_sequence(sequence)
+    seq = resolve_sequence(sequence, imu_warning=config.blur != "none")  # the IMU is read only for blur
     response = config.response_for(seq, response)
     built = build_methods(methods, mode=config.mode, response=response, options=config.options)
     model, source = config.noise_for(seq, response)

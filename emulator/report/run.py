@@ -17,7 +17,8 @@ from emulator.io.runfolder import read_run_json, read_tables
 from emulator.report.figures import legend_outside, log_ticks_at, new_figure, plural, same_as, save
 from emulator.report.words import mode_words, selector_words
 
-__all__ = ["PLOT_FILE", "summarise_run", "exposure_figure", "plot_exposure", "run_markdown", "write_run_report"]
+__all__ = ["PLOT_FILE", "summarise_run", "run_flags", "exposure_figure", "plot_exposure", "run_markdown",
+           "write_run_report"]
 
 #: The exposure-against-time figure of a run.
 PLOT_FILE = "exposure.png"
@@ -79,7 +80,7 @@ def summarise_run(run_dir: str | os.PathLike, info: dict | None = None, tables: 
         "mean_saturated_fraction": compare_methods({n: tables[n]["saturated_fraction"] for n in names}, "mean",
                                                    higher_is_better=False, block=True, seed=1),
     }
-    return {
+    summary = {
         "intervals": intervals,
         "run": str(run_dir),
         "sequence": info.get("sequence"),
@@ -93,6 +94,66 @@ def summarise_run(run_dir: str | os.PathLike, info: dict | None = None, tables: 
         "methods": methods,
         "timing": info.get("timing"),
     }
+    flags = run_flags(info, tables)
+    if flags is not None:  # only where something is flagged: other runs' results stay as they were
+        summary["flags"] = flags
+    return summary
+
+
+def run_flags(info: dict, tables: dict) -> dict | None:
+    """What a run emulated from less than a full sweep, or None when nothing needs a flag.
+
+    ``partial_cycles``: the recording's cycles missing a bracket on either camera, with what
+    was missing (``run.json``); per method, how many of its cycles were partial, how many
+    were emulated upwards by more than :data:`~emulator.emulate.UPWARD_RATIO_FLAG`, and its
+    largest upward ratio (None when it never emulated upwards).
+    """
+    from emulator.emulate import UPWARD_RATIO_FLAG
+
+    partial = list(info.get("partial_cycles") or [])
+    partial_set = {int(p["cycle"]) for p in partial}
+    per_method = {}
+    for name, t in tables.items():
+        ratio = np.asarray(t["ratio"], dtype=float)
+        up = ratio[ratio > 1.0]
+        per_method[name] = {
+            "partial_cycles_used": int(sum(int(c) in partial_set for c in t["cycle"])),
+            "cycles_above_ratio_bound": int(np.sum(ratio > UPWARD_RATIO_FLAG)),
+            "worst_upward_ratio": float(up.max()) if up.size else None,
+        }
+    if not partial and not any(m["cycles_above_ratio_bound"] for m in per_method.values()):
+        return None
+    skipped = {int(s["cycle"]) for s in info.get("skipped_cycles") or [] if isinstance(s, dict)}
+    return {
+        "upward_ratio_bound": UPWARD_RATIO_FLAG,
+        "partial_cycles": partial,
+        "partial_cycles_skipped": sum(int(p["cycle"]) in skipped for p in partial),
+        "methods": per_method,
+    }
+
+
+def _flags_markdown(flags: dict) -> list[str]:
+    """The report's section on partial cycles and large upward ratios."""
+    from emulator.dataset import missing_text
+
+    bound = flags["upward_ratio_bound"]
+    partial = flags["partial_cycles"]
+    lines = ["", "Flags (partial cycles and large upward ratios):", ""]
+    if partial:
+        lines.append(f"Partial cycles (a bracket missing on either camera): {len(partial)}"
+                     + (f", {flags['partial_cycles_skipped']} of them left out (--skip-partial)"
+                        if flags["partial_cycles_skipped"] else
+                        "; their images come from the brackets that are there (--skip-partial leaves them out)"))
+        lines += [f"- cycle {p['cycle']}: {missing_text(p['missing'])}" for p in partial]
+        lines.append("")
+    lines += [f"Emulating up by a ratio k stretches one bracket DN into k DN and raises the noise by about sqrt(k); "
+              f"ratios above {bound:g} are flagged (with brackets a factor 2 apart and the default clamp, a "
+              "complete sweep never needs more than 2).", "",
+              f"| method | partial cycles used | cycles with ratio > {bound:g} | largest upward ratio |",
+              "| --- | ---: | ---: | ---: |"]
+    lines += [f"| {n} | {m['partial_cycles_used']} | {m['cycles_above_ratio_bound']} | "
+              f"{_fmt(m['worst_upward_ratio'], '.3g')} |" for n, m in flags["methods"].items()]
+    return lines
 
 
 def _mode(info: dict, name: str) -> str:
@@ -146,11 +207,19 @@ def _fmt(v, spec=".3g"):
 
 def run_markdown(info: dict, summary: dict) -> str:
     """The markdown report of a run."""
+    flags = summary.get("flags")
+    flagged = ""
+    if flags is not None:
+        above = sum(1 for m in flags["methods"].values() if m["cycles_above_ratio_bound"])
+        flagged = (f" ({len(flags['partial_cycles'])} partial"
+                   + (f", {flags['partial_cycles_skipped']} left out" if flags["partial_cycles_skipped"] else "")
+                   + (f"; {above} method(s) emulated up by more than {flags['upward_ratio_bound']:g}x" if above else "")
+                   + ": see Flags)")
     lines = [
         f"# AE closed-loop run: {Path(info.get('sequence', '')).name}",
         "",
         f"- sequence: `{info.get('sequence')}`",
-        f"- status: {info.get('status')}, cycles {info.get('cycles_done')}/{info.get('n_cycles')}",
+        f"- status: {info.get('status')}, cycles {info.get('cycles_done')}/{info.get('n_cycles')}{flagged}",
         f"- methods: {mode_words(info.get('mode'))} (`--mode {info.get('mode')}`)",
         f"- brackets chosen by {selector_words(info.get('selector'))} (`--selector {info.get('selector')}`; the left "
         "camera's saturation decides for both)",
@@ -205,6 +274,8 @@ def run_markdown(info: dict, summary: dict) -> str:
     lines += ["", f"Skipped cycles: {len(skipped)}"]
     for s in skipped:
         lines.append(f"- cycle {s['cycle']}: {s['reason']}")
+    if flags is not None:
+        lines += _flags_markdown(flags)
     timing = summary.get("timing") or {}
     if timing:
         lines += [

@@ -46,7 +46,7 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
 def register(vsub) -> None:
     q = vsub.add_parser("blur", help=HELP, description=HELP)
     add_arguments(q)
-    q.set_defaults(func=run_from_args, experiment="blur")
+    q.set_defaults(func=run_from_args, experiment="blur", extras=("synth",))  # renders walks: checked up front
 
 
 def config_from_args(args) -> BlurConfig:

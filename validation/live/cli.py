@@ -95,7 +95,8 @@ def register(vsub) -> argparse.ArgumentParser:
     """Add ``live`` to the sub-parsers of ``exposim validate``."""
     q = vsub.add_parser("live", help=HELP, description=DESCRIPTION)
     add_arguments(q)
-    q.set_defaults(func=lambda args: run(args, "exposim validate live"), experiment="live")
+    q.set_defaults(func=lambda args: run(args, "exposim validate live"), experiment="live",
+                   extras=("synth",))  # renders walks: checked before any output (emulator.cli)
     return q
 
 
