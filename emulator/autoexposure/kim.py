@@ -74,6 +74,7 @@ __all__ = [
     "metric_paper",
     "softmax_weights",
     "local_entropy",
+    "merge_repeats",
 ]
 
 #: Activation slope alpha = 2^4 of pi = 2 / (1 + exp(-alpha H~ + tau)) - 1 (Kim's hytansigmoid).
@@ -238,6 +239,36 @@ def metric_paper(y: np.ndarray, *, alpha=ACTIVATION_ALPHA, tau=ACTIVATION_TAU,
     return float(np.dot(w, qv) + qv.mean() * np.dot(act * mask, w))
 
 
+def merge_repeats(t, e, noise: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Window points at the same exposure merged: (exposures, mean metric, noise / count), first-seen order.
+
+    k observations y_i = f(t) + e_i, e_i ~ N(0, noise), at one exposure carry the same information
+    about f as their mean with noise / k: the posterior is identical, and the log marginal likelihood
+    differs by a term that does not depend on the kernel's hyperparameters, so the best fit is the
+    same.  Numerically they are not the same: two equal rows in K (exposure clamped at the grid end
+    twice, or an unchanged proposal) with a noise of 0.2 against metric values of 1e3-1e4 make K
+    near-singular (condition ~ amplitude / 0.2 up to 5e12) and the likelihood a flat plateau around
+    -(y_1 - y_2)^2 / (4 noise), about -2.6e6 on a real window, where the optimizer stops anywhere
+    and its stopping point follows SciPy's L-BFGS-B implementation (measured: the paper-mode
+    trajectory on the upstream sample parted at cycle 6 between SciPy 1.14 and 1.17).
+    """
+    xs: list[float] = []
+    sums: list[float] = []
+    counts: list[int] = []
+    for ti, ei in zip(t, e):
+        ti = float(ti)
+        if ti in xs:
+            j = xs.index(ti)
+            sums[j] += float(ei)
+            counts[j] += 1
+        else:
+            xs.append(ti)
+            sums.append(float(ei))
+            counts.append(1)
+    c = np.asarray(counts, dtype=np.float64)
+    return np.asarray(xs), np.asarray(sums) / c, float(noise) / c
+
+
 _FAST_GPR = None
 #: Every step runs under one BLAS/OpenMP thread (:mod:`emulator.pools`): the optimizer's tiny
 #: BLAS calls are ~7x slower with a thread pool on a busy machine (measured), and GP-MI
@@ -387,15 +418,19 @@ class Kim2018(AutoExposureMethod):
         amplitude = GP_BOUNDS if self.mode == "borealhdr" else GP_AMPLITUDE_BOUNDS_PAPER
         kernel = ConstantKernel(1.0, amplitude) * RBF(1.0, GP_BOUNDS)
         cls = _fast_gpr_class() if self.gp_backend == "fast" else GaussianProcessRegressor
+        if self.mode == "borealhdr":  # REF: every window point as it is
+            x, yv, alpha = (np.asarray(self.window_t, dtype=np.float64), np.asarray(self.window_e, dtype=np.float64),
+                            np.full(len(self.window_t), self.gp_noise, dtype=np.float64))
+        else:
+            x, yv, alpha = merge_repeats(self.window_t, self.window_e, self.gp_noise)
         gp = cls(
             kernel=kernel,
-            alpha=np.full(len(self.window_t), self.gp_noise, dtype=np.float64),
+            alpha=alpha,
             n_restarts_optimizer=self.gp_restarts,
             normalize_y=False,
             random_state=self._rng if self._rng is not None else self.seed,
         )
-        x = np.asarray(self.window_t, dtype=np.float64).reshape(-1, 1)
-        yv = np.asarray(self.window_e, dtype=np.float64)
+        x = x.reshape(-1, 1)
         with warnings.catch_warnings(), single_thread_pools(_STEP_POOLS):
             warnings.simplefilter("ignore", ConvergenceWarning)
             warnings.simplefilter("ignore", RuntimeWarning)
