@@ -413,3 +413,54 @@ def test_metric_ref_fast_exact_path_equals_50_digit_reference():
         assert _bin_sums(y8, q) == exact
         counts = np.bincount(y8.ravel(), minlength=256).tolist()
         assert metric_ref(y) == _metric_from_bins_50_digits(counts, exact, y.size)
+
+
+# ---------------------------------------------------------------------------- repeated exposures (paper mode)
+#: A real paper-mode window (the upstream BorealHDR sample, cycle 5): the exposure clamped at the
+#: grid end three times, newest first.
+REPEAT_T = [35.0, 35.0, 35.0, 6.836734693877551, 1.2040816326530612]
+REPEAT_E = [12226.03332526619, 11693.888468236864, 13142.948058364103, 4202.858675928288, 994.9986358355777]
+
+
+def test_merge_repeats_keeps_the_posterior():
+    """k observations at one exposure with noise a and their mean with noise a / k give the same
+    GP posterior (fixed kernel): mean and std agree to rounding on the whole grid."""
+    from sklearn.gaussian_process import GaussianProcessRegressor
+    from sklearn.gaussian_process.kernels import RBF, ConstantKernel
+
+    from emulator.autoexposure.kim import GP_NOISE, merge_repeats
+
+    x, y, alpha = merge_repeats(REPEAT_T, REPEAT_E, GP_NOISE)
+    assert x.tolist() == [35.0, 6.836734693877551, 1.2040816326530612]
+    assert y[0] == pytest.approx(sum(REPEAT_E[:3]) / 3, rel=1e-15)
+    assert alpha.tolist() == pytest.approx([GP_NOISE / 3, GP_NOISE, GP_NOISE])
+    grid = np.linspace(0.5, 35, 50).reshape(-1, 1)
+    kernel = ConstantKernel(3e7) * RBF(12.0)  # a fixed, well-scaled kernel: no optimizer
+    full = GaussianProcessRegressor(kernel, alpha=np.full(5, GP_NOISE), optimizer=None).fit(
+        np.reshape(REPEAT_T, (-1, 1)), REPEAT_E)
+    merged = GaussianProcessRegressor(kernel, alpha=alpha, optimizer=None).fit(x.reshape(-1, 1), y)
+    mf, sf = full.predict(grid, return_std=True)
+    mm, sm = merged.predict(grid, return_std=True)
+    assert np.allclose(mm, mf, rtol=1e-6, atol=1e-3)
+    assert np.allclose(sm, sf, rtol=1e-6, atol=1e-3)
+
+
+def test_paper_fit_on_repeated_exposures_is_well_posed_and_seed_free():
+    """Before merging, this window's likelihood was a plateau near -(y1 - y2)^2 / (4 * 0.2) ~ -2.6e6
+    with the length scale at its 1e-5 bound, and where the optimizer stopped followed SciPy's
+    version.  Merged, the best fit is interior (length scale between 1 and 100 ms, likelihood
+    above -100), and every restart seed proposes the same exposure."""
+    proposals, fits = set(), []
+    for seed in range(5):
+        m = Kim2018(mode="paper", seed=seed, range_ms=None)
+        for t, e in zip(reversed(REPEAT_T[1:]), reversed(REPEAT_E[1:])):
+            m.update(t, e)
+        m.window_t, m.window_e = list(REPEAT_T[1:]), list(REPEAT_E[1:])
+        m.window_t.insert(0, REPEAT_T[0])
+        m.window_e.insert(0, REPEAT_E[0])
+        gp, mu, std = m._fit()
+        fits.append((float(np.exp(gp.kernel_.theta[1])), float(gp.log_marginal_likelihood_value_)))
+        proposals.add(float(m.coarse[int(np.argmax(mu + math.sqrt(m.gamma_mi) * (np.sqrt(std**2 + 1.0) - 1.0)))]))
+    for length_ms, lml in fits:
+        assert 1.0 < length_ms < 100.0 and lml > -100.0
+    assert len(proposals) == 1
