@@ -50,6 +50,7 @@ def synthesize(
     blur: bool = True,
     render_per: str = "shot",
     integrate: bool = True,
+    margin_step_px: int = 1,
     imu_rate_hz: float = 100.0,
     cache_dir=None,
     variant: str | None = None,
@@ -95,6 +96,9 @@ def synthesize(
     integrate : bool
         With ``blur``: False samples every shot at its trigger instant from the same warped
         renders (no exposure-time blur, same render noise: the sharp twin of a blurred walk).
+    margin_step_px : int
+        With ``blur``: round every render's margin up to a multiple of this many pixels, so the
+        walk's renders share a few image sizes (each new size costs a kernel compilation).
     imu_rate_hz : float
         Rate of the walk's gyro and accelerometer written as ``imu/imu.csv`` (IMU frame x
         forward, y left, z up: :data:`scenes.walks.CAMERA_FROM_IMU`; a static camera reads zero rates and
@@ -148,7 +152,8 @@ def synthesize(
                                                cache_dir=cache_dir, variant=render_variant, denoise=settings,
                                                render_seed=render_seed),
                       fps=fps, n_brackets=len(brackets_ms), max_window_ms=max(list(brackets_ms) + list(gt_exposures_ms)),
-                      baseline_m=baseline, render_per=render_per, integrate=integrate)
+                      baseline_m=baseline, render_per=render_per, integrate=integrate,
+                      margin_step_px=margin_step_px)
     source, blurred_source, render_job, shot_renderer, prefetched = _providers(
         scene, traj, shots, baseline_m=baseline, render_seed=render_seed,
         render=dict(width=width, height=height, spp=spp, fov_deg=cam.fov_x_deg, cache_dir=cache_dir,
