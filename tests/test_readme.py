@@ -112,6 +112,8 @@ def test_setup_commands_install_into_a_virtual_environment_in_one_line():
         assert steps[:2] == ["apt-get update", steps[1]] and "python3-venv" in steps[1].split(), cmd
         assert steps[2:4] == ["python3 -m venv .venv", ". .venv/bin/activate"], cmd
         assert all("pip" not in s.split() for s in steps[:4]), cmd
+    for cmd in commands[:2]:  # Dr.Jit's library loads libatomic.so.1, absent from a minimal Debian 12
+        assert {"libllvm19", "libatomic1"} <= set(cmd.split(" && ")[1].split()), cmd
     assert "/.venv/" in (ROOT / ".gitignore").read_text().splitlines()
 
 
