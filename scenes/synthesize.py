@@ -43,6 +43,7 @@ def synthesize(
     noise: bool = True,
     gt_exposures_ms=(),
     gt_captures: str = "noiseless",
+    gt_cameras=None,
     save_radiance: bool = False,
     start_time_ns: int = 1_700_000_000_000_000_000,
     speed_mps: float | None = None,
@@ -116,7 +117,7 @@ def synthesize(
         shot by shot while capturing).
     render_progress : callable, optional
         With a scheduler: called with 1 after each rendered shot.
-    Other parameters go to :func:`synth.capture_sequence` (noise, ground-truth captures,
+    Other parameters go to :func:`synth.capture_sequence` (noise, ground-truth captures and their cameras,
     radiance EXRs) and :func:`scenes.render` (cache, variant).
 
     Returns
@@ -180,6 +181,7 @@ def synthesize(
         noise=noise,
         gt_exposures_ms=tuple(gt_exposures_ms),
         gt_captures=gt_captures,
+        gt_cameras=gt_cameras,
         save_radiance=save_radiance,
         overwrite=overwrite,
         progress=progress,

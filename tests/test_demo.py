@@ -81,8 +81,10 @@ def test_quick_demo_end_to_end(tmp_path, capsys, monkeypatch):
     assert second["dataset"] == str(dataset) and second["dataset_reused"] is True
     assert second["emulation"] == emu  # same recording, same figures
     assert _tree(dataset) == before and (out / "results.json").read_text() == json.dumps(results, indent=1) + "\n"
-    dataset_bytes = sum(size for size, _ in before.values())
-    assert sum(size for size, _ in _tree(again).values()) < dataset_bytes
+    # the new folder holds run results only, none of the recording's parts
+    parts = {p.name for p in dataset.iterdir()}
+    assert {"camera_left", "camera_right", "ground_truth", "imu"} <= parts
+    assert not any(p.name in parts for p in again.rglob("*"))
 
 
 def test_damaged_cached_recording_is_written_again_and_user_files_are_kept(tmp_path, monkeypatch):
