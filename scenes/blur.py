@@ -181,7 +181,11 @@ class ShotRenderer:
     def __init__(self, scene, pose_at, t0_s: float, max_exposure_ms: float, *, width: int, height: int,
                  spp: int, seed: int = 0, fov_deg: float = DEFAULT_FOV_DEG, cache_dir=None, variant=None,
                  denoise=None, samples_per_px: float = SUBINSTANTS_PER_PX, near_depth_m: float = NEAR_DEPTH_M,
-                 anchor_s: float | None = None, interpolation: str = "linear", supersample: int = 1):
+                 anchor_s: float | None = None, interpolation: str = "linear", supersample: int = 1,
+                 margin_step_px: int = 1):
+        if isinstance(margin_step_px, bool) or not isinstance(margin_step_px, int) or margin_step_px < 1:
+            raise RenderError(f"margin_step_px must be an integer >= 1, got {margin_step_px!r}")
+        self.margin_step_px = margin_step_px
         if isinstance(supersample, bool) or not isinstance(supersample, int) or supersample < 1:
             raise RenderError(f"supersample must be an integer >= 1, got {supersample!r}")
         self.supersample = supersample
@@ -212,13 +216,16 @@ class ShotRenderer:
 
     def margin_px(self) -> int:
         """Pixels of margin the render needs: the longer image path from the anchor to either end
-        of the span (points at ``near_depth_m``), rounded up, plus 2 for the interpolation."""
+        of the span (points at ``near_depth_m``), rounded up, plus 2 for the interpolation, then up to a
+        multiple of ``margin_step_px`` (renders of a walk then share a few sizes: Dr.Jit compiles its
+        kernels again for every new image size, about a second each on 2 cores)."""
         t1 = self.t0_s + 1e-3 * self.max_exposure_ms
         halves = [(self.t0_s, self.anchor_s), (self.anchor_s, t1)]
         reach = max(predicted_blur_px(np.asarray(self.pose_at(np.linspace(a, b, _PATH_SAMPLES)), dtype=np.float64),
                                       self.width, self.height, self.fov_deg, near_depth_m=self.near_depth_m)
                     for a, b in halves if b > a)
-        return int(math.ceil(reach)) + 2
+        step = self.margin_step_px
+        return -(-(int(math.ceil(reach)) + 2) // step) * step
 
     def render_job(self) -> dict:
         """The :func:`scenes.render` keyword arguments of the one render (for a Dask prefetch)."""

@@ -43,6 +43,7 @@ def synthesize(
     noise: bool = True,
     gt_exposures_ms=(),
     gt_captures: str = "noiseless",
+    gt_cameras=None,
     save_radiance: bool = False,
     start_time_ns: int = 1_700_000_000_000_000_000,
     speed_mps: float | None = None,
@@ -50,6 +51,7 @@ def synthesize(
     blur: bool = True,
     render_per: str = "shot",
     integrate: bool = True,
+    margin_step_px: int = 1,
     imu_rate_hz: float = 100.0,
     cache_dir=None,
     variant: str | None = None,
@@ -95,6 +97,9 @@ def synthesize(
     integrate : bool
         With ``blur``: False samples every shot at its trigger instant from the same warped
         renders (no exposure-time blur, same render noise: the sharp twin of a blurred walk).
+    margin_step_px : int
+        With ``blur``: round every render's margin up to a multiple of this many pixels, so the
+        walk's renders share a few image sizes (each new size costs a kernel compilation).
     imu_rate_hz : float
         Rate of the walk's gyro and accelerometer written as ``imu/imu.csv`` (IMU frame x
         forward, y left, z up: :data:`scenes.walks.CAMERA_FROM_IMU`; a static camera reads zero rates and
@@ -112,7 +117,7 @@ def synthesize(
         shot by shot while capturing).
     render_progress : callable, optional
         With a scheduler: called with 1 after each rendered shot.
-    Other parameters go to :func:`synth.capture_sequence` (noise, ground-truth captures,
+    Other parameters go to :func:`synth.capture_sequence` (noise, ground-truth captures and their cameras,
     radiance EXRs) and :func:`scenes.render` (cache, variant).
 
     Returns
@@ -148,7 +153,8 @@ def synthesize(
                                                cache_dir=cache_dir, variant=render_variant, denoise=settings,
                                                render_seed=render_seed),
                       fps=fps, n_brackets=len(brackets_ms), max_window_ms=max(list(brackets_ms) + list(gt_exposures_ms)),
-                      baseline_m=baseline, render_per=render_per, integrate=integrate)
+                      baseline_m=baseline, render_per=render_per, integrate=integrate,
+                      margin_step_px=margin_step_px)
     source, blurred_source, render_job, shot_renderer, prefetched = _providers(
         scene, traj, shots, baseline_m=baseline, render_seed=render_seed,
         render=dict(width=width, height=height, spp=spp, fov_deg=cam.fov_x_deg, cache_dir=cache_dir,
@@ -175,6 +181,7 @@ def synthesize(
         noise=noise,
         gt_exposures_ms=tuple(gt_exposures_ms),
         gt_captures=gt_captures,
+        gt_cameras=gt_cameras,
         save_radiance=save_radiance,
         overwrite=overwrite,
         progress=progress,

@@ -46,15 +46,18 @@ class WalkShots:
         True: a shot integrates over its exposure window.  False: every shot is the scene at
         its trigger instant, warped from the same renders (a window of 0 ms): the sharp twin of
         a blurred walk, which shares its render noise (validation.blur's live-versus-emulated table).
+    margin_step_px : int
+        Render margins are rounded up to a multiple of this (:class:`scenes.blur.ShotRenderer`).
     """
 
     def __init__(self, scene, traj, *, render: dict, fps: float, n_brackets: int, max_window_ms: float,
-                 baseline_m: float, render_per: str = "shot", integrate: bool = True):
+                 baseline_m: float, render_per: str = "shot", integrate: bool = True, margin_step_px: int = 1):
         if render_per not in ("shot", "cycle"):
             raise SceneError(f"render_per must be 'shot' or 'cycle', got {render_per!r}")
         self.scene, self.traj, self.render = scene, traj, dict(render)
         self.fps, self.n_brackets, self.max_window_ms = float(fps), int(n_brackets), float(max_window_ms)
         self.baseline_m, self.render_per, self.integrate = float(baseline_m), render_per, bool(integrate)
+        self.margin_step_px = margin_step_px
         self._renderers: collections.OrderedDict = collections.OrderedDict()
 
     def seed(self, index: int, camera: str) -> int:
@@ -77,7 +80,8 @@ class WalkShots:
         r = self.render
         return ShotRenderer(self.scene, self.poses(camera), shot_time_s(first, self.fps), span_ms, width=r["width"],
                             height=r["height"], spp=r["spp"], seed=self.seed(first, camera), fov_deg=r["fov_deg"],
-                            cache_dir=r["cache_dir"], variant=r["variant"], denoise=r["denoise"])
+                            cache_dir=r["cache_dir"], variant=r["variant"], denoise=r["denoise"],
+                            margin_step_px=self.margin_step_px)
 
     def renderer(self, index: int, camera: str):
         """The renderer serving shot ``index`` (its sweep's with ``render_per="cycle"``)."""
@@ -103,7 +107,8 @@ class WalkShots:
 
     def describe(self) -> dict:
         return {"render_per": self.render_per, "max_window_ms": self.max_window_ms, "fps": self.fps,
-                "n_brackets": self.n_brackets, "baseline_m": self.baseline_m, "integrate": self.integrate}
+                "n_brackets": self.n_brackets, "baseline_m": self.baseline_m, "integrate": self.integrate,
+                "margin_step_px": self.margin_step_px}
 
 
 def walk_radiance(dataset, scene, *, cache_dir=None):
@@ -134,7 +139,7 @@ def walk_radiance(dataset, scene, *, cache_dir=None):
                                                render_seed=render["render_seed"], cache_dir=cache_dir),
                       fps=blur["fps"], n_brackets=blur["n_brackets"], max_window_ms=blur["max_window_ms"],
                       baseline_m=blur["baseline_m"], render_per=blur["render_per"],
-                      integrate=bool(blur.get("integrate", True)))
+                      integrate=bool(blur.get("integrate", True)), margin_step_px=int(blur.get("margin_step_px", 1)))
     start_ns = int(meta["start_time_ns"])
 
     def radiance(timestamp_ns: int, camera: str, exposure_ms: float) -> np.ndarray:

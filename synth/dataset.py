@@ -105,7 +105,7 @@ def load_camera(sequence_path: str | os.PathLike) -> Camera:
 
 def recording_metadata(camera: Camera, shots, brackets, *, generator: str, gt_captures_kinds, fps, stereo,
                        baseline_m, seed, noise, gt_exposures, save_radiance, start_time_ns, start_bracket_index,
-                       source, timestamps_note: str | None = None) -> dict:
+                       source, timestamps_note: str | None = None, gt_cameras=None) -> dict:
     """The ``exposim.json`` of a recording (levels, schedule, seeds, camera, source)."""
     from emulator import __version__
 
@@ -128,6 +128,8 @@ def recording_metadata(camera: Camera, shots, brackets, *, generator: str, gt_ca
         "noise": bool(noise),
         "gt_exposures_ms": list(gt_exposures),
         "gt_captures": list(gt_captures_kinds) if gt_exposures else [],
+        "gt_cameras": (list(gt_cameras) if gt_cameras is not None else (["left", "right"] if stereo else ["left"]))
+        if gt_exposures else [],
         "save_radiance": bool(save_radiance),
         "radiance_units": "W m^-2 sr^-1 (float32, linear)",
         "poses": "ground_truth/poses_<camera>.txt, TUM (timestamp_s tx ty tz qx qy qz qw), camera-to-world, "

@@ -244,6 +244,7 @@ def capture_sequence(
     noise: bool = True,
     gt_exposures_ms=(),
     gt_captures: str = "noiseless",
+    gt_cameras=None,
     save_radiance: bool = False,
     overwrite: bool = False,
     progress=None,
@@ -295,6 +296,8 @@ def capture_sequence(
     gt_captures : str
         ``"noiseless"`` (exact, ``ground_truth/captures_noiseless``), ``"noisy"``
         (``captures_noisy``, independent noise) or ``"both"``.
+    gt_cameras : sequence of str or None
+        The cameras that get ground-truth captures (default: every camera).
     save_radiance : bool
         Also write each shot's radiance as OpenEXR.
     overwrite : bool
@@ -339,6 +342,9 @@ def capture_sequence(
     if gt_captures not in GT_CAPTURES:
         raise SynthError(f"gt_captures must be one of {', '.join(GT_CAPTURES)}, got {gt_captures!r}")
     gt_exposures = tuple(check_exposure_ms(t, "gt_exposures_ms") for t in gt_exposures_ms)
+    gt_sides = sides if gt_cameras is None else tuple(gt_cameras)
+    if not gt_sides or not set(gt_sides) <= set(sides):
+        raise SynthError(f"gt_cameras must name some of the recorded cameras ({', '.join(sides)}), got {gt_cameras!r}")
     brackets = _check_brackets(brackets_ms)
     get_frame, n_frames = _frame_getter(source, stereo)
     if n_shots is None:
@@ -369,7 +375,8 @@ def capture_sequence(
                     _check_rig(left_pose, pose, baseline_m, where)
                 poses[side].append(pose)
                 _write_shot(staging, shot, side, c, radiance, where, camera=camera, seed=seed, noise=noise,
-                            save_radiance=save_radiance, gt_exposures=gt_exposures, gt_kinds=GT_CAPTURES[gt_captures],
+                            save_radiance=save_radiance, gt_kinds=GT_CAPTURES[gt_captures],
+                            gt_exposures=gt_exposures if side in gt_sides else (),
                             gt_radiance=get_frame if getattr(source, "exposure_aware", False) else None)
             if progress is not None:
                 progress(shot.index + 1, len(shots))
@@ -378,6 +385,7 @@ def capture_sequence(
         meta = recording_metadata(camera, shots, brackets, generator=GENERATOR,
                                   gt_captures_kinds=GT_CAPTURES[gt_captures], fps=fps, stereo=stereo,
                                   baseline_m=baseline_m, seed=seed, noise=noise, gt_exposures=gt_exposures,
+                                  gt_cameras=[s for s in sides if s in gt_sides],
                                   save_radiance=save_radiance, start_time_ns=start_time_ns,
                                   start_bracket_index=start_bracket_index,
                                   source=_describe(source, source_description),

@@ -91,3 +91,63 @@ def test_every_results_page_names_its_date_commit_and_machine():
         date, commit, machine = (c.strip() for c in head[4].strip("|").split("|"))
         assert re.fullmatch(r"\d{4}-\d{2}-\d{2}", date) and re.fullmatch(r"`[0-9a-f]{7,40}`", commit), page.name
         assert "cores" in machine, page.name
+
+
+def _setup_commands() -> list[str]:
+    """The one-line commands of the README's set-up section, in order."""
+    section = README.split("## Set-up", 1)[1].split("\n## ", 1)[0]
+    return [block.strip() for block in section.split("```")[1::2]]
+
+
+def test_setup_commands_install_into_a_virtual_environment_in_one_line():
+    """Debian's python3 refuses pip outside a virtual environment (PEP 668), so every set-up
+    command makes `.venv` and activates it before pip, in the same line."""
+    commands = _setup_commands()
+    assert len(commands) == 3
+    assert commands[0].endswith("pip install -e '.[all]' && exposim demo")
+    assert commands[1].endswith("pip install -e '.[all,test]' && python -m pytest -q")
+    for cmd in commands:
+        assert "\n" not in cmd, cmd
+        steps = cmd.split(" && ")
+        assert steps[:2] == ["apt-get update", steps[1]] and "python3-venv" in steps[1].split(), cmd
+        assert steps[2:4] == ["python3 -m venv .venv", ". .venv/bin/activate"], cmd
+        assert all("pip" not in s.split() for s in steps[:4]), cmd
+    for cmd in commands[:2]:  # Dr.Jit's library loads libatomic.so.1, absent from a minimal Debian 12
+        assert {"libllvm19", "libatomic1"} <= set(cmd.split(" && ")[1].split()), cmd
+    assert "/.venv/" in (ROOT / ".gitignore").read_text().splitlines()
+
+
+def test_activating_the_virtual_environment_works_under_the_ci_shell_options(tmp_path):
+    """`. .venv/bin/activate` survives `bash -euo pipefail` (how .ci/run runs the test command)."""
+    import sys
+
+    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(tmp_path / ".venv")], check=True)
+    got = subprocess.run(["bash", "-euo", "pipefail", "-c", ". .venv/bin/activate && python -c 'import sys; print(sys.prefix)'"],
+                         cwd=tmp_path, capture_output=True, text=True)
+    assert got.returncode == 0, got.stderr
+    assert Path(got.stdout.strip()).resolve() == (tmp_path / ".venv").resolve()
+
+
+def test_the_test_run_collects_nothing_under_the_virtual_environment(tmp_path):
+    """The project's pytest options (testpaths, --doctest-modules) with a `.venv` beside the packages:
+    neither `pytest` nor `pytest .` imports a module of the virtual environment."""
+    import sys
+
+    options = (ROOT / "pyproject.toml").read_text(encoding="utf-8").split("[tool.pytest.ini_options]", 1)[1]
+    options = options.split("\n[", 1)[0]
+    (tmp_path / "pyproject.toml").write_text("[tool.pytest.ini_options]" + options, encoding="utf-8")
+    testpaths = re.search(r"testpaths = \[(.*)\]", options).group(1).replace('"', "").split(", ")
+    assert "." not in testpaths and ".venv" not in testpaths
+    for pkg in testpaths:
+        (tmp_path / pkg).mkdir()
+        (tmp_path / pkg / f"m_{pkg}.py").write_text('def f():\n    """\n    >>> 1 + 1\n    2\n    """\n')
+    venv_lib = tmp_path / ".venv" / "lib" / "python3.11" / "site-packages"
+    venv_lib.mkdir(parents=True)
+    (tmp_path / ".venv" / "pyvenv.cfg").write_text("home = /usr/bin\n")
+    (venv_lib / "test_theirs.py").write_text("raise SystemExit('collected from .venv')\n")
+    (venv_lib / "theirs.py").write_text("raise SystemExit('collected from .venv')\n")
+    for args in ([], ["."]):
+        got = subprocess.run([sys.executable, "-m", "pytest", "--collect-only", "-q", "-p", "no:cacheprovider", *args],
+                             cwd=tmp_path, capture_output=True, text=True)
+        assert got.returncode == 0, got.stdout + got.stderr
+        assert ".venv" not in got.stdout and len(re.findall(r"::m_\w+\.f$", got.stdout, re.M)) == len(testpaths)

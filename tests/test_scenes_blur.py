@@ -127,6 +127,40 @@ def test_a_moving_shot_blurs_along_the_walk(tmp_path):
         blur.predicted_blur_px(traj.poses(np.linspace(1.0, 1.032, 5)), 48, 30), rel=1e-12)
 
 
+def test_margin_step_rounds_every_margin_up_and_the_render_follows(tmp_path):
+    _, make_shot = _walk_shots(tmp_path, spp=1)
+    exact = make_shot().margin_px()
+    for step in (1, 3, 8):
+        shot = make_shot(margin_step_px=step)
+        margin = shot.margin_px()
+        assert margin % step == 0 and exact <= margin < exact + step
+        job = shot.render_job()
+        assert (job["width"], job["height"]) == (48 + 2 * margin, 30 + 2 * margin)
+    for bad in (0, -8, 2.5, True):
+        with pytest.raises(RenderError, match="margin_step_px must be an integer >= 1"):
+            make_shot(margin_step_px=bad)
+
+
+def test_a_walk_rendered_per_cycle_shares_two_render_sizes_with_8_px_steps():
+    """What the demo relies on: its 12-sweep forest_winter walk (256x160, margins for 45 ms plus a
+    sweep) has one render size per distinct margin; 8 px steps leave two of them."""
+    import scenes
+    from scenes.walkshots import WalkShots
+
+    scene = scenes.get_scene("forest_winter")
+    traj = scene.trajectory(12 * 6 / 22.0 + 1.0)
+    margins = {}
+    for step in (1, 8):
+        shots = WalkShots(scene, traj, render=dict(width=256, height=160, spp=8, fov_deg=78.0, cache_dir=False,
+                                                   variant="scalar_rgb", denoise="off", render_seed=0),
+                          fps=22.0, n_brackets=6, max_window_ms=45.0, baseline_m=0.18, render_per="cycle",
+                          margin_step_px=step)
+        margins[step] = [shots.renderer(i, cam).margin_px() for i in range(0, 72, 6) for cam in ("left", "right")]
+        assert shots.describe()["margin_step_px"] == step
+    assert [-(-m // 8) * 8 for m in margins[1]] == margins[8]
+    assert len(set(margins[8])) <= 2 < len(set(margins[1]))
+
+
 @pytest.mark.render
 def test_synthesize_blurs_with_one_render_per_cycle(tmp_path):
     import json
@@ -162,10 +196,10 @@ def test_live_radiance_rebuilds_the_brackets_and_integrates_other_exposures(tmp_
     scene = scenes.get_scene("forest_summer")
     cache = tmp_path / "cache"
     out = synthesize(scene, tmp_path / "ds", n_cycles=1, width=32, height=20, spp=1, denoise="off", cache_dir=cache,
-                     save_radiance=True, stereo=False)
+                     save_radiance=True, stereo=False, margin_step_px=5)
     brackets = json.loads((out / "exposim.json").read_text())["brackets_ms"]
     live = walk_radiance(out, scene, cache_dir=cache)
-    assert live.exposure_aware
+    assert live.exposure_aware and live.shots.margin_step_px == 5  # read back, so the renders are the writer's
     stamps = sorted(int(p.stem) for p in (out / "ground_truth" / "radiance" / "camera_left").glob("*.exr"))
     n_renders = len(list(cache.rglob("*.exr")))
     for ts, e in zip(stamps, brackets):

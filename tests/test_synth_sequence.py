@@ -15,6 +15,7 @@ import yaml
 from scipy.spatial.transform import Rotation
 
 import synth
+from synth.errors import SynthError
 import synth.sequence
 from emulator.emulate import emulate
 from emulator.io.borealhdr import exposure_folder_name, load_sequence, sequence_response
@@ -191,6 +192,27 @@ def test_same_seed_gives_identical_files(tmp_path, camera, chart):
     c = _hashes(capture_sequence(chart, tmp_path / "c", camera, **{**kw, "seed": 10}))
     differs = [k for k in a if k.startswith("camera_") and a[k] != c[k]]
     assert len(differs) == 14
+
+
+def test_ground_truth_of_the_left_camera_only_leaves_the_rest_identical(tmp_path, camera, chart):
+    kw = dict(n_shots=4, gt_exposures_ms=(5.0, 20.0), gt_captures="noisy", seed=3)
+    both = _hashes(capture_sequence(chart, tmp_path / "both", camera, **kw))
+    left = _hashes(capture_sequence(chart, tmp_path / "left", camera, gt_cameras=("left",), **kw))
+    dropped = sorted(k for k in both if k not in left)
+    assert len(dropped) == 4 * 2 and all(k.startswith("ground_truth/captures_noisy/camera_right/") for k in dropped)
+    assert {k: left[k] for k in left if k.startswith(("camera_", "ground_truth/captures"))} == {
+        k: both[k] for k in left if k.startswith(("camera_", "ground_truth/captures"))}  # same bytes, same seeds
+    assert json.loads((tmp_path / "left" / "exposim.json").read_text())["gt_cameras"] == ["left"]
+    assert json.loads((tmp_path / "both" / "exposim.json").read_text())["gt_cameras"] == ["left", "right"]
+    for bad in ((), ("centre",), ("right",)):
+        target = tmp_path / f"bad-{len(list(tmp_path.iterdir()))}"
+        if bad == ("right",):  # a mono recording has no right camera
+            with pytest.raises(SynthError, match=r"gt_cameras must name some of the recorded cameras \(left\)"):
+                capture_sequence(chart, target, camera, stereo=False, gt_cameras=bad, **kw)
+        else:
+            with pytest.raises(SynthError, match="gt_cameras must name some of the recorded cameras"):
+                capture_sequence(chart, target, camera, gt_cameras=bad, **kw)
+        assert not target.exists()
 
 
 def test_existing_dataset_is_not_overwritten_unless_asked(tmp_path, camera, chart):

@@ -1,8 +1,8 @@
 """``exposim demo``: the main job end to end on the embedded synthetic default.
 
 1. Synthesise a short stereo walk through ``forest_winter`` (Mitsuba render -> synthetic
-   BorealHDR camera with noise), with noiseless ground-truth captures at a few target
-   exposures at every shot instant.  The recording goes into the dataset cache
+   BorealHDR camera with noise), with noiseless ground-truth captures of the left camera (the
+   one step 2 checks) at a few target exposures at every shot instant.  The recording goes into the dataset cache
    (``<render cache>/datasets/demo-<key>``, :func:`demo_dataset`), keyed by everything that
    decides its bytes, so a second demo with the same configuration reads it instead of
    writing another full copy (62 of the 74 MB of a default demo folder).
@@ -47,15 +47,24 @@ _DATASET_MODULES = ("scenes.synthesize", "scenes.trajectory", "synth.camera", "s
                     "synth.presets", "synth.response_fit", "synth.sequence", "synth.dataset")
 
 
+#: How the demo renders its blurred walk: one render per bracket sweep and camera, warped to
+#: every shot's exposure window (a sixth of the renders of one per shot), margins rounded up to
+#: 8 px (two image sizes, so Dr.Jit compiles its kernels twice, not once per render), and the
+#: faster OIDN preset (16-spp albedo and normal).  ``$EXPOSIM_DENOISE``, when set, names the denoiser.
+RENDERING = dict(render_per="cycle", margin_step_px=8, denoise="oidn-fast")
+
+
 def demo_config(quick: bool = False) -> dict:
-    """Size of the demo: the default takes a few minutes on 2 cores, ``quick`` well under one."""
+    """Size of the demo: the default takes about a minute on 2 cores, ``quick`` well under one."""
     if quick:
-        return dict(scene="forest_winter", n_cycles=4, width=96, height=60, spp=4, vo_frames=4, vo_ratio=0.9)
+        return dict(scene="forest_winter", n_cycles=4, width=96, height=60, spp=4, vo_frames=4, vo_ratio=0.9,
+                    **RENDERING)
     # 256x160 at 8 spp: the cheapest size at which SIFT survives the renders' own noise and
     # the stereo VO tracks every frame of forest_winter (measured in validation.ae_study;
     # 192x120 at 8 spp failed 58 of 77 VO steps).  The VO's ratio test is 0.9 for the same
     # reason; the feature benchmark keeps the paper's 0.8.
-    return dict(scene="forest_winter", n_cycles=12, width=256, height=160, spp=8, vo_frames=12, vo_ratio=0.9)
+    return dict(scene="forest_winter", n_cycles=12, width=256, height=160, spp=8, vo_frames=12, vo_ratio=0.9,
+                **RENDERING)
 
 
 def new_output_dir(base: str | Path = "exposim-demo") -> Path:
@@ -65,8 +74,15 @@ def new_output_dir(base: str | Path = "exposim-demo") -> Path:
 
 def _synth_kwargs(cfg: dict) -> dict:
     """The :func:`scenes.synthesize.synthesize` arguments of the demo's recording."""
+    import os
+
+    from scenes.denoise import ENV_DENOISE, default_denoiser
+
+    # the denoiser by name, so that it enters the recording's key (:func:`demo_dataset_key`)
+    denoise = default_denoiser() if os.environ.get(ENV_DENOISE, "").strip() else cfg["denoise"]
     return dict(n_cycles=cfg["n_cycles"], width=cfg["width"], height=cfg["height"], spp=cfg["spp"],
-                gt_exposures_ms=GT_EXPOSURES_MS, gt_captures="noiseless", seed=0)
+                render_per=cfg["render_per"], margin_step_px=cfg["margin_step_px"], denoise=denoise,
+                gt_exposures_ms=GT_EXPOSURES_MS, gt_captures="noiseless", gt_cameras=("left",), seed=0)
 
 
 def demo_dataset_key(cfg: dict) -> str:
@@ -356,6 +372,26 @@ def _fmt(v) -> str:
         return str(v)
 
 
+def _rendering_note(dataset: Path) -> str:
+    """One sentence on how the recording was rendered, read from its description."""
+    from emulator.io.borealhdr import read_recording_metadata
+
+    source = read_recording_metadata(Path(dataset)).get("source") or {}
+    render, walk = source.get("render") or {}, (source.get("trajectory") or {}).get("walk")
+    den = render.get("denoise") or {}
+    settings = den.get("settings") or {}
+    denoised = (f"denoised by Open Image Denoise ({settings.get('quality')} quality, albedo and normal at "
+                f"{settings.get('aux_spp')} spp)" if den.get("name", "off") != "off" else "not denoised")
+    blur = render.get("blur_shots")
+    if not blur:
+        return f"Rendering: {render.get('spp')} spp path tracing, {denoised}; no motion blur."
+    per = "bracket sweep (6 shots)" if blur.get("render_per") == "cycle" else "shot"
+    how = "turns like the BorealHDR backpack" if walk in (None, "borealhdr") else f"follows the {walk} walk"
+    return (f"Rendering: {render.get('spp')} spp path tracing, {denoised}. The camera {how} and every shot "
+            f"integrates the scene over its own exposure window (motion blur): one render per {per} and camera, "
+            "with depth, warped to each window's sub-instants.")
+
+
 def _report(out: Path, cfg: dict, emu: dict, run_dir: Path, feats: dict, vo: dict, timings: dict,
             dataset: Path, reused: bool) -> str:
     lines = [
@@ -365,6 +401,8 @@ def _report(out: Path, cfg: dict, emu: dict, run_dir: Path, feats: dict, vo: dic
         f"{cfg['width']}x{cfg['height']} px, {cfg['spp']} spp, synthetic BorealHDR camera (noise on), stereo; "
         f"SIFT ratio test {feats.get('parameters', {}).get('ratio')} for the features (the library's) and "
         f"{cfg['vo_ratio']} for VO (at this image size the stricter test leaves too few matches to track).",
+        "",
+        _rendering_note(dataset),
         "",
         f"Synthetic recording: `{dataset}` ("
         + ("reused: an earlier demo with the same configuration synthesised it" if reused else "synthesised now")
