@@ -115,7 +115,7 @@ def test_no_reference_is_said_once_in_words(parallel, tmp_path, capsys):
     assert "The recording seq has none (no ground_truth/poses_left.txt in it" in results["limitations"][0]
     assert "shared BorealHDR sample" not in err and "shared BorealHDR sample" not in results["limitations"][0]
     report = (tmp_path / "out" / "report.md").read_text()
-    assert "## What could not be computed, and why" in report and "lidar_poses.txt" in report
+    assert "## What could not be computed, and why" in report and "--reference FILE" in report
     assert not (tmp_path / "out" / "evo").exists()
 
 

@@ -308,7 +308,7 @@ def register(subparsers) -> None:
     v.add_argument("--refine-extrinsics", type=_refine_mode, default="auto", metavar="auto|N",
                    help="re-estimate the rig's relative rotation from left-right matches: 'auto' (default) when "
                    "the median epipolar residual of 2 stereo pairs under the calibration exceeds half the row "
-                   "tolerance (the BorealHDR Sept. 2023 files: 16 px); N > 0: always, from N pairs; 0: never")
+                   "tolerance (the BorealHDR Sept. 2023 files: 17 px); N > 0: always, from N pairs; 0: never")
     v.add_argument("--scale", type=float, default=1.0, help="rectified image scale, (0, 1] (default 1)")
     v.add_argument("--deltas", type=_floats, help="RPE pair lengths in m, comma-separated (default: 10..50 %% "
                    "of the reference path length)")

@@ -376,7 +376,8 @@ def load_sequence(
         if root.is_file():
             source = ZipSource(root)
         elif not root.is_dir():
-            raise FileNotFoundError(f"{root}: sequence folder not found (nor a trajectory .zip)")
+            raise FileNotFoundError(f"{root}: sequence folder not found (nor a trajectory .zip); give the path of a "
+                                    "recording folder in the BorealHDR layout (camera_left/<ms>/<ns>.png)")
         else:
             source = FolderSource(root)
     meta = read_recording_metadata(root, source)

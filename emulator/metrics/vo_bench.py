@@ -79,7 +79,7 @@ def no_reference_note(sequence: str | Path | None) -> str:
         "and no --reference FILE was given). BorealHDR's "
         "reference trajectories are computed from the 3-D lidar and the IMU by a lidar-inertial SLAM based on "
         "libpointmatcher; exported as a TUM file of the left camera's poses (camera-to-world, "
-        "OpenCV axes; what exposim's examples call lidar_poses.txt) it is given with --reference FILE. Without it the "
+        "OpenCV axes, timestamps in s) it is given with --reference FILE. Without it the "
         "VO's tracking statistics and trajectories are still computed."
     )
 

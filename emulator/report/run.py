@@ -253,8 +253,8 @@ def run_markdown(info: dict, summary: dict) -> str:
                               f"{_fmt(r['ci95'][1] if r['ci95'] else None)}]" for n, r in iv["mean_exposure_ms"].items())
                   + ".", "", "Mean saturated fraction (%), lower is better:", ""]
         lines += comparison_table(iv["mean_saturated_fraction"], "mean saturated (%)", spec=".2f", scale=100.0)
-    lines += ["", "Saturated: pixels at the white level in the emulated image; valid: pixels the emulation could "
-              "reconstruct (not clipped in the bracket). \"-\": no cycle of that method (or no timing recorded)."]
+    lines += ["", "Saturated: pixels at the black or the white level in the emulated image; valid: pixels the emulation "
+              "could reconstruct (not clipped in the source bracket: a black source pixel emulated upwards is not valid). \"-\": no cycle of that method (or no timing recorded)."]
     if "fixed" in summary["methods"]:
         opts = info.get("method_options", {}).get("fixed") or {}
         n = opts.get("n_auto_frames")

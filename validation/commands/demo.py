@@ -91,7 +91,7 @@ def summary_lines(results: dict, result: dict) -> list[str]:
         lines.append("  median SIFT matches between consecutive frames: " + ", ".join(f"{m} {feats[m]['median_matches']:.0f}" for m in ranked))
     failed = {m: len(v.get("failures", [])) for m, v in vo.items()}
     frames = sum(v.get("n_frames", 0) for v in vo.values())
-    lines.append(f"  stereo VO: {sum(failed.values())} of {frames} frames failed"
+    lines.append(f"  stereo VO: {sum(failed.values())} of {frames} frames failed over {len(vo)} methods"
                  + ("" if not any(failed.values()) else
                     " (" + ", ".join(f"{m} {n}" for m, n in failed.items() if n) + ")"))
     how = "reused from an earlier demo" if result["dataset_reused"] else "synthesised now, kept for the next demo"

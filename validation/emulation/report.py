@@ -218,8 +218,9 @@ def _emulation_md(r: dict, figures: list[str]) -> str:
                  f"{100 * agree[lbl]:.1f} % |")
     if r.get("hard_cases"):
         L += ["", "## Hard cases", "",
-              "Scenes over 100 dB: " + ", ".join(f"{s} ({d['info']['dynamic_range_db']:.0f} dB)"
-                                                  for s, d in r["per_scene"].items() if d["info"]["over_100_db"]) + ".",
+              "Scenes over 100 dB: " + (", ".join(f"{s} ({d['info']['dynamic_range_db']:.0f} dB)"
+                                                   for s, d in r["per_scene"].items() if d["info"]["over_100_db"])
+                                         or "none in this configuration") + ".",
               "", "| case | target (ms) | bracket (ms) | valid fraction | valid RMSE | invalid RMSE | all RMSE | "
                   "noiseless valid | bound ok |", "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
         for case, d in r["hard_cases"].items():
