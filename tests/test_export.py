@@ -173,3 +173,25 @@ def test_export_as_given_when_asked(sample_run, tmp_path, capsys):
     assert meta["written"] == "given" and "written as given (--refine-extrinsics 0: not checked)" in err
     given = load_stereo_calibration(meta["folder"])
     assert (out / "calibration" / "right.yaml").read_text() == format_camera_info(given.right)
+
+
+def test_euroc_sensor_yaml_carries_the_written_stereo_pose(sample_run, tmp_path, capsys):
+    """EuRoC's T_BS: identity for cam0 (the body frame is the left camera) and, for cam1, the right
+    camera's pose in the left's frame from the extrinsics export wrote (refined on the sample): a
+    front end reading only sensor.yaml gets the baseline, not two cameras at one point."""
+    from emulator.metrics.stereo import load_stereo_calibration
+
+    out = tmp_path / "euroc"
+    code, _, err = _cli(capsys, "export", str(sample_run), "--method", "shim", "--format", "euroc", "-o", str(out))
+    assert code == 0, err
+    written = load_stereo_calibration(out / "calibration")
+    t0 = np.array(yaml.safe_load((out / "mav0" / "cam0" / "sensor.yaml").read_text())["T_BS"]["data"]).reshape(4, 4)
+    t1 = np.array(yaml.safe_load((out / "mav0" / "cam1" / "sensor.yaml").read_text())["T_BS"]["data"]).reshape(4, 4)
+    np.testing.assert_array_equal(t0, np.eye(4))
+    # X_left = T_BS(cam1) X_right inverts X_right = R X_left + T
+    x_left = np.array([0.3, -0.2, 4.0])
+    x_right = written.R @ x_left + written.T
+    np.testing.assert_allclose(t1[:3, :3] @ x_right + t1[:3, 3], x_left, atol=1e-12)
+    assert np.linalg.norm(t1[:3, 3]) == pytest.approx(written.baseline_m, rel=1e-12)
+    assert 0.17 < written.baseline_m < 0.19 and t1[0, 3] > 0.17  # the right camera lies along +x of the left
+    np.testing.assert_array_equal(t1[3], [0.0, 0.0, 0.0, 1.0])

@@ -78,15 +78,25 @@ def _seconds(ns: int) -> str:
     return f"{ns // 1_000_000_000}.{ns % 1_000_000_000:09d}"
 
 
-def _sensor_yaml(info: CameraInfo, rate_hz: float) -> str:
-    """EuRoC ``sensor.yaml`` of one camera (body frame = this camera: identity T_BS)."""
+def body_from_camera(calib, cam: str) -> np.ndarray:
+    """EuRoC's ``T_BS`` of a camera with the body frame = the left camera's: identity for the left,
+    the right camera's pose in the left's frame for the right (the inverse of ``X_r = R X_l + T``)."""
+    t = np.eye(4)
+    if cam == "right":
+        R = np.asarray(calib.R, dtype=np.float64).reshape(3, 3)
+        t[:3, :3] = R.T
+        t[:3, 3] = -R.T @ np.asarray(calib.T, dtype=np.float64).reshape(3)
+    return t
+
+
+def _sensor_yaml(info: CameraInfo, rate_hz: float, t_bs: np.ndarray) -> str:
+    """EuRoC ``sensor.yaml`` of one camera (``t_bs``: :func:`body_from_camera`)."""
     K, D = info.K, np.asarray(info.D, dtype=np.float64).ravel()
     d4 = (list(D[:4]) + [0.0] * 4)[:4]
     return (
         "sensor_type: camera\n"
-        f"comment: exported by exposim from {info.path}\n"
-        "T_BS:\n  cols: 4\n  rows: 4\n  data: [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, "
-        "0.0, 0.0, 0.0, 1.0]\n"
+        f"comment: exported by exposim from {info.path}; body frame = the left camera (cam0)\n"
+        f"T_BS:\n  cols: 4\n  rows: 4\n  data: [{', '.join(repr(float(v)) for v in t_bs.ravel())}]\n"
         f"rate_hz: {rate_hz:.6g}\n"
         f"resolution: [{info.width}, {info.height}]\n"
         "camera_model: pinhole\n"
@@ -132,7 +142,8 @@ def _export_files(method, run, tmp: Path, fmt: str, cameras, calib, mono8: bool)
                 stamps = [int(r.split(",")[0]) for r in rows]
                 rate = (len(stamps) - 1) / ((stamps[-1] - stamps[0]) / 1e9) if len(stamps) > 1 else 0.0
                 _write(tmp / "mav0" / folder / "sensor.yaml",
-                       _sensor_yaml(calib.left if cam == "left" else calib.right, rate).encode())
+                       _sensor_yaml(calib.left if cam == "left" else calib.right, rate,
+                                    body_from_camera(calib, cam)).encode())
         else:
             header = f"# {cam} camera images of method {method.name}, exported by exposim\n# timestamp filename\n"
             _write(tmp / f"{cam}.txt", (header + "\n".join(rows) + "\n").encode())
