@@ -1,7 +1,8 @@
 """Reproduce the calibration tables of docs/verdicts.md: ``python -m validation.verdicts.calibrate``.
 
 Prints, for simulated metric tables (no renders), the verdict rates of a perfect, a random
-and a tied emulator at several study sizes and noise scales, and (``--findings``) how often
+and a tied emulator and of one whose true omega2 is exactly the margin, at several study
+sizes and noise scales, and (``--findings``) how often
 each AE finding is judged ``holds`` when its claim is false (tied and near-tied
 configurations, Gaussian, one far noisier method, heavy tails) and its power by effect size.
 ``--seeds`` sets the simulated studies per cell.
@@ -13,6 +14,7 @@ import argparse
 import time
 
 from validation.verdicts import NOISE_TO_METHOD_SD
+from validation.verdicts.agreement import OMEGA2_MAX
 from validation.verdicts.findings import FINDINGS, false_holds_rates, finding_power
 from validation.verdicts.power import verdict_rates
 from validation.verdicts.simulate import Scales
@@ -46,8 +48,8 @@ def findings_tables(n_studies: int, walks=(30, 56)) -> None:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m validation.verdicts.calibrate", description=__doc__.split("\n\n")[0])
     p.add_argument("--seeds", type=int, default=300, help="simulated studies per cell (default 300)")
-    p.add_argument("--walks", type=lambda s: [int(x) for x in s.split(",")], default=[10, 30, 40, 50, 60],
-                   help="study sizes (default 10,30,40,50,60)")
+    p.add_argument("--walks", type=lambda s: [int(x) for x in s.split(",")], default=[10, 30, 56, 120],
+                   help="study sizes (default 10,30,56,120)")
     p.add_argument("--findings", action="store_true", help="also the AE findings' tables")
     p.add_argument("--no-agreement", action="store_true", help="skip the live-versus-emulated tables")
     args = p.parse_args(argv)
@@ -58,8 +60,10 @@ def main(argv=None) -> int:
             perfect = verdict_rates("live-draw", w, sc, n_seeds=args.seeds, n_resamples=200, seed=[w, 1])
             random = verdict_rates("random", w, sc, n_seeds=args.seeds, n_resamples=200, seed=[w, 2])
             tied = verdict_rates("tied", w, sc, n_seeds=args.seeds, n_resamples=200, seed=[w, 3])
+            margin = verdict_rates("exact", w, sc, n_seeds=args.seeds, n_resamples=200, seed=[w, 5],
+                                   omega2_true=OMEGA2_MAX)
             print(f"{label} scale (noise / method SD {noise}), {w} walks: perfect {_pct(perfect)}; random "
-                  f"{_pct(random)}; tied {_pct(tied)}", flush=True)
+                  f"{_pct(random)}; tied {_pct(tied)}; true omega2 exactly {OMEGA2_MAX} {_pct(margin)}", flush=True)
     if args.findings:
         findings_tables(args.seeds)
     print(f"{time.perf_counter() - t0:.0f} s")
