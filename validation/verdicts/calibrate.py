@@ -4,7 +4,9 @@ Prints, for simulated metric tables (no renders), the verdict rates of a perfect
 and a tied emulator and of one whose true omega2 is exactly the margin, at several study
 sizes and noise scales, and (``--findings``) how often
 each AE finding is judged ``holds`` when its claim is false (tied and near-tied
-configurations, Gaussian, one far noisier method, heavy tails) and its power by effect size.
+configurations, Gaussian, one far noisier method, heavy tails) and its power by effect size,
+and (``--intervals``) how often each one-sided bound of omega2 lies on the wrong side of a
+known true omega2.
 ``--seeds`` sets the simulated studies per cell.
 """
 
@@ -24,6 +26,33 @@ __all__ = ["main"]
 
 def _pct(r: dict) -> str:
     return f"agrees {100 * r['agrees']:.0f} %, disagrees {100 * r['disagrees']:.0f} %"
+
+
+def interval_table(n_studies: int, n_resamples: int = 400) -> None:
+    """How often each one-sided 95 % bound of omega2 lies on the wrong side of the truth (nominal 5 %): plain and
+    bias-corrected percentiles of the untruncated statistic, on studies whose true omega2 is exact."""
+    import numpy as np
+
+    from emulator.stats import percentile_interval, rng_of
+    from validation.verdicts.agreement import omega2_untruncated
+    from validation.verdicts.simulate import simulate_tables
+
+    rng = rng_of(0)
+    for o in (0.0, OMEGA2_MAX, 1.0):
+        for noise, w in ((1.0, 30), (1.0, 56), (NOISE_TO_METHOD_SD["rpe"], 56)):
+            t = simulate_tables("exact", w, Scales(1.0, 0.5, noise), n_seeds=n_studies, seed=rng, omega2_true=o)
+            raw = omega2_untruncated(t["live"], t["emulated"])
+            miss = np.zeros(4)
+            for k in range(n_studies):
+                idx = rng.integers(0, w, (n_resamples, w))
+                boot = omega2_untruncated(t["live"][k][idx], t["emulated"][k][idx])
+                p_lo, p_hi = percentile_interval(boot, 0.9)
+                c_lo, c_hi = percentile_interval(boot, 0.9, estimate=raw[k])
+                miss += [p_hi < o, c_hi < o, p_lo > o, c_lo > o]
+            print(f"true omega2 {o}, noise / method SD {noise}, {w} walks, {n_studies} studies: upper bound below "
+                  f"the truth: plain {100 * miss[0] / n_studies:.1f} %, bias-corrected {100 * miss[1] / n_studies:.1f} "
+                  f"%; lower bound above it: plain {100 * miss[2] / n_studies:.1f} %, bias-corrected "
+                  f"{100 * miss[3] / n_studies:.1f} %", flush=True)
 
 
 def findings_tables(n_studies: int, walks=(30, 56)) -> None:
@@ -52,6 +81,7 @@ def main(argv=None) -> int:
                    help="study sizes (default 10,30,56,120)")
     p.add_argument("--findings", action="store_true", help="also the AE findings' tables")
     p.add_argument("--no-agreement", action="store_true", help="skip the live-versus-emulated tables")
+    p.add_argument("--intervals", action="store_true", help="also the one-sided bounds' error rates of omega2")
     args = p.parse_args(argv)
     t0 = time.perf_counter()
     for label, noise in ({} if args.no_agreement else NOISE_TO_METHOD_SD).items():
@@ -64,6 +94,8 @@ def main(argv=None) -> int:
                                    omega2_true=OMEGA2_MAX)
             print(f"{label} scale (noise / method SD {noise}), {w} walks: perfect {_pct(perfect)}; random "
                   f"{_pct(random)}; tied {_pct(tied)}; true omega2 exactly {OMEGA2_MAX} {_pct(margin)}", flush=True)
+    if args.intervals:
+        interval_table(args.seeds)
     if args.findings:
         findings_tables(args.seeds)
     print(f"{time.perf_counter() - t0:.0f} s")
