@@ -155,3 +155,10 @@ def test_the_seeds_are_the_bootstrap_clusters():
     a = judge_metrics(tables, METHODS, power=False, walks=walks, n_resamples=200)["metrics"]["median_matches"]
     b = judge_metrics(tables, METHODS, power=False, n_resamples=200)["metrics"]["median_matches"]
     assert a["omega2"] == b["omega2"] and a["omega2_ci90"] != b["omega2_ci90"]  # same estimate, other resamples
+    # the conditions' intervals too: two seeds of 4 walks, values constant within a seed -> every resample
+    # mean is 0, 0.5 or 1 (whole seeds), so are the interval's ends
+    from validation.live.evidence import condition_table
+
+    t = np.repeat([[0.0], [1.0]], 4, axis=0)
+    ci = condition_table(t, ["a"], n_resamples=200, clusters=[0] * 4 + [1] * 4)["a"]["ci95"]
+    assert set(ci) <= {0.0, 0.5, 1.0} and ci[0] < ci[1]

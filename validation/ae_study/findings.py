@@ -307,7 +307,7 @@ def findings_with_evidence(summary: dict, findings: list[dict], taus=(5, 100), s
         else:
             g.update({"effect": r["effect"], "ci95": r["ci95"], "p": r["p"], "p_adjusted": r["p_adjusted"],
                       "verdict": r["verdict"], "n_walks": r["n_walks"], "effect_definition": r["definition"],
-                      "verdict_reason": r["reason"]})
+                      "verdict_reason": r["reason"], "test": r.get("test"), "family": r.get("family")})
         out.append(g)
     return out
 

@@ -177,19 +177,24 @@ def store_walks_table(out, walks, tables: dict, methods) -> str:
     return WALKS_TABLE
 
 
-def condition_table(table: np.ndarray, methods, *, n_resamples: int = 1000, seed=0) -> dict:
-    """Per method: the walk mean of one metric with its cluster-bootstrap 95 % interval (walks with a value)."""
+def condition_table(table: np.ndarray, methods, *, n_resamples: int = 1000, seed=0, clusters=None) -> dict:
+    """Per method: the walk mean of one metric with its bootstrap 95 % interval (walks with a value; the walks
+    of one ``clusters`` label, the seed, drawn together)."""
+    from validation.verdicts.ranking import cluster_plan, over_plan
+
     t = np.asarray(table, dtype=np.float64)
     out = {}
     rng = rng_of(seed)
     for k, m in enumerate(methods):
-        v = t[:, k][np.isfinite(t[:, k])]
+        ok = np.isfinite(t[:, k])
+        v = t[:, k][ok]
         if v.size == 0:
             out[m] = {"mean": None, "ci95": [None, None], "n_walks": 0}
             continue
         ci = [None, None]
         if v.size >= 2:
-            lo, hi = percentile_interval(v[rng.integers(0, v.size, (n_resamples, v.size))].mean(axis=1))
+            plan = cluster_plan(v.size, n_resamples, rng, None if clusters is None else np.asarray(clusters)[ok])
+            lo, hi = percentile_interval(over_plan(lambda x: x.mean(axis=-1), plan, v))
             ci = [float(lo), float(hi)]
         out[m] = {"mean": float(v.mean()), "ci95": ci, "n_walks": int(v.size)}
     return out
@@ -285,7 +290,8 @@ def judge_metrics(tables: dict, methods, *, n_resamples: int = 1000, seed: int =
             continue
         conditions[cname] = {"run": run, "status": "run", "metrics": {
             metric: condition_table(tables[run][metric], names, n_resamples=n_resamples,
-                                    seed=[seed, 22_002, list(METRICS).index(metric)]) for metric in METRICS}}
+                                    seed=[seed, 22_002, list(METRICS).index(metric)], clusters=clusters)
+            for metric in METRICS}}
     power_out = {}
     for metric in METRICS:
         if not power or CONDITIONS[REFERENCE_LIVE] not in tables:
