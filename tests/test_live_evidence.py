@@ -136,8 +136,13 @@ def test_walks_table_round_trip_and_redraw_from_the_table_alone(tmp_path):
     for m in METRICS:
         for k in ("verdict", "omega2", "omega2_ci90", "pairs_verdict", "emulation_bias", "margin_in_ranking_terms"):
             assert again["metrics"][m][k] == before["metrics"][m][k], (m, k)
-    # a table that differs from the records is never overwritten
-    (tmp_path / WALKS_TABLE).write_text(text.replace(",0,fixed,", ",0,fixed,", 1)[:-40] + "\n")
+    # a resumed study completes its table (every earlier row kept); a table whose rows differ is never overwritten
+    few = "\n".join(text.splitlines()[:50]) + "\n"
+    (tmp_path / WALKS_TABLE).write_text(few)
+    finish_replicated(tmp_path, _records(tables, 10), command="test", power_seeds=0)
+    assert (tmp_path / WALKS_TABLE).read_text() == text
+    row = text.splitlines()[1]
+    (tmp_path / WALKS_TABLE).write_text(text.replace(row, row[:-3] + "999", 1))
     with pytest.raises(LiveError, match="walks.csv"):
         finish_replicated(tmp_path, _records(tables, 10), command="test", power_seeds=0)
     (tmp_path / WALKS_TABLE).write_text(text.replace("walk,scene", "walk;scene"))

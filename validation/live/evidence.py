@@ -158,7 +158,8 @@ def parse_walks_table(text: str, name: str = WALKS_TABLE) -> tuple[list[str], li
 def store_walks_table(out, walks, tables: dict, methods) -> str:
     """Write the per-walk table into the study folder ``out`` (:data:`WALKS_TABLE`); returns its name.
 
-    An existing table with the same content is left alone; one that differs is never
+    An existing table with the same content is left alone, one whose every row the new table
+    keeps is completed (a resumed study adds walks); one whose rows differ is never
     overwritten (a :class:`~validation.live.config.LiveError` says so).
     """
     from pathlib import Path
@@ -169,11 +170,13 @@ def store_walks_table(out, walks, tables: dict, methods) -> str:
     path = Path(out) / WALKS_TABLE
     text = walks_table_csv(walks, tables, methods)
     if path.is_file():
-        if read_text(path) != text:
+        old = read_text(path)
+        if old == text:
+            return WALKS_TABLE
+        if not set(old.splitlines()) <= set(text.splitlines()):
             raise LiveError(f"{path}: differs from the walks recomputed from this folder's raw records; move it "
                             "away to write it again")
-        return WALKS_TABLE
-    write_text(path, text, overwrite=False)
+    write_text(path, text, overwrite=True)
     return WALKS_TABLE
 
 
