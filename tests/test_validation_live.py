@@ -289,6 +289,8 @@ def test_exposim_validate_live_cli(tmp_path, render_cache, capsys, monkeypatch):
     assert res["config"] == {**TINY.to_dict(), "n_cycles": CONFIGS["quick"].n_cycles, "latency_frames": 2}
     assert res["conditions"]["native-rate live"]["status"] == "run"
     assert all(r["verdict"] == "undetermined" for r in res["metrics"].values())
+    assert all(r["pairs_verdict"] is None or r["pairs_verdict"]["verdict"] == "undetermined"
+               for r in res["metrics"].values())  # --quick decides nothing, the pairwise check included
     assert all(r["verdict"] == "undetermined"
                for r in res["comparisons"]["emulated vs native-rate live"]["metrics"].values())
     assert res["command"].startswith(f"exposim validate live -o {out} --quick --scenes forest_winter")

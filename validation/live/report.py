@@ -120,7 +120,8 @@ def evidence_markdown(results: dict) -> str:
         pv, mr = r.get("pairs_verdict") or {}, r.get("margin_in_ranking_terms") or {}
         lines.append(f"| {m} | **{r['verdict']}** | {fmt(r['omega2'])} | {_ci(r['omega2_ci90'])} | "
                      f"{pv.get('verdict', 'n/a')} ({fmt(pv.get('bound'))} vs {fmt(pv.get('margin'))}) | "
-                     f"{fmt(mr.get('expected_kendall_tau'), '.2f')}, {fmt(mr.get('best_method_changes_probability'), '.2f')} | "
+                     f"{fmt(mr.get('expected_kendall_tau'), '.2f')}, "
+                     f"{fmt(mr.get('best_method_changes_probability'), '.2f')} | "
                      f"{fmt(r.get('disattenuated_correlation'), '.2f')} | {fmt(r['tau_live_emulated'], '.2f')} | "
                      f"{fmt(r['tau_live_live'], '.2f')} | {r.get('pairs_live_significant', 'n/a')} / "
                      f"{r['pairs_equivalent'] if r.get('pairs_equivalent') is not None else 'n/a'} / "
@@ -132,7 +133,8 @@ def evidence_markdown(results: dict) -> str:
             lines.append(f"| {label} | " + " | ".join("not run" for _ in metrics) + " |")
             continue
         lines.append(f"| {label} | " + " | ".join(
-            f"{c['metrics'][m]['verdict']} {fmt(c['metrics'][m]['omega2'], '.2f')} {_ci(c['metrics'][m]['omega2_ci90'], '.2f')}"
+            f"{c['metrics'][m]['verdict']} {fmt(c['metrics'][m]['omega2'], '.2f')} "
+            f"{_ci(c['metrics'][m]['omega2_ci90'], '.2f')}"
             for m in metrics) + " |")
     bias = {m: r["emulation_bias"] for m, r in metrics.items() if r.get("emulation_bias")}
     if bias:

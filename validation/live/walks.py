@@ -26,7 +26,8 @@ import numpy as np
 from emulator.io.files import read_results, to_jsonable, write_results
 from validation.live.config import BRIGHTENING_PAIRS, CONTROL, NOISE_OPTIONS, VARIANTS, LiveConfig, config_from_dict
 
-__all__ = ["WALKS_DIR", "NATIVE_RUN", "CONTROL_STREAM", "control_seed", "walk_record_path", "walk_name", "run_walk", "run_walks", "read_walk"]
+__all__ = ["WALKS_DIR", "NATIVE_RUN", "CONTROL_STREAM", "control_seed", "walk_record_path", "walk_name", "run_walk",
+           "run_walks", "read_walk"]
 
 #: Sub-folder of an experiment with one record per finished walk.
 WALKS_DIR = "walks"
