@@ -125,7 +125,8 @@ class Scene:
         ``walk``: ``"borealhdr"`` (default: turns like the BorealHDR backpack,
         :class:`scenes.walks.GaitWalk`), ``"gentle"`` (:func:`scenes.trajectory.walk`) or
         ``"replay:PATH"`` (a recorded gyro); see :func:`scenes.walks.make_walk`.  Keyword
-        arguments go to the walk's builder.
+        arguments go to the walk's builder.  The walk's random stream includes the scene's
+        name (``stream``), so two scenes with one seed do not share their motion.
         """
         from scenes import trajectory as tr
         from scenes.walks import DEFAULT_WALK, make_walk
@@ -134,6 +135,7 @@ class Scene:
             return tr.static(self.default_pose(), duration_s=duration_s)
         kwargs.setdefault("start", self.start)
         kwargs.setdefault("heading_deg", self.heading_deg)
+        kwargs.setdefault("stream", self.name)
         return make_walk(DEFAULT_WALK if walk is None else walk, duration_s,
                          seed=self.seed if seed is None else seed, **kwargs)
 

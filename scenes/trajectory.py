@@ -21,6 +21,7 @@ __all__ = [
     "BASELINE_M",
     "Trajectory",
     "walk",
+    "stream_key",
     "static",
     "look_pose",
     "stereo_right",
@@ -209,6 +210,7 @@ def walk(
     sway_deg: float = 0.5,
     turn_deg: float = 4.0,
     turn_period_s: float = 40.0,
+    stream: str = "",
 ) -> Trajectory:
     """A smooth walk at constant horizontal speed with a small head bob.
 
@@ -236,6 +238,10 @@ def walk(
         Amplitude of head pitch (per step) and roll (per stride), degrees.
     turn_deg, turn_period_s : float
         Amplitude (degrees) and period (s) of the slow meander of the heading.
+    stream : str
+        Name mixed into the random stream with ``seed`` (a scene's walk passes the scene's
+        name, so two scenes with one seed do not share their motion); empty: the stream of
+        ``seed`` alone (what walks were before the scene joined it).
 
     Returns
     -------
@@ -247,13 +253,21 @@ def walk(
             raise SceneError(f"walk: {name} must be a finite number > {max(lo, 0)}, got {v!r}")
     if not 0.0 <= bob_amplitude_m < height_m:
         raise SceneError(f"walk: bob_amplitude_m must be in [0, height_m), got {bob_amplitude_m!r}")
-    rng = np.random.default_rng([int(seed), 7])
+    rng = np.random.default_rng(stream_key(seed, 7, stream))
     phases = tuple(float(p) for p in rng.uniform(0.0, 2.0 * math.pi, 4))
     return Trajectory(duration_s=float(duration_s), start=(float(start[0]), float(start[1])),
                       heading_deg=float(heading_deg), speed_mps=float(speed_mps), height_m=float(height_m),
                       bob_amplitude_m=float(bob_amplitude_m), step_frequency_hz=float(step_frequency_hz),
                       pitch_deg=float(pitch_deg), sway_deg=float(sway_deg), turn_deg=float(turn_deg),
                       turn_period_s=float(turn_period_s), phases=phases)
+
+
+def stream_key(seed: int, purpose: int, stream: str = "") -> list[int]:
+    """Entropy of a random stream: ``[seed, purpose]``, plus a CRC-32 of ``stream`` when it is not empty."""
+    import zlib
+
+    key = [int(seed), int(purpose)]
+    return key + [zlib.crc32(stream.encode("utf-8"))] if stream else key
 
 
 def static(pose, duration_s: float = 1.0) -> Trajectory:

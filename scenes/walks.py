@@ -83,11 +83,11 @@ class _BodyPath:
     (error far below a micrometre: the heading turns over tens of seconds).
     """
 
-    def __init__(self, duration_s, start, heading_deg, speed_mps, seed):
+    def __init__(self, duration_s, start, heading_deg, speed_mps, seed, stream=""):
         from scenes.trajectory import walk
 
         self.path = walk(duration_s, speed_mps=speed_mps, bob_amplitude_m=0.0, seed=seed, start=start,
-                         heading_deg=heading_deg, sway_deg=0.0, pitch_deg=0.0)
+                         heading_deg=heading_deg, sway_deg=0.0, pitch_deg=0.0, stream=stream)
         n = int(math.ceil(duration_s / _BODY_GRID_S)) + 1
         self.grid = np.arange(n) * _BODY_GRID_S
         h = self.path.heading_rad(self.grid)
@@ -181,6 +181,9 @@ class GaitWalk(_Timed):
         sum of lines gives about 2.3).
     seed : int
         Seed of the lines' frequencies and phases.
+    stream : str
+        Name mixed into the seed's random stream (a scene's walk: the scene's name); empty:
+        the stream of the seed alone (walks before the scene joined it).
     """
 
     duration_s: float
@@ -195,10 +198,13 @@ class GaitWalk(_Timed):
     lateral_sway_m: float = 0.015
     intensity_modulation: float = 0.3
     seed: int = 0
+    stream: str = ""
     _lines: dict = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
-        rng = np.random.default_rng([int(self.seed), 21])
+        from scenes.trajectory import stream_key
+
+        rng = np.random.default_rng(stream_key(self.seed, 21, self.stream))
         stride = 0.5 * self.step_frequency_hz
         lines = {}
         for axis in ("roll", "pitch", "yaw"):
@@ -217,7 +223,7 @@ class GaitWalk(_Timed):
         lines = {axis: _modulate(*wap, self.intensity_modulation, phases[2]) for axis, wap in lines.items()}
         object.__setattr__(self, "_lines", {"axes": lines, "phases": phases,
                                             "body": _BodyPath(self.duration_s, self.start, self.heading_deg,
-                                                               self.speed_mps, self.seed)})
+                                                               self.speed_mps, self.seed, self.stream)})
 
     def angles_rad(self, t: np.ndarray) -> dict:
         """Head yaw, pitch and roll offsets (rad) at times t: integrals of the rate lines, zero at their mean."""

@@ -55,7 +55,8 @@ def test_replicated_results_contract(tmp_path, kind, expected):
     assert on_disk["n_walks"] == 40 == res["n_walks"]
     assert set(on_disk["metrics"]) == set(METRICS)
     for m, r in on_disk["metrics"].items():
-        assert set(r) >= {"omega2", "omega2_ci95", "tau_live_emulated", "tau_live_live", "verdict", "reason"}
+        assert set(r) >= {"omega2", "omega2_ci90", "tau_live_emulated", "tau_live_live", "verdict", "reason", "family",
+                          "pairs_verdict", "margin_in_ranking_terms", "emulation_bias"}
     # every ranked metric carries the same simulated values (success: the sign only)
     for m in ("median_matches", "median_uniformity", "rpe_trans_pct"):
         assert on_disk["metrics"][m]["verdict"] == expected, on_disk["metrics"][m]
@@ -95,13 +96,74 @@ def test_headline_is_the_verdict_with_its_interval_and_tau_is_secondary():
     from validation.live.report import headline
 
     res = {"n_walks": 52, "reference_condition": "cycle-rate live", "metrics": {
-        "median_matches": {"verdict": "agrees", "omega2": 0.04, "omega2_ci95": [0.0, 0.15],
-                           "tau_live_emulated": 0.81, "tau_live_live": 0.9, "tau_live_live_ci95": [0.62, 1.0]},
-        "rpe_trans_pct": {"verdict": "undetermined", "omega2": 0.7, "omega2_ci95": [0.1, None],
+        "median_matches": {"verdict": "agrees", "omega2": 0.04, "omega2_ci90": [0.0, 0.15],
+                           "tau_live_emulated": 0.81, "tau_live_live": 0.9, "tau_live_live_ci95": [0.62, 1.0],
+                           "pairs_verdict": {"verdict": "undetermined"}},
+        "rpe_trans_pct": {"verdict": "undetermined", "omega2": 0.7, "omega2_ci90": [0.1, None],
                           "tau_live_emulated": None, "tau_live_live": None}}}
     lines = headline(res).splitlines()
-    assert lines[0] == "verdicts over 52 walks, emulated vs cycle-rate live (agrees: omega2's 95 % upper end <= 0.2):"
-    assert lines[1] == "  median_matches: agrees, omega2 0.04 [0, 0.15]"
+    assert lines[0] == ("verdicts over 52 walks, emulated vs cycle-rate live (agrees: omega2's one-sided 95 % upper "
+                        "bound <= 0.2; per metric, not corrected across metrics):")
+    assert lines[1] == "  median_matches: agrees, omega2 0.04 [0, 0.15]; pairwise check undetermined"
     assert lines[2] == "  rpe_trans_pct: undetermined, omega2 0.7 [0.1, inf]"
     assert lines[3].startswith("secondary, not a verdict:") and "median_matches 0.81 vs 0.90 [0.62, 1.00]" in lines[3]
     assert len(lines) == 4 and "0.9:" not in headline(res)
+
+
+def test_walks_table_round_trip_and_redraw_from_the_table_alone(tmp_path):
+    from validation.live.config import LiveError
+    from validation.live.evidence import WALKS_TABLE, parse_walks_table, walk_labels
+    from validation.live.experiment import finish_replicated, redraw
+
+    sim = simulate_tables("live-draw", 40, Scales(sd_method=1.0, sd_walk_method=0.3, sd_noise=0.3), seed=7)
+    sim["live"][0][3, 2] = np.nan  # a missing value stays missing
+    tables = {CONDITIONS["cycle-rate live"]: sim["live"][0], CONDITIONS["emulated"]: sim["emulated"][0],
+              "live-same-instant-reseeded": sim["control"][0]}
+    res = finish_replicated(tmp_path, _records(tables, 10), command="test", power_seeds=0)
+    assert res["walks_table"] == WALKS_TABLE
+    text = (tmp_path / WALKS_TABLE).read_text()
+    assert text.splitlines()[0] == ("walk,scene,seed,method,condition,median_uniformity,median_matches,"
+                                    "success_rate_tau100,segment_success_rate_tau100,vo_failed_frames,rpe_trans_pct")
+    assert len(text.splitlines()) == 1 + 3 * 40 * len(METHODS)
+    walks, methods, back = parse_walks_table(text)
+    assert walks == res["walks"] and methods == list(METHODS)
+    for run, t in tables.items():  # exact: every value as written, NaN where missing
+        np.testing.assert_array_equal(back[run]["median_matches"], t)
+    assert walk_labels(walks)[1][:5] == [0, 0, 0, 0, 1]  # 4 scenes per seed: the seed is the cluster
+    # only the table (and results.json for the configuration) left: --redraw gives the same verdicts, to the digit
+    before = json.loads((tmp_path / "results.json").read_text())
+    again = redraw(tmp_path)
+    for m in METRICS:
+        for k in ("verdict", "omega2", "omega2_ci90", "pairs_verdict", "emulation_bias", "margin_in_ranking_terms"):
+            assert again["metrics"][m][k] == before["metrics"][m][k], (m, k)
+    # a resumed study completes its table (every earlier row kept); a table whose rows differ is never overwritten
+    few = "\n".join(text.splitlines()[:50]) + "\n"
+    (tmp_path / WALKS_TABLE).write_text(few)
+    finish_replicated(tmp_path, _records(tables, 10), command="test", power_seeds=0)
+    assert (tmp_path / WALKS_TABLE).read_text() == text
+    row = text.splitlines()[1]
+    (tmp_path / WALKS_TABLE).write_text(text.replace(row, row[:-3] + "999", 1))
+    with pytest.raises(LiveError, match="walks.csv"):
+        finish_replicated(tmp_path, _records(tables, 10), command="test", power_seeds=0)
+    (tmp_path / WALKS_TABLE).write_text(text.replace("walk,scene", "walk;scene"))
+    with pytest.raises(LiveError, match="line 1"):
+        parse_walks_table((tmp_path / WALKS_TABLE).read_text())
+
+
+def test_the_seeds_are_the_bootstrap_clusters():
+    from validation.live.evidence import judge_metrics
+
+    sim = simulate_tables("live-draw", 40, Scales(sd_method=1.0, sd_walk_method=0.3, sd_noise=0.3), seed=7)
+    tables = {CONDITIONS["cycle-rate live"]: {m: sim["live"][0] for m in METRICS},
+              CONDITIONS["emulated"]: {m: sim["emulated"][0] for m in METRICS}}
+    walks = [f"{s}/seed{k}" for k in range(10) for s in SCENES]
+    a = judge_metrics(tables, METHODS, power=False, walks=walks, n_resamples=200)["metrics"]["median_matches"]
+    b = judge_metrics(tables, METHODS, power=False, n_resamples=200)["metrics"]["median_matches"]
+    assert a["omega2"] == b["omega2"] and a["omega2_ci90"] != b["omega2_ci90"]  # same estimate, other resamples
+    # the conditions' intervals too: two seeds of 4 walks, values constant within a seed -> every resample
+    # mean is 0, 0.5 or 1 (whole seeds), so are the interval's ends
+    from validation.live.evidence import condition_table
+
+    t = np.repeat([[0.0], [1.0]], 4, axis=0)
+    ci = condition_table(t, ["a"], n_resamples=200, clusters=[0] * 4 + [1] * 4)["a"]["ci95"]
+    assert set(ci) <= {0.0, 0.5, 1.0} and ci[0] < ci[1]

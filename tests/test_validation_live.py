@@ -231,7 +231,7 @@ def test_tiny_experiment_end_to_end(tmp_path, render_cache, monkeypatch):
     assert set(on_disk["metrics"]) == set(METRICS)
     for r in on_disk["metrics"].values():
         assert r["verdict"] == "undetermined" and r["reason"]
-        assert set(r) >= {"omega2", "omega2_ci95", "tau_live_emulated", "tau_live_live"}
+        assert set(r) >= {"omega2", "omega2_ci90", "tau_live_emulated", "tau_live_live", "pairs_verdict"}
     # the three conditions side by side: native-rate live runs by default (22 fps, latency 1)
     assert (on_disk["config"]["latency_frames"], on_disk["config"]["frame_rate_hz"]) == (1, 22.0)
     for cname in ("native-rate live", "cycle-rate live", "emulated"):
@@ -289,6 +289,8 @@ def test_exposim_validate_live_cli(tmp_path, render_cache, capsys, monkeypatch):
     assert res["config"] == {**TINY.to_dict(), "n_cycles": CONFIGS["quick"].n_cycles, "latency_frames": 2}
     assert res["conditions"]["native-rate live"]["status"] == "run"
     assert all(r["verdict"] == "undetermined" for r in res["metrics"].values())
+    assert all(r["pairs_verdict"] is None or r["pairs_verdict"]["verdict"] == "undetermined"
+               for r in res["metrics"].values())  # --quick decides nothing, the pairwise check included
     assert all(r["verdict"] == "undetermined"
                for r in res["comparisons"]["emulated vs native-rate live"]["metrics"].values())
     assert res["command"].startswith(f"exposim validate live -o {out} --quick --scenes forest_winter")
@@ -432,3 +434,11 @@ def test_a_failed_walk_is_an_error_row_and_the_others_are_judged(tmp_path, rende
     assert main(args + ["--resume"]) == 0
     res = json.loads((tmp_path / "rep" / "results.json").read_text())
     assert res["failed_walks"] == [] and res["n_walks"] == 2
+
+
+def test_the_live_control_has_a_stream_of_its_own():
+    from validation.live.walks import control_seed
+
+    seeds = {control_seed(s, scene) for s in range(20) for scene in ("forest_winter", "sun_glare")}
+    assert len(seeds) == 40 and not seeds & set(range(1000))  # never another walk's or replicate's seed
+    assert control_seed(4, "sun_glare") == control_seed(4, "sun_glare")

@@ -34,7 +34,7 @@ def test_paper_sized_effect_in_the_studys_residual_sds(tmp_path):
     r = r - r.mean(axis=0) - r.mean(axis=1, keepdims=True) + r.mean()  # walk x method part only
     a = rng.normal(size=(12, 1))
     rpe = 2.0 + (a - a.mean()) + r  # level 2 %, no method effect
-    row = paper_sized_power(_units(rpe), n_seeds=5, candidates=(12,), n_permutations=200)["rpe_trans_worst_kim"]
+    row = paper_sized_power(_units(rpe), n_seeds=5, candidates=(12,))["rpe_trans_worst_kim"]
     sd = np.sqrt((r ** 2).sum() / (11 * 6))  # the two-way residual
     assert row["level"] == pytest.approx(2.0) and row["sd_residual"] == pytest.approx(sd)
     assert row["effect_study_units"] == pytest.approx(0.65 * 2.0 / ((4.21 + 5.75 + 5.1) / 3))

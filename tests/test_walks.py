@@ -114,9 +114,26 @@ def test_make_walk_presets_and_scene_default():
     gentle = scene.trajectory(5.0, walk="gentle")
     assert isinstance(gentle, tr.Trajectory)
     np.testing.assert_array_equal(gentle.pose(1.0), tr.walk(5.0, seed=scene.seed, start=scene.start,
-                                                           heading_deg=scene.heading_deg).pose(1.0))
+                                                           heading_deg=scene.heading_deg,
+                                                           stream="forest_summer").pose(1.0))
     with pytest.raises(SceneError, match="unknown walk"):
         walks.make_walk("brisk", 5.0)
+
+
+def test_a_scenes_walk_stream_includes_the_scene():
+    import scenes
+
+    # the same seed in two scenes: different motion (the random stream includes the scene's name) ...
+    a = scenes.get_scene("forest_summer", seed=3).trajectory(5.0, start=(0.0, 0.0), heading_deg=0.0)
+    b = scenes.get_scene("forest_winter", seed=3).trajectory(5.0, start=(0.0, 0.0), heading_deg=0.0)
+    assert a.stream == "forest_summer" and b.stream == "forest_winter"
+    assert not np.allclose(a.pose(2.0), b.pose(2.0))
+    # ... each one reproducible, and an empty stream is the seed's own (old) stream
+    again = walks.gait_walk(5.0, seed=3, stream="forest_summer")
+    np.testing.assert_array_equal(a.pose(2.0), again.pose(2.0))
+    assert tr.stream_key(3, 21) == [3, 21] and tr.stream_key(3, 21, "x")[:2] == [3, 21]
+    np.testing.assert_array_equal(tr.walk(5.0, seed=3).pose(1.0), tr.walk(5.0, seed=3, stream="").pose(1.0))
+    assert not np.allclose(tr.walk(5.0, seed=3).pose(2.0), tr.walk(5.0, seed=3, stream="sun_glare").pose(2.0))
 
 
 def test_imu_samples_at_rest_read_gravity():

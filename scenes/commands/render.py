@@ -151,7 +151,8 @@ def _timestamps_and_poses(scene, args):
     else:
         from scenes.walks import DEFAULT_WALK, make_walk
 
-        traj = make_walk(DEFAULT_WALK, duration, seed=scene.seed, start=scene.start, heading_deg=scene.heading_deg)
+        traj = make_walk(DEFAULT_WALK, duration, seed=scene.seed, start=scene.start, heading_deg=scene.heading_deg,
+                         stream=scene.name)
     ts = traj.timestamps(args.rate) if args.duration > 0 else np.zeros(1)
     return ts, traj.poses(ts)
 

@@ -286,7 +286,8 @@ def findings_with_evidence(summary: dict, findings: list[dict], taus=(5, 100), s
     The walks are the summary's scenes (each an independent walk with its seeds); per finding
     :func:`validation.verdicts.findings.evaluate` adds ``effect`` (signed: positive is the
     paper's claim), ``ci95`` (cluster bootstrap over walks), ``p`` and ``p_adjusted``
-    (label-permutation null, Holm across the findings), ``verdict`` (holds / contradicted /
+    (the claim tested as stated: every one-sided paired comparison it needs, Holm across the
+    findings), ``verdict`` (holds / contradicted /
     undetermined / by-construction, the last not counted), ``n_walks``, ``effect_definition``
     and ``verdict_reason``.  ``holds`` stays the point comparison of issue 7.
     """
@@ -306,7 +307,7 @@ def findings_with_evidence(summary: dict, findings: list[dict], taus=(5, 100), s
         else:
             g.update({"effect": r["effect"], "ci95": r["ci95"], "p": r["p"], "p_adjusted": r["p_adjusted"],
                       "verdict": r["verdict"], "n_walks": r["n_walks"], "effect_definition": r["definition"],
-                      "verdict_reason": r["reason"]})
+                      "verdict_reason": r["reason"], "test": r.get("test"), "family": r.get("family")})
         out.append(g)
     return out
 

@@ -171,10 +171,12 @@ def report_markdown(results: dict) -> str:
         lines.append(f"| {f['claim']} | {f['paper']} | {f.get('verdict', 'n/a')} | {_fmt(f.get('effect'))} "
                      f"({_fmt(ci[0])}..{_fmt(ci[1])}) | {_fmt(f.get('p_adjusted'), '.2g')} | "
                      f"{_fmt(f['holds']) if f['holds'] is not None else 'undecided'} | {f['detail']} |")
-    lines += ["", "Verdict: the finding's effect (signed, positive = the paper's claim; see `effect_definition` in "
-              "results.json) against interchangeable methods (labels permuted within each walk), Holm across the "
-              "findings; undetermined with fewer than 10 walks; by-construction findings cannot fail and are not "
-              "counted. The point comparison is the single-number test, without evidence."]
+    lines += ["", "Verdict: each claim tested as the paper states it (a \"best\" or \"poorest\" method against each "
+              "other method: every one-sided paired comparison over walks must reject); family: Holm across the "
+              "tested claims for holds, and across their opposites for contradicted; undetermined with fewer than 10 "
+              "walks; by-construction findings cannot fail and are not counted. The effect is signed, positive = the "
+              "paper's claim (see `effect_definition` in results.json). The point comparison is the single-number "
+              "test, without evidence."]
     lines += ["", "## Figures", "", "![summary](ae_study_summary.png)", "",
               "![features (Fig. 4)](features/fig4_features.png)", "",
               "## Why this size and VO ratio", "", f"- symptom: {VO_CONFIGURATION_NOTE['symptom']}",

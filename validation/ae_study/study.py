@@ -199,7 +199,9 @@ def finish_replicated_study(out, studies: list[dict], command: str | None = None
                      f"{_fmt(f['p_adjusted'], '.2g')} | {f.get('n_walks') if f.get('n_walks') is not None else '-'} | "
                      f"{f.get('effect_definition') or f.get('verdict_reason')} |")
     from validation.ae_study.report import method_intervals, method_intervals_markdown
+    from validation.verdicts.findings import FAMILY
 
+    lines += ["", f"Each claim is tested as stated (every comparison it needs must reject). Family: {FAMILY}."]
     results["method_intervals"] = method_intervals(per_scene)
     lines += [""] + method_intervals_markdown(per_scene)
     write_report(out, "\n".join(lines) + "\n")

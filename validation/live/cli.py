@@ -87,7 +87,8 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     add_json(p)
     p.add_argument("--redraw", action="store_true",
                    help="only recompute the verdicts and rewrite results.json, report.md and the figures of the "
-                        "existing folder OUT from its raw.json")
+                        "existing folder OUT from its raw.json (or from its per-walk table walks.csv where only that "
+                        "and results.json are left)")
     return p
 
 

@@ -32,7 +32,11 @@ from validation.live.config import (
     REFERENCE_LIVE,
 )
 
-__all__ = ["WALK_METRICS", "walk_value", "walk_values", "condition_table", "metric_scales", "judge_metrics"]
+__all__ = ["WALK_METRICS", "WALKS_TABLE", "walk_value", "walk_values", "walk_labels", "walks_table_csv",
+           "parse_walks_table", "store_walks_table", "condition_table", "metric_scales", "judge_metrics"]
+
+#: The study's per-walk table in its folder: one row per walk, method and condition, every metric.
+WALKS_TABLE = "walks.csv"
 
 #: Per-walk value of each ranked metric, from one method's entry of
 #: ``ae_study.summarise(...)["per_scene"][scene]`` (the walk's own figures).
@@ -83,19 +87,117 @@ def walk_values(records: list[dict], methods) -> tuple[list[str], dict[str, dict
     return walks, tables
 
 
-def condition_table(table: np.ndarray, methods, *, n_resamples: int = 1000, seed=0) -> dict:
-    """Per method: the walk mean of one metric with its cluster-bootstrap 95 % interval (walks with a value)."""
+def walk_labels(walks) -> tuple[list[str], list[int]]:
+    """(scenes, seeds) of walk names ``<scene>/seed<S>`` (:func:`walk_values`)."""
+    scenes, seeds = [], []
+    for w in walks:
+        scene, _, seed = str(w).rpartition("/seed")
+        if not scene or not seed.isdigit():
+            raise ValueError(f"walk name {w!r} is not <scene>/seed<S>")
+        scenes.append(scene)
+        seeds.append(int(seed))
+    return scenes, seeds
+
+
+_TABLE_HEAD = ("walk", "scene", "seed", "method", "condition")
+
+
+def walks_table_csv(walks, tables: dict, methods) -> str:
+    """The per-walk table as CSV text: ``walk, scene, seed, method, condition`` and every metric of
+    :data:`WALK_METRICS` (exact: each float as its shortest round-trip text; empty where it does not exist)."""
+    scenes, seeds = walk_labels(walks)
+    lines = [",".join(_TABLE_HEAD + tuple(WALK_METRICS))]
+    for run in sorted(tables):
+        for w, name in enumerate(walks):
+            for k, m in enumerate(methods):
+                vals = [tables[run][metric][w, k] for metric in WALK_METRICS]
+                lines.append(",".join([name, scenes[w], str(seeds[w]), m, run]
+                                      + ["" if not math.isfinite(v) else repr(float(v)) for v in vals]))
+    return "\n".join(lines) + "\n"
+
+
+def parse_walks_table(text: str, name: str = WALKS_TABLE) -> tuple[list[str], list[str], dict]:
+    """(walks, methods, ``{run: {metric: (walks, methods)}}``) of :func:`walks_table_csv` text, in its order.
+
+    A malformed table is a :class:`~validation.live.config.LiveError` naming the file and the line.
+    """
+    from validation.live.config import LiveError
+
+    rows = [r for r in text.splitlines() if r.strip()]
+    head = tuple(rows[0].split(",")) if rows else ()
+    if head[:len(_TABLE_HEAD)] != _TABLE_HEAD or not set(head[len(_TABLE_HEAD):]) <= set(WALK_METRICS):
+        raise LiveError(f"{name}: line 1 must be {','.join(_TABLE_HEAD)} followed by metric names, got "
+                        f"{rows[0] if rows else 'an empty file'!r}")
+    metrics = head[len(_TABLE_HEAD):]
+    walks, methods, runs, cells = [], [], [], {}
+    for n, row in enumerate(rows[1:], start=2):
+        f = row.split(",")
+        if len(f) != len(head):
+            raise LiveError(f"{name}: line {n} has {len(f)} fields, the header {len(head)}")
+        try:
+            vals = [float(v) if v else math.nan for v in f[len(_TABLE_HEAD):]]
+        except ValueError:
+            raise LiveError(f"{name}: line {n}: a metric value is not a number: {row!r}") from None
+        for lst, v in ((walks, f[0]), (methods, f[3]), (runs, f[4])):
+            if v not in lst:
+                lst.append(v)
+        cells[(f[4], f[0], f[3])] = vals
+    tables = {}
+    for run in runs:
+        tables[run] = {metric: np.full((len(walks), len(methods)), np.nan) for metric in metrics}
+        for w, walk in enumerate(walks):
+            for k, m in enumerate(methods):
+                vals = cells.get((run, walk, m))
+                if vals is None:
+                    raise LiveError(f"{name}: no row for walk {walk}, method {m}, condition {run}")
+                for metric, v in zip(metrics, vals):
+                    tables[run][metric][w, k] = v
+    return walks, methods, tables
+
+
+def store_walks_table(out, walks, tables: dict, methods) -> str:
+    """Write the per-walk table into the study folder ``out`` (:data:`WALKS_TABLE`); returns its name.
+
+    An existing table with the same content is left alone, one whose every row the new table
+    keeps is completed (a resumed study adds walks); one whose rows differ is never
+    overwritten (a :class:`~validation.live.config.LiveError` says so).
+    """
+    from pathlib import Path
+
+    from emulator.io.files import read_text, write_text
+    from validation.live.config import LiveError
+
+    path = Path(out) / WALKS_TABLE
+    text = walks_table_csv(walks, tables, methods)
+    if path.is_file():
+        old = read_text(path)
+        if old == text:
+            return WALKS_TABLE
+        if not set(old.splitlines()) <= set(text.splitlines()):
+            raise LiveError(f"{path}: differs from the walks recomputed from this folder's raw records; move it "
+                            "away to write it again")
+    write_text(path, text, overwrite=True)
+    return WALKS_TABLE
+
+
+def condition_table(table: np.ndarray, methods, *, n_resamples: int = 1000, seed=0, clusters=None) -> dict:
+    """Per method: the walk mean of one metric with its bootstrap 95 % interval (walks with a value; the walks
+    of one ``clusters`` label, the seed, drawn together)."""
+    from validation.verdicts.ranking import cluster_plan, over_plan
+
     t = np.asarray(table, dtype=np.float64)
     out = {}
     rng = rng_of(seed)
     for k, m in enumerate(methods):
-        v = t[:, k][np.isfinite(t[:, k])]
+        ok = np.isfinite(t[:, k])
+        v = t[:, k][ok]
         if v.size == 0:
             out[m] = {"mean": None, "ci95": [None, None], "n_walks": 0}
             continue
         ci = [None, None]
         if v.size >= 2:
-            lo, hi = percentile_interval(v[rng.integers(0, v.size, (n_resamples, v.size))].mean(axis=1))
+            plan = cluster_plan(v.size, n_resamples, rng, None if clusters is None else np.asarray(clusters)[ok])
+            lo, hi = percentile_interval(over_plan(lambda x: x.mean(axis=-1), plan, v))
             ci = [float(lo), float(hi)]
         out[m] = {"mean": float(v.mean()), "ci95": ci, "n_walks": int(v.size)}
     return out
@@ -137,16 +239,19 @@ def metric_scales(tables: dict, metric: str, *, min_walks: int = 2):
 
 
 def judge_metrics(tables: dict, methods, *, n_resamples: int = 1000, seed: int = 0, power: bool = True,
-                  power_seeds: int = 100) -> dict:
+                  power_seeds: int = 100, walks=None) -> dict:
     """results.json's ``metrics``, ``comparisons``, ``conditions``, ``power`` and ``n_walks`` from walk tables.
 
-    ``tables``: :func:`walk_values`' second item.  A comparison whose runs were not made
-    (the native-rate live loop where none was given) is ``{"status": "not run"}``.
+    ``tables``: :func:`walk_values`' second item.  ``walks``: their names (``<scene>/seed<S>``):
+    the bootstrap then resamples the seeds as clusters (the walks of one seed together, so
+    each resample keeps every scene's share).  A comparison whose runs were not made (the
+    native-rate live loop where none was given) is ``{"status": "not run"}``.
     """
     from validation.verdicts.agreement import MIN_WALKS, judge
     from validation.verdicts.power import power_summary
 
     names = list(methods)
+    clusters = None if walks is None else walk_labels(walks)[1]
     control = tables.get(f"live-{CONTROL}")
     comparisons = {}
     for label, (ref, other) in COMPARISONS.items():
@@ -160,7 +265,8 @@ def judge_metrics(tables: dict, methods, *, n_resamples: int = 1000, seed: int =
             res = judge(tables[ref][metric], tables[other][metric],
                         None if control is None else control[metric], methods=names,
                         margin=EQUIVALENCE_MARGINS.get(metric), higher_is_better=higher, n_resamples=n_resamples,
-                        seed=[seed, 22_001, list(COMPARISONS).index(label), list(METRICS).index(metric)])
+                        seed=[seed, 22_001, list(COMPARISONS).index(label), list(METRICS).index(metric)],
+                        clusters=clusters)
             per_metric[metric] = res
         comparisons[label] = {"status": "run", "reference": ref, "compared": other, "metrics": per_metric}
     headline = next(iter(COMPARISONS))
@@ -168,9 +274,11 @@ def judge_metrics(tables: dict, methods, *, n_resamples: int = 1000, seed: int =
     metrics = {}
     if comparisons[headline]["status"] == "run":
         for metric, res in comparisons[headline]["metrics"].items():
-            metrics[metric] = {k: res[k] for k in ("omega2", "omega2_ci95", "tau_live_emulated", "tau_live_live",
-                                                   "verdict", "reason")}
-            metrics[metric].update({k: res[k] for k in ("n_walks", "disattenuated_correlation",
+            metrics[metric] = {k: res[k] for k in ("omega2", "omega2_ci90", "tau_live_emulated", "tau_live_live",
+                                                   "verdict", "reason", "family")}
+            metrics[metric].update({k: res[k] for k in ("n_walks", "omega2_untruncated", "omega2_interval",
+                                                        "pairs_verdict", "margin_in_ranking_terms", "emulation_bias",
+                                                        "disattenuated_correlation",
                                                         "disattenuated_correlation_ci95", "live_method_p",
                                                         "tau_live_emulated_ci95", "tau_live_live_ci95",
                                                         "tau_emulated_below_control_fraction",
@@ -185,7 +293,8 @@ def judge_metrics(tables: dict, methods, *, n_resamples: int = 1000, seed: int =
             continue
         conditions[cname] = {"run": run, "status": "run", "metrics": {
             metric: condition_table(tables[run][metric], names, n_resamples=n_resamples,
-                                    seed=[seed, 22_002, list(METRICS).index(metric)]) for metric in METRICS}}
+                                    seed=[seed, 22_002, list(METRICS).index(metric)], clusters=clusters)
+            for metric in METRICS}}
     power_out = {}
     for metric in METRICS:
         if not power or CONDITIONS[REFERENCE_LIVE] not in tables:

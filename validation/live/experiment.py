@@ -17,10 +17,11 @@ from pathlib import Path
 
 import numpy as np
 
-from emulator.io.files import RESULTS_FILE, first_free, read_results, write_results
+from emulator.io.files import RESULTS_FILE, first_free, read_results, read_text, write_results
 from emulator.report.html import write_report
 from validation.live.compare import measure_noise_variance_ratio
 from validation.live.config import BRIGHTENING_PAIRS, CONFIGS, LiveConfig, LiveError, config_from_dict
+from validation.live.evidence import WALKS_TABLE
 from validation.live.report import plot_metrics, plot_trajectories, report_markdown
 from validation.live.verdicts import assemble, ratio_use
 from validation.live.walks import NATIVE_RUN
@@ -220,7 +221,7 @@ def finish(out, raw: dict) -> dict:
         nvr_up = _brightening_on_chart(out / "datasets" / scenes[0], cfg)
     results = assemble(cfg, per_scene, raw["summaries"], raw["findings"], raw["noise_variance_ratio"],
                        list(cfg.methods))
-    results.update(evidence(cfg, [raw]))
+    results.update(evidence(cfg, [raw], folder=out))
     results["noise_variance_ratio_brightening"] = {"plain": nvr_up["plain"], "consistent": nvr_up["consistent"]}
     results["noise_variance_ratio_brightening_detail"] = nvr_up
     results["emulation_ratio_use"] = ratio_use(per_scene, list(cfg.methods))
@@ -246,15 +247,19 @@ def finish(out, raw: dict) -> dict:
     return results
 
 
-def evidence(cfg: LiveConfig, records: list[dict], power_seeds: int = 100) -> dict:
+def evidence(cfg: LiveConfig, records: list[dict], power_seeds: int = 100, folder=None) -> dict:
     """results.json's replicated verdicts (:func:`validation.live.evidence.judge_metrics`) over the walks of
-    ``records`` (one experiment, or the replicates of :func:`run_replicated`)."""
-    from validation.live.evidence import judge_metrics, walk_values
+    ``records`` (one experiment, or the replicates of :func:`run_replicated`); with ``folder``, the per-walk
+    table is stored there (:func:`validation.live.evidence.store_walks_table`)."""
+    from validation.live.evidence import judge_metrics, store_walks_table, walk_values
 
     walks, tables = walk_values(records, cfg.methods)
     out = {"walks": walks, "n_walks": len(walks)}
+    if tables and folder is not None:
+        out["walks_table"] = store_walks_table(folder, walks, tables, cfg.methods)
     if tables:
-        out.update(judge_metrics(tables, cfg.methods, seed=cfg.seed, power=power_seeds > 0, power_seeds=power_seeds))
+        out.update(judge_metrics(tables, cfg.methods, seed=cfg.seed, power=power_seeds > 0, power_seeds=power_seeds,
+                                 walks=walks))
         out["n_walks"] = len(walks)
     else:
         out.update({"metrics": {}, "reason": "no benchmark metrics in this experiment (metrics off)"})
@@ -307,7 +312,7 @@ def finish_replicated(out, records: list[dict], command: str | None = None, powe
                "timings": {"total_s": float(sum((r.get("timings") or {}).get("total_s", 0.0) for r in records)),
                            **({} if wall_s is None else {"wall_s": float(wall_s)})},
                "failed_walks": failed}
-    results.update(evidence(cfg, records, power_seeds=power_seeds))
+    results.update(evidence(cfg, records, power_seeds=power_seeds, folder=out))
     write_report(out, "# Live versus emulated, replicated\n\n"
                  + f"{len(records)} replicate(s) of the experiment (seeds "
                  + ", ".join(str(r["config"]["seed"]) for r in records) + f"), {results['n_walks']} walks. "
@@ -333,6 +338,29 @@ def _live_sheets(out: Path, scene: str) -> str:
     return "\n".join(parts)
 
 
+def verdicts_from_table(out, power_seeds: int = 100) -> dict:
+    """The verdicts of a study folder that keeps only its per-walk table (and its results.json for the
+    configuration): results.json's evidence and report.md recomputed from ``walks.csv``."""
+    from validation.live.evidence import judge_metrics, parse_walks_table
+    from validation.live.report import evidence_markdown
+
+    out = Path(out)
+    prev = read_results(out / RESULTS_FILE) if (out / RESULTS_FILE).is_file() else {}
+    if "config" not in prev:
+        raise LiveError(f"{out / RESULTS_FILE}: needed beside {WALKS_TABLE} for the study's configuration")
+    cfg = config_from_dict(prev["config"])
+    walks, methods, tables = parse_walks_table(read_text(out / WALKS_TABLE, LiveError), str(out / WALKS_TABLE))
+    results = {k: prev[k] for k in ("experiment", "command", "config", "replicates", "timings", "failed_walks")
+               if k in prev}
+    results.update({"walks": walks, "n_walks": len(walks), "walks_table": WALKS_TABLE})
+    results.update(judge_metrics(tables, methods, seed=cfg.seed, power=power_seeds > 0, power_seeds=power_seeds,
+                                 walks=walks))
+    write_report(out, f"# Live versus emulated, recomputed from {WALKS_TABLE}\n\n{len(walks)} walks. Command: "
+                 f"`{results.get('command')}`\n\n" + evidence_markdown(results))
+    write_results(out / RESULTS_FILE, results)
+    return results
+
+
 def redraw(out) -> dict:
     """Recompute the verdicts and rewrite ``results.json``, ``report.md`` and the figures of an
     experiment folder from its ``raw.json`` (nothing is rendered, played back or measured again)."""
@@ -344,6 +372,8 @@ def redraw(out) -> dict:
             previous = Path(out) / RESULTS_FILE
             command = read_results(previous).get("command") if previous.is_file() else None
             return finish_replicated(out, records, command=command)
+    if not path.is_file() and (Path(out) / WALKS_TABLE).is_file():
+        return verdicts_from_table(out)  # a stored study folder: the walks table alone
     if not path.is_file():
         raise LiveError(f"{path}: not found; not a finished live experiment folder")
     raw = read_results(path)

@@ -26,7 +26,8 @@ import numpy as np
 from emulator.io.files import read_results, to_jsonable, write_results
 from validation.live.config import BRIGHTENING_PAIRS, CONTROL, NOISE_OPTIONS, VARIANTS, LiveConfig, config_from_dict
 
-__all__ = ["WALKS_DIR", "NATIVE_RUN", "walk_record_path", "walk_name", "run_walk", "run_walks", "read_walk"]
+__all__ = ["WALKS_DIR", "NATIVE_RUN", "CONTROL_STREAM", "control_seed", "walk_record_path", "walk_name", "run_walk",
+           "run_walks", "read_walk"]
 
 #: Sub-folder of an experiment with one record per finished walk.
 WALKS_DIR = "walks"
@@ -62,6 +63,19 @@ def _runs_summary(cycles, names) -> dict:
     return {"methods": out}
 
 
+#: Purpose word of the re-seeded live control's capture-noise stream.
+CONTROL_STREAM = 22_033
+
+
+def control_seed(seed: int, scene: str) -> int:
+    """The capture-noise seed of the re-seeded live control of walk (``scene``, ``seed``): a stream of its own
+    (from ``[seed, CONTROL_STREAM, CRC-32 of the scene]``), never another walk's or replicate's seed (studies
+    before it used ``seed + 1``, the next replicate's live seed)."""
+    from scenes.trajectory import stream_key
+
+    return int(np.random.SeedSequence(stream_key(seed, CONTROL_STREAM, scene)).generate_state(1)[0])
+
+
 def _collect(iterator, n: int, desc: str, progress: bool) -> list:
     got = []
     with _bar(n, desc, progress) as bar:
@@ -89,7 +103,7 @@ def _loops(cfg: LiveConfig, seq, radiance, camera, model, response, native_loop,
     t0 = time.perf_counter()
     live_runs = [(v, v, cfg.seed) for v in VARIANTS]
     if cfg.control:
-        live_runs.append((CONTROL, "same-instant", cfg.seed + 1))
+        live_runs.append((CONTROL, "same-instant", control_seed(cfg.seed, scene)))
     for label, timing, seed in live_runs:
         cycles[f"live-{label}"] = _collect(
             iter_live(seq, radiance, camera, names, timing=timing, noise=cfg.capture_noise, seed=seed, **common),

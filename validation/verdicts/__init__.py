@@ -1,5 +1,5 @@
 """Verdicts with evidence (issue 22): live versus emulated agreement per metric, the AE study's
-findings with intervals and a permutation null, the simulated tables they are calibrated on,
+findings tested as stated (intersection-union tests, Holm), the simulated tables they are calibrated on,
 and the power functions that size the studies.
 
 Modules: :mod:`~validation.verdicts.agreement` (omega2, the verdict per metric),

@@ -15,10 +15,13 @@ methods)::
 
 0 for an emulator that orders and spaces the methods as live does, about 2 for one whose
 method effects are unrelated to live's (same spread, random order), 1 for one that ties
-every method.  The interval is a cluster bootstrap over walks: the union of the plain and
-the bias-corrected percentile intervals, conservative at both ends (measured in
-docs/verdicts.md: either interval alone put the true omega2 outside it on one side in up
-to 16 % of simulated studies of 10-30 walks).
+every method.  The interval: the untruncated statistic (the interaction component may be
+negative when noise explains it all) is bootstrapped over the walks (the seeds as clusters
+where the study gives them: :func:`validation.verdicts.ranking.cluster_plan`); its one-sided
+95 % lower bound is the bias-corrected (BC) percentile 5 % of the replicates, its upper bound
+the plain percentile 95 % (the BC upper bound was measured too low: :func:`one_sided_bounds`),
+and both are truncated at 0 afterwards (``omega2_ci90``: each end a one-sided 95 % bound).
+Error rates of the rule, measured on simulated studies, are in docs/verdicts.md.
 
 Verdict (:func:`judge`), in this order:
 
@@ -27,16 +30,20 @@ Verdict (:func:`judge`), in this order:
 2. ``undetermined`` when live does not separate the methods (the live method effects are
    not significant: two-way F test, p >= :data:`ALPHA`; every method tied live included):
    there is no ranking to agree with, and a tie never counts as agreement;
-3. ``agrees`` when the upper end of the omega2 interval is at most :data:`OMEGA2_MAX`;
-4. ``disagrees`` when its lower end is above :data:`OMEGA2_MAX`;
+3. ``agrees`` when the one-sided 95 % upper bound of omega2 is at most :data:`OMEGA2_MAX`;
+4. ``disagrees`` when its one-sided 95 % lower bound is above :data:`OMEGA2_MAX`;
 5. otherwise ``undetermined``: the interval straddles :data:`OMEGA2_MAX` (the reason
    gives the interval and the walks a decision needs, from :mod:`validation.verdicts.power`).
 
-Reported beside it, not part of the rule: the disattenuated correlation of the method
-effects between the conditions (with interval); per pair of methods that differs live
-(paired t-test, Holm over the pairs), a TOST equivalence test of the difference of
-differences within the metric's stated margin; Kendall tau-b of the walk-mean method
-values live vs emulated against tau-b live vs control (its bootstrap distribution).
+Beside it, a second primary check on pairs (:func:`validation.verdicts.ranking.pairs_check`):
+per pair of methods that differs live (paired t-test, Holm over the pairs), a TOST
+equivalence test of the difference of differences within the metric's stated margin
+(``pairs_verdict``).  Reported, not part of either rule: the margin in ranking terms (the
+expected Kendall tau and the probability that the best method changes at omega2 =
+:data:`OMEGA2_MAX` on the study's live spacings), each method's emulation bias (emulated -
+live) with its interval, the disattenuated correlation of the method effects between the
+conditions (with interval), and Kendall tau-b of the walk-mean method values live vs
+emulated against tau-b live vs control (its bootstrap distribution).
 """
 
 from __future__ import annotations
@@ -54,12 +61,14 @@ from emulator.stats import (
     tost_paired,
     variance_components,
 )
+from validation.verdicts.ranking import cluster_plan, emulation_bias, margin_in_ranking_terms, over_plan, pairs_check
 
-__all__ = ["ALPHA", "OMEGA2_MAX", "MIN_WALKS", "VERDICTS", "complete_walks", "omega2", "judge_batch", "judge"]
+__all__ = ["ALPHA", "OMEGA2_MAX", "MIN_WALKS", "VERDICTS", "complete_walks", "omega2", "omega2_untruncated",
+           "one_sided_bounds", "judge_batch", "judge"]
 
 #: Level of every test (and 1 - confidence of every interval).
 ALPHA = 0.05
-#: The goal: an emulator agrees when omega2's 95 % interval lies at or below this.
+#: The goal: an emulator agrees when omega2's one-sided 95 % upper bound lies at or below this.
 OMEGA2_MAX = 0.2
 #: Fewest complete walks for a verdict other than undetermined: below 10, a perfect emulator was judged
 #: ``disagrees`` in up to 7 % of simulated studies (5 walks, noise 2.8 method SD; docs/verdicts.md), at 10
@@ -80,20 +89,38 @@ def complete_walks(*tables) -> np.ndarray:
     return ok
 
 
-def omega2(live, emulated) -> np.ndarray:
-    """The interaction-variance ratio of walks x methods tables (leading axes vectorised).
-
-    A negative interaction variance component (noise explains all of it) counts as 0; a
-    live method variance component at or below 0 (live does not separate the methods)
-    gives +inf (the ratio is undefined and cannot support agreement).
-    """
+def omega2_untruncated(live, emulated) -> np.ndarray:
+    """The interaction-variance ratio of walks x methods tables (leading axes vectorised), not truncated:
+    negative when noise alone explains more than the interaction.  A live method variance component at or
+    below 0 (live does not separate the methods) gives +inf (undefined; cannot support agreement)."""
     live = np.asarray(live, dtype=np.float64)
     emulated = np.asarray(emulated, dtype=np.float64)
     s_live, _ = variance_components(live)
     s_int, _ = variance_components(emulated - live)
     with np.errstate(divide="ignore", invalid="ignore"):
-        r = np.maximum(s_int, 0.0) / s_live
+        r = s_int / s_live
     return np.where(s_live > 0, r, np.inf)
+
+
+def omega2(live, emulated) -> np.ndarray:
+    """:func:`omega2_untruncated` truncated at 0 (the point estimate the reports give)."""
+    return np.maximum(omega2_untruncated(live, emulated), 0.0)
+
+
+def one_sided_bounds(replicates, estimate, alpha: float = ALPHA) -> tuple[float, float]:
+    """(lower, upper) one-sided ``1 - alpha`` bounds from bootstrap replicates of the untruncated statistic,
+    truncated at 0 afterwards.
+
+    Lower: the bias-corrected percentile ``alpha``.  Upper: the larger of the plain and the
+    bias-corrected percentiles ``1 - alpha``.  Measured on studies of known omega2
+    (docs/verdicts.md): at a true omega2 of 0.2 the bias-corrected lower bound lies above it
+    in 3.6-4.6 % of studies (nominal 5 %), the plain one in 9.6-12.2 %; the bias-corrected
+    upper bound lies below it in 14-29 %, the plain one in 0-2.4 %: each end is the one that
+    keeps its level.
+    """
+    lo, hi_bc = percentile_interval(replicates, 1.0 - 2.0 * alpha, estimate=estimate)
+    _, hi = percentile_interval(replicates, 1.0 - 2.0 * alpha)
+    return max(float(lo), 0.0), max(float(hi), float(hi_bc), 0.0)
 
 
 def _disattenuated(live, emulated) -> np.ndarray:
@@ -119,37 +146,42 @@ def _live_f_test(live) -> tuple[np.ndarray, np.ndarray]:
 
 
 def judge_batch(live, emulated, *, n_resamples: int = 1000, seed=0, omega2_max: float = OMEGA2_MAX,
-                alpha: float = ALPHA, min_walks: int = MIN_WALKS, chunk: int = 32) -> dict[str, np.ndarray]:
+                alpha: float = ALPHA, min_walks: int = MIN_WALKS, chunk: int = 32, plan=None) -> dict[str, np.ndarray]:
     """The verdict rule of :func:`judge` on many complete studies at once (the calibration's loop).
 
     ``live``, ``emulated``: (studies, walks, methods), every value finite.  Returns arrays
-    over the studies: ``verdict`` (index into :data:`VERDICTS`), ``omega2``, ``lo``, ``hi``
-    (the percentile interval over ``n_resamples`` cluster-bootstrap resamples of the walks),
-    ``live_p`` (F test of the live method effect), ``tied`` (every method ties live on every walk).
+    over the studies: ``verdict`` (index into :data:`VERDICTS`), ``omega2`` (truncated),
+    ``omega2_untruncated``, ``lo``, ``hi`` (the one-sided 95 % bounds, :func:`one_sided_bounds`, over
+    ``n_resamples`` bootstrap resamples: ``plan`` when given, one plan for every study, else walks drawn
+    independently), ``live_p`` (F test of the live method effect), ``tied`` (every method ties live on
+    every walk).
     """
     L = np.asarray(live, dtype=np.float64)
     E = np.asarray(emulated, dtype=np.float64)
     n, w, m = L.shape
     rng = rng_of(seed)
-    est = omega2(L, E)
+    raw = omega2_untruncated(L, E)
+    est = np.maximum(raw, 0.0)
     _, p = _live_f_test(L)
     lo = np.empty(n)
     hi = np.empty(n)
     for a in range(0, n, chunk):
         b = min(n, a + chunk)
-        idx = rng.integers(0, w, size=(b - a, n_resamples, w))
-        rows = np.arange(b - a)[:, None, None]
-        boot = omega2(L[a:b][rows, idx], E[a:b][rows, idx])  # (chunk, resamples)
-        p_lo, p_hi = percentile_interval(boot, 1.0 - alpha, axis=1)
-        for k in range(b - a):  # the union with the bias-corrected interval: conservative at both ends
-            c_lo, c_hi = percentile_interval(boot[k], 1.0 - alpha, estimate=est[a + k])
-            lo[a + k], hi[a + k] = min(p_lo[k], c_lo), max(p_hi[k], c_hi)
+        if plan is None:
+            idx = rng.integers(0, w, size=(b - a, n_resamples, w))
+            rows = np.arange(b - a)[:, None, None]
+            boot = omega2_untruncated(L[a:b][rows, idx], E[a:b][rows, idx])  # (chunk, resamples)
+        else:
+            boot = np.stack([over_plan(omega2_untruncated, plan, L[k], E[k]) for k in range(a, b)])
+        for k in range(b - a):
+            lo[a + k], hi[a + k] = one_sided_bounds(boot[k], raw[a + k], alpha)
     tied = np.all(np.ptp(L, axis=2) == 0, axis=1)
     verdict = np.full(n, VERDICTS.index("undetermined"))
     decidable = (w >= min_walks) & (p < alpha)
     verdict[decidable & (hi <= omega2_max)] = VERDICTS.index("agrees")
     verdict[decidable & (lo > omega2_max)] = VERDICTS.index("disagrees")
-    return {"verdict": verdict, "omega2": est, "lo": lo, "hi": hi, "live_p": p, "tied": tied}
+    return {"verdict": verdict, "omega2": est, "omega2_untruncated": raw, "lo": lo, "hi": hi, "live_p": p,
+            "tied": tied}
 
 
 def _finite(v):
@@ -163,7 +195,7 @@ def _interval(lo, hi):
 
 def judge(live, emulated, control=None, *, methods=None, margin: float | None = None,
           higher_is_better: bool = True, n_resamples: int = 1000, seed=0, omega2_max: float = OMEGA2_MAX,
-          alpha: float = ALPHA, min_walks: int = MIN_WALKS, detail: bool = True) -> dict:
+          alpha: float = ALPHA, min_walks: int = MIN_WALKS, detail: bool = True, clusters=None) -> dict:
     """The verdict on one metric: does ``emulated`` order the methods as ``live`` does?
 
     Parameters
@@ -174,23 +206,28 @@ def judge(live, emulated, control=None, *, methods=None, margin: float | None = 
     control : array_like, optional
         (walks, methods), live again with other capture-noise seeds: tau(live, live).
     methods : sequence of str, optional
-        Names of the columns (for the pair tests).
+        Names of the columns (for the pair tests and the biases).
     margin : float, optional
         Equivalence margin of the difference of differences, in the metric's unit
-        (TOST skipped without one).
+        (the pairwise check is undetermined without one).
     higher_is_better : bool
-        Only orients the reported pair differences.
+        Orients the reported pair differences and "the best method".
     n_resamples, seed
-        Cluster bootstrap over walks.
+        Bootstrap over walks.
     detail : bool
-        Also compute the pair tests and taus (False: the verdict and omega2 only; what
-        the calibration loops need).
+        Also compute the pairwise check, biases, margin in ranking terms, pair tests and taus
+        (False: the verdict and omega2 only; what the calibration loops need).
+    clusters : sequence, optional
+        One label per walk (its seed): the walks of one label are resampled together
+        (:func:`validation.verdicts.ranking.cluster_plan`); None: every walk on its own.
 
     Returns
     -------
     dict
-        ``verdict``, ``reason``, ``n_walks``, ``omega2``, ``omega2_ci95`` ([lo, hi]; None
-        for an unbounded end), ``live_method_f``/``live_method_p``, and with ``detail``
+        ``verdict``, ``reason``, ``family``, ``n_walks``, ``omega2``, ``omega2_untruncated``,
+        ``omega2_ci90`` ([lo, hi]: one-sided 95 % bounds; None for an unbounded end),
+        ``live_method_f``/``live_method_p``, and with ``detail`` ``pairs_verdict`` (the
+        pairwise check), ``margin_in_ranking_terms``, ``emulation_bias`` (per method),
         ``disattenuated_correlation`` (+ ``_ci95``), ``tau_live_emulated``,
         ``tau_live_live`` (+ ``_ci95`` and ``tau_emulated_below_control_fraction``),
         ``pairs`` (per pair of methods: live difference, its Holm-adjusted p, and for the
@@ -202,15 +239,19 @@ def judge(live, emulated, control=None, *, methods=None, margin: float | None = 
     if L.shape != E.shape or L.ndim != 2 or (C is not None and C.shape != L.shape):
         raise ValueError(f"live, emulated (and control) must be walks x methods tables of one shape, got "
                          f"{L.shape}, {E.shape}{'' if C is None else ', ' + str(C.shape)}")
+    if clusters is not None and len(clusters) != L.shape[0]:
+        raise ValueError(f"clusters must give one label per walk ({L.shape[0]}), got {len(clusters)}")
     ok = complete_walks(L, E, C) if L.shape[0] else np.zeros(0, bool)
     L, E = L[ok], E[ok]
     C = None if C is None else C[ok]
     w, m = L.shape
     names = list(methods) if methods is not None else [str(i) for i in range(m)]
-    out = {"n_walks": int(w), "verdict": "undetermined", "reason": "", "omega2": None, "omega2_ci95": [None, None],
-           "omega2_max": omega2_max, "live_method_f": None, "live_method_p": None}
+    out = {"n_walks": int(w), "verdict": "undetermined", "reason": "", "family": FAMILY, "omega2": None,
+           "omega2_untruncated": None, "omega2_ci90": [None, None], "omega2_max": omega2_max,
+           "omega2_interval": INTERVAL, "live_method_f": None, "live_method_p": None}
     if detail:
-        out.update({"disattenuated_correlation": None, "disattenuated_correlation_ci95": [None, None],
+        out.update({"pairs_verdict": None, "margin_in_ranking_terms": None, "emulation_bias": None,
+                    "disattenuated_correlation": None, "disattenuated_correlation_ci95": [None, None],
                     "tau_live_emulated": None, "tau_live_emulated_ci95": [None, None], "tau_live_live": None,
                     "tau_live_live_ci95": [None, None], "tau_emulated_below_control_fraction": None,
                     "pairs": [], "margin": margin})
@@ -218,50 +259,67 @@ def judge(live, emulated, control=None, *, methods=None, margin: float | None = 
         out["reason"] = f"{w} complete walk(s) x {m} method(s): nothing to compare"
         return out
     rng = rng_of(seed)
+    plan = cluster_plan(w, n_resamples, rng, None if clusters is None else np.asarray(list(clusters))[ok])
     batch = judge_batch(L[None], E[None], n_resamples=n_resamples, seed=rng, omega2_max=omega2_max, alpha=alpha,
-                        min_walks=min_walks)
+                        min_walks=min_walks, plan=plan)
     F, p = _live_f_test(L)
     p = float(p)
     out["live_method_f"], out["live_method_p"] = _finite(F), p
     out["omega2"] = _finite(batch["omega2"][0])
+    out["omega2_untruncated"] = _finite(batch["omega2_untruncated"][0])
     lo, hi = float(batch["lo"][0]), float(batch["hi"][0])
-    out["omega2_ci95"] = _interval(lo, hi)
-    idx = rng.integers(0, w, size=(n_resamples, w))
+    out["omega2_ci90"] = _interval(lo, hi)
     if detail:
-        _details(out, L, E, C, idx, names, margin, higher_is_better, alpha)
+        _details(out, L, E, C, plan, names, margin, higher_is_better, alpha, omega2_max, rng)
+        if w < min_walks:
+            out["pairs_verdict"].update(verdict="undetermined", reason=f"{w} complete walks, fewer than {min_walks}")
     out["verdict"] = VERDICTS[int(batch["verdict"][0])]
+    bounds = f"omega2 one-sided 95 % bounds [{lo:.3g}, {hi:.3g}]"
     if w < min_walks:
-        out["reason"] = (f"{w} complete walks, fewer than {min_walks}: a cluster bootstrap over so few walks is "
+        out["reason"] = (f"{w} complete walks, fewer than {min_walks}: a bootstrap over so few walks is "
                          "no interval")
     elif not p < alpha:
         out["reason"] = ("every method ties live on every walk: no ranking to agree with" if batch["tied"][0] else
                          f"live does not separate the methods (F test p = {p:.2g} >= {alpha}): no ranking to "
                          "agree with at this size")
     elif out["verdict"] == "agrees":
-        out["reason"] = f"omega2 95 % interval [{lo:.3g}, {hi:.3g}] at or below {omega2_max}"
+        out["reason"] = f"{bounds}: the upper bound is at or below {omega2_max}"
     elif out["verdict"] == "disagrees":
-        out["reason"] = f"omega2 95 % interval [{lo:.3g}, {hi:.3g}] above {omega2_max}"
+        out["reason"] = f"{bounds}: the lower bound is above {omega2_max}"
     else:
-        out["reason"] = f"omega2 95 % interval [{lo:.3g}, {hi:.3g}] straddles {omega2_max}: more walks needed"
+        out["reason"] = f"{bounds} straddle {omega2_max}: more walks needed"
     return out
 
 
-def _details(out, L, E, C, idx, names, margin, higher_is_better, alpha) -> None:
+#: How the omega2 interval is made, in words (results.json's ``omega2_interval``).
+INTERVAL = ("bootstrap of the untruncated omega2 over walks (seeds as clusters where given): lower end the "
+            "bias-corrected 5 % percentile, upper end the 95 % percentile (each a one-sided 95 % bound), truncated "
+            "at 0")
+#: The multiplicity family of an agreement verdict, in words.
+FAMILY = ("one metric and one comparison: omega2's one-sided 95 % bounds, not corrected across metrics or "
+          "comparisons")
+
+
+def _details(out, L, E, C, plan, names, margin, higher_is_better, alpha, omega2_max, rng) -> None:
     from scipy.stats import ttest_1samp
 
     w, m = L.shape
     out["disattenuated_correlation"] = _finite(_disattenuated(L, E))
-    out["disattenuated_correlation_ci95"] = _interval(*_nan_interval(_disattenuated(L[idx], E[idx]), alpha))
+    out["disattenuated_correlation_ci95"] = _interval(*_nan_interval(over_plan(_disattenuated, plan, L, E), alpha))
     mean_l, mean_e = L.mean(axis=0), E.mean(axis=0)
     out["tau_live_emulated"] = _finite(kendall_tau_b(mean_l, mean_e))
-    tle = kendall_tau_b(L[idx].mean(axis=1), E[idx].mean(axis=1))
+    means = lambda *t: tuple(x.mean(axis=-2) for x in t)  # noqa: E731
+    tle = over_plan(lambda a, b: kendall_tau_b(*means(a, b)), plan, L, E)
     out["tau_live_emulated_ci95"] = _interval(*_nan_interval(tle, alpha))
     if C is not None:
         out["tau_live_live"] = _finite(kendall_tau_b(mean_l, C.mean(axis=0)))
-        tll = kendall_tau_b(L[idx].mean(axis=1), C[idx].mean(axis=1))
+        tll = over_plan(lambda a, b: kendall_tau_b(*means(a, b)), plan, L, C)
         out["tau_live_live_ci95"] = _interval(*_nan_interval(tll, alpha))
         both = np.isfinite(tle) & np.isfinite(tll)
         out["tau_emulated_below_control_fraction"] = float(np.mean(tle[both] < tll[both])) if both.any() else None
+    out["margin_in_ranking_terms"] = margin_in_ranking_terms(mean_l, omega2_max, higher_is_better=higher_is_better,
+                                                             seed=rng)
+    out["emulation_bias"] = emulation_bias(L, E, names, plan)
     i, j = np.triu_indices(m, 1)
     d_live = L[:, i] - L[:, j]  # (walks, pairs)
     d_emu = E[:, i] - E[:, j]
@@ -288,6 +346,7 @@ def _details(out, L, E, C, idx, names, margin, higher_is_better, alpha) -> None:
     out["pairs_live_significant"] = len(sig)
     out["pairs_equivalent"] = sum(1 for r in sig if r["equivalent"]) if margin is not None else None
     out["pairs_reversed"] = sum(1 for r in sig if r["live_difference"] * r["emulated_difference"] < 0)
+    out["pairs_verdict"] = pairs_check(dod[:, p_adj < alpha], margin, alpha=alpha)
 
 
 def _nan_interval(rep, alpha):

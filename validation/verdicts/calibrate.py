@@ -1,9 +1,13 @@
 """Reproduce the calibration tables of docs/verdicts.md: ``python -m validation.verdicts.calibrate``.
 
 Prints, for simulated metric tables (no renders), the verdict rates of a perfect, a random
-and a tied emulator at several study sizes and noise scales, and the AE findings' rates
-under interchangeable methods and with a true effect.  ``--seeds`` sets the simulated
-studies per cell (the docs used 300 for the verdicts, 200 and 100 for the findings).
+and a tied emulator and of one whose true omega2 is exactly the margin, at several study
+sizes and noise scales, and (``--findings``) how often
+each AE finding is judged ``holds`` when its claim is false (tied and near-tied
+configurations, Gaussian, one far noisier method, heavy tails) and its power by effect size,
+and (``--intervals``) how often each one-sided bound of omega2 lies on the wrong side of a
+known true omega2.
+``--seeds`` sets the simulated studies per cell.
 """
 
 from __future__ import annotations
@@ -11,10 +15,9 @@ from __future__ import annotations
 import argparse
 import time
 
-import numpy as np
-
 from validation.verdicts import NOISE_TO_METHOD_SD
-from validation.verdicts.findings import FINDINGS, evaluate, finding_power, simulated_tables
+from validation.verdicts.agreement import OMEGA2_MAX
+from validation.verdicts.findings import FINDINGS, false_holds_rates, finding_power
 from validation.verdicts.power import verdict_rates
 from validation.verdicts.simulate import Scales
 
@@ -25,37 +28,76 @@ def _pct(r: dict) -> str:
     return f"agrees {100 * r['agrees']:.0f} %, disagrees {100 * r['disagrees']:.0f} %"
 
 
+def interval_table(n_studies: int, n_resamples: int = 400) -> None:
+    """How often each one-sided 95 % bound of omega2 lies on the wrong side of the truth (nominal 5 %): plain and
+    bias-corrected percentiles of the untruncated statistic, on studies whose true omega2 is exact."""
+    import numpy as np
+
+    from emulator.stats import percentile_interval, rng_of
+    from validation.verdicts.agreement import omega2_untruncated
+    from validation.verdicts.simulate import simulate_tables
+
+    rng = rng_of(0)
+    for o in (0.0, OMEGA2_MAX, 1.0):
+        for noise, w in ((1.0, 30), (1.0, 56), (NOISE_TO_METHOD_SD["rpe"], 56)):
+            t = simulate_tables("exact", w, Scales(1.0, 0.5, noise), n_seeds=n_studies, seed=rng, omega2_true=o)
+            raw = omega2_untruncated(t["live"], t["emulated"])
+            miss = np.zeros(4)
+            for k in range(n_studies):
+                idx = rng.integers(0, w, (n_resamples, w))
+                boot = omega2_untruncated(t["live"][k][idx], t["emulated"][k][idx])
+                p_lo, p_hi = percentile_interval(boot, 0.9)
+                c_lo, c_hi = percentile_interval(boot, 0.9, estimate=raw[k])
+                miss += [p_hi < o, c_hi < o, p_lo > o, c_lo > o]
+            print(f"true omega2 {o}, noise / method SD {noise}, {w} walks, {n_studies} studies: upper bound below "
+                  f"the truth: plain {100 * miss[0] / n_studies:.1f} %, bias-corrected {100 * miss[1] / n_studies:.1f} "
+                  f"%; lower bound above it: plain {100 * miss[2] / n_studies:.1f} %, bias-corrected "
+                  f"{100 * miss[3] / n_studies:.1f} %", flush=True)
+
+
+def findings_tables(n_studies: int, walks=(30, 56)) -> None:
+    """The AE findings: false ``holds`` on tied and near-tied configurations, and power by effect size."""
+    tested = list(FINDINGS) + ["vo_similar"]
+    cases = (("tied", {}), ("near-tied (rival 0.2 SD ahead)", {"delta": 0.2}), ("tied, M_Kim 10x noisier",
+             {"noisy": {"kim": 10.0}}), ("tied, t3 noise", {"df": 3.0}))
+    for w in walks:
+        for label, kw in cases:
+            rates = {f: false_holds_rates(f, w, n_studies=n_studies, seed=[w, len(label)], **kw) for f in tested}
+            worst = max(rates, key=lambda f: rates[f]["raw"])
+            print(f"false claims, {label}, {w} walks, {n_studies} studies: holds at its own 5 % test at most "
+                  f"{100 * rates[worst]['raw']:.1f} % ({worst}); with Holm across the family at most "
+                  f"{100 * max(r['verdict'] for r in rates.values()):.1f} %", flush=True)
+    for fid in ("fixed_most_matches", "rpe_trans_best_50", "rpe_trans_worst_kim", "gradient_ahead_vo"):
+        for d in (0.3, 0.41, 0.5, 1.0):
+            pw = [finding_power(fid, d, w, n_seeds=n_studies, seed=[w, 4]) for w in (56, 120, 240)]
+            print(f"{fid}, true effect {d} noise SD: holds in " + ", ".join(
+                f"{100 * p:.0f} % at {w} walks" for p, w in zip(pw, (56, 120, 240))), flush=True)
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m validation.verdicts.calibrate", description=__doc__.split("\n\n")[0])
     p.add_argument("--seeds", type=int, default=300, help="simulated studies per cell (default 300)")
-    p.add_argument("--walks", type=lambda s: [int(x) for x in s.split(",")], default=[10, 30, 40, 50, 60],
-                   help="study sizes (default 10,30,40,50,60)")
-    p.add_argument("--findings", action="store_true", help="also the AE findings' tables (slower)")
+    p.add_argument("--walks", type=lambda s: [int(x) for x in s.split(",")], default=[10, 30, 56, 120],
+                   help="study sizes (default 10,30,56,120)")
+    p.add_argument("--findings", action="store_true", help="also the AE findings' tables")
+    p.add_argument("--no-agreement", action="store_true", help="skip the live-versus-emulated tables")
+    p.add_argument("--intervals", action="store_true", help="also the one-sided bounds' error rates of omega2")
     args = p.parse_args(argv)
     t0 = time.perf_counter()
-    for label, noise in NOISE_TO_METHOD_SD.items():
+    for label, noise in ({} if args.no_agreement else NOISE_TO_METHOD_SD).items():
         sc = Scales(sd_method=1.0, sd_walk_method=0.5, sd_noise=noise)
         for w in args.walks:
             perfect = verdict_rates("live-draw", w, sc, n_seeds=args.seeds, n_resamples=200, seed=[w, 1])
             random = verdict_rates("random", w, sc, n_seeds=args.seeds, n_resamples=200, seed=[w, 2])
             tied = verdict_rates("tied", w, sc, n_seeds=args.seeds, n_resamples=200, seed=[w, 3])
+            margin = verdict_rates("exact", w, sc, n_seeds=args.seeds, n_resamples=200, seed=[w, 5],
+                                   omega2_true=OMEGA2_MAX)
             print(f"{label} scale (noise / method SD {noise}), {w} walks: perfect {_pct(perfect)}; random "
-                  f"{_pct(random)}; tied {_pct(tied)}", flush=True)
+                  f"{_pct(random)}; tied {_pct(tied)}; true omega2 exactly {OMEGA2_MAX} {_pct(margin)}", flush=True)
+    if args.intervals:
+        interval_table(args.seeds)
     if args.findings:
-        rng = np.random.default_rng(0)
-        for w in (10, 30):
-            counts = {fid: 0 for fid in FINDINGS}
-            n = max(args.seeds // 2, 1)
-            for _ in range(n):
-                for r in evaluate(simulated_tables(w, seed=rng), n_resamples=100, seed=rng):
-                    if r["id"] in counts and r["verdict"] == "holds":
-                        counts[r["id"]] += 1
-            print(f"interchangeable methods, {w} walks, {n} studies: largest fraction of a finding holding "
-                  f"{max(counts.values()) / n:.3f} ({max(counts, key=counts.get)})", flush=True)
-        for d in (0.3, 0.5, 1.0):
-            for w in (30, 60, 120):
-                pw = finding_power("rpe_trans_worst_kim", d, w, n_seeds=max(args.seeds // 3, 1), seed=[w, 4])
-                print(f"rpe_trans_worst_kim, effect {d} noise SD, {w} walks: holds in {100 * pw:.0f} %", flush=True)
+        findings_tables(args.seeds)
     print(f"{time.perf_counter() - t0:.0f} s")
     return 0
 

@@ -1,42 +1,47 @@
-"""The paper's findings (section V-D) as statistics: effect size, cluster-bootstrap interval,
-label-permutation null, Holm across findings.
+"""The paper's findings (section V-D) as statistics, each tested as the paper states it.
 
 The unit is an independent walk (a scene of the AE study with its seeds): per walk and
 method the study's figures (``ae_study.summarise(...)["per_scene"][scene][method]``).
-Every finding is an effect computed from the methods' walk means, signed so that a
-positive effect is the paper's claim:
+Every finding has
 
-* ``effect``: on the observed walks;
-* ``ci95``: percentile interval over a cluster bootstrap of the walks;
-* ``p``: two-sided label-permutation test: the methods' labels are permuted within each
-  walk (the null: the methods are interchangeable), the effect recomputed; ``p = 2 *
-  min(P(perm >= obs), P(perm <= obs))`` with the +1 correction;
-* ``p_adjusted``: Holm across the findings that are tested;
-* ``verdict``: ``holds`` (p_adjusted < alpha, effect above the null), ``contradicted``
-  (p_adjusted < alpha, effect below the null), ``undetermined`` otherwise or with fewer than
+* ``effect``: its statistic on the methods' walk means, signed so that a positive effect is
+  the paper's claim (``vo_similar``: the ratio largest / smallest itself);
+* ``ci95``: percentile interval of the effect over a cluster bootstrap of the walks;
+* a **test of the claim as stated** (:mod:`validation.verdicts.claims`): a claim about
+  every other method ("M_fixed has the most matches": fixed beats classical-30 *and*
+  classical-50 *and* ...) is the intersection of one-sided paired comparisons, and holds
+  only when each of them rejects (intersection-union: ``p`` is the largest of the parts'
+  p-values); "M_fixed is not the best" holds when one other method beats it (Bonferroni
+  over the others); the equivalence ``vo_similar`` (largest / smallest method mean
+  translation RPE at most 1.5) holds when every ordered pair satisfies
+  ``mean_i <= 1.5 mean_j`` significantly, one paired test per pair (intersection-union);
+* ``p_adjusted``: Holm across every tested claim, ``vo_similar`` included (the family
+  ``holds``); the p-values of the opposite claims (a method significantly ahead of the
+  claimed one: ``p_contradicted``) form a second family with its own Holm adjustment;
+* ``verdict``: ``holds`` (``p_adjusted < alpha``), ``contradicted``
+  (``p_contradicted_adjusted < alpha``), ``undetermined`` otherwise or with fewer than
   :data:`~validation.verdicts.agreement.MIN_WALKS` walks, and ``by-construction`` for the
-  findings that cannot fail whatever the methods do (not tested, not counted):
-  success can only fall as tau rises (a run that keeps >= tau matches keeps >= a smaller
-  tau), and "VO fails on some run" holds on one failed frame of one run.
+  findings that cannot fail whatever the methods do (not tested, not counted): success can
+  only fall as tau rises, and "VO fails on some run" holds on one failed frame of one run.
 
-``vo_similar`` (all methods similar in VO: largest / smallest translation RPE at most
-1.5) is an equivalence claim, true under interchangeable methods, so it has no
-permutation test: ``holds`` when the bootstrap interval of the ratio lies at or below 1.5,
-``contradicted`` when above, else ``undetermined`` (noise alone no longer fails it).
+The error rates of these tests on tied and near-tied configurations (a claim that is false
+by nothing or by little) are measured by :func:`false_holds_rates`; docs/verdicts.md has
+the numbers.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 
 import numpy as np
 
-from emulator.stats import holm, percentile_interval, rng_of
+from emulator.stats import percentile_interval, rng_of
 from validation.verdicts.agreement import ALPHA, MIN_WALKS
+from validation.verdicts.claims import Claim, claim_pvalues, holm_rows
 
-__all__ = ["FINDINGS", "BY_CONSTRUCTION", "CLAIMED", "unit_tables", "finding_effects", "evaluate", "simulated_tables",
-           "finding_power"]
+__all__ = ["FINDINGS", "SPECS", "BY_CONSTRUCTION", "CLAIMED", "SIMILAR_RATIO", "FAMILY", "unit_tables", "claim_of",
+           "finding_effects", "evaluate", "batch_verdicts", "simulated_tables", "configuration_shift",
+           "false_holds_rates", "finding_power"]
 
 _METHODS = ("fixed", "classical-30", "classical-50", "classical-70", "shim", "zhang", "kim")
 
@@ -50,81 +55,57 @@ _PATHS = {
     "rpe_rot": ("vo", "rpe_rot_deg_per_m"),
     "vo_failed": ("vo", "n_failed_frames"),
 }
+#: The equivalence finding: largest / smallest translation RPE at most this.
+SIMILAR_RATIO = 1.5
 
-
-def _idx(methods, names):
-    return [methods.index(n) for n in names]
-
-
-def _others(methods, names):
-    return [k for k, m in enumerate(methods) if m not in names]
-
-
-def _top_vs_rest(target: str, higher: bool = True) -> Callable:
-    """target minus the best of the others (higher), or the best of the others minus target (lower)."""
-    def f(mean, methods):
-        t = mean[..., methods.index(target)]
-        o = mean[..., _others(methods, (target,))]
-        return t - o.max(axis=-1) if higher else o.min(axis=-1) - t
-    return f
-
-
-def _group_below_rest(group, higher_is_worse: bool = False) -> Callable:
-    """Each of ``group`` below the mean of the others: mean(others) - max(group) (or, for a metric where
-    lower is better and the group is claimed worst, min(group) - mean(others))."""
-    def f(mean, methods):
-        g = mean[..., _idx(methods, group)]
-        rest = mean[..., _others(methods, group)].mean(axis=-1)
-        return g.min(axis=-1) - rest if higher_is_worse else rest - g.max(axis=-1)
-    return f
-
-
-def _mean_gap(group, lower_is_better: bool = True) -> Callable:
-    """mean(others) - mean(group): the group is better on a lower-is-better metric."""
-    def f(mean, methods):
-        g = mean[..., _idx(methods, group)].mean(axis=-1)
-        rest = mean[..., _others(methods, group)].mean(axis=-1)
-        return rest - g if lower_is_better else g - rest
-    return f
-
-
-def _two_lowest(pair) -> Callable:
-    """min of the others - max of the pair: both of the pair below every other method."""
-    def f(mean, methods):
-        return mean[..., _others(methods, pair)].min(axis=-1) - mean[..., _idx(methods, pair)].max(axis=-1)
-    return f
-
-
-def _fixed_not_best(mean, methods):
-    """fixed minus the best (lowest) of the others: positive when some method beats fixed."""
-    return mean[..., methods.index("fixed")] - mean[..., _others(methods, ("fixed",))].min(axis=-1)
-
-
-#: Tested findings: id -> (metric, effect of the method walk means, what a positive effect says).
-FINDINGS = {
-    "fixed_most_matches": ("matches", _top_vs_rest("fixed"), "M_fixed's median matches minus the best other's"),
-    "uniformity_70_kim_lower": ("uniformity", _group_below_rest(("classical-70", "kim")),
+#: Tested findings: id -> (metric, form, claimed methods, what a positive effect says).  Forms:
+#: ``above_every`` (each claimed method above every other), ``below_every`` (each below every other),
+#: ``below_mean`` (each below the mean of the others), ``mean_gap`` (the claimed methods' mean below the
+#: others' mean), ``not_lowest`` (some other method below the claimed one).
+SPECS = {
+    "fixed_most_matches": ("matches", "above_every", ("fixed",), "M_fixed's median matches minus the best other's"),
+    "uniformity_70_kim_lower": ("uniformity", "below_mean", ("classical-70", "kim"),
                                 "mean uniformity of the others minus the higher of M_70% and M_Kim"),
-    "fixed_best_success_sequences": ("success_seq_hi", _top_vs_rest("fixed"),
+    "fixed_best_success_sequences": ("success_seq_hi", "above_every", ("fixed",),
                                      "M_fixed's sequence success at the largest tau minus the best other's"),
-    "poorest_success_30_70_kim_sequences": ("success_seq_hi", _group_below_rest(("classical-30", "classical-70", "kim")),
-                                            "others' mean sequence success minus the best of M_30%, M_70%, M_Kim"),
-    "fixed_best_success_segments": ("success_seg_hi", _top_vs_rest("fixed"),
+    "poorest_success_30_70_kim_sequences": ("success_seq_hi", "below_every", ("classical-30", "classical-70", "kim"),
+                                            "the lowest sequence success of the others minus the best of M_30%, "
+                                            "M_70%, M_Kim"),
+    "fixed_best_success_segments": ("success_seg_hi", "above_every", ("fixed",),
                                     "M_fixed's segment success rate minus the best other's"),
-    "poorest_success_30_70_kim_segments": ("success_seg_hi", _group_below_rest(("classical-30", "classical-70", "kim")),
-                                           "others' mean segment success minus the best of M_30%, M_70%, M_Kim"),
-    "rpe_trans_best_50": ("rpe_trans", _top_vs_rest("classical-50", higher=False),
+    "poorest_success_30_70_kim_segments": ("success_seg_hi", "below_every", ("classical-30", "classical-70", "kim"),
+                                           "the lowest segment success of the others minus the best of M_30%, "
+                                           "M_70%, M_Kim"),
+    "rpe_trans_best_50": ("rpe_trans", "below_every", ("classical-50",),
                           "the best other translation RPE minus M_50%'s (%)"),
-    "rpe_trans_worst_kim": ("rpe_trans", _top_vs_rest("kim", higher=True),
+    "rpe_trans_worst_kim": ("rpe_trans", "above_every", ("kim",),
                             "M_Kim's translation RPE minus the worst other's (%)"),
-    "rpe_rot_best_zhang_50": ("rpe_rot", _two_lowest(("zhang", "classical-50")),
+    "rpe_rot_best_zhang_50": ("rpe_rot", "below_every", ("zhang", "classical-50"),
                               "the lowest other rotation RPE minus the higher of M_Zhang and M_50% (deg/m)"),
-    "fixed_not_best_vo": ("rpe_trans", _fixed_not_best, "M_fixed's translation RPE minus the best other's (%)"),
-    "gradient_ahead_vo": ("rpe_trans", _mean_gap(("shim", "zhang")),
+    "fixed_not_best_vo": ("rpe_trans", "not_lowest", ("fixed",),
+                          "M_fixed's translation RPE minus the best other's (%)"),
+    "gradient_ahead_vo": ("rpe_trans", "mean_gap", ("shim", "zhang"),
                           "others' mean translation RPE minus M_Shim's and M_Zhang's mean (%)"),
-    "gradient_fewer_vo_failures": ("vo_failed", _mean_gap(("shim", "zhang")),
+    "gradient_fewer_vo_failures": ("vo_failed", "mean_gap", ("shim", "zhang"),
                                    "others' mean failed VO frames minus M_Shim's and M_Zhang's mean"),
 }
+#: The test of each form, in words (the reports' ``test``).
+_TESTS = {
+    "above_every": "each claimed method above each other one: every one-sided paired t-test rejects "
+                   "(intersection-union)",
+    "below_every": "each claimed method below each other one: every one-sided paired t-test rejects "
+                   "(intersection-union)",
+    "below_mean": "each claimed method below the others' mean: every one-sided paired t-test rejects "
+                  "(intersection-union)",
+    "mean_gap": "one one-sided paired t-test of the walks' contrast",
+    "not_lowest": "some other method below the claimed one: the smallest one-sided paired t-test p, Bonferroni "
+                  "over the others",
+    "similar": f"every ordered pair: mean_i <= {SIMILAR_RATIO} mean_j, every one-sided paired t-test rejects "
+               "(intersection-union)",
+}
+#: The multiplicity family of every tested finding's verdict, in words.
+FAMILY = ("the AE findings: Holm across the 13 tested claims (vo_similar included) for holds, and across their "
+          "opposites for contradicted")
 #: Findings that cannot fail whatever the methods do: id -> why.
 BY_CONSTRUCTION = {
     "success_falls_with_tau_sequences": "a run whose every pair has >= tau_hi matches has >= tau_lo matches too: the "
@@ -133,8 +114,80 @@ BY_CONSTRUCTION = {
                                        "smaller",
     "vo_fails_on_some_runs": "holds on one failed VO frame of one run; no comparison of methods",
 }
-#: The equivalence finding: largest / smallest translation RPE at most this.
-SIMILAR_RATIO = 1.5
+
+
+def _split(methods, group):
+    g = [methods.index(n) for n in group]
+    return g, [k for k, m in enumerate(methods) if m not in group]
+
+
+def _effect(form: str, group) -> callable:
+    def f(mean, methods):
+        g, o = _split(list(methods), group)
+        mg, mo = mean[..., g], mean[..., o]
+        if form == "above_every":
+            return mg.min(axis=-1) - mo.max(axis=-1)
+        if form == "below_every":
+            return mo.min(axis=-1) - mg.max(axis=-1)
+        if form == "below_mean":
+            return mo.mean(axis=-1) - mg.max(axis=-1)
+        if form == "mean_gap":
+            return mo.mean(axis=-1) - mg.mean(axis=-1)
+        return mg[..., 0] - mo.min(axis=-1)  # not_lowest
+    return f
+
+
+#: Tested findings: id -> (metric, effect of the method walk means, what a positive effect says).
+FINDINGS = {fid: (metric, _effect(form, group), definition) for fid, (metric, form, group, definition) in SPECS.items()}
+
+
+def claim_of(fid: str, methods) -> Claim:
+    """The claim of finding ``fid`` (or ``"vo_similar"``) over ``methods`` as contrasts of the method columns."""
+    methods = list(methods)
+    m = len(methods)
+    if fid == "vo_similar":
+        rows, labels = [], []
+        for i in range(m):
+            for j in range(m):
+                if i != j:
+                    w = np.zeros(m)
+                    w[j] += SIMILAR_RATIO
+                    w[i] -= 1.0
+                    rows.append(w)
+                    labels.append(f"{methods[i]} <= {SIMILAR_RATIO} x {methods[j]}")
+        return Claim(rows, "all", labels)
+    _, form, group, _ = SPECS[fid]
+    g, o = _split(methods, group)
+    rows, labels = [], []
+
+    def unit(k):
+        w = np.zeros(m)
+        w[k] = 1.0
+        return w
+
+    if form in ("above_every", "below_every"):
+        sign = 1.0 if form == "above_every" else -1.0
+        for a in g:
+            for b in o:
+                rows.append(sign * (unit(a) - unit(b)))
+                labels.append(f"{methods[a]} {'>' if sign > 0 else '<'} {methods[b]}")
+    elif form == "below_mean":
+        rest = np.zeros(m)
+        rest[o] = 1.0 / len(o)
+        for a in g:
+            rows.append(rest - unit(a))
+            labels.append(f"{methods[a]} < the others' mean")
+    elif form == "mean_gap":
+        w = np.zeros(m)
+        w[o] = 1.0 / len(o)
+        w[g] = -1.0 / len(g)
+        rows.append(w)
+        labels.append(f"mean of {', '.join(group)} < the others' mean")
+    else:  # not_lowest: some other below the claimed one
+        for b in o:
+            rows.append(unit(g[0]) - unit(b))
+            labels.append(f"{methods[b]} < {methods[g[0]]}")
+    return Claim(rows, "any" if form == "not_lowest" else "all", labels)
 
 
 def _value(entry: dict | None, path) -> float:
@@ -162,64 +215,82 @@ def finding_effects(tables: dict[str, np.ndarray], methods=_METHODS) -> dict[str
     return {fid: f(np.nanmean(tables[metric], axis=-2), methods) for fid, (metric, f, _) in FINDINGS.items()}
 
 
-def evaluate(tables: dict[str, np.ndarray], methods=_METHODS, *, n_resamples: int = 1000,
-             n_permutations: int = 2000, seed=0, alpha: float = ALPHA, min_walks: int = MIN_WALKS) -> list[dict]:
-    """Every finding of :data:`FINDINGS`, :data:`BY_CONSTRUCTION` and ``vo_similar`` with its evidence.
+def _ratio(mean):
+    mn = mean.min(axis=-1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(mn > 0, mean.max(axis=-1) / mn, np.inf)
+
+
+def _tested_ids():
+    return list(FINDINGS) + ["vo_similar"]
+
+
+def _metric_of(fid):
+    return "rpe_trans" if fid == "vo_similar" else FINDINGS[fid][0]
+
+
+def _decide(p_holds, p_contra, n_walks, alpha, min_walks):
+    """Holm in both families (last axis: the findings), then the verdict codes: 1 holds, -1 contradicted, 0 not."""
+    a_h, a_c = holm_rows(p_holds), holm_rows(p_contra)
+    holds = (a_h < alpha) & ~(a_c < alpha)
+    contra = (a_c < alpha) & ~(a_h < alpha)
+    code = np.where(holds, 1, np.where(contra, -1, 0))
+    return np.where(np.asarray(n_walks) >= min_walks, code, 0), a_h, a_c
+
+
+def evaluate(tables: dict[str, np.ndarray], methods=_METHODS, *, n_resamples: int = 1000, seed=0,
+             alpha: float = ALPHA, min_walks: int = MIN_WALKS) -> list[dict]:
+    """Every finding of :data:`FINDINGS`, ``vo_similar`` and :data:`BY_CONSTRUCTION` with its evidence.
 
     ``tables``: :func:`unit_tables`.  Units with a missing value of a finding's metric are
-    left out of that finding.  Returns a list of ``{id, effect, ci95, p, p_adjusted, verdict,
-    n_walks, definition, reason}``.
+    left out of that finding.  Returns a list of ``{id, effect, ci95, p, p_adjusted,
+    p_contradicted, p_contradicted_adjusted, verdict, n_walks, definition, test, family,
+    parts, reason}`` (``parts``: per one-sided comparison its walk-mean contrast and p-values).
     """
     rng = rng_of(seed)
     methods = list(methods)
-    n_units = next(iter(tables.values())).shape[0]
-    # one set of within-walk label permutations for every finding (each test stays exact; Holm allows dependence)
-    perms = np.argsort(rng.random((n_permutations, n_units, len(methods))), axis=-1)
     rows = []
-    for fid, (metric, f, definition) in FINDINGS.items():
-        t = tables[metric]
-        ok = np.all(np.isfinite(t), axis=1)
-        t = t[ok]
+    for fid in _tested_ids():
+        t = tables[_metric_of(fid)]
+        t = t[np.all(np.isfinite(t), axis=1)]
         u = t.shape[0]
+        similar = fid == "vo_similar"
+        form = "similar" if similar else SPECS[fid][1]
+        definition = (f"largest / smallest method mean translation RPE (holds at or below {SIMILAR_RATIO})" if similar
+                      else FINDINGS[fid][2])
         row = {"id": fid, "effect": None, "ci95": [None, None], "p": None, "p_adjusted": None,
-               "verdict": "undetermined", "n_walks": int(u), "definition": definition, "reason": ""}
-        absent = [m for m in CLAIMED[fid] if m not in methods]
-        if absent or len(methods) <= len(CLAIMED[fid]):
+               "p_contradicted": None, "p_contradicted_adjusted": None, "verdict": "undetermined", "n_walks": int(u),
+               "definition": definition, "test": _TESTS[form], "family": FAMILY, "parts": [], "reason": ""}
+        claimed = () if similar else SPECS[fid][2]
+        absent = [m for m in claimed if m not in methods]
+        if absent or len(methods) <= len(claimed) or len(methods) < 2:
             row["reason"] = (f"method(s) {', '.join(absent)} not in this study" if absent
                              else "no other method to compare with")
             rows.append(row)
             continue
         if u == 0:
-            row["reason"] = f"no walk with a {metric} value for every method"
+            row["reason"] = f"no walk with a {_metric_of(fid)} value for every method"
             rows.append(row)
             continue
-        est = float(f(t.mean(axis=0), methods))
-        row["effect"] = est
+        stat = _ratio if similar else (lambda mean, f=FINDINGS[fid][1]: f(mean, methods))
+        row["effect"] = float(stat(t.mean(axis=0)))
         if u >= 2:
-            boot = f(t[rng.integers(0, u, (n_resamples, u))].mean(axis=1), methods)
-            lo, hi = percentile_interval(boot, 1.0 - alpha)
-            row["ci95"] = [float(lo), float(hi)]
-        # label permutation within each walk
-        null = f(np.take_along_axis(t[None], perms[:, ok], axis=-1).mean(axis=1), methods)
-        p_hi = (1 + np.sum(null >= est - 1e-12)) / (n_permutations + 1)
-        p_lo = (1 + np.sum(null <= est + 1e-12)) / (n_permutations + 1)
-        row["p"] = float(min(1.0, 2 * min(p_hi, p_lo)))
-        row["_direction"] = "holds" if p_hi < p_lo else "contradicted"
+            lo, hi = percentile_interval(stat(t[rng.integers(0, u, (n_resamples, u))].mean(axis=1)), 1.0 - alpha)
+            row["ci95"] = [float(lo), None if not math.isfinite(hi) else float(hi)]
+        claim = claim_of(fid, methods)
+        pv = claim_pvalues(claim, t)
+        row["p"], row["p_contradicted"] = float(pv["holds"]), float(pv["contradicted"])
+        row["parts"] = [{"comparison": lab, "mean": float(pv["part_mean"][k]), "p_above": float(pv["part_p_above"][k]),
+                         "p_below": float(pv["part_p_below"][k])} for k, lab in enumerate(claim.labels)]
         rows.append(row)
     tested = [r for r in rows if r["p"] is not None]
-    adj = holm([r["p"] for r in tested])
-    for r, a in zip(tested, adj):
-        r["p_adjusted"] = float(a)
-        direction = r.pop("_direction")
-        if r["n_walks"] < min_walks:
-            r["reason"] = f"{r['n_walks']} walks, fewer than {min_walks}: no interval over so few walks"
-        elif a < alpha:
-            r["verdict"] = direction
-            r["reason"] = (f"permutation p = {r['p']:.3g}, Holm-adjusted {a:.3g} < {alpha}: the effect lies "
-                           f"{'above' if direction == 'holds' else 'below'} what interchangeable methods give")
-        else:
-            r["reason"] = f"Holm-adjusted permutation p = {a:.3g} >= {alpha}: interchangeable methods give as much"
-    rows.append(_similar(tables["rpe_trans"], rng, n_resamples, alpha, min_walks))
+    if tested:
+        codes, a_h, a_c = _decide(np.array([r["p"] for r in tested]), np.array([r["p_contradicted"] for r in tested]),
+                                  np.array([r["n_walks"] for r in tested]), alpha, min_walks)
+        for r, code, ah, ac in zip(tested, codes, a_h, a_c):
+            r["p_adjusted"], r["p_contradicted_adjusted"] = float(ah), float(ac)
+            r["verdict"] = {1: "holds", -1: "contradicted", 0: "undetermined"}[int(code)]
+            r["reason"] = _reason(r, alpha, min_walks)
     for fid, why in BY_CONSTRUCTION.items():
         rows.append({"id": fid, "effect": None, "ci95": [None, None], "p": None, "p_adjusted": None,
                      "verdict": "by-construction", "n_walks": None, "definition": None,
@@ -227,82 +298,132 @@ def evaluate(tables: dict[str, np.ndarray], methods=_METHODS, *, n_resamples: in
     return rows
 
 
-def _similar(t: np.ndarray, rng, n_resamples: int, alpha: float, min_walks: int) -> dict:
-    t = t[np.all(np.isfinite(t), axis=1)]
-    u = t.shape[0]
-    row = {"id": "vo_similar", "effect": None, "ci95": [None, None], "p": None, "p_adjusted": None,
-           "verdict": "undetermined", "n_walks": int(u),
-           "definition": f"largest / smallest method mean translation RPE (holds at or below {SIMILAR_RATIO})",
-           "reason": ""}
-    if u == 0:
-        row["reason"] = "no walk with a translation RPE for every method"
-        return row
+def _reason(r: dict, alpha: float, min_walks: int) -> str:
+    if r["n_walks"] < min_walks:
+        return f"{r['n_walks']} walks, fewer than {min_walks}: no verdict over so few walks"
+    if r["verdict"] == "holds":
+        return (f"every comparison the claim needs rejects: p = {r['p']:.3g}, Holm-adjusted {r['p_adjusted']:.3g} "
+                f"< {alpha}")
+    if r["verdict"] == "contradicted":
+        return (f"a comparison goes significantly against the claim: p = {r['p_contradicted']:.3g}, Holm-adjusted "
+                f"{r['p_contradicted_adjusted']:.3g} < {alpha}")
+    weakest = max(r["parts"], key=lambda q: q["p_above"]) if r["parts"] else None
+    where = f" (weakest comparison: {weakest['comparison']}, p = {weakest['p_above']:.3g})" if weakest else ""
+    return f"Holm-adjusted p = {r['p_adjusted']:.3g} >= {alpha}: the claim is not shown{where}"
 
-    def ratio(mean):
-        mn = mean.min(axis=-1)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            return np.where(mn > 0, mean.max(axis=-1) / mn, np.inf)
 
-    row["effect"] = float(ratio(t.mean(axis=0)))
-    if u >= 2:
-        lo, hi = percentile_interval(ratio(t[rng.integers(0, u, (n_resamples, u))].mean(axis=1)), 1.0 - alpha)
-        row["ci95"] = [float(lo), None if not math.isfinite(hi) else float(hi)]
-    else:
-        lo, hi = -math.inf, math.inf
-    if u < min_walks:
-        row["reason"] = f"{u} walks, fewer than {min_walks}: no interval over so few walks"
-    elif hi <= SIMILAR_RATIO:
-        row["verdict"], row["reason"] = "holds", f"95 % interval [{lo:.3g}, {hi:.3g}] at or below {SIMILAR_RATIO}"
-    elif lo > SIMILAR_RATIO:
-        row["verdict"], row["reason"] = "contradicted", f"95 % interval [{lo:.3g}, {hi:.3g}] above {SIMILAR_RATIO}"
-    else:
-        row["reason"] = f"95 % interval [{lo:.3g}, {hi:.3g}] straddles {SIMILAR_RATIO}: equivalence not shown"
-    return row
+def batch_verdicts(tables: dict[str, np.ndarray], methods=_METHODS, *, alpha: float = ALPHA,
+                   min_walks: int = MIN_WALKS) -> dict[str, dict[str, np.ndarray]]:
+    """The verdicts of :func:`evaluate` on many complete studies at once (no intervals: the calibration's loop).
+
+    ``tables``: ``{metric: (studies, walks, methods)}``, every value finite.  Returns per
+    tested finding ``{"raw_holds": p < alpha (no Holm: the worst case, every other claim
+    rejected), "verdict": 1 holds / -1 contradicted / 0 undetermined}``, arrays over the studies.
+    """
+    methods = list(methods)
+    ids = [f for f in _tested_ids() if all(m in methods for m in (() if f == "vo_similar" else SPECS[f][2]))]
+    ph, pc = [], []
+    for fid in ids:
+        pv = claim_pvalues(claim_of(fid, methods), tables[_metric_of(fid)])
+        ph.append(pv["holds"])
+        pc.append(pv["contradicted"])
+    ph, pc = np.stack(ph, axis=-1), np.stack(pc, axis=-1)
+    n_walks = next(iter(tables.values())).shape[-2]
+    codes, _, _ = _decide(ph, pc, n_walks, alpha, min_walks)
+    return {fid: {"raw_holds": ph[..., k] < alpha, "verdict": codes[..., k]} for k, fid in enumerate(ids)}
 
 
 #: The methods a finding's claim is about, and the sign of the shift that makes the claim true on its metric.
-CLAIMED = {
-    "fixed_most_matches": ({"fixed": 1.0}),
-    "uniformity_70_kim_lower": ({"classical-70": -1.0, "kim": -1.0}),
-    "fixed_best_success_sequences": ({"fixed": 1.0}),
-    "poorest_success_30_70_kim_sequences": ({"classical-30": -1.0, "classical-70": -1.0, "kim": -1.0}),
-    "fixed_best_success_segments": ({"fixed": 1.0}),
-    "poorest_success_30_70_kim_segments": ({"classical-30": -1.0, "classical-70": -1.0, "kim": -1.0}),
-    "rpe_trans_best_50": ({"classical-50": -1.0}),
-    "rpe_trans_worst_kim": ({"kim": 1.0}),
-    "rpe_rot_best_zhang_50": ({"zhang": -1.0, "classical-50": -1.0}),
-    "fixed_not_best_vo": ({"fixed": 1.0}),
-    "gradient_ahead_vo": ({"shim": -1.0, "zhang": -1.0}),
-    "gradient_fewer_vo_failures": ({"shim": -1.0, "zhang": -1.0}),
-}
+CLAIMED = {fid: {m: (1.0 if form in ("above_every", "not_lowest") else -1.0) for m in group}
+           for fid, (_, form, group, _) in SPECS.items()}
 
 
 def simulated_tables(n_walks: int, *, effect_noise_sd: dict | None = None, noise_sd: float = 1.0, seed=0,
-                     methods=_METHODS) -> dict[str, np.ndarray]:
-    """Per-unit tables of every metric with interchangeable methods (noise ``noise_sd`` per walk and method, a
-    walk level common to the methods), plus, per finding id in ``effect_noise_sd``, its claimed methods
-    shifted in the claim's direction by that many noise SDs (:data:`CLAIMED`)."""
+                     methods=_METHODS, n_studies: int | None = None, shifts: dict | None = None,
+                     noisy: dict | None = None, df: float | None = None, level: float = 5.0) -> dict[str, np.ndarray]:
+    """Per-unit tables of every metric: a walk level common to the methods plus noise per walk and method.
+
+    ``effect_noise_sd``: per finding id, its claimed methods shifted in the claim's direction by
+    that many noise SDs (:data:`CLAIMED`); ``shifts``: per metric, a shift per method (noise
+    SDs) added on top; ``noisy``: per method a factor on its noise SD (a method like M_Kim,
+    far noisier than the others); ``df``: Student-t noise with ``df`` degrees of freedom
+    (heavy tails; scaled to the same SD) instead of Gaussian.  ``n_studies``: a leading
+    axis of independent studies (shape (n_studies, n_walks, methods)).
+    """
     rng = rng_of(seed)
     methods = list(methods)
-    out = {m: 5.0 + rng.normal(0.0, noise_sd, (n_walks, len(methods))) + rng.normal(0.0, 1.0, (n_walks, 1))
+    lead = () if n_studies is None else (int(n_studies),)
+    sd = np.full(len(methods), float(noise_sd))
+    for m, k in (noisy or {}).items():
+        sd[methods.index(m)] *= float(k)
+
+    def noise(shape):
+        if df is None:
+            return rng.normal(0.0, 1.0, shape)
+        return rng.standard_t(df, shape) * math.sqrt((df - 2.0) / df)
+
+    out = {m: level + noise(lead + (n_walks, len(methods))) * sd + rng.normal(0.0, 1.0, lead + (n_walks, 1))
            for m in _PATHS}
     for fid, d in (effect_noise_sd or {}).items():
-        metric = FINDINGS[fid][0]
         shift = np.zeros(len(methods))
         for m, sign in CLAIMED[fid].items():
             shift[methods.index(m)] = sign * d * noise_sd
-        out[metric] = out[metric] + shift
+        out[FINDINGS[fid][0]] = out[FINDINGS[fid][0]] + shift
+    for metric, s in (shifts or {}).items():
+        out[metric] = out[metric] + np.asarray(s, dtype=np.float64) * noise_sd
     return out
 
 
+def configuration_shift(fid: str, methods=_METHODS, *, gap: float = 0.5, delta: float = 0.0,
+                        level: float = 5.0) -> np.ndarray:
+    """Per-method shift (noise SDs) on ``fid``'s metric that makes its claim false by ``delta``.
+
+    ``delta = 0`` is the tied configuration (the boundary of the claim, where a test is most
+    likely to say ``holds`` for a false claim): the claimed methods ``gap`` ahead of the rest,
+    and one other method (the rival) tied with them; ``delta > 0`` puts the rival ``delta``
+    ahead of the claimed methods (near-tied).  ``vo_similar``: the last method at exactly
+    ``SIMILAR_RATIO`` times the first (plus ``delta``), the others 1.2 times it.
+    """
+    methods = list(methods)
+    s = np.zeros(len(methods))
+    if fid == "vo_similar":  # only the pair (last, first) at the boundary; the others in between
+        s[1:-1] = 0.2 * level
+        s[-1] = (SIMILAR_RATIO - 1.0) * level + delta
+        return s
+    _, form, group, _ = SPECS[fid]
+    g, o = _split(methods, group)
+    rival = o[0]
+    if form in ("above_every", "below_every"):
+        sign = 1.0 if form == "above_every" else -1.0
+        s[g] = sign * gap
+        s[rival] = sign * (gap + delta)
+    elif form == "below_mean":  # the first claimed method at the others' mean, the rest of the group below it
+        s[g] = -gap
+        s[g[0]] = delta
+    elif form == "mean_gap":  # the group's mean at the others' mean, its members apart
+        s[g[0]], s[g[1]] = -gap, gap + 2.0 * delta
+    else:  # not_lowest: the claimed method tied lowest with the rival
+        s[g] = -gap - delta
+        s[rival] = -gap
+    return s
+
+
+def false_holds_rates(fid: str, n_walks: int, *, delta: float = 0.0, gap: float = 0.5, n_studies: int = 400,
+                      seed=0, noisy: dict | None = None, df: float | None = None) -> dict[str, float]:
+    """Fraction of ``n_studies`` simulated studies in which the false claim ``fid`` (:func:`configuration_shift`)
+    is judged ``holds``: ``raw`` (its own test at alpha: the worst case, every other claim of the family
+    rejected) and ``verdict`` (Holm across the family, the other claims false as well)."""
+    metric = _metric_of(fid)
+    t = simulated_tables(n_walks, seed=seed, n_studies=n_studies, noisy=noisy, df=df,
+                         shifts={metric: configuration_shift(fid, gap=gap, delta=delta)})
+    v = batch_verdicts(t)[fid]
+    return {"raw": float(np.mean(v["raw_holds"])), "verdict": float(np.mean(v["verdict"] == 1))}
+
+
 def finding_power(fid: str, effect_noise_sd: float, n_walks: int, *, n_seeds: int = 100, seed=0,
-                  n_permutations: int = 2000) -> float:
+                  noisy: dict | None = None, df: float | None = None) -> float:
     """Fraction of simulated studies of ``n_walks`` in which finding ``fid`` with a true effect of
     ``effect_noise_sd`` per-walk noise SDs is judged ``holds`` (Holm across all findings included)."""
-    rng = rng_of(seed)
-    hits = 0
-    for _ in range(n_seeds):
-        t = simulated_tables(n_walks, effect_noise_sd={fid: effect_noise_sd}, seed=rng)
-        res = {r["id"]: r for r in evaluate(t, n_resamples=100, n_permutations=n_permutations, seed=rng)}
-        hits += res[fid]["verdict"] == "holds"
-    return hits / n_seeds
+    t = simulated_tables(n_walks, effect_noise_sd={fid: effect_noise_sd}, seed=seed, n_studies=n_seeds, noisy=noisy,
+                         df=df)
+    return float(np.mean(batch_verdicts(t)[fid]["verdict"] == 1))

@@ -94,5 +94,5 @@ def power_summary(n_walks: int, scales: Scales, *, n_seeds: int = 100, seed=0) -
         "perfect_emulator_rates": verdict_rates("live-draw", n_walks, scales, n_seeds=n_seeds, seed=seed),
         "random_emulator_rates": verdict_rates("random", n_walks, scales, n_seeds=n_seeds, seed=seed),
         "definition": f"simulated studies ({n_seeds} seeds) with the measured variance components; agrees: omega2 "
-                      f"95 % upper <= {OMEGA2_MAX}; power 0.8; level {ALPHA}",
+                      f"one-sided 95 % upper bound <= {OMEGA2_MAX}; power 0.8; level {ALPHA}",
     }

@@ -19,7 +19,11 @@ Emulators (``kind``):
   fresh draw): the same spread, no relation to live;
 * ``"tied"``: every method equal (``beta_E = 0``, ``g_E = 0``);
 * ``"scaled"``: ``beta_E = beta + delta`` with ``delta`` a fresh draw of SD
-  ``sqrt(omega2_true) * sd(beta)`` (the interaction of a given size: power).
+  ``sqrt(omega2_true) * sd(beta)`` (the interaction of a given size on average: power);
+* ``"exact"``: the same with ``delta`` centred and rescaled so that its variance over the
+  methods is exactly ``omega2_true * var(beta)`` in every study (the true omega2 is
+  ``omega2_true``: what an interval's coverage and the rule's error at the margin are
+  measured on).
 
 ``interchangeable`` (the AE findings' null) draws ``beta = 0``.
 """
@@ -34,7 +38,7 @@ from emulator.stats import rng_of
 
 __all__ = ["Scales", "KINDS", "method_effects", "simulate_tables"]
 
-KINDS = ("live-draw", "random", "tied", "scaled")
+KINDS = ("live-draw", "random", "tied", "scaled", "exact")
 
 
 @dataclass(frozen=True)
@@ -87,7 +91,12 @@ def simulate_tables(kind: str, n_walks: int, scales: Scales, *, n_methods: int =
         be, ge = 0.0, 0.0
     else:
         sd_b = b.std(ddof=1) if b.size > 1 else 0.0
-        be = b + rng.normal(0.0, np.sqrt(omega2_true) * sd_b, (n_seeds, 1, n_methods))
+        delta = rng.normal(0.0, np.sqrt(omega2_true) * sd_b, (n_seeds, 1, n_methods))
+        if kind == "exact":
+            delta = delta - delta.mean(axis=-1, keepdims=True)
+            sd_d = delta.std(axis=-1, ddof=1, keepdims=True)
+            delta = np.where(sd_d > 0, delta / np.where(sd_d > 0, sd_d, 1.0), 0.0) * np.sqrt(omega2_true) * sd_b
+        be = b + delta
         ge = g
     emulated = be + a + ge + rng.normal(0.0, scales.sd_noise, shape)
     return {"live": live, "emulated": emulated, "control": control}

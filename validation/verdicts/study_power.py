@@ -119,7 +119,7 @@ def finding_scales(table) -> dict:
 
 
 def paper_sized_power(units: list[dict], *, n_walks: int | None = None, n_seeds: int = 100, seed: int = 0,
-                      candidates=(10, 20, 30, 45, 60, 90, 120, 180, 240), n_permutations: int = 1000) -> dict:
+                      candidates=(10, 20, 30, 45, 60, 90, 120, 180, 240)) -> dict:
     """Per finding of :data:`PAPER_EFFECTS`: the paper's effect in the study's units and in its per-walk
     residual SDs, the power of a true effect of that size at ``n_walks`` (default: the study's complete
     walks) and the fewest ``candidates`` walks with power >= 0.8 (None: not within them)."""
@@ -144,11 +144,9 @@ def paper_sized_power(units: list[dict], *, n_walks: int | None = None, n_seeds:
         by_sd = (abs(pe["paper_effect"]) / pe["paper_method_sd"] * sc["sd_method"] / sc["sd_residual"]
                  if pe["paper_method_sd"] > 0 else None)
         row.update(effect_study_units=eff, effect_noise_sd=d, effect_noise_sd_by_method_sd=by_sd, n_walks_power=size,
-                   power_at_size=finding_power(fid, d, size, n_seeds=n_seeds, seed=[seed, k, size],
-                                               n_permutations=n_permutations))
+                   power_at_size=finding_power(fid, d, size, n_seeds=n_seeds, seed=[seed, k, size]))
         for w in candidates:
-            p = row["power_at_size"] if w == size else finding_power(fid, d, w, n_seeds=n_seeds, seed=[seed, k, w],
-                                                                     n_permutations=n_permutations)
+            p = row["power_at_size"] if w == size else finding_power(fid, d, w, n_seeds=n_seeds, seed=[seed, k, w])
             if p >= 0.8:
                 row["walks_for_80_percent"] = int(w)
                 break
