@@ -98,3 +98,21 @@ def test_cli_warns_once_without_an_imu_and_refuses_a_lone_latency(recording, tmp
     assert main(["run", str(recording), "-o", str(tmp_path / "cli2"), "--latency-frames", "2", "-q"]) == 1
     assert "--latency-frames 2: used only with --rate native" in capsys.readouterr().err
     assert not (tmp_path / "cli2").exists()
+
+
+def test_benchmarks_read_one_frame_per_recorder_cycle(recording, tmp_path):
+    from emulator.io.runfolder import read_run_folder
+    from emulator.metrics.bench import bench_features
+    from emulator.metrics.bench_common import benchmark_frames
+
+    _run(recording, tmp_path / "run")
+    run = read_run_folder(tmp_path / "run")
+    picked = benchmark_frames(run)
+    first = json.loads((tmp_path / "run" / "run.json").read_text())["native"]["benchmarked_frames"]
+    for m, method in picked.methods.items():  # the frames at each sweep's first shot, in time order
+        assert [f.timestamp_ns for f in method.frames] == [run.methods[m].frames[k].timestamp_ns for k in first]
+    assert benchmark_frames(run, every_frame=True) is run
+    res = bench_features(tmp_path / "run", tmp_path / "feat", methods=["classical-50"])
+    assert res["methods"]["classical-50"]["n_images"] == 4
+    res = bench_features(tmp_path / "run", tmp_path / "feat_all", methods=["classical-50"], every_frame=True)
+    assert res["methods"]["classical-50"]["n_images"] == 16 and res["parameters"]["every_frame"] is True
