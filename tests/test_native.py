@@ -295,3 +295,22 @@ def test_run_config_rate_and_latency():
             RunConfig(rate="native", latency_frames=bad)
     with pytest.raises(PlaybackError, match="rate"):
         cfg.resumed(RunConfig().to_json())
+
+
+def test_native_emulation_summary_figures():
+    from validation.live.native import native_emulation_summary
+
+    walk = lambda w, u: {"m": {"rmse_percent": w, "rmse_percent_unwarped": u,  # noqa: E731
+                               "source_offset": [0, 1, -2, 0], "exposure_log2_error": [0.0, 0.1, 0.2]}}
+    per_walk = {"a/seed0": walk([1.0, 2.0, 3.0, 9.0], [4.0, 4.0, 6.0, 8.0]),  # medians 2.5 and 5: the warp halves it
+                "b/seed0": walk([2.0, 2.0, 2.0, 2.0], [3.0, 3.0, 3.0, 3.0]),  # 2 and 3: a third
+                "c/seed0": None}  # a walk without the native condition is left out
+    out = native_emulation_summary(per_walk, ["m"], seed=0)
+    a = out["per_walk"]["a/seed0"]["m"]
+    assert a["image_rmse_percent_median"] == 2.5 and a["image_rmse_percent_median_unwarped"] == 5.0
+    assert a["warp_share_of_error"] == 0.5 and a["neighbour_fraction"] == 0.5 and a["exposure_log2_error_median"] == 0.1
+    r, c = out["median_image_rmse_percent"], out["warp_cut_fraction"]
+    assert r["estimate"] == 2.25 and r["n_walks"] == 2 and 2.0 <= r["ci95"][0] <= r["ci95"][1] <= 2.5
+    assert c["estimate"] == pytest.approx((0.5 + 1 / 3) / 2) and c["met"] is False  # the interval reaches below 0.5
+    assert r["met"] is True  # the whole interval is under 3 %
+    assert native_emulation_summary({"a": None}, ["m"]) is None
