@@ -6,9 +6,9 @@ or of a nearby frame (:class:`emulator.playback.native.NativeProvider`).  This m
 the two numeric parts of that:
 
 * **the native selector** (:func:`native_select`): among the candidate frames within
-  :data:`WINDOW_CYCLES` recorder cycle of frame k, those whose source can give ``t`` without
-  losing more than :data:`SATURATION_LIMIT` of the image to clipping are kept (as HigherNoSat
-  keeps a bracket below 1 % saturation); of those, the one of least cost
+  :data:`WINDOW_CYCLES` recorder cycle of frame k, those that lose at most :data:`SATURATION_LIMIT`
+  more of the image to clipping than the least clipped candidate are kept (pixels at black
+  emulated upwards, at white downwards); of those, the one of least cost
 
       cost = max(0, log2(t / bracket)) + MOTION_STOPS_PER_FRAME * |offset|
 
@@ -17,8 +17,8 @@ the two numeric parts of that:
   between frame k and the source (``offset`` in frames; the warp undoes the rotation, not
   the translation nor the gyro's errors).  Ties go to the smaller ``|offset|``, then to the
   earlier frame.  Frame k's own bracket is therefore used whenever it can give ``t`` from
-  above (cost 0), and an upward emulation of it is kept while it costs less than the
-  nearest clean neighbour.  When no candidate is clean, the least clipped one is used.
+  above (cost 0) without clipping more than the others, and an upward emulation of it is kept
+  while it costs less than the nearest kept neighbour.
 * **the warp** (:func:`warp_to_instant`): a source frame taken at another instant is moved
   to frame k's instant by the infinite homography of the camera's rotation between the two
   (``H = K R^T K^-1``, :func:`emulator.blur.rotation_homography`), each RGGB site on its own
@@ -52,9 +52,10 @@ __all__ = [
 #: Candidate source frames lie within this many recorder cycles (sweeps) of frame k, each side.
 WINDOW_CYCLES = 1
 #: Cost of one frame of time offset, in stops of upward emulation (docs/native.md).
-MOTION_STOPS_PER_FRAME = 0.5
-#: A candidate is clean when at most this fraction of its pixels cannot give the target (as HigherNoSat's 1 %).
-SATURATION_LIMIT = 0.01
+MOTION_STOPS_PER_FRAME = 1.0
+#: A candidate is kept when at most this fraction more of its pixels than the least clipped candidate's
+#: cannot give the target (docs/native.md: measured on a synthetic walk, motion costs more than clipping).
+SATURATION_LIMIT = 0.2
 
 
 @dataclass(frozen=True)
@@ -110,10 +111,8 @@ def native_select(target_ms: float, candidates: Iterable[NativeCandidate], *,
     def order(c: NativeCandidate) -> tuple:
         return (round(native_cost(target_ms, c, motion_stops_per_frame), 12), abs(c.offset), c.offset)
 
-    clean = [c for c in cands if c.invalid_fraction <= saturation_limit]
-    if clean:
-        return min(clean, key=order)
-    return min(cands, key=lambda c: (c.invalid_fraction,) + order(c))
+    least = min(c.invalid_fraction for c in cands)
+    return min((c for c in cands if c.invalid_fraction <= least + saturation_limit), key=order)
 
 
 # ============================================================================ the warp

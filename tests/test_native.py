@@ -57,44 +57,54 @@ def C(offset, bracket, invalid=0.0):
     return NativeCandidate(offset, bracket, invalid)
 
 
+RULE = {"motion_stops_per_frame": 0.5, "saturation_limit": 0.01}  # the rule's parameters these cases are worked for
+
+
+def pick(target, cands, **kw):
+    return native_select(target, cands, **{**RULE, **kw})
+
+
 # ============================================================================ the selector, by hand
 def test_own_bracket_from_above_is_chosen():
     cands = [C(-1, 1.0), C(0, 8.0), C(1, 16.0), C(2, 4.0)]
-    assert native_select(4.0, cands).offset == 0  # 8 ms emulated down: cost 0
-    assert native_select(8.0, cands).offset == 0  # the bracket itself
+    assert pick(4.0, cands).offset == 0  # 8 ms emulated down: cost 0
+    assert pick(8.0, cands).offset == 0  # the bracket itself
 
 
 def test_motion_against_upward_ratio():
     # frame k is a 1 ms shot, target 8 ms: up 3 stops from its own bracket (cost 3), or the
     # 8 ms shot 3 frames later (1.5), or the 32 ms shot 1 frame earlier (0.5)
     cands = [C(-1, 32.0), C(0, 1.0), C(1, 2.0), C(2, 4.0), C(3, 8.0)]
-    assert native_select(8.0, cands).offset == -1
-    assert native_cost(8.0, C(0, 1.0)) == 3.0 and native_cost(8.0, C(3, 8.0)) == 1.5
+    assert pick(8.0, cands).offset == -1
+    assert native_cost(8.0, C(0, 1.0), 0.5) == 3.0 and native_cost(8.0, C(3, 8.0), 0.5) == 1.5
     # the 32 ms shot clipped beyond 1 %: the next cost is 4 ms two frames later (1 + 1 = 2) against 8 ms at +3 (1.5)
     cands[0] = C(-1, 32.0, invalid=0.05)
-    assert native_select(8.0, cands).offset == 3
+    assert pick(8.0, cands).offset == 3
     # a heavier motion weight keeps frame k's own bracket: 3 stops against 3 frames at 1 stop each
-    assert native_select(8.0, cands, motion_stops_per_frame=1.0).offset == 0
+    assert pick(8.0, cands, motion_stops_per_frame=1.0).offset == 0
     # a small upward ratio beats a neighbour: 2 ms -> 2.6 ms (0.38 stop) against 4 ms one frame later (0.5)
-    assert native_select(2.6, [C(0, 2.0), C(1, 4.0)]).offset == 0
-    assert native_select(3.0, [C(0, 2.0), C(1, 4.0)]).offset == 1  # 0.58 stop > 0.5
+    assert pick(2.6, [C(0, 2.0), C(1, 4.0)]).offset == 0
+    assert pick(3.0, [C(0, 2.0), C(1, 4.0)]).offset == 1  # 0.58 stop > 0.5
 
 
 def test_ties_go_to_the_nearer_then_the_earlier_frame():
-    assert native_select(4.0, [C(2, 8.0), C(-2, 8.0)]).offset == -2
-    assert native_select(4.0, [C(2, 4.0), C(0, 2.0)]).offset == 0  # 1 stop up against 2 frames: equal, the nearer
-    assert native_select(4.0, [C(3, 4.0), C(-1, 1.0)]).offset == 3  # 1.5 against 0.5 + 2 = 2.5
+    assert pick(4.0, [C(2, 8.0), C(-2, 8.0)]).offset == -2
+    assert pick(4.0, [C(2, 4.0), C(0, 2.0)]).offset == 0  # 1 stop up against 2 frames: equal, the nearer
+    assert pick(4.0, [C(3, 4.0), C(-1, 1.0)]).offset == 3  # 1.5 against 0.5 + 2 = 2.5
 
 
-def test_nothing_clean_takes_the_least_clipped_and_bad_input_is_refused():
-    got = native_select(4.0, [C(0, 8.0, 0.30), C(1, 2.0, 0.05), C(-1, 16.0, 0.5)])
-    assert got.offset == 1
+def test_clipping_is_judged_against_the_least_clipped_candidate_and_bad_input_is_refused():
+    got = pick(4.0, [C(0, 8.0, 0.30), C(1, 2.0, 0.05), C(-1, 16.0, 0.5)])
+    assert got.offset == 1  # only the least clipped is within 1 % of the least clipped
+    # a dark scene: every short bracket loses 20-21 % at black; within 1 % of each other, the cost decides
+    got = pick(8.0, [C(0, 1.0, 0.205), C(1, 2.0, 0.21), C(3, 8.0, 0.20), C(-1, 32.0, 0.35)])
+    assert got.offset == 3  # 1.5 against 3 (own) and 2.5: the 32 ms shot clips 15 % more, out
     with pytest.raises(EmulationError, match="no candidate"):
         native_select(4.0, [])
     with pytest.raises(EmulationError, match="target_ms"):
-        native_select(float("nan"), [C(0, 1.0)])
+        pick(float("nan"), [C(0, 1.0)])
     with pytest.raises(EmulationError, match="motion weight"):
-        native_select(4.0, [C(0, 1.0)], motion_stops_per_frame=-1)
+        pick(4.0, [C(0, 1.0)], motion_stops_per_frame=-1)
 
 
 def test_invalid_fraction_counts_what_the_ratio_loses():
@@ -169,11 +179,11 @@ def static(tmp_path_factory):
     return seq, load_camera(path), sequence_response(seq), DatasetRadiance(path)
 
 
-def _native(seq, resp, methods, **cfg):
+def _native(seq, resp, methods, rule=None, **cfg):
     config = RunConfig(rate="native", initial_ms=4.0, **cfg)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", NativeWarpWarning)
-        provider = NativeProvider(seq, config, resp)
+        provider = NativeProvider(seq, config, resp, **(rule or {}))
     return provider, list(closed_loop(provider, {m.name: m for m in methods}, config, want_right=True,
                                       keep_images=True))
 
@@ -235,9 +245,10 @@ def ramp(tmp_path_factory):
 
 def test_selection_on_a_hand_built_sequence(ramp):
     """A constant target of 3 ms on the sweep 4, 8, 16, 32, 1, 2 ms (x3), the 32 ms shots clipped: the
-    source of each frame, worked out by hand from the rule (cost = stops up + 0.5 per frame of offset)."""
+    source of each frame, worked out by hand from the rule (cost = stops up + 0.5 per frame of offset,
+    candidates clipping over 1 % more than the least clipped left out); then with the defaults."""
     seq, resp = ramp
-    provider, frames = _native(seq, resp, [Constant(3.0)])
+    provider, frames = _native(seq, resp, [Constant(3.0)], rule=RULE)
     assert provider.frames.exposures == [4.0, 8.0, 16.0, 32.0, 1.0, 2.0] * 3
     lost = {e: invalid_fraction(np.bincount(f.load().ravel(), minlength=4095), 3.0 / e, white_level=4094,
                                 black_level=0) for e, f in seq.cycles[1].frames["left"].items()}
@@ -252,6 +263,12 @@ def test_selection_on_a_hand_built_sequence(ramp):
     assert got[2:] == expected[2:]
     brackets = [cs.steps["constant-3"].bracket_ms for cs in frames]
     assert brackets[2:] == [16.0, 16.0, 16.0, 4.0, 4.0, 8.0, 16.0, 16.0, 16.0, 4.0, 4.0, 8.0, 16.0, 16.0, 16.0, 2.0]
+    # the defaults (1 stop per frame, 20 % of clipping): the 32 ms shots (14 % clipped) serve themselves; the
+    # 1 ms shot takes the 32 ms one just before it (cost 1) over its own emulated up 3x (1.58), the 2 ms one after
+    # it (0.58 + 1) and the 4 ms one two frames later (2); the 2 ms shot is emulated up 1.5x (0.58), not the 4 ms
+    # one after it (1)
+    _, frames = _native(seq, resp, [Constant(3.0)])
+    assert [cs.steps["constant-3"].native.source_offset for cs in frames] == [0, 0, 0, 0, -1, 0] * 3
 
 
 def test_a_rotation_from_the_gyro_between_frames(static):

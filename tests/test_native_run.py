@@ -116,3 +116,23 @@ def test_benchmarks_read_one_frame_per_recorder_cycle(recording, tmp_path):
     assert res["methods"]["classical-50"]["n_images"] == 4
     res = bench_features(tmp_path / "run", tmp_path / "feat_all", methods=["classical-50"], every_frame=True)
     assert res["methods"]["classical-50"]["n_images"] == 16 and res["parameters"]["every_frame"] is True
+
+
+def test_dataset_run_on_threads_with_a_zip_gives_the_single_runs_tables(tmp_path, capsys):
+    from test_datasetrun import make_dataset
+
+    root = make_dataset(tmp_path / "root")
+    out = tmp_path / "out"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main(["run", str(root), "--sequences", "all", "--methods", "classical-50,fixed", "--rate", "native",
+                     "-o", str(out), "--scheduler", "threads", "--workers", "2", "--group-size", "1",
+                     "--no-progress"]) == 0
+        assert main(["run", str(root / "seqB.zip"), "--methods", "classical-50,fixed", "--rate", "native",
+                     "-o", str(tmp_path / "single"), "--no-progress"]) == 0
+    for m in ("classical-50", "fixed"):
+        unit = (out / "seqB" / m / m / "exposures.csv").read_bytes()
+        assert unit == (tmp_path / "single" / m / "exposures.csv").read_bytes()
+        assert len(unit.decode().splitlines()) == 1 + 18  # 3 sweeps of 6 frames, one row each
+        assert len((out / "seqA" / m / m / "exposures.csv").read_text().splitlines()) == 1 + 24
+    assert json.loads((out / "dataset.json").read_text())["config"]["rate"] == "native"

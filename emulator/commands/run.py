@@ -357,7 +357,7 @@ def _print_run_summary(args, summary: dict) -> int:
     timing = summary.get("timing") or {}
     if timing.get("cycles_per_s"):
         steady = timing.get("steady_cycles_per_s")
-        print(f"speed       {timing['cycles_per_s']:.2f} cycles/s"
+        print(f"speed       {timing['cycles_per_s']:.2f} {'frames' if native else 'cycles'}/s"
               + (f" ({steady:.2f} after start-up, {timing['startup_s']:.2f} s)" if steady else ""))
     if failed:
         print(f"FAILED      {len(failed)} of {len(summary['methods'])} method(s); the others' results are complete"

@@ -41,8 +41,8 @@ from emulator.autoexposure.isolation import readonly_view
 from emulator.dataset import CAMERAS
 from emulator.emulate import apply_lut
 from emulator.errors import CalibrationError
-from emulator.native import (MOTION_STOPS_PER_FRAME, WINDOW_CYCLES, NativeCandidate, invalid_fraction, native_select,
-                             rotation_between, warp_to_instant)
+from emulator.native import (MOTION_STOPS_PER_FRAME, SATURATION_LIMIT, WINDOW_CYCLES, NativeCandidate,
+                             invalid_fraction, native_select, rotation_between, warp_to_instant)
 from emulator.playback.config import RunConfig
 from emulator.playback.emulated import METHOD_CAMERA, _CycleImages, _fractions
 from emulator.playback.loop import Shot
@@ -140,7 +140,8 @@ class NativeTick:
             _, hist = p.images(j).get(p.cameras[0], e)
             cands.append(NativeCandidate(j - self.index, e, invalid_fraction(hist, target_ms / e, white_level=p.white,
                                                                              black_level=p.black)))
-        best = native_select(target_ms, cands, motion_stops_per_frame=p.motion_stops_per_frame)
+        best = native_select(target_ms, cands, motion_stops_per_frame=p.motion_stops_per_frame,
+                             saturation_limit=p.saturation_limit)
         return self.index + best.offset
 
     def shot(self, target_ms: float, want_right: bool = False) -> Shot:
@@ -186,8 +187,9 @@ class NativeProvider:
     warp : bool
         False: neighbour frames are used unwarped even where the gyro is known (the warp's
         share of the error is measured so).
-    motion_stops_per_frame : float
-        The native selector's weight of one frame of offset (:data:`emulator.native.MOTION_STOPS_PER_FRAME`).
+    motion_stops_per_frame, saturation_limit : float
+        The native selector's weight of one frame of offset and its clipping margin
+        (:data:`emulator.native.MOTION_STOPS_PER_FRAME`, :data:`emulator.native.SATURATION_LIMIT`).
     """
 
     #: Frames are decoded on demand and memoised per frame, so ticks are independent (see EmulatedProvider).
@@ -195,7 +197,8 @@ class NativeProvider:
 
     def __init__(self, sequence, config: RunConfig, response, *, cameras=None, noise=None,
                  stats: RunStats | None = None, blur=None, motion="auto", warp: bool = True,
-                 motion_stops_per_frame: float = MOTION_STOPS_PER_FRAME) -> None:
+                 motion_stops_per_frame: float = MOTION_STOPS_PER_FRAME,
+                 saturation_limit: float = SATURATION_LIMIT) -> None:
         self.sequence = sequence
         self.response = response
         self.white, self.black = int(sequence.white_level), int(sequence.black_level)
@@ -209,6 +212,7 @@ class NativeProvider:
         self.stats = stats if stats is not None else RunStats()
         self.latency_ticks = int(getattr(config, "latency_frames", 1))
         self.motion_stops_per_frame = float(motion_stops_per_frame)
+        self.saturation_limit = float(saturation_limit)
         self.frames = _Frames(sequence, self.cameras)
         self.window = WINDOW_CYCLES * max(1, len(sequence.brackets))
         self.motion = self._motion(motion) if warp else None
@@ -239,7 +243,7 @@ class NativeProvider:
     def describe(self) -> dict:
         """What ``run.json`` records under ``"native"``."""
         return {"latency_frames": self.latency_ticks, "window_frames": self.window, "n_frames": len(self.frames),
-                "motion_stops_per_frame": self.motion_stops_per_frame,
+                "motion_stops_per_frame": self.motion_stops_per_frame, "saturation_limit": self.saturation_limit,
                 "warp": ("rotation from the gyro" if self.motion is not None else "none"),
                 **({"stamp": self.motion.stamp} if self.motion is not None else {}),
                 "benchmarked_frames": sorted(k for k in self.frames.benchmarked if k is not None)}

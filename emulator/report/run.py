@@ -259,7 +259,9 @@ def run_markdown(info: dict, summary: dict) -> str:
         *_rate_lines(info, summary),
         f"- methods: {mode_words(info.get('mode'))} (`--mode {info.get('mode')}`)",
         f"- brackets chosen by {selector_words(info.get('selector'))} (`--selector {info.get('selector')}`; the left "
-        "camera's saturation decides for both)",
+        "camera's saturation decides for both)" if summary.get("rate") != "native" else
+        "- source frames chosen by the native selector (upward ratio against time offset and clipping; the left "
+        "camera decides for both)",
         f"- initial exposure {info.get('initial_ms')} ms, clamp {info.get('range_ms')} ms, response `{info.get('response')}`",
         f"- images: {info.get('save')}",
         f"- command: `{info.get('command') or '(library call)'}`, "

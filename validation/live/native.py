@@ -198,14 +198,15 @@ def cycle_picks(provider) -> dict[int, int]:
     return {k: int(provider.frames.cycles[k].index) for k in sorted(provider.frames.benchmarked) if k is not None}
 
 
-def native_provider(seq, response, config, *, warp: bool = True):
+def native_provider(seq, response, config, *, warp: bool = True, **kw):
     """The native-rate image provider of a synthetic walk: the walk's gyro (no offset to remove),
-    timestamps at the trigger, the synthetic camera's intrinsics (its calibration files)."""
+    timestamps at the trigger, the synthetic camera's intrinsics (its calibration files); ``kw``:
+    :class:`~emulator.playback.NativeProvider`'s (the selector's weight)."""
     from emulator.motion import recording_motion
     from emulator.playback import NativeProvider
 
     motion = recording_motion(seq, stamp="start", remove_bias=False) if warp and seq.imu is not None else None
-    return NativeProvider(seq, config, response, motion=motion, warp=warp)
+    return NativeProvider(seq, config, response, motion=motion, warp=warp, **kw)
 
 
 def emulated_native_loop(seq, methods, response, config) -> tuple[object, list]:
@@ -219,22 +220,24 @@ def emulated_native_loop(seq, methods, response, config) -> tuple[object, list]:
     return provider, list(closed_loop(provider, built, config, want_right=True, keep_images=True))
 
 
-def native_image_errors(seq, live_frames, response, config, names) -> dict:
+def native_image_errors(seq, live_frames, response, config, names, **kw) -> dict:
     """Per method: native emulation of each frame at the exposure the native live camera applied, against
     that live frame (open loop: the same target, so the error is the emulation's and not the trajectory's).
 
     Per frame the RMSE (% of the DN range) over the pixels the emulation can give (the source's validity
     mask, moved with the image, inside the view) with the warp and without (the same selection), the
-    source offset and the warp angle.  Returns ``{method: {"rmse_percent", "rmse_percent_unwarped",
-    "source_offset", "warp_deg"}}`` (lists, one entry per frame)."""
+    source offset and the warp angle; ``rmse_percent_all`` counts every pixel in view, those the source
+    lost to clipping included.  Returns ``{method: {"rmse_percent", "rmse_percent_unwarped",
+    "rmse_percent_all", "source_offset", "warp_deg"}}`` (lists, one entry per frame)."""
     import cv2
 
     from emulator.blur import rotation_homography
     from emulator.emulate import validity_mask
 
-    warped, plain = native_provider(seq, response, config), native_provider(seq, response, config, warp=False)
+    warped, plain = native_provider(seq, response, config, **kw), native_provider(seq, response, config, warp=False, **kw)
     white, black = int(seq.white_level), int(seq.black_level)
-    out = {m: {"rmse_percent": [], "rmse_percent_unwarped": [], "source_offset": [], "warp_deg": []} for m in names}
+    out = {m: {"rmse_percent": [], "rmse_percent_unwarped": [], "rmse_percent_all": [], "source_offset": [],
+               "warp_deg": []} for m in names}
     live_by = {cs.cycle: cs for cs in live_frames}
     for tick_w, tick_p in zip(warped.ticks(), plain.ticks()):
         cs = live_by.get(tick_w.index)
@@ -249,15 +252,17 @@ def native_image_errors(seq, live_frames, response, config, names) -> dict:
             j = tick_w.index + a.native.source_offset
             src = warped.frames.cycles[j].frames["left"][a.bracket_ms].load()
             mask = validity_mask(src, a.ratio, response)
-            rm = mask
+            rm, inside = mask, np.ones_like(mask)
             if a.native.source_offset and warped.motion is not None and np.isfinite(a.native.warp_deg):
                 R = warped.rotation(j, tick_w.index, a.bracket_ms, target)
                 K, _ = warped.motion.K("left", (src.shape[1], src.shape[0]))
-                rm = cv2.warpPerspective(mask.astype(np.uint8), rotation_homography(K, R),
-                                         (src.shape[1], src.shape[0]), flags=cv2.INTER_NEAREST,
-                                         borderMode=cv2.BORDER_CONSTANT, borderValue=0) > 0
+                rm, inside = (cv2.warpPerspective(x.astype(np.uint8), rotation_homography(K, R),
+                                                  (src.shape[1], src.shape[0]), flags=cv2.INTER_NEAREST,
+                                                  borderMode=cv2.BORDER_CONSTANT, borderValue=0) > 0
+                              for x in (mask, inside))
             live = lv.left.astype(np.float64)
-            for key, img, msk in (("rmse_percent", a.left, rm), ("rmse_percent_unwarped", b.left, mask)):
+            for key, img, msk in (("rmse_percent", a.left, rm), ("rmse_percent_unwarped", b.left, mask),
+                                  ("rmse_percent_all", a.left, inside)):
                 d = img.astype(np.float64)[msk] - live[msk]
                 out[m][key].append(100.0 * float(np.sqrt(np.mean(d * d))) / (white - black) if d.size else math.nan)
             out[m]["source_offset"].append(int(a.native.source_offset))
@@ -299,10 +304,10 @@ def native_emulation_summary(per_walk: dict, names, *, seed: int = 0) -> dict | 
     if not walks:
         return None
     table: dict = {}
-    pooled = {"rmse": [], "unwarped": [], "cut": []}
+    pooled = {"rmse": [], "unwarped": [], "cut": [], "all": [], "cut_nb": []}
     for w, per in walks.items():
         table[w] = {}
-        allw, allu = [], []
+        allw, allu, alla, nbw, nbu = [], [], [], [], []
         for m in names:
             d = per.get(m) or {}
             rw, ru = _median(d.get("rmse_percent", [])), _median(d.get("rmse_percent_unwarped", []))
@@ -314,7 +319,14 @@ def native_emulation_summary(per_walk: dict, names, *, seed: int = 0) -> dict | 
                            "frames": int(off.size)}
             allw += list(d.get("rmse_percent", []))
             allu += list(d.get("rmse_percent_unwarped", []))
+            alla += list(d.get("rmse_percent_all", []))
+            nb = off != 0
+            nbw += list(np.asarray(d.get("rmse_percent", []), dtype=float)[nb]) if off.size else []
+            nbu += list(np.asarray(d.get("rmse_percent_unwarped", []), dtype=float)[nb]) if off.size else []
         mw, mu = _median(allw), _median(allu)
+        pooled["all"].append(_median(alla))
+        w_nb, u_nb = _median(nbw), _median(nbu)
+        pooled["cut_nb"].append((1.0 - w_nb / u_nb) if w_nb is not None and u_nb else None)
         pooled["rmse"].append(mw)
         pooled["unwarped"].append(mu)
         pooled["cut"].append((1.0 - mw / mu) if mw is not None and mu else None)
@@ -329,6 +341,8 @@ def native_emulation_summary(per_walk: dict, names, *, seed: int = 0) -> dict | 
                                       "met": None if rmse["estimate"] is None else bool(
                                           (rmse["ci95"] or [rmse["estimate"]] * 2)[1] <= GOAL_NATIVE_RMSE_PERCENT)},
         "median_image_rmse_percent_unwarped": _over_walks(pooled["unwarped"], [seed, 32, 3]),
+        "median_image_rmse_percent_every_pixel": _over_walks(pooled["all"], [seed, 32, 4]),
+        "warp_cut_fraction_neighbour_frames": _over_walks(pooled["cut_nb"], [seed, 32, 5]),
         "warp_cut_fraction": {**cut, "goal_at_least": GOAL_WARP_CUT,
                               "met": None if cut["estimate"] is None else bool(
                                   (cut["ci95"] or [cut["estimate"]] * 2)[0] >= GOAL_WARP_CUT)},
@@ -355,6 +369,10 @@ def native_markdown(results: dict) -> str:
              f"- median image error {iv(r)} % of range (goal: at most {r['goal_at_most']:g} %; "
              f"{'met' if r['met'] else 'not met' if r['met'] is not None else 'not measured'})",
              f"- the same selection without the warp: {iv(u)} %",
+             f"- counting every pixel in view (those the source lost to clipping too): "
+             f"{iv(ne['median_image_rmse_percent_every_pixel'])} %",
+             f"- on the frames a neighbour served, share of the error the warp removes: "
+             f"{iv(ne['warp_cut_fraction_neighbour_frames'])}",
              f"- share of that error the warp removes: {iv(c)} (goal: at least {c['goal_at_least']:g}; "
              f"{'met' if c['met'] else 'not met' if c['met'] is not None else 'not measured'})", "",
              "| walk | method | error % | unwarped % | warp's share | exposure log2 error | neighbour served |",
