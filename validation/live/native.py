@@ -363,9 +363,8 @@ def native_markdown(results: dict) -> str:
         return format(d["estimate"], spec) + (f" [{ci[0]:{spec}}, {ci[1]:{spec}}]" if ci else " (one walk: no interval)")
 
     lines = ["", "## Emulated at the camera's own rate", "",
-             "Each recorded frame emulated at the exposure the native-rate live camera applied, from its own bracket "
-             "or a nearby frame's turned to its instant with the gyro, against that live frame (" + ne["definition"]
-             + "):", "",
+             "Each recorded frame is emulated from its own bracket or a nearby frame's, turned to its instant with "
+             "the gyro. Definition: " + ne["definition"] + ".", "",
              f"- median image error {iv(r)} % of range (goal: at most {r['goal_at_most']:g} %; "
              f"{'met' if r['met'] else 'not met' if r['met'] is not None else 'not measured'})",
              f"- the same selection without the warp: {iv(u)} %",
@@ -373,7 +372,8 @@ def native_markdown(results: dict) -> str:
              f"{iv(ne['median_image_rmse_percent_every_pixel'])} %",
              f"- on the frames a neighbour served, share of the error the warp removes: "
              f"{iv(ne['warp_cut_fraction_neighbour_frames'])}",
-             f"- share of that error the warp removes: {iv(c)} (goal: at least {c['goal_at_least']:g}; "
+             f"- share of the median error the warp removes, over every frame: {iv(c)} (goal: at least "
+             f"{c['goal_at_least']:g}; "
              f"{'met' if c['met'] else 'not met' if c['met'] is not None else 'not measured'})", "",
              "| walk | method | error % | unwarped % | warp's share | exposure log2 error | neighbour served |",
              "| --- | --- | ---: | ---: | ---: | ---: | ---: |"]
