@@ -31,6 +31,8 @@ from emulator.io.runfolder import CSV_COLUMNS, CSV_FILE, RUN_FILE, RunWriter, fo
 from emulator.playback.config import CONFIG_KEYS
 from emulator.playback import METHOD_CAMERA, MethodStep, RunConfig, RunStats, closed_loop, prepare_run, \
     resolve_sequence
+from emulator.io.runcsv import NATIVE_COLUMNS
+from emulator.playback.offline import at_rate
 
 __all__ = ["run_to_folder", "write_run", "saved_image", "RUN_JSON_EVERY"]
 
@@ -219,7 +221,7 @@ def write_run(sequence, methods, out_dir, config: RunConfig | None = None, *, re
     seq = resolve_sequence(sequence, imu_warning=cfg.blur != "none")  # the IMU is read only for blur
     method_specs = parse_methods(methods) if isinstance(methods, str) else list(methods)
     stats = RunStats()
-    prep = prepare_run(seq, method_specs, cfg, response, stats=stats)
+    prep = at_rate(prepare_run(seq, method_specs, cfg, response, stats=stats), cfg)  # native: every frame a tick
     seq, response, built, provider, model, model_source, hook = prep
     names = list(built)
     identity = {"sequence": str(Path(seq.path).resolve()), "methods": names, "response": cfg.response_name(response)}
@@ -237,13 +239,17 @@ def write_run(sequence, methods, out_dir, config: RunConfig | None = None, *, re
             run_json = _new_run_json(cfg, identity, seq, built, method_specs, model, model_source, command,
                                      writer.lock.owner["started"], hook)
             run_json.update(run_json_extra or {})
+            if cfg.rate == "native":
+                run_json["native"] = provider.describe()  # window, warp, latency, benchmarked frames
         run_json["jobs"] = cfg.jobs
         partial = [{"cycle": c.index, "missing": c.missing_by_camera(seq.cameras)} for c in seq.cycles
                    if c.missing_by_camera(seq.cameras)]
         if partial:  # flagged in the report (emulator.report.run); absent when every cycle is complete
             run_json["partial_cycles"] = partial
-        writer.start(run_json, names, seq.cameras, cfg.save, cycles=[c.index for c in seq.cycles])  # resume: validated
-        rows = _loop_into(writer, provider, built, cfg, stats, out, progress, len(seq.cycles))
+        ticks = getattr(provider, "tick_indices", None) or [c.index for c in seq.cycles]  # native: frames
+        writer.start(run_json, names, seq.cameras, cfg.save, cycles=ticks,  # resume: validated
+                     columns=NATIVE_COLUMNS if cfg.rate == "native" else ())
+        rows = _loop_into(writer, provider, built, cfg, stats, out, progress, len(ticks))
         if hook is not None:
             hook.write_table(out)  # blur.csv: each emulated image's blur
         if cfg.save != "none":

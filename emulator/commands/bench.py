@@ -112,6 +112,7 @@ def _bench_features(args, bench_features):
         matcher=args.matcher,
         scale=args.scale,
         max_frames=args.max_frames,
+        every_frame=args.every_frame,
         force=args.force,
         progress=bars_enabled(args.quiet),
         command=_command_line(args, ("run_dirs",)),
@@ -171,6 +172,7 @@ def _bench_vo(args, bench_vo, params):
         max_diff_s=args.max_diff,
         rpe_on_failure=args.rpe_on_failure,
         max_frames=args.max_frames,
+        every_frame=args.every_frame,
         force=args.force,
         progress=bars_enabled(args.quiet),
         command=_command_line(args, ("run_dir",)),
@@ -263,6 +265,9 @@ def _common_sift(p: argparse.ArgumentParser) -> None:
                    help="nearest neighbours: kd-trees (default) or exact brute force")
     p.add_argument("--methods", help="comma-separated subset of the run's methods")
     p.add_argument("--max-frames", type=int, help="use only the first N images of each method (a reduced run)")
+    p.add_argument("--every-frame", action="store_true",
+                   help="a run made with --rate native: use every frame (default: one per recorder cycle, the frame at "
+                        "the cycle's first shot, so that native and cycle-rate runs are compared on the same images)")
     p.add_argument("-o", "--output", required=True, help="output folder (results.json, figures, report.md)")
     p.add_argument("--force", action="store_true", help="overwrite an existing results.json")
     add_quiet(p, "no progress bars or summary")

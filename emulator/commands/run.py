@@ -78,6 +78,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--skip-partial", action="store_true",
                    help="leave out every cycle missing a bracket on either camera (default: use the brackets that are "
                         "there; partial cycles and upward ratios above 8 are flagged in the report either way)")
+    p.add_argument("--rate", choices=("cycle", "native"), default=None,
+                   help="cycle (default): each method proposes once per bracket sweep, as in the paper; native: after "
+                        "every recorded frame, at the recorder's frame rate, each frame emulated from its own bracket "
+                        "or a nearby frame's, turned to its instant with the gyro (docs/native.md)")
+    p.add_argument("--latency-frames", type=int, default=None, metavar="N",
+                   help="with --rate native: a proposal made after reading frame k is first used at frame k + 1 + N "
+                        "(default 1, as a live camera)")
     p.add_argument("--resume", action="store_true",
                    help="continue an interrupted run in OUTDIR (its run.json gives the configuration)")
     p.add_argument("--sequences", default=None, metavar="all|NAME,...",
@@ -156,6 +163,9 @@ def _command(args) -> str:
         parts.append("--blur-aware")
     if getattr(args, "skip_partial", False):
         parts.append("--skip-partial")
+    for flag, value in (("--rate", getattr(args, "rate", None)), ("--latency-frames", getattr(args, "latency_frames", None))):
+        if value is not None:
+            parts += [flag, str(value)]
     if args.resume:
         parts.append("--resume")
     if getattr(args, "method_timeout_s", None) is not None:
@@ -167,7 +177,7 @@ def _command(args) -> str:
 _FLAGS = {"initial_ms": "--initial-ms", "range_ms": "--range-ms", "jobs": "--jobs", "noise_seed": "--noise-seed",
           "png_level": "--png-level", "blur": "--blur", "blur_aware": "--blur-aware",
           "method_timeout_s": "--method-timeout-s", "selector": "--selector", "mode": "--mode", "save": "--save",
-          "noise": "--noise", "skip_partial": "--skip-partial"}
+          "noise": "--noise", "skip_partial": "--skip-partial", "rate": "--rate", "latency_frames": "--latency-frames"}
 
 
 def _given(args) -> dict:
@@ -183,7 +193,8 @@ def _given(args) -> dict:
             "method_timeout_s": args.method_timeout_s,
             "response_path": str(args.response) if args.response is not None else None,
             "png_level": args.png_level, "blur": args.blur, "blur_aware": True if args.blur_aware else None,
-            "skip_partial": True if getattr(args, "skip_partial", False) else None}
+            "skip_partial": True if getattr(args, "skip_partial", False) else None,
+            "rate": getattr(args, "rate", None), "latency_frames": getattr(args, "latency_frames", None)}
 
 
 def config_from_args(args, base=None):
@@ -217,6 +228,8 @@ def _check_args(args) -> None:
             raise ExposimError(f"{flag} {count}: must be >= 1")
     if args.noise_model is not None and args.noise != "consistent" and not args.resume:
         raise ExposimError("--noise-model is used only with --noise consistent")
+    if getattr(args, "latency_frames", None) is not None and args.rate != "native" and not args.resume:
+        raise ExposimError(f"--latency-frames {args.latency_frames}: used only with --rate native")
 
 
 def _progress_bar(desc: str, unit: str):
@@ -332,7 +345,9 @@ def _print_run_summary(args, summary: dict) -> int:
         print(json.dumps(summary, indent=1), file=getattr(args, "json_stream", None) or sys.stdout)
         return rc
     print(f"run folder  {args.output}")
-    print(f"cycles      {summary['cycles_done']}/{summary['n_cycles']}"
+    native = summary.get("rate") == "native"
+    print(f"frames      {summary['cycles_done']}/{summary.get('n_frames')} (native rate)" if native else
+          f"cycles      {summary['cycles_done']}/{summary['n_cycles']}"
           + (f" ({len(summary['skipped_cycles'])} skipped)" if summary["skipped_cycles"] else ""))
     for name, m in summary["methods"].items():
         mean = m["mean_exposure_ms"]
@@ -342,7 +357,7 @@ def _print_run_summary(args, summary: dict) -> int:
     timing = summary.get("timing") or {}
     if timing.get("cycles_per_s"):
         steady = timing.get("steady_cycles_per_s")
-        print(f"speed       {timing['cycles_per_s']:.2f} cycles/s"
+        print(f"speed       {timing['cycles_per_s']:.2f} {'frames' if native else 'cycles'}/s"
               + (f" ({steady:.2f} after start-up, {timing['startup_s']:.2f} s)" if steady else ""))
     if failed:
         print(f"FAILED      {len(failed)} of {len(summary['methods'])} method(s); the others' results are complete"

@@ -16,7 +16,7 @@ import numpy as np
 
 from emulator.errors import RunFolderError
 
-__all__ = ["CSV_FILE", "CSV_COLUMNS", "EXTRA_COLUMNS", "format_row", "read_csv_rows", "read_tables",
+__all__ = ["CSV_FILE", "CSV_COLUMNS", "EXTRA_COLUMNS", "NATIVE_COLUMNS", "format_row", "read_csv_rows", "read_tables",
            "tables_from_rows"]
 
 CSV_FILE = "exposures.csv"
@@ -34,7 +34,13 @@ EXTRA_COLUMNS = (
     "missing_left_ms",
     "missing_right_ms",
 )
-_INT_COLUMNS = frozenset({"cycle", "timestamp_ns", "guarded", "clamped"})
+#: Columns a native-rate run appends (``exposim run --rate native``; ``cycle`` is then the frame index):
+#: the frame's recorder cycle, 1 where the benchmarks use the frame (its cycle's first shot), the source
+#: frame's offset (frames; 0: its own bracket) and timestamp, and the rotation the warp undid (degrees;
+#: empty where a neighbour was used without a warp).
+NATIVE_COLUMNS = ("recorder_cycle", "benchmarked", "source_offset", "source_timestamp_ns", "warp_deg")
+_INT_COLUMNS = frozenset({"cycle", "timestamp_ns", "guarded", "clamped", "recorder_cycle", "benchmarked",
+                          "source_offset", "source_timestamp_ns"})
 _LIST_COLUMNS = frozenset({"missing_left_ms", "missing_right_ms"})
 
 
@@ -42,12 +48,14 @@ def format_row(step) -> list[str]:
     """The CSV row of a step: every column of :data:`CSV_COLUMNS` + :data:`EXTRA_COLUMNS`.
 
     ``step`` has an attribute per column.  Integers and flags as integers, floats at full
-    precision (``repr``), None as an empty cell, exposure lists as ``;``-joined ``%g``.
+    precision (``repr``), None as an empty cell, exposure lists as ``;``-joined ``%g``.  A native-rate
+    step (``step.native`` set) adds :data:`NATIVE_COLUMNS`.
     """
     out = []
-    for col in CSV_COLUMNS + EXTRA_COLUMNS:
-        v = getattr(step, col)
-        if v is None:
+    native = getattr(step, "native", None)
+    for col in CSV_COLUMNS + EXTRA_COLUMNS + (NATIVE_COLUMNS if native is not None else ()):
+        v = getattr(native, col) if col in NATIVE_COLUMNS else getattr(step, col)
+        if v is None or (col == "warp_deg" and math.isnan(v)):
             out.append("")
         elif col in _INT_COLUMNS:
             out.append(str(int(v)))
@@ -85,13 +93,14 @@ def read_csv_rows(path: str | os.PathLike, *, repair: bool = False) -> list[list
 
 def tables_from_rows(rows: dict[str, list[list[str]]]) -> dict[str, dict[str, np.ndarray]]:
     """Each method's rows (as :func:`format_row` makes them) as the columns :func:`read_tables` gives."""
-    columns = CSV_COLUMNS + EXTRA_COLUMNS
+    columns = CSV_COLUMNS + EXTRA_COLUMNS + NATIVE_COLUMNS
     return {name: _columns([dict(zip(columns, r)) for r in method_rows]) for name, method_rows in rows.items()}
 
 
 def _columns(rows: list[dict]) -> dict[str, np.ndarray]:
     cols = {}
-    for col in CSV_COLUMNS + EXTRA_COLUMNS:
+    native = NATIVE_COLUMNS if rows and all(r.get(NATIVE_COLUMNS[0]) not in (None, "") for r in rows) else ()
+    for col in CSV_COLUMNS + EXTRA_COLUMNS + native:
         if col in _LIST_COLUMNS:
             continue
         vals = [r.get(col) or "" for r in rows]

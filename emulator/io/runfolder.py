@@ -152,7 +152,7 @@ class RunWriter:
 
     # ------------------------------------------------------------------ content
     def start(self, run_json: dict, methods: Sequence[str], cameras: Sequence[str], save: str,
-              cycles: Sequence[int] | None = None) -> None:
+              cycles: Sequence[int] | None = None, columns: Sequence[str] = ()) -> None:
         """Record ``run_json`` with status "running" and this writer; open every method's CSV.
 
         Resuming, each CSV is validated before anything is appended: its rows must be, in
@@ -191,7 +191,7 @@ class RunWriter:
             fh = open(path, "a", newline="")
             writer = csv.writer(fh, lineterminator="\n")
             if new:
-                writer.writerow(CSV_COLUMNS + EXTRA_COLUMNS)
+                writer.writerow(CSV_COLUMNS + EXTRA_COLUMNS + tuple(columns))  # native rate: NATIVE_COLUMNS
                 fh.flush()
             self._csv[name] = (fh, writer)
 

@@ -20,7 +20,7 @@ import numpy as np
 from emulator.errors import MetricsError
 from emulator.io.files import RESULTS_FILE, prepare_output, write_results
 from emulator.io.runfolder import RunFolder, read_run_folder
-from emulator.metrics.bench_common import CONVERSION, _features_sheet, _frames, _progress, _version
+from emulator.metrics.bench_common import CONVERSION, _features_sheet, _frames, _progress, _version, benchmark_frames
 from emulator.metrics.features import (
     DEFAULT_TAUS,
     GRID_CELLS,
@@ -82,6 +82,7 @@ def bench_features(
     matcher: str = "flann",
     scale: float = 1.0,
     max_frames: int | None = None,
+    every_frame: bool = False,
     taus: Sequence[int] | None = None,
     seed: int = 0,
     force: bool = False,
@@ -105,6 +106,9 @@ def bench_features(
         Image scale before SIFT, (0, 1]; 1 = full resolution (the paper).
     max_frames : int, optional
         Use only the first ``max_frames`` images of each method (a reduced run).
+    every_frame : bool
+        A native-rate run (``exposim run --rate native``): every frame instead of one per
+        recorder cycle (:func:`~emulator.metrics.bench_common.benchmark_frames`).
     taus : sequence of int, optional
         Thresholds of the success curve; default :func:`tau_grid`, the paper's 5..500
         extended until every method's curve reaches 0.
@@ -125,7 +129,8 @@ def bench_features(
     if not run_dirs:
         raise MetricsError("bench_features: no run folder given")
     out = prepare_output(out_dir, force=force)
-    runs: list[RunFolder] = [read_run_folder(d, list(methods) if methods else None) for d in run_dirs]
+    runs: list[RunFolder] = [benchmark_frames(read_run_folder(d, list(methods) if methods else None), every_frame)
+                             for d in run_dirs]
     parameters = {
         "grid": [int(grid[0]), int(grid[1])],
         "ratio": ratio,
@@ -133,6 +138,7 @@ def bench_features(
         "matcher": matcher,
         "scale": scale,
         "max_frames": max_frames,
+        **({"every_frame": True} if every_frame else {}),
         "seed": seed,
         "conversion": CONVERSION,
         "sift": "cv2.SIFT_create defaults: nOctaveLayers=3, contrastThreshold=0.04, edgeThreshold=10, sigma=1.6",

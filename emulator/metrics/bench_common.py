@@ -11,7 +11,7 @@ from emulator.errors import MetricsError
 from emulator.io.runfolder import MethodRun
 from emulator.metrics.features import load_gray8
 
-__all__ = ["CONVERSION"]
+__all__ = ["CONVERSION", "benchmark_frames"]
 
 #: The 12-bit to 8-bit conversion, as stated in the results.
 CONVERSION = (
@@ -31,6 +31,32 @@ def _progress(iterable, progress: bool, desc: str, total: int):
     from tqdm import tqdm
 
     return tqdm(iterable, desc=desc, total=total, unit="img", disable=not progress, leave=False)
+
+
+def benchmark_frames(run, every_frame: bool = False):
+    """The frames a benchmark uses of ``run`` (a :class:`~emulator.io.runfolder.RunFolder`).
+
+    A cycle-rate run: all of them.  A native-rate run (``exposim run --rate native``): one per
+    recorder cycle, the frame at the cycle's first shot (column ``benchmarked`` of each method's
+    table), the instant the native-rate live condition is benchmarked at, so that both rates are
+    compared on the same number of equally spaced images; ``every_frame``: all of them.
+    """
+    from dataclasses import replace
+
+    from emulator.io.runcsv import read_tables
+
+    if every_frame or run.meta.get("rate") != "native":
+        return run
+    tables = read_tables(run.path, list(run.methods))
+    methods = {}
+    for name, method in run.methods.items():
+        t = tables[name]
+        if "benchmarked" not in t:
+            raise MetricsError(f"{run.path / name / 'exposures.csv'}: a native-rate table without its column "
+                               "'benchmarked'; pass --every-frame to use every frame")
+        keep = {int(ts) for ts, b in zip(t["timestamp_ns"], t["benchmarked"]) if b}
+        methods[name] = replace(method, frames=tuple(f for f in method.frames if f.timestamp_ns in keep))
+    return replace(run, methods=methods)
 
 
 def _frames(method: MethodRun, max_frames: int | None):

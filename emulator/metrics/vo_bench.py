@@ -17,7 +17,7 @@ from emulator.errors import CalibrationError, ExposimError, MetricsError, RunFol
 from emulator.io.files import RESULTS_FILE, prepare_output, write_results
 from emulator.io.runfolder import RunFolder, read_run_folder
 from emulator.io.tum import write_tum
-from emulator.metrics.bench_common import CONVERSION, _features_sheet, _frames, _progress, _version
+from emulator.metrics.bench_common import CONVERSION, _features_sheet, _frames, _progress, _version, benchmark_frames
 from emulator.metrics.features import load_gray8
 from emulator.metrics.rpe import ESTIMATE_HEADER, rpe_by_length
 from emulator.metrics.stereo import (
@@ -194,11 +194,11 @@ def _refine(calib, frames, run: RunFolder, mode, parameters: VOParameters, limit
     return calib.with_extrinsics(est.R, est.T), record
 
 
-def _check_inputs(run_dir, out_dir, methods, max_frames, calibration, baseline_m, force):
+def _check_inputs(run_dir, out_dir, methods, max_frames, calibration, baseline_m, force, every_frame=False):
     """The run, its frames per method, the calibration choice and the calibration, all checked."""
     if (Path(out_dir) / RESULTS_FILE).exists() and not force:
         prepare_output(out_dir, force=force)  # refuses, naming the file
-    run = read_run_folder(run_dir, list(methods) if methods else None, require_right=True)
+    run = benchmark_frames(read_run_folder(run_dir, list(methods) if methods else None, require_right=True), every_frame)
     selected = {name: _frames(m, max_frames) for name, m in run.methods.items()}
     first_ns = min((fr[0].timestamp_ns for fr in selected.values() if fr), default=None)
     choice = choose_calibration(run.sequence, calibration, first_ns)
@@ -358,6 +358,7 @@ def bench_vo(
     force: bool = False,
     progress: bool = False,
     command: str | None = None,
+    every_frame: bool = False,
 ) -> dict:
     """Stereo VO on every method's images of a run, and its RPE against a reference (Fig. 6).
 
@@ -406,8 +407,9 @@ def bench_vo(
         reference is interpolated at the image times (evo ``SyncMethod.interpolation``).
     rpe_on_failure : bool
         Also compute the RPE of runs where the VO failed (marked as such).
-    max_frames : int, optional
-        Use only the first ``max_frames`` frames of each method.
+    max_frames, every_frame
+        Use only the first ``max_frames`` frames of each method; every frame of a native-rate run (default: one
+        per recorder cycle, :func:`~emulator.metrics.bench_common.benchmark_frames`).
     force, progress, command
         See :func:`bench_features`.
 
@@ -416,7 +418,7 @@ def bench_vo(
     dict
         The content of ``results.json``.
     """
-    run, selected, choice, calib = _check_inputs(run_dir, out_dir, methods, max_frames, calibration, baseline_m, force)
+    run, selected, choice, calib = _check_inputs(run_dir, out_dir, methods, max_frames, calibration, baseline_m, force, every_frame)
     calib_dir = choice.folder
     limitations: list[str] = []
     ref_path, ref_source = _reference_path(run, reference)

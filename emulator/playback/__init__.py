@@ -6,7 +6,9 @@
   method -> next exposure), with :mod:`~emulator.playback.seam`'s :func:`call_method` the one
   place a method is asked;
 * providers: :mod:`~emulator.playback.emulated` (the brackets of a recording, emulated at
-  each target: offline), :mod:`~emulator.playback.live` (live shots once per cycle, or at a
+  each target: offline, once per cycle), :mod:`~emulator.playback.native` (every recorded frame,
+  from its own or a nearby frame's bracket, warped by the gyro: ``rate="native"``),
+  :mod:`~emulator.playback.live` (live shots once per cycle, or at a
   camera's own frame rate with an exposure latency);
 * :mod:`~emulator.playback.offline`: :func:`iter_run` and :func:`run` on a recording;
 * :mod:`~emulator.playback.records`: :class:`MethodStep`, :class:`CycleStep`, :class:`RunStats`,
@@ -43,7 +45,8 @@ from emulator.playback.config import (
 from emulator.playback.emulated import METHOD_CAMERA, EmulatedProvider
 from emulator.playback.live import BOREALHDR_FRAME_RATE_HZ, LiveCycleProvider, LiveRateProvider
 from emulator.playback.loop import Shot, closed_loop
-from emulator.playback.offline import iter_run, prepare_run, resolve_sequence, run
+from emulator.playback.native import NativeProvider
+from emulator.playback.offline import at_rate, iter_run, prepare_run, resolve_sequence, run
 from emulator.playback.records import CycleStep, MethodStep, RunResult, RunStats
 from emulator.playback.seam import MethodAnswer, call_method, clamp, guard_exposure
 
@@ -54,6 +57,8 @@ __all__ = [
     "run",
     "iter_run",
     "prepare_run",
+    "at_rate",
+    "NativeProvider",
     "resolve_sequence",
     "closed_loop",
     "call_method",

@@ -45,7 +45,9 @@ DEFAULT_SELECTOR = "higher-no-sat"
 MODES = ("paper", "borealhdr")
 #: Keys of ``run.json`` that are the configuration (a resume compares these).
 CONFIG_KEYS = ("selector", "initial_ms", "range_ms", "save", "mode", "options", "method_timeout_s", "noise", "blur",
-               "skip_partial")
+               "skip_partial", "rate", "latency_frames")
+#: How often a method proposes: once per bracket sweep (the paper's) or after every recorded frame.
+RATES = ("cycle", "native")
 
 
 def parse_option(text: str) -> tuple[str, str, object]:
@@ -136,6 +138,12 @@ class RunConfig:
         Leave out every cycle missing a bracket on either camera (``--skip-partial``; skipped
         cycles are listed with what was missing).  ``run.json`` records ``"skip_partial": true``
         when set (absent: false, as in folders from before the setting).
+    rate : {"cycle", "native"}
+        ``cycle`` (default): a method proposes once per bracket sweep; ``native``: after every
+        recorded frame, at the recorder's rate (:mod:`emulator.playback.native`, docs/native.md).
+        ``run.json`` records ``"rate"`` and ``"latency_frames"`` for a native run only.
+    latency_frames : int
+        Native rate: a proposal made after reading frame k is first used at frame k + 1 + N (default 1).
     """
 
     initial_ms: float = DEFAULT_INITIAL_MS
@@ -154,6 +162,8 @@ class RunConfig:
     blur: str = "none"
     blur_aware: bool = False
     skip_partial: bool = False
+    rate: str = "cycle"
+    latency_frames: int = 1
 
     def __post_init__(self) -> None:
         from emulator.select import SELECTORS
@@ -217,6 +227,12 @@ class RunConfig:
         put(self, "skip_partial", bool(self.skip_partial))
         if isinstance(self.noise_model, Path):
             put(self, "noise_model", str(self.noise_model))
+        if self.rate not in RATES:
+            raise PlaybackError(f"rate must be one of {', '.join(RATES)}, got {self.rate!r}")
+        lat = self.latency_frames
+        if isinstance(lat, bool) or not isinstance(lat, (int, np.integer)) or lat < 0:
+            raise PlaybackError(f"latency_frames must be an integer >= 0, got {lat!r}")
+        put(self, "latency_frames", int(lat))
 
     # ------------------------------------------------------------------ derived values
     @property
@@ -337,6 +353,7 @@ class RunConfig:
                      {"mode": self.blur, **({"placement": DEFAULT_PLACEMENT} if self.blur == "consistent" else {}),
                       **({"blur_aware": True} if self.blur_aware else {})}),
             **({"skip_partial": True} if self.skip_partial else {}),
+            **({"rate": "native", "latency_frames": self.latency_frames} if self.rate == "native" else {}),
         })
 
     @classmethod
@@ -365,6 +382,8 @@ class RunConfig:
             blur=(run_json.get("blur") or {}).get("mode", "none"),  # folders from before --blur: none
             blur_aware=bool((run_json.get("blur") or {}).get("blur_aware", False)),
             skip_partial=bool(run_json.get("skip_partial", False)),
+            rate=run_json.get("rate") or "cycle",  # folders from before --rate: cycle
+            latency_frames=int(run_json.get("latency_frames", 1)),
         )
 
     def resumed(self, recorded: Mapping, given: Iterable[str] = CONFIG_KEYS, *, where: str = "run.json",

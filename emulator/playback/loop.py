@@ -70,6 +70,7 @@ class Shot:
     valid_fraction_right: float | None = None
     missing_left_ms: tuple[float, ...] = ()
     missing_right_ms: tuple[float, ...] = ()
+    native: object = None  #: native rate: the frame's source and warp (:class:`~emulator.playback.native.NativeInfo`)
 
 
 def closed_loop(
@@ -118,7 +119,7 @@ def closed_loop(
             bracket_saturated_fraction=shot.bracket_saturated_fraction,
             saturated_fraction_right=shot.saturated_fraction_right, valid_fraction_right=shot.valid_fraction_right,
             missing_left_ms=tuple(shot.missing_left_ms), missing_right_ms=tuple(shot.missing_right_ms),
-            left=shot.left, right=shot.right if want_right else None,
+            left=shot.left, right=shot.right if want_right else None, native=shot.native,
         )
         if on_step is not None:
             on_step(st)

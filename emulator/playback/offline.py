@@ -16,7 +16,7 @@ from emulator.playback.emulated import EmulatedProvider
 from emulator.playback.loop import closed_loop
 from emulator.playback.records import CycleStep, MethodStep, RunResult, RunStats
 
-__all__ = ["iter_run", "run", "prepare_run", "Prepared", "resolve_sequence"]
+__all__ = ["iter_run", "run", "prepare_run", "at_rate", "Prepared", "resolve_sequence"]
 
 
 def resolve_sequence(sequence, *, imu_warning: bool = True) -> Sequence:
@@ -54,6 +54,18 @@ def prepare_run(sequence, methods, config: RunConfig, response=None, *, stats: R
     hook = blur if blur is not None else config.blur_for(seq, response)
     provider = EmulatedProvider(seq, config, response, noise=noise, stats=stats, blur=hook)
     return Prepared(seq, response, built, provider, model, source, hook)
+
+
+def at_rate(prep: Prepared, config: RunConfig) -> Prepared:
+    """``prep`` with the image provider of ``config.rate``: the cycle-rate one :func:`prepare_run` made,
+    or a :class:`~emulator.playback.native.NativeProvider` on the same recording, response, noise and blur."""
+    if config.rate != "native":
+        return prep
+    from emulator.playback.native import NativeProvider
+
+    p = prep.provider
+    return prep._replace(provider=NativeProvider(prep.sequence, config, prep.response, cameras=p.cameras,
+                                                 noise=p.noise, stats=p.stats, blur=prep.blur))
 
 
 def iter_run(
@@ -100,7 +112,7 @@ def iter_run(
     """
     cfg = RunConfig.from_kwargs(config, **settings)
     stats = stats if stats is not None else RunStats()
-    prep = prepare_run(sequence, methods, cfg, response, stats=stats, blur=blur)
+    prep = at_rate(prepare_run(sequence, methods, cfg, response, stats=stats, blur=blur), cfg)
     return closed_loop(prep.provider, prep.methods, cfg, want_right=emulate_right, keep_images=keep_images, on_step=on_step,
                        stats=stats)
 
@@ -120,7 +132,7 @@ def run(
     """
     cfg = RunConfig.from_kwargs(config, **settings)
     stats = RunStats()
-    prep = prepare_run(sequence, methods, cfg, response, stats=stats)
+    prep = at_rate(prepare_run(sequence, methods, cfg, response, stats=stats), cfg)
     seq, built = prep.sequence, prep.methods
     steps: dict[str, list[MethodStep]] = {name: [] for name in built}
     skipped: list[tuple[int, str]] = []
@@ -132,5 +144,5 @@ def run(
         for name, st in cs.steps.items():
             steps[name].append(st)
         if progress is not None:
-            progress(i, len(seq.cycles))
+            progress(i, len(getattr(prep.provider, "tick_indices", seq.cycles)))
     return RunResult(steps, skipped, built, stats, failed)

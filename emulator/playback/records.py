@@ -34,6 +34,8 @@ class MethodStep:
     missing_right_ms: tuple[float, ...] = ()
     left: np.ndarray | None = field(default=None, repr=False)
     right: np.ndarray | None = field(default=None, repr=False)
+    #: Native rate: the frame's recorder cycle, source frame and warp (:class:`~emulator.playback.native.NativeInfo`).
+    native: object = None
 
 
 @dataclass

@@ -68,6 +68,7 @@ def summarise_run(run_dir: str | os.PathLike, info: dict | None = None, tables: 
             "method_ms_per_frame": (info.get("timing") or {}).get("method_ms_per_frame", {}).get(name),
             "status": _status((info.get("method_status") or {}).get(name, "ok"), t["guarded"], t["cycle"]),
             "fallback_cycles": [int(c) for c in t["cycle"][t["guarded"].astype(bool)]] if n else [],
+            **_source_offsets(t),
         }
     from emulator.stats import compare_methods, statistic_interval
 
@@ -93,11 +94,24 @@ def summarise_run(run_dir: str | os.PathLike, info: dict | None = None, tables: 
         "range_ms": info.get("range_ms"),
         "methods": methods,
         "timing": info.get("timing"),
+        "rate": info.get("rate") or "cycle",
+        **({"latency_frames": info.get("latency_frames"), "n_frames": (info.get("native") or {}).get("n_frames")}
+           if info.get("rate") == "native" else {}),
     }
     flags = run_flags(info, tables)
     if flags is not None:  # only where something is flagged: other runs' results stay as they were
         summary["flags"] = flags
     return summary
+
+
+def _source_offsets(t: dict) -> dict:
+    """Native rate: how often each source offset served (frames; 0: the frame's own bracket), and how
+    many neighbours were used without a warp (no gyro); nothing at cycle rate."""
+    if "source_offset" not in t:
+        return {}
+    offsets, counts = np.unique(t["source_offset"], return_counts=True)
+    unwarped = int(np.sum((t["source_offset"] != 0) & np.isnan(t["warp_deg"])))
+    return {"source_offsets": {str(int(o)): int(c) for o, c in zip(offsets, counts)}, "unwarped_neighbours": unwarped}
 
 
 def run_flags(info: dict, tables: dict) -> dict | None:
@@ -117,7 +131,7 @@ def run_flags(info: dict, tables: dict) -> dict | None:
         ratio = np.asarray(t["ratio"], dtype=float)
         up = ratio[ratio > 1.0]
         per_method[name] = {
-            "partial_cycles_used": int(sum(int(c) in partial_set for c in t["cycle"])),
+            "partial_cycles_used": int(sum(int(c) in partial_set for c in t.get("recorder_cycle", t["cycle"]))),
             "cycles_above_ratio_bound": int(np.sum(ratio > UPWARD_RATIO_FLAG)),
             "worst_upward_ratio": float(up.max()) if up.size else None,
         }
@@ -205,6 +219,25 @@ def _fmt(v, spec=".3g"):
     return "-" if v is None else format(v, spec)
 
 
+def _rate_lines(info: dict, summary: dict) -> list[str]:
+    """The report's words on the rate; at native rate, how often each source offset served."""
+    if summary.get("rate") != "native":
+        return []
+    nat = info.get("native") or {}
+    lines = [f"- rate: native (every recorded frame; a proposal made after frame k is used from frame "
+             f"k + {1 + int(summary.get('latency_frames') or 0)}); each frame from its own bracket or one within "
+             f"{nat.get('window_frames')} frames, {'turned to its instant by the gyro' if nat.get('warp') != 'none' else 'not warped (no gyro)'}",
+             "", "Source frame of each frame, per method (offset in frames; 0: its own bracket):", ""]
+    offsets = sorted({int(o) for m in summary["methods"].values() for o in m.get("source_offsets", {})})
+    lines += ["| method | " + " | ".join(f"{o:+d}" if o else "0" for o in offsets) + " | unwarped neighbours |",
+              "| --- |" + " ---: |" * (len(offsets) + 1)]
+    for name, m in summary["methods"].items():
+        got = m.get("source_offsets", {})
+        lines.append(f"| {name} | " + " | ".join(str(got.get(str(o), 0)) for o in offsets)
+                     + f" | {m.get('unwarped_neighbours', 0)} |")
+    return lines + [""]
+
+
 def run_markdown(info: dict, summary: dict) -> str:
     """The markdown report of a run."""
     flags = summary.get("flags")
@@ -219,10 +252,16 @@ def run_markdown(info: dict, summary: dict) -> str:
         f"# AE closed-loop run: {Path(info.get('sequence', '')).name}",
         "",
         f"- sequence: `{info.get('sequence')}`",
-        f"- status: {info.get('status')}, cycles {info.get('cycles_done')}/{info.get('n_cycles')}{flagged}",
+        f"- status: {info.get('status')}, cycles {info.get('cycles_done')}/{info.get('n_cycles')}{flagged}"
+        if summary.get("rate") != "native" else
+        f"- status: {info.get('status')}, frames {info.get('cycles_done')}/{summary.get('n_frames')} of "
+        f"{info.get('n_cycles')} recorder cycles{flagged}",
+        *_rate_lines(info, summary),
         f"- methods: {mode_words(info.get('mode'))} (`--mode {info.get('mode')}`)",
         f"- brackets chosen by {selector_words(info.get('selector'))} (`--selector {info.get('selector')}`; the left "
-        "camera's saturation decides for both)",
+        "camera's saturation decides for both)" if summary.get("rate") != "native" else
+        "- source frames chosen by the native selector (upward ratio against time offset and clipping; the left "
+        "camera decides for both)",
         f"- initial exposure {info.get('initial_ms')} ms, clamp {info.get('range_ms')} ms, response `{info.get('response')}`",
         f"- images: {info.get('save')}",
         f"- command: `{info.get('command') or '(library call)'}`, "

@@ -67,7 +67,7 @@ PRIMARY_NOISE = "plain"
 #: once per cycle at its own exposure at the cycle's first shot (fixed-instant: not the
 #: emulator's bracket instant, which would copy the emulator's timing by construction).
 CONDITIONS = {"native-rate live": "live-native", "cycle-rate live": "live-fixed-instant",
-              "emulated": f"emulated-{PRIMARY_NOISE}"}
+              "emulated": f"emulated-{PRIMARY_NOISE}", "emulated native": "emulated-native"}
 #: The live condition the per-metric verdicts (results.json ``metrics``) judge the emulator against:
 #: what emulation changes, at the benchmark's own update rate.
 REFERENCE_LIVE = "cycle-rate live"
@@ -77,6 +77,7 @@ COMPARISONS = {
     "emulated vs cycle-rate live": ("live-fixed-instant", f"emulated-{PRIMARY_NOISE}"),
     "cycle-rate vs native-rate live": ("live-native", "live-fixed-instant"),
     "emulated vs native-rate live": ("live-native", f"emulated-{PRIMARY_NOISE}"),
+    "emulated native vs native-rate live": ("live-native", "emulated-native"),
     "emulated (consistent noise) vs cycle-rate live": ("live-fixed-instant", "emulated-consistent"),
     "emulated vs same-instant live": ("live-same-instant", f"emulated-{PRIMARY_NOISE}"),
 }

@@ -289,7 +289,7 @@ def judge_metrics(tables: dict, methods, *, n_resamples: int = 1000, seed: int =
         if run not in tables:
             conditions[cname] = {"run": run, "status": "not run",
                                  "reason": "no native-rate live loop was given to this experiment"
-                                 if cname == "native-rate live" else f"run {run} not made"}
+                                 if cname in ("native-rate live", "emulated native") else f"run {run} not made"}
             continue
         conditions[cname] = {"run": run, "status": "run", "metrics": {
             metric: condition_table(tables[run][metric], names, n_resamples=n_resamples,

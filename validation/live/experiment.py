@@ -103,8 +103,9 @@ def assemble_raw(experiment, cfg: LiveConfig, failed: dict[str, str], command: s
     timings["total_s"] = float(sum(w["timings"][f"walk_{w['scene']}_s"] for w in walks))
     raw = {"config": cfg.to_dict(), "command": command, "exposim_version": __version__,
            "render_variant": walks[0]["render_variant"] if walks else None, "timings": timings,
-           "per_scene": {w["scene"]: {"comparison": w["comparison"], "trajectories": w["trajectories"]}
-                         for w in walks},
+           "per_scene": {w["scene"]: {"comparison": w["comparison"], "trajectories": w["trajectories"],
+                                      **({"native_emulation": w["native_emulation"]} if w.get("native_emulation")
+                                         else {})} for w in walks},
            "summaries": {}, "findings": {},
            "noise_variance_ratio": walks[0]["noise_variance_ratio"] if walks else None,
            "noise_variance_ratio_brightening": walks[0]["noise_variance_ratio_brightening"] if walks else None,
@@ -225,6 +226,12 @@ def finish(out, raw: dict) -> dict:
     results["noise_variance_ratio_brightening"] = {"plain": nvr_up["plain"], "consistent": nvr_up["consistent"]}
     results["noise_variance_ratio_brightening_detail"] = nvr_up
     results["emulation_ratio_use"] = ratio_use(per_scene, list(cfg.methods))
+    from validation.live.native import native_emulation_summary, native_markdown
+
+    native = native_emulation_summary({f"{s}/seed{cfg.seed}": per_scene[s].get("native_emulation") for s in scenes},
+                                      list(cfg.methods), seed=cfg.seed)
+    if native is not None:
+        results["native_emulation"] = native
     results.update({
         "experiment": "live versus emulated",
         "exposim_version": raw.get("exposim_version"),
@@ -242,7 +249,7 @@ def finish(out, raw: dict) -> dict:
         plot_trajectories(per_scene[s]["trajectories"], out / f"exposure_{s}.png", title=s)
     if cfg.metrics:
         plot_metrics(results, out / "metrics.png")
-    write_report(out, report_markdown(results), sheets=[_live_sheets(out, scenes[0])])
+    write_report(out, report_markdown(results) + native_markdown(results), sheets=[_live_sheets(out, scenes[0])])
     write_results(out / RESULTS_FILE, results)
     return results
 

@@ -35,6 +35,7 @@ mid-exposure stamp, its ``target_ms`` the exposure the camera applied (queued
 from __future__ import annotations
 
 import bisect
+import math
 from collections.abc import Callable, Iterator
 from dataclasses import replace
 
@@ -42,8 +43,9 @@ import numpy as np
 
 from validation.live.config import FIXED_INSTANT_BRACKET_INDEX, LiveError
 
-__all__ = ["NATIVE_FRAME_RATE_HZ", "NATIVE_LATENCY_FRAMES", "GRID_TOLERANCE_NS", "shot_timestamps",
-           "window_start_shoot", "native_rate_loop"]
+__all__ = ["NATIVE_FRAME_RATE_HZ", "NATIVE_LATENCY_FRAMES", "GRID_TOLERANCE_NS", "EMULATED_NATIVE_RUN", "shot_timestamps",
+           "window_start_shoot", "native_rate_loop", "per_cycle", "cycle_picks", "native_provider", "emulated_native_loop",
+           "native_image_errors"]
 
 #: Frame rate of the native-rate live camera: the BorealHDR recorder's.
 NATIVE_FRAME_RATE_HZ = 22.0
@@ -178,3 +180,207 @@ def _per_cycle(loop, pick: dict[int, int]) -> Iterator:
             continue  # a frame between cycle instants: its images are dropped here
         yield replace(cs, cycle=ci, steps={m: replace(st, cycle=ci) for m, st in cs.steps.items()}, failed=failed)
         failed = {}
+
+
+# ============================================================================ emulated native (issue 32)
+#: Run name of the emulated native-rate condition (``exposim run --rate native`` on the walk's recording).
+EMULATED_NATIVE_RUN = "emulated-native"
+
+
+def per_cycle(frames, pick: dict[int, int]) -> list:
+    """The steps of the frames ``pick`` names (frame -> cycle index), relabelled with the cycle index; methods
+    that failed at a frame not picked are named in the next picked step's ``failed``."""
+    return list(_per_cycle(iter(frames), pick))
+
+
+def cycle_picks(provider) -> dict[int, int]:
+    """Frame -> recorder cycle of the frames the benchmarks use (the native live condition's instants)."""
+    return {k: int(provider.frames.cycles[k].index) for k in sorted(provider.frames.benchmarked) if k is not None}
+
+
+def native_provider(seq, response, config, *, warp: bool = True, **kw):
+    """The native-rate image provider of a synthetic walk: the walk's gyro (no offset to remove),
+    timestamps at the trigger, the synthetic camera's intrinsics (its calibration files); ``kw``:
+    :class:`~emulator.playback.NativeProvider`'s (the selector's weight)."""
+    from emulator.motion import recording_motion
+    from emulator.playback import NativeProvider
+
+    motion = recording_motion(seq, stamp="start", remove_bias=False) if warp and seq.imu is not None else None
+    return NativeProvider(seq, config, response, motion=motion, warp=warp, **kw)
+
+
+def emulated_native_loop(seq, methods, response, config) -> tuple[object, list]:
+    """The emulated native-rate closed loop of ``methods`` on a walk's recording: ``(provider, every frame's
+    CycleStep with images)``."""
+    from emulator.autoexposure.methodset import build_methods
+    from emulator.playback import closed_loop
+
+    provider = native_provider(seq, response, config)
+    built = build_methods(methods, mode=config.mode, response=response, options=config.options)
+    return provider, list(closed_loop(provider, built, config, want_right=True, keep_images=True))
+
+
+def native_image_errors(seq, live_frames, response, config, names, **kw) -> dict:
+    """Per method: native emulation of each frame at the exposure the native live camera applied, against
+    that live frame (open loop: the same target, so the error is the emulation's and not the trajectory's).
+
+    Per frame the RMSE (% of the DN range) over the pixels the emulation can give (the source's validity
+    mask, moved with the image, inside the view) with the warp and without (the same selection), the
+    source offset and the warp angle; ``rmse_percent_all`` counts every pixel in view, those the source
+    lost to clipping included.  Returns ``{method: {"rmse_percent", "rmse_percent_unwarped",
+    "rmse_percent_all", "source_offset", "warp_deg"}}`` (lists, one entry per frame)."""
+    import cv2
+
+    from emulator.blur import rotation_homography
+    from emulator.emulate import validity_mask
+
+    warped, plain = native_provider(seq, response, config, **kw), native_provider(seq, response, config, warp=False, **kw)
+    white, black = int(seq.white_level), int(seq.black_level)
+    out = {m: {"rmse_percent": [], "rmse_percent_unwarped": [], "rmse_percent_all": [], "source_offset": [],
+               "warp_deg": []} for m in names}
+    live_by = {cs.cycle: cs for cs in live_frames}
+    for tick_w, tick_p in zip(warped.ticks(), plain.ticks()):
+        cs = live_by.get(tick_w.index)
+        if cs is None:
+            continue
+        for m in names:
+            lv = cs.steps.get(m)
+            if lv is None or tick_w.skipped:
+                continue
+            target = float(lv.target_ms)
+            a, b = tick_w.shot(target), tick_p.shot(target)
+            j = tick_w.index + a.native.source_offset
+            src = warped.frames.cycles[j].frames["left"][a.bracket_ms].load()
+            mask = validity_mask(src, a.ratio, response)
+            rm, inside = mask, np.ones_like(mask)
+            if a.native.source_offset and warped.motion is not None and np.isfinite(a.native.warp_deg):
+                R = warped.rotation(j, tick_w.index, a.bracket_ms, target)
+                K, _ = warped.motion.K("left", (src.shape[1], src.shape[0]))
+                rm, inside = (cv2.warpPerspective(x.astype(np.uint8), rotation_homography(K, R),
+                                                  (src.shape[1], src.shape[0]), flags=cv2.INTER_NEAREST,
+                                                  borderMode=cv2.BORDER_CONSTANT, borderValue=0) > 0
+                              for x in (mask, inside))
+            live = lv.left.astype(np.float64)
+            for key, img, msk in (("rmse_percent", a.left, rm), ("rmse_percent_unwarped", b.left, mask),
+                                  ("rmse_percent_all", a.left, inside)):
+                d = img.astype(np.float64)[msk] - live[msk]
+                out[m][key].append(100.0 * float(np.sqrt(np.mean(d * d))) / (white - black) if d.size else math.nan)
+            out[m]["source_offset"].append(int(a.native.source_offset))
+            out[m]["warp_deg"].append(float(a.native.warp_deg))
+    return out
+
+
+#: Goals of issue 32 for native emulation against the native live frame at the same instant (480x300).
+GOAL_NATIVE_RMSE_PERCENT = 3.0
+GOAL_WARP_CUT = 0.5
+
+
+def _median(values) -> float | None:
+    a = np.asarray([v for v in values if v is not None], dtype=np.float64)
+    a = a[np.isfinite(a)]
+    return float(np.median(a)) if a.size else None
+
+
+def _over_walks(values: list, seed) -> dict:
+    """Mean over walks of one figure, with a bootstrap 95 % interval over walks (None with fewer than 2)."""
+    a = np.asarray([v for v in values if v is not None and np.isfinite(v)], dtype=np.float64)
+    if not a.size:
+        return {"estimate": None, "ci95": None, "n_walks": 0}
+    ci = None
+    if a.size >= 2:
+        rng = np.random.default_rng(seed)
+        boots = a[rng.integers(0, a.size, (2000, a.size))].mean(axis=1)
+        ci = [float(np.percentile(boots, 2.5)), float(np.percentile(boots, 97.5))]
+    return {"estimate": float(a.mean()), "ci95": ci, "n_walks": int(a.size)}
+
+
+def native_emulation_summary(per_walk: dict, names, *, seed: int = 0) -> dict | None:
+    """results.json's ``native_emulation``: per walk and method, the median image error of native emulation
+    against the native live frame at the same instant (with and without the warp), the median exposure
+    log2 error of the emulated native loop against the native live loop, how often a neighbour frame served
+    and the warp's share of the error; over walks, each walk's median over its frames and methods, averaged,
+    with a bootstrap interval over walks, against the goals."""
+    walks = {w: d for w, d in per_walk.items() if d}
+    if not walks:
+        return None
+    table: dict = {}
+    pooled = {"rmse": [], "unwarped": [], "cut": [], "all": [], "cut_nb": []}
+    for w, per in walks.items():
+        table[w] = {}
+        allw, allu, alla, nbw, nbu = [], [], [], [], []
+        for m in names:
+            d = per.get(m) or {}
+            rw, ru = _median(d.get("rmse_percent", [])), _median(d.get("rmse_percent_unwarped", []))
+            off = np.asarray(d.get("source_offset", []))
+            table[w][m] = {"image_rmse_percent_median": rw, "image_rmse_percent_median_unwarped": ru,
+                           "exposure_log2_error_median": _median(d.get("exposure_log2_error", [])),
+                           "neighbour_fraction": float(np.mean(off != 0)) if off.size else None,
+                           "warp_share_of_error": (1.0 - rw / ru) if rw is not None and ru else None,
+                           "frames": int(off.size)}
+            allw += list(d.get("rmse_percent", []))
+            allu += list(d.get("rmse_percent_unwarped", []))
+            alla += list(d.get("rmse_percent_all", []))
+            nb = off != 0
+            nbw += list(np.asarray(d.get("rmse_percent", []), dtype=float)[nb]) if off.size else []
+            nbu += list(np.asarray(d.get("rmse_percent_unwarped", []), dtype=float)[nb]) if off.size else []
+        mw, mu = _median(allw), _median(allu)
+        pooled["all"].append(_median(alla))
+        w_nb, u_nb = _median(nbw), _median(nbu)
+        pooled["cut_nb"].append((1.0 - w_nb / u_nb) if w_nb is not None and u_nb else None)
+        pooled["rmse"].append(mw)
+        pooled["unwarped"].append(mu)
+        pooled["cut"].append((1.0 - mw / mu) if mw is not None and mu else None)
+    rmse = _over_walks(pooled["rmse"], [seed, 32, 1])
+    cut = _over_walks(pooled["cut"], [seed, 32, 2])
+    return {
+        "definition": "per frame, the left image of native emulation at the exposure the native live camera applied, "
+                      "against that live frame (RMSE over the pixels the source can give, % of the DN range); per walk "
+                      "the median over frames and methods; over walks the mean with a bootstrap 95 % interval",
+        "per_walk": table,
+        "median_image_rmse_percent": {**rmse, "goal_at_most": GOAL_NATIVE_RMSE_PERCENT,
+                                      "met": None if rmse["estimate"] is None else bool(
+                                          (rmse["ci95"] or [rmse["estimate"]] * 2)[1] <= GOAL_NATIVE_RMSE_PERCENT)},
+        "median_image_rmse_percent_unwarped": _over_walks(pooled["unwarped"], [seed, 32, 3]),
+        "median_image_rmse_percent_every_pixel": _over_walks(pooled["all"], [seed, 32, 4]),
+        "warp_cut_fraction_neighbour_frames": _over_walks(pooled["cut_nb"], [seed, 32, 5]),
+        "warp_cut_fraction": {**cut, "goal_at_least": GOAL_WARP_CUT,
+                              "met": None if cut["estimate"] is None else bool(
+                                  (cut["ci95"] or [cut["estimate"]] * 2)[0] >= GOAL_WARP_CUT)},
+    }
+
+
+def native_markdown(results: dict) -> str:
+    """The report's section on emulated native rate (empty when it did not run)."""
+    ne = results.get("native_emulation")
+    if not ne:
+        return ""
+    r, u, c = ne["median_image_rmse_percent"], ne["median_image_rmse_percent_unwarped"], ne["warp_cut_fraction"]
+
+    def iv(d, spec=".2f"):
+        if d["estimate"] is None:
+            return "-"
+        ci = d["ci95"]
+        return format(d["estimate"], spec) + (f" [{ci[0]:{spec}}, {ci[1]:{spec}}]" if ci else " (one walk: no interval)")
+
+    lines = ["", "## Emulated at the camera's own rate", "",
+             "Each recorded frame is emulated from its own bracket or a nearby frame's, turned to its instant with "
+             "the gyro. Definition: " + ne["definition"] + ".", "",
+             f"- median image error {iv(r)} % of range (goal: at most {r['goal_at_most']:g} %; "
+             f"{'met' if r['met'] else 'not met' if r['met'] is not None else 'not measured'})",
+             f"- the same selection without the warp: {iv(u)} %",
+             f"- counting every pixel in view (those the source lost to clipping too): "
+             f"{iv(ne['median_image_rmse_percent_every_pixel'])} %",
+             f"- on the frames a neighbour served, share of the error the warp removes: "
+             f"{iv(ne['warp_cut_fraction_neighbour_frames'])}",
+             f"- share of the median error the warp removes, over every frame: {iv(c)} (goal: at least "
+             f"{c['goal_at_least']:g}; "
+             f"{'met' if c['met'] else 'not met' if c['met'] is not None else 'not measured'})", "",
+             "| walk | method | error % | unwarped % | warp's share | exposure log2 error | neighbour served |",
+             "| --- | --- | ---: | ---: | ---: | ---: | ---: |"]
+    f = lambda v, s=".2f": "-" if v is None else format(v, s)  # noqa: E731
+    for w, per in ne["per_walk"].items():
+        for m, d in per.items():
+            lines.append(f"| {w} | {m} | {f(d['image_rmse_percent_median'])} | "
+                         f"{f(d['image_rmse_percent_median_unwarped'])} | {f(d['warp_share_of_error'])} | "
+                         f"{f(d['exposure_log2_error_median'], '.3f')} | {f(d['neighbour_fraction'])} |")
+    return "\n".join(lines) + "\n"

@@ -86,8 +86,10 @@ def _collect(iterator, n: int, desc: str, progress: bool) -> list:
 
 
 def _loops(cfg: LiveConfig, seq, radiance, camera, model, response, native_loop, tag: str, progress: bool,
-           timings: dict, scene: str) -> dict:
-    """Every run of the walk: {run name: [CycleStep with images]}."""
+           timings: dict, scene: str, native_out: dict | None = None) -> dict:
+    """Every run of the walk: {run name: [CycleStep with images]}; ``native_out`` gets the native
+    emulation's per-frame errors (:func:`validation.live.native.native_image_errors`)."""
+    native_out = {} if native_out is None else native_out
     from emulator.playback import RunConfig
     from validation.live.loops import iter_emulated, iter_live
 
@@ -109,12 +111,42 @@ def _loops(cfg: LiveConfig, seq, radiance, camera, model, response, native_loop,
             iter_live(seq, radiance, camera, names, timing=timing, noise=cfg.capture_noise, seed=seed, **common),
             len(seq.cycles), f"{tag}: live loop ({label})", progress)
     if native_loop is not None:
-        cycles[NATIVE_RUN] = _collect(
+        every = _collect(
             native_loop(seq, radiance, camera, names, seed=cfg.seed, noise=cfg.capture_noise,
-                        initial_ms=cfg.initial_ms, selector=cfg.selector, response=response),
-            len(seq.cycles), f"{tag}: live loop (native rate)", progress)
+                        initial_ms=cfg.initial_ms, selector=cfg.selector, response=response, every_frame=True),
+            len(seq.cycles) * 6, f"{tag}: live loop (native rate)", progress)
+        timings[f"live_{scene}_s"] = time.perf_counter() - t0
+        _emulated_native(cfg, seq, response, every, cycles, native_out, timings, scene)
+        return cycles
     timings[f"live_{scene}_s"] = time.perf_counter() - t0
     return cycles
+
+
+def _emulated_native(cfg: LiveConfig, seq, response, every: list, cycles: dict, native_out: dict, timings: dict,
+                     scene: str) -> None:
+    """The emulated native-rate condition (issue 32) beside the native live one: both runs benchmarked on
+    the frame at each cycle's first shot; and the open-loop image error of native emulation (with and
+    without the warp) at the exposures the native live camera applied."""
+    from emulator.playback import RunConfig
+    from validation.live.native import (EMULATED_NATIVE_RUN, cycle_picks, emulated_native_loop,
+                                        native_image_errors, per_cycle)
+
+    names = list(cfg.methods)
+    t0 = time.perf_counter()
+    config = RunConfig(initial_ms=cfg.initial_ms, selector=cfg.selector, rate="native",
+                       latency_frames=cfg.latency_frames)
+    provider, emulated = emulated_native_loop(seq, names, response, config)
+    picks = cycle_picks(provider)
+    cycles[NATIVE_RUN] = per_cycle(every, picks)
+    cycles[EMULATED_NATIVE_RUN] = per_cycle(emulated, picks)
+    timings[f"emulated_native_{scene}_s"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    native_out.update(native_image_errors(seq, every, response, config, names))
+    from validation.live.compare import exposure_log2_errors
+
+    for m, err in exposure_log2_errors(emulated, every, names).items():
+        native_out[m]["exposure_log2_error"] = err.tolist()  # every frame after the first
+    timings[f"native_image_errors_{scene}_s"] = time.perf_counter() - t0
 
 
 def _comparisons(cfg: LiveConfig, cycles: dict, seq, response) -> dict:
@@ -198,7 +230,9 @@ def run_walk(config: dict, scene_name: str, experiment: str, cache_dir=None, nat
     first = seq.cycles[0].frames["left"][seq.cycles[0].available(("left",))[0]].timestamp_ns
     ratio_input = (frames(first, "left"), camera, response, model)
     radiance = walk_radiance(ds, scene, cache_dir=cache_dir) or frames  # live shots blurred over their windows
-    cycles = _loops(cfg, seq, radiance, camera, model, response, native_loop, tag, progress, timings, scene_name)
+    native_errors: dict = {}
+    cycles = _loops(cfg, seq, radiance, camera, model, response, native_loop, tag, progress, timings, scene_name,
+                    native_errors)
     runs = list(cycles)
     comp = _comparisons(cfg, cycles, seq, response)
     names = list(cfg.methods)
@@ -225,7 +259,8 @@ def run_walk(config: dict, scene_name: str, experiment: str, cache_dir=None, nat
     record = {"walk": tag, "scene": scene_name, "config": cfg.to_dict(), "runs": runs,
               "render_variant": scenes.choose_variant(), "comparison": comp, "trajectories": trajectories,
               "run_summaries": summaries, "benchmarks": bench, "noise_variance_ratio": nvr,
-              "noise_variance_ratio_brightening": nvr_up, "timings": timings}
+              "noise_variance_ratio_brightening": nvr_up, "timings": timings,
+              **({"native_emulation": native_errors} if native_errors else {})}
     write_results(walk_record_path(exp, scene_name), to_jsonable(record))
     say(f"{tag}: done in {timings[f'walk_{scene_name}_s'] / 60:.1f} min")
     return {"walk": tag, "seconds": timings[f"walk_{scene_name}_s"]}

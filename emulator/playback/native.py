@@ -1,0 +1,317 @@
+"""The native-rate image provider: every recorded frame is a tick (``exposim run --rate native``).
+
+At cycle rate (:class:`~emulator.playback.emulated.EmulatedProvider`) a method proposes once
+per bracket sweep.  Here it proposes after every recorded frame of the first camera, at the
+recorder's own rate, with an exposure latency of ``config.latency_frames`` (default 1): a
+proposal made after reading frame k is first used at frame ``k + 1 + latency``.  It is the
+same closed loop (:func:`~emulator.playback.loop.closed_loop`); only the images differ:
+
+* frame k's image at the applied exposure ``t`` comes from frame k's own bracket or from a
+  frame within one recorder cycle each side (:data:`emulator.native.WINDOW_CYCLES`; the
+  frames present for every camera), chosen by :func:`emulator.native.native_select` (time
+  offset against upward ratio and clipping);
+* the source is emulated at ``t`` as at cycle rate (lookup table, then ``--blur consistent``'s
+  hook, then ``--noise consistent``'s noise, each seeded by the source frame) and, when it is
+  another frame, moved to frame k's instant by the rotation the gyro measured between the
+  two (:func:`emulator.native.warp_to_instant`): from the middle of the window the emulated
+  image stands for to the middle of frame k's window at ``t`` (frame k's window starts where
+  its recorded shot started; the timestamp convention is the blur model's,
+  :data:`emulator.blur.DEFAULT_STAMP`, or the trigger for a synthetic recording);
+* without an IMU (or a camera calibration) the neighbour is used as it is, and one warning
+  says so.
+
+Each step carries a :class:`NativeInfo` (``MethodStep.native``): the recorder cycle of
+the frame, whether it is the frame the benchmarks use (the cycle's first shot present for
+every camera: the instant of the native-rate live condition), the source frame's offset and
+timestamp and the warp's angle.  Frames are decoded once each (a sliding window of them is
+kept), and methods with the same target in a frame share one image.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from emulator.autoexposure.isolation import readonly_view
+from emulator.dataset import CAMERAS
+from emulator.emulate import apply_lut
+from emulator.errors import CalibrationError
+from emulator.native import (MOTION_STOPS_PER_FRAME, SATURATION_LIMIT, WINDOW_CYCLES, NativeCandidate,
+                             invalid_fraction, native_select, rotation_between, warp_to_instant)
+from emulator.playback.config import RunConfig
+from emulator.playback.emulated import METHOD_CAMERA, _CycleImages, _fractions
+from emulator.playback.loop import Shot
+from emulator.playback.records import RunStats
+
+__all__ = ["NativeProvider", "NativeInfo", "NativeWarpWarning", "recording_stamp"]
+
+
+class NativeWarpWarning(UserWarning):
+    """A native-rate run on a recording without a gyro (or calibration): neighbour frames are not warped."""
+
+
+@dataclass(frozen=True)
+class NativeInfo:
+    """What a native-rate step adds to its row (``exposures.csv``'s native columns)."""
+
+    recorder_cycle: int
+    benchmarked: bool
+    source_offset: int
+    source_timestamp_ns: int
+    warp_deg: float  #: rotation undone by the warp, degrees (0: own frame or at rest; NaN: not warped)
+
+
+def recording_stamp(sequence) -> str:
+    """Where a frame's timestamp lies in its window: the trigger (``start``) for a synthetic recording
+    (its ``exposim.json`` says so), else the blur model's default (docs/blur.md)."""
+    from emulator.blur import DEFAULT_STAMP
+
+    note = str((getattr(sequence, "metadata", None) or {}).get("timestamps", ""))
+    return "start" if note.startswith("trigger instant") else DEFAULT_STAMP
+
+
+class _Frames:
+    """The recording's frames of the first camera, in time order, with what each has for every camera."""
+
+    def __init__(self, sequence, cameras) -> None:
+        lead = cameras[0]
+        rows = []
+        for cycle in sequence.cycles:
+            for e, fr in cycle.frames.get(lead, {}).items():
+                rows.append((int(fr.timestamp_ns), float(e), cycle))
+        rows.sort(key=lambda r: r[0])
+        self.timestamps = [r[0] for r in rows]
+        self.exposures = [r[1] for r in rows]
+        self.cycles = [r[2] for r in rows]
+        # every camera's shot at this instant (same exposure, same timestamp)
+        self.complete = [all(c in cyc.frames and cyc.frames[c].get(e) is not None
+                             and int(cyc.frames[c][e].timestamp_ns) == ts for c in cameras)
+                         for ts, e, cyc in rows]
+        self.index = {ts: k for k, ts in enumerate(self.timestamps)}
+        first = set()
+        for cycle in sequence.cycles:  # the instant of the native-rate live condition (its first shot)
+            avail = cycle.available(tuple(cameras))
+            if avail:
+                first.add(self.index.get(int(cycle.frames[lead][avail[0]].timestamp_ns)))
+        self.benchmarked = first
+
+    def __len__(self) -> int:
+        return len(self.timestamps)
+
+
+class NativeTick:
+    """One recorded frame of a :class:`NativeProvider` (see :meth:`shot`)."""
+
+    def __init__(self, provider: "NativeProvider", k: int) -> None:
+        p = self.provider = provider
+        fr = p.frames
+        self.index = k
+        cycle, e = fr.cycles[k], fr.exposures[k]
+        self.missing = {c: [e] for c in p.cameras if not (c in cycle.frames and e in cycle.frames[c])}
+        lo, hi = max(0, k - p.window), min(len(fr) - 1, k + p.window)
+        self.sources = [j for j in range(lo, hi + 1) if fr.complete[j]]
+        self.skipped = None if self.sources else "no frame within one cycle has every camera's shot"
+        if self.skipped is None and p.skip_partial and cycle.missing_by_camera(p.cameras):
+            self.skipped = "frame of a partial cycle left out (--skip-partial)"
+        self._lock = threading.Lock()
+        self._locks: dict = {}
+        self._data: dict = {}
+
+    def _memo(self, key, compute):
+        with self._lock:
+            lock = self._locks.setdefault(key, threading.Lock())
+        with lock:
+            hit = self._data.get(key)
+            if hit is None:
+                hit = self._data[key] = compute()
+            return hit
+
+    def select(self, target_ms: float) -> int:
+        """The source frame (index) of ``target_ms``."""
+        p, fr = self.provider, self.provider.frames
+        cands = []
+        for j in self.sources:
+            e = fr.exposures[j]
+            _, hist = p.images(j).get(p.cameras[0], e)
+            cands.append(NativeCandidate(j - self.index, e, invalid_fraction(hist, target_ms / e, white_level=p.white,
+                                                                             black_level=p.black)))
+        best = native_select(target_ms, cands, motion_stops_per_frame=p.motion_stops_per_frame,
+                             saturation_limit=p.saturation_limit)
+        return self.index + best.offset
+
+    def shot(self, target_ms: float, want_right: bool = False) -> Shot:
+        p, fr = self.provider, self.provider.frames
+        k = self.index
+        j = self._memo(("select", float(target_ms)), lambda: self.select(target_ms))
+        e = fr.exposures[j]
+        ratio = target_ms / e
+        table, valid = p.response.lut(ratio)
+        lead, other = p.cameras[0], (p.cameras[1] if len(p.cameras) > 1 else None)
+        images = p.images(j)
+        _, hist = images.get(lead, e)
+        left, inside, angle = self._memo((lead, j, ratio), lambda: p.emulate(lead, j, k, ratio, table, target_ms))
+        sat, val = _fractions(hist, table, valid, p.white, p.black)
+        info = NativeInfo(int(fr.cycles[k].index), k in fr.benchmarked, j - k, fr.timestamps[j], angle)
+        shot = Shot(timestamp_ns=fr.timestamps[k], exposure_ms=float(target_ms), bracket_ms=float(e), ratio=float(ratio),
+                    left=left, saturated_fraction=sat, valid_fraction=val * inside,
+                    bracket_saturated_fraction=images.saturated(lead, e),
+                    missing_left_ms=tuple(self.missing.get(lead, ())),
+                    missing_right_ms=tuple(self.missing.get(other, ())) if other else (), native=info)
+        if other is not None:
+            _, rhist = images.get(other, e)
+            rsat, rval = _fractions(rhist, table, valid, p.white, p.black)
+            shot.saturated_fraction_right, shot.valid_fraction_right = rsat, rval * inside
+            if want_right:
+                shot.right = self._memo((other, j, ratio),
+                                        lambda: p.emulate(other, j, k, ratio, table, target_ms))[0]
+        return shot
+
+
+class NativeProvider:
+    """A recording's frames as ticks, each emulated from its own or a nearby frame's bracket.
+
+    Parameters
+    ----------
+    sequence, config, response, cameras, noise, stats, blur
+        As :class:`~emulator.playback.emulated.EmulatedProvider` (``config.latency_frames``
+        is the latency; its selector plays no part).
+    motion : "auto", RecordingMotion or None
+        The gyro and intrinsics of the warp: "auto" (default) the blur hook's, else the
+        recording's own (:func:`emulator.motion.recording_motion`, timestamps by
+        :func:`recording_stamp`); None: no warp.
+    warp : bool
+        False: neighbour frames are used unwarped even where the gyro is known (the warp's
+        share of the error is measured so).
+    motion_stops_per_frame, saturation_limit : float
+        The native selector's weight of one frame of offset and its clipping margin
+        (:data:`emulator.native.MOTION_STOPS_PER_FRAME`, :data:`emulator.native.SATURATION_LIMIT`).
+    """
+
+    #: Frames are decoded on demand and memoised per frame, so ticks are independent (see EmulatedProvider).
+    ticks_ahead = 2
+
+    def __init__(self, sequence, config: RunConfig, response, *, cameras=None, noise=None,
+                 stats: RunStats | None = None, blur=None, motion="auto", warp: bool = True,
+                 motion_stops_per_frame: float = MOTION_STOPS_PER_FRAME,
+                 saturation_limit: float = SATURATION_LIMIT) -> None:
+        self.sequence = sequence
+        self.response = response
+        self.white, self.black = int(sequence.white_level), int(sequence.black_level)
+        if cameras is None:
+            cams = tuple(c for c in CAMERAS if c in sequence.cameras)
+            cameras = ((METHOD_CAMERA,) + tuple(c for c in cams if c != METHOD_CAMERA)) if METHOD_CAMERA in cams \
+                else cams
+        self.cameras = tuple(cameras)
+        self.noise, self.blur = noise, blur
+        self.skip_partial = bool(getattr(config, "skip_partial", False))
+        self.stats = stats if stats is not None else RunStats()
+        self.latency_ticks = int(getattr(config, "latency_frames", 1))
+        self.motion_stops_per_frame = float(motion_stops_per_frame)
+        self.saturation_limit = float(saturation_limit)
+        self.frames = _Frames(sequence, self.cameras)
+        self.window = WINDOW_CYCLES * max(1, len(sequence.brackets))
+        self.motion = self._motion(motion) if warp else None
+        self.warp = bool(warp)
+        self._images: dict = {}
+        self._lock = threading.Lock()
+        self._shapes: dict = {}
+
+    def _motion(self, motion):
+        if motion is None or motion != "auto":
+            return motion
+        if self.blur is not None:
+            return self.blur.motion
+        from emulator.motion import recording_motion
+
+        why = None
+        if getattr(self.sequence, "imu", None) is None:
+            why = "no imu/imu.csv"
+        else:
+            try:
+                return recording_motion(self.sequence, stamp=recording_stamp(self.sequence))
+            except CalibrationError:
+                why = "no camera calibration (left.yaml)"
+        warnings.warn(f"{self.sequence.path}: {why}; at native rate a neighbour frame is used without undoing the "
+                      "camera's rotation since its instant", NativeWarpWarning, stacklevel=2)
+        return None
+
+    def describe(self) -> dict:
+        """What ``run.json`` records under ``"native"``."""
+        return {"latency_frames": self.latency_ticks, "window_frames": self.window, "n_frames": len(self.frames),
+                "motion_stops_per_frame": self.motion_stops_per_frame, "saturation_limit": self.saturation_limit,
+                "warp": ("rotation from the gyro" if self.motion is not None else "none"),
+                **({"stamp": self.motion.stamp} if self.motion is not None else {}),
+                "benchmarked_frames": sorted(k for k in self.frames.benchmarked if k is not None)}
+
+    @property
+    def tick_indices(self) -> list[int]:
+        return list(range(len(self.frames)))
+
+    def images(self, j: int) -> _CycleImages:
+        """The decoded images of frame ``j``'s cycle (each bracket decoded once)."""
+        cycle = self.frames.cycles[j]
+        with self._lock:
+            hit = self._images.get(cycle.index)
+            if hit is None:
+                hit = self._images[cycle.index] = _CycleImages(cycle, self.white, self.black, self.stats, self.noise,
+                                                               self._shapes, self.blur)
+            return hit
+
+    def _forget(self, k: int) -> None:
+        """Drop the decoded cycles no tick from ``k`` on can reach (a dropped one is decoded again if asked)."""
+        oldest = self.frames.cycles[max(0, k - self.window - self.ticks_ahead - 2)].index
+        with self._lock:
+            for c in [c for c in self._images if c < oldest]:
+                del self._images[c]
+
+    def _window_s(self, j: int, exposure_ms: float) -> tuple[float, float]:
+        """The window (s, the gyro's clock) of an image of ``exposure_ms`` stamped at frame ``j``'s timestamp."""
+        from emulator.blur import exposure_window_s
+
+        return exposure_window_s(self.motion.t_s(self.frames.timestamps[j]), exposure_ms, self.motion.stamp)
+
+    def rotation(self, j: int, k: int, source_ms: float, target_ms: float):
+        """The camera's rotation from the middle of the window frame ``j``'s image stands for (``source_ms``)
+        to the middle of frame ``k``'s window at ``target_ms`` (which starts where frame k's shot started)."""
+        a, b = self._window_s(j, source_ms)
+        start = self._window_s(k, self.frames.exposures[k])[0]
+        return rotation_between(self.motion.omega, 0.5 * (a + b), start + target_ms * 5e-4)
+
+    def emulate(self, camera: str, j: int, k: int, ratio: float, table, target_ms: float):
+        """Frame ``j``'s bracket emulated at ``ratio`` for frame ``k``: ``(image, inside_fraction, warp_deg)``."""
+        from emulator.blur import rotation_homography
+
+        e = self.frames.exposures[j]
+        images = self.images(j)
+        raw, _ = images.get(camera, e)
+        out = raw
+        if ratio != 1.0:
+            t0 = time.perf_counter()
+            out = apply_lut(table, raw)
+            if self.blur is not None:
+                out = self.blur.apply(images.cycle, camera, e, ratio, raw, out)
+            if self.noise is not None:
+                out = images._add_noise(camera, e, ratio, raw, out)
+            self.stats.add("emulate_s", time.perf_counter() - t0)
+        if j == k:
+            return readonly_view(out), 1.0, 0.0
+        if self.motion is None:
+            return readonly_view(out), 1.0, math.nan
+        blurred = self.blur is not None and target_ms > e  # the emulated image stands for the target's window
+        R = self.rotation(j, k, target_ms if blurred else e, target_ms)
+        if R is None:
+            return readonly_view(out), 1.0, math.nan
+        angle = math.degrees(math.acos(max(-1.0, min(1.0, (np.trace(R) - 1.0) / 2.0))))
+        K, _ = self.motion.K(camera, (raw.shape[1], raw.shape[0]))
+        warped, inside = warp_to_instant(out, rotation_homography(K, R), self.response)
+        return readonly_view(warped), inside, angle
+
+    def ticks(self):
+        for k in range(len(self.frames)):
+            self._forget(k)
+            yield NativeTick(self, k)

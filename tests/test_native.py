@@ -1,0 +1,333 @@
+"""Native-rate emulation (issue 32): the selector, the rotation warp, the provider in the one closed loop."""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+
+import synth
+from emulator.blur import rotation_homography
+from emulator.errors import EmulationError, PlaybackError
+from emulator.io.borealhdr import load_sequence, sequence_response
+from emulator.native import NativeCandidate, invalid_fraction, native_cost, native_select, warp_to_instant
+from emulator.playback import NativeProvider, RunConfig, closed_loop
+from emulator.playback.native import NativeWarpWarning
+from emulator.response import CameraResponse
+from synth.procedural import hdr_chart
+from synth.sequence import BASELINE_M, load_camera
+from validation.common import quantisation_bound
+from validation.live import DatasetRadiance
+from validation.live.native import native_rate_loop, shot_timestamps
+
+W, H = 40, 24
+PROPOSALS = (1.5, 3.0, 6.0, 12.0, 2.5, 5.0, 9.0, 24.0, 0.7)
+
+
+class Counter:
+    """Proposes PROPOSALS in turn, whatever it reads."""
+
+    name = "counter"
+
+    def __init__(self) -> None:
+        self.n = 0
+
+    def reset(self) -> None:
+        pass
+
+    def next_exposure(self, raw, exposure_ms):
+        self.n += 1
+        return PROPOSALS[(self.n - 1) % len(PROPOSALS)]
+
+
+class Constant:
+    def __init__(self, ms: float) -> None:
+        self.name, self.ms = f"constant-{ms:g}", ms
+
+    def reset(self) -> None:
+        pass
+
+    def next_exposure(self, raw, exposure_ms):
+        return self.ms
+
+
+def C(offset, bracket, invalid=0.0):
+    return NativeCandidate(offset, bracket, invalid)
+
+
+RULE = {"motion_stops_per_frame": 0.5, "saturation_limit": 0.01}  # the rule's parameters these cases are worked for
+
+
+def pick(target, cands, **kw):
+    return native_select(target, cands, **{**RULE, **kw})
+
+
+# ============================================================================ the selector, by hand
+def test_own_bracket_from_above_is_chosen():
+    cands = [C(-1, 1.0), C(0, 8.0), C(1, 16.0), C(2, 4.0)]
+    assert pick(4.0, cands).offset == 0  # 8 ms emulated down: cost 0
+    assert pick(8.0, cands).offset == 0  # the bracket itself
+
+
+def test_motion_against_upward_ratio():
+    # frame k is a 1 ms shot, target 8 ms: up 3 stops from its own bracket (cost 3), or the
+    # 8 ms shot 3 frames later (1.5), or the 32 ms shot 1 frame earlier (0.5)
+    cands = [C(-1, 32.0), C(0, 1.0), C(1, 2.0), C(2, 4.0), C(3, 8.0)]
+    assert pick(8.0, cands).offset == -1
+    assert native_cost(8.0, C(0, 1.0), 0.5) == 3.0 and native_cost(8.0, C(3, 8.0), 0.5) == 1.5
+    # the 32 ms shot clipped beyond 1 %: the next cost is 4 ms two frames later (1 + 1 = 2) against 8 ms at +3 (1.5)
+    cands[0] = C(-1, 32.0, invalid=0.05)
+    assert pick(8.0, cands).offset == 3
+    # a heavier motion weight keeps frame k's own bracket: 3 stops against 3 frames at 1 stop each
+    assert pick(8.0, cands, motion_stops_per_frame=1.0).offset == 0
+    # a small upward ratio beats a neighbour: 2 ms -> 2.6 ms (0.38 stop) against 4 ms one frame later (0.5)
+    assert pick(2.6, [C(0, 2.0), C(1, 4.0)]).offset == 0
+    assert pick(3.0, [C(0, 2.0), C(1, 4.0)]).offset == 1  # 0.58 stop > 0.5
+
+
+def test_ties_go_to_the_nearer_then_the_earlier_frame():
+    assert pick(4.0, [C(2, 8.0), C(-2, 8.0)]).offset == -2
+    assert pick(4.0, [C(2, 4.0), C(0, 2.0)]).offset == 0  # 1 stop up against 2 frames: equal, the nearer
+    assert pick(4.0, [C(3, 4.0), C(-1, 1.0)]).offset == 3  # 1.5 against 0.5 + 2 = 2.5
+
+
+def test_clipping_is_judged_against_the_least_clipped_candidate_and_bad_input_is_refused():
+    got = pick(4.0, [C(0, 8.0, 0.30), C(1, 2.0, 0.05), C(-1, 16.0, 0.5)])
+    assert got.offset == 1  # only the least clipped is within 1 % of the least clipped
+    # a dark scene: every short bracket loses 20-21 % at black; within 1 % of each other, the cost decides
+    got = pick(8.0, [C(0, 1.0, 0.205), C(1, 2.0, 0.21), C(3, 8.0, 0.20), C(-1, 32.0, 0.35)])
+    assert got.offset == 3  # 1.5 against 3 (own) and 2.5: the 32 ms shot clips 15 % more, out
+    with pytest.raises(EmulationError, match="no candidate"):
+        native_select(4.0, [])
+    with pytest.raises(EmulationError, match="target_ms"):
+        pick(float("nan"), [C(0, 1.0)])
+    with pytest.raises(EmulationError, match="motion weight"):
+        pick(4.0, [C(0, 1.0)], motion_stops_per_frame=-1)
+
+
+def test_invalid_fraction_counts_what_the_ratio_loses():
+    hist = np.zeros(4095, dtype=np.int64)
+    hist[0], hist[100], hist[4094] = 2, 5, 3
+    assert invalid_fraction(hist, 2.0, white_level=4094, black_level=0) == 0.2  # black lost going up
+    assert invalid_fraction(hist, 0.5, white_level=4094, black_level=0) == 0.3  # white lost going down
+    assert invalid_fraction(hist, 1.0, white_level=4094, black_level=0) == 0.0
+
+
+# ============================================================================ the warp
+def _texture(u, v):
+    """A smooth texture in linear exposure (0.2..0.8 of the range), periods 13-41 px."""
+    return 0.5 + 0.12 * np.sin(u / 6.5 + 0.3) + 0.1 * np.cos(v / 4.1) + 0.08 * np.sin((u + 2 * v) / 9.0)
+
+
+def _rot(axis, deg):
+    import cv2
+
+    return cv2.Rodrigues(np.asarray(axis, dtype=np.float64) * math.radians(deg))[0]
+
+
+@pytest.mark.parametrize("bayer", [True, False])
+def test_a_known_pure_rotation_is_undone_to_sub_pixel(bayer):
+    import cv2
+
+    w, h = 320, 240
+    K = np.array([[300.0, 0, (w - 1) / 2], [0, 300.0, (h - 1) / 2], [0, 0, 1]])
+    R = _rot([0, 1, 0], 1.2) @ _rot([1, 0, 0], -0.8) @ _rot([0, 0, 1], 0.6)  # about 10 px, 4 px and a roll
+    Hm = rotation_homography(K, R)  # source pixel -> pixel after the turn
+    resp = CameraResponse.linear()
+    v, u = np.mgrid[0:h, 0:w].astype(np.float64)
+    top = resp.white_level
+    src = np.rint(_texture(u, v) * top).astype(np.uint16)
+    q = np.linalg.inv(Hm) @ np.stack([u.ravel(), v.ravel(), np.ones(u.size)])
+    dst = np.rint(_texture((q[0] / q[2]).reshape(h, w), (q[1] / q[2]).reshape(h, w)) * top)
+    warped, inside = warp_to_instant(src, Hm, resp, bayer=bayer)
+    core = (slice(20, -20), slice(20, -20))
+    a, b, s = (x[core].astype(np.float64) for x in (warped, dst, src))
+    (dx, dy), _ = cv2.phaseCorrelate(a, b)
+    assert math.hypot(dx, dy) < 0.02  # what is left of the turn: under a fiftieth of a pixel
+    rms = lambda x: float(np.sqrt(np.mean((x - b) ** 2))) / top  # noqa: E731
+    assert rms(s) > 0.05  # unwarped, the turn (10 px, 4 px and a roll) costs over 5 % of the range
+    assert rms(a) < 0.005  # warped, under 0.5 % (bilinear resampling of each Bayer plane)
+    # the share of the image the source covers: the outline moved by the homography
+    assert 0.93 < inside < 0.97
+
+
+def test_identity_warp_is_byte_for_byte():
+    resp = CameraResponse.linear()
+    img = np.random.default_rng(0).integers(0, 4095, (24, 40)).astype(np.uint16)
+    out, inside = warp_to_instant(img, np.eye(3), resp)
+    assert np.array_equal(out, img) and inside == 1.0
+
+
+# ============================================================================ the provider in the loop
+@pytest.fixture(scope="module")
+def static(tmp_path_factory):
+    chart = hdr_chart(W, H, seed=3, dynamic_range_db=60.0)
+    right = np.eye(4)
+    right[0, 3] = BASELINE_M
+
+    def source(t, cam):
+        return chart, (np.eye(4) if cam == "left" else right)
+
+    cam = synth.Camera.preset("borealhdr", width=W, height=H)
+    path = synth.capture_sequence(source, tmp_path_factory.mktemp("native") / "static", cam, n_cycles=3, seed=5,
+                                  noise=False, save_radiance=True, start_bracket_index=2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        seq = load_sequence(path)
+    return seq, load_camera(path), sequence_response(seq), DatasetRadiance(path)
+
+
+def _native(seq, resp, methods, rule=None, **cfg):
+    config = RunConfig(rate="native", initial_ms=4.0, **cfg)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", NativeWarpWarning)
+        provider = NativeProvider(seq, config, resp, **(rule or {}))
+    return provider, list(closed_loop(provider, {m.name: m for m in methods}, config, want_right=True,
+                                      keep_images=True))
+
+
+@pytest.mark.parametrize("latency", [0, 1, 3])
+def test_one_step_per_recorded_frame_with_the_latency(static, latency):
+    seq, cam, resp, _ = static
+    _, frames = _native(seq, resp, [Counter()], latency_frames=latency)
+    shots = shot_timestamps(seq)
+    assert [cs.cycle for cs in frames] == list(range(len(shots)))
+    steps = [cs.steps["counter"] for cs in frames]
+    assert [st.timestamp_ns for st in steps] == shots  # every frame at its own recorded instant
+    for k, st in enumerate(steps):
+        assert st.target_ms == (4.0 if k <= latency else steps[k - 1 - latency].next_ms), (k, latency)
+
+
+def test_static_scene_equals_the_native_live_frames_to_quantisation(static):
+    seq, cam, resp, rad = static
+    _, emu = _native(seq, resp, [Counter()])
+    live = list(native_rate_loop(seq, rad, cam, [Counter()], response=resp, noise=False, initial_ms=4.0,
+                                 every_frame=True))
+    assert len(emu) == len(live) == len(shot_timestamps(seq))
+    offsets, emulated = set(), 0
+    for e, v in zip(emu, live):
+        a, b = e.steps["counter"], v.steps["counter"]
+        assert a.target_ms == b.target_ms and a.next_ms == b.next_ms
+        src = next(f for c in seq.cycles for f in c.frames["left"].values()
+                   if f.timestamp_ns == a.native.source_timestamp_ns).load()
+        offsets.add(a.native.source_offset)
+        for mine, theirs in ((a.left, b.left), (a.right, b.right)):
+            if a.ratio == 1.0:
+                assert np.array_equal(mine, theirs)
+                continue
+            valid = resp.lut(a.ratio)[1][src]
+            diff = np.abs(mine.astype(np.float64) - theirs.astype(np.float64))
+            bound = quantisation_bound(resp, src, a.ratio)
+            assert np.all(diff[valid] <= bound[valid] + 1e-9), (e.cycle, float((diff - bound)[valid].max()))
+            emulated += 1
+    assert emulated >= 4 and len(offsets) >= 3, (emulated, offsets)  # neighbours served, ratios off 1
+
+
+@pytest.fixture(scope="module")
+def ramp(tmp_path_factory):
+    """A static ramp whose 32 ms shots clip 14 % of their pixels and no shorter one clips (checked below)."""
+    base = np.linspace(0.4, 1.0, W * H, dtype=np.float32).reshape(H, W)
+    field = np.repeat(base[:, :, None], 3, axis=2) * np.float32(15.0)
+
+    def source(t, cam):
+        return field, np.eye(4)
+
+    cam = synth.Camera.preset("borealhdr", width=W, height=H)
+    path = synth.capture_sequence(source, tmp_path_factory.mktemp("native") / "ramp", cam, n_shots=18, seed=5,
+                                  noise=False, stereo=False, start_bracket_index=2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        seq = load_sequence(path)
+    return seq, sequence_response(seq)
+
+
+def test_selection_on_a_hand_built_sequence(ramp):
+    """A constant target of 3 ms on the sweep 4, 8, 16, 32, 1, 2 ms (x3), the 32 ms shots clipped: the
+    source of each frame, worked out by hand from the rule (cost = stops up + 0.5 per frame of offset,
+    candidates clipping over 1 % more than the least clipped left out); then with the defaults."""
+    seq, resp = ramp
+    provider, frames = _native(seq, resp, [Constant(3.0)], rule=RULE)
+    assert provider.frames.exposures == [4.0, 8.0, 16.0, 32.0, 1.0, 2.0] * 3
+    lost = {e: invalid_fraction(np.bincount(f.load().ravel(), minlength=4095), 3.0 / e, white_level=4094,
+                                black_level=0) for e, f in seq.cycles[1].frames["left"].items()}
+    assert lost[32.0] > 0.1 and max(v for e, v in lost.items() if e != 32.0) == 0.0  # the premise
+    # 4, 8, 16 ms: their own, downwards (cost 0); 32 ms: clipped, so the 16 ms shot before (0.5);
+    # 1 ms: its own costs log2(3) = 1.58, the 2 ms after 0.58 + 0.5, the 16 ms two before and the 4 ms two
+    # after 1.0 each: the earlier; 2 ms: its own 0.58, the 4 ms after 0.5; the last 2 ms has no frame after
+    expected = [0, 0, 0, -1, -2, 1] * 3
+    expected[-1] = 0
+    got = [cs.steps["constant-3"].native.source_offset for cs in frames]
+    assert [cs.steps["constant-3"].target_ms for cs in frames][2:] == [3.0] * 16  # latency 1: from frame 2
+    assert got[2:] == expected[2:]
+    brackets = [cs.steps["constant-3"].bracket_ms for cs in frames]
+    assert brackets[2:] == [16.0, 16.0, 16.0, 4.0, 4.0, 8.0, 16.0, 16.0, 16.0, 4.0, 4.0, 8.0, 16.0, 16.0, 16.0, 2.0]
+    # the defaults (1 stop per frame, 20 % of clipping): the 32 ms shots (14 % clipped) serve themselves; the
+    # 1 ms shot takes the 32 ms one just before it (cost 1) over its own emulated up 3x (1.58), the 2 ms one after
+    # it (0.58 + 1) and the 4 ms one two frames later (2); the 2 ms shot is emulated up 1.5x (0.58), not the 4 ms
+    # one after it (1)
+    _, frames = _native(seq, resp, [Constant(3.0)])
+    assert [cs.steps["constant-3"].native.source_offset for cs in frames] == [0, 0, 0, 0, -1, 0] * 3
+
+
+def test_a_rotation_from_the_gyro_between_frames(static):
+    seq, cam, resp, _ = static
+    from emulator.motion import recording_motion
+
+    rate = np.array([0.0, 0.2, 0.0])  # rad/s about the camera's y axis
+    K = np.array([[40.0, 0, 19.5], [0, 40.0, 11.5], [0, 0, 1]])
+    motion = recording_motion(seq, omega=lambda t: np.tile(rate, (np.size(t), 1)), origin_ns=0,
+                              intrinsics={"left": (K, (W, H)), "right": (K, (W, H))}, stamp="start")
+    provider = NativeProvider(seq, RunConfig(rate="native"), resp, motion=motion)
+    fr = provider.frames
+    R = provider.rotation(4, 2, fr.exposures[4], 3.0)  # from frame 4's window middle to frame 2's at 3 ms
+    t_from = fr.timestamps[4] * 1e-9 + fr.exposures[4] * 5e-4
+    t_to = fr.timestamps[2] * 1e-9 + 3.0 * 5e-4
+    angle = math.degrees(math.acos((np.trace(R) - 1) / 2))
+    assert angle == pytest.approx(math.degrees(0.2 * abs(t_to - t_from)), rel=1e-6)
+    assert R[0, 2] * (t_to - t_from) > 0  # turned about +y forward in time
+
+
+def test_without_an_imu_one_warning_and_no_warp(static):
+    seq, cam, resp, _ = static
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        provider = NativeProvider(seq, RunConfig(rate="native"), resp)
+    assert [str(w.message).split(": ", 1)[1] for w in caught if w.category is NativeWarpWarning] == [
+        "no imu/imu.csv; at native rate a neighbour frame is used without undoing the camera's rotation since its "
+        "instant"]
+    assert provider.motion is None and provider.describe()["warp"] == "none"
+
+
+def test_run_config_rate_and_latency():
+    assert RunConfig().rate == "cycle" and "rate" not in RunConfig().to_json()
+    cfg = RunConfig(rate="native", latency_frames=2)
+    assert cfg.to_json()["rate"] == "native" and cfg.to_json()["latency_frames"] == 2
+    assert RunConfig.from_json(cfg.to_json()) == cfg
+    with pytest.raises(PlaybackError, match="^rate must be one of cycle, native"):
+        RunConfig(rate="fast")
+    for bad in (-1, 1.5, True):
+        with pytest.raises(PlaybackError, match="^latency_frames must be an integer >= 0"):
+            RunConfig(rate="native", latency_frames=bad)
+    with pytest.raises(PlaybackError, match="rate"):
+        cfg.resumed(RunConfig().to_json())
+
+
+def test_native_emulation_summary_figures():
+    from validation.live.native import native_emulation_summary
+
+    walk = lambda w, u: {"m": {"rmse_percent": w, "rmse_percent_unwarped": u,  # noqa: E731
+                               "source_offset": [0, 1, -2, 0], "exposure_log2_error": [0.0, 0.1, 0.2]}}
+    per_walk = {"a/seed0": walk([1.0, 2.0, 3.0, 9.0], [4.0, 4.0, 6.0, 8.0]),  # medians 2.5 and 5: the warp halves it
+                "b/seed0": walk([2.0, 2.0, 2.0, 2.0], [3.0, 3.0, 3.0, 3.0]),  # 2 and 3: a third
+                "c/seed0": None}  # a walk without the native condition is left out
+    out = native_emulation_summary(per_walk, ["m"], seed=0)
+    a = out["per_walk"]["a/seed0"]["m"]
+    assert a["image_rmse_percent_median"] == 2.5 and a["image_rmse_percent_median_unwarped"] == 5.0
+    assert a["warp_share_of_error"] == 0.5 and a["neighbour_fraction"] == 0.5 and a["exposure_log2_error_median"] == 0.1
+    r, c = out["median_image_rmse_percent"], out["warp_cut_fraction"]
+    assert r["estimate"] == 2.25 and r["n_walks"] == 2 and 2.0 <= r["ci95"][0] <= r["ci95"][1] <= 2.5
+    assert c["estimate"] == pytest.approx((0.5 + 1 / 3) / 2) and c["met"] is False  # the interval reaches below 0.5
+    assert r["met"] is True  # the whole interval is under 3 %
+    assert native_emulation_summary({"a": None}, ["m"]) is None
