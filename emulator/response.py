@@ -81,6 +81,11 @@ class CameraResponse:
     _luts: OrderedDict = field(default_factory=OrderedDict, init=False, repr=False)
     _lock: threading.Lock = field(default_factory=threading.Lock, init=False, repr=False)
 
+    def __reduce__(self):
+        # the LUT cache and its lock stay behind (method workers get the table, not the cache)
+        return (type(self), (np.array(self.g), self.white_level, self.black_level, self.name,
+                             None if self.knots is None else np.array(self.knots)))
+
     def __post_init__(self) -> None:
         # private, and immutable at the buffer level (a view of a bytes object): the caller's
         # array stays theirs, and no setflags(write=True) can change the table afterwards

@@ -1,0 +1,455 @@
+"""Method workers: every AE method of a run in its own process (:func:`start_methods`).
+
+A :class:`MethodWorker` stands in the closed loop for one method.  Its process is forked
+from Python's fork server (a fresh interpreter started for the purpose, which holds none of
+the run's open files), builds the method itself (the plugin's import and factory run there,
+never in the run's process), and answers one call at a time:
+
+- the image reaches it through a shared-memory block owned by the run (one per worker,
+  written before each call; the worker copies it into an immutable buffer of its own, so
+  nothing it does reaches the run's arrays or another method);
+- it returns only the proposal, the method's fallback count and what the method printed;
+  the run process owns every file;
+- the run waits for the answer at most the method time limit (``--method-timeout-s``,
+  default :data:`DEFAULT_METHOD_TIMEOUT_S`): past it the worker is killed (with any process
+  it started) and the method fails with the reason, while the others go on;
+- a worker that dies, forks (``os.fork``: the child exits at once), or leaves a thread running
+  after a call is killed the same way and its method fails, named.
+
+A worker runs in its own session (a terminal's Ctrl-C reaches only the run, which stops its
+workers) and dies with the run.  :func:`start_methods` with ``workers="inline"`` builds the
+methods in the run's process instead (for debugging; the time limit is then checked only
+after a call returns).
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import pickle
+import signal
+import sys
+import threading
+import weakref
+from multiprocessing import shared_memory
+
+import numpy as np
+
+from emulator.autoexposure._base import AutoExposureError, MethodFailed
+from emulator.errors import PlaybackError
+
+__all__ = ["MethodWorker", "start_methods", "stop_methods", "effective_timeout_s", "DEFAULT_METHOD_TIMEOUT_S",
+           "WORKER_MODES"]
+
+#: Per-call limit of a method in a worker when ``--method-timeout-s`` is not given, seconds: far
+#: above any built-in's call (under 0.1 s on a 1920x1200 frame), so only a stuck method meets it.
+DEFAULT_METHOD_TIMEOUT_S = 120.0
+#: ``process``: each method in its own worker process (the default); ``inline``: in the run's process.
+WORKER_MODES = ("process", "inline")
+_FORK_EXIT = 70  # exit status of the child of an os.fork inside a worker (it exits at once)
+_PRELOAD = ["emulator.playback.workers", "emulator.autoexposure.builtin"]
+_ctx = None
+_ctx_lock = threading.Lock()
+
+
+def effective_timeout_s(config) -> float | None:
+    """The per-call limit a run applies: ``config.method_timeout_s``, else the default (workers only)."""
+    if config.method_timeout_s is not None:
+        return float(config.method_timeout_s)
+    return DEFAULT_METHOD_TIMEOUT_S if getattr(config, "workers", "process") == "process" else None
+
+
+def _context():
+    global _ctx
+    with _ctx_lock:
+        if _ctx is None:
+            ctx = multiprocessing.get_context("forkserver")
+            ctx.set_forkserver_preload(_PRELOAD)
+            _ctx = ctx
+        return _ctx
+
+
+# ---------------------------------------------------------------- the worker's side
+def _die_with_parent() -> None:
+    """Linux: SIGKILL when the fork server (which ends with the run) goes."""
+    try:
+        import ctypes
+
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):  # pragma: no cover - not Linux
+        pass
+
+
+def _child_main(conn) -> None:
+    try:
+        os.setsid()  # own process group: stopped with whatever it starts; Ctrl-C goes to the run only
+    except OSError:  # pragma: no cover
+        pass
+    _die_with_parent()
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    _Child(conn).serve()
+
+
+class _Child:
+    def __init__(self, conn) -> None:
+        self.conn = conn
+        self.method = None
+        self.name = None
+        self.shm = None
+        self.pending = None  # a failure found when the method was built, reported at its first call
+        self.forked: list = []
+        self.allowed = set(threading.enumerate())
+        os.register_at_fork(after_in_parent=lambda: self.forked.append(True),
+                            after_in_child=lambda: os._exit(_FORK_EXIT))
+
+    def serve(self) -> None:
+        while True:
+            try:
+                msg = self.conn.recv()
+            except (EOFError, OSError):
+                os._exit(0)
+            if msg[0] == "stop":
+                os._exit(0)
+            reply = getattr(self, "do_" + msg[0])(*msg[1:])
+            try:
+                self.conn.send(reply)
+            except (EOFError, OSError):
+                os._exit(0)
+            if reply[0] == "fatal":
+                os._exit(0)
+
+    def _left_threads(self) -> list[str]:
+        from emulator import pools
+
+        pool = getattr(pools, "_LUT_POOL", None)
+        ours = set(getattr(pool, "_threads", ()) or ())
+        return [t.name for t in threading.enumerate() if t not in self.allowed and t not in ours and t.is_alive()]
+
+    def _hostile(self, when: str) -> str | None:
+        if self.forked:
+            return f"forked a child process (os.fork) {when}; its process was stopped"
+        left = self._left_threads()
+        if left:
+            return (f"left {len(left)} thread{'s' if len(left) > 1 else ''} running {when} ({', '.join(left[:3])}); "
+                    "its process was stopped")
+        return None
+
+    def do_build(self, item, mode, response, options, sys_path, cwd, environ):
+        from emulator.autoexposure.isolation import _describe
+
+        sys.path[:] = sys_path  # the run's, now (the fork server has those of its start)
+        os.environ.clear()
+        os.environ.update(environ)
+        try:
+            os.chdir(cwd)
+            self.name, self.method = _build_one(item, mode, response, options)
+        except (AutoExposureError, PlaybackError) as exc:
+            return ("error", type(exc).__name__, str(exc))
+        except BaseException as exc:  # noqa: BLE001 - anything a factory does is reported, by name
+            return ("error", "AutoExposureError", f"AE method {_label(item)} could not be built: {_describe(exc)}")
+        config = {}
+        if hasattr(self.method, "config"):
+            try:
+                config = dict(self.method.config())
+            except BaseException as exc:  # noqa: BLE001
+                config = {"config_error": f"config(): {_describe(exc)}"}
+        self.pending = self._hostile("after it was built")
+        try:
+            pickle.dumps(config)
+        except Exception:  # noqa: BLE001 - a plugin's config with objects: their text
+            config = {k: repr(v) for k, v in config.items()}
+        return ("built", self.name, config)
+
+    def _image(self, shm_name, nbytes, shape, dtype):
+        if self.shm is None or self.shm.name != shm_name:
+            if self.shm is not None:
+                self.shm.close()
+            self.shm = shared_memory.SharedMemory(name=shm_name)  # the run owns (and removes) the block
+        data = bytes(self.shm.buf[:nbytes])  # this worker's own immutable copy
+        return np.frombuffer(data, dtype=np.dtype(dtype)).reshape(shape)
+
+    def _output(self) -> tuple[str, int]:
+        from emulator.autoexposure.isolation import captured_output
+
+        return captured_output(self.name, clear=True)
+
+    def do_call(self, shm_name, nbytes, shape, dtype, exposure_ms, raw):
+        from emulator.autoexposure.isolation import _describe, call_method
+        from emulator.pools import single_thread_pools
+
+        if self.pending is not None:
+            return ("fatal", self.pending, "", 0)
+        if shape is not None:
+            raw = self._image(shm_name, nbytes, shape, dtype)
+        self.forked.clear()
+        try:
+            with single_thread_pools(user_api="blas"):  # results independent of the machine's cores
+                value = call_method(self.method, raw, exposure_ms)
+            guard = int(getattr(self.method, "guard_count", 0) or 0)
+        except MethodFailed as exc:
+            bad = self._hostile("in next_exposure")
+            return ("fatal" if bad else "failed", bad or str(exc), *self._output())
+        except BaseException as exc:  # noqa: BLE001 - KeyboardInterrupt raised by a method included
+            return ("failed", _describe(exc), *self._output())
+        bad = self._hostile("in next_exposure")  # forks: in the call; threads: still running after it
+        if bad:
+            return ("fatal", bad, *self._output())
+        try:
+            pickle.dumps(value)
+        except Exception:  # noqa: BLE001 - not a number anyway: the loop's guard replaces it
+            value = None
+        return ("answer", value, guard, *self._output())
+
+    def do_reset(self):
+        reset = getattr(self.method, "reset", None)
+        if callable(reset):
+            reset()
+        return ("ok",)
+
+
+def _label(item) -> str:
+    if isinstance(item, tuple):
+        return repr(item[0])
+    return repr(item) if isinstance(item, str) else repr(getattr(item, "name", type(item).__name__))
+
+
+def _build_one(item, mode, response, options):
+    """(name, method) of one ``--methods`` item, built as :func:`build_methods` builds it."""
+    from emulator.autoexposure import METHOD_NAMES
+    from emulator.autoexposure.methodset import build_methods
+    from emulator.autoexposure.registry import is_import_path, plugin_from_path
+
+    if isinstance(item, tuple):  # an installed plugin: (name, entry point value), as the run found it
+        from emulator.autoexposure.registry import MethodPlugin, build_plugin, load_import_path
+
+        name, value = item
+        plugin = MethodPlugin(name, value, load_import_path(value))
+        return name, build_plugin(plugin, mode=mode, response=response, options=options.get(name))
+    if isinstance(item, str):
+        key = plugin_from_path(item).name if item not in METHOD_NAMES and is_import_path(item) else item
+    else:
+        key = getattr(item, "name", None)
+    subset = {key: options[key]} if key in options else {}
+    built = build_methods([item], mode=mode, response=response, options=subset)
+    return next(iter(built.items()))
+
+
+# ---------------------------------------------------------------- the run's side
+def _kill(proc) -> None:
+    """SIGKILL the worker and its process group (whatever it started), then reap it."""
+    pid = proc.pid
+    if pid is None:
+        return
+    try:
+        if os.getpgid(pid) == pid:  # its own group (setsid): never the run's
+            os.killpg(pid, signal.SIGKILL)
+        else:
+            proc.kill()
+    except (ProcessLookupError, PermissionError, OSError):
+        pass
+    proc.join(5)
+
+
+def _release(proc, shm_box) -> None:
+    _kill(proc)
+    shm = shm_box[0]
+    if shm is not None:
+        shm_box[0] = None
+        try:
+            shm.close()
+            shm.unlink()
+        except (OSError, BufferError):
+            pass
+
+
+def _ended(proc) -> str:
+    proc.join(5)
+    code = proc.exitcode
+    if code is None:
+        return "its process stopped answering"
+    if code < 0:
+        try:
+            return f"its process was killed by {signal.Signals(-code).name}"
+        except ValueError:
+            return f"its process was killed by signal {-code}"
+    return f"its process exited with status {code}"
+
+
+def _start(proc) -> None:
+    """Start ``proc``, also from a daemonic process (a Dask worker of a dataset run), which
+    multiprocessing refuses children: a method worker dies with the fork server, which dies with
+    the process that started it, so nothing outlives the run."""
+    me = multiprocessing.current_process()
+    with _ctx_lock:
+        daemon = me._config.get("daemon")
+        try:
+            if daemon:
+                me._config["daemon"] = False
+            proc.start()
+        finally:
+            if daemon:
+                me._config["daemon"] = daemon
+
+
+class MethodWorker:
+    """One AE method running in its own process; called by the closed loop like the method itself."""
+
+    def __init__(self, item, *, mode: str, response, options: dict, timeout_s: float) -> None:
+        ctx = _context()
+        self.timeout_s = float(timeout_s)
+        self.label = _label(item)
+        self.name = self.label
+        self.failed: str | None = None
+        self._guard = 0
+        self._config: dict = {}
+        self._shm_box: list = [None]
+        self._conn, child = ctx.Pipe()
+        self._proc = ctx.Process(target=_child_main, args=(child,), daemon=True, name="exposim-method")
+        _start(self._proc)
+        child.close()
+        self._finalizer = weakref.finalize(self, _release, self._proc, self._shm_box)
+        try:
+            self._conn.send(("build", item, mode, response, options, list(sys.path), os.getcwd(),
+                            dict(os.environ)))
+        except (pickle.PicklingError, TypeError, AttributeError) as exc:
+            self.close()
+            raise PlaybackError(f"AE method {self.label} cannot be handed to a worker process ({exc}); define its "
+                                "class at module level, or run it in the run's process (workers='inline', "
+                                "--workers inline)") from None
+
+    def built(self) -> "MethodWorker":
+        """Wait for the worker to build its method; raise the build's error (naming the method)."""
+        try:
+            reply = self._ask(None)
+        except MethodFailed as exc:
+            self.close()
+            raise AutoExposureError(f"AE method {self.label} could not be built: {exc}") from None
+        if reply[0] == "error":
+            self.close()
+            raise (PlaybackError if reply[1] == "PlaybackError" else AutoExposureError)(reply[2])
+        _, self.name, self._config = reply
+        return self
+
+    def _ask(self, msg):
+        if msg is not None:
+            self._conn.send(msg)
+        try:
+            if not self._conn.poll(self.timeout_s):
+                self.failed = (f"did not return within the limit of {self.timeout_s:g} s (--method-timeout-s); "
+                               "its process was stopped")
+                self.kill()
+                raise MethodFailed(self.failed)
+            return self._conn.recv()
+        except (EOFError, OSError, ConnectionError):
+            self.failed = f"{_ended(self._proc)} in next_exposure" if msg is None or msg[0] == "call" \
+                else _ended(self._proc)
+            self.kill()
+            raise MethodFailed(self.failed) from None
+
+    def next_exposure(self, raw, exposure_ms):
+        if self.failed is not None:
+            raise MethodFailed(self.failed)
+        if isinstance(raw, np.ndarray) and not raw.dtype.hasobject:
+            a = np.ascontiguousarray(raw)
+            shm = self._shm_box[0]
+            if shm is None or shm.size < a.nbytes:
+                if shm is not None:
+                    shm.close()
+                    shm.unlink()
+                shm = self._shm_box[0] = shared_memory.SharedMemory(create=True, size=max(a.nbytes, 1))
+            np.ndarray(a.shape, a.dtype, buffer=shm.buf)[...] = a
+            msg = ("call", shm.name, a.nbytes, a.shape, a.dtype.str, exposure_ms, None)
+        else:
+            msg = ("call", None, 0, None, None, exposure_ms, raw)
+        reply = self._ask(msg)
+        kind = reply[0]
+        from emulator.autoexposure.isolation import keep_output
+
+        keep_output(self.name, reply[-2], reply[-1])
+        if kind == "answer":
+            self._guard = reply[2]
+            return reply[1]
+        if kind == "fatal":
+            self.failed = reply[1]
+            self.kill()
+        raise MethodFailed(reply[1])
+
+    @property
+    def guard_count(self) -> int:
+        return self._guard
+
+    def reset(self) -> None:
+        if self.failed is None:
+            self._ask(("reset",))
+
+    def config(self) -> dict:
+        return dict(self._config)
+
+    def pid(self) -> int | None:
+        return self._proc.pid
+
+    def kill(self) -> None:
+        """Stop the process now (a call waiting on it then fails); the shared memory stays until :meth:`close`."""
+        _kill(self._proc)
+
+    def close(self) -> None:
+        """Stop the process and release its shared memory."""
+        self._finalizer()
+        try:
+            self._conn.close()
+        except OSError:  # pragma: no cover
+            pass
+
+    def __repr__(self) -> str:
+        return f"MethodWorker({self.name!r}, pid={self._proc.pid})"
+
+
+def start_methods(spec, config, response) -> dict:
+    """The run's methods by name: :class:`MethodWorker` s (``config.workers == "process"``), or
+    built in this process (``"inline"``); ``spec`` as for :func:`~emulator.autoexposure.methodset.build_methods`."""
+    from emulator.autoexposure import METHOD_NAMES
+    from emulator.autoexposure.methodset import build_methods, parse_methods
+
+    if getattr(config, "workers", "process") == "inline":
+        return build_methods(spec, mode=config.mode, response=response, options=config.options)
+    items = parse_methods(spec) if isinstance(spec, str) else list(spec)
+    for item in items:
+        if not isinstance(item, str) and (not getattr(item, "name", None)
+                                          or not callable(getattr(item, "next_exposure", None))):
+            raise PlaybackError(f"{item!r} is neither a method name nor an AE method (name, next_exposure)")
+    plugins = None
+    for i, item in enumerate(items):
+        if isinstance(item, str) and item not in METHOD_NAMES and ":" not in item:
+            from emulator.autoexposure.registry import installed_methods
+
+            plugins = installed_methods() if plugins is None else plugins
+            parse_methods([item], plugins=plugins)  # an unknown or broken plugin name: refused here, in one line
+            items[i] = (item, plugins[item].value)
+    options = dict(config.options or {})
+    timeout = effective_timeout_s(config)
+    started: list[MethodWorker] = []
+    out: dict = {}
+    try:
+        for item in items:
+            started.append(MethodWorker(item, mode=config.mode, response=response, options=options, timeout_s=timeout))
+        for worker in started:
+            worker.built()
+            if worker.name in out:
+                raise PlaybackError(f"two methods are named {worker.name!r}")
+            out[worker.name] = worker
+        unknown = set(options) - set(METHOD_NAMES) - set(out)
+        if unknown:
+            raise PlaybackError(f"options given for unknown method(s): {', '.join(sorted(unknown))}")
+    except BaseException:
+        stop_methods({str(i): w for i, w in enumerate(started)})
+        raise
+    return out
+
+
+def stop_methods(methods, *, kill_only: bool = False) -> None:
+    """Stop every worker among ``methods`` (``kill_only``: their processes, keeping the shared memory
+    for calls still returning); built-in-process methods are left alone."""
+    for m in list(methods.values()):
+        if isinstance(m, MethodWorker):
+            m.kill() if kill_only else m.close()
