@@ -223,7 +223,8 @@ class CameraResponse:
         if key == 1.0:
             table = np.arange(self.white_level + 1, dtype=np.uint16)
         else:
-            target = self.forward(key * self.g)
+            with np.errstate(over="ignore"):  # a huge ratio overflows to inf, which clips to white as it should
+                target = self.forward(key * self.g)
             table = np.clip(np.rint(target), self.black_level, self.white_level).astype(np.uint16)
         dn = np.arange(self.white_level + 1)
         clipped_high = dn >= self.white_level

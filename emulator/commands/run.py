@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import shlex
 import sys
 from pathlib import Path
@@ -346,7 +345,9 @@ def _print_run_summary(args, summary: dict) -> int:
     failed = {n: m["status"] for n, m in summary["methods"].items() if m.get("status", "ok").startswith("failed")}
     rc = 1 if failed and args.strict else 0
     if args.json:
-        print(json.dumps(summary, indent=1), file=getattr(args, "json_stream", None) or sys.stdout)
+        from emulator.io.files import strict_json
+
+        print(strict_json(summary, indent=1), file=getattr(args, "json_stream", None) or sys.stdout)
         return rc
     print(f"run folder  {args.output}")
     print(f"cycles      {summary['cycles_done']}/{summary['n_cycles']}"
@@ -443,7 +444,9 @@ def _run_dataset(args) -> int:
         if bar is not None:
             bar.close()
     if args.json:
-        print(json.dumps(summary, indent=1), file=getattr(args, "json_stream", None) or sys.stdout)
+        from emulator.io.files import strict_json
+
+        print(strict_json(summary, indent=1), file=getattr(args, "json_stream", None) or sys.stdout)
     else:
         t = summary["throughput"]
         print(f"dataset run {args.output}  ({len(summary['sequences'])} sequences, {len(summary['units'])} units, "

@@ -32,6 +32,7 @@ so the interrupted run can be resumed.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import os
@@ -180,20 +181,27 @@ class RunWriter:
         self.update(status="running", writer=self.lock.owner if self.lock else None)
         for name in methods:
             mdir = self.path / name
-            if save != "none":
-                for cam in cameras:
-                    (mdir / IMAGES_DIR / cam).mkdir(parents=True, exist_ok=True)
             path = mdir / CSV_FILE
-            rows = read_csv_rows(path, repair=True) if self.resume else []
-            self._recorded[name] = {int(r[0]): r for r in rows}
-            mdir.mkdir(parents=True, exist_ok=True)
-            new = not path.exists() or path.stat().st_size == 0
-            fh = open(path, "a", newline="")
-            writer = csv.writer(fh, lineterminator="\n")
-            if new:
-                writer.writerow(CSV_COLUMNS + EXTRA_COLUMNS)
-                fh.flush()
-            self._csv[name] = (fh, writer)
+            try:
+                if save != "none":
+                    for cam in cameras:
+                        (mdir / IMAGES_DIR / cam).mkdir(parents=True, exist_ok=True)
+                rows = read_csv_rows(path, repair=True) if self.resume else []
+                self._recorded[name] = {int(r[0]): r for r in rows}
+                mdir.mkdir(parents=True, exist_ok=True)
+                new = not path.exists() or path.stat().st_size == 0
+                fh = open(path, "a", newline="")
+                self._csv[name] = (fh, csv.writer(fh, lineterminator="\n"))
+                if new:
+                    self._csv[name][1].writerow(CSV_COLUMNS + EXTRA_COLUMNS)
+                    fh.flush()
+            except OSError as exc:  # a full disk while writing a header: name the file, and run.json says so
+                from emulator.io.files import with_path
+
+                named = with_path(exc, path)
+                with contextlib.suppress(OSError):
+                    self.update(status="failed", error=f"{type(named).__name__}: {named}")
+                raise named from None
 
     def update(self, **fields) -> None:
         """Set fields of ``run.json`` (and the time of the update) and write it atomically."""

@@ -146,8 +146,10 @@ class _Child:
             self.name, self.method = _build_one(item, mode, response, options)
         except (AutoExposureError, PlaybackError) as exc:
             return ("error", type(exc).__name__, str(exc))
-        except BaseException as exc:  # noqa: BLE001 - anything a factory does is reported, by name
-            return ("error", "AutoExposureError", f"AE method {_label(item)} could not be built: {_describe(exc)}")
+        except BaseException as exc:  # noqa: BLE001 - KeyboardInterrupt included: Ctrl-C never reaches a worker
+            where = "importing or building it" if isinstance(item, str) else "building it"
+            return ("error", "AutoExposureError",
+                    f"AE method {_label(item)}: {where} {_describe(exc).rstrip(': ')} in its worker process")
         config = {}
         if hasattr(self.method, "config"):
             try:
