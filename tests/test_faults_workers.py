@@ -267,3 +267,47 @@ def test_a_signal_while_a_method_hangs_ends_the_run_at_once(seq, plugin_dir, tmp
     proc.communicate(timeout=30)
     assert proc.returncode == rc
     assert json.loads((out / "run.json").read_text())["status"] == "interrupted"
+
+
+STUCK = '''
+import signal, sys, time
+from pathlib import Path
+from emulator.interrupts import remove_at_forced_exit, watchdog
+
+staging = Path(sys.argv[1])
+staging.mkdir()
+remove_at_forced_exit(staging)
+for sig in (signal.SIGINT, signal.SIGTERM):  # as native code that swallows the signal
+    signal.signal(sig, lambda *a: None)
+with watchdog(lambda: "exposim stuck", grace_s=1.0):
+    print("ready", flush=True)
+    while True:
+        time.sleep(0.05)
+'''
+
+
+@pytest.mark.parametrize("sig,rc,what", [(signal.SIGINT, 130, "interrupted"),
+                                         (signal.SIGTERM, 143, "terminated (SIGTERM)")])
+def test_a_command_stuck_after_a_signal_is_ended_and_leaves_no_staging_folder(tmp_path, sig, rc, what):
+    script = tmp_path / "stuck.py"
+    script.write_text(STUCK)
+    staging = tmp_path / ".walk.partial-x"
+    proc = subprocess.Popen([sys.executable, str(script), str(staging)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    assert proc.stdout.readline() == "ready\n"
+    proc.send_signal(sig)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == rc
+    assert err.strip().splitlines()[-1] == f"exposim stuck: {what}; ended 1 s after the signal"
+    assert not staging.exists()
+
+
+def test_interrupts_end_runs_while_cpu_bound_work_runs_beside_them(seq, plugin_dir, tmp_path):
+    """Both cores busy with other work: SIGINT still ends a run (a method hanging in its worker) at once."""
+    burners = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(2)]
+    try:
+        test_a_signal_while_a_method_hangs_ends_the_run_at_once(seq, plugin_dir, tmp_path, signal.SIGINT, 130)
+    finally:
+        for b in burners:
+            b.kill()
+            b.wait()
