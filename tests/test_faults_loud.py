@@ -192,8 +192,8 @@ def test_a_resume_mismatch_names_the_column_that_differs(seq, tmp_path, capsys):
     (out / "run.json").write_text(json.dumps(info))
     assert main(["run", str(seq), "-o", str(out), "--resume", "--no-progress"]) == 1
     assert _error_line(capsys) == (
-        f"exposim run: error: {csv}: resume replay of cycle 1 differs from the recorded row (guarded {edited} recorded, "
-        f"{1 - int(edited)} replayed); the table was edited, or the folder was written by another configuration or "
+        f"exposim run: error: {csv}: resume replay of cycle 1 differs from the recorded row (guarded {edited} "
+        f"recorded, {1 - int(edited)} replayed); the table was edited, or the folder was written by another configuration or "
         "version of exposim")
 
 

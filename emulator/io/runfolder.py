@@ -45,7 +45,7 @@ from pathlib import Path
 import numpy as np
 
 from emulator.errors import OutputExistsError, RunFolderError
-from emulator.io.files import format_timestamp_s, read_metadata, write_metadata
+from emulator.io.files import format_timestamp_s, read_metadata, with_path, write_metadata
 from emulator.io.png import write_png8, write_png16
 from emulator.io.runcsv import (CSV_COLUMNS, CSV_FILE, EXTRA_COLUMNS, format_row, read_csv_rows, read_tables,
                                 tables_from_rows)
@@ -180,14 +180,11 @@ class RunWriter:
             self.run_json["resume_repairs"] = list(self.run_json.get("resume_repairs", [])) + repairs
         self.update(status="running", writer=self.lock.owner if self.lock else None)
         for name in methods:
-            mdir = self.path / name
-            path = mdir / CSV_FILE
+            mdir, path = self.path / name, self.path / name / CSV_FILE
             try:
-                if save != "none":
-                    for cam in cameras:
-                        (mdir / IMAGES_DIR / cam).mkdir(parents=True, exist_ok=True)
-                rows = read_csv_rows(path, repair=True) if self.resume else []
-                self._recorded[name] = {int(r[0]): r for r in rows}
+                for cam in cameras if save != "none" else ():
+                    (mdir / IMAGES_DIR / cam).mkdir(parents=True, exist_ok=True)
+                self._recorded[name] = {int(r[0]): r for r in (read_csv_rows(path, repair=True) if self.resume else [])}
                 mdir.mkdir(parents=True, exist_ok=True)
                 new = not path.exists() or path.stat().st_size == 0
                 fh = open(path, "a", newline="")
@@ -196,8 +193,6 @@ class RunWriter:
                     self._csv[name][1].writerow(CSV_COLUMNS + EXTRA_COLUMNS)
                     fh.flush()
             except OSError as exc:  # a full disk while writing a header: name the file, and run.json says so
-                from emulator.io.files import with_path
-
                 named = with_path(exc, path)
                 with contextlib.suppress(OSError):
                     self.update(status="failed", error=f"{type(named).__name__}: {named}")
@@ -219,8 +214,6 @@ class RunWriter:
             writer.writerow(row)
             fh.flush()
         except OSError as exc:  # a full disk: name the file
-            from emulator.io.files import with_path
-
             raise with_path(exc, self.path / method / CSV_FILE) from None
 
     def image_path(self, method: str, camera: str, timestamp_ns: int) -> Path:
