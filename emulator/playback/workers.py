@@ -109,6 +109,9 @@ class _Child:
                 msg = self.conn.recv()
             except (EOFError, OSError):
                 os._exit(0)
+            except Exception as exc:  # noqa: BLE001 - an object that cannot be rebuilt here (its class in a script)
+                self.conn.send(("error", "handoff", f"{type(exc).__name__}: {exc}"))
+                continue
             if msg[0] == "stop":
                 os._exit(0)
             reply = getattr(self, "do_" + msg[0])(*msg[1:])
@@ -282,16 +285,33 @@ def _start(proc) -> None:
     """Start ``proc``, also from a daemonic process (a Dask worker of a dataset run), which
     multiprocessing refuses children: a method worker dies with the fork server, which dies with
     the process that started it, so nothing outlives the run."""
+    from multiprocessing import spawn
+
     me = multiprocessing.current_process()
+    real = spawn.get_preparation_data
+
+    def without_main(name):  # a worker never runs the caller's main script again (a script, stdin, pytest)
+        data = real(name)
+        data.pop("init_main_from_path", None)
+        data.pop("init_main_from_name", None)
+        return data
+
     with _ctx_lock:
         daemon = me._config.get("daemon")
         try:
             if daemon:
                 me._config["daemon"] = False
+            spawn.get_preparation_data = without_main
             proc.start()
         finally:
+            spawn.get_preparation_data = real
             if daemon:
                 me._config["daemon"] = daemon
+
+
+def _handoff(label: str, why) -> str:
+    return (f"AE method {label} cannot be handed to a worker process ({why}); define its class at the top level "
+            "of an importable module, or run it in the run's process (workers='inline', --workers inline)")
 
 
 class MethodWorker:
@@ -316,9 +336,7 @@ class MethodWorker:
                             dict(os.environ)))
         except (pickle.PicklingError, TypeError, AttributeError) as exc:
             self.close()
-            raise PlaybackError(f"AE method {self.label} cannot be handed to a worker process ({exc}); define its "
-                                "class at module level, or run it in the run's process (workers='inline', "
-                                "--workers inline)") from None
+            raise PlaybackError(_handoff(self.label, exc)) from None
 
     def built(self) -> "MethodWorker":
         """Wait for the worker to build its method; raise the build's error (naming the method)."""
@@ -329,6 +347,8 @@ class MethodWorker:
             raise AutoExposureError(f"AE method {self.label} could not be built: {exc}") from None
         if reply[0] == "error":
             self.close()
+            if reply[1] == "handoff":
+                raise PlaybackError(_handoff(self.label, reply[2]))
             raise (PlaybackError if reply[1] == "PlaybackError" else AutoExposureError)(reply[2])
         _, self.name, self._config = reply
         return self
