@@ -50,21 +50,33 @@ def _memory_kib(pid: int) -> dict:
     return out
 
 
+def _cpu_s(pid: int) -> float:
+    """User + system CPU seconds of a process so far (/proc/PID/stat)."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return 0.0
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
 def one_run(seq, response, mode, workers, jobs):
     cfg = RunConfig(mode=mode, initial_ms=INITIAL_MS, range_ms=RANGE_MS, jobs=jobs, workers=workers)
     stats = RunStats()
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     prep = prepare_run(seq, "all", cfg, response, stats=stats)
     traj = {name: [] for name in prep.methods}
-    memory = {}
+    memory, worker_cpu = {}, 0.0
     n = len(seq.cycles)
     for cs in closed_loop(prep.provider, prep.methods, cfg, want_right=True, stats=stats):
         for name, st in cs.steps.items():
             traj[name].append((st.target_ms, st.bracket_ms))
         if cs.cycle == seq.cycles[n - 1].index:
             memory = {name: _memory_kib(m.pid()) for name, m in prep.methods.items() if isinstance(m, MethodWorker)}
+            worker_cpu = sum(_cpu_s(m.pid()) for m in prep.methods.values() if isinstance(m, MethodWorker))
     wall = time.perf_counter() - t0
-    return wall, stats.as_dict(), traj, memory
+    timing = stats.as_dict()
+    timing["cpu_s"] = time.process_time() - c0 + worker_cpu  # this process and its method workers
+    return wall, timing, traj, memory
 
 
 def main(argv=None) -> int:
@@ -100,15 +112,19 @@ def main(argv=None) -> int:
                         results.setdefault(key, []).append((wall, timing, traj, memory))
                         print(f"round {rnd + 1} {mode:9s} {frames:5s} {workers:7s} jobs {jobs}: {wall:6.1f} s, "
                               f"{args.cycles / wall:5.2f} cycles/s, steady {timing['steady_cycles_per_s']:5.2f}, "
+                              f"CPU {timing['cpu_s'] / args.cycles:.3f} s/cycle, "
                               f"load {os.getloadavg()[0]:.1f}", flush=True)
-        print(f"\n{'mode':9s} {'frames':6s} {'workers':7s} {'jobs':>4s} {'cycles/s':>17s} {'steady':>17s} same")
+        print(f"\n{'mode':9s} {'frames':6s} {'workers':7s} {'jobs':>4s} {'cycles/s':>17s} {'steady':>17s} "
+              f"{'CPU s/cycle':>17s} same")
         first = {}
         for (mode, frames, workers, jobs), runs in results.items():
             ref = first.setdefault(mode, runs[0][2])
             rates = ", ".join(f"{args.cycles / r[0]:.2f}" for r in runs)
             steady = ", ".join(f"{r[1]['steady_cycles_per_s']:.2f}" for r in runs)
             same = all(r[2] == ref for r in runs)
-            print(f"{mode:9s} {frames:6s} {workers:7s} {jobs:4d} {rates:>17s} {steady:>17s} {'yes' if same else 'NO'}")
+            cpu = ", ".join(f"{r[1]['cpu_s'] / args.cycles:.3f}" for r in runs)
+            print(f"{mode:9s} {frames:6s} {workers:7s} {jobs:4d} {rates:>17s} {steady:>17s} {cpu:>17s} "
+                  f"{'yes' if same else 'NO'}")
         mem = [(k, r[3]) for k, runs in results.items() for r in runs if r[3]]
         if mem:
             (mode, frames, workers, jobs), m = mem[0]

@@ -47,7 +47,7 @@ DEFAULT_METHOD_TIMEOUT_S = 120.0
 #: ``process``: each method in its own worker process (the default); ``inline``: in the run's process.
 WORKER_MODES = ("process", "inline")
 _FORK_EXIT = 70  # exit status of the child of an os.fork inside a worker (it exits at once)
-_PRELOAD = ["emulator.playback.workers", "emulator.autoexposure.builtin"]
+_PRELOAD = ["emulator.playback._worker_preload"]
 _ctx = None
 _ctx_lock = threading.Lock()
 
@@ -98,6 +98,7 @@ class _Child:
         self.name = None
         self.shm = None
         self.pending = None  # a failure found when the method was built, reported at its first call
+        self.gray_code = None
         self.forked: list = []
         self.allowed = set(threading.enumerate())
         os.register_at_fork(after_in_parent=lambda: self.forked.append(True),
@@ -160,33 +161,42 @@ class _Child:
             except BaseException as exc:  # noqa: BLE001
                 config = {"config_error": f"config(): {_describe(exc)}"}
         self.pending = self._hostile("after it was built")
+        # a built-in's gray image is computed once per image by the run and handed over with it
+        code = None if getattr(type(self.method), "private_images", False) else getattr(self.method, "gray_code", None)
+        self.gray_code = code if isinstance(code, int) else None
         try:
             pickle.dumps(config)
         except Exception:  # noqa: BLE001 - a plugin's config with objects: their text
             config = {k: repr(v) for k, v in config.items()}
-        return ("built", self.name, config)
+        return ("built", self.name, config, self.gray_code)
 
-    def _image(self, shm_name, nbytes, shape, dtype):
+    def _image(self, shm_name, nbytes, shape, dtype, gray_nbytes):
         if self.shm is None or self.shm.name != shm_name:
             if self.shm is not None:
                 self.shm.close()
             self.shm = shared_memory.SharedMemory(name=shm_name)  # the run owns (and removes) the block
         data = bytes(self.shm.buf[:nbytes])  # this worker's own immutable copy
-        return np.frombuffer(data, dtype=np.dtype(dtype)).reshape(shape)
+        raw = np.frombuffer(data, dtype=np.dtype(dtype)).reshape(shape)
+        if gray_nbytes:  # the run's gray image of this frame: what AutoExposureMethod.gray would compute
+            from emulator.autoexposure._frame import FRAME_MEMO
+
+            gray = np.frombuffer(bytes(self.shm.buf[nbytes:nbytes + gray_nbytes]), dtype=np.uint16).reshape(shape)
+            FRAME_MEMO.put(raw, ("gray", self.gray_code), gray)
+        return raw
 
     def _output(self) -> tuple[str, int]:
         from emulator.autoexposure.isolation import captured_output
 
         return captured_output(self.name, clear=True)
 
-    def do_call(self, shm_name, nbytes, shape, dtype, exposure_ms, raw):
+    def do_call(self, shm_name, nbytes, shape, dtype, exposure_ms, raw, gray_nbytes=0):
         from emulator.autoexposure.isolation import _describe, call_method
         from emulator.pools import single_thread_pools
 
         if self.pending is not None:
             return ("fatal", self.pending, "", 0)
         if shape is not None:
-            raw = self._image(shm_name, nbytes, shape, dtype)
+            raw = self._image(shm_name, nbytes, shape, dtype, gray_nbytes)
         self.forked.clear()
         try:
             with single_thread_pools(user_api="blas"):  # results independent of the machine's cores
@@ -325,6 +335,7 @@ class MethodWorker:
         self.failed: str | None = None
         self._guard = 0
         self._config: dict = {}
+        self._gray_code = None
         self._shm_box: list = [None]
         self._conn, child = ctx.Pipe()
         self._proc = ctx.Process(target=_child_main, args=(child,), daemon=True, name="exposim-method")
@@ -350,7 +361,7 @@ class MethodWorker:
             if reply[1] == "handoff":
                 raise PlaybackError(_handoff(self.label, reply[2]))
             raise (PlaybackError if reply[1] == "PlaybackError" else AutoExposureError)(reply[2])
-        _, self.name, self._config = reply
+        _, self.name, self._config, self._gray_code = reply
         return self
 
     def _ask(self, msg):
@@ -374,14 +385,19 @@ class MethodWorker:
             raise MethodFailed(self.failed)
         if isinstance(raw, np.ndarray) and not raw.dtype.hasobject:
             a = np.ascontiguousarray(raw)
+            gray = self._gray(raw)
+            size = a.nbytes + (0 if gray is None else gray.nbytes)
             shm = self._shm_box[0]
-            if shm is None or shm.size < a.nbytes:
+            if shm is None or shm.size < size:
                 if shm is not None:
                     shm.close()
                     shm.unlink()
-                shm = self._shm_box[0] = shared_memory.SharedMemory(create=True, size=max(a.nbytes, 1))
+                shm = self._shm_box[0] = shared_memory.SharedMemory(create=True, size=max(size, 1))
             np.ndarray(a.shape, a.dtype, buffer=shm.buf)[...] = a
-            msg = ("call", shm.name, a.nbytes, a.shape, a.dtype.str, exposure_ms, None)
+            if gray is not None:
+                np.ndarray(gray.shape, gray.dtype, buffer=shm.buf, offset=a.nbytes)[...] = gray
+            msg = ("call", shm.name, a.nbytes, a.shape, a.dtype.str, exposure_ms, None,
+                   0 if gray is None else gray.nbytes)
         else:
             msg = ("call", None, 0, None, None, exposure_ms, raw)
         reply = self._ask(msg)
@@ -396,6 +412,18 @@ class MethodWorker:
             self.failed = reply[1]
             self.kill()
         raise MethodFailed(reply[1])
+
+    def _gray(self, raw):
+        """The method's gray image of ``raw``, computed once per image for every worker (the methods'
+        own conversion and memo: the same bytes the method would compute)."""
+        if self._gray_code is None or raw.ndim != 2 or raw.dtype != np.uint16:
+            return None
+        from emulator.autoexposure._base import to_gray
+        from emulator.autoexposure._frame import FRAME_MEMO
+
+        code = self._gray_code
+        gray = FRAME_MEMO.get(raw, ("gray", code), lambda: to_gray(raw, code))
+        return gray if gray.shape == raw.shape and gray.dtype == np.uint16 else None
 
     @property
     def guard_count(self) -> int:
