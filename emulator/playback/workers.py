@@ -24,6 +24,7 @@ after a call returns).
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing
 import os
 import pickle
@@ -72,12 +73,10 @@ def _context():
 # ---------------------------------------------------------------- the worker's side
 def _die_with_parent() -> None:
     """Linux: SIGKILL when the fork server (which ends with the run) goes."""
-    try:
-        import ctypes
+    import ctypes
 
+    with contextlib.suppress(OSError, AttributeError):  # not Linux: the worker ends when its pipe closes
         ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
-    except (OSError, AttributeError):  # pragma: no cover - not Linux
-        pass
 
 
 def _child_main(conn) -> None:
@@ -450,9 +449,6 @@ class MethodWorker:
             self._conn.close()
         except OSError:  # pragma: no cover
             pass
-
-    def __repr__(self) -> str:
-        return f"MethodWorker({self.name!r}, pid={self._proc.pid})"
 
 
 def start_methods(spec, config, response) -> dict:
