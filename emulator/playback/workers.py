@@ -435,7 +435,7 @@ class MethodWorker:
     def config(self) -> dict:
         return dict(self._config)
 
-    def pid(self) -> int | None:
+    def pid(self) -> int | None:  # noqa: D102
         return self._proc.pid
 
     def kill(self) -> None:
@@ -445,10 +445,8 @@ class MethodWorker:
     def close(self) -> None:
         """Stop the process and release its shared memory."""
         self._finalizer()
-        try:
+        with contextlib.suppress(OSError):
             self._conn.close()
-        except OSError:  # pragma: no cover
-            pass
 
 
 def start_methods(spec, config, response) -> dict:
