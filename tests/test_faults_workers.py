@@ -104,6 +104,26 @@ class Dier(_Base):
         os._exit(3)
 
 
+class ServerKill(_Base):
+    """Kills the process that started the workers (the fork server), not itself."""
+    name = "server-kill"
+    done = False
+
+    def act(self, raw, t):
+        if not ServerKill.done:  # once: afterwards the parent is another process
+            ServerKill.done = True
+            os.kill(os.getppid(), 9)
+
+
+class PidSleeper(_Base):
+    name = "pid-sleeper"
+
+    def act(self, raw, t):
+        with open(os.environ["HOSTILE_PID_FILE"], "w") as fh:
+            fh.write(str(os.getpid()))
+        time.sleep(10 ** 6)
+
+
 class SelfKill(_Base):
     name = "self-kill"
 
@@ -219,6 +239,7 @@ def test_a_method_that_leaves_a_thread_running_fails_and_the_command_exits(seq, 
 @pytest.mark.parametrize("plugin,name,why", [
     ("Dier", "dier", "failed: its process exited with status 3 in next_exposure at cycle 0"),
     ("SelfKill", "self-kill", "failed: its process was killed by SIGKILL in next_exposure at cycle 0"),
+    ("ServerKill", "server-kill", "ok"),
 ])
 def test_a_method_whose_process_dies_fails_alone(seq, alone, plugin_dir, tmp_path, plugin, name, why):
     out = tmp_path / "run"
@@ -311,3 +332,30 @@ def test_interrupts_end_runs_while_cpu_bound_work_runs_beside_them(seq, plugin_d
         for b in burners:
             b.kill()
             b.wait()
+
+
+def test_a_worker_hanging_in_a_call_ends_when_the_run_is_killed(seq, plugin_dir, tmp_path):
+    pid_file = tmp_path / "pid"
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(plugin_dir), os.environ.get("PYTHONPATH", "")]),
+           "HOSTILE_PID_FILE": str(pid_file)}
+    cmd = [sys.executable, "-m", "emulator.cli", "run", str(seq), "--methods", "hostile_workers:PidSleeper",
+           "-o", str(tmp_path / "run"), "--no-progress"]
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 90
+    while not (pid_file.is_file() and pid_file.read_text()):
+        assert time.monotonic() < deadline and proc.poll() is None
+        time.sleep(0.05)
+    worker = int(pid_file.read_text())
+    proc.kill()  # no cleanup in the run: the worker must notice by itself
+    proc.wait()
+    deadline = time.monotonic() + 30
+    while os.path.exists(f"/proc/{worker}") and "zombie" not in _state(worker):
+        assert time.monotonic() < deadline, "the worker outlived the run"
+        time.sleep(0.1)
+
+
+def _state(pid: int) -> str:
+    try:
+        return open(f"/proc/{pid}/status").read().split("State:")[1].split("\n")[0].lower()
+    except (OSError, IndexError):
+        return "zombie"
