@@ -76,7 +76,10 @@ class _Child:
                 continue
             if msg[0] == "stop":
                 os._exit(0)
-            reply = getattr(self, "do_" + msg[0])(*msg[1:])
+            try:
+                reply = getattr(self, "do_" + msg[0])(*msg[1:])
+            except BaseException as exc:  # noqa: BLE001 - e.g. an exception whose message itself raises
+                reply = ("fatal", f"broke its process ({type(exc).__name__} while reporting its result)", "", 0)
             try:
                 self.conn.send(reply)
             except (EOFError, OSError):

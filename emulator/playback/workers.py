@@ -176,6 +176,9 @@ class MethodWorker:
         except MethodFailed as exc:
             self.close()
             raise AutoExposureError(f"AE method {self.label} could not be built: {exc}") from None
+        if reply[0] == "fatal":
+            self.close()
+            raise AutoExposureError(f"AE method {self.label} could not be built: it {reply[1]}")
         if reply[0] == "error":
             self.close()
             if reply[1] == "handoff":
