@@ -171,22 +171,29 @@ def main(argv: list[str] | None = None) -> int:
     previous = None
     if threading.current_thread() is threading.main_thread():
         previous = signal.signal(signal.SIGTERM, _on_sigterm)
+    from emulator.interrupts import watchdog
+
     shown = warnings.showwarning
     warnings.showwarning = _one_line_warning
     try:
-        return _main(argv)
+        with watchdog(lambda: _command_name[0]):  # Ctrl-C / SIGTERM end the command within seconds, whatever runs
+            return _main(argv)
     finally:
         warnings.showwarning = shown
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
 
 
+_command_name = ["exposim"]  # what the watchdog's message names
+
+
 def _main(argv: list[str] | None) -> int:
-    command = "exposim"
+    command = _command_name[0] = "exposim"
     try:
         parser = build_parser()
         args = parser.parse_args(argv)
         command = f"exposim {args.command}" if getattr(args, "command", None) else "exposim"
+        _command_name[0] = command
         for cmd in parser.commands:
             if cmd.error is not None and cmd.name != args.command:
                 print(f"exposim: warning: command '{cmd.name}' is broken ({cmd.error})", file=sys.stderr)

@@ -81,6 +81,11 @@ class CameraResponse:
     _luts: OrderedDict = field(default_factory=OrderedDict, init=False, repr=False)
     _lock: threading.Lock = field(default_factory=threading.Lock, init=False, repr=False)
 
+    def __reduce__(self):
+        # the LUT cache and its lock stay behind (method workers get the table, not the cache)
+        return (type(self), (np.array(self.g), self.white_level, self.black_level, self.name,
+                             None if self.knots is None else np.array(self.knots)))
+
     def __post_init__(self) -> None:
         # private, and immutable at the buffer level (a view of a bytes object): the caller's
         # array stays theirs, and no setflags(write=True) can change the table afterwards
@@ -218,7 +223,8 @@ class CameraResponse:
         if key == 1.0:
             table = np.arange(self.white_level + 1, dtype=np.uint16)
         else:
-            target = self.forward(key * self.g)
+            with np.errstate(over="ignore"):  # a huge ratio overflows to inf, which clips to white as it should
+                target = self.forward(key * self.g)
             table = np.clip(np.rint(target), self.black_level, self.white_level).astype(np.uint16)
         dn = np.arange(self.white_level + 1)
         clipped_high = dn >= self.white_level

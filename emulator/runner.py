@@ -29,6 +29,7 @@ from emulator.errors import PlaybackError
 from emulator.gray import bayer_to_gray8
 from emulator.io.runfolder import CSV_COLUMNS, CSV_FILE, RUN_FILE, RunWriter, format_row, tables_from_rows
 from emulator.playback.config import CONFIG_KEYS
+from emulator.playback.workers import effective_timeout_s
 from emulator.playback import METHOD_CAMERA, MethodStep, RunConfig, RunStats, closed_loop, prepare_run, \
     resolve_sequence
 from emulator.io.runcsv import NATIVE_COLUMNS
@@ -242,6 +243,8 @@ def write_run(sequence, methods, out_dir, config: RunConfig | None = None, *, re
             if cfg.rate == "native":
                 run_json["native"] = provider.describe()  # window, warp, latency, benchmarked frames
         run_json["jobs"] = cfg.jobs
+        run_json["workers"] = cfg.workers  # how the methods ran (results do not depend on it)
+        run_json["method_timeout_applied_s"] = effective_timeout_s(cfg)
         partial = [{"cycle": c.index, "missing": c.missing_by_camera(seq.cameras)} for c in seq.cycles
                    if c.missing_by_camera(seq.cameras)]
         if partial:  # flagged in the report (emulator.report.run); absent when every cycle is complete
@@ -286,11 +289,7 @@ def _loop_into(writer: RunWriter, provider, built: dict, cfg: RunConfig, stats: 
                 if rec is None:
                     writer.append_row(name, row)
                 elif rec != row:
-                    raise PlaybackError(
-                        f"{out / name / CSV_FILE}: resume replay of cycle {st.cycle} differs from the recorded "
-                        f"row ({','.join(rec[:len(CSV_COLUMNS)])} recorded, "
-                        f"{','.join(row[:len(CSV_COLUMNS)])} replayed); the folder was written by another "
-                        "configuration or version")
+                    raise PlaybackError(_resume_mismatch(out / name / CSV_FILE, st.cycle, rec, row))
                 rows[name].append(row)
             done += 1
             if done % RUN_JSON_EVERY == 0:
@@ -314,6 +313,21 @@ def _loop_into(writer: RunWriter, provider, built: dict, cfg: RunConfig, stats: 
         writer.update(status=status, cycles_done=done, skipped_cycles=skipped, timing=stats.as_dict(),
                       method_status=method_status)
     return rows
+
+
+def _resume_mismatch(path: Path, cycle: int, recorded: list[str], replayed: list[str]) -> str:
+    """One line naming the columns where a resumed folder's row and the replay differ."""
+    from emulator.io.runfolder import EXTRA_COLUMNS
+
+    names = list(CSV_COLUMNS) + list(EXTRA_COLUMNS)
+    n = max(len(recorded), len(replayed))
+    cell = lambda row, i: row[i] if i < len(row) else "(none)"  # noqa: E731
+    diff = [i for i in range(n) if cell(recorded, i) != cell(replayed, i)]
+    shown = "; ".join(f"{names[i] if i < len(names) else f'column {i + 1}'} {cell(recorded, i)} recorded, "
+                      f"{cell(replayed, i)} replayed" for i in diff[:3])
+    more = f" and {len(diff) - 3} more column(s)" if len(diff) > 3 else ""
+    return (f"{path}: resume replay of cycle {cycle} differs from the recorded row ({shown}{more}); the table was "
+            "edited, or the folder was written by another configuration or version of exposim")
 
 
 #: File in a method's folder holding what the method printed (stdout and stderr, in order).

@@ -221,7 +221,11 @@ def check_target(out_dir: Path, overwrite: bool) -> None:
 
 def new_staging(out_dir: Path) -> Path:
     """The hidden staging folder ``.NAME.partial-XXXXXXXX`` beside ``out_dir`` (umask honoured)."""
-    return make_staging_dir(out_dir.parent, f".{out_dir.name}.partial-")
+    from emulator.interrupts import remove_at_forced_exit
+
+    staging = make_staging_dir(out_dir.parent, f".{out_dir.name}.partial-")
+    remove_at_forced_exit(staging)  # a process ended seconds after Ctrl-C leaves no partial dataset
+    return staging
 
 
 def publish(staging: Path, out_dir: Path, overwrite: bool) -> None:

@@ -42,7 +42,9 @@ def test_kim_fit_failure_is_recorded_per_cycle_and_in_the_report(seq, tmp_path, 
 
     monkeypatch.setattr(kim_mod.Kim2018, "_fit", failing_fit)
     out = tmp_path / "run"
-    assert main(["run", str(seq), "--methods", "kim,classical-50", "-o", str(out), "--no-progress"]) == 0
+    # the patch is in this process: the methods run here too (--workers inline)
+    assert main(["run", str(seq), "--methods", "kim,classical-50", "-o", str(out), "--no-progress",
+                 "--workers", "inline"]) == 0
     rows = (out / "kim" / "exposures.csv").read_text().splitlines()
     header = rows[0].split(",")
     guarded = [int(r.split(",")[header.index("guarded")]) for r in rows[1:]]

@@ -39,12 +39,13 @@ def _tables(run_dir, names):
 
 
 def test_ctrl_c_inside_a_method_stops_the_run_and_keeps_a_valid_prefix(dataset, tmp_path):
+    """In the run's process (--workers inline) a KeyboardInterrupt during a call is Ctrl-C."""
     seq = dataset / "b"
     methods = f"{MOD}:Interrupt,classical-50"
     clean = tmp_path / "clean"
     out = tmp_path / "run"
     try:
-        rc = main(["run", str(seq), "--methods", methods, "-o", str(out), "-q"])
+        rc = main(["run", str(seq), "--methods", methods, "-o", str(out), "-q", "--workers", "inline"])
     except KeyboardInterrupt:
         rc = 130
     assert rc == 130, rc  # Ctrl-C stops the run: it is not one method's failure
@@ -55,6 +56,19 @@ def test_ctrl_c_inside_a_method_stops_the_run_and_keeps_a_valid_prefix(dataset, 
     # so resume only classical-50's share: the table it has is a prefix of the clean one
     got = (out / "classical-50" / "exposures.csv").read_bytes()
     assert (clean / "classical-50" / "exposures.csv").read_bytes().startswith(got)
+
+
+def test_keyboard_interrupt_raised_by_a_method_in_its_worker_is_its_own_failure(dataset, tmp_path):
+    """A worker never receives the terminal's Ctrl-C (it runs in its own session), so a
+    KeyboardInterrupt there is the method's own doing: it fails alone, named, and the run completes."""
+    seq = dataset / "b"
+    clean, out = tmp_path / "clean", tmp_path / "run"
+    assert main(["run", str(seq), "--methods", f"{MOD}:Interrupt,classical-50", "-o", str(out), "-q"]) == 0
+    assert main(["run", str(seq), "--methods", "classical-50", "-o", str(clean), "-q"]) == 0
+    info = json.loads((out / "run.json").read_text())
+    assert info["status"] == "complete"
+    assert info["method_status"]["h-interrupt"] == "failed: raised KeyboardInterrupt:  at cycle 2"
+    assert (out / "classical-50" / "exposures.csv").read_bytes() == (clean / "classical-50" / "exposures.csv").read_bytes()
 
 
 def test_sigterm_marks_the_run_interrupted_and_resume_gives_the_clean_bytes(dataset, tmp_path):

@@ -186,7 +186,7 @@ def test_non_finite_proposal_is_guarded_and_counted(static_seq, tmp_path):
         def next_exposure(self, raw, exposure_ms):
             return math.nan
 
-    res = run(root, [Broken()], initial_ms=3.0)
+    res = run(root, [Broken()], initial_ms=3.0, workers="inline")  # a local class stays in this process
     steps = res.steps["broken"]
     assert all(s.guarded and s.next_ms == 3.0 for s in steps)
 

@@ -77,6 +77,18 @@ class FrameMemo:
                 self._data.popitem(last=False)
         return value
 
+    def put(self, frame: np.ndarray, key: Hashable, value) -> None:
+        """Record ``value`` (read-only) as ``key`` of ``frame`` (immutable), as :meth:`get` would after computing it."""
+        if not is_immutable(frame):
+            return
+        if isinstance(value, np.ndarray):
+            value.setflags(write=False)
+        with self._lock:
+            self._data[(id(frame), key)] = (frame, value)
+            self._data.move_to_end((id(frame), key))
+            while len(self._data) > self.size:
+                self._data.popitem(last=False)
+
     def clear(self) -> None:
         with self._lock:
             self._data.clear()

@@ -47,7 +47,7 @@ from emulator.autoexposure._base import MethodFailed
 from emulator.autoexposure._frame import is_immutable
 
 __all__ = ["call_method", "call_factory", "frozen", "is_frozen", "readonly_view", "is_readonly_view",
-           "absolute", "captured_output", "MAX_CAPTURED_CHARS"]
+           "absolute", "captured_output", "keep_output", "MAX_CAPTURED_CHARS"]
 
 #: Characters of a method's printed output kept per method (the rest is counted, not kept).
 MAX_CAPTURED_CHARS = 65536
@@ -202,6 +202,17 @@ def _keep_output(name: str, parts: list) -> None:
         room = MAX_CAPTURED_CHARS - len(kept[0])
         kept[0] += text[: max(room, 0)]
         kept[1] += len(text)
+
+
+def keep_output(name: str, text: str, total: int) -> None:
+    """Add what a method printed elsewhere (its worker process): ``text`` kept of ``total`` characters."""
+    if not total:
+        return
+    with _stream_lock:
+        kept = _outputs.setdefault(name, ["", 0])
+        room = MAX_CAPTURED_CHARS - len(kept[0])
+        kept[0] += text[: max(room, 0)]
+        kept[1] += int(total)
 
 
 def captured_output(name: str | None = None, *, clear: bool = False):

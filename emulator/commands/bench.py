@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 import shlex
 import shutil
 import sys
@@ -88,7 +87,9 @@ def _removed_on_failure(output):
 def _print_json(results: dict) -> None:
     from emulator.io.files import to_jsonable
 
-    print(json.dumps(to_jsonable(results), indent=1))
+    from emulator.io.files import strict_json
+
+    print(strict_json(to_jsonable(results), indent=1))
 
 
 def _features(args: argparse.Namespace) -> int:
@@ -237,7 +238,9 @@ def _rpe(args: argparse.Namespace) -> int:
               "does not; the order is REF EST as in evo_rpe: swap the files if they are the wrong way round",
               file=sys.stderr)
     if args.json:
-        print(json.dumps({"rmse": stats["rmse"], "mean": stats["mean"], "median": stats["median"]}))
+        from emulator.io.files import strict_json
+
+        print(strict_json({"rmse": stats["rmse"], "mean": stats["mean"], "median": stats["median"]}))
     else:
         unit = "frames" if args.delta_unit == "f" else "m"
         scaled = f", scale corrected x{stats['scale']:.6f}" if args.align_scale else ""

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 from emulator.commands.progress import add_quiet, bars_enabled
@@ -52,7 +51,9 @@ def _cache(args) -> int:
 
         s = build_frame_cache(args.sequence, args.frame_cache, level=args.level, progress=progress)
     if args.json:
-        print(json.dumps({k: str(v) if isinstance(v, Path) else v for k, v in s.items()}, indent=1))
+        from emulator.io.files import strict_json
+
+        print(strict_json({k: str(v) if isinstance(v, Path) else v for k, v in s.items()}, indent=1))
         return 0
     ratio = s["cache_bytes"] / s["png_bytes"] if s["png_bytes"] else float("nan")
     print(f"{s['cache_dir']}: {s['frames']} frames ({s['written']} written, {s['kept']} kept, "

@@ -183,7 +183,9 @@ def _calibrate(args) -> int:
         if score:
             d["cross_bracket"] = {k: {"response": v.response_name, "median_pct": v.median_pct,
                                       "mean_pct": v.mean_pct, "n_pairs": len(v.pairs)} for k, v in score.items()}
-        print(json.dumps(d))
+        from emulator.io.files import strict_json
+
+        print(strict_json(d))
         return 0
     info = result.info
     print(f"method      {result.method}")
@@ -242,7 +244,9 @@ def _calibrate_noise(args) -> int:
         d = json_safe(estimate.to_dict())
         d.update(output=str(out), sequence=str(seq.path), response=response.name,
                  full_well_std=json_safe(full_well_std))
-        print(json.dumps(d))
+        from emulator.io.files import strict_json
+
+        print(strict_json(d))
         return 0
 
     def pm(value: float, std: float, fmt: str, unit: str) -> str:

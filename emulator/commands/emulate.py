@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 from pathlib import Path
 
 from emulator.errors import ExposimError
@@ -189,7 +190,14 @@ def _blur_info(motion, cam: str, timestamp_ns: int, source_ms: float, target_ms:
     mismatch = src - tgt
     if consistent and mismatch < 0:
         mismatch = 0.0
-    return {"source_blur_px": src, "target_blur_px": tgt, "blur_mismatch_px": mismatch}
+    out = {"source_blur_px": src, "target_blur_px": tgt, "blur_mismatch_px": mismatch}
+    for key, ms in (("source_blur_px", source_ms), ("target_blur_px", target_ms)):
+        if not math.isfinite(out[key]):  # strict JSON: null, and why
+            out[key] = None
+            out["blur_mismatch_px"] = None
+            out["blur_note"] = (f"no blur predicted for the {ms:g} ms exposure window: the IMU record does not "
+                                "cover it")
+    return out
 
 
 def _has_calibration(sequence, calibration) -> bool:
@@ -229,7 +237,9 @@ def _emulate(args) -> int:
         info["cameras"][cam]["output"] = str(path)
     info["save"] = args.save
     if args.json:
-        print(json.dumps(info, indent=1))
+        from emulator.io.files import strict_json
+
+        print(strict_json(info, indent=1))
     else:
         print(
             f"cycle {info['cycle']}: target {info['target_ms']:g} ms from bracket {info['bracket_ms']:g} ms "
@@ -238,6 +248,8 @@ def _emulate(args) -> int:
         )
         for cam, c in info["cameras"].items():
             blur = (f"; blur source {c['source_blur_px']:.2f} px, target {c['target_blur_px']:.2f} px, excess "
-                    f"{c['blur_mismatch_px']:+.2f} px" if "blur_mismatch_px" in c else "")
+                    f"{c['blur_mismatch_px']:+.2f} px" if c.get("blur_mismatch_px") is not None else "")
+            if c.get("blur_note"):
+                blur = f"; {c['blur_note']}"
             print(f"  {cam:5s} {c['source']} (t = {c['timestamp_ns']} ns) -> {c['output']}{blur}")
     return 0

@@ -6,7 +6,6 @@ Only parses arguments and calls :func:`emulator.io.export.export_method`.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 
 __all__ = ["register"]
@@ -37,7 +36,9 @@ def _export(args: argparse.Namespace) -> int:
     summary = export_method(run, args.method, args.output, args.format, calibration=calib, mono8=args.mono8,
                             metadata={"calibration_written": written})
     if args.json:
-        print(json.dumps(summary))
+        from emulator.io.files import strict_json
+
+        print(strict_json(summary))
     else:
         print(f"exported {summary['n_images']} images of {args.method} ({', '.join(summary['cameras'])}; "
               f"{', '.join(summary['encodings'])}) as {args.format} to {summary['output']}", file=sys.stderr)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 __all__ = ["register"]
@@ -45,7 +44,9 @@ def _info(args) -> int:
     desc["imu"], desc["blur"] = _motion(seq, args)
     desc["response"], desc["calibration"] = _found_files(seq, args.calibration)
     if args.json:
-        print(json.dumps(desc, indent=1))
+        from emulator.io.files import strict_json
+
+        print(strict_json(desc, indent=1))
         return 0
     print(f"sequence   {seq.path}")
     print(f"cameras    {', '.join(seq.cameras)}")

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import shlex
 import sys
 from pathlib import Path
@@ -42,7 +41,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--png-level", type=int, default=None, metavar="0..9",
                    help="zlib level of the saved images (default 0: stored, the fastest; 1..9 smaller files, the "
                         "same decoded images)")
-    p.add_argument("--jobs", type=int, default=1, help="threads across methods (same output for any value)")
+    p.add_argument("--jobs", type=int, default=1,
+                   help="how many methods compute at once, each in its own process (same output for any value)")
     p.add_argument("--mode", choices=("paper", "borealhdr"), default=None,
                    help="method behaviour: paper (default, reference defects corrected) or borealhdr (reference code)")
     p.add_argument("--initial-ms", type=float, default=None,
@@ -98,8 +98,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scheduler-file", type=Path, default=None, metavar="PATH",
                    help="dataset runs: the scheduler file of a running Dask cluster (dask scheduler "
                         "--scheduler-file PATH, dask-jobqueue)")
-    p.add_argument("--workers", type=int, default=None,
-                   help="dataset runs: worker processes (--scheduler local) or threads (--scheduler threads)")
+    p.add_argument("--workers", type=_workers_arg, default=None, metavar="N|process|inline",
+                   help="process (default): every AE method in its own process, stopped past --method-timeout-s; "
+                        "inline: in the run's process (debugging only: a method can then stall or change the run); "
+                        "dataset runs: N worker processes (--scheduler local) or threads (--scheduler threads)")
     p.add_argument("--group-size", type=int, default=None,
                    help="dataset runs: methods per unit of work (default: all, one unit per sequence, the methods "
                         "sharing decoded images; 1: one (sequence, method) per unit, the finest parallelism)")
@@ -128,8 +130,9 @@ def _add_plugin_arguments(p: argparse.ArgumentParser) -> None:
     action.help += extra.replace("%", "%%")
     p.add_argument("--method-timeout-s", "--method-timeout", dest="method_timeout_s", type=float, default=None,
                    metavar="S",
-                   help="per-call wall-time limit of a method, s: a slower call fails the method (its rows stop, "
-                   "the others go on); default none (--method-timeout: deprecated alias)")
+                   help="per-call wall-time limit of a method, s: a call still running then is stopped and the method "
+                   "fails (its rows stop, the others go on); default 120 (--workers inline: checked only after the "
+                   "call returns, no default; --method-timeout: deprecated alias)")
     p.add_argument("--strict", action="store_true",
                    help="exit with code 1 when a method failed (default: 0, failures named in the summary)")
 
@@ -141,6 +144,16 @@ def _warn_broken_plugins() -> None:
     for name, plugin in installed_methods().items():
         if plugin.error is not None:
             print(f"exposim run: warning: AE method plugin '{name}' is broken ({plugin.error})", file=sys.stderr)
+
+
+def _workers_arg(text: str):
+    """``--workers``: a count (dataset runs) or how methods run (process, inline)."""
+    if text in ("process", "inline"):
+        return text
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of workers, process or inline, got {text!r}") from None
 
 
 def _command(args) -> str:
@@ -159,6 +172,8 @@ def _command(args) -> str:
         parts += ["--option", text]
     if args.jobs != 1:
         parts += ["--jobs", str(args.jobs)]
+    if getattr(args, "workers", None) == "inline":
+        parts += ["--workers", "inline"]
     if getattr(args, "blur_aware", False):
         parts.append("--blur-aware")
     if getattr(args, "skip_partial", False):
@@ -191,6 +206,7 @@ def _given(args) -> dict:
             "selector": args.selector, "mode": args.mode, "options": options or None, "jobs": args.jobs,
             "save": args.save, "noise": args.noise, "noise_model": args.noise_model, "noise_seed": args.noise_seed,
             "method_timeout_s": args.method_timeout_s,
+            "workers": args.workers if isinstance(getattr(args, "workers", None), str) else None,
             "response_path": str(args.response) if args.response is not None else None,
             "png_level": args.png_level, "blur": args.blur, "blur_aware": True if args.blur_aware else None,
             "skip_partial": True if getattr(args, "skip_partial", False) else None,
@@ -224,7 +240,7 @@ def _check_args(args) -> None:
         if seed is not None and not 0 <= seed <= SEED_MAX:
             raise ExposimError(f"{flag} {seed}: must be in 0..{SEED_MAX}")
     for flag, count in (("--workers", args.workers), ("--group-size", args.group_size)):
-        if count is not None and count < 1:  # 0 would silently mean "default"
+        if isinstance(count, int) and count < 1:  # 0 would silently mean "default"
             raise ExposimError(f"{flag} {count}: must be >= 1")
     if args.noise_model is not None and args.noise != "consistent" and not args.resume:
         raise ExposimError("--noise-model is used only with --noise consistent")
@@ -342,7 +358,9 @@ def _print_run_summary(args, summary: dict) -> int:
     failed = {n: m["status"] for n, m in summary["methods"].items() if m.get("status", "ok").startswith("failed")}
     rc = 1 if failed and args.strict else 0
     if args.json:
-        print(json.dumps(summary, indent=1), file=getattr(args, "json_stream", None) or sys.stdout)
+        from emulator.io.files import strict_json
+
+        print(strict_json(summary, indent=1), file=getattr(args, "json_stream", None) or sys.stdout)
         return rc
     print(f"run folder  {args.output}")
     native = summary.get("rate") == "native"
@@ -395,8 +413,15 @@ def _check_methods_once(methods: str, run_options: dict) -> None:
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        build_methods(methods, mode=run_options.get("mode") or "paper", response=None,
-                      options=run_options.get("options"))
+        if run_options.get("workers") == "inline":
+            build_methods(methods, mode=run_options.get("mode") or "paper", response=None,
+                          options=run_options.get("options"))
+            return
+        from emulator.playback import RunConfig
+        from emulator.playback.workers import start_methods, stop_methods
+
+        config = RunConfig(mode=run_options.get("mode") or "paper", options=run_options.get("options") or {})
+        stop_methods(start_methods(methods, config, None))  # built in worker processes, as the run builds them
 
 
 def _run_dataset(args) -> int:
@@ -412,7 +437,8 @@ def _run_dataset(args) -> int:
     group_size = args.group_size or recorded.get("group_size")
     scheduler, scheduler_file = (("threads", None) if args.scheduler == "threads" and args.scheduler_file is None
                                  else resolve_scheduler(args.scheduler, args.scheduler_file))
-    _check_methods_once(methods, {"mode": config.mode, "options": config.options})  # before dataset.json exists
+    _check_methods_once(methods, {"mode": config.mode, "options": config.options,  # before dataset.json exists
+                                  "workers": config.workers})
 
     bar = None
     progress = None
@@ -428,12 +454,14 @@ def _run_dataset(args) -> int:
     try:
         summary = run_dataset(args.sequence, args.output, config, sequences=args.sequences, methods=methods,
                               group_size=group_size, scheduler=scheduler, scheduler_file=scheduler_file,
-                              n_workers=args.workers, retries=args.retries, resume=args.resume, progress=progress)
+                              n_workers=args.workers if isinstance(args.workers, int) else None, retries=args.retries, resume=args.resume, progress=progress)
     finally:
         if bar is not None:
             bar.close()
     if args.json:
-        print(json.dumps(summary, indent=1), file=getattr(args, "json_stream", None) or sys.stdout)
+        from emulator.io.files import strict_json
+
+        print(strict_json(summary, indent=1), file=getattr(args, "json_stream", None) or sys.stdout)
     else:
         t = summary["throughput"]
         print(f"dataset run {args.output}  ({len(summary['sequences'])} sequences, {len(summary['units'])} units, "

@@ -116,17 +116,22 @@ class FolderSource:
 
     def read_bytes(self, path: Path) -> bytes:
         path = Path(path)
+        if path.is_dir():
+            raise DatasetError(f"{path}: is a folder, expected an image file <timestamp_ns>.png")
         if not path.is_file():
             raise FileNotFoundError(f"{path}: image not found")
         return path.read_bytes()
 
     def read_head(self, path: Path, n: int) -> bytes:
         """The first ``n`` bytes of a file (a PNG's signature and IHDR chunk)."""
-        fd = os.open(path, os.O_RDONLY)  # unbuffered: ~2x faster than open() for 24 bytes
         try:
-            return os.read(fd, n)
-        finally:
-            os.close(fd)
+            fd = os.open(path, os.O_RDONLY)  # unbuffered: ~2x faster than open() for 24 bytes
+            try:
+                return os.read(fd, n)
+            finally:
+                os.close(fd)
+        except IsADirectoryError:
+            raise DatasetError(f"{path}: is a folder, expected an image file <timestamp_ns>.png") from None
 
     def __repr__(self) -> str:
         return f"FolderSource({str(self.root)!r})"

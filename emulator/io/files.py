@@ -34,6 +34,7 @@ import numpy as np
 from emulator.errors import DatasetError, ExposimError, OutputExistsError
 
 __all__ = [
+    "strict_json",
     "read_bytes",
     "RESULTS_FILE",
     "REPORT_FILE",
@@ -150,6 +151,34 @@ def read_text(path: str | os.PathLike, error: type[Exception] = DatasetError) ->
 
 
 # ---------------------------------------------------------------------------- JSON
+def strict_json(obj, *, indent=None, reasons: Mapping | None = None) -> str:
+    """``obj`` as strict JSON text (no NaN or Infinity, which strict parsers refuse): a non-finite
+    figure becomes ``null``, and a mapping at the top level gets ``"null_reasons"``, key path ->
+    why (``reasons`` by key path, else what the value was)."""
+    found: dict[str, str] = {}
+
+    def clean(value, where):
+        if isinstance(value, Mapping):
+            return {str(k): clean(v, f"{where}.{k}" if where else str(k)) for k, v in value.items()}
+        if isinstance(value, (list, tuple)):
+            return [clean(v, f"{where}[{i}]") for i, v in enumerate(value)]
+        if isinstance(value, np.ndarray):
+            return clean(value.tolist(), where)
+        if isinstance(value, np.generic):
+            value = value.item()
+        if isinstance(value, float) and not math.isfinite(value):
+            found[where] = (reasons or {}).get(where) or f"not a finite number ({value!r})"
+            return None
+        if isinstance(value, os.PathLike):
+            return os.fspath(value)
+        return value
+
+    out = clean(obj, "")
+    if found and isinstance(out, dict):
+        out.setdefault("null_reasons", {}).update(found)
+    return json.dumps(out, indent=indent, allow_nan=False, default=str)
+
+
 def to_jsonable(obj, *, where: str = "", float_digits: int | None = None):
     """``obj`` with numpy scalars/arrays, tuples and paths turned into JSON types.
 

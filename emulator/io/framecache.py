@@ -118,11 +118,13 @@ def read_cached_frame(path, *, png_path=None, white_level: int | None = None) ->
     import zstandard
 
     path = Path(path)
+    source = f" (cache of {png_path})" if png_path is not None else ""
     try:
         fh = open(path, "rb")
     except FileNotFoundError:
         return None
-    source = f" (cache of {png_path})" if png_path is not None else ""
+    except IsADirectoryError:
+        raise FrameCacheEntryError(f"{path}: is a folder, not a frame cache entry{source}; rebuild the cache") from None
     try:
         with fh, zstandard.ZstdDecompressor().stream_reader(fh) as reader:
             head = reader.read(len(MAGIC))

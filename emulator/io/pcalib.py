@@ -89,7 +89,10 @@ def read_pcalib(path: str | os.PathLike) -> np.ndarray:
         try:
             values[i] = float(tok)
         except ValueError:
-            raise ResponseError(f"{path}: sample {i} is {tok!r}, not a number") from None
+            shown = tok if len(tok) <= 40 else f"{tok[:40]}... ({len(tok)} characters)"
+            sep = next((c for c in ",;\t" if c in tok), None)
+            hint = f"; samples are separated by {sep!r}, a pcalib file separates them by spaces" if sep else ""
+            raise ResponseError(f"{path}: sample {i} is {shown!r}, not a number{hint}") from None
     bad = ~np.isfinite(values)
     if bad.any():
         first = int(np.flatnonzero(bad)[0])

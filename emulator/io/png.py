@@ -35,7 +35,7 @@ PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 
 def png_structure_problem(data: bytes) -> str | None:
-    """What is wrong with a PNG's chunk structure (lengths, CRCs, IHDR first, IEND last), or None.
+    """What is wrong with a PNG's chunk structure (lengths, CRCs, IHDR first, image data, IEND last), or None.
 
     Checked before decoding so that a damaged file is one clear error, without the lines
     libpng prints on stderr.  Costs one CRC pass over the file (about a millisecond per MB).
@@ -46,7 +46,7 @@ def png_structure_problem(data: bytes) -> str | None:
     view = memoryview(data)  # slices without copies
     unpack, crc32 = struct.unpack_from, zlib.crc32
     pos, n = 8, len(data)
-    first = True
+    first, idat = True, False
     while pos + 12 <= n:
         length, ctype = unpack(">I4s", data, pos)
         end = pos + 12 + length
@@ -57,8 +57,9 @@ def png_structure_problem(data: bytes) -> str | None:
         if first and ctype != b"IHDR":
             return "first chunk is not IHDR"
         first = False
+        idat = idat or ctype == b"IDAT"
         if ctype == b"IEND":
-            return None
+            return None if idat else "no IDAT chunk (the image data is missing)"
         pos = end
     return "no IEND chunk (truncated)"
 

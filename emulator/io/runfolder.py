@@ -32,6 +32,7 @@ so the interrupted run can be resumed.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import os
@@ -44,7 +45,7 @@ from pathlib import Path
 import numpy as np
 
 from emulator.errors import OutputExistsError, RunFolderError
-from emulator.io.files import format_timestamp_s, read_metadata, write_metadata
+from emulator.io.files import format_timestamp_s, read_metadata, with_path, write_metadata
 from emulator.io.png import write_png8, write_png16
 from emulator.io.runcsv import (CSV_COLUMNS, CSV_FILE, EXTRA_COLUMNS, format_row, read_csv_rows, read_tables,
                                 tables_from_rows)
@@ -179,21 +180,23 @@ class RunWriter:
             self.run_json["resume_repairs"] = list(self.run_json.get("resume_repairs", [])) + repairs
         self.update(status="running", writer=self.lock.owner if self.lock else None)
         for name in methods:
-            mdir = self.path / name
-            if save != "none":
-                for cam in cameras:
+            mdir, path = self.path / name, self.path / name / CSV_FILE
+            try:
+                for cam in cameras if save != "none" else ():
                     (mdir / IMAGES_DIR / cam).mkdir(parents=True, exist_ok=True)
-            path = mdir / CSV_FILE
-            rows = read_csv_rows(path, repair=True) if self.resume else []
-            self._recorded[name] = {int(r[0]): r for r in rows}
-            mdir.mkdir(parents=True, exist_ok=True)
-            new = not path.exists() or path.stat().st_size == 0
-            fh = open(path, "a", newline="")
-            writer = csv.writer(fh, lineterminator="\n")
-            if new:
-                writer.writerow(CSV_COLUMNS + EXTRA_COLUMNS + tuple(columns))  # native rate: NATIVE_COLUMNS
-                fh.flush()
-            self._csv[name] = (fh, writer)
+                self._recorded[name] = {int(r[0]): r for r in (read_csv_rows(path, repair=True) if self.resume else [])}
+                mdir.mkdir(parents=True, exist_ok=True)
+                new = not path.exists() or path.stat().st_size == 0
+                fh = open(path, "a", newline="")
+                self._csv[name] = (fh, csv.writer(fh, lineterminator="\n"))
+                if new:
+                    self._csv[name][1].writerow(CSV_COLUMNS + EXTRA_COLUMNS + tuple(columns))  # native: NATIVE_COLUMNS
+                    fh.flush()
+            except OSError as exc:  # a full disk while writing a header: name the file, and run.json says so
+                named = with_path(exc, path)
+                with contextlib.suppress(OSError):
+                    self.update(status="failed", error=f"{type(named).__name__}: {named}")
+                raise named from None
 
     def update(self, **fields) -> None:
         """Set fields of ``run.json`` (and the time of the update) and write it atomically."""
@@ -211,8 +214,6 @@ class RunWriter:
             writer.writerow(row)
             fh.flush()
         except OSError as exc:  # a full disk: name the file
-            from emulator.io.files import with_path
-
             raise with_path(exc, self.path / method / CSV_FILE) from None
 
     def image_path(self, method: str, camera: str, timestamp_ns: int) -> Path:

@@ -85,6 +85,12 @@ def _same_file(a, b) -> bool:
         return False
 
 
+def _applied_timeout(config) -> float | None:
+    from emulator.playback.workers import effective_timeout_s
+
+    return effective_timeout_s(config)
+
+
 def _number(value, name: str) -> float:
     if isinstance(value, bool):
         raise PlaybackError(f"{name} must be a number, got {value!r}")
@@ -112,7 +118,10 @@ class RunConfig:
     options : mapping
         Per-method options, ``{method: {key: value}}`` (``--option METHOD.KEY=VALUE``).
     jobs : int
-        Threads across the methods of a cycle (results do not depend on it).
+        How many methods compute at once (each in its own worker process; results do not depend on it).
+    workers : {"process", "inline"}
+        ``process`` (the default): every method in its own worker process, with a time limit that
+        interrupts; ``inline``: in the run's own process (for debugging; no isolation from the run).
     save : {"none", "png16", "png8"}
         What a run folder keeps of the emulated images.
     noise : {"none", "consistent"}
@@ -122,7 +131,8 @@ class RunConfig:
     noise_seed : int
         Seed of the added noise (>= 0).
     method_timeout_s : float or None
-        Per-call wall-time limit of ``next_exposure``, s (> 0), or None.
+        Per-call wall-time limit of ``next_exposure``, s (> 0), or None: with workers, the default
+        limit (:data:`emulator.playback.workers.DEFAULT_METHOD_TIMEOUT_S`); inline, none.
     response_path : str, path or None
         A pcalib file; None: the one found beside the recording.
     blur : {"none", "consistent"}
@@ -152,6 +162,7 @@ class RunConfig:
     mode: str = "paper"
     options: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
     jobs: int = 1
+    workers: str = "process"
     save: str = "none"
     noise: str = "none"
     noise_model: Any = None
@@ -190,6 +201,8 @@ class RunConfig:
         if isinstance(self.jobs, bool) or not isinstance(self.jobs, (int, np.integer)) or int(self.jobs) < 1:
             raise PlaybackError(f"jobs must be an integer >= 1, got {self.jobs!r}")
         put(self, "jobs", int(self.jobs))
+        if self.workers not in ("process", "inline"):
+            raise PlaybackError(f"workers must be process or inline, got {self.workers!r}")
         if self.save not in SAVE_MODES:
             raise PlaybackError(f"save must be one of {', '.join(SAVE_MODES)}, got {self.save!r}")
         from emulator.emulate import NOISE_MODES
@@ -348,6 +361,8 @@ class RunConfig:
             "method_timeout_s": self.method_timeout_s,
             "noise": noise,
             "jobs": self.jobs,
+            "workers": self.workers,
+            "method_timeout_applied_s": _applied_timeout(self),
             "png_level": self.png_level,
             "blur": (blur_hook.describe() if blur_hook is not None else
                      {"mode": self.blur, **({"placement": DEFAULT_PLACEMENT} if self.blur == "consistent" else {}),
@@ -372,6 +387,7 @@ class RunConfig:
             mode=run_json.get("mode") or "paper",
             options=run_json.get("options") or {},
             jobs=int(run_json.get("jobs") or 1),
+            workers=run_json.get("workers") or "process",
             save=run_json.get("save") or "none",
             noise=noise.get("mode", "none"),
             noise_model=model if model and Path(model).is_file() else None,
@@ -425,4 +441,4 @@ class RunConfig:
             raise PlaybackError(f"{where}: --resume with a different configuration ({', '.join(diff)}): recorded "
                                 + "; ".join(f"{k}={theirs.get(k)!r}" for k in diff))
         keep = {k: getattr(self, k) for k in ("response_path", "noise_model") if getattr(self, k) is not None}
-        return old.replace(jobs=self.jobs, **keep)
+        return old.replace(jobs=self.jobs, workers=self.workers, **keep)

@@ -26,8 +26,11 @@ For each tick the loop hands every method that has not failed the shot at its cu
 exposure, asks it through :func:`emulator.playback.seam.call_method` (the one call site),
 and records a :class:`MethodStep`.  A method that fails (raises
 :class:`~emulator.autoexposure.registry.MethodFailed`, including a call over the time
-limit) gets no step from that tick on and is named in :attr:`CycleStep.failed`.  Methods
-run on ``config.jobs`` threads under one BLAS thread each (:mod:`emulator.pools`); with
+limit) gets no step from that tick on and is named in :attr:`CycleStep.failed`.  A method
+given as a :class:`~emulator.playback.workers.MethodWorker` (what :func:`~emulator.playback.prepare_run`
+builds by default) computes in its own process, which ends with the loop.  Methods
+are asked from ``config.jobs`` threads (so that many workers compute at once), under one
+BLAS thread each (:mod:`emulator.pools`); with
 more than one job a method may run up to ``provider.ticks_ahead`` ticks (default 0) ahead of
 the oldest tick not yet yielded instead of waiting for the slowest method at every tick.
 Ticks are yielded in order either way, so results depend neither on ``jobs`` nor on the
@@ -48,6 +51,7 @@ from emulator.autoexposure.registry import MethodFailed
 from emulator.playback.config import RunConfig
 from emulator.playback.records import CycleStep, MethodStep, RunStats
 from emulator.playback.seam import call_method
+from emulator.playback.workers import MethodWorker, stop_methods
 from emulator.pools import single_thread_pools
 
 __all__ = ["Shot", "closed_loop"]
@@ -101,9 +105,10 @@ def closed_loop(
     def step_one(name: str, tick) -> MethodStep | MethodFailed:
         target = pending[name][0]
         shot = tick.shot(target, want_right)
-        try:
-            answer = call_method(methods[name], shot.left, shot.exposure_ms, range_ms=config.range_ms,
-                                 timeout_s=config.method_timeout_s)
+        method = methods[name]
+        try:  # a worker enforces its own limit (it interrupts); inline, the limit is checked after the call
+            answer = call_method(method, shot.left, shot.exposure_ms, range_ms=config.range_ms,
+                                 timeout_s=None if isinstance(method, MethodWorker) else config.method_timeout_s)
         except MethodFailed as exc:
             return exc
         stats.add_method(name, answer.elapsed_s)
@@ -127,10 +132,14 @@ def closed_loop(
             st.left = st.right = None
         return st
 
-    if config.jobs <= 1:
-        yield from _serial_ticks(provider, methods, step_one, failed, stats)
-    else:
-        yield from _pipelined_ticks(provider, methods, step_one, failed, last_s, stats, config.jobs)
+    try:
+        if config.jobs <= 1:
+            yield from _serial_ticks(provider, methods, step_one, failed, stats)
+        else:
+            yield from _pipelined_ticks(provider, methods, step_one, failed, last_s, stats, config.jobs,
+                                        abort=lambda: stop_methods(methods, kill_only=True))
+    finally:
+        stop_methods(methods)  # the worker processes end with the loop (emulator.playback.workers)
 
 
 def _advance(failed: dict, names, results, index: int):
@@ -168,7 +177,8 @@ def _serial_ticks(provider, methods, step_one, failed, stats) -> Iterator[CycleS
         stats.wall_s = time.perf_counter() - start
 
 
-def _pipelined_ticks(provider, methods, step_one, failed, last_s, stats, jobs: int) -> Iterator[CycleStep]:
+def _pipelined_ticks(provider, methods, step_one, failed, last_s, stats, jobs: int,
+                     abort=None) -> Iterator[CycleStep]:
     """``jobs`` threads; each method goes on to its next tick as soon as its own step is done.
 
     Methods are independent closed loops that share only the provider's images, so a method
@@ -271,6 +281,10 @@ def _pipelined_ticks(provider, methods, step_one, failed, last_s, stats, jobs: i
                         stopped.add(name)
                     else:
                         place(name)
+    except BaseException:  # Ctrl-C, an error, or the consumer stopped: calls in flight end with their workers
+        if abort is not None:
+            abort()
+        raise
     finally:
         stats.wall_s = time.perf_counter() - start
         pool.shutdown(wait=True, cancel_futures=True)

@@ -42,17 +42,23 @@ class Prepared(NamedTuple):
 def prepare_run(sequence, methods, config: RunConfig, response=None, *, stats: RunStats | None = None,
                 blur=None) -> Prepared:
     """Resolve the recording's side of a run: the response at the recording's levels, the methods
-    (built by name with ``config.mode``, ``config.options[name]`` and that response), the noise
-    model, the blur hook (``blur``, else ``config``'s), and the emulated provider."""
-    from emulator.autoexposure.methodset import build_methods
+    (built by name with ``config.mode``, ``config.options[name]`` and that response, each in its
+    own worker process unless ``config.workers == "inline"``; :mod:`emulator.playback.workers`),
+    the noise model, the blur hook (``blur``, else ``config``'s), and the emulated provider.  The
+    workers stop when the closed loop over them ends (or :func:`~emulator.playback.workers.stop_methods`)."""
+    from emulator.playback.workers import start_methods, stop_methods
 
     seq = resolve_sequence(sequence, imu_warning=config.blur != "none")  # the IMU is read only for blur
     response = config.response_for(seq, response)
-    built = build_methods(methods, mode=config.mode, response=response, options=config.options)
-    model, source = config.noise_for(seq, response)
-    noise = None if model is None else (model, config.noise_seed)
-    hook = blur if blur is not None else config.blur_for(seq, response)
-    provider = EmulatedProvider(seq, config, response, noise=noise, stats=stats, blur=hook)
+    built = start_methods(methods, config, response)  # one worker process per method (config.workers)
+    try:
+        model, source = config.noise_for(seq, response)
+        hook = blur if blur is not None else config.blur_for(seq, response)
+        provider = EmulatedProvider(seq, config, response, noise=None if model is None else (model, config.noise_seed),
+                                    stats=stats, blur=hook)
+    except BaseException:
+        stop_methods(built)
+        raise
     return Prepared(seq, response, built, provider, model, source, hook)
 
 

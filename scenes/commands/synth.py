@@ -134,7 +134,8 @@ def stop_between_images(command: str):
         hits.append(signum)
         if len(hits) > 1:
             raise KeyboardInterrupt
-        sys.stderr.write(f"\n{command}: interrupted; stopping after the current image (Ctrl-C again: at once)\n")
+        with contextlib.suppress(RuntimeError, OSError):  # stderr busy in the interrupted code (a progress bar)
+            sys.stderr.write(f"\n{command}: interrupted; stopping after the current image (Ctrl-C again: at once)\n")
 
     def check():
         if hits:

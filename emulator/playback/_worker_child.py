@@ -1,0 +1,214 @@
+"""The worker's side of :mod:`emulator.playback.workers`: one AE method in its own process.
+
+The process builds the method (a plugin's import and factory run here), then answers calls one
+at a time: the image comes from the run's shared memory into an immutable copy of its own, the
+answer goes back with the method's fallback count and what it printed.  A fork (the child
+exits at once) or a thread left running after a call is reported, and the process then exits;
+it also ends once the run's process is gone, even while a call hangs.
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+import signal
+import sys
+import threading
+import time
+from multiprocessing import shared_memory
+
+import numpy as np
+
+from emulator.autoexposure._base import AutoExposureError, MethodFailed
+from emulator.errors import PlaybackError
+
+_FORK_EXIT = 70  # exit status of the child of an os.fork inside a worker (it exits at once)
+
+
+def _die_with_run(run_pid: int) -> None:
+    """End this worker (and its group) once the run's process is gone, even while a call hangs; the
+    run is watched itself, not the fork server, which a method could kill (taking every worker along)."""
+    def watch():
+        while True:
+            time.sleep(1.0)
+            try:
+                os.kill(run_pid, 0)
+            except ProcessLookupError:
+                os.killpg(os.getpid(), signal.SIGKILL) if os.getpgid(0) == os.getpid() else os._exit(1)
+            except OSError:
+                pass
+
+    threading.Thread(target=watch, daemon=True, name="exposim-run-watch").start()
+
+
+def _child_main(conn, run_pid: int) -> None:
+    try:
+        os.setsid()  # own process group: stopped with whatever it starts; Ctrl-C goes to the run only
+    except OSError:  # pragma: no cover
+        pass
+    _die_with_run(run_pid)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    _Child(conn).serve()
+
+
+class _Child:
+    def __init__(self, conn) -> None:
+        self.conn = conn
+        self.method = None
+        self.name = None
+        self.shm = None
+        self.pending = None  # a failure found when the method was built, reported at its first call
+        self.gray_code = None
+        self.forked: list = []
+        self.allowed = set(threading.enumerate())
+        os.register_at_fork(after_in_parent=lambda: self.forked.append(True),
+                            after_in_child=lambda: os._exit(_FORK_EXIT))
+
+    def serve(self) -> None:
+        while True:
+            try:
+                msg = self.conn.recv()
+            except (EOFError, OSError):
+                os._exit(0)
+            except Exception as exc:  # noqa: BLE001 - an object that cannot be rebuilt here (its class in a script)
+                self.conn.send(("error", "handoff", f"{type(exc).__name__}: {exc}"))
+                continue
+            if msg[0] == "stop":
+                os._exit(0)
+            try:
+                reply = getattr(self, "do_" + msg[0])(*msg[1:])
+            except BaseException as exc:  # noqa: BLE001 - e.g. an exception whose message itself raises
+                reply = ("fatal", f"broke its process ({type(exc).__name__} while reporting its result)", "", 0)
+            try:
+                self.conn.send(reply)
+            except (EOFError, OSError):
+                os._exit(0)
+            if reply[0] == "fatal":
+                os._exit(0)
+
+    def _left_threads(self) -> list[str]:
+        from emulator import pools
+
+        pool = getattr(pools, "_LUT_POOL", None)
+        ours = set(getattr(pool, "_threads", ()) or ())
+        return [t.name for t in threading.enumerate() if t not in self.allowed and t not in ours and t.is_alive()]
+
+    def _hostile(self, when: str) -> str | None:
+        if self.forked:
+            return f"forked a child process (os.fork) {when}; its process was stopped"
+        left = self._left_threads()
+        if left:
+            return (f"left {len(left)} thread{'s' if len(left) > 1 else ''} running {when} ({', '.join(left[:3])}); "
+                    "its process was stopped")
+        return None
+
+    def do_build(self, item, mode, response, options, sys_path, cwd, environ):
+        from emulator.autoexposure.isolation import _describe
+
+        sys.path[:] = sys_path  # the run's, now (the fork server has those of its start)
+        os.environ.clear()
+        os.environ.update(environ)
+        try:
+            os.chdir(cwd)
+            self.name, self.method = _build_one(item, mode, response, options)
+        except (AutoExposureError, PlaybackError) as exc:
+            return ("error", type(exc).__name__, str(exc))
+        except BaseException as exc:  # noqa: BLE001 - KeyboardInterrupt included: Ctrl-C never reaches a worker
+            where = "importing or building it" if isinstance(item, str) else "building it"
+            return ("error", "AutoExposureError",
+                    f"AE method {_label(item)}: {where} {_describe(exc).rstrip(': ')} in its worker process")
+        config = {}
+        if hasattr(self.method, "config"):
+            try:
+                config = dict(self.method.config())
+            except BaseException as exc:  # noqa: BLE001
+                config = {"config_error": f"config(): {_describe(exc)}"}
+        self.pending = self._hostile("after it was built")
+        # a built-in's gray image is computed once per image by the run and handed over with it
+        code = None if getattr(type(self.method), "private_images", False) else getattr(self.method, "gray_code", None)
+        self.gray_code = code if isinstance(code, int) else None
+        try:
+            pickle.dumps(config)
+        except Exception:  # noqa: BLE001 - a plugin's config with objects: their text
+            config = {k: repr(v) for k, v in config.items()}
+        return ("built", self.name, config, self.gray_code)
+
+    def _image(self, shm_name, nbytes, shape, dtype, gray_nbytes):
+        if self.shm is None or self.shm.name != shm_name:
+            if self.shm is not None:
+                self.shm.close()
+            self.shm = shared_memory.SharedMemory(name=shm_name)  # the run owns (and removes) the block
+        data = bytes(self.shm.buf[:nbytes])  # this worker's own immutable copy
+        raw = np.frombuffer(data, dtype=np.dtype(dtype)).reshape(shape)
+        if gray_nbytes:  # the run's gray image of this frame: what AutoExposureMethod.gray would compute
+            from emulator.autoexposure._frame import FRAME_MEMO
+
+            gray = np.frombuffer(bytes(self.shm.buf[nbytes:nbytes + gray_nbytes]), dtype=np.uint16).reshape(shape)
+            FRAME_MEMO.put(raw, ("gray", self.gray_code), gray)
+        return raw
+
+    def _output(self) -> tuple[str, int]:
+        from emulator.autoexposure.isolation import captured_output
+
+        return captured_output(self.name, clear=True)
+
+    def do_call(self, shm_name, nbytes, shape, dtype, exposure_ms, raw, gray_nbytes=0):
+        from emulator.autoexposure.isolation import _describe, call_method
+        from emulator.pools import single_thread_pools
+
+        if self.pending is not None:
+            return ("fatal", self.pending, "", 0)
+        if shape is not None:
+            raw = self._image(shm_name, nbytes, shape, dtype, gray_nbytes)
+        self.forked.clear()
+        try:
+            with single_thread_pools(user_api="blas"):  # results independent of the machine's cores
+                value = call_method(self.method, raw, exposure_ms)
+            guard = int(getattr(self.method, "guard_count", 0) or 0)
+        except MethodFailed as exc:
+            bad = self._hostile("in next_exposure")
+            return ("fatal" if bad else "failed", bad or str(exc), *self._output())
+        except BaseException as exc:  # noqa: BLE001 - KeyboardInterrupt raised by a method included
+            return ("failed", _describe(exc), *self._output())
+        bad = self._hostile("in next_exposure")  # forks: in the call; threads: still running after it
+        if bad:
+            return ("fatal", bad, *self._output())
+        try:
+            pickle.dumps(value)
+        except Exception:  # noqa: BLE001 - not a number anyway: the loop's guard replaces it
+            value = None
+        return ("answer", value, guard, *self._output())
+
+    def do_reset(self):
+        reset = getattr(self.method, "reset", None)
+        if callable(reset):
+            reset()
+        return ("ok",)
+
+
+def _label(item) -> str:
+    if isinstance(item, tuple):
+        return repr(item[0])
+    return repr(item) if isinstance(item, str) else repr(getattr(item, "name", type(item).__name__))
+
+
+def _build_one(item, mode, response, options):
+    """(name, method) of one ``--methods`` item, built as :func:`build_methods` builds it."""
+    from emulator.autoexposure import METHOD_NAMES
+    from emulator.autoexposure.methodset import build_methods
+    from emulator.autoexposure.registry import is_import_path, plugin_from_path
+
+    if isinstance(item, tuple):  # an installed plugin: (name, entry point value), as the run found it
+        from emulator.autoexposure.registry import MethodPlugin, build_plugin, load_import_path
+
+        name, value = item
+        plugin = MethodPlugin(name, value, load_import_path(value))
+        return name, build_plugin(plugin, mode=mode, response=response, options=options.get(name))
+    if isinstance(item, str):
+        key = plugin_from_path(item).name if item not in METHOD_NAMES and is_import_path(item) else item
+    else:
+        key = getattr(item, "name", None)
+    subset = {key: options[key]} if key in options else {}
+    built = build_methods([item], mode=mode, response=response, options=subset)
+    return next(iter(built.items()))

@@ -1,0 +1,323 @@
+"""Method workers: every AE method of a run in its own process (:func:`start_methods`).
+
+A :class:`MethodWorker` stands in the closed loop for one method.  Its process is forked
+from Python's fork server (a fresh interpreter started for the purpose, which holds none of
+the run's open files), builds the method itself (the plugin's import and factory run there,
+never in the run's process), and answers one call at a time:
+
+- the image reaches it through a shared-memory block owned by the run (one per worker,
+  written before each call; the worker copies it into an immutable buffer of its own, so
+  nothing it does reaches the run's arrays or another method);
+- it returns only the proposal, the method's fallback count and what the method printed;
+  the run process owns every file;
+- the run waits for the answer at most the method time limit (``--method-timeout-s``,
+  default :data:`DEFAULT_METHOD_TIMEOUT_S`): past it the worker is killed (with any process
+  it started) and the method fails with the reason, while the others go on;
+- a worker that dies, forks (``os.fork``: the child exits at once), or leaves a thread running
+  after a call is killed the same way and its method fails, named.
+
+A worker runs in its own session (a terminal's Ctrl-C reaches only the run, which stops its
+workers) and dies with the run.  :func:`start_methods` with ``workers="inline"`` builds the
+methods in the run's process instead (for debugging; the time limit is then checked only
+after a call returns).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import multiprocessing
+import os
+import pickle
+import signal
+import sys
+import threading
+import weakref
+from multiprocessing import shared_memory
+
+import numpy as np
+
+from emulator.autoexposure._base import AutoExposureError, MethodFailed
+from emulator.errors import PlaybackError
+from emulator.playback._worker_child import _child_main, _label
+
+__all__ = ["MethodWorker", "start_methods", "stop_methods", "effective_timeout_s", "DEFAULT_METHOD_TIMEOUT_S",
+           "WORKER_MODES"]
+
+#: Per-call limit of a method in a worker when ``--method-timeout-s`` is not given, seconds: far
+#: above any built-in's call (under 0.1 s on a 1920x1200 frame), so only a stuck method meets it.
+DEFAULT_METHOD_TIMEOUT_S = 120.0
+#: ``process``: each method in its own worker process (the default); ``inline``: in the run's process.
+WORKER_MODES = ("process", "inline")
+_PRELOAD = ["emulator.playback._worker_preload"]  # imports the worker side too
+_ctx = None
+_ctx_lock = threading.Lock()
+
+
+def effective_timeout_s(config) -> float | None:
+    """The per-call limit a run applies: ``config.method_timeout_s``, else the default (workers only)."""
+    if config.method_timeout_s is not None:
+        return float(config.method_timeout_s)
+    return DEFAULT_METHOD_TIMEOUT_S if getattr(config, "workers", "process") == "process" else None
+
+
+def _context():
+    global _ctx
+    with _ctx_lock:
+        if _ctx is None:
+            ctx = multiprocessing.get_context("forkserver")
+            ctx.set_forkserver_preload(_PRELOAD)
+            _ctx = ctx
+        return _ctx
+
+
+# ---------------------------------------------------------------- the run's side
+def _kill(proc) -> None:
+    """SIGKILL the worker and its process group (whatever it started), then reap it."""
+    pid = proc.pid
+    if pid is None:
+        return
+    try:
+        if os.getpgid(pid) == pid:  # its own group (setsid): never the run's
+            os.killpg(pid, signal.SIGKILL)
+        else:
+            proc.kill()
+    except (ProcessLookupError, PermissionError, OSError):
+        pass
+    proc.join(5)
+
+
+def _release(proc, shm_box) -> None:
+    _kill(proc)
+    shm = shm_box[0]
+    if shm is not None:
+        shm_box[0] = None
+        try:
+            shm.close()
+            shm.unlink()
+        except (OSError, BufferError):
+            pass
+
+
+def _ended(proc) -> str:
+    proc.join(5)
+    code = proc.exitcode
+    if code is None:
+        return "its process stopped answering"
+    if code < 0:
+        try:
+            return f"its process was killed by {signal.Signals(-code).name}"
+        except ValueError:
+            return f"its process was killed by signal {-code}"
+    return f"its process exited with status {code}"
+
+
+def _start(proc) -> None:
+    """Start ``proc``, also from a daemonic process (a Dask worker of a dataset run), which
+    multiprocessing refuses children: a method worker dies with the fork server, which dies with
+    the process that started it, so nothing outlives the run."""
+    from multiprocessing import spawn
+
+    me = multiprocessing.current_process()
+    real = spawn.get_preparation_data
+
+    def without_main(name):  # a worker never runs the caller's main script again (a script, stdin, pytest)
+        data = real(name)
+        data.pop("init_main_from_path", None)
+        data.pop("init_main_from_name", None)
+        return data
+
+    with _ctx_lock:
+        daemon = me._config.get("daemon")
+        try:
+            if daemon:
+                me._config["daemon"] = False
+            spawn.get_preparation_data = without_main
+            proc.start()
+        finally:
+            spawn.get_preparation_data = real
+            if daemon:
+                me._config["daemon"] = daemon
+
+
+def _handoff(label: str, why) -> str:
+    return (f"AE method {label} cannot be handed to a worker process ({why}); define its class at the top level "
+            "of an importable module, or run it in the run's process (workers='inline', --workers inline)")
+
+
+class MethodWorker:
+    """One AE method running in its own process; called by the closed loop like the method itself."""
+
+    def __init__(self, item, *, mode: str, response, options: dict, timeout_s: float) -> None:
+        ctx = _context()
+        self.timeout_s = float(timeout_s)
+        self.label = _label(item)
+        self.name = self.label
+        self.failed: str | None = None
+        self._guard = 0
+        self._config: dict = {}
+        self._gray_code = None
+        self._shm_box: list = [None]
+        self._conn, child = ctx.Pipe()
+        self._proc = ctx.Process(target=_child_main, args=(child, os.getpid()), daemon=True, name="exposim-method")
+        _start(self._proc)
+        child.close()
+        self._finalizer = weakref.finalize(self, _release, self._proc, self._shm_box)
+        try:
+            self._conn.send(("build", item, mode, response, options, list(sys.path), os.getcwd(),
+                            dict(os.environ)))
+        except (pickle.PicklingError, TypeError, AttributeError) as exc:
+            self.close()
+            raise PlaybackError(_handoff(self.label, exc)) from None
+
+    def built(self) -> "MethodWorker":
+        """Wait for the worker to build its method; raise the build's error (naming the method)."""
+        try:
+            reply = self._ask(None)
+        except MethodFailed as exc:
+            self.close()
+            raise AutoExposureError(f"AE method {self.label} could not be built: {exc}") from None
+        if reply[0] == "fatal":
+            self.close()
+            raise AutoExposureError(f"AE method {self.label} could not be built: it {reply[1]}")
+        if reply[0] == "error":
+            self.close()
+            if reply[1] == "handoff":
+                raise PlaybackError(_handoff(self.label, reply[2]))
+            raise (PlaybackError if reply[1] == "PlaybackError" else AutoExposureError)(reply[2])
+        _, self.name, self._config, self._gray_code = reply
+        return self
+
+    def _ask(self, msg):
+        if msg is not None:
+            self._conn.send(msg)
+        try:
+            if not self._conn.poll(self.timeout_s):
+                self.failed = (f"did not return within the limit of {self.timeout_s:g} s (--method-timeout-s); "
+                               "its process was stopped")
+                self.kill()
+                raise MethodFailed(self.failed)
+            return self._conn.recv()
+        except (EOFError, OSError, ConnectionError):
+            self.failed = f"{_ended(self._proc)} in next_exposure" if msg is None or msg[0] == "call" \
+                else _ended(self._proc)
+            self.kill()
+            raise MethodFailed(self.failed) from None
+
+    def next_exposure(self, raw, exposure_ms):
+        if self.failed is not None:
+            raise MethodFailed(self.failed)
+        if isinstance(raw, np.ndarray) and not raw.dtype.hasobject:
+            a = np.ascontiguousarray(raw)
+            gray = self._gray(raw)
+            size = a.nbytes + (0 if gray is None else gray.nbytes)
+            shm = self._shm_box[0]
+            if shm is None or shm.size < size:
+                if shm is not None:
+                    shm.close()
+                    shm.unlink()
+                shm = self._shm_box[0] = shared_memory.SharedMemory(create=True, size=max(size, 1))
+            np.ndarray(a.shape, a.dtype, buffer=shm.buf)[...] = a
+            if gray is not None:
+                np.ndarray(gray.shape, gray.dtype, buffer=shm.buf, offset=a.nbytes)[...] = gray
+            msg = ("call", shm.name, a.nbytes, a.shape, a.dtype.str, exposure_ms, None,
+                   0 if gray is None else gray.nbytes)
+        else:
+            msg = ("call", None, 0, None, None, exposure_ms, raw)
+        reply = self._ask(msg)
+        kind = reply[0]
+        from emulator.autoexposure.isolation import keep_output
+
+        keep_output(self.name, reply[-2], reply[-1])
+        if kind == "answer":
+            self._guard = reply[2]
+            return reply[1]
+        if kind == "fatal":
+            self.failed = reply[1]
+            self.kill()
+        raise MethodFailed(reply[1])
+
+    def _gray(self, raw):
+        """The method's gray image of ``raw``, computed once per image for every worker (the methods'
+        own conversion and memo: the same bytes the method would compute)."""
+        if self._gray_code is None or raw.ndim != 2 or raw.dtype != np.uint16:
+            return None
+        from emulator.autoexposure._base import to_gray
+        from emulator.autoexposure._frame import FRAME_MEMO
+
+        code = self._gray_code
+        gray = FRAME_MEMO.get(raw, ("gray", code), lambda: to_gray(raw, code))
+        return gray if gray.shape == raw.shape and gray.dtype == np.uint16 else None
+
+    @property
+    def guard_count(self) -> int:
+        return self._guard
+
+    def reset(self) -> None:
+        if self.failed is None:
+            self._ask(("reset",))
+
+    def config(self) -> dict:
+        return dict(self._config)
+
+    def pid(self) -> int | None:  # noqa: D102
+        return self._proc.pid
+
+    def kill(self) -> None:
+        """Stop the process now (a call waiting on it then fails); the shared memory stays until :meth:`close`."""
+        _kill(self._proc)
+
+    def close(self) -> None:
+        """Stop the process and release its shared memory."""
+        self._finalizer()
+        with contextlib.suppress(OSError):
+            self._conn.close()
+
+
+def start_methods(spec, config, response) -> dict:
+    """The run's methods by name: :class:`MethodWorker` s (``config.workers == "process"``), or
+    built in this process (``"inline"``); ``spec`` as for :func:`~emulator.autoexposure.methodset.build_methods`."""
+    from emulator.autoexposure import METHOD_NAMES
+    from emulator.autoexposure.methodset import build_methods, parse_methods
+
+    if getattr(config, "workers", "process") == "inline":
+        return build_methods(spec, mode=config.mode, response=response, options=config.options)
+    items = parse_methods(spec) if isinstance(spec, str) else list(spec)
+    for item in items:
+        if not isinstance(item, str) and (not getattr(item, "name", None)
+                                          or not callable(getattr(item, "next_exposure", None))):
+            raise PlaybackError(f"{item!r} is neither a method name nor an AE method (name, next_exposure)")
+    plugins = None
+    for i, item in enumerate(items):
+        if isinstance(item, str) and item not in METHOD_NAMES and ":" not in item:
+            from emulator.autoexposure.registry import installed_methods
+
+            plugins = installed_methods() if plugins is None else plugins
+            parse_methods([item], plugins=plugins)  # an unknown or broken plugin name: refused here, in one line
+            items[i] = (item, plugins[item].value)
+    options = dict(config.options or {})
+    timeout = effective_timeout_s(config)
+    started: list[MethodWorker] = []
+    out: dict = {}
+    try:
+        for item in items:
+            started.append(MethodWorker(item, mode=config.mode, response=response, options=options, timeout_s=timeout))
+        for worker in started:
+            worker.built()
+            if worker.name in out:
+                raise PlaybackError(f"two methods are named {worker.name!r}")
+            out[worker.name] = worker
+        unknown = set(options) - set(METHOD_NAMES) - set(out)
+        if unknown:
+            raise PlaybackError(f"options given for unknown method(s): {', '.join(sorted(unknown))}")
+    except BaseException:
+        stop_methods({str(i): w for i, w in enumerate(started)})
+        raise
+    return out
+
+
+def stop_methods(methods, *, kill_only: bool = False) -> None:
+    """Stop every worker among ``methods`` (``kill_only``: their processes, keeping the shared memory
+    for calls still returning); built-in-process methods are left alone."""
+    for m in list(methods.values()):
+        if isinstance(m, MethodWorker):
+            m.kill() if kill_only else m.close()
