@@ -100,11 +100,13 @@ def test_dask_runs_equal_serial_and_survive_a_killed_worker(tmp_path, killer_mod
         plain = run_dataset(root, tmp_path / "dask", methods=methods, group_size=4, scheduler=address)
         assert plain["errors"] == [] and csv_bytes(tmp_path / "dask") == expected
 
-        # The killer's first call kills its worker process with a partial staging folder behind;
-        # the scheduler runs the task again on a fresh worker.
+        # The killer's first call kills its process with a partial staging folder behind; methods run
+        # inline here, so that process is the Dask worker (in their own processes, the default, the
+        # killer fails alone: tests/test_faults_workers.py); the scheduler runs the task again on a
+        # fresh worker.
         marker.unlink()
         killed = run_dataset(root, tmp_path / "killed", methods=methods, group_size=4, scheduler=address,
-                             retries=2)
+                             retries=2, workers="inline")
     assert marker.read_text() == "killed\n"
     assert killed["errors"] == [] and len(killed["units"]) == 2
     assert csv_bytes(tmp_path / "killed") == expected  # no row lost, none written twice

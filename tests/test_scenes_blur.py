@@ -141,9 +141,10 @@ def test_margin_step_rounds_every_margin_up_and_the_render_follows(tmp_path):
             make_shot(margin_step_px=bad)
 
 
-def test_a_walk_rendered_per_cycle_shares_two_render_sizes_with_8_px_steps():
+def test_a_walk_rendered_per_cycle_shares_few_render_sizes_with_8_px_steps():
     """What the demo relies on: its 12-sweep forest_winter walk (256x160, margins for 45 ms plus a
-    sweep) has one render size per distinct margin; 8 px steps leave two of them."""
+    sweep) has one render size per distinct margin (each a new kernel compilation for Dr.Jit); 8 px
+    steps leave three of them where 1 px steps leave more than twice as many."""
     import scenes
     from scenes.walkshots import WalkShots
 
@@ -158,7 +159,7 @@ def test_a_walk_rendered_per_cycle_shares_two_render_sizes_with_8_px_steps():
         margins[step] = [shots.renderer(i, cam).margin_px() for i in range(0, 72, 6) for cam in ("left", "right")]
         assert shots.describe()["margin_step_px"] == step
     assert [-(-m // 8) * 8 for m in margins[1]] == margins[8]
-    assert len(set(margins[8])) <= 2 < len(set(margins[1]))
+    assert len(set(margins[8])) <= 3 and 2 * len(set(margins[8])) < len(set(margins[1]))
 
 
 @pytest.mark.render

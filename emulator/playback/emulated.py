@@ -36,7 +36,25 @@ __all__ = ["EmulatedProvider", "EmulatedTick", "METHOD_CAMERA"]
 METHOD_CAMERA = "left"
 
 
-class _CycleImages:
+class _Memo:
+    """``compute()`` once per key, whichever thread asks first (one lock per key)."""
+
+    def _memo_init(self) -> None:
+        self._lock = threading.Lock()
+        self._locks: dict = {}
+        self._data: dict = {}
+
+    def _memo(self, key: tuple, compute):
+        with self._lock:
+            lock = self._locks.setdefault(key, threading.Lock())
+        with lock:
+            hit = self._data.get(key)
+            if hit is None:
+                hit = self._data[key] = compute()
+            return hit
+
+
+class _CycleImages(_Memo):
     """Decoded brackets of one cycle, each decoded at most once (thread-safe), with histograms."""
 
     def __init__(self, cycle, white_level: int, black_level: int, stats: RunStats, noise=None,
@@ -48,19 +66,7 @@ class _CycleImages:
         self.stats = stats
         self.noise = noise  # None, or (NoiseModel, seed) for noise-consistent emulation
         self.blur = blur  # None, or a hook .apply(cycle, camera, exposure_ms, ratio, raw, out) -> out (blur-consistent)
-        self._lock = threading.Lock()
-        self._locks: dict = {}
-        self._data: dict = {}
-
-    def _memo(self, key: tuple, compute):
-        """``compute()`` once per key for the cycle, whichever thread asks first (one lock per key)."""
-        with self._lock:
-            lock = self._locks.setdefault(key, threading.Lock())
-        with lock:
-            hit = self._data.get(key)
-            if hit is None:
-                hit = self._data[key] = compute()
-            return hit
+        self._memo_init()
 
     def get(self, camera: str, exposure_ms: float) -> tuple[np.ndarray, np.ndarray]:
         return self._memo((camera, exposure_ms), lambda: self._decode(camera, exposure_ms))

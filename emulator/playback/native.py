@@ -44,7 +44,7 @@ from emulator.errors import CalibrationError
 from emulator.native import (MOTION_STOPS_PER_FRAME, SATURATION_LIMIT, WINDOW_CYCLES, NativeCandidate,
                              invalid_fraction, native_select, rotation_between, warp_to_instant)
 from emulator.playback.config import RunConfig
-from emulator.playback.emulated import METHOD_CAMERA, _CycleImages, _fractions
+from emulator.playback.emulated import METHOD_CAMERA, _CycleImages, _fractions, _Memo
 from emulator.playback.loop import Shot
 from emulator.playback.records import RunStats
 
@@ -104,7 +104,7 @@ class _Frames:
         return len(self.timestamps)
 
 
-class NativeTick:
+class NativeTick(_Memo):
     """One recorded frame of a :class:`NativeProvider` (see :meth:`shot`)."""
 
     def __init__(self, provider: "NativeProvider", k: int) -> None:
@@ -118,18 +118,7 @@ class NativeTick:
         self.skipped = None if self.sources else "no frame within one cycle has every camera's shot"
         if self.skipped is None and p.skip_partial and cycle.missing_by_camera(p.cameras):
             self.skipped = "frame of a partial cycle left out (--skip-partial)"
-        self._lock = threading.Lock()
-        self._locks: dict = {}
-        self._data: dict = {}
-
-    def _memo(self, key, compute):
-        with self._lock:
-            lock = self._locks.setdefault(key, threading.Lock())
-        with lock:
-            hit = self._data.get(key)
-            if hit is None:
-                hit = self._data[key] = compute()
-            return hit
+        self._memo_init()
 
     def select(self, target_ms: float) -> int:
         """The source frame (index) of ``target_ms``."""
