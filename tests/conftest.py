@@ -78,3 +78,24 @@ def stop_at_synthesize(monkeypatch) -> dict:
 
     monkeypatch.setattr(scenes.synthesize, "synthesize", stand_in)
     return seen
+
+
+def static_chart_recording(folder: Path, width: int, height: int, *, dynamic_range_db: float = 60.0,
+                           **capture) -> Path:
+    """A synthetic stereo recording of a static HDR chart (right camera one baseline along x), written by
+    ``synth.capture_sequence(..., **capture)`` into ``folder``: what the native-rate tests emulate."""
+    import numpy as np
+
+    import synth
+    from synth.procedural import hdr_chart
+    from synth.sequence import BASELINE_M
+
+    chart = hdr_chart(width, height, seed=3, dynamic_range_db=dynamic_range_db)
+    right = np.eye(4)
+    right[0, 3] = BASELINE_M
+
+    def source(t, cam):
+        return chart, (np.eye(4) if cam == "left" else right)
+
+    cam = synth.Camera.preset("borealhdr", width=width, height=height)
+    return synth.capture_sequence(source, folder, cam, seed=5, **capture)

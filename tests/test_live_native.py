@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import synth
+
 from emulator.io.borealhdr import load_sequence, sequence_response
-from synth.procedural import hdr_chart
-from synth.sequence import BASELINE_M, load_camera
+from synth.sequence import load_camera
 from validation.live import DatasetRadiance, iter_live
 from validation.live.config import LiveError
 from validation.live.native import native_rate_loop, shot_timestamps
+from conftest import static_chart_recording  # noqa: E402
 
 W, H = 40, 24
 PROPOSALS = (1.5, 3.0, 6.0, 12.0, 2.5, 5.0, 9.0)  # distinct: an off-by-one frame cannot pass
@@ -59,16 +59,8 @@ class WindowRadiance:
 
 @pytest.fixture(scope="module")
 def static(tmp_path_factory):
-    chart = hdr_chart(W, H, seed=3, dynamic_range_db=60.0)
-    right = np.eye(4)
-    right[0, 3] = BASELINE_M
-
-    def source(t, cam):
-        return chart, (np.eye(4) if cam == "left" else right)
-
-    cam = synth.Camera.preset("borealhdr", width=W, height=H)
-    path = synth.capture_sequence(source, tmp_path_factory.mktemp("native") / "static", cam, n_cycles=3, seed=5,
-                                  noise=False, save_radiance=True)
+    path = static_chart_recording(tmp_path_factory.mktemp("native") / "static", W, H, n_cycles=3, noise=False,
+                                  save_radiance=True)
     seq = load_sequence(path)
     return seq, load_camera(path), sequence_response(seq), DatasetRadiance(path)
 

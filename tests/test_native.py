@@ -8,6 +8,7 @@ import warnings
 import numpy as np
 import pytest
 
+
 import synth
 from emulator.blur import rotation_homography
 from emulator.errors import EmulationError, PlaybackError
@@ -16,11 +17,11 @@ from emulator.native import NativeCandidate, invalid_fraction, native_cost, nati
 from emulator.playback import NativeProvider, RunConfig, closed_loop
 from emulator.playback.native import NativeWarpWarning
 from emulator.response import CameraResponse
-from synth.procedural import hdr_chart
-from synth.sequence import BASELINE_M, load_camera
+from synth.sequence import load_camera
 from validation.common import quantisation_bound
 from validation.live import DatasetRadiance
 from validation.live.native import native_rate_loop, shot_timestamps
+from conftest import static_chart_recording  # noqa: E402
 
 W, H = 40, 24
 PROPOSALS = (1.5, 3.0, 6.0, 12.0, 2.5, 5.0, 9.0, 24.0, 0.7)
@@ -163,16 +164,8 @@ def test_identity_warp_is_byte_for_byte():
 # ============================================================================ the provider in the loop
 @pytest.fixture(scope="module")
 def static(tmp_path_factory):
-    chart = hdr_chart(W, H, seed=3, dynamic_range_db=60.0)
-    right = np.eye(4)
-    right[0, 3] = BASELINE_M
-
-    def source(t, cam):
-        return chart, (np.eye(4) if cam == "left" else right)
-
-    cam = synth.Camera.preset("borealhdr", width=W, height=H)
-    path = synth.capture_sequence(source, tmp_path_factory.mktemp("native") / "static", cam, n_cycles=3, seed=5,
-                                  noise=False, save_radiance=True, start_bracket_index=2)
+    path = static_chart_recording(tmp_path_factory.mktemp("native") / "static", W, H, n_cycles=3, noise=False,
+                                  save_radiance=True, start_bracket_index=2)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         seq = load_sequence(path)

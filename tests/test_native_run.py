@@ -5,15 +5,13 @@ from __future__ import annotations
 import json
 import warnings
 
-import numpy as np
 import pytest
 
-import synth
+
 from emulator.cli import main
 from emulator.io.runcsv import CSV_COLUMNS, EXTRA_COLUMNS, NATIVE_COLUMNS
 from emulator.runner import run_to_folder
-from synth.procedural import hdr_chart
-from synth.sequence import BASELINE_M
+from conftest import static_chart_recording  # noqa: E402
 
 W, H = 40, 24
 METHODS = "classical-50,shim,zhang,fixed"
@@ -22,16 +20,8 @@ METHODS = "classical-50,shim,zhang,fixed"
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory):
     """A static stereo chart, 3 sweeps started mid-sweep, no IMU."""
-    chart = hdr_chart(W, H, seed=3, dynamic_range_db=50.0)
-    right = np.eye(4)
-    right[0, 3] = BASELINE_M
-
-    def source(t, cam):
-        return chart, (np.eye(4) if cam == "left" else right)
-
-    cam = synth.Camera.preset("borealhdr", width=W, height=H)
-    return synth.capture_sequence(source, tmp_path_factory.mktemp("nrun") / "static", cam, n_shots=16, seed=5,
-                                  noise=True, start_bracket_index=3)
+    return static_chart_recording(tmp_path_factory.mktemp("nrun") / "static", W, H, dynamic_range_db=50.0,
+                                  n_shots=16, noise=True, start_bracket_index=3)
 
 
 def _run(seq, out, **kw):
