@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import math
 import threading
-import time
 import warnings
 from dataclasses import dataclass
 
@@ -39,7 +38,6 @@ import numpy as np
 
 from emulator.autoexposure.isolation import readonly_view
 from emulator.dataset import CAMERAS
-from emulator.emulate import apply_lut
 from emulator.errors import CalibrationError
 from emulator.native import (MOTION_STOPS_PER_FRAME, SATURATION_LIMIT, WINDOW_CYCLES, NativeCandidate,
                              invalid_fraction, native_select, rotation_between, warp_to_instant)
@@ -276,17 +274,7 @@ class NativeProvider:
         from emulator.blur import rotation_homography
 
         e = self.frames.exposures[j]
-        images = self.images(j)
-        raw, _ = images.get(camera, e)
-        out = raw
-        if ratio != 1.0:
-            t0 = time.perf_counter()
-            out = apply_lut(table, raw)
-            if self.blur is not None:
-                out = self.blur.apply(images.cycle, camera, e, ratio, raw, out)
-            if self.noise is not None:
-                out = images._add_noise(camera, e, ratio, raw, out)
-            self.stats.add("emulate_s", time.perf_counter() - t0)
+        out = self.images(j)._emulate(camera, e, ratio, table, self.stats)  # the cycle rate's emulation
         if j == k:
             return readonly_view(out), 1.0, 0.0
         if self.motion is None:
@@ -296,7 +284,7 @@ class NativeProvider:
         if R is None:
             return readonly_view(out), 1.0, math.nan
         angle = math.degrees(math.acos(max(-1.0, min(1.0, (np.trace(R) - 1.0) / 2.0))))
-        K, _ = self.motion.K(camera, (raw.shape[1], raw.shape[0]))
+        K, _ = self.motion.K(camera, (out.shape[1], out.shape[0]))
         warped, inside = warp_to_instant(out, rotation_homography(K, R), self.response)
         return readonly_view(warped), inside, angle
 
