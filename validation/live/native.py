@@ -182,7 +182,7 @@ def _per_cycle(loop, pick: dict[int, int]) -> Iterator:
         failed = {}
 
 
-# ============================================================================ emulated native (issue 32)
+# ============================================================================ emulated native
 #: Run name of the emulated native-rate condition (``exposim run --rate native`` on the walk's recording).
 EMULATED_NATIVE_RUN = "emulated-native"
 
@@ -270,7 +270,7 @@ def native_image_errors(seq, live_frames, response, config, names, **kw) -> dict
     return out
 
 
-#: Goals of issue 32 for native emulation against the native live frame at the same instant (480x300).
+#: Goals for native emulation against the native live frame at the same instant (480x300).
 GOAL_NATIVE_RMSE_PERCENT = 3.0
 GOAL_WARP_CUT = 0.5
 

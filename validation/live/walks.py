@@ -124,7 +124,7 @@ def _loops(cfg: LiveConfig, seq, radiance, camera, model, response, native_loop,
 
 def _emulated_native(cfg: LiveConfig, seq, response, every: list, cycles: dict, native_out: dict, timings: dict,
                      scene: str) -> None:
-    """The emulated native-rate condition (issue 32) beside the native live one: both runs benchmarked on
+    """The emulated native-rate condition beside the native live one: both runs benchmarked on
     the frame at each cycle's first shot; and the open-loop image error of native emulation (with and
     without the warp) at the exposures the native live camera applied."""
     from emulator.playback import RunConfig
