@@ -166,8 +166,9 @@ def render(
         None: the default cache (``$EXPOSIM_CACHE`` or ``~/.cache/exposim/renders``);
         a path: that folder; False: no cache.
     variant : str, optional
-        Mitsuba variant; default :func:`scenes.choose_variant` (``llvm_ad_rgb``
-        when a child process proves it works, else ``scalar_rgb``).  An explicit
+        Mitsuba variant; default :func:`scenes.choose_variant` (``cuda_ad_rgb`` on an
+        NVIDIA GPU, else ``llvm_ad_rgb``, each when a child process proves it works, else
+        ``scalar_rgb``).  An explicit
         (or ``EXPOSIM_MITSUBA_VARIANT``) variant is probed only when something
         must be rendered, so a cache hit costs only the file read.
     denoise : str or scenes.denoise.DenoiseSettings, optional

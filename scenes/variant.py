@@ -1,7 +1,7 @@
 """Choosing a Mitsuba variant safely.
 
-``llvm_ad_rgb`` is much faster than ``scalar_rgb`` but Dr.Jit aborts the whole
-process (no exception) when the system's LLVM is too old or missing.  So a JIT
+``cuda_ad_rgb`` (an NVIDIA GPU) is the fastest, then ``llvm_ad_rgb``, then ``scalar_rgb``; but
+Dr.Jit aborts the whole process (no exception) when the system's LLVM is too old or missing.  So a JIT
 variant is only ever set in this process after a child Python process has
 loaded it and rendered a tiny scene with it.  Results are cached per process.
 """
@@ -9,6 +9,7 @@ loaded it and rendered a tiny scene with it.  Results are cached per process.
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 import threading
@@ -20,8 +21,8 @@ __all__ = ["VALID_VARIANTS", "PREFERRED_VARIANTS", "ENV_VARIANT", "choose_varian
 
 #: RGB variants the scenes can render with (radiance is RGB).
 VALID_VARIANTS = ("llvm_ad_rgb", "scalar_rgb", "cuda_ad_rgb")
-#: Tried in order by :func:`choose_variant`.
-PREFERRED_VARIANTS = ("llvm_ad_rgb", "scalar_rgb")
+#: Tried in order by :func:`choose_variant` (``cuda_ad_rgb`` only where an NVIDIA driver is present).
+PREFERRED_VARIANTS = ("cuda_ad_rgb", "llvm_ad_rgb", "scalar_rgb")
 #: Environment variable that forces a variant (still probed if it is a JIT variant).
 ENV_VARIANT = "EXPOSIM_MITSUBA_VARIANT"
 
@@ -67,6 +68,12 @@ def probe_variant(variant: str, *, timeout_s: float = 180.0) -> bool:
     return proc.returncode == 0 and _MARKER in proc.stdout
 
 
+def _has_nvidia_driver() -> bool:
+    """True where an NVIDIA driver is installed (its device node or ``nvidia-smi``): only then is the CUDA
+    variant worth a probe."""
+    return os.path.exists("/dev/nvidiactl") or shutil.which("nvidia-smi") is not None
+
+
 def _usable(variant: str) -> bool:
     with _lock:
         if variant not in _probed:
@@ -106,7 +113,8 @@ def ensure_variant(variant: str) -> str:
 
 
 def choose_variant(*, refresh: bool = False) -> str:
-    """The Mitsuba variant renders use: ``llvm_ad_rgb`` when it works, else ``scalar_rgb``.
+    """The Mitsuba variant renders use: ``cuda_ad_rgb`` where an NVIDIA GPU renders with it, else
+    ``llvm_ad_rgb`` when it works, else ``scalar_rgb``.
 
     The environment variable ``EXPOSIM_MITSUBA_VARIANT`` forces a variant without
     a probe here, so reading renders from the cache never starts a child process;
@@ -129,6 +137,8 @@ def choose_variant(*, refresh: bool = False) -> str:
         return check_variant_name(forced)
     if _chosen is None:
         for v in PREFERRED_VARIANTS:
+            if v.startswith("cuda_") and not _has_nvidia_driver():
+                continue
             if _usable(v):
                 _chosen = v
                 break

@@ -538,6 +538,22 @@ def test_variant_probe_falls_back_when_llvm_aborts(monkeypatch, _restore_variant
         scenes.render("static_lab", np.eye(4), width=8, height=8, spp=1, cache_dir=False)
 
 
+def test_cuda_variant_chosen_only_with_a_driver_and_a_passing_probe(monkeypatch, _restore_variant_state):
+    """The GPU variant comes first where an NVIDIA driver is present and its probe renders; else llvm."""
+    monkeypatch.delenv("EXPOSIM_MITSUBA_VARIANT", raising=False)
+    probed = []
+    monkeypatch.setattr(var, "probe_variant", lambda v, **kw: probed.append(v) or v in ok)
+    ok = {"cuda_ad_rgb", "llvm_ad_rgb"}
+    monkeypatch.setattr(var, "_has_nvidia_driver", lambda: False)
+    assert scenes.choose_variant(refresh=True) == "llvm_ad_rgb" and probed == ["llvm_ad_rgb"]
+    monkeypatch.setattr(var, "_has_nvidia_driver", lambda: True)
+    probed.clear()
+    assert scenes.choose_variant(refresh=True) == "cuda_ad_rgb" and probed == ["cuda_ad_rgb"]
+    ok = {"llvm_ad_rgb"}  # a driver but no working CUDA variant (old driver, no GPU memory)
+    probed.clear()
+    assert scenes.choose_variant(refresh=True) == "llvm_ad_rgb" and probed == ["cuda_ad_rgb", "llvm_ad_rgb"]
+
+
 def test_variant_probe_failure_modes(monkeypatch, _restore_variant_state):
     monkeypatch.setattr(var, "_PROBE_SCRIPT", "raise SystemExit(3)")
     assert var.probe_variant("llvm_ad_rgb") is False
