@@ -49,9 +49,18 @@ def test_replicated_results_contract(tmp_path, kind, expected):
 
     sim = simulate_tables(kind, 40, Scales(sd_method=1.0, sd_walk_method=0.3, sd_noise=0.3), seed=7)
     tables = {CONDITIONS["cycle-rate live"]: sim["live"][0], CONDITIONS["emulated"]: sim["emulated"][0],
-              "live-same-instant-reseeded": sim["control"][0]}
+              CONDITIONS["cycle-rate live re-seeded"]: sim["control"][0]}
     res = finish_replicated(tmp_path, _records(tables, 10), command="test", power_seeds=0)
     on_disk = json.loads((tmp_path / "results.json").read_text())
+    # the live-live control, like for like: cycle-rate live against itself re-seeded, a comparison of its own
+    ctl = on_disk["comparisons"]["cycle-rate live re-seeded vs cycle-rate live"]
+    assert ctl["status"] == "run" and ctl["compared"] == "live-fixed-instant-reseeded"
+    assert ctl["metrics"]["median_matches"]["verdict"] == "agrees"  # a perfect emulator: one more live draw
+    assert on_disk["comparisons"]["emulated vs cycle-rate live"]["control"] == "live-fixed-instant-reseeded"
+    assert on_disk["metrics"]["median_matches"]["tau_live_live"] is not None
+    assert on_disk["comparisons"]["native-rate live re-seeded vs native-rate live"]["status"] == "not run"
+    assert on_disk["conditions"]["cycle-rate live re-seeded"]["status"] == "run"
+    assert "re-seeded" in on_disk["conditions"]["native-rate live re-seeded"]["reason"]
     assert on_disk["n_walks"] == 40 == res["n_walks"]
     assert set(on_disk["metrics"]) == set(METRICS)
     for m, r in on_disk["metrics"].items():
@@ -136,6 +145,12 @@ def test_walks_table_round_trip_and_redraw_from_the_table_alone(tmp_path):
     for m in METRICS:
         for k in ("verdict", "omega2", "omega2_ci90", "pairs_verdict", "emulation_bias", "margin_in_ranking_terms"):
             assert again["metrics"][m][k] == before["metrics"][m][k], (m, k)
+    # a study from before the re-seeded cycle-rate and native-rate live runs: those are 'not run', and no
+    # control of another condition stands in for them
+    assert again["comparisons"]["cycle-rate live re-seeded vs cycle-rate live"]["status"] == "not run"
+    assert again["conditions"]["cycle-rate live re-seeded"]["status"] == "not run"
+    assert again["metrics"]["median_matches"]["tau_live_live"] is None
+    assert again["comparisons"]["emulated vs same-instant live"]["control"] == "live-same-instant-reseeded"
     # a resumed study completes its table (every earlier row kept); a table whose rows differ is never overwritten
     few = "\n".join(text.splitlines()[:50]) + "\n"
     (tmp_path / WALKS_TABLE).write_text(few)

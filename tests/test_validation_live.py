@@ -245,6 +245,15 @@ def test_tiny_experiment_end_to_end(tmp_path, render_cache, monkeypatch):
     fixed = tmp_path / "out" / "runs" / "forest_winter" / "live-fixed-instant" / "classical-50"
     assert len((native / "images" / "times.txt").read_text().splitlines()) == cfg.n_cycles
     assert len(on_disk["walks"]) == 1 and (fixed / "exposures.csv").is_file()
+    # each live reference re-seeded (the live-live control, like for like): its own run and walks-table condition
+    table = (tmp_path / "out" / "walks.csv").read_text()
+    for run in ("live-fixed-instant-reseeded", "live-native-reseeded", "live-same-instant-reseeded"):
+        assert (tmp_path / "out" / "runs" / "forest_winter" / run / "classical-50" / "exposures.csv").is_file(), run
+        assert sum(f",{run}," in row for row in table.splitlines()) == len(cfg.methods), run
+    assert len((tmp_path / "out" / "runs" / "forest_winter" / "live-native-reseeded" / "classical-50" / "images"
+                / "times.txt").read_text().splitlines()) == cfg.n_cycles
+    assert on_disk["comparisons"]["native-rate live re-seeded vs native-rate live"]["status"] == "run"
+    assert on_disk["comparisons"]["emulated native vs native-rate live"]["control"] == "live-native-reseeded"
     with pytest.raises(Exception, match="refusing to overwrite"):
         run_live_experiment(tmp_path / "out", cfg, progress=False, cache_dir=render_cache)
 
@@ -277,7 +286,7 @@ def test_exposim_validate_live_cli(tmp_path, render_cache, capsys, monkeypatch):
     args = ["validate", "live", "-o", str(out), "--quick", "--scenes", ",".join(TINY.scenes),
             "--size", f"{TINY.width}x{TINY.height}", "--spp", str(TINY.spp), "--methods", ",".join(TINY.methods),
             "--noise-repeats", str(TINY.noise_repeats), "--cache-dir", str(render_cache), "--no-progress",
-            "--latency-frames", "2"]
+            "--latency-frames", "2", "--no-control"]
     assert exposim(args) == 0
     printed = capsys.readouterr().out
     assert "\n  median_matches: undetermined, omega2 " in printed, printed
@@ -286,8 +295,15 @@ def test_exposim_validate_live_cli(tmp_path, render_cache, capsys, monkeypatch):
     assert all(key in res for key in REQUIRED_KEYS)
     assert set(res["noise_variance_ratio"]) == {"plain", "consistent"}
     assert all(np.isfinite(v) and v > 0 for v in res["noise_variance_ratio"].values())
-    assert res["config"] == {**TINY.to_dict(), "n_cycles": CONFIGS["quick"].n_cycles, "latency_frames": 2}
+    assert res["config"] == {**TINY.to_dict(), "n_cycles": CONFIGS["quick"].n_cycles, "latency_frames": 2,
+                             "control": False}
     assert res["conditions"]["native-rate live"]["status"] == "run"
+    # --no-control: no re-seeded live run (not in the walks table, its conditions and comparisons not run)
+    assert not any("reseeded" in p.name for p in (out / "runs" / "forest_winter").iterdir())
+    assert "reseeded" not in (out / "walks.csv").read_text()
+    assert res["conditions"]["cycle-rate live re-seeded"]["status"] == "not run"
+    assert res["comparisons"]["native-rate live re-seeded vs native-rate live"]["status"] == "not run"
+    assert res["config"]["control"] is False
     assert all(r["verdict"] == "undetermined" for r in res["metrics"].values())
     assert all(r["pairs_verdict"] is None or r["pairs_verdict"]["verdict"] == "undetermined"
                for r in res["metrics"].values())  # --quick decides nothing, the pairwise check included
@@ -442,3 +458,9 @@ def test_the_live_control_has_a_stream_of_its_own():
     seeds = {control_seed(s, scene) for s in range(20) for scene in ("forest_winter", "sun_glare")}
     assert len(seeds) == 40 and not seeds & set(range(1000))  # never another walk's or replicate's seed
     assert control_seed(4, "sun_glare") == control_seed(4, "sun_glare")
+    # each re-seeded live run (same-instant, cycle-rate, native-rate) draws from a stream of its own
+    from validation.live.walks import RESEEDED_STREAMS
+
+    per_run = [{control_seed(s, "forest_winter", stream) for s in range(20)} for stream in RESEEDED_STREAMS.values()]
+    assert len(set().union(*per_run)) == 20 * len(RESEEDED_STREAMS) == 60
+    assert control_seed(4, "sun_glare", RESEEDED_STREAMS["live-same-instant-reseeded"]) == control_seed(4, "sun_glare")

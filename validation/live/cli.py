@@ -60,7 +60,9 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
                    help="run the experiment on this many seeds (--seed, +1, ...): each scene of each is an "
                         "independent walk of the replicated verdicts (default 1; the verdicts need >= 10 walks, "
                         "docs/verdicts.md sizes a decision)")
-    p.add_argument("--no-control", action="store_true", help="skip the re-seeded live control run")
+    p.add_argument("--no-control", action="store_true",
+                   help="skip the re-seeded live runs (each live condition again with other capture-noise seeds: "
+                        "the live-against-live controls)")
     p.add_argument("--latency-frames", type=int,
                    help="exposure latency of the native-rate live camera, frames: a proposal made after frame k is "
                         f"used from frame k + 1 + latency (default {full.latency_frames})")

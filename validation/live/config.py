@@ -13,6 +13,7 @@ __all__ = [
     "METHODS",
     "VARIANTS",
     "CONTROL",
+    "RESEEDED",
     "NOISE_OPTIONS",
     "BRIGHTENING_PAIRS",
     "DARKENING_PAIRS",
@@ -41,6 +42,12 @@ METHODS = ("fixed", "classical-30", "classical-50", "classical-70", "shim", "zha
 VARIANTS = ("same-instant", "fixed-instant")
 #: The live control run: same-instant with other capture-noise seeds.
 CONTROL = "same-instant-reseeded"
+#: The re-seeded live runs, one per live reference (the live-live controls, like for like): live run ->
+#: the same run again with capture-noise streams of its own (seed, scene and a purpose word each), so that
+#: "emulated vs live" stands beside "live vs live re-seeded" of the same condition.  Run with the control
+#: (``LiveConfig.control``); the native one only where the native-rate condition runs.
+RESEEDED = {"live-same-instant": f"live-{CONTROL}", "live-fixed-instant": "live-fixed-instant-reseeded",
+            "live-native": "live-native-reseeded"}
 #: Emulation noise options: name in results -> ``emulate(noise=...)``.
 NOISE_OPTIONS = {"plain": "none", "consistent": "consistent"}
 #: (source, target) ms pairs of the darkening noise variance ratio (the source is the cleaner one).
@@ -67,7 +74,9 @@ PRIMARY_NOISE = "plain"
 #: once per cycle at its own exposure at the cycle's first shot (fixed-instant: not the
 #: emulator's bracket instant, which would copy the emulator's timing by construction).
 CONDITIONS = {"native-rate live": "live-native", "cycle-rate live": "live-fixed-instant",
-              "emulated": f"emulated-{PRIMARY_NOISE}", "emulated native": "emulated-native"}
+              "emulated": f"emulated-{PRIMARY_NOISE}", "emulated native": "emulated-native",
+              "native-rate live re-seeded": RESEEDED["live-native"],
+              "cycle-rate live re-seeded": RESEEDED["live-fixed-instant"]}
 #: The live condition the per-metric verdicts (results.json ``metrics``) judge the emulator against:
 #: what emulation changes, at the benchmark's own update rate.
 REFERENCE_LIVE = "cycle-rate live"
@@ -80,6 +89,8 @@ COMPARISONS = {
     "emulated native vs native-rate live": ("live-native", "emulated-native"),
     "emulated (consistent noise) vs cycle-rate live": ("live-fixed-instant", "emulated-consistent"),
     "emulated vs same-instant live": ("live-same-instant", f"emulated-{PRIMARY_NOISE}"),
+    "cycle-rate live re-seeded vs cycle-rate live": ("live-fixed-instant", RESEEDED["live-fixed-instant"]),
+    "native-rate live re-seeded vs native-rate live": ("live-native", RESEEDED["live-native"]),
 }
 #: Equivalence margin of the difference of differences (emulated minus live, per pair of methods) in
 #: each metric's unit: the smallest change of a method difference that would change what a reader
@@ -131,7 +142,8 @@ class LiveConfig:
     capture_noise : bool
         Sensor noise in the recording and the live captures (False: exact, for tests).
     control : bool
-        Also run the re-seeded live control.
+        Also run the re-seeded live runs (:data:`RESEEDED`: same-instant, cycle-rate and, with
+        ``native``, native-rate live again with capture-noise streams of their own).
     metrics : bool
         Run the feature and VO benchmarks (False: exposure and image comparison only).
     keep_radiance : bool

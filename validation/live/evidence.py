@@ -30,6 +30,7 @@ from validation.live.config import (
     EQUIVALENCE_MARGINS,
     METRICS,
     REFERENCE_LIVE,
+    RESEEDED,
 )
 
 __all__ = ["WALK_METRICS", "WALKS_TABLE", "walk_value", "walk_values", "walk_labels", "walks_table_csv",
@@ -207,17 +208,20 @@ def metric_scales(tables: dict, metric: str, *, min_walks: int = 2):
     """``(Scales, complete walks, None)`` of one metric measured on a study's walk tables, or ``(None, n, reason)``.
 
     The reference live condition's table gives the method SD and its residual; the run
-    noise comes from the two live runs that differ only in their capture-noise seeds
-    (same-instant and its re-seeded control: their difference's residual is twice the run
-    noise variance), and the rest of the reference's residual is walk x method.  Without a
-    control all of the residual counts as noise (conservative).
+    noise comes from two live runs that differ only in their capture-noise seeds (the
+    reference and its re-seeded run, or in studies without one, same-instant and its
+    re-seeded control: their difference's residual is twice the run noise variance), and the
+    rest of the reference's residual is walk x method.  Without a control all of the
+    residual counts as noise (conservative).
     """
     from validation.verdicts.power import scales_from_tables
 
-    live = tables.get(CONDITIONS[REFERENCE_LIVE], {}).get(metric)
+    ref = CONDITIONS[REFERENCE_LIVE]
+    live = tables.get(ref, {}).get(metric)
     if live is None:
-        return None, 0, f"run {CONDITIONS[REFERENCE_LIVE]} not in this study"
-    control = tables.get(f"live-{CONTROL}", {}).get(metric)
+        return None, 0, f"run {ref} not in this study"
+    pair = (ref, RESEEDED[ref]) if RESEEDED[ref] in tables else ("live-same-instant", f"live-{CONTROL}")
+    control = tables.get(pair[1], {}).get(metric)
     ok = np.all(np.isfinite(live), axis=1)
     if control is not None:
         ok &= np.all(np.isfinite(control), axis=1)
@@ -225,7 +229,7 @@ def metric_scales(tables: dict, metric: str, *, min_walks: int = 2):
     if n < min_walks:
         return None, n, f"{n} complete walks, fewer than {min_walks}: no variance components to size the study from"
     sc = scales_from_tables(live[ok])
-    same = tables.get("live-same-instant", {}).get(metric)
+    same = tables.get(pair[0], {}).get(metric)
     if control is not None and same is not None:
         both = ok & np.all(np.isfinite(same), axis=1)
         if both.sum() >= 2:
@@ -236,6 +240,15 @@ def metric_scales(tables: dict, metric: str, *, min_walks: int = 2):
     if sc.sd_method <= 0:
         return None, n, "live shows no method effect at this size (variance component <= 0)"
     return sc, n, None
+
+
+def _not_run_reason(cname: str, run: str) -> str:
+    if run in RESEEDED.values():
+        return ("the re-seeded live runs were skipped (--no-control) or the study predates them"
+                + (", or the native-rate condition was not run" if "native" in run else ""))
+    if cname in ("native-rate live", "emulated native"):
+        return "no native-rate live loop was given to this experiment"
+    return f"run {run} not made"
 
 
 def judge_metrics(tables: dict, methods, *, n_resamples: int = 1000, seed: int = 0, power: bool = True,
@@ -252,7 +265,6 @@ def judge_metrics(tables: dict, methods, *, n_resamples: int = 1000, seed: int =
 
     names = list(methods)
     clusters = None if walks is None else walk_labels(walks)[1]
-    control = tables.get(f"live-{CONTROL}")
     comparisons = {}
     for label, (ref, other) in COMPARISONS.items():
         if ref not in tables or other not in tables:
@@ -260,6 +272,7 @@ def judge_metrics(tables: dict, methods, *, n_resamples: int = 1000, seed: int =
             comparisons[label] = {"status": "not run", "reference": ref, "compared": other,
                                   "reason": f"run(s) {', '.join(missing)} not made in this experiment"}
             continue
+        control = tables.get(RESEEDED.get(ref))  # like for like: the reference itself, re-seeded
         per_metric = {}
         for metric, (_, higher) in METRICS.items():
             res = judge(tables[ref][metric], tables[other][metric],
@@ -268,7 +281,8 @@ def judge_metrics(tables: dict, methods, *, n_resamples: int = 1000, seed: int =
                         seed=[seed, 22_001, list(COMPARISONS).index(label), list(METRICS).index(metric)],
                         clusters=clusters)
             per_metric[metric] = res
-        comparisons[label] = {"status": "run", "reference": ref, "compared": other, "metrics": per_metric}
+        comparisons[label] = {"status": "run", "reference": ref, "compared": other,
+                              "control": RESEEDED.get(ref) if control is not None else None, "metrics": per_metric}
     headline = next(iter(COMPARISONS))
     n_walks = int(next(iter(next(iter(tables.values())).values())).shape[0]) if tables else 0
     metrics = {}
@@ -287,9 +301,7 @@ def judge_metrics(tables: dict, methods, *, n_resamples: int = 1000, seed: int =
     conditions = {}
     for cname, run in CONDITIONS.items():
         if run not in tables:
-            conditions[cname] = {"run": run, "status": "not run",
-                                 "reason": "no native-rate live loop was given to this experiment"
-                                 if cname in ("native-rate live", "emulated native") else f"run {run} not made"}
+            conditions[cname] = {"run": run, "status": "not run", "reason": _not_run_reason(cname, run)}
             continue
         conditions[cname] = {"run": run, "status": "run", "metrics": {
             metric: condition_table(tables[run][metric], names, n_resamples=n_resamples,

@@ -30,7 +30,9 @@ def plot_trajectories(trajectories: dict, path: Path, title: str = "") -> Path:
     fig, axes = new_figure(ncols, 4.0, 3.0, nrows=nrows)
     styles = {"emulated-plain": ("C0", "-", "o"), "emulated-consistent": ("C1", "--", "s"),
               "live-same-instant": ("k", "-", "."), "live-fixed-instant": ("C2", ":", "x"),
-              f"live-{CONTROL}": ("0.6", "-.", "")}
+              f"live-{CONTROL}": ("0.6", "-.", ""), "live-fixed-instant-reseeded": ("C2", "-.", ""),
+              "live-native": ("C4", "-", "+"), "live-native-reseeded": ("C4", "-.", ""),
+              "emulated-native": ("C5", "--", "d")}
     for ax, name in zip(axes, names):
         for r in runs:
             y = trajectories[r][name]["target_ms"]

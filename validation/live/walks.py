@@ -19,14 +19,23 @@ import shutil
 import sys
 import time
 from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 
 from emulator.io.files import read_results, to_jsonable, write_results
-from validation.live.config import BRIGHTENING_PAIRS, CONTROL, NOISE_OPTIONS, VARIANTS, LiveConfig, config_from_dict
+from validation.live.config import (
+    BRIGHTENING_PAIRS,
+    CONTROL,
+    NOISE_OPTIONS,
+    RESEEDED,
+    VARIANTS,
+    LiveConfig,
+    config_from_dict,
+)
 
-__all__ = ["WALKS_DIR", "NATIVE_RUN", "CONTROL_STREAM", "control_seed", "walk_record_path", "walk_name", "run_walk",
+__all__ = ["WALKS_DIR", "NATIVE_RUN", "CONTROL_STREAM", "RESEEDED_STREAMS", "control_seed", "walk_record_path", "walk_name", "run_walk",
            "run_walks", "read_walk"]
 
 #: Sub-folder of an experiment with one record per finished walk.
@@ -65,15 +74,19 @@ def _runs_summary(cycles, names) -> dict:
 
 #: Purpose word of the re-seeded live control's capture-noise stream.
 CONTROL_STREAM = 22_033
+#: Purpose word of each re-seeded live run's capture-noise stream (:data:`~validation.live.config.RESEEDED`).
+RESEEDED_STREAMS = {RESEEDED["live-same-instant"]: CONTROL_STREAM, RESEEDED["live-fixed-instant"]: 22_034,
+                    RESEEDED["live-native"]: 22_035}
 
 
-def control_seed(seed: int, scene: str) -> int:
-    """The capture-noise seed of the re-seeded live control of walk (``scene``, ``seed``): a stream of its own
-    (from ``[seed, CONTROL_STREAM, CRC-32 of the scene]``), never another walk's or replicate's seed (studies
-    before it used ``seed + 1``, the next replicate's live seed)."""
+def control_seed(seed: int, scene: str, stream: int = CONTROL_STREAM) -> int:
+    """The capture-noise seed of a re-seeded live run of walk (``scene``, ``seed``): a stream of its own
+    (from ``[seed, stream, CRC-32 of the scene]``; ``stream``: :data:`RESEEDED_STREAMS`, the same-instant
+    control's by default), never another walk's or replicate's seed (studies before it used ``seed + 1``,
+    the next replicate's live seed)."""
     from scenes.trajectory import stream_key
 
-    return int(np.random.SeedSequence(stream_key(seed, CONTROL_STREAM, scene)).generate_state(1)[0])
+    return int(np.random.SeedSequence(stream_key(seed, stream, scene)).generate_state(1)[0])
 
 
 def _collect(iterator, n: int, desc: str, progress: bool) -> list:
@@ -104,8 +117,9 @@ def _loops(cfg: LiveConfig, seq, radiance, camera, model, response, native_loop,
     timings[f"emulated_{scene}_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     live_runs = [(v, v, cfg.seed) for v in VARIANTS]
-    if cfg.control:
-        live_runs.append((CONTROL, "same-instant", control_seed(cfg.seed, scene)))
+    if cfg.control:  # each cycle-rate live run again, with capture-noise streams of its own
+        live_runs += [(RESEEDED[f"live-{v}"].removeprefix("live-"), v,
+                       control_seed(cfg.seed, scene, RESEEDED_STREAMS[RESEEDED[f"live-{v}"]])) for v in VARIANTS]
     for label, timing, seed in live_runs:
         cycles[f"live-{label}"] = _collect(
             iter_live(seq, radiance, camera, names, timing=timing, noise=cfg.capture_noise, seed=seed, **common),
@@ -116,17 +130,23 @@ def _loops(cfg: LiveConfig, seq, radiance, camera, model, response, native_loop,
                         initial_ms=cfg.initial_ms, selector=cfg.selector, response=response, every_frame=True),
             len(seq.cycles) * 6, f"{tag}: live loop (native rate)", progress)
         timings[f"live_{scene}_s"] = time.perf_counter() - t0
-        _emulated_native(cfg, seq, response, every, cycles, native_out, timings, scene)
+        reseeded = None
+        if cfg.control:  # native-rate live again, with a capture-noise stream of its own
+            reseeded = partial(native_loop, seq, radiance, camera, names, noise=cfg.capture_noise,
+                               initial_ms=cfg.initial_ms, selector=cfg.selector, response=response, every_frame=True,
+                               seed=control_seed(cfg.seed, scene, RESEEDED_STREAMS[RESEEDED[NATIVE_RUN]]))
+        _emulated_native(cfg, seq, response, every, cycles, native_out, timings, scene, reseeded)
         return cycles
     timings[f"live_{scene}_s"] = time.perf_counter() - t0
     return cycles
 
 
 def _emulated_native(cfg: LiveConfig, seq, response, every: list, cycles: dict, native_out: dict, timings: dict,
-                     scene: str) -> None:
+                     scene: str, reseeded: Callable | None = None) -> None:
     """The emulated native-rate condition beside the native live one: both runs benchmarked on
     the frame at each cycle's first shot; and the open-loop image error of native emulation (with and
-    without the warp) at the exposures the native live camera applied."""
+    without the warp) at the exposures the native live camera applied.  ``reseeded``: the re-seeded
+    native-rate live loop (every frame), benchmarked on the same frames."""
     from emulator.playback import RunConfig
     from validation.live.native import (EMULATED_NATIVE_RUN, cycle_picks, emulated_native_loop,
                                         native_image_errors, per_cycle)
@@ -140,6 +160,10 @@ def _emulated_native(cfg: LiveConfig, seq, response, every: list, cycles: dict, 
     cycles[NATIVE_RUN] = per_cycle(every, picks)
     cycles[EMULATED_NATIVE_RUN] = per_cycle(emulated, picks)
     timings[f"emulated_native_{scene}_s"] = time.perf_counter() - t0
+    if reseeded is not None:
+        t0 = time.perf_counter()
+        cycles[RESEEDED[NATIVE_RUN]] = per_cycle(reseeded(), picks)  # streamed: only the picked frames are kept
+        timings[f"live_native_reseeded_{scene}_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     native_out.update(native_image_errors(seq, every, response, config, names))
     from validation.live.compare import exposure_log2_errors
