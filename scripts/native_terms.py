@@ -65,6 +65,9 @@ def main(argv=None) -> int:
                                       initial_ms=cfg.initial_ms, response=response, every_frame=True,
                                       latency_frames=cfg.latency_frames))
         config = RunConfig(initial_ms=cfg.initial_ms, rate="native", latency_frames=cfg.latency_frames)
+        if args.attribution and not hasattr(radiance, "shots"):
+            raise SystemExit(f"native_terms: --attribution: {ds} has no walk to take the true rotation from "
+                             "(written without exposure integration)")
         if args.attribution:
             attribution(seq, every, response, config, names, radiance.shots.traj, pooled["attribution"])
         for w in weights:
