@@ -2,14 +2,15 @@
 
 Usage: python benchmarks/bench_native.py [SEQUENCE] [--jobs 1,2] [--repeat N] [--mode paper]
 
-Each configuration (rate x jobs) runs ``emulator.playback.iter_run`` with all seven methods, left
+Each configuration (rate x jobs) runs the closed loop of ``exposim run`` with all seven methods, left
 and right images emulated, the PNGs decoded (no frame cache), interleaved round-robin so that load
 from other processes spreads over all of them; best of ``--repeat``.  Printed per configuration:
 ticks (cycles at cycle rate, recorded frames at native rate), wall seconds, recorded frames per
 second (the recording's frames the run covered over its wall time: at cycle rate a cycle covers
-its sweep's frames, at native rate each frame is a tick), method calls per second, the process CPU
-seconds (all threads, least of the repeats), and the load average.  At native rate every method is
-asked after every frame, about six times as often as at cycle rate.
+its sweep's frames, at native rate each frame is a tick), method calls per second, the CPU seconds
+of the run's process and of its method workers (all threads, least of the repeats), and the load
+average.  At native rate every method is asked after every frame, about six times as often as at
+cycle rate.
 """
 
 from __future__ import annotations
@@ -26,19 +27,28 @@ sys.path.insert(0, str(HERE))
 
 from emulator.autoexposure import METHOD_NAMES  # noqa: E402
 from emulator.io.borealhdr import load_sequence, sequence_response  # noqa: E402
-from emulator.playback import RunStats, iter_run  # noqa: E402
+from emulator.playback import RunConfig, RunStats, closed_loop, prepare_run  # noqa: E402
+from emulator.playback.offline import at_rate  # noqa: E402
+from emulator.playback.workers import MethodWorker  # noqa: E402
+from bench_workers import _cpu_s  # noqa: E402
 from _timing import SAMPLE_SEQ  # noqa: E402
 
 
 def one(seq, response, rate: str, jobs: int, mode: str) -> dict:
     stats = RunStats()
     c0, t0 = time.process_time(), time.perf_counter()
+    cfg = RunConfig(rate=rate, jobs=jobs, mode=mode)
+    prep = at_rate(prepare_run(seq, ",".join(METHOD_NAMES), cfg, response, stats=stats), cfg)
+    workers = [m for m in prep.methods.values() if isinstance(m, MethodWorker)]
+    n_ticks = len(getattr(prep.provider, "tick_indices", seq.cycles))
     ticks = calls = 0
-    for cs in iter_run(seq, ",".join(METHOD_NAMES), response=response, rate=rate, jobs=jobs, mode=mode,
-                       emulate_right=True, stats=stats):
+    worker_cpu = 0.0
+    for cs in closed_loop(prep.provider, prep.methods, cfg, want_right=True, stats=stats):
         ticks += 1
         calls += len(cs.steps)
-    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+        if ticks == n_ticks:  # before the loop ends its workers
+            worker_cpu = sum(_cpu_s(m.pid()) for m in workers)
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0 + worker_cpu
     frames = sum(len(c.frames.get("left", {})) for c in seq.cycles)
     return {"ticks": ticks, "wall_s": wall, "cpu_s": cpu, "frames_per_s": frames / wall, "calls_per_s": calls / wall}
 

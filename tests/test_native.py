@@ -311,6 +311,7 @@ def test_native_emulation_summary_figures():
     from validation.live.native import native_emulation_summary
 
     walk = lambda w, u: {"m": {"rmse_percent": w, "rmse_percent_unwarped": u,  # noqa: E731
+                               "rmse_percent_own_bracket": [x if i in (0, 3) else x / 2 for i, x in enumerate(w)],
                                "source_offset": [0, 1, -2, 0], "exposure_log2_error": [0.0, 0.1, 0.2]}}
     per_walk = {"a/seed0": walk([1.0, 2.0, 3.0, 9.0], [4.0, 4.0, 6.0, 8.0]),  # medians 2.5 and 5: the warp halves it
                 "b/seed0": walk([2.0, 2.0, 2.0, 2.0], [3.0, 3.0, 3.0, 3.0]),  # 2 and 3: a third
@@ -323,4 +324,36 @@ def test_native_emulation_summary_figures():
     assert r["estimate"] == 2.25 and r["n_walks"] == 2 and 2.0 <= r["ci95"][0] <= r["ci95"][1] <= 2.5
     assert c["estimate"] == pytest.approx((0.5 + 1 / 3) / 2) and c["met"] is False  # the interval reaches below 0.5
     assert r["met"] is True  # the whole interval is under 3 %
+    # neighbour frames (offsets 1 and -2): a: 2.5 against 5, the own bracket 1.25; b: 2 against 3, the own bracket 1
+    assert out["warp_cut_fraction_neighbour_frames"]["estimate"] == pytest.approx((0.5 + 1 / 3) / 2)
+    nb = out["neighbour_frames"]
+    assert nb["median_image_rmse_percent_own_bracket"]["estimate"] == pytest.approx((1.25 + 1.0) / 2)
+    assert nb["median_image_rmse_percent_unwarped"]["estimate"] == pytest.approx((5.0 + 3.0) / 2)
+    assert out["warp_cut_fraction_of_excess_neighbour_frames"]["estimate"] == pytest.approx((2.5 / 3.75 + 0.5) / 2)
+    # a perfect warp: a's neighbour frames at 0 give 0, 0, 1, 9 (median 0.5 of 5), b's 0, 0, 2, 2 (1 of 3)
+    assert out["warp_cut_fraction_perfect_warp"]["estimate"] == pytest.approx((0.9 + 2 / 3) / 2)
     assert native_emulation_summary({"a": None}, ["m"]) is None
+
+
+
+def test_native_image_errors_on_a_static_scene(static):
+    """At rest and without noise every emulated frame is the live one to quantisation, warped or not, and on the
+    frames a neighbour served the frame's own bracket at the same exposure is as close; elsewhere it is the frame."""
+    from validation.live.native import native_image_errors
+
+    seq, cam, resp, rad = static
+    live = list(native_rate_loop(seq, rad, cam, [Counter()], response=resp, noise=False, initial_ms=4.0,
+                                 every_frame=True))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", NativeWarpWarning)
+        d = native_image_errors(seq, live, resp, RunConfig(rate="native", initial_ms=4.0), ["counter"])["counter"]
+    n = len(shot_timestamps(seq))
+    assert all(len(v) == n for v in d.values())
+    off = np.asarray(d["source_offset"])
+    assert (off != 0).sum() >= 3 and (off == 0).sum() >= 3
+    for key in ("rmse_percent", "rmse_percent_unwarped", "rmse_percent_own_bracket"):  # over the pixels they can give
+        assert max(d[key]) < 0.5, key  # a few DN of 4094 at most
+    assert max(d["rmse_percent_all"]) > 1.0  # every pixel in view: those the source lost to clipping count
+    assert d["rmse_percent"] == d["rmse_percent_unwarped"]  # no gyro: nothing to warp
+    own = [o for o, s in zip(d["rmse_percent_own_bracket"], off) if s == 0]
+    assert own == [r for r, s in zip(d["rmse_percent"], off) if s == 0]

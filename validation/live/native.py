@@ -227,8 +227,11 @@ def native_image_errors(seq, live_frames, response, config, names, **kw) -> dict
     Per frame the RMSE (% of the DN range) over the pixels the emulation can give (the source's validity
     mask, moved with the image, inside the view) with the warp and without (the same selection), the
     source offset and the warp angle; ``rmse_percent_all`` counts every pixel in view, those the source
-    lost to clipping included.  Returns ``{method: {"rmse_percent", "rmse_percent_unwarped",
-    "rmse_percent_all", "source_offset", "warp_deg"}}`` (lists, one entry per frame)."""
+    lost to clipping included; ``rmse_percent_own_bracket`` is frame k's own bracket emulated at the same
+    exposure over the pixels both it and the source can give (the error of an instant with no motion to
+    undo, on the frames a neighbour served; the same as ``rmse_percent`` on the others).  Returns
+    ``{method: {"rmse_percent", "rmse_percent_unwarped", "rmse_percent_all", "rmse_percent_own_bracket",
+    "source_offset", "warp_deg"}}`` (lists, one entry per frame)."""
     import cv2
 
     from emulator.blur import rotation_homography
@@ -236,8 +239,8 @@ def native_image_errors(seq, live_frames, response, config, names, **kw) -> dict
 
     warped, plain = native_provider(seq, response, config, **kw), native_provider(seq, response, config, warp=False, **kw)
     white, black = int(seq.white_level), int(seq.black_level)
-    out = {m: {"rmse_percent": [], "rmse_percent_unwarped": [], "rmse_percent_all": [], "source_offset": [],
-               "warp_deg": []} for m in names}
+    out = {m: {"rmse_percent": [], "rmse_percent_unwarped": [], "rmse_percent_all": [], "rmse_percent_own_bracket": [],
+               "source_offset": [], "warp_deg": []} for m in names}
     live_by = {cs.cycle: cs for cs in live_frames}
     for tick_w, tick_p in zip(warped.ticks(), plain.ticks()):
         cs = live_by.get(tick_w.index)
@@ -261,8 +264,14 @@ def native_image_errors(seq, live_frames, response, config, names, **kw) -> dict
                                                   borderMode=cv2.BORDER_CONSTANT, borderValue=0) > 0
                               for x in (mask, inside))
             live = lv.left.astype(np.float64)
+            own, own_mask = a.left, rm
+            if a.native.source_offset:
+                k, e = tick_w.index, warped.frames.exposures[tick_w.index]
+                table, valid = response.lut(target / e)
+                raw = warped.images(k).get("left", e)[0]
+                own, own_mask = warped.images(k).emulated("left", e, target / e, table, warped.stats), rm & valid[raw]
             for key, img, msk in (("rmse_percent", a.left, rm), ("rmse_percent_unwarped", b.left, mask),
-                                  ("rmse_percent_all", a.left, inside)):
+                                  ("rmse_percent_all", a.left, inside), ("rmse_percent_own_bracket", own, own_mask)):
                 d = img.astype(np.float64)[msk] - live[msk]
                 out[m][key].append(100.0 * float(np.sqrt(np.mean(d * d))) / (white - black) if d.size else math.nan)
             out[m]["source_offset"].append(int(a.native.source_offset))
@@ -304,10 +313,11 @@ def native_emulation_summary(per_walk: dict, names, *, seed: int = 0) -> dict | 
     if not walks:
         return None
     table: dict = {}
-    pooled = {"rmse": [], "unwarped": [], "cut": [], "all": [], "cut_nb": []}
+    pooled = {"rmse": [], "unwarped": [], "cut": [], "all": [], "cut_nb": [], "cut_nb_excess": [], "cut_perfect": [],
+              "nb_rmse": [], "nb_unwarped": [], "nb_own": []}
     for w, per in walks.items():
         table[w] = {}
-        allw, allu, alla, nbw, nbu = [], [], [], [], []
+        allw, allu, alla, nbw, nbu, nbo, perfect = [], [], [], [], [], [], []
         for m in names:
             d = per.get(m) or {}
             rw, ru = _median(d.get("rmse_percent", [])), _median(d.get("rmse_percent_unwarped", []))
@@ -321,15 +331,24 @@ def native_emulation_summary(per_walk: dict, names, *, seed: int = 0) -> dict | 
             allu += list(d.get("rmse_percent_unwarped", []))
             alla += list(d.get("rmse_percent_all", []))
             nb = off != 0
+            # a perfect warp: every neighbour frame without error, the frames served by their own bracket as they are
+            perfect += [0.0 if n else x for x, n in zip(d.get("rmse_percent", []), nb)]
             nbw += list(np.asarray(d.get("rmse_percent", []), dtype=float)[nb]) if off.size else []
             nbu += list(np.asarray(d.get("rmse_percent_unwarped", []), dtype=float)[nb]) if off.size else []
+            nbo += list(np.asarray(d.get("rmse_percent_own_bracket", []), dtype=float)[nb]) if off.size else []
         mw, mu = _median(allw), _median(allu)
         pooled["all"].append(_median(alla))
-        w_nb, u_nb = _median(nbw), _median(nbu)
+        w_nb, u_nb, o_nb = _median(nbw), _median(nbu), _median(nbo)
         pooled["cut_nb"].append((1.0 - w_nb / u_nb) if w_nb is not None and u_nb else None)
+        pooled["cut_nb_excess"].append((u_nb - w_nb) / (u_nb - o_nb) if None not in (w_nb, u_nb, o_nb) and u_nb > o_nb
+                                       else None)
+        for key, v in (("nb_rmse", w_nb), ("nb_unwarped", u_nb), ("nb_own", o_nb)):
+            pooled[key].append(v)
         pooled["rmse"].append(mw)
         pooled["unwarped"].append(mu)
         pooled["cut"].append((1.0 - mw / mu) if mw is not None and mu else None)
+        mp = _median(perfect)
+        pooled["cut_perfect"].append((1.0 - mp / mu) if mp is not None and mu else None)
     rmse = _over_walks(pooled["rmse"], [seed, 32, 1])
     cut = _over_walks(pooled["cut"], [seed, 32, 2])
     return {
@@ -343,6 +362,11 @@ def native_emulation_summary(per_walk: dict, names, *, seed: int = 0) -> dict | 
         "median_image_rmse_percent_unwarped": _over_walks(pooled["unwarped"], [seed, 32, 3]),
         "median_image_rmse_percent_every_pixel": _over_walks(pooled["all"], [seed, 32, 4]),
         "warp_cut_fraction_neighbour_frames": _over_walks(pooled["cut_nb"], [seed, 32, 5]),
+        "neighbour_frames": {"median_image_rmse_percent": _over_walks(pooled["nb_rmse"], [seed, 32, 6]),
+                             "median_image_rmse_percent_unwarped": _over_walks(pooled["nb_unwarped"], [seed, 32, 7]),
+                             "median_image_rmse_percent_own_bracket": _over_walks(pooled["nb_own"], [seed, 32, 8])},
+        "warp_cut_fraction_of_excess_neighbour_frames": _over_walks(pooled["cut_nb_excess"], [seed, 32, 9]),
+        "warp_cut_fraction_perfect_warp": _over_walks(pooled["cut_perfect"], [seed, 32, 10]),
         "warp_cut_fraction": {**cut, "goal_at_least": GOAL_WARP_CUT,
                               "met": None if cut["estimate"] is None else bool(
                                   (cut["ci95"] or [cut["estimate"]] * 2)[0] >= GOAL_WARP_CUT)},
@@ -371,10 +395,14 @@ def native_markdown(results: dict) -> str:
              f"- counting every pixel in view (those the source lost to clipping too): "
              f"{iv(ne['median_image_rmse_percent_every_pixel'])} %",
              f"- on the frames a neighbour served, share of the error the warp removes: "
-             f"{iv(ne['warp_cut_fraction_neighbour_frames'])}",
+             f"{iv(ne['warp_cut_fraction_neighbour_frames'])}; share of what the motion adds there (the error above "
+             f"the frame's own bracket at the same exposure) the warp removes: "
+             f"{iv(ne.get('warp_cut_fraction_of_excess_neighbour_frames') or {'estimate': None})}",
              f"- share of the median error the warp removes, over every frame: {iv(c)} (goal: at least "
              f"{c['goal_at_least']:g}; "
-             f"{'met' if c['met'] else 'not met' if c['met'] is not None else 'not measured'})", "",
+             f"{'met' if c['met'] else 'not met' if c['met'] is not None else 'not measured'}); a perfect warp "
+             f"(every neighbour frame without error) would remove "
+             f"{iv(ne.get('warp_cut_fraction_perfect_warp') or {'estimate': None})}", "",
              "| walk | method | error % | unwarped % | warp's share | exposure log2 error | neighbour served |",
              "| --- | --- | ---: | ---: | ---: | ---: | ---: |"]
     f = lambda v, s=".2f": "-" if v is None else format(v, s)  # noqa: E731
