@@ -49,19 +49,7 @@ def _child_main(conn, run_pid: int) -> None:
     _die_with_run(run_pid)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
-    _one_opencv_thread()
     _Child(conn).serve()
-
-
-def _one_opencv_thread() -> None:
-    """One OpenCV thread per worker: a run's parallelism is its workers (``--jobs``), and OpenCV's
-    own pool in each of them would only compete for the same cores (the filters, lookups and
-    histograms the methods call give the same bytes on any number of threads)."""
-    try:
-        import cv2
-    except ImportError:  # pragma: no cover - a plugin environment without OpenCV
-        return
-    cv2.setNumThreads(1)
 
 
 class _Child:
