@@ -131,7 +131,7 @@ def _cumulative_weights(n_pixels: int, p: float, order: int) -> np.ndarray:
 
 
 def sorted_values(d: np.ndarray) -> np.ndarray:
-    """``np.sort(d)`` of a float64 array, about a third faster on a frame's 2.3 million values.
+    """``np.sort(d)`` of a float64 array, a little faster on a frame's 2.3 million values (4-14 %).
 
     Two counting passes (NumPy's radix sort of 16-bit keys) order the values by the top 32 bits
     of their order-preserving integer key, which leaves the array nearly sorted; a stable merge
