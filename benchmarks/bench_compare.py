@@ -10,8 +10,10 @@ that the load of other processes falls on both alike.  Each process runs every
 configuration (mode x jobs x frames: PNG decoded, or the decoded-frame cache, built by the
 same checkout into a temporary folder) once after a warm-up.
 
-Prints, per configuration and checkout: the least process CPU seconds per cycle over the
-rounds (all threads; the figure to compare on a shared machine), the median, the best
+Prints, per configuration and checkout: the least CPU seconds per cycle over the rounds (the
+run's process, all threads, and its method workers where the checkout has them, counted
+through the fork server that starts them once they have ended; the figure to compare on a
+shared machine), the median, the best
 wall-clock cycles/s (meaningful on an idle machine only), and whether the two checkouts'
 exposure trajectories are equal.  The load average is printed at the start and the end.
 """
@@ -31,6 +33,21 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 INITIAL_MS, RANGE_MS = 4.0, (0.02, 50.0)
+
+
+def _forkserver_cpu_s() -> float:
+    """CPU seconds of the method workers so far: the fork server's own and those of its ended
+    children (a checkout whose methods run in worker processes; 0 for one that has none)."""
+    try:
+        from multiprocessing import forkserver
+
+        pid = forkserver._forkserver._forkserver_pid
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split() if pid else None
+    except (ImportError, AttributeError, OSError):
+        return 0.0
+    if not fields:
+        return 0.0
+    return sum(int(f) for f in fields[11:15]) / os.sysconf("SC_CLK_TCK")  # utime, stime, cutime, cstime
 
 
 def _worker(args) -> None:
@@ -66,9 +83,10 @@ def _worker(args) -> None:
     for mode in args.modes_list:
         for jobs in args.jobs_list:
             for frames in args.frames_list:
-                w0, c0 = time.perf_counter(), time.process_time()
+                w0, c0, f0 = time.perf_counter(), time.process_time(), _forkserver_cpu_s()
                 n, digest = loop(mode, jobs, frames)
-                wall, cpu = time.perf_counter() - w0, time.process_time() - c0
+                wall = time.perf_counter() - w0
+                cpu = time.process_time() - c0 + _forkserver_cpu_s() - f0  # the run's process and its workers
                 print(json.dumps({"mode": mode, "jobs": jobs, "frames": frames, "cycles": n, "wall_s": wall,
                                   "cpu_s": cpu, "trajectories": digest}), flush=True)
 

@@ -10,8 +10,9 @@ shared sample by default; :func:`bench_save.replay_recording`, hard links).  Eve
 (``iter_run(..., emulate_right=True)``), in this process, round-robin over ``--rounds`` so that
 other load falls on all alike.  Printed per configuration: wall s of the whole call (workers
 started and stopped included), cycles/s over it, steady cycles/s after the first cycle, whether
-the exposure trajectories equal those of the first configuration, and, for worker runs, each
-worker's resident and proportional memory (``/proc/PID/smaps_rollup``: Rss, Pss, private) at
+the exposure trajectories equal those of the first configuration; where the CPU goes (the
+run's process, each method's worker); and, for worker runs, each worker's resident and
+proportional memory (``/proc/PID/smaps_rollup``: Rss, Pss, private) at
 the last cycle.
 """
 
@@ -65,17 +66,19 @@ def one_run(seq, response, mode, workers, jobs):
     t0, c0 = time.perf_counter(), time.process_time()
     prep = prepare_run(seq, "all", cfg, response, stats=stats)
     traj = {name: [] for name in prep.methods}
-    memory, worker_cpu = {}, 0.0
+    memory, per_worker = {}, {}
     n = len(seq.cycles)
     for cs in closed_loop(prep.provider, prep.methods, cfg, want_right=True, stats=stats):
         for name, st in cs.steps.items():
             traj[name].append((st.target_ms, st.bracket_ms))
         if cs.cycle == seq.cycles[n - 1].index:
             memory = {name: _memory_kib(m.pid()) for name, m in prep.methods.items() if isinstance(m, MethodWorker)}
-            worker_cpu = sum(_cpu_s(m.pid()) for m in prep.methods.values() if isinstance(m, MethodWorker))
+            per_worker = {name: _cpu_s(m.pid()) for name, m in prep.methods.items() if isinstance(m, MethodWorker)}
     wall = time.perf_counter() - t0
     timing = stats.as_dict()
-    timing["cpu_s"] = time.process_time() - c0 + worker_cpu  # this process and its method workers
+    timing["run_cpu_s"] = time.process_time() - c0  # the run's process: decoding, emulation, gray images, rows
+    timing["worker_cpu_s"] = per_worker  # each method's worker, whole life (start-up and every call)
+    timing["cpu_s"] = timing["run_cpu_s"] + sum(per_worker.values())  # this process and its method workers
     return wall, timing, traj, memory
 
 
@@ -125,6 +128,14 @@ def main(argv=None) -> int:
             cpu = ", ".join(f"{r[1]['cpu_s'] / args.cycles:.3f}" for r in runs)
             print(f"{mode:9s} {frames:6s} {workers:7s} {jobs:4d} {rates:>17s} {steady:>17s} {cpu:>17s} "
                   f"{'yes' if same else 'NO'}")
+        print("\nwhere the CPU goes, s per cycle (first round): the run's process (decoding, emulation, gray "
+              "images, rows), then each method's worker")
+        for (mode, frames, workers, jobs), runs in results.items():
+            t = runs[0][1]
+            parts = " ".join(f"{name} {cpu / args.cycles:.3f}" for name, cpu in t["worker_cpu_s"].items())
+            print(f"  {mode:9s} {frames:5s} {workers:7s} jobs {jobs}: run {t['run_cpu_s'] / args.cycles:.3f}"
+                  f"{' | ' + parts if parts else ''}; decoding {t['decodes'] / args.cycles:.1f} images per cycle, "
+                  f"{t['decode_ms_per_image']:.1f} ms each (wall)")
         mem = [(k, r[3]) for k, runs in results.items() for r in runs if r[3]]
         if mem:
             (mode, frames, workers, jobs), m = mem[0]
