@@ -130,35 +130,34 @@ def _rates(live, reseeded, clusters, k, scenario, n_studies, seed, **kw) -> dict
     return {**{v: counts[v] / n_studies for v in VERDICTS}, "complete_walks_median": float(np.median(walks))}
 
 
-def _walks_needed(live, reseeded, clusters, n_studies, seed, candidates, target) -> dict:
-    """Smallest candidate study size (walks) at which the perfect emulator is judged ``agrees`` in at least
-    ``target`` of the plasmode studies: a bisection over the candidates (the rate is taken to grow with the
-    walks); every size tried is listed, those with more seeds than the study has flagged as extrapolated."""
+def _walks_needed(live, reseeded, clusters, n_studies, seed, candidates, target, own_rate) -> dict:
+    """Smallest study size (walks: ``candidates`` and the study's own) at which the perfect emulator is judged
+    ``agrees`` in at least ``target`` of the plasmode studies: a bisection on the side of the study's own size
+    (``own_rate``) that holds the answer, the rate taken to grow with the walks; every size tried is listed,
+    those with more seeds than the study has flagged as extrapolated."""
     per_seed = float(np.mean([c.size for c in clusters]))
-    ks = sorted({max(2, math.ceil(n / per_seed)) for n in candidates})
-    tried = {}
+    own = len(clusters)
+    ks = sorted({max(2, math.ceil(n / per_seed)) for n in candidates} | {own})
+    tried = {ks.index(own): own_rate}
 
     def rate(i):
         if i not in tried:
             tried[i] = _rates(live, reseeded, clusters, ks[i], "perfect", n_studies, _seed(seed, ks[i]))["agrees"]
         return tried[i]
 
-    lo, hi = 0, len(ks) - 1
-    if rate(hi) < target:
-        found = None
-    else:
-        while lo < hi:
-            mid = (lo + hi) // 2
-            if rate(mid) >= target:
-                hi = mid
-            else:
-                lo = mid + 1
-        found = lo
+    lo, hi = (0, ks.index(own)) if own_rate >= target else (ks.index(own) + 1, len(ks) - 1)
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if rate(mid) >= target:
+            hi = mid
+        else:
+            lo = mid + 1
+    found = lo if lo < len(ks) and rate(lo) >= target else None
     sizes = [{"seeds": ks[i], "walks": round(ks[i] * per_seed), "agrees": tried[i],
-              "extrapolated": ks[i] > len(clusters)} for i in sorted(tried)]
+              "extrapolated": ks[i] > own} for i in sorted(tried)]
     return {"walks": None if found is None else round(ks[found] * per_seed),
             "seeds": None if found is None else ks[found],
-            "extrapolated": None if found is None else ks[found] > len(clusters),
+            "extrapolated": None if found is None else ks[found] > own,
             "target": target, "largest_tried_walks": round(ks[-1] * per_seed), "sizes_tried": sizes}
 
 
@@ -205,7 +204,8 @@ def metric_calibration(live, reseeded, seeds, methods, *, n_studies: int = STUDI
                           "(variance component <= 0): an omega2 relative to it is undefined"}
     rates["random"] = _rates(L, R, clusters, n_seeds, "random", n_studies, _seed(seed, 3))
     out["rates"] = rates
-    out["walks_needed_for_agrees"] = _walks_needed(L, R, clusters, n_studies, _seed(seed, 4), candidates, target)
+    out["walks_needed_for_agrees"] = _walks_needed(L, R, clusters, n_studies, _seed(seed, 4), candidates, target,
+                                                   rates["perfect"]["agrees"])
     return out
 
 
