@@ -56,6 +56,8 @@ RESEEDED_SUFFIX = "-reseeded"
 WALK_CANDIDATES = (10, 15, 20, 30, 45, 60, 90, 120, 180, 240)
 #: The calibration's file in the study folder.
 CALIBRATION_FILE = "calibration.json"
+#: Fewest seeds and complete walks a plasmode resamples (fewer: every draw repeats the same one or two walks).
+MIN_SEEDS, MIN_COMPLETE_WALKS = 2, 4
 #: The method made noisy in the injected emulator, where the study runs it.
 NOISY_DEFAULT = "kim"
 
@@ -178,9 +180,9 @@ def metric_calibration(live, reseeded, seeds, methods, *, n_studies: int = STUDI
     n_seeds = len(clusters)
     out = {"status": "not computed", "n_walks": int(L.shape[0]), "complete_walks": int(ok.sum()),
            "n_seeds": n_seeds, "n_studies": int(n_studies)}
-    if n_seeds < 2 or ok.sum() < 2:
-        out["reason"] = (f"{n_seeds} seed(s) and {int(ok.sum())} complete walk(s): a plasmode needs at least 2 "
-                         "seeds with complete walks to resample")
+    if n_seeds < MIN_SEEDS or ok.sum() < MIN_COMPLETE_WALKS:
+        out["reason"] = (f"{n_seeds} seed(s) and {int(ok.sum())} complete walk(s): a plasmode needs at least "
+                         f"{MIN_SEEDS} seeds and {MIN_COMPLETE_WALKS} complete walks to resample")
         return out
     live_var = float(variance_components(L[ok])[0])
     noise = _residual_sd(L[ok], R[ok])
