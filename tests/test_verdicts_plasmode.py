@@ -157,3 +157,23 @@ def test_the_study_folder_keeps_its_calibration_and_redraw_recomputes_it(tmp_pat
     redraw(tmp_path)  # from walks.csv and results.json alone, as many studies as the folder used: the same bytes
     assert (tmp_path / "calibration.json").read_bytes() == first
     assert json.loads((tmp_path / "results.json").read_text())["calibration"] == cal
+
+
+def test_command_line_reads_the_folder_and_never_overwrites(tmp_path, capsys):
+    from validation.live.experiment import finish_replicated
+    from validation.verdicts.plasmode import main
+
+    assert main([str(tmp_path / "nowhere")]) == 1
+    assert "walks.csv" in capsys.readouterr().err  # one line naming the file
+    live, again = _study(3, noise=2.0, seed=9)
+    tables = {"live-fixed-instant": live, "emulated-plain": again, "live-same-instant": live,
+              "live-same-instant-reseeded": again}
+    finish_replicated(tmp_path, _records(tables, 3), command="test", power_seeds=0, calibration_studies=0)
+    assert json.loads((tmp_path / "calibration.json").read_text())["status"] == "not computed"
+    out = tmp_path / "cal.json"
+    assert main([str(tmp_path), "--studies", "3", "--json", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "| median_matches | 12 of 12 |" in text and "12 walks, 3 plasmode studies" in text
+    assert json.loads(out.read_text())["n_studies"] == 3
+    assert main([str(tmp_path), "--studies", "3", "--json", str(out)]) == 1
+    assert "never overwritten" in capsys.readouterr().err
