@@ -246,7 +246,7 @@ DEFINITION = ("plasmode: studies of the study's own seeds (each with its walks, 
 
 
 def _rate(r: dict, verdict: str) -> str:
-    return r.get("reason", "") if r.get("status") == "not computed" else f"{100 * r[verdict]:.0f} %"
+    return "n/a (no live method effect)" if r.get("status") == "not computed" else f"{100 * r[verdict]:.0f} %"
 
 
 def calibration_markdown(cal: dict | None) -> str:
