@@ -8,7 +8,10 @@ seeds as its clusters) judges an emulator whose truth is known:
 
 * ``perfect``: the re-seeded live run of the same walks (same condition, other
   capture-noise seeds) stands in for the emulated table: everything a perfect emulator
-  would still differ by (capture noise and the closed loop's response to it), as measured;
+  would still differ by (capture noise and the closed loop's response to it), as measured.
+  Its method means minus live's over the study's walks are centred away (in a finite study
+  they are noise; resampled as they are, they would become a true interaction of the
+  plasmode's population, which the more walks are drawn the surer the rule finds);
 * ``injected``: the re-seeded run plus known method effects whose variance over the methods
   is ``omega2`` times the live method-effect variance (measured on all the walks; a random
   direction per plasmode study, rescaled to that variance exactly), plus per-walk noise:
@@ -186,6 +189,10 @@ def metric_calibration(live, reseeded, seeds, methods, *, n_studies: int = STUDI
         return out
     live_var = float(variance_components(L[ok])[0])
     noise = _residual_sd(L[ok], R[ok])
+    # the re-seeded run's method means minus live's, over these walks, are noise; resampled, they would become a
+    # true interaction of the plasmode's population: removed, so that the perfect emulator's is exactly 0
+    bias = (R[ok] - L[ok]).mean(axis=0)
+    R = R - (bias - bias.mean())
     noisy = noisy_method if noisy_method is not None else (
         NOISY_DEFAULT if NOISY_DEFAULT in names else names[int(np.argmax(noise))])
     if noisy not in names:
