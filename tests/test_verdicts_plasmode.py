@@ -177,3 +177,10 @@ def test_command_line_reads_the_folder_and_never_overwrites(tmp_path, capsys):
     assert json.loads(out.read_text())["n_studies"] == 3
     assert main([str(tmp_path), "--studies", "3", "--json", str(out)]) == 1
     assert "never overwritten" in capsys.readouterr().err
+
+
+def test_validate_live_refuses_a_negative_count(tmp_path, capsys):
+    from validation.live.cli import main
+
+    assert main(["-o", str(tmp_path), "--redraw", "--calibration-studies", "-1"]) == 1
+    assert capsys.readouterr().err.strip() == "live: --calibration-studies must be >= 0, got -1"
