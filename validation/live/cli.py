@@ -85,6 +85,9 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument("--resume", action="store_true",
                    help="finish the study already in OUT (same options): walks whose record exists "
                         "(walks/<scene>.json) are not run again, failed ones are")
+    p.add_argument("--calibration-studies", type=int, metavar="N",
+                   help="plasmode studies per emulator and size in the calibration of the verdicts on the study's "
+                        "own walks (default 100; 0 skips it; with --redraw, default: as many as the folder used)")
     add_quiet(p, "no progress bars")
     add_json(p)
     p.add_argument("--redraw", action="store_true",
@@ -144,6 +147,8 @@ def command_line(args, prog: str) -> str:
         words += ["--" + key.replace("_", "-"), str(value)]
     if getattr(args, "replicates", 1) != 1:
         words += ["--replicates", str(args.replicates)]
+    if getattr(args, "calibration_studies", None) is not None:
+        words += ["--calibration-studies", str(args.calibration_studies)]
     words += [flag for flag, on in (("--no-control", args.no_control), ("--keep-radiance", args.keep_radiance),
                                     ("--no-native", getattr(args, "no_native", False))) if on]
     return shlex.join(words)
@@ -161,8 +166,10 @@ def run(args, prog: str = "exposim validate live") -> int:
     def log(msg: str) -> None:
         print(msg, file=sys.stderr)
 
+    if args.calibration_studies is not None and args.calibration_studies < 0:
+        raise ExposimError(f"--calibration-studies must be >= 0, got {args.calibration_studies}")
     if args.redraw:
-        results = redraw(args.output)
+        results = redraw(args.output, calibration_studies=args.calibration_studies)
         if args.json:
             print_json(results)
             return 0
@@ -181,7 +188,7 @@ def run(args, prog: str = "exposim validate live") -> int:
     kw = dict(progress=bars_enabled(args.quiet), command=command_line(args, prog), cache_dir=args.cache_dir,
               log=None if args.quiet else log, scheduler=scheduler, n_workers=args.workers, resume=args.resume)
     if args.replicates > 1:
-        results = run_replicated(out, cfg, args.replicates, **kw)
+        results = run_replicated(out, cfg, args.replicates, calibration_studies=args.calibration_studies, **kw)
     else:
         results = run_live_experiment(out, cfg, **kw)
     failed = results.get("failed_walks") or []

@@ -34,7 +34,8 @@ from validation.live.config import (
 )
 
 __all__ = ["WALK_METRICS", "WALKS_TABLE", "walk_value", "walk_values", "walk_labels", "walks_table_csv",
-           "parse_walks_table", "store_walks_table", "condition_table", "metric_scales", "judge_metrics"]
+           "parse_walks_table", "store_walks_table", "condition_table", "metric_scales", "judge_metrics", "calibration",
+           "store_calibration"]
 
 #: The study's per-walk table in its folder: one row per walk, method and condition, every metric.
 WALKS_TABLE = "walks.csv"
@@ -252,13 +253,15 @@ def _not_run_reason(cname: str, run: str) -> str:
 
 
 def judge_metrics(tables: dict, methods, *, n_resamples: int = 1000, seed: int = 0, power: bool = True,
-                  power_seeds: int = 100, walks=None) -> dict:
+                  power_seeds: int = 100, walks=None, calibration_studies: int | None = None) -> dict:
     """results.json's ``metrics``, ``comparisons``, ``conditions``, ``power`` and ``n_walks`` from walk tables.
 
     ``tables``: :func:`walk_values`' second item.  ``walks``: their names (``<scene>/seed<S>``):
     the bootstrap then resamples the seeds as clusters (the walks of one seed together, so
     each resample keeps every scene's share).  A comparison whose runs were not made (the
-    native-rate live loop where none was given) is ``{"status": "not run"}``.
+    native-rate live loop where none was given) is ``{"status": "not run"}``.  ``calibration``: the verdict
+    rule calibrated on these walks (:func:`calibration`; ``calibration_studies`` plasmode studies per
+    emulator and size, the default where None, none where 0).
     """
     from validation.verdicts.agreement import MIN_WALKS, judge
     from validation.verdicts.power import power_summary
@@ -317,4 +320,29 @@ def judge_metrics(tables: dict, methods, *, n_resamples: int = 1000, seed: int =
             continue
         power_out[metric] = {"status": "computed", **power_summary(n, sc, n_seeds=power_seeds, seed=[seed, 22_003])}
     return {"n_walks": n_walks, "reference_condition": REFERENCE_LIVE, "metrics": metrics,
-            "comparisons": comparisons, "conditions": conditions, "power": power_out}
+            "comparisons": comparisons, "conditions": conditions, "power": power_out,
+            "calibration": calibration(tables, walks, names, seed=seed, n_studies=calibration_studies)}
+
+
+def calibration(tables: dict, walks, methods, *, seed: int = 0, n_studies: int | None = None) -> dict:
+    """results.json's ``calibration``: the plasmode calibration of the verdict rule on the study's own walks
+    (:func:`validation.verdicts.plasmode.calibrate`) for every live condition that was run re-seeded."""
+    from validation.verdicts.plasmode import STUDIES, calibrate
+
+    n = STUDIES if n_studies is None else int(n_studies)
+    if n <= 0 or walks is None:
+        return {"status": "not computed", "reason": "no plasmode studies asked for" if n <= 0 else
+                "the walks' scenes and seeds are not known"}
+    return calibrate(tables, walk_labels(walks)[1], methods, metrics=list(METRICS), n_studies=n, seed=seed)
+
+
+def store_calibration(out, cal: dict) -> str:
+    """Write the calibration into the study folder ``out`` (:data:`~validation.verdicts.plasmode.CALIBRATION_FILE`,
+    rewritten with results.json by ``--redraw``); returns its name."""
+    from pathlib import Path
+
+    from emulator.io.files import write_results
+    from validation.verdicts.plasmode import CALIBRATION_FILE
+
+    write_results(Path(out) / CALIBRATION_FILE, cal)
+    return CALIBRATION_FILE

@@ -254,11 +254,13 @@ def finish(out, raw: dict) -> dict:
     return results
 
 
-def evidence(cfg: LiveConfig, records: list[dict], power_seeds: int = 100, folder=None) -> dict:
+def evidence(cfg: LiveConfig, records: list[dict], power_seeds: int = 100, folder=None,
+             calibration_studies: int | None = None) -> dict:
     """results.json's replicated verdicts (:func:`validation.live.evidence.judge_metrics`) over the walks of
     ``records`` (one experiment, or the replicates of :func:`run_replicated`); with ``folder``, the per-walk
-    table is stored there (:func:`validation.live.evidence.store_walks_table`)."""
-    from validation.live.evidence import judge_metrics, store_walks_table, walk_values
+    table is stored there (:func:`validation.live.evidence.store_walks_table`), and the calibration
+    (``calibration_studies`` plasmode studies; :func:`validation.live.evidence.store_calibration`)."""
+    from validation.live.evidence import judge_metrics, store_calibration, store_walks_table, walk_values
 
     walks, tables = walk_values(records, cfg.methods)
     out = {"walks": walks, "n_walks": len(walks)}
@@ -266,15 +268,17 @@ def evidence(cfg: LiveConfig, records: list[dict], power_seeds: int = 100, folde
         out["walks_table"] = store_walks_table(folder, walks, tables, cfg.methods)
     if tables:
         out.update(judge_metrics(tables, cfg.methods, seed=cfg.seed, power=power_seeds > 0, power_seeds=power_seeds,
-                                 walks=walks))
+                                 walks=walks, calibration_studies=calibration_studies))
         out["n_walks"] = len(walks)
+        if folder is not None:
+            out["calibration_file"] = store_calibration(folder, out["calibration"])
     else:
         out.update({"metrics": {}, "reason": "no benchmark metrics in this experiment (metrics off)"})
     return out
 
 
 def run_replicated(out, config: LiveConfig | None = None, replicates: int = 1, *, command: str | None = None,
-                   resume: bool = False, **kwargs) -> dict:
+                   resume: bool = False, calibration_studies: int | None = None, **kwargs) -> dict:
     """The experiment on ``replicates`` seeds (``config.seed``, ``+1``, ...), each scene of each one an
     independent walk; the verdicts over all of them.
 
@@ -298,11 +302,12 @@ def run_replicated(out, config: LiveConfig | None = None, replicates: int = 1, *
     if not any(r["per_scene"] for r in records):
         raise LiveError("every walk failed; see the failed_walks of " + ", ".join(
             str(e / RAW_FILE) for e, _ in experiments))
-    return finish_replicated(out, records, command=command, wall_s=time.perf_counter() - t0)
+    return finish_replicated(out, records, command=command, wall_s=time.perf_counter() - t0,
+                             calibration_studies=calibration_studies)
 
 
 def finish_replicated(out, records: list[dict], command: str | None = None, power_seeds: int = 100,
-                      wall_s: float | None = None) -> dict:
+                      wall_s: float | None = None, calibration_studies: int | None = None) -> dict:
     """``results.json`` and ``report.md`` of the verdicts over the replicates' walks (``power_seeds``:
     simulated studies per point of the power functions)."""
     from validation.live.report import evidence_markdown
@@ -319,7 +324,7 @@ def finish_replicated(out, records: list[dict], command: str | None = None, powe
                "timings": {"total_s": float(sum((r.get("timings") or {}).get("total_s", 0.0) for r in records)),
                            **({} if wall_s is None else {"wall_s": float(wall_s)})},
                "failed_walks": failed}
-    results.update(evidence(cfg, records, power_seeds=power_seeds, folder=out))
+    results.update(evidence(cfg, records, power_seeds=power_seeds, folder=out, calibration_studies=calibration_studies))
     write_report(out, "# Live versus emulated, replicated\n\n"
                  + f"{len(records)} replicate(s) of the experiment (seeds "
                  + ", ".join(str(r["config"]["seed"]) for r in records) + f"), {results['n_walks']} walks. "
@@ -345,10 +350,10 @@ def _live_sheets(out: Path, scene: str) -> str:
     return "\n".join(parts)
 
 
-def verdicts_from_table(out, power_seeds: int = 100) -> dict:
+def verdicts_from_table(out, power_seeds: int = 100, calibration_studies: int | None = None) -> dict:
     """The verdicts of a study folder that keeps only its per-walk table (and its results.json for the
     configuration): results.json's evidence and report.md recomputed from ``walks.csv``."""
-    from validation.live.evidence import judge_metrics, parse_walks_table
+    from validation.live.evidence import judge_metrics, parse_walks_table, store_calibration
     from validation.live.report import evidence_markdown
 
     out = Path(out)
@@ -361,26 +366,31 @@ def verdicts_from_table(out, power_seeds: int = 100) -> dict:
                if k in prev}
     results.update({"walks": walks, "n_walks": len(walks), "walks_table": WALKS_TABLE})
     results.update(judge_metrics(tables, methods, seed=cfg.seed, power=power_seeds > 0, power_seeds=power_seeds,
-                                 walks=walks))
+                                 walks=walks, calibration_studies=calibration_studies))
+    results["calibration_file"] = store_calibration(out, results["calibration"])
     write_report(out, f"# Live versus emulated, recomputed from {WALKS_TABLE}\n\n{len(walks)} walks. Command: "
                  f"`{results.get('command')}`\n\n" + evidence_markdown(results))
     write_results(out / RESULTS_FILE, results)
     return results
 
 
-def redraw(out) -> dict:
-    """Recompute the verdicts and rewrite ``results.json``, ``report.md`` and the figures of an
-    experiment folder from its ``raw.json`` (nothing is rendered, played back or measured again)."""
+def redraw(out, calibration_studies: int | None = None) -> dict:
+    """Recompute the verdicts and rewrite ``results.json``, ``report.md``, ``calibration.json`` and the figures
+    of an experiment folder from its ``raw.json`` (nothing is rendered, played back or measured again).
+    ``calibration_studies``: plasmode studies of the calibration; None: as many as the folder's results.json
+    used (the default where it has none)."""
+    previous = Path(out) / RESULTS_FILE
+    if calibration_studies is None and previous.is_file():
+        calibration_studies = (read_results(previous).get("calibration") or {}).get("n_studies")
     path = Path(out) / RAW_FILE
     reps = Path(out) / REPLICATES_DIR
     if not path.is_file() and reps.is_dir():
         records = [read_results(p / RAW_FILE) for p in sorted(reps.iterdir()) if (p / RAW_FILE).is_file()]
         if records:
-            previous = Path(out) / RESULTS_FILE
             command = read_results(previous).get("command") if previous.is_file() else None
-            return finish_replicated(out, records, command=command)
+            return finish_replicated(out, records, command=command, calibration_studies=calibration_studies)
     if not path.is_file() and (Path(out) / WALKS_TABLE).is_file():
-        return verdicts_from_table(out)  # a stored study folder: the walks table alone
+        return verdicts_from_table(out, calibration_studies=calibration_studies)  # the walks table alone
     if not path.is_file():
         raise LiveError(f"{path}: not found; not a finished live experiment folder")
     raw = read_results(path)

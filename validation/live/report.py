@@ -179,7 +179,9 @@ def evidence_markdown(results: dict) -> str:
                          f"{p['walks_needed_for_agrees'] if p['walks_needed_for_agrees'] else '> 240'} | "
                          f"{fmt(100 * p['perfect_emulator_rates']['agrees'], '.0f')} % | "
                          f"{fmt(100 * p['random_emulator_rates']['disagrees'], '.0f')} % |")
-    return "\n".join(lines) + "\n"
+    from validation.verdicts.plasmode import calibration_markdown
+
+    return "\n".join(lines) + "\n" + calibration_markdown(results.get("calibration"))
 
 
 def report_markdown(results: dict) -> str:

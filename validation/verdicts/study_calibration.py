@@ -1,0 +1,64 @@
+"""The plasmode calibration of a finished live study, from its folder's ``walks.csv``:
+``python -m validation.verdicts.study_calibration OUT`` prints it (and writes it to a new ``--json`` file) without
+touching the folder (:mod:`validation.verdicts.plasmode`; ``validate live`` writes the same into the folder).
+"""
+
+from __future__ import annotations
+
+from validation.verdicts.plasmode import NOISY_FACTOR, STUDIES, calibrate, calibration_markdown
+
+__all__ = ["main"]
+
+
+def main(argv=None) -> int:
+    """``python -m validation.verdicts.plasmode FOLDER``: the calibration of a live study folder's ``walks.csv``,
+    printed (and written to ``--json``), without touching the folder."""
+    import argparse
+    import sys
+    import time
+    from pathlib import Path
+
+    from emulator.errors import ExposimError
+
+    p = argparse.ArgumentParser(prog="python -m validation.verdicts.study_calibration",
+                                description="How often the live-versus-emulated verdict rule is right on a study's "
+                                            "own walks (plasmode studies drawn from its walks.csv).")
+    p.add_argument("folder", type=Path, help="a live study folder with walks.csv")
+    p.add_argument("--studies", type=int, default=STUDIES, help=f"plasmode studies per emulator and size "
+                   f"(default {STUDIES})")
+    p.add_argument("--seed", type=int, help="seed of the draws (default: the study's, from its results.json)")
+    p.add_argument("--noisy-factor", type=float, default=NOISY_FACTOR,
+                   help=f"the noisier method's injected noise, times its own residual SD (default {NOISY_FACTOR:g})")
+    p.add_argument("--json", type=Path, help="also write the numbers to this new JSON file")
+    args = p.parse_args(argv)
+    try:
+        from emulator.io.files import read_results, read_text, write_results
+        from validation.live.config import METRICS, LiveError
+        from validation.live.evidence import WALKS_TABLE, parse_walks_table, walk_labels
+
+        if args.studies < 1:
+            raise ExposimError(f"--studies must be >= 1, got {args.studies}")
+        if args.json is not None and args.json.exists():
+            raise ExposimError(f"{args.json}: exists; give a new file name (results are never overwritten)")
+        walks, methods, tables = parse_walks_table(read_text(args.folder / WALKS_TABLE, LiveError),
+                                                   str(args.folder / WALKS_TABLE))
+        seed = args.seed
+        if seed is None:
+            res = args.folder / "results.json"
+            seed = int(read_results(res).get("config", {}).get("seed", 0)) if res.is_file() else 0
+        t0 = time.perf_counter()
+        cal = calibrate(tables, walk_labels(walks)[1], methods, metrics=list(METRICS), n_studies=args.studies,
+                        seed=seed, noisy_factor=args.noisy_factor)
+        wall = time.perf_counter() - t0
+    except (ExposimError, OSError, ValueError) as exc:
+        print(f"study_calibration: {exc}", file=sys.stderr)
+        return 1
+    print(calibration_markdown(cal), end="")
+    print(f"{len(walks)} walks, {args.studies} plasmode studies per emulator and size: {wall:.1f} s")
+    if args.json is not None:
+        write_results(args.json, cal, overwrite=False)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
