@@ -74,6 +74,7 @@ def test_replicated_results_contract(tmp_path, kind, expected):
     assert on_disk["power"] == {}  # power_seeds 0: not simulated
     assert "## Verdicts per metric" in (tmp_path / "report.md").read_text()
     # the headline: both live references with equal weight, then the cycle-rate benchmark against native-rate live
+    assert list(on_disk)[:4] == ["experiment", "command", "n_walks", "headlines"]  # results.json leads with it
     h = on_disk["headlines"]
     assert list(h["comparisons"]) == ["emulated vs cycle-rate live", "emulated native vs native-rate live",
                                       "emulated vs native-rate live"]
@@ -181,6 +182,10 @@ def test_walks_table_round_trip_and_redraw_from_the_table_alone(tmp_path):
     for m in METRICS:
         for k in ("verdict", "omega2", "omega2_ci90", "pairs_verdict", "emulation_bias", "margin_in_ranking_terms"):
             assert again["metrics"][m][k] == before["metrics"][m][k], (m, k)
+    for label, c in before["headlines"]["comparisons"].items():  # the headline too, verdicts and family
+        for m, r in (c.get("metrics") or {}).items():
+            assert {k: again["headlines"]["comparisons"][label]["metrics"][m][k] for k in r} == r, (label, m)
+    assert again["headlines"]["family"] == before["headlines"]["family"]
     # a study from before the re-seeded cycle-rate and native-rate live runs: those are 'not run', and no
     # control of another condition stands in for them
     assert again["comparisons"]["cycle-rate live re-seeded vs cycle-rate live"]["status"] == "not run"

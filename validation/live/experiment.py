@@ -208,6 +208,12 @@ def _brightening_on_chart(dataset: Path, cfg: LiveConfig) -> dict:
     return res
 
 
+def _lead(results: dict) -> dict:
+    """results.json's keys with what the study is and its headline first."""
+    first = [k for k in ("experiment", "command", "n_walks", "headlines") if k in results]
+    return {**{k: results[k] for k in first}, **{k: v for k, v in results.items() if k not in first}}
+
+
 def finish(out, raw: dict) -> dict:
     """Verdicts, figures, ``report.md`` and ``results.json`` from the raw record (see :func:`redraw`)."""
     out = Path(out)
@@ -253,6 +259,7 @@ def finish(out, raw: dict) -> dict:
         plot_metrics(results, out / "metrics.png")
     results["study_folder"] = folder_check(out)
     write_report(out, report_markdown(results) + native_markdown(results), sheets=[_live_sheets(out, scenes[0])])
+    results = _lead(results)
     write_results(out / RESULTS_FILE, results)
     return results
 
@@ -350,6 +357,7 @@ def finish_replicated(out, records: list[dict], command: str | None = None, powe
                  + folder_markdown(results["study_folder"])
                  + "".join(f"Failed walk (not judged; `--resume` runs it again): {f['walk']}: {f['error']}\n\n"
                            for f in results["failed_walks"]) + evidence_markdown(results))
+    results = _lead(results)
     write_results(out / RESULTS_FILE, results)
     return results
 
@@ -393,6 +401,7 @@ def verdicts_from_table(out, power_seeds: int = 100) -> dict:
     write_report(out, f"# Live versus emulated, recomputed from {WALKS_TABLE}\n\n{len(walks)} walks. Command "
                  f"(paths relative to this folder): `{results.get('command')}`\n\n"
                  + folder_markdown(results["study_folder"]) + evidence_markdown(results))
+    results = _lead(results)
     write_results(out / RESULTS_FILE, results)
     return results
 
