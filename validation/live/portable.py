@@ -9,6 +9,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import re
 from pathlib import Path
@@ -19,8 +20,10 @@ __all__ = ["ABSOLUTE_PATH", "STUDY_FILES", "REPOSITORY", "relative_command", "ou
 #: An absolute POSIX path of at least two parts (``/tmp/x``), or a Windows one (``C:\\x``), not inside a word or
 #: a URL (``km/h``, ``tcp://host`` are not paths).
 ABSOLUTE_PATH = re.compile(r"(?<![\w.:/~-])/(?:[\w.+@-]+/)+[\w.+@-]*|\b[A-Za-z]:\\[^\s\"'`|)]+")
-#: The files of a complete study folder: the verdicts, the report, the walks table, the power analysis.
-STUDY_FILES = ("results.json", "report.md", "walks.csv", "power.json")
+#: The files of a complete study folder: the verdicts, the report, the walks table, the power analysis, and the
+#: on-the-data calibration where this installation makes one.
+STUDY_FILES = ("results.json", "report.md", "walks.csv", "power.json") + (
+    ("calibration.json",) if importlib.util.find_spec("validation.verdicts.plasmode") is not None else ())
 #: The repository's root (paths inside it are not outside paths).
 REPOSITORY = Path(__file__).resolve().parents[2]
 _DATA_URI = re.compile(r"data:[\w/+.-]+;base64,[A-Za-z0-9+/=]+")

@@ -127,7 +127,8 @@ def evidence_markdown(results: dict) -> str:
     if not metrics:
         lines += [results.get("reason", "No metrics."), ""]
         return "\n".join(lines) + "\n"
-    lines += ["| metric | verdict | omega2 | one-sided 95 % bounds | family | pairwise check (widest pair bound) | "
+    lines += ["| metric | verdict | omega2 | one-sided 95 % bounds | family | pairwise check, its own family: the pairs live "
+              "separates (widest pair bound vs margin) | "
               "margin: expected tau, P(best changes) | disattenuated r | tau live-emulated | tau live-live | "
               "pairs differing live / equivalent / reversed | reason |",
               "| --- | --- | ---: | --- | --- | --- | --- | ---: | ---: | ---: | --- | --- |"]
