@@ -40,12 +40,13 @@ def test_a_study_folder_is_complete_and_names_no_outside_path(tmp_path):
     res = finish_replicated(out, _records(tables, 10), command=f"exposim validate live -o {out} --replicates 10",
                             power_seeds=0)
     assert res["command"] == "exposim validate live -o . --replicates 10"
-    assert res["study_folder"] == {"missing_files": [], "outside_paths": []}
+    assert res["study_folder"] == {"missing_files": [], "files_naming_outside_paths": []}
     assert {"results.json", "report.md", "walks.csv", "power.json"} <= {p.name for p in out.iterdir()}
     assert outside_paths(out) == []
     assert "not ready to be committed" not in (out / "report.md").read_text()
     # a file that names a path outside the repository is found, and the report says so
     (out / "notes.md").write_text("made from /scratch/me/raw")
     again = redraw(out)
-    assert again["study_folder"]["outside_paths"] == ["notes.md: /scratch/me/raw"]
+    assert again["study_folder"]["files_naming_outside_paths"] == ["notes.md"]
     assert "not ready to be committed" in (out / "report.md").read_text()
+    assert "/scratch" not in (out / "results.json").read_text() + (out / "report.md").read_text()

@@ -77,21 +77,22 @@ WRITTEN = ("results.json", "report.md", "report.html")
 
 def folder_check(folder) -> dict:
     """results.json's ``study_folder``: the study files missing (results.json and report.md are written after
-    this check and count as present) and the paths outside the repository that its other files name."""
+    this check and count as present) and the files (relative to the folder) that name an absolute path outside
+    the repository; the paths themselves are not copied (results.json must not name them either)."""
+    found = outside_paths(folder, skip=WRITTEN, limit=10_000)
     return {"missing_files": [f for f in missing_files(folder) if f not in WRITTEN],
-            "outside_paths": outside_paths(folder, skip=WRITTEN)}
+            "files_naming_outside_paths": list(dict.fromkeys(p.split(": ", 1)[0] for p in found))}
 
 
 def folder_markdown(check: dict | None) -> str:
     """A line for the report when the folder is not complete or names paths outside the repository."""
-    if not check or not (check["missing_files"] or check["outside_paths"]):
+    if not check or not (check["missing_files"] or check["files_naming_outside_paths"]):
         return ""
     parts = []
     if check["missing_files"]:
         parts.append("it lacks " + ", ".join(check["missing_files"]))
-    if check["outside_paths"]:
-        files = list(dict.fromkeys(p.split(": ", 1)[0] for p in check["outside_paths"]))
-        n = len(check["outside_paths"])
-        parts.append(f"{n}{'+' if n >= 50 else ''} path(s) outside the repository are named in {len(files)} of its "
-                     f"files (first {files[0]}; results.json lists them)")
+    files = check["files_naming_outside_paths"]
+    if files:
+        parts.append(f"{len(files)} of its files name paths outside the repository (first {files[0]}; results.json "
+                     "lists the files)")
     return "**This study folder is not ready to be committed as it is**: " + "; ".join(parts) + ".\n\n"
