@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from validation.live.config import CONDITIONS, METHODS, METRICS, SCENES, LiveConfig
+from validation.live.config import CONDITIONS, JUDGED_METRICS, METHODS, METRICS, SCENES, LiveConfig
 from validation.live.evidence import walk_value, walk_values
 from validation.verdicts.simulate import Scales, simulate_tables
 
@@ -16,9 +16,9 @@ def _entry(v: float) -> dict:
             "segment_success": {"100": {"rate": v}}, "vo": {"n_failed_frames": v, "rpe_trans_pct": v}}
 
 
-def _records(tables: dict, n_rep: int, scenes=SCENES) -> list[dict]:
+def _records(tables: dict, n_rep: int, scenes=SCENES, n_cycles: int = 40) -> list[dict]:
     """Experiment records (raw.json content) holding ``tables`` (run -> (walks, methods)) over n_rep seeds."""
-    cfg = LiveConfig(scenes=tuple(scenes), n_cycles=3).to_dict()
+    cfg = LiveConfig(scenes=tuple(scenes), n_cycles=n_cycles).to_dict()
     recs = []
     for k in range(n_rep):
         summ = {}
@@ -62,7 +62,7 @@ def test_replicated_results_contract(tmp_path, kind, expected):
     assert on_disk["conditions"]["cycle-rate live re-seeded"]["status"] == "run"
     assert "re-seeded" in on_disk["conditions"]["native-rate live re-seeded"]["reason"]
     assert on_disk["n_walks"] == 40 == res["n_walks"]
-    assert set(on_disk["metrics"]) == set(METRICS)
+    assert set(on_disk["metrics"]) == set(JUDGED_METRICS)
     for m, r in on_disk["metrics"].items():
         assert set(r) >= {"omega2", "omega2_ci90", "tau_live_emulated", "tau_live_live", "verdict", "reason", "family",
                           "pairs_verdict", "margin_in_ranking_terms", "emulation_bias"}
@@ -73,6 +73,23 @@ def test_replicated_results_contract(tmp_path, kind, expected):
     assert on_disk["comparisons"]["cycle-rate vs native-rate live"]["status"] == "not run"
     assert on_disk["power"] == {}  # power_seeds 0: not simulated
     assert "## Verdicts per metric" in (tmp_path / "report.md").read_text()
+    # the headline: both live references with equal weight, then the cycle-rate benchmark against native-rate live
+    assert list(on_disk)[:4] == ["experiment", "command", "n_walks", "headlines"]  # results.json leads with it
+    h = on_disk["headlines"]
+    assert list(h["comparisons"]) == ["emulated vs cycle-rate live", "emulated native vs native-rate live",
+                                      "emulated vs native-rate live"]
+    assert h["distinct_metrics"] == ["median_uniformity", "median_matches", "segment_success_rate_tau100",
+                                     "vo_failed_frames", "rpe_trans_rank"]
+    cyc = h["comparisons"]["emulated vs cycle-rate live"]
+    assert cyc["live_live"] == "cycle-rate live re-seeded vs cycle-rate live"
+    assert cyc["metrics"]["median_matches"]["live_live"]["verdict"] == "agrees"
+    assert h["comparisons"]["emulated native vs native-rate live"]["status"] == "not run"
+    assert h["family"]["size"] == 5  # the native-rate comparisons were not run: 5 metrics x 1 comparison
+    for m, r in cyc["metrics"].items():  # every verdict with its interval and its family
+        assert r["family"] and len(r["omega2_ci90"]) == 2, m
+    report = (tmp_path / "report.md").read_text()
+    assert report.index("## Headline: emulated against both live references") < report.index("## Verdicts per metric")
+    assert "headline, Holm over 5" in report and "own, not corrected" in report
 
 
 def test_quick_sized_record_is_undetermined(tmp_path):
@@ -84,6 +101,26 @@ def test_quick_sized_record_is_undetermined(tmp_path):
     assert res["n_walks"] == 4
     assert {r["verdict"] for r in res["metrics"].values()} == {"undetermined"}
     assert all("fewer than 10" in r["reason"] for r in res["metrics"].values())
+    # an undetermined headline verdict says what would decide it; below 10 walks there is nothing to size it from
+    for m in ("median_matches", "rpe_trans_rank"):
+        assert "fewer than 10" in res["metrics"][m]["walks_to_decide"]["reason"]
+
+
+def test_quick_walks_decide_nothing_however_many(tmp_path):
+    from validation.live.experiment import finish_replicated, redraw
+
+    sim = simulate_tables("random", 40, Scales(sd_method=1.0, sd_walk_method=0.3, sd_noise=0.3), seed=7)
+    tables = {CONDITIONS["cycle-rate live"]: sim["live"][0], CONDITIONS["emulated"]: sim["emulated"][0],
+              CONDITIONS["cycle-rate live re-seeded"]: sim["control"][0]}
+    for res in (finish_replicated(tmp_path, _records(tables, 10, n_cycles=3), command="test", power_seeds=0),
+                redraw(tmp_path)):
+        assert res["n_walks"] == 40  # enough walks, and a random emulator: it would be judged disagrees
+        for c in res["comparisons"].values():
+            for r in (c.get("metrics") or {}).values():
+                assert r["verdict"] == "undetermined" and "pipeline check" in r["reason"]
+                assert r["pairs_verdict"]["verdict"] == "undetermined"
+        assert res["headlines"]["comparisons"]["emulated vs cycle-rate live"]["metrics"]["median_matches"][
+            "verdict"] == "undetermined"
 
 
 @pytest.mark.slow
@@ -112,7 +149,7 @@ def test_headline_is_the_verdict_with_its_interval_and_tau_is_secondary():
                           "tau_live_emulated": None, "tau_live_live": None}}}
     lines = headline(res).splitlines()
     assert lines[0] == ("verdicts over 52 walks, emulated vs cycle-rate live (agrees: omega2's one-sided 95 % upper "
-                        "bound <= 0.2; per metric, not corrected across metrics):")
+                        "bound <= 0.2; family per metric in results.json):")
     assert lines[1] == "  median_matches: agrees, omega2 0.04 [0, 0.15]; pairwise check undetermined"
     assert lines[2] == "  rpe_trans_pct: undetermined, omega2 0.7 [0.1, inf]"
     assert lines[3].startswith("secondary, not a verdict:") and "median_matches 0.81 vs 0.90 [0.62, 1.00]" in lines[3]
@@ -145,12 +182,16 @@ def test_walks_table_round_trip_and_redraw_from_the_table_alone(tmp_path):
     for m in METRICS:
         for k in ("verdict", "omega2", "omega2_ci90", "pairs_verdict", "emulation_bias", "margin_in_ranking_terms"):
             assert again["metrics"][m][k] == before["metrics"][m][k], (m, k)
+    for label, c in before["headlines"]["comparisons"].items():  # the headline too, verdicts and family
+        for m, r in (c.get("metrics") or {}).items():
+            assert {k: again["headlines"]["comparisons"][label]["metrics"][m][k] for k in r} == r, (label, m)
+    assert again["headlines"]["family"] == before["headlines"]["family"]
     # a study from before the re-seeded cycle-rate and native-rate live runs: those are 'not run', and no
     # control of another condition stands in for them
     assert again["comparisons"]["cycle-rate live re-seeded vs cycle-rate live"]["status"] == "not run"
     assert again["conditions"]["cycle-rate live re-seeded"]["status"] == "not run"
     assert again["metrics"]["median_matches"]["tau_live_live"] is None
-    assert again["comparisons"]["emulated vs same-instant live"]["control"] == "live-same-instant-reseeded"
+    assert again["comparisons"]["emulated vs cycle-rate live"]["control"] is None
     # a resumed study completes its table (every earlier row kept); a table whose rows differ is never overwritten
     few = "\n".join(text.splitlines()[:50]) + "\n"
     (tmp_path / WALKS_TABLE).write_text(few)

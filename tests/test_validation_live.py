@@ -20,7 +20,7 @@ from synth.noise_model import noise_model_of
 from synth.procedural import hdr_chart
 from synth.sequence import BASELINE_M, load_camera
 from validation.common import quantisation_bound
-from validation.live.config import config_from_dict
+from validation.live.config import JUDGED_METRICS, config_from_dict
 from validation.live import (
     METRICS,
     CONFIGS,
@@ -228,7 +228,7 @@ def test_tiny_experiment_end_to_end(tmp_path, render_cache, monkeypatch):
     assert res["headline_noise"] == "plain"  # declared, never selected
     # issue 22's contract: one walk (one scene, one seed) cannot resolve the methods
     assert on_disk["n_walks"] == 1
-    assert set(on_disk["metrics"]) == set(METRICS)
+    assert set(on_disk["metrics"]) == set(JUDGED_METRICS)
     for r in on_disk["metrics"].values():
         assert r["verdict"] == "undetermined" and r["reason"]
         assert set(r) >= {"omega2", "omega2_ci90", "tau_live_emulated", "tau_live_live", "pairs_verdict"}
@@ -236,7 +236,7 @@ def test_tiny_experiment_end_to_end(tmp_path, render_cache, monkeypatch):
     assert (on_disk["config"]["latency_frames"], on_disk["config"]["frame_rate_hz"]) == (1, 22.0)
     for cname in ("native-rate live", "cycle-rate live", "emulated"):
         cond = on_disk["conditions"][cname]
-        assert cond["status"] == "run" and set(cond["metrics"]) == set(METRICS)
+        assert cond["status"] == "run" and set(cond["metrics"]) == set(JUDGED_METRICS)
     for label in ("cycle-rate vs native-rate live", "emulated vs native-rate live"):
         comp = on_disk["comparisons"][label]
         assert comp["status"] == "run"
@@ -309,7 +309,9 @@ def test_exposim_validate_live_cli(tmp_path, render_cache, capsys, monkeypatch):
                for r in res["metrics"].values())  # --quick decides nothing, the pairwise check included
     assert all(r["verdict"] == "undetermined"
                for r in res["comparisons"]["emulated vs native-rate live"]["metrics"].values())
-    assert res["command"].startswith(f"exposim validate live -o {out} --quick --scenes forest_winter")
+    assert res["command"].startswith("exposim validate live -o . --quick --scenes forest_winter")  # relative
+    assert str(tmp_path) not in res["command"] and str(tmp_path) not in (out / "report.md").read_text()
+    assert res["study_folder"]["missing_files"] == []
     # the run folders are the ones `exposim run` writes: one writer, its lock released
     run = out / "runs" / "forest_winter" / "live-fixed-instant"
     meta = json.loads((run / "run.json").read_text())

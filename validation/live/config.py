@@ -24,6 +24,11 @@ __all__ = [
     "REFERENCE_LIVE",
     "COMPARISONS",
     "EQUIVALENCE_MARGINS",
+    "RPE_RANK",
+    "JUDGED_METRICS",
+    "HEADLINE_COMPARISONS",
+    "HEADLINE_METRICS",
+    "LIVE_LIVE",
     "GOAL_TAU_MIN",
     "GOAL_EXPOSURE_LOG2_MEDIAN",
     "LiveError",
@@ -104,7 +109,32 @@ EQUIVALENCE_MARGINS = {
     "segment_success_rate_tau100": 0.10,
     "vo_failed_frames": 2.0,
     "rpe_trans_pct": 0.5,
+    "rpe_trans_rank": 1.0,
 }
+#: Translation RPE with a lost VO as part of the outcome: per walk, each method's rank of translation RPE
+#: (1 = lowest), methods whose VO was lost on the walk (no RPE) sharing the worst ranks.  The plain
+#: ``rpe_trans_pct`` keeps only the walks where every method kept its VO (the sensitivity analysis beside it).
+RPE_RANK = "rpe_trans_rank"
+#: Every metric the verdicts judge: name -> higher is better (:data:`METRICS` and :data:`RPE_RANK`, derived
+#: from the walks table's RPE and failed-frame columns).
+JUDGED_METRICS = {**{k: higher for k, (_, higher) in METRICS.items()}, RPE_RANK: False}
+#: The headline, in this order: both live references with equal weight (label -> what it answers), then
+#: the cycle-rate benchmark against the native-rate camera beside them.  Their verdicts on
+#: :data:`HEADLINE_METRICS` form one family (Holm).
+HEADLINE_COMPARISONS = {
+    "emulated vs cycle-rate live": "what the offline benchmark can match: a camera updated once per bracket cycle",
+    "emulated native vs native-rate live": "what a robot's camera does: every frame at 22 fps, with an exposure "
+                                           "latency",
+    "emulated vs native-rate live": "beside them: the cycle-rate benchmark against the native-rate camera",
+}
+#: The distinct metrics of the headline: the sequence success rate is left out (it is computed from the same
+#: per-pair matches as the segment success rate: a walk succeeds only when each of its segments does), and RPE
+#: counts a lost VO as the worst outcome (:data:`RPE_RANK`).
+HEADLINE_METRICS = ("median_uniformity", "median_matches", "segment_success_rate_tau100", "vo_failed_frames",
+                    RPE_RANK)
+#: The live-against-live control of each live reference: reference run -> its comparison with itself re-seeded.
+LIVE_LIVE = {"live-fixed-instant": "cycle-rate live re-seeded vs cycle-rate live",
+             "live-native": "native-rate live re-seeded vs native-rate live"}
 #: Goals of issue 14.
 GOAL_TAU_MIN = 0.9
 GOAL_EXPOSURE_LOG2_MEDIAN = 0.05

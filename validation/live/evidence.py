@@ -28,14 +28,16 @@ from validation.live.config import (
     CONDITIONS,
     CONTROL,
     EQUIVALENCE_MARGINS,
-    METRICS,
+    HEADLINE_COMPARISONS,
+    HEADLINE_METRICS,
+    JUDGED_METRICS,
     REFERENCE_LIVE,
     RESEEDED,
 )
 
 __all__ = ["WALK_METRICS", "WALKS_TABLE", "walk_value", "walk_values", "walk_labels", "walks_table_csv",
-           "parse_walks_table", "store_walks_table", "condition_table", "metric_scales", "judge_metrics", "calibration",
-           "store_calibration"]
+           "parse_walks_table", "store_walks_table", "condition_table", "metric_scales", "judge_metrics",
+           "pilot_reason", "calibration", "store_calibration"]
 
 #: The study's per-walk table in its folder: one row per walk, method and condition, every metric.
 WALKS_TABLE = "walks.csv"
@@ -205,7 +207,7 @@ def condition_table(table: np.ndarray, methods, *, n_resamples: int = 1000, seed
     return out
 
 
-def metric_scales(tables: dict, metric: str, *, min_walks: int = 2):
+def metric_scales(tables: dict, metric: str, *, min_walks: int = 2, reference: str | None = None):
     """``(Scales, complete walks, None)`` of one metric measured on a study's walk tables, or ``(None, n, reason)``.
 
     The reference live condition's table gives the method SD and its residual; the run
@@ -217,11 +219,12 @@ def metric_scales(tables: dict, metric: str, *, min_walks: int = 2):
     """
     from validation.verdicts.power import scales_from_tables
 
-    ref = CONDITIONS[REFERENCE_LIVE]
+    ref = reference or CONDITIONS[REFERENCE_LIVE]
     live = tables.get(ref, {}).get(metric)
     if live is None:
         return None, 0, f"run {ref} not in this study"
-    pair = (ref, RESEEDED[ref]) if RESEEDED[ref] in tables else ("live-same-instant", f"live-{CONTROL}")
+    pair = (ref, RESEEDED.get(ref)) if RESEEDED.get(ref) in tables else (
+        ("live-same-instant", f"live-{CONTROL}") if reference is None else (ref, None))
     control = tables.get(pair[1], {}).get(metric)
     ok = np.all(np.isfinite(live), axis=1)
     if control is not None:
@@ -253,21 +256,27 @@ def _not_run_reason(cname: str, run: str) -> str:
 
 
 def judge_metrics(tables: dict, methods, *, n_resamples: int = 1000, seed: int = 0, power: bool = True,
-                  power_seeds: int = 100, walks=None, calibration_studies: int | None = None) -> dict:
+                  power_seeds: int = 100, walks=None, pilot: str | None = None,
+                  calibration_studies: int | None = None) -> dict:
     """results.json's ``metrics``, ``comparisons``, ``conditions``, ``power`` and ``n_walks`` from walk tables.
 
     ``tables``: :func:`walk_values`' second item.  ``walks``: their names (``<scene>/seed<S>``):
     the bootstrap then resamples the seeds as clusters (the walks of one seed together, so
     each resample keeps every scene's share).  A comparison whose runs were not made (the
-    native-rate live loop where none was given) is ``{"status": "not run"}``.  ``calibration``: the verdict
+    native-rate live loop where none was given) is ``{"status": "not run"}``.  ``pilot``: why this
+    study decides nothing (a pipeline check): every verdict is then ``undetermined`` with that reason.
+    ``calibration``: the verdict
     rule calibrated on these walks (:func:`calibration`; ``calibration_studies`` plasmode studies per
     emulator and size, the default where None, none where 0).
     """
-    from validation.verdicts.agreement import MIN_WALKS, judge
+    from validation.verdicts.agreement import ALPHA, MIN_WALKS, judge
     from validation.verdicts.power import power_summary
+
+    from validation.live.headline import apply_family, headlines, with_derived
 
     names = list(methods)
     clusters = None if walks is None else walk_labels(walks)[1]
+    tables = with_derived(tables)
     comparisons = {}
     for label, (ref, other) in COMPARISONS.items():
         if ref not in tables or other not in tables:
@@ -277,15 +286,22 @@ def judge_metrics(tables: dict, methods, *, n_resamples: int = 1000, seed: int =
             continue
         control = tables.get(RESEEDED.get(ref))  # like for like: the reference itself, re-seeded
         per_metric = {}
-        for metric, (_, higher) in METRICS.items():
+        for metric, higher in JUDGED_METRICS.items():
+            if metric not in tables[ref] or metric not in tables[other]:
+                continue
             res = judge(tables[ref][metric], tables[other][metric],
                         None if control is None else control[metric], methods=names,
                         margin=EQUIVALENCE_MARGINS.get(metric), higher_is_better=higher, n_resamples=n_resamples,
-                        seed=[seed, 22_001, list(COMPARISONS).index(label), list(METRICS).index(metric)],
+                        seed=[seed, 22_001, list(COMPARISONS).index(label), list(JUDGED_METRICS).index(metric)],
                         clusters=clusters)
             per_metric[metric] = res
         comparisons[label] = {"status": "run", "reference": ref, "compared": other,
                               "control": RESEEDED.get(ref) if control is not None else None, "metrics": per_metric}
+    if pilot:
+        _decide_nothing(comparisons, pilot)
+    family = apply_family(comparisons, alpha=ALPHA, min_walks=MIN_WALKS)
+    if power:
+        _walks_to_decide(tables, comparisons, power_seeds, seed, ALPHA / max(family["size"], 1))
     headline = next(iter(COMPARISONS))
     n_walks = int(next(iter(next(iter(tables.values())).values())).shape[0]) if tables else 0
     metrics = {}
@@ -293,6 +309,9 @@ def judge_metrics(tables: dict, methods, *, n_resamples: int = 1000, seed: int =
         for metric, res in comparisons[headline]["metrics"].items():
             metrics[metric] = {k: res[k] for k in ("omega2", "omega2_ci90", "tau_live_emulated", "tau_live_live",
                                                    "verdict", "reason", "family")}
+            metrics[metric].update({k: res[k] for k in ("verdict_alone", "p_agrees", "p_disagrees",
+                                                        "p_agrees_adjusted", "p_disagrees_adjusted",
+                                                        "walks_to_decide") if k in res})
             metrics[metric].update({k: res[k] for k in ("n_walks", "omega2_untruncated", "omega2_interval",
                                                         "pairs_verdict", "margin_in_ranking_terms", "emulation_bias",
                                                         "disattenuated_correlation",
@@ -308,10 +327,10 @@ def judge_metrics(tables: dict, methods, *, n_resamples: int = 1000, seed: int =
             continue
         conditions[cname] = {"run": run, "status": "run", "metrics": {
             metric: condition_table(tables[run][metric], names, n_resamples=n_resamples,
-                                    seed=[seed, 22_002, list(METRICS).index(metric)], clusters=clusters)
-            for metric in METRICS}}
+                                    seed=[seed, 22_002, list(JUDGED_METRICS).index(metric)], clusters=clusters)
+            for metric in JUDGED_METRICS if metric in tables[run]}}
     power_out = {}
-    for metric in METRICS:
+    for metric in JUDGED_METRICS:
         if not power or CONDITIONS[REFERENCE_LIVE] not in tables:
             break
         sc, n, reason = metric_scales(tables, metric, min_walks=MIN_WALKS)
@@ -319,9 +338,51 @@ def judge_metrics(tables: dict, methods, *, n_resamples: int = 1000, seed: int =
             power_out[metric] = {"status": "not computed", "reason": reason}
             continue
         power_out[metric] = {"status": "computed", **power_summary(n, sc, n_seeds=power_seeds, seed=[seed, 22_003])}
-    return {"n_walks": n_walks, "reference_condition": REFERENCE_LIVE, "metrics": metrics,
-            "comparisons": comparisons, "conditions": conditions, "power": power_out,
+    return {"n_walks": n_walks, "reference_condition": REFERENCE_LIVE, "headlines": headlines(comparisons, family),
+            "metrics": metrics, "comparisons": comparisons, "conditions": conditions, "power": power_out,
             "calibration": calibration(tables, walks, names, seed=seed, n_studies=calibration_studies)}
+
+
+def _decide_nothing(comparisons: dict, why: str) -> None:
+    """Every verdict (and pairwise check) of ``comparisons`` undetermined, in place, the reason first."""
+    for c in comparisons.values():
+        for r in (c.get("metrics") or {}).values():
+            r["verdict"], r["reason"] = "undetermined", f"{why}; {r['reason']}"
+            r["p_agrees"] = r["p_disagrees"] = None
+            if isinstance(r.get("pairs_verdict"), dict):
+                r["pairs_verdict"].update(verdict="undetermined", reason=why)
+
+
+def pilot_reason(config) -> str | None:
+    """Why a study of this configuration decides nothing (walks as short as ``--quick``'s: a pipeline check),
+    or None."""
+    from validation.live.config import CONFIG_CHANGES
+
+    n = CONFIG_CHANGES["quick"]["n_cycles"]
+    if config.n_cycles <= n:
+        return (f"walks of {config.n_cycles} cycles (--quick's length, {n} or fewer) are a pipeline check and "
+                "decide nothing")
+    return None
+
+
+def _walks_to_decide(tables: dict, comparisons: dict, power_seeds: int, seed: int, alpha: float) -> None:
+    """Each undetermined headline verdict gets ``walks_to_decide`` (:func:`validation.live.headline.walks_to_decide`
+    with the variance components of its reference live run), in place."""
+    from validation.live.headline import walks_to_decide
+    from validation.verdicts.agreement import MIN_WALKS
+
+    for k, label in enumerate(HEADLINE_COMPARISONS):
+        c = comparisons.get(label) or {}
+        if c.get("status") != "run":
+            continue
+        for metric in HEADLINE_METRICS:
+            r = c["metrics"].get(metric)
+            if r is None or r["verdict"] != "undetermined":
+                continue
+            sc, n, reason = metric_scales(tables, metric, min_walks=MIN_WALKS, reference=c["reference"])
+            r["walks_to_decide"] = ({"walks": None, "towards": None, "reason": reason} if sc is None else
+                                    walks_to_decide(sc, r["omega2_untruncated"], alpha=alpha, n_seeds=power_seeds,
+                                                    seed=[seed, 22_004, k, list(JUDGED_METRICS).index(metric)]))
 
 
 def calibration(tables: dict, walks, methods, *, seed: int = 0, n_studies: int | None = None) -> dict:

@@ -22,12 +22,14 @@ from emulator.report.html import write_report
 from validation.live.compare import measure_noise_variance_ratio
 from validation.live.config import BRIGHTENING_PAIRS, CONFIGS, LiveConfig, LiveError, config_from_dict
 from validation.live.evidence import WALKS_TABLE
+from validation.live.portable import folder_check, folder_markdown, relative_command
 from validation.live.report import plot_metrics, plot_trajectories, report_markdown
 from validation.live.verdicts import assemble, ratio_use
 from validation.live.walks import NATIVE_RUN
 
-__all__ = ["RAW_FILE", "REPLICATES_DIR", "STUDY_FILE", "NATIVE_RUN", "numbered_output", "run_live_experiment",
-           "run_study", "assemble_raw", "finish", "evidence", "run_replicated", "finish_replicated", "redraw"]
+__all__ = ["RAW_FILE", "REPLICATES_DIR", "STUDY_FILE", "POWER_FILE", "NATIVE_RUN", "numbered_output",
+           "run_live_experiment", "run_study", "assemble_raw", "finish", "evidence", "store_power", "run_replicated",
+           "finish_replicated", "redraw"]
 
 #: What :func:`redraw` recomputes the verdicts from (per-cycle comparisons, benchmark summaries).
 RAW_FILE = "raw.json"
@@ -101,7 +103,7 @@ def assemble_raw(experiment, cfg: LiveConfig, failed: dict[str, str], command: s
     present = [w["scene"] for w in walks]
     timings = {k: v for w in walks for k, v in w["timings"].items()}
     timings["total_s"] = float(sum(w["timings"][f"walk_{w['scene']}_s"] for w in walks))
-    raw = {"config": cfg.to_dict(), "command": command, "exposim_version": __version__,
+    raw = {"config": cfg.to_dict(), "command": relative_command(command, experiment), "exposim_version": __version__,
            "render_variant": walks[0]["render_variant"] if walks else None, "timings": timings,
            "per_scene": {w["scene"]: {"comparison": w["comparison"], "trajectories": w["trajectories"],
                                       **({"native_emulation": w["native_emulation"]} if w.get("native_emulation")
@@ -206,6 +208,12 @@ def _brightening_on_chart(dataset: Path, cfg: LiveConfig) -> dict:
     return res
 
 
+def _lead(results: dict) -> dict:
+    """results.json's keys with what the study is and its headline first."""
+    first = [k for k in ("experiment", "command", "n_walks", "headlines") if k in results]
+    return {**{k: results[k] for k in first}, **{k: v for k, v in results.items() if k not in first}}
+
+
 def finish(out, raw: dict) -> dict:
     """Verdicts, figures, ``report.md`` and ``results.json`` from the raw record (see :func:`redraw`)."""
     out = Path(out)
@@ -235,7 +243,7 @@ def finish(out, raw: dict) -> dict:
     results.update({
         "experiment": "live versus emulated",
         "exposim_version": raw.get("exposim_version"),
-        "command": raw.get("command"),
+        "command": relative_command(raw.get("command"), out),
         "config": cfg.to_dict(),
         "render_variant": raw.get("render_variant"),
         "timings": raw.get("timings", {}),
@@ -249,7 +257,9 @@ def finish(out, raw: dict) -> dict:
         plot_trajectories(per_scene[s]["trajectories"], out / f"exposure_{s}.png", title=s)
     if cfg.metrics:
         plot_metrics(results, out / "metrics.png")
+    results["study_folder"] = folder_check(out)
     write_report(out, report_markdown(results) + native_markdown(results), sheets=[_live_sheets(out, scenes[0])])
+    results = _lead(results)
     write_results(out / RESULTS_FILE, results)
     return results
 
@@ -260,7 +270,8 @@ def evidence(cfg: LiveConfig, records: list[dict], power_seeds: int = 100, folde
     ``records`` (one experiment, or the replicates of :func:`run_replicated`); with ``folder``, the per-walk
     table is stored there (:func:`validation.live.evidence.store_walks_table`), and the calibration
     (``calibration_studies`` plasmode studies; :func:`validation.live.evidence.store_calibration`)."""
-    from validation.live.evidence import judge_metrics, store_calibration, store_walks_table, walk_values
+    from validation.live.evidence import (judge_metrics, pilot_reason, store_calibration, store_walks_table,
+                                          walk_values)
 
     walks, tables = walk_values(records, cfg.methods)
     out = {"walks": walks, "n_walks": len(walks)}
@@ -268,13 +279,30 @@ def evidence(cfg: LiveConfig, records: list[dict], power_seeds: int = 100, folde
         out["walks_table"] = store_walks_table(folder, walks, tables, cfg.methods)
     if tables:
         out.update(judge_metrics(tables, cfg.methods, seed=cfg.seed, power=power_seeds > 0, power_seeds=power_seeds,
-                                 walks=walks, calibration_studies=calibration_studies))
+                                 walks=walks, pilot=pilot_reason(cfg), calibration_studies=calibration_studies))
         out["n_walks"] = len(walks)
         if folder is not None:
             out["calibration_file"] = store_calibration(folder, out["calibration"])
+            out["power_file"] = store_power(folder, out)
     else:
         out.update({"metrics": {}, "reason": "no benchmark metrics in this experiment (metrics off)"})
     return out
+
+
+#: The power analysis of a study folder (per metric what the study's size decides, per undetermined headline
+#: verdict the walks that would decide it).
+POWER_FILE = "power.json"
+
+
+def store_power(folder, results: dict) -> str:
+    """Write :data:`POWER_FILE` into ``folder`` from results.json's ``power`` and the headline's walks to decide;
+    returns its name (recomputed from the same walks, it is the same bytes)."""
+    walks_to_decide = {label: {m: r["walks_to_decide"] for m, r in (c.get("metrics") or {}).items()
+                               if "walks_to_decide" in r}
+                       for label, c in (results.get("headlines") or {}).get("comparisons", {}).items()}
+    write_results(Path(folder) / POWER_FILE, {"n_walks": results.get("n_walks"), "power": results.get("power", {}),
+                                              "walks_to_decide": walks_to_decide})
+    return POWER_FILE
 
 
 def run_replicated(out, config: LiveConfig | None = None, replicates: int = 1, *, command: str | None = None,
@@ -319,18 +347,22 @@ def finish_replicated(out, records: list[dict], command: str | None = None, powe
         raise LiveError(f"{out}: no walk of the study ran (" + "; ".join(f"{f['walk']}: {f['error']}" for f in failed)
                         + ")")
     cfg = config_from_dict(records[0]["config"])
+    command = relative_command(command, out)
     results = {"experiment": "live versus emulated, replicated", "command": command,
                "config": cfg.to_dict(), "replicates": [f"{REPLICATES_DIR}/seed{r['config']['seed']}" for r in records],
                "timings": {"total_s": float(sum((r.get("timings") or {}).get("total_s", 0.0) for r in records)),
                            **({} if wall_s is None else {"wall_s": float(wall_s)})},
                "failed_walks": failed}
     results.update(evidence(cfg, records, power_seeds=power_seeds, folder=out, calibration_studies=calibration_studies))
+    results["study_folder"] = folder_check(out)
     write_report(out, "# Live versus emulated, replicated\n\n"
                  + f"{len(records)} replicate(s) of the experiment (seeds "
                  + ", ".join(str(r["config"]["seed"]) for r in records) + f"), {results['n_walks']} walks. "
-                 + f"Command: `{command}`\n\n"
+                 + f"Command (paths relative to this folder): `{command}`\n\n"
+                 + folder_markdown(results["study_folder"])
                  + "".join(f"Failed walk (not judged; `--resume` runs it again): {f['walk']}: {f['error']}\n\n"
                            for f in results["failed_walks"]) + evidence_markdown(results))
+    results = _lead(results)
     write_results(out / RESULTS_FILE, results)
     return results
 
@@ -353,7 +385,7 @@ def _live_sheets(out: Path, scene: str) -> str:
 def verdicts_from_table(out, power_seeds: int = 100, calibration_studies: int | None = None) -> dict:
     """The verdicts of a study folder that keeps only its per-walk table (and its results.json for the
     configuration): results.json's evidence and report.md recomputed from ``walks.csv``."""
-    from validation.live.evidence import judge_metrics, parse_walks_table, store_calibration
+    from validation.live.evidence import judge_metrics, parse_walks_table, pilot_reason, store_calibration
     from validation.live.report import evidence_markdown
 
     out = Path(out)
@@ -365,11 +397,18 @@ def verdicts_from_table(out, power_seeds: int = 100, calibration_studies: int | 
     results = {k: prev[k] for k in ("experiment", "command", "config", "replicates", "timings", "failed_walks")
                if k in prev}
     results.update({"walks": walks, "n_walks": len(walks), "walks_table": WALKS_TABLE})
+    results["command"] = relative_command(results.get("command"), out)
     results.update(judge_metrics(tables, methods, seed=cfg.seed, power=power_seeds > 0, power_seeds=power_seeds,
-                                 walks=walks, calibration_studies=calibration_studies))
+                                 walks=walks, pilot=pilot_reason(cfg),
+                                 calibration_studies=calibration_studies))
     results["calibration_file"] = store_calibration(out, results["calibration"])
-    write_report(out, f"# Live versus emulated, recomputed from {WALKS_TABLE}\n\n{len(walks)} walks. Command: "
-                 f"`{results.get('command')}`\n\n" + evidence_markdown(results))
+    if power_seeds > 0:
+        results["power_file"] = store_power(out, results)
+    results["study_folder"] = folder_check(out)
+    write_report(out, f"# Live versus emulated, recomputed from {WALKS_TABLE}\n\n{len(walks)} walks. Command "
+                 f"(paths relative to this folder): `{results.get('command')}`\n\n"
+                 + folder_markdown(results["study_folder"]) + evidence_markdown(results))
+    results = _lead(results)
     write_results(out / RESULTS_FILE, results)
     return results
 

@@ -182,6 +182,16 @@ def iter_emulated(sequence, methods, *, noise: str = "none", noise_model=None, s
                     noise_model=noise_model, noise_seed=seed)
 
 
+def _relative_to(path, folder) -> str:
+    """``path`` relative to ``folder`` (a study folder moves as a whole), or absolute where no relative path exists."""
+    import os
+
+    try:
+        return os.path.relpath(Path(path).resolve(), Path(folder).resolve())
+    except ValueError:  # another drive
+        return str(Path(path).resolve())
+
+
 def write_run_folder(folder, sequence_path, cycles, names, *, white_level: int, black_level: int,
                      description: dict | None = None) -> Path:
     """Write cycles (with images) as a run folder that ``exposim bench features|vo`` read.
@@ -189,7 +199,7 @@ def write_run_folder(folder, sequence_path, cycles, names, *, white_level: int, 
     The layout of :func:`emulator.runner.run_to_folder` with ``save="png16"``, written by
     the same :class:`emulator.io.runfolder.RunWriter`: ``run.json``,
     ``<method>/exposures.csv``, ``<method>/images/{left,right}/<ts>.png``,
-    ``<method>/images/times.txt``.  Refuses an existing non-empty folder
+    ``<method>/images/times.txt``; the recording is named relative to ``folder``.  Refuses an existing non-empty folder
     (:class:`~emulator.errors.OutputExistsError`).
     """
     from emulator.io.runfolder import RunWriter, format_row
@@ -197,7 +207,7 @@ def write_run_folder(folder, sequence_path, cycles, names, *, white_level: int, 
     folder = Path(folder)
     cycles = list(cycles)
     cameras = ["left"] + (["right"] if any(st.right is not None for cs in cycles for st in cs.steps.values()) else [])
-    run_json = {"sequence": str(Path(sequence_path).resolve()), "methods": list(names), "save": "png16",
+    run_json = {"sequence": _relative_to(sequence_path, folder), "methods": list(names), "save": "png16",
                 "white_level": int(white_level), "black_level": int(black_level), "cameras": cameras,
                 "n_cycles": len(cycles), **(description or {})}
     with RunWriter(folder) as writer:

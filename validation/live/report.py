@@ -93,19 +93,32 @@ def _ci(iv, spec=".3g") -> str:
     return f"[{fmt(lo, spec)}, {'inf' if hi is None else fmt(hi, spec)}]"
 
 
+def _family_short(text) -> str:
+    """A verdict's family in a table cell: the headline family with its size, or the verdict's own."""
+    if not text:
+        return "n/a"
+    if text.startswith("headline:"):
+        return f"headline, Holm over {text.split()[1]}"
+    return "own, not corrected"
+
+
 def evidence_markdown(results: dict) -> str:
     """The replicated verdicts (issue 22): per metric omega2 with its interval and the verdict, the
     other comparisons, the three conditions side by side, and what the study's size can decide."""
+    from validation.live.headline import headlines_markdown
     from validation.verdicts.agreement import OMEGA2_MAX
 
-    lines = ["## Verdicts per metric (omega2, bootstrap over walks, the seeds as clusters)", "",
+    lines = [headlines_markdown(results).rstrip("\n"), "",
+             f"## Verdicts per metric, emulated vs {results.get('reference_condition')} (omega2, bootstrap over "
+             "walks, the seeds as clusters)", "",
              f"{results.get('n_walks', 0)} independent walks ({', '.join(results.get('walks', []))}). Emulated "
              f"(plain, the benchmark's default, declared before the data) against {results.get('reference_condition')}."
              " omega2 = var over the methods of (emulated - live method effects) / var of the live method effects; "
              f"agrees: its one-sided 95 % upper bound at or below {OMEGA2_MAX}; disagrees: its one-sided 95 % lower "
              "bound above it; undetermined otherwise, or when live does not separate the methods (a tie is not "
-             "agreement), or with fewer than 10 walks. Each verdict is one metric and one comparison, not corrected "
-             "across metrics or comparisons. The pairwise check: every pair of methods that live separates has its "
+             "agreement), or with fewer than 10 walks. The headline's verdicts are one family (Holm, in the family "
+             "column; 'alone' is the verdict at its own level); the other comparisons' verdicts are each their own "
+             "family, not corrected. The pairwise check: every pair of methods that live separates has its "
              "difference of differences (emulated - live) within the metric's margin (90 % interval; TOST). The "
              f"margin in ranking terms: at omega2 = {OMEGA2_MAX} on this study's live spacings, the expected Kendall "
              "tau between the live and the emulated ranking and the probability that the best method changes. "
@@ -114,13 +127,16 @@ def evidence_markdown(results: dict) -> str:
     if not metrics:
         lines += [results.get("reason", "No metrics."), ""]
         return "\n".join(lines) + "\n"
-    lines += ["| metric | verdict | omega2 | one-sided 95 % bounds | pairwise check (widest pair bound) | "
+    lines += ["| metric | verdict | omega2 | one-sided 95 % bounds | family | pairwise check, its own family: the pairs live "
+              "separates (widest pair bound vs margin) | "
               "margin: expected tau, P(best changes) | disattenuated r | tau live-emulated | tau live-live | "
               "pairs differing live / equivalent / reversed | reason |",
-              "| --- | --- | ---: | --- | --- | --- | ---: | ---: | ---: | --- | --- |"]
+              "| --- | --- | ---: | --- | --- | --- | --- | ---: | ---: | ---: | --- | --- |"]
     for m, r in metrics.items():
         pv, mr = r.get("pairs_verdict") or {}, r.get("margin_in_ranking_terms") or {}
-        lines.append(f"| {m} | **{r['verdict']}** | {fmt(r['omega2'])} | {_ci(r['omega2_ci90'])} | "
+        alone = (f" ({r['verdict_alone']} alone)" if r.get("verdict_alone") not in (None, r["verdict"]) else "")
+        lines.append(f"| {m} | **{r['verdict']}**{alone} | {fmt(r['omega2'])} | {_ci(r['omega2_ci90'])} | "
+                     f"{_family_short(r.get('family'))} | "
                      f"{pv.get('verdict', 'n/a')} ({fmt(pv.get('bound'))} vs {fmt(pv.get('margin'))}) | "
                      f"{fmt(mr.get('expected_kendall_tau'), '.2f')}, "
                      f"{fmt(mr.get('best_method_changes_probability'), '.2f')} | "
@@ -128,16 +144,16 @@ def evidence_markdown(results: dict) -> str:
                      f"{fmt(r['tau_live_live'], '.2f')} | {r.get('pairs_live_significant', 'n/a')} / "
                      f"{r['pairs_equivalent'] if r.get('pairs_equivalent') is not None else 'n/a'} / "
                      f"{r.get('pairs_reversed', 'n/a')} (margin {fmt(r.get('margin'))}) | {r['reason']} |")
-    lines += ["", "### Other comparisons", "", "| comparison | " + " | ".join(metrics) + " |",
-              "| --- | " + " | ".join("---" for _ in metrics) + " |"]
+    lines += ["", "### Every comparison (verdict, omega2, one-sided 95 % bounds, family)", "",
+              "| comparison | " + " | ".join(metrics) + " |", "| --- | " + " | ".join("---" for _ in metrics) + " |"]
     for label, c in (results.get("comparisons") or {}).items():
         if c["status"] != "run":
             lines.append(f"| {label} | " + " | ".join("not run" for _ in metrics) + " |")
             continue
         lines.append(f"| {label} | " + " | ".join(
             f"{c['metrics'][m]['verdict']} {fmt(c['metrics'][m]['omega2'], '.2f')} "
-            f"{_ci(c['metrics'][m]['omega2_ci90'], '.2f')}"
-            for m in metrics) + " |")
+            f"{_ci(c['metrics'][m]['omega2_ci90'], '.2f')}, {_family_short(c['metrics'][m].get('family'))}"
+            if m in c["metrics"] else "n/a" for m in metrics) + " |")
     bias = {m: r["emulation_bias"] for m, r in metrics.items() if r.get("emulation_bias")}
     if bias:
         meths = list(next(iter(bias.values())))
@@ -164,7 +180,8 @@ def evidence_markdown(results: dict) -> str:
                   + " |"]
         for m in metrics:
             for meth in methods:
-                cells = [f"{fmt(c['metrics'][m][meth]['mean'])} {_ci(c['metrics'][m][meth]['ci95'])}" for c in ran.values()]
+                cells = [f"{fmt(c['metrics'][m][meth]['mean'])} {_ci(c['metrics'][m][meth]['ci95'])}"
+                         if m in c["metrics"] else "n/a" for c in ran.values()]
                 lines.append(f"| {m} | {meth} | " + " | ".join(cells) + " |")
     power = results.get("power") or {}
     if power:
@@ -195,9 +212,13 @@ def report_markdown(results: dict) -> str:
         f"{len(cfg['scenes'])} synthetic stereo walks ({', '.join(cfg['scenes'])}), {cfg['n_cycles']} cycles each, "
         f"{cfg['width']}x{cfg['height']} px at {cfg['spp']} spp, {len(cfg['methods'])} AE methods, seed {cfg['seed']}. "
         f"Fixed instant of the fixed-instant variant: {cfg['fixed_instant']}.",
-        f"Command: `{results.get('command')}`",
+        f"Command (paths relative to this folder): `{results.get('command')}`",
         "",
     ]
+    from validation.live.portable import folder_markdown
+
+    if folder_markdown(results.get("study_folder")):
+        lines += [folder_markdown(results["study_folder"])]
     failed = results.get("failed_walks") or []
     if failed:
         lines += [f"**{len(failed)} walk(s) failed** and are not judged: "
@@ -360,10 +381,12 @@ def headline(results: dict) -> str:
     then, labelled secondary, Kendall tau(live, emulated) against tau(live, live) of the control."""
     from validation.verdicts.agreement import OMEGA2_MAX
 
+    from validation.live.headline import headline_lines
+
     metrics = results.get("metrics") or {}
-    lines = [f"verdicts over {results.get('n_walks', 0)} walks, emulated vs {results.get('reference_condition')} "
-             f"(agrees: omega2's one-sided 95 % upper bound <= {OMEGA2_MAX}; per metric, not corrected across "
-             "metrics):"]
+    lines = headline_lines(results)
+    lines += [f"verdicts over {results.get('n_walks', 0)} walks, emulated vs {results.get('reference_condition')} "
+              f"(agrees: omega2's one-sided 95 % upper bound <= {OMEGA2_MAX}; family per metric in results.json):"]
     lines += [f"  {m}: {r['verdict']}, omega2 {fmt(r['omega2'], '.3g')} {_ci(r['omega2_ci90'])}"
               + (f"; pairwise check {r['pairs_verdict']['verdict']}" if r.get("pairs_verdict") else "")
               for m, r in metrics.items()] or ["  none (no benchmark metrics)"]

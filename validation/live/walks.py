@@ -35,8 +35,8 @@ from validation.live.config import (
     config_from_dict,
 )
 
-__all__ = ["WALKS_DIR", "NATIVE_RUN", "CONTROL_STREAM", "RESEEDED_STREAMS", "control_seed", "walk_record_path", "walk_name", "run_walk",
-           "run_walks", "read_walk"]
+__all__ = ["WALKS_DIR", "NATIVE_RUN", "CONTROL_STREAM", "RESEEDED_STREAMS", "control_seed", "walk_record_path",
+           "walk_name", "run_walk", "run_walks", "read_walk"]
 
 #: Sub-folder of an experiment with one record per finished walk.
 WALKS_DIR = "walks"

@@ -64,7 +64,7 @@ from emulator.stats import (
 from validation.verdicts.ranking import cluster_plan, emulation_bias, margin_in_ranking_terms, over_plan, pairs_check
 
 __all__ = ["ALPHA", "OMEGA2_MAX", "MIN_WALKS", "VERDICTS", "complete_walks", "omega2", "omega2_untruncated",
-           "omega2_over_plan", "one_sided_bounds", "judge_batch", "judge"]
+           "omega2_over_plan", "one_sided_bounds", "bound_pvalues", "judge_batch", "judge"]
 
 #: Level of every test (and 1 - confidence of every interval).
 ALPHA = 0.05
@@ -169,6 +169,33 @@ def one_sided_bounds(replicates, estimate, alpha: float = ALPHA) -> tuple[float,
     return max(float(lo), 0.0), max(float(hi), float(hi_bc), 0.0)
 
 
+def bound_pvalues(replicates, estimate, omega2_max: float = OMEGA2_MAX) -> tuple[float, float]:
+    """(p_agrees, p_disagrees): the smallest level at which :func:`one_sided_bounds` would put the upper bound at
+    or below ``omega2_max`` (agrees), and the lower bound above it (disagrees), from the same replicates.
+
+    With ``G`` the fraction of replicates at or below ``omega2_max`` and ``z0`` the bias correction:
+    ``p_disagrees = Phi(Phi^-1(G) - 2 z0)`` (the bias-corrected lower bound), ``p_agrees`` the larger of
+    ``1 - G`` (the plain upper bound) and ``1 - Phi(Phi^-1(G) - 2 z0)`` (the bias-corrected one).  A verdict's
+    p-value, so that a family of verdicts can be corrected (Holm); up to the quantiles' interpolation,
+    ``p_agrees <= alpha`` exactly when the upper bound at ``alpha`` is at or below ``omega2_max``.
+    """
+    from scipy.stats import norm
+
+    r = np.asarray(replicates, dtype=np.float64).ravel()
+    r = np.where(np.isnan(r), np.inf, r)
+    n = r.size
+    if n == 0:
+        return math.nan, math.nan
+    clip = (0.5 / n, 1.0 - 0.5 / n)
+    g = min(max(float(np.mean(r <= omega2_max)), clip[0]), clip[1])
+    z0 = 0.0
+    if estimate is not None and math.isfinite(float(estimate)):
+        frac = (np.sum(r < estimate) + 0.5 * np.sum(r == estimate)) / n
+        z0 = float(norm.ppf(min(max(frac, clip[0]), clip[1])))
+    bc = float(norm.cdf(norm.ppf(g) - 2.0 * z0))
+    return max(1.0 - g, 1.0 - bc), bc
+
+
 def _disattenuated(live, emulated) -> np.ndarray:
     s_l, _ = variance_components(live)
     s_e, _ = variance_components(emulated)
@@ -211,6 +238,7 @@ def judge_batch(live, emulated, *, n_resamples: int = 1000, seed=0, omega2_max: 
     _, p = _live_f_test(L)
     lo = np.empty(n)
     hi = np.empty(n)
+    p_agrees, p_disagrees = np.empty(n), np.empty(n)
     for a in range(0, n, chunk):
         b = min(n, a + chunk)
         if plan is None:
@@ -221,13 +249,14 @@ def judge_batch(live, emulated, *, n_resamples: int = 1000, seed=0, omega2_max: 
             boot = np.stack([omega2_over_plan(plan, L[k], E[k]) for k in range(a, b)])
         for k in range(b - a):
             lo[a + k], hi[a + k] = one_sided_bounds(boot[k], raw[a + k], alpha)
+            p_agrees[a + k], p_disagrees[a + k] = bound_pvalues(boot[k], raw[a + k], omega2_max)
     tied = np.all(np.ptp(L, axis=2) == 0, axis=1)
     verdict = np.full(n, VERDICTS.index("undetermined"))
     decidable = (w >= min_walks) & (p < alpha) & ~tied  # a tie's F is rounding noise: never decidable
     verdict[decidable & (hi <= omega2_max)] = VERDICTS.index("agrees")
     verdict[decidable & (lo > omega2_max)] = VERDICTS.index("disagrees")
     return {"verdict": verdict, "omega2": est, "omega2_untruncated": raw, "lo": lo, "hi": hi, "live_p": p,
-            "tied": tied}
+            "tied": tied, "p_agrees": p_agrees, "p_disagrees": p_disagrees}
 
 
 def _finite(v):
@@ -294,7 +323,8 @@ def judge(live, emulated, control=None, *, methods=None, margin: float | None = 
     names = list(methods) if methods is not None else [str(i) for i in range(m)]
     out = {"n_walks": int(w), "verdict": "undetermined", "reason": "", "family": FAMILY, "omega2": None,
            "omega2_untruncated": None, "omega2_ci90": [None, None], "omega2_max": omega2_max,
-           "omega2_interval": INTERVAL, "live_method_f": None, "live_method_p": None}
+           "omega2_interval": INTERVAL, "live_method_f": None, "live_method_p": None, "p_agrees": None,
+           "p_disagrees": None}
     if detail:
         out.update({"pairs_verdict": None, "margin_in_ranking_terms": None, "emulation_bias": None,
                     "disattenuated_correlation": None, "disattenuated_correlation_ci95": [None, None],
@@ -315,6 +345,7 @@ def judge(live, emulated, control=None, *, methods=None, margin: float | None = 
     out["omega2_untruncated"] = _finite(batch["omega2_untruncated"][0])
     lo, hi = float(batch["lo"][0]), float(batch["hi"][0])
     out["omega2_ci90"] = _interval(lo, hi)
+    out["p_agrees"], out["p_disagrees"] = _finite(batch["p_agrees"][0]), _finite(batch["p_disagrees"][0])
     if detail:
         _details(out, L, E, C, plan, names, margin, higher_is_better, alpha, omega2_max, rng)
         if w < min_walks:
