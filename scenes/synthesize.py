@@ -148,8 +148,7 @@ def synthesize(
     duration_s = n_shots / fps + 1.0
     walk_kwargs = {} if speed_mps is None else {"speed_mps": float(speed_mps)}
     traj = scene.trajectory(duration_s, walk=walk, **walk_kwargs)
-    imu = None if not imu_rate_hz else _imu_of(traj, n_shots / fps + 0.1, imu_rate_hz,
-                                                                    start_time_ns)
+    imu = None if not imu_rate_hz else _imu_of(traj, n_shots / fps + 0.1, imu_rate_hz, start_time_ns)
     blur = bool(blur) and not scene.is_static
     if render_per not in ("shot", "cycle"):
         raise ExposimError(f"render_per must be 'shot' or 'cycle', got {render_per!r}")
@@ -158,8 +157,8 @@ def synthesize(
     shots = WalkShots(scene, traj, render=dict(width=width, height=height, spp=spp, fov_deg=cam.fov_x_deg,
                                                cache_dir=cache_dir, variant=render_variant, denoise=settings,
                                                render_seed=render_seed),
-                      fps=fps, n_brackets=len(brackets_ms), max_window_ms=_window_ms(brackets_ms, gt_exposures_ms, max_window_ms),
-                      baseline_m=baseline, render_per=render_per, integrate=integrate,
+                      fps=fps, n_brackets=len(brackets_ms),
+                      max_window_ms=_window_ms(brackets_ms, gt_exposures_ms, max_window_ms), baseline_m=baseline, render_per=render_per, integrate=integrate,
                       margin_step_px=margin_step_px)
     source, blurred_source, render_job, shot_renderer, prefetched = _providers(
         scene, traj, shots, baseline_m=baseline, render_seed=render_seed,
