@@ -52,6 +52,7 @@ def synthesize(
     render_per: str = "shot",
     integrate: bool = True,
     margin_step_px: int = 1,
+    max_window_ms: float | None = None,
     imu_rate_hz: float = 100.0,
     cache_dir=None,
     variant: str | None = None,
@@ -100,6 +101,11 @@ def synthesize(
     margin_step_px : int
         With ``blur``: round every render's margin up to a multiple of this many pixels, so the
         walk's renders share a few image sizes (each new size costs a kernel compilation).
+    max_window_ms : float, optional
+        With ``blur``: the longest exposure window every shot's render is sized for (default:
+        the longest bracket or ground-truth exposure).  A live capture longer than that gets a
+        render of its own, so a closed loop whose exposures reach beyond the brackets (AE clamp
+        ranges reach 50 ms) renders less when its walk is sized for its range.
     imu_rate_hz : float
         Rate of the walk's gyro and accelerometer written as ``imu/imu.csv`` (IMU frame x
         forward, y left, z up: :data:`scenes.walks.CAMERA_FROM_IMU`; a static camera reads zero rates and
@@ -142,8 +148,7 @@ def synthesize(
     duration_s = n_shots / fps + 1.0
     walk_kwargs = {} if speed_mps is None else {"speed_mps": float(speed_mps)}
     traj = scene.trajectory(duration_s, walk=walk, **walk_kwargs)
-    imu = None if not imu_rate_hz else _imu_of(traj, n_shots / fps + 0.1, imu_rate_hz,
-                                                                    start_time_ns)
+    imu = None if not imu_rate_hz else _imu_of(traj, n_shots / fps + 0.1, imu_rate_hz, start_time_ns)
     blur = bool(blur) and not scene.is_static
     if render_per not in ("shot", "cycle"):
         raise ExposimError(f"render_per must be 'shot' or 'cycle', got {render_per!r}")
@@ -152,8 +157,8 @@ def synthesize(
     shots = WalkShots(scene, traj, render=dict(width=width, height=height, spp=spp, fov_deg=cam.fov_x_deg,
                                                cache_dir=cache_dir, variant=render_variant, denoise=settings,
                                                render_seed=render_seed),
-                      fps=fps, n_brackets=len(brackets_ms), max_window_ms=max(list(brackets_ms) + list(gt_exposures_ms)),
-                      baseline_m=baseline, render_per=render_per, integrate=integrate,
+                      fps=fps, n_brackets=len(brackets_ms),
+                      max_window_ms=_window_ms(brackets_ms, gt_exposures_ms, max_window_ms), baseline_m=baseline, render_per=render_per, integrate=integrate,
                       margin_step_px=margin_step_px)
     source, blurred_source, render_job, shot_renderer, prefetched = _providers(
         scene, traj, shots, baseline_m=baseline, render_seed=render_seed,
@@ -189,6 +194,16 @@ def synthesize(
         source_description=description,
         imu=imu,
     )
+
+
+def _window_ms(brackets_ms, gt_exposures_ms, max_window_ms) -> float:
+    longest = max(list(brackets_ms) + list(gt_exposures_ms))
+    if max_window_ms is None:
+        return float(longest)
+    if not (isinstance(max_window_ms, (int, float)) and math.isfinite(max_window_ms) and max_window_ms >= longest):
+        raise ExposimError(f"max_window_ms must be a number >= the longest exposure ({longest:g} ms), "
+                           f"got {max_window_ms!r}")
+    return float(max_window_ms)
 
 
 def _providers(scene, traj, shots: WalkShots, *, baseline_m: float, render_seed: int, render: dict):

@@ -197,7 +197,7 @@ def test_numbered_output_and_cli_errors(tmp_path, capsys):
 
 #: The tiny configuration of the end-to-end tests (one scene, 3 cycles, 64x40 px, two methods).
 TINY = LiveConfig(scenes=("forest_winter",), n_cycles=3, width=64, height=40, spp=2, methods=("fixed", "classical-50"),
-                  noise_repeats=4)
+                  noise_repeats=4, render_per="shot", denoise="off")
 REQUIRED_KEYS = ("exposure_log2_error_median", "exposure_log2_error_max", "image_rmse_percent_median",
                  "rank_kendall_tau", "rank_kendall_tau_min", "noise_variance_ratio")
 
@@ -286,7 +286,7 @@ def test_exposim_validate_live_cli(tmp_path, render_cache, capsys, monkeypatch):
     args = ["validate", "live", "-o", str(out), "--quick", "--scenes", ",".join(TINY.scenes),
             "--size", f"{TINY.width}x{TINY.height}", "--spp", str(TINY.spp), "--methods", ",".join(TINY.methods),
             "--noise-repeats", str(TINY.noise_repeats), "--cache-dir", str(render_cache), "--no-progress",
-            "--latency-frames", "2", "--no-control"]
+            "--latency-frames", "2", "--no-control", "--render-per", TINY.render_per, "--denoise", TINY.denoise]
     assert exposim(args) == 0
     printed = capsys.readouterr().out
     assert "\n  median_matches: undetermined, omega2 " in printed, printed

@@ -150,7 +150,7 @@ def test_the_study_folder_keeps_its_calibration_and_redraw_recomputes_it(tmp_pat
     assert list(cal["pairs"]) == ["live-same-instant vs live-same-instant-reseeded"]
     assert set(cal["pairs"]["live-same-instant vs live-same-instant-reseeded"]["metrics"]) == {
         "median_uniformity", "median_matches", "success_rate_tau100", "segment_success_rate_tau100",
-        "vo_failed_frames", "rpe_trans_pct"}
+        "vo_failed_frames", "rpe_trans_pct", "rpe_trans_rank"}
     assert res["calibration_file"] == "calibration.json"
     assert "plasmode calibration" in (tmp_path / "report.md").read_text()
     first = (tmp_path / "calibration.json").read_bytes()

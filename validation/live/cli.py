@@ -18,7 +18,7 @@ from emulator.commands.progress import add_json, add_quiet, bars_enabled, print_
 from emulator.commands import argtypes
 from emulator.distributed import check_scheduler
 from emulator.errors import ExposimError
-from validation.live.config import CONFIG_CHANGES, CONFIGS, DEFAULTS, LiveConfig
+from validation.live.config import CONFIG_CHANGES, CONFIGS, DEFAULTS, STUDY_DENOISE, LiveConfig
 
 __all__ = ["HELP", "DESCRIPTION", "add_arguments", "register", "build_parser", "config_from_args", "command_line",
            "run", "main"]
@@ -74,6 +74,9 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument("--render-per", choices=("shot", "cycle"),
                    help="one render per shot and camera, or one per bracket sweep and camera warped with depth "
                         f"to every shot (a sixth of the renders) (default {full.render_per})")
+    p.add_argument("--denoise", choices=("oidn", "oidn-fast", "off"),
+                   help="denoiser of the renders (default $EXPOSIM_DENOISE when set, else "
+                        f"{STUDY_DENOISE})")
     p.add_argument("--keep-radiance", action="store_true", help="keep the datasets' radiance EXRs (large)")
     p.add_argument("--cache-dir", help="render cache (default $EXPOSIM_CACHE or ~/.cache/exposim/renders)")
     p.add_argument("--scheduler", default=None, metavar="serial|local|tcp://HOST:PORT",
@@ -118,7 +121,7 @@ def config_from_args(args) -> LiveConfig:
     if args.size is not None:
         changes["width"], changes["height"] = args.size
     for key in ("spp", "seed", "scenes", "methods", "noise_repeats", "latency_frames", "frame_rate_hz",
-                "render_per"):
+                "render_per", "denoise"):
         if getattr(args, key, None) is not None:
             changes[key] = getattr(args, key)
     if args.no_control:
@@ -136,7 +139,7 @@ def command_line(args, prog: str) -> str:
     if args.quick:
         words.append("--quick")
     for key in ("scenes", "cycles", "size", "spp", "seed", "methods", "noise_repeats", "latency_frames",
-                "frame_rate_hz", "render_per"):
+                "frame_rate_hz", "render_per", "denoise"):
         value = getattr(args, key, None)
         if value is None:
             continue

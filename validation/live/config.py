@@ -31,6 +31,11 @@ __all__ = [
     "LIVE_LIVE",
     "GOAL_TAU_MIN",
     "GOAL_EXPOSURE_LOG2_MEDIAN",
+    "STUDY_WIDTH",
+    "STUDY_HEIGHT",
+    "STUDY_SPP",
+    "STUDY_DENOISE",
+    "STUDY_RENDER_PER",
     "LiveError",
     "LiveConfig",
     "CONFIG_CHANGES",
@@ -138,6 +143,12 @@ LIVE_LIVE = {"live-fixed-instant": "cycle-rate live re-seeded vs cycle-rate live
 #: Goals of issue 14.
 GOAL_TAU_MIN = 0.9
 GOAL_EXPOSURE_LOG2_MEDIAN = 0.05
+#: The study's render settings: 480x300, one render per bracket sweep and camera warped to its shots, OIDN's
+#: full denoiser (docs/results/render.md, "Render noise against sensor noise").
+STUDY_WIDTH, STUDY_HEIGHT = 480, 300
+STUDY_SPP = 8
+STUDY_DENOISE = "oidn"
+STUDY_RENDER_PER = "cycle"
 
 
 class LiveError(ExposimError):
@@ -188,13 +199,17 @@ class LiveConfig:
         ``"shot"`` (one render per shot and camera) or ``"cycle"`` (one render per bracket sweep
         and camera, warped with depth to every shot's exposure window: a sixth of the renders;
         :func:`scenes.synthesize.synthesize`).
+    denoise : str or None
+        Denoiser of the renders (``"oidn"``, ``"oidn-fast"`` or ``"off"``, :mod:`scenes.denoise`);
+        None: ``$EXPOSIM_DENOISE`` when set, else :data:`STUDY_DENOISE`.  Resolved when the
+        configuration is built, so ``results.json`` records the one the walks used.
     """
 
     scenes: tuple[str, ...] = SCENES
     n_cycles: int = 40
-    width: int = 256
-    height: int = 160
-    spp: int = 8
+    width: int = STUDY_WIDTH
+    height: int = STUDY_HEIGHT
+    spp: int = STUDY_SPP
     seed: int = 0
     methods: tuple[str, ...] = METHODS
     initial_ms: float = 4.0
@@ -210,10 +225,14 @@ class LiveConfig:
     native: bool = True
     latency_frames: int = 1
     frame_rate_hz: float = 22.0
-    render_per: str = "shot"
+    render_per: str = STUDY_RENDER_PER
+    denoise: str | None = None
 
     def __post_init__(self) -> None:
+        import os
+
         import scenes
+        from scenes.denoise import DENOISERS, ENV_DENOISE
 
         from emulator.autoexposure.methodset import parse_methods
         from emulator.select import SELECTORS
@@ -248,6 +267,13 @@ class LiveConfig:
             raise LiveError(f"frame_rate_hz must be finite and positive, got {self.frame_rate_hz!r}")
         if self.render_per not in ("shot", "cycle"):
             raise LiveError(f"render_per must be 'shot' or 'cycle', got {self.render_per!r}")
+        if self.denoise is None:
+            env = os.environ.get(ENV_DENOISE, "").strip()
+            object.__setattr__(self, "denoise", env or STUDY_DENOISE)
+            if env and env not in DENOISERS:
+                raise LiveError(f"${ENV_DENOISE}={env!r} is not a denoiser; valid: {', '.join(DENOISERS)}")
+        elif self.denoise not in DENOISERS:
+            raise LiveError(f"denoise must be one of {', '.join(DENOISERS)}, got {self.denoise!r}")
 
     @property
     def duration_s(self) -> float:
@@ -271,8 +297,8 @@ class LiveConfig:
 
 
 #: The changes of each named configuration to the defaults: ``full``: 40 cycles (11 s, ~6 m
-#: of walk) per scene at the AE study's 256x160, 8 spp; ``quick``: 3 cycles per scene (a
-#: pipeline check in a few minutes on 2 cores).
+#: of walk) per scene at the study's render settings (480x300, 8 spp, ``oidn``, one render per
+#: sweep); ``quick``: 3 cycles per scene (a pipeline check).
 CONFIG_CHANGES = {"full": {}, "quick": {"n_cycles": 3, "noise_repeats": 8}}
 #: The defaults of :class:`LiveConfig` (read without building one: ``exposim --help`` stays light).
 DEFAULTS = {f.name: f.default for f in fields(LiveConfig)}
@@ -304,6 +330,7 @@ CONFIGS = _Configs()
 def config_from_dict(d: dict) -> LiveConfig:
     """The :class:`LiveConfig` recorded by :meth:`LiveConfig.to_dict` (extra keys ignored)."""
     kw = {f.name: d[f.name] for f in fields(LiveConfig) if f.name in d}
+    kw.setdefault("render_per", "shot")  # records from before the option rendered every shot
     for k in ("scenes", "methods", "taus"):
         if k in kw:
             kw[k] = tuple(kw[k])

@@ -394,7 +394,7 @@ def calibration(tables: dict, walks, methods, *, seed: int = 0, n_studies: int |
     if n <= 0 or walks is None:
         return {"status": "not computed", "reason": "no plasmode studies asked for" if n <= 0 else
                 "the walks' scenes and seeds are not known"}
-    return calibrate(tables, walk_labels(walks)[1], methods, metrics=list(METRICS), n_studies=n, seed=seed)
+    return calibrate(tables, walk_labels(walks)[1], methods, metrics=list(JUDGED_METRICS), n_studies=n, seed=seed)
 
 
 def store_calibration(out, cal: dict) -> str:

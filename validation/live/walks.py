@@ -211,6 +211,14 @@ def _benchmarks(cfg: LiveConfig, exp: Path, scene: str, runs: list[str], progres
     return {"features": features, "vo": vo, "feature_taus": taus}
 
 
+def _live_window_ms() -> float:
+    """The longest exposure a live shot can have (the AE clamp range's upper end): the walk's renders are
+    sized for it, so that no live shot needs a render of its own."""
+    from emulator.playback import RunConfig
+
+    return float(RunConfig().range_ms[1])
+
+
 def run_walk(config: dict, scene_name: str, experiment: str, cache_dir=None, native_loop: Callable | None = None,
              command: str | None = None, progress: bool = False, log: Callable[[str], None] | None = None) -> dict:
     """Run one walk (``scene_name`` at ``config``'s seed) into ``experiment``; write and return its record.
@@ -242,7 +250,9 @@ def run_walk(config: dict, scene_name: str, experiment: str, cache_dir=None, nat
     with _bar(cfg.n_cycles * 6, f"{tag}: render + record", progress) as bar:
         synthesize(scene, ds, n_cycles=cfg.n_cycles, width=cfg.width, height=cfg.height, spp=cfg.spp, stereo=True,
                    seed=cfg.seed, render_seed=cfg.seed, noise=cfg.capture_noise, save_radiance=True,
-                   render_per=cfg.render_per, cache_dir=cache_dir, progress=lambda d, n: bar.update(d - bar.n))
+                   render_per=cfg.render_per, denoise=cfg.denoise, max_window_ms=_live_window_ms(),
+                   cache_dir=cache_dir,
+                   progress=lambda d, n: bar.update(d - bar.n))
     timings[f"record_{scene_name}_s"] = time.perf_counter() - t_start
     say(f"{tag}: recorded {cfg.n_cycles} cycles in {timings[f'record_{scene_name}_s']:.0f} s")
     seq = load_sequence(ds)

@@ -1,0 +1,77 @@
+"""Render noise against sensor noise for features, per render setting (validation/render_study/balance.py).
+
+Usage:
+    python scripts/render_noise_balance.py -o OUT.json oidn-fast@2 oidn@8 [--sweeps 0,11,22,33,44]
+        [--render-per cycle|shot|still] [--size 480x300] [--exposures 8,32] [--scene forest_winter] [--cache-dir DIR]
+
+For each setting (DENOISER@SPP or DENOISER@SPP/AUX_SPP): keypoint repeatability between two render seeds
+(same sensor noise) and between two sensor-noise draws (same render), at each exposure, mean and 95 %
+interval over the walk's sweeps, and the renders' seconds per sweep and camera. Writes OUT.json (refuses an existing
+file) and prints one line per setting and exposure.
+"""
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from emulator.errors import ExposimError
+from validation.render_study.balance import noise_balance, parse_setting
+
+
+def _floats(text):
+    try:
+        return tuple(float(x) for x in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {text!r}") from None
+
+
+def _size(text):
+    w, sep, h = text.partition("x")
+    if not (sep and w.isdigit() and h.isdigit()):
+        raise argparse.ArgumentTypeError(f"expected WxH, e.g. 480x300, got {text!r}")
+    return int(w), int(h)
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("settings", nargs="+", help="render settings, e.g. oidn-fast@2 oidn@8 oidn@8/32 off@64")
+    p.add_argument("-o", "--output", type=Path, required=True, help="JSON file to write (never overwritten)")
+    p.add_argument("--scene", default="forest_winter")
+    p.add_argument("--size", type=_size, default=(480, 300))
+    p.add_argument("--exposures", type=_floats, default=(8.0, 32.0), help="ms (default 8,32)")
+    p.add_argument("--sweeps", type=_floats, default=(0, 11, 22, 33, 44),
+                   help="bracket sweeps of the walk, 273 ms each (default 0,11,22,33,44: every 3 s)")
+    p.add_argument("--render-per", choices=("cycle", "shot", "still"), default="cycle",
+                   help="the study's shots from one render per sweep (default), from one render per shot, or "
+                        "still renders without warp and blur")
+    p.add_argument("--cache-dir", default=None,
+                   help="render cache (default none, so that the seconds are the renders')")
+    args = p.parse_args(argv)
+    if args.output.exists():
+        print(f"{args.output}: exists; choose another output file", file=sys.stderr)
+        return 2
+    try:
+        for s in args.settings:
+            parse_setting(s)
+        results = []
+        for s in args.settings:
+            r = noise_balance(s, scene_key=args.scene, width=args.size[0], height=args.size[1],
+                              exposures_ms=args.exposures, sweeps=tuple(int(x) for x in args.sweeps),
+                              render_per=args.render_per, cache_dir=args.cache_dir or False)
+            results.append(r)
+            for e, v in r["exposures"].items():
+                ro, so, d = v["render_only"], v["sensor_only"], v["difference"]
+                print(f"{s:>14} {e:>3} ms  render-only {ro[0]:5.1f} [{ro[1]:5.1f}, {ro[2]:5.1f}]  sensor-only "
+                      f"{so[0]:5.1f} [{so[1]:5.1f}, {so[2]:5.1f}]  difference {d[0]:+5.1f} [{d[1]:+5.1f}, {d[2]:+5.1f}]"
+                      f"  {'met' if v['met'] else 'NOT met'}  {r['seconds_per_sweep']:.2f} s/sweep", flush=True)
+    except ExposimError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    args.output.parent.mkdir(parents=True, exist_ok=True)
+    args.output.write_text(json.dumps({"command": " ".join(sys.argv), "results": results}, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,69 @@
+"""The live study's render settings: its defaults, the denoiser it records, and renders sized for live shots."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import scenes
+from emulator.errors import ExposimError
+from validation.live.config import (STUDY_DENOISE, STUDY_HEIGHT, STUDY_RENDER_PER, STUDY_SPP, STUDY_WIDTH, LiveConfig,
+                                    LiveError, config_from_dict)
+
+
+def test_the_defaults_are_the_study_render_settings(monkeypatch):
+    monkeypatch.delenv("EXPOSIM_DENOISE", raising=False)
+    cfg = LiveConfig()
+    assert (cfg.width, cfg.height, cfg.spp, cfg.denoise, cfg.render_per) == (480, 300, 8, "oidn", "cycle")
+    assert (STUDY_WIDTH, STUDY_HEIGHT, STUDY_SPP, STUDY_DENOISE, STUDY_RENDER_PER) == (480, 300, 8, "oidn", "cycle")
+    assert cfg.to_dict()["denoise"] == "oidn" and cfg.to_dict()["renders"] == 40 * 2 * 4
+    monkeypatch.setenv("EXPOSIM_DENOISE", "oidn-fast")  # the environment names the default, resolved and recorded
+    assert LiveConfig().denoise == "oidn-fast" and LiveConfig(denoise="off").denoise == "off"
+    monkeypatch.setenv("EXPOSIM_DENOISE", "median")
+    with pytest.raises(LiveError, match=r"\$EXPOSIM_DENOISE='median' is not a denoiser"):
+        LiveConfig()
+    monkeypatch.delenv("EXPOSIM_DENOISE")
+    with pytest.raises(LiveError, match="denoise must be one of oidn, oidn-fast, off, got 'nlm'"):
+        LiveConfig(denoise="nlm")
+    # records from before the options: every shot rendered; a recorded denoiser is kept
+    assert config_from_dict({}).render_per == "shot"
+    assert config_from_dict({"denoise": "oidn-fast", "render_per": "cycle"}).denoise == "oidn-fast"
+
+
+def test_the_denoise_option_reaches_the_configuration_and_the_command(monkeypatch):
+    from validation.live.cli import build_parser, command_line, config_from_args
+
+    monkeypatch.delenv("EXPOSIM_DENOISE", raising=False)
+    args = build_parser().parse_args(["-o", "/tmp/x", "--denoise", "oidn-fast"])
+    assert config_from_args(args).denoise == "oidn-fast"
+    assert "--denoise oidn-fast" in command_line(args, "exposim validate live")
+    assert config_from_args(build_parser().parse_args(["-o", "/tmp/x"])).denoise == STUDY_DENOISE
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["-o", "/tmp/x", "--denoise", "nlm"])
+
+
+@pytest.mark.render
+def test_a_walk_sized_for_the_clamp_range_renders_nothing_for_long_live_shots(tmp_path):
+    from scenes.synthesize import synthesize
+    from scenes.walkshots import walk_radiance
+
+    scene = scenes.get_scene("forest_summer")
+    kw = dict(n_cycles=1, width=32, height=20, spp=1, denoise="off", stereo=False, render_per="cycle")
+    counts = {}
+    for window in (None, 50.0):
+        cache = tmp_path / f"cache-{window}"
+        out = synthesize(scene, tmp_path / f"ds-{window}", cache_dir=cache, max_window_ms=window, **kw)
+        meta = json.loads((out / "exposim.json").read_text())
+        assert meta["source"]["render"]["blur_shots"]["max_window_ms"] == (window or 32.0)
+        live = walk_radiance(out, scene, cache_dir=cache)
+        last = sorted(int(p.stem) for p in (out / "camera_left" / "32.0").glob("*.png"))[-1]  # the sweep's last shot
+        before = len(list(cache.rglob("*.exr")))
+        img = live(last, "left", 50.0)
+        assert img.shape == (20, 32, 3) and np.all(np.isfinite(img))
+        counts[window] = len(list(cache.rglob("*.exr"))) - before
+    assert counts[None] >= 1 and counts[50.0] == 0  # sized for 32 ms: a render of its own; for 50 ms: none
+    with pytest.raises(ExposimError, match=r"max_window_ms must be a number >= the longest exposure \(32 ms\)"):
+        synthesize(scene, tmp_path / "bad", cache_dir=tmp_path / "c", max_window_ms=20.0, **kw)
+    assert not (tmp_path / "bad").exists()
