@@ -14,6 +14,8 @@ import os
 import re
 from pathlib import Path
 
+from emulator.io.files import read_text
+
 __all__ = ["ABSOLUTE_PATH", "STUDY_FILES", "REPOSITORY", "relative_command", "outside_paths", "missing_files",
            "folder_check", "folder_markdown"]
 
@@ -53,8 +55,8 @@ def outside_paths(folder, root=REPOSITORY, limit: int = 50, skip=()) -> list[str
         if not path.is_file() or path.suffix.lower() not in _TEXT or str(path.relative_to(folder)) in skip:
             continue
         try:
-            text = path.read_text(encoding="utf-8")
-        except (OSError, UnicodeDecodeError):
+            text = read_text(path, error=ValueError)
+        except (OSError, ValueError):
             continue
         text = _DATA_URI.sub("", text)  # embedded images (base64 holds slashes)
         for p in dict.fromkeys(ABSOLUTE_PATH.findall(text)):
