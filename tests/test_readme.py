@@ -54,7 +54,7 @@ def test_ci_runs_the_readme_test_command():
                          text=True, check=True).stdout
     block = README.split("<!-- test-command -->", 1)[1].split("```", 2)[1].strip()
     assert got == block
-    assert got.endswith("python -m pytest -q")
+    assert got.endswith("python -m pytest -q -n 2 --dist loadfile")
 
 
 def _relative_links(text: str) -> list[str]:
@@ -105,7 +105,7 @@ def test_setup_commands_install_into_a_virtual_environment_in_one_line():
     commands = _setup_commands()
     assert len(commands) == 3
     assert commands[0].endswith("pip install -e '.[all]' && exposim demo")
-    assert commands[1].endswith("pip install -e '.[all,test]' && python -m pytest -q")
+    assert commands[1].endswith("pip install -e '.[all,test]' && python -m pytest -q -n 2 --dist loadfile")
     for cmd in commands:
         assert "\n" not in cmd, cmd
         steps = cmd.split(" && ")
