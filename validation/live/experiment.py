@@ -270,22 +270,31 @@ def evidence(cfg: LiveConfig, records: list[dict], power_seeds: int = 100, folde
     ``records`` (one experiment, or the replicates of :func:`run_replicated`); with ``folder``, the per-walk
     table is stored there (:func:`validation.live.evidence.store_walks_table`), and the calibration
     (``calibration_studies`` plasmode studies; :func:`validation.live.evidence.store_calibration`)."""
-    from validation.live.evidence import (judge_metrics, pilot_reason, store_calibration, store_walks_table,
-                                          walk_values)
+    from validation.live.evidence import store_walks_table, walk_values
 
     walks, tables = walk_values(records, cfg.methods)
     out = {"walks": walks, "n_walks": len(walks)}
     if tables and folder is not None:
         out["walks_table"] = store_walks_table(folder, walks, tables, cfg.methods)
     if tables:
-        out.update(judge_metrics(tables, cfg.methods, seed=cfg.seed, power=power_seeds > 0, power_seeds=power_seeds,
-                                 walks=walks, pilot=pilot_reason(cfg), calibration_studies=calibration_studies))
+        out.update(_judged(cfg, tables, cfg.methods, walks, folder, power_seeds, calibration_studies))
         out["n_walks"] = len(walks)
-        if folder is not None:
-            out["calibration_file"] = store_calibration(folder, out["calibration"])
-            out["power_file"] = store_power(folder, out)
     else:
         out.update({"metrics": {}, "reason": "no benchmark metrics in this experiment (metrics off)"})
+    return out
+
+
+def _judged(cfg: LiveConfig, tables: dict, methods, walks, folder, power_seeds: int,
+            calibration_studies: int | None) -> dict:
+    """The verdicts over ``walks`` (:func:`validation.live.evidence.judge_metrics`); with ``folder``, the
+    calibration and the power analysis are also stored there (their file names in the result)."""
+    from validation.live.evidence import judge_metrics, pilot_reason, store_calibration
+
+    out = judge_metrics(tables, methods, seed=cfg.seed, power=power_seeds > 0, power_seeds=power_seeds, walks=walks,
+                        pilot=pilot_reason(cfg), calibration_studies=calibration_studies)
+    if folder is not None:
+        out["calibration_file"] = store_calibration(folder, out["calibration"])
+        out["power_file"] = store_power(folder, out)
     return out
 
 
@@ -385,7 +394,7 @@ def _live_sheets(out: Path, scene: str) -> str:
 def verdicts_from_table(out, power_seeds: int = 100, calibration_studies: int | None = None) -> dict:
     """The verdicts of a study folder that keeps only its per-walk table (and its results.json for the
     configuration): results.json's evidence and report.md recomputed from ``walks.csv``."""
-    from validation.live.evidence import judge_metrics, parse_walks_table, pilot_reason, store_calibration
+    from validation.live.evidence import parse_walks_table
     from validation.live.report import evidence_markdown
 
     out = Path(out)
@@ -398,12 +407,7 @@ def verdicts_from_table(out, power_seeds: int = 100, calibration_studies: int | 
                if k in prev}
     results.update({"walks": walks, "n_walks": len(walks), "walks_table": WALKS_TABLE})
     results["command"] = relative_command(results.get("command"), out)
-    results.update(judge_metrics(tables, methods, seed=cfg.seed, power=power_seeds > 0, power_seeds=power_seeds,
-                                 walks=walks, pilot=pilot_reason(cfg),
-                                 calibration_studies=calibration_studies))
-    results["calibration_file"] = store_calibration(out, results["calibration"])
-    if power_seeds > 0:
-        results["power_file"] = store_power(out, results)
+    results.update(_judged(cfg, tables, methods, walks, out, power_seeds, calibration_studies))
     results["study_folder"] = folder_check(out)
     write_report(out, f"# Live versus emulated, recomputed from {WALKS_TABLE}\n\n{len(walks)} walks. Command "
                  f"(paths relative to this folder): `{results.get('command')}`\n\n"
