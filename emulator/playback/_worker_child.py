@@ -41,7 +41,38 @@ def _die_with_run(run_pid: int) -> None:
     threading.Thread(target=watch, daemon=True, name="exposim-run-watch").start()
 
 
+#: glibc's mallopt parameters (malloc.h): M_TRIM_THRESHOLD, M_MMAP_THRESHOLD.
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
+#: Freed memory a worker keeps for its next call instead of handing it back to the system, bytes.
+KEEP_FREED_BYTES = 256 << 20
+#: Largest block served from the worker's heap (glibc's ceiling on 64-bit): a frame's float64 arrays fit.
+HEAP_BLOCK_BYTES = 32 << 20
+
+
+def _keep_freed_memory() -> None:
+    """Keep the memory a call frees for the next call (glibc only; elsewhere nothing changes).
+
+    A call allocates the same large arrays every time (the image's own copy, its gray image, a
+    method's per-pixel arrays: 18 MB for Zhang's derivatives at 1920x1200).  By default glibc
+    hands such blocks back to the system when they are freed, and the next call then takes a
+    page fault for every 4 KiB it touches again: measured in the closed loop, 11,700 faults per
+    Zhang call and 1,300 per call of a method that only reads the image, a fifth of Zhang's CPU.
+    Served from a heap that is not trimmed, the same blocks are reused; the pixels and every
+    result are the same."""
+    import ctypes
+    import ctypes.util
+
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        mallopt = libc.mallopt
+    except (OSError, AttributeError):  # not glibc
+        return
+    mallopt(_M_MMAP_THRESHOLD, HEAP_BLOCK_BYTES)
+    mallopt(_M_TRIM_THRESHOLD, KEEP_FREED_BYTES)
+
+
 def _child_main(conn, run_pid: int) -> None:
+    _keep_freed_memory()
     try:
         os.setsid()  # own process group: stopped with whatever it starts; Ctrl-C goes to the run only
     except OSError:  # pragma: no cover
