@@ -164,6 +164,15 @@ class EmulatedTick:
 
     def shot(self, target_ms: float, want_right: bool = False) -> Shot:
         """The shot of ``target_ms``: the selected bracket emulated (first camera; second when asked)."""
+        shot, rest = self.split_shot(target_ms, want_right)
+        rest()
+        return shot
+
+    def split_shot(self, target_ms: float, want_right: bool = False):
+        """(shot, rest): :meth:`shot` in two parts.  ``shot`` holds what the method reads (the first
+        camera); ``rest()`` fills in the second camera (its fractions, its image when asked) and
+        raises what :meth:`shot` would raise for it.  The closed loop calls ``rest()`` while the
+        method's worker computes, so the second camera's decoding costs no time on the method's chain."""
         p = self.provider
         lead, other = p.cameras[0], (p.cameras[1] if len(p.cameras) > 1 else None)
         key = self.select(target_ms)
@@ -178,7 +187,10 @@ class EmulatedTick:
                     bracket_saturated_fraction=self.images.saturated(lead, key),
                     missing_left_ms=tuple(self.missing.get(lead, ())),
                     missing_right_ms=tuple(self.missing.get(other, ())) if other else ())
-        if other is not None:
+        if other is None:
+            return shot, _nothing
+
+        def rest() -> None:
             rframe = self.cycle.frames[other][key]
             if rframe.timestamp_ns != frame.timestamp_ns:
                 raise DatasetError(
@@ -190,7 +202,12 @@ class EmulatedTick:
                                                                                     p.black)
             if want_right:
                 shot.right = self.images.emulated(other, key, ratio, table, p.stats)
-        return shot
+
+        return shot, rest
+
+
+def _nothing() -> None:
+    return None
 
 
 class EmulatedProvider:

@@ -21,6 +21,9 @@ Provider protocol (duck-typed)::
         .skipped             None, or why no method can run in this tick
         .shot(target_ms, want_right) -> Shot   (thread-safe; methods with the same
                                                 target may share one image)
+        .split_shot(target_ms, want_right)     optional: (shot, rest), the shot without the second
+                                                camera's part and rest() that adds it; a method in a
+                                                worker then computes while rest() runs
 
 For each tick the loop hands every method that has not failed the shot at its current
 exposure, asks it through :func:`emulator.playback.seam.call_method` (the one call site),
@@ -104,8 +107,14 @@ def closed_loop(
 
     def step_one(name: str, tick) -> MethodStep | MethodFailed:
         target = pending[name][0]
-        shot = tick.shot(target, want_right)
         method = methods[name]
+        split = getattr(tick, "split_shot", None)
+        if split is not None and isinstance(method, MethodWorker):
+            shot, rest = split(target, want_right)
+            method.send_ahead(shot.left, shot.exposure_ms)  # the method computes in its process ...
+            rest()  # ... while this thread does the second camera's part of the shot
+        else:
+            shot = tick.shot(target, want_right)
         try:  # a worker enforces its own limit (it interrupts); inline, the limit is checked after the call
             answer = call_method(method, shot.left, shot.exposure_ms, range_ms=config.range_ms,
                                  timeout_s=None if isinstance(method, MethodWorker) else config.method_timeout_s)

@@ -31,6 +31,7 @@ import pickle
 import signal
 import sys
 import threading
+import time
 import weakref
 from multiprocessing import shared_memory
 
@@ -157,6 +158,7 @@ class MethodWorker:
         self._config: dict = {}
         self._gray_code = None
         self._shm_box: list = [None]
+        self._ahead = None  # (raw, exposure_ms, monotonic time) of a call sent ahead
         self._conn, child = ctx.Pipe()
         self._proc = ctx.Process(target=_child_main, args=(child, os.getpid()), daemon=True, name="exposim-method")
         _start(self._proc)
@@ -187,11 +189,13 @@ class MethodWorker:
         _, self.name, self._config, self._gray_code = reply
         return self
 
-    def _ask(self, msg):
+    def _ask(self, msg, sent_at: float | None = None):
         if msg is not None:
             self._conn.send(msg)
         try:
-            if not self._conn.poll(self.timeout_s):
+            # a call sent ahead (:meth:`send_ahead`) has been running since it was sent
+            left = self.timeout_s if sent_at is None else max(0.0, self.timeout_s - (time.monotonic() - sent_at))
+            if not self._conn.poll(left):
                 self.failed = (f"did not return within the limit of {self.timeout_s:g} s (--method-timeout-s); "
                                "its process was stopped")
                 self.kill()
@@ -203,9 +207,7 @@ class MethodWorker:
             self.kill()
             raise MethodFailed(self.failed) from None
 
-    def next_exposure(self, raw, exposure_ms):
-        if self.failed is not None:
-            raise MethodFailed(self.failed)
+    def _message(self, raw, exposure_ms) -> tuple:
         if isinstance(raw, np.ndarray) and not raw.dtype.hasobject:
             a = np.ascontiguousarray(raw)
             gray = self._gray(raw)
@@ -219,11 +221,34 @@ class MethodWorker:
             np.ndarray(a.shape, a.dtype, buffer=shm.buf)[...] = a
             if gray is not None:
                 np.ndarray(gray.shape, gray.dtype, buffer=shm.buf, offset=a.nbytes)[...] = gray
-            msg = ("call", shm.name, a.nbytes, a.shape, a.dtype.str, exposure_ms, None,
-                   0 if gray is None else gray.nbytes)
+            return ("call", shm.name, a.nbytes, a.shape, a.dtype.str, exposure_ms, None,
+                    0 if gray is None else gray.nbytes)
+        return ("call", None, 0, None, None, exposure_ms, raw)
+
+    def send_ahead(self, raw, exposure_ms) -> None:
+        """Start the call :meth:`next_exposure` will make with this very ``raw`` and ``exposure_ms``, so
+        that the run can do other work while the method computes (the answer is read by that call;
+        its time limit counts from now).  A worker that cannot take it now is left to that call."""
+        if self.failed is not None or self._ahead is not None:
+            return
+        msg = self._message(raw, exposure_ms)
+        try:
+            self._conn.send(msg)
+        except (OSError, ValueError):  # its process is gone: the call itself finds out and says why
+            return
+        self._ahead = (raw, exposure_ms, time.monotonic())
+
+    def next_exposure(self, raw, exposure_ms):
+        if self.failed is not None:
+            raise MethodFailed(self.failed)
+        ahead, self._ahead = self._ahead, None
+        if ahead is not None and ahead[0] is raw and ahead[1] == exposure_ms:
+            msg, sent_at = None, ahead[2]
         else:
-            msg = ("call", None, 0, None, None, exposure_ms, raw)
-        reply = self._ask(msg)
+            if ahead is not None:  # pragma: no cover - the loop always makes the call it sent ahead
+                raise PlaybackError(f"AE method {self.label}: a call was sent ahead for another image")
+            msg, sent_at = self._message(raw, exposure_ms), None
+        reply = self._ask(msg, sent_at)
         kind = reply[0]
         from emulator.autoexposure.isolation import keep_output
 
