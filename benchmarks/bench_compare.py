@@ -95,7 +95,11 @@ def _run(checkout: Path, args, cache_dir: Path) -> list[dict]:
     env = dict(os.environ, PYTHONPATH=str(checkout))
     cmd = [sys.executable, "-W", "ignore", str(HERE / "bench_compare.py"), "--worker", str(args.sequence),
            "--cache-dir", str(cache_dir), "--modes", args.modes, "--jobs", args.jobs, "--frames", args.frames]
-    out = subprocess.run(cmd, env=env, cwd=str(checkout), capture_output=True, text=True, check=True).stdout
+    proc = subprocess.run(cmd, env=env, cwd=str(checkout), capture_output=True, text=True)
+    if proc.returncode != 0:  # e.g. a recording without a response file that an older checkout needs
+        last = (proc.stderr.strip().splitlines() or ["(no message)"])[-1]
+        raise SystemExit(f"bench_compare: the run of {checkout} failed: {last}")
+    out = proc.stdout
     return [json.loads(line) for line in out.splitlines() if line.startswith("{")]
 
 

@@ -11,8 +11,10 @@ never in the run's process), and answers one call at a time:
 - it returns only the proposal, the method's fallback count and what the method printed;
   the run process owns every file;
 - the run waits for the answer at most the method time limit (``--method-timeout-s``,
-  default :data:`DEFAULT_METHOD_TIMEOUT_S`): past it the worker is killed (with any process
-  it started) and the method fails with the reason, while the others go on;
+  default :data:`DEFAULT_METHOD_TIMEOUT_S`), counted from the moment the call was sent (the
+  closed loop sends it ahead, :meth:`MethodWorker.send_ahead`, and does the second camera's
+  part of the shot meanwhile): past it the worker is killed (with any process it started)
+  and the method fails with the reason, while the others go on;
 - a worker that dies, forks (``os.fork``: the child exits at once), or leaves a thread running
   after a call is killed the same way and its method fails, named.
 
