@@ -101,10 +101,14 @@ def _collect(iterator, n: int, desc: str, progress: bool) -> list:
 def _loops(cfg: LiveConfig, seq, radiance, camera, model, response, native_loop, tag: str, progress: bool,
            timings: dict, scene: str, native_out: dict | None = None) -> dict:
     """Every run of the walk: {run name: [CycleStep with images]}; ``native_out`` gets the native
-    emulation's per-frame errors (:func:`validation.live.native.native_image_errors`)."""
+    emulation's per-frame errors (:func:`validation.live.native.native_image_errors`).
+
+    The cycle-rate live runs advance together, and the native-rate live run with its re-seeded twin, so
+    that the radiance of a shot several of them capture is integrated once
+    (:class:`~validation.live.loops.SharedRadiance`); each run is what it is alone."""
     native_out = {} if native_out is None else native_out
     from emulator.playback import RunConfig
-    from validation.live.loops import iter_emulated, iter_live
+    from validation.live.loops import SharedRadiance, iter_emulated, iter_live, lockstep
 
     names = list(cfg.methods)
     common = dict(config=RunConfig(initial_ms=cfg.initial_ms, selector=cfg.selector), response=response)
@@ -120,25 +124,55 @@ def _loops(cfg: LiveConfig, seq, radiance, camera, model, response, native_loop,
     if cfg.control:  # each cycle-rate live run again, with capture-noise streams of its own
         live_runs += [(RESEEDED[f"live-{v}"].removeprefix("live-"), v,
                        control_seed(cfg.seed, scene, RESEEDED_STREAMS[RESEEDED[f"live-{v}"]])) for v in VARIANTS]
-    for label, timing, seed in live_runs:
-        cycles[f"live-{label}"] = _collect(
-            iter_live(seq, radiance, camera, names, timing=timing, noise=cfg.capture_noise, seed=seed, **common),
-            len(seq.cycles), f"{tag}: live loop ({label})", progress)
+    shared = (SharedRadiance(radiance, keep=2 * len(names) * len(live_runs))
+              if getattr(radiance, "exposure_aware", False) else radiance)
+    with _bar(len(seq.cycles) * len(live_runs), f"{tag}: live loops ({len(live_runs)} runs)", progress) as bar:
+        got = lockstep([iter_live(seq, shared, camera, names, timing=timing, noise=cfg.capture_noise, seed=seed,
+                                  **common) for _, timing, seed in live_runs], on_step=lambda: bar.update(1))
+    for (label, _, _), steps in zip(live_runs, got):
+        cycles[f"live-{label}"] = steps
     if native_loop is not None:
-        every = _collect(
-            native_loop(seq, radiance, camera, names, seed=cfg.seed, noise=cfg.capture_noise,
-                        initial_ms=cfg.initial_ms, selector=cfg.selector, response=response, every_frame=True),
-            len(seq.cycles) * 6, f"{tag}: live loop (native rate)", progress)
-        timings[f"live_{scene}_s"] = time.perf_counter() - t0
-        reseeded = None
-        if cfg.control:  # native-rate live again, with a capture-noise stream of its own
-            reseeded = partial(native_loop, seq, radiance, camera, names, noise=cfg.capture_noise,
-                               initial_ms=cfg.initial_ms, selector=cfg.selector, response=response, every_frame=True,
-                               seed=control_seed(cfg.seed, scene, RESEEDED_STREAMS[RESEEDED[NATIVE_RUN]]))
-        _emulated_native(cfg, seq, response, every, cycles, native_out, timings, scene, reseeded)
+        _native_loops(cfg, seq, radiance, camera, names, native_loop, response, cycles, native_out, timings, scene,
+                      tag, progress, t0)
         return cycles
     timings[f"live_{scene}_s"] = time.perf_counter() - t0
     return cycles
+
+
+def _native_loops(cfg: LiveConfig, seq, radiance, camera, names, native_loop, response, cycles: dict,
+                  native_out: dict, timings: dict, scene: str, tag: str, progress: bool, t0: float) -> None:
+    """The native-rate live run (every frame) and, with the control, its re-seeded twin advanced with it (only
+    the frames the benchmarks use kept); then the emulated native-rate condition (:func:`_emulated_native`)."""
+    from emulator.playback import RunConfig
+    from validation.live.loops import SharedRadiance, lockstep
+    from validation.live.native import cycle_picks, native_provider
+
+    kw = dict(noise=cfg.capture_noise, initial_ms=cfg.initial_ms, selector=cfg.selector, response=response,
+              every_frame=True)
+    seeds = [cfg.seed] + ([control_seed(cfg.seed, scene, RESEEDED_STREAMS[RESEEDED[NATIVE_RUN]])]
+                          if cfg.control else [])
+    shared = (SharedRadiance(radiance, keep=2 * len(names) * len(seeds))
+              if getattr(radiance, "exposure_aware", False) else radiance)
+    loops = [native_loop(seq, shared, camera, names, seed=s, **kw) for s in seeds]
+    if cfg.control:  # the re-seeded frames are streamed: only the benchmarked ones are kept
+        config = RunConfig(initial_ms=cfg.initial_ms, selector=cfg.selector, rate="native",
+                           latency_frames=cfg.latency_frames)
+        loops[1] = _thinned(loops[1], set(cycle_picks(native_provider(seq, response, config))))
+    with _bar(len(seq.cycles) * 6 * len(loops), f"{tag}: live loop (native rate, {len(loops)} runs)",
+              progress) as bar:
+        got = lockstep(loops, on_step=lambda: bar.update(1))
+    timings[f"live_{scene}_s"] = time.perf_counter() - t0
+    _emulated_native(cfg, seq, response, got[0], cycles, native_out, timings, scene,
+                     (lambda: got[1]) if cfg.control else None)
+
+
+def _thinned(frames, keep: set):
+    """Every frame of ``frames``, those whose index is not in ``keep`` without their steps (their images):
+    what :func:`validation.live.native.per_cycle` reads of them (the failures) is left."""
+    from dataclasses import replace
+
+    for cs in frames:
+        yield cs if cs.cycle in keep else replace(cs, steps={})
 
 
 def _emulated_native(cfg: LiveConfig, seq, response, every: list, cycles: dict, native_out: dict, timings: dict,
@@ -219,6 +253,20 @@ def _live_window_ms() -> float:
     return float(RunConfig().range_ms[1])
 
 
+#: Most renderers a walk keeps for its live runs (each holds a render with its margin and its depth: about
+#: 3.4 MB at 480x300).
+MAX_RENDERERS_KEPT = 64
+
+
+def _renderers_kept(cfg: LiveConfig) -> int:
+    """Renderers the walk's live runs keep: one per camera and sweep (or shot) of the walk, at most
+    :data:`MAX_RENDERERS_KEPT`, so that each is prepared once for all the runs."""
+    from scenes.walkshots import KEEP_RENDERERS
+
+    per_sweep = 2 * (1 if cfg.render_per == "cycle" else 6)
+    return max(KEEP_RENDERERS, min(MAX_RENDERERS_KEPT, per_sweep * (cfg.n_cycles + 1)))
+
+
 def run_walk(config: dict, scene_name: str, experiment: str, cache_dir=None, native_loop: Callable | None = None,
              command: str | None = None, progress: bool = False, log: Callable[[str], None] | None = None) -> dict:
     """Run one walk (``scene_name`` at ``config``'s seed) into ``experiment``; write and return its record.
@@ -263,7 +311,8 @@ def run_walk(config: dict, scene_name: str, experiment: str, cache_dir=None, nat
     frames = DatasetRadiance(ds)
     first = seq.cycles[0].frames["left"][seq.cycles[0].available(("left",))[0]].timestamp_ns
     ratio_input = (frames(first, "left"), camera, response, model)
-    radiance = walk_radiance(ds, scene, cache_dir=cache_dir) or frames  # live shots blurred over their windows
+    # live shots blurred over their windows; the renders (and depths) of the walk are kept for all its live runs
+    radiance = walk_radiance(ds, scene, cache_dir=cache_dir, keep=_renderers_kept(cfg)) or frames
     native_errors: dict = {}
     cycles = _loops(cfg, seq, radiance, camera, model, response, native_loop, tag, progress, timings, scene_name,
                     native_errors)
