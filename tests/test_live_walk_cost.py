@@ -126,3 +126,51 @@ def test_a_walk_keeps_one_renderer_per_camera_and_sweep_up_to_a_bound():
     assert _renderers_kept(replace(cfg, n_cycles=8, render_per="cycle")) == 18
     assert _renderers_kept(replace(cfg, n_cycles=8, render_per="shot")) == MAX_RENDERERS_KEPT
     assert _renderers_kept(replace(cfg, n_cycles=3, render_per="cycle")) == 8
+
+
+def test_run_images_written_fast_read_the_same_and_dropped_after_measuring(static, tmp_path):
+    from emulator.io.png import read_image
+    from validation.live.experiment import _live_sheets
+    from validation.live.loops import drop_run_images, has_run_images, write_run_folder
+
+    seq, cam, resp, frames = static
+    cycles = list(iter_live(seq, CountingRadiance(frames), cam, list(METHODS), timing="fixed-instant", response=resp))
+    kw = dict(white_level=seq.white_level, black_level=seq.black_level)
+    slow = write_run_folder(tmp_path / "runs" / "walk" / "level1", seq.path, cycles, list(METHODS), **kw)
+    fast = write_run_folder(tmp_path / "runs" / "walk" / "level0", seq.path, cycles, list(METHODS), png_level=0, **kw)
+    pngs = sorted(p.relative_to(slow) for p in slow.glob("*/images/*/*.png"))
+    assert len(pngs) == len(METHODS) * len(cycles) * 2
+    assert pngs == sorted(p.relative_to(fast) for p in fast.glob("*/images/*/*.png"))
+    for rel in pngs:  # the same pixels, stored uncompressed
+        assert np.array_equal(read_image(slow / rel), read_image(fast / rel))
+        assert (fast / rel).stat().st_size > (slow / rel).stat().st_size
+    assert "level0" in _live_sheets(tmp_path, "walk") and has_run_images(fast)
+    kept = sorted(p.relative_to(fast) for p in fast.rglob("*") if p.is_file() and p.suffix != ".png")
+    assert drop_run_images(fast) == len(pngs) and not has_run_images(fast)
+    assert sorted(p.relative_to(fast) for p in fast.rglob("*") if p.is_file()) == kept  # run.json, csv, times.txt
+    assert {"run.json", "fixed/exposures.csv", "fixed/images/times.txt"} <= {str(p) for p in kept}
+    sheets = _live_sheets(tmp_path, "walk")  # the report's contact sheets leave the dropped run out
+    assert "level1" in sheets and "level0" not in sheets
+    assert drop_run_images(fast) == 0
+
+
+def test_no_run_images_reaches_every_walk_and_stays_out_of_the_command(tmp_path, monkeypatch):
+    import emulator.distributed
+    from conftest import SynthesizeCalled
+
+    from validation.live.cli import build_parser, command_line, main
+
+    seen = []
+
+    def no_walks(fn, args, **kwargs):
+        seen.append([a[-1] for a in args])  # run_walk's keep_run_images
+        raise SynthesizeCalled
+
+    monkeypatch.setattr(emulator.distributed, "run_tasks", no_walks)
+    for flag, keep in ((["--no-run-images"], False), ([], True)):
+        with pytest.raises(SynthesizeCalled):
+            main(["-o", str(tmp_path / f"out{keep}"), "--quick", "--no-progress", "--scenes", "forest_edge,sun_glare"]
+                 + flag)
+        assert seen[-1] == [keep, keep]
+    args = build_parser().parse_args(["-o", "x", "--no-run-images"])
+    assert "--no-run-images" not in command_line(args, "exposim validate live")  # the results do not depend on it

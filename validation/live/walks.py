@@ -268,11 +268,14 @@ def _renderers_kept(cfg: LiveConfig) -> int:
 
 
 def run_walk(config: dict, scene_name: str, experiment: str, cache_dir=None, native_loop: Callable | None = None,
-             command: str | None = None, progress: bool = False, log: Callable[[str], None] | None = None) -> dict:
+             command: str | None = None, progress: bool = False, log: Callable[[str], None] | None = None,
+             keep_run_images: bool = True) -> dict:
     """Run one walk (``scene_name`` at ``config``'s seed) into ``experiment``; write and return its record.
 
     ``config``: :meth:`LiveConfig.to_dict` (plain data, so the call can travel to a Dask
     worker).  Folders of an earlier, unfinished attempt at this walk are removed first.
+    ``keep_run_images`` False: the runs' images are written fast (PNG level 0) and deleted once the
+    benchmarks have read them (the record is the same).
     Returns ``{"walk", "seconds"}``; the record itself is ``walks/<scene>.json``.
     """
     import scenes
@@ -283,7 +286,7 @@ def run_walk(config: dict, scene_name: str, experiment: str, cache_dir=None, nat
     from synth.noise_model import noise_model_of
     from synth.sequence import load_camera
     from validation.live.compare import measure_noise_variance_ratio
-    from validation.live.loops import DatasetRadiance, write_run_folder
+    from validation.live.loops import DatasetRadiance, drop_run_images, write_run_folder
 
     cfg = config_from_dict(config)
     exp = Path(experiment)
@@ -322,7 +325,8 @@ def run_walk(config: dict, scene_name: str, experiment: str, cache_dir=None, nat
     summaries = {}
     for r in runs:
         write_run_folder(exp / "runs" / scene_name / r, ds, cycles[r], names, white_level=seq.white_level,
-                         black_level=seq.black_level, description={"run": r, "scene": scene_name})
+                         black_level=seq.black_level, description={"run": r, "scene": scene_name},
+                         png_level=1 if keep_run_images else 0)
         summaries[r] = _runs_summary(cycles[r], names)
     trajectories = {r: {m: {"timestamp_ns": [cs.steps[m].timestamp_ns for cs in cycles[r] if m in cs.steps],
                             "target_ms": [cs.steps[m].target_ms for cs in cycles[r] if m in cs.steps],
@@ -338,6 +342,9 @@ def run_walk(config: dict, scene_name: str, experiment: str, cache_dir=None, nat
     if not cfg.keep_radiance:
         shutil.rmtree(ds / "ground_truth" / "radiance", ignore_errors=True)
     bench = _benchmarks(cfg, exp, scene_name, runs, progress, command, timings) if cfg.metrics else None
+    if not keep_run_images:  # the benchmarks have read them
+        for r in runs:
+            drop_run_images(exp / "runs" / scene_name / r)
     timings[f"walk_{scene_name}_s"] = time.perf_counter() - t_start
     record = {"walk": tag, "scene": scene_name, "config": cfg.to_dict(), "runs": runs,
               "render_variant": scenes.choose_variant(), "comparison": comp, "trajectories": trajectories,
@@ -351,13 +358,14 @@ def run_walk(config: dict, scene_name: str, experiment: str, cache_dir=None, nat
 
 def run_walks(experiments: list[tuple[Path, LiveConfig]], *, scheduler=None, n_workers: int | None = None,
               cache_dir=None, native_loop: Callable | None = None, command: str | None = None,
-              progress: bool = True, log: Callable[[str], None] | None = None) -> dict:
+              progress: bool = True, log: Callable[[str], None] | None = None, keep_run_images: bool = True) -> dict:
     """Run every walk of ``experiments`` whose record does not exist yet, as one batch of tasks.
 
     ``scheduler``: None or ``"serial"`` (this process, one walk after the other), ``"local"``
     (a local Dask cluster, ``n_workers`` processes), a ``tcp://``/``tls://`` address or a
     :class:`distributed.Client` (:func:`emulator.distributed.open_client`); on Dask the
-    workers must see ``experiments`` and ``cache_dir`` under the same paths.  Returns
+    workers must see ``experiments`` and ``cache_dir`` under the same paths.  ``keep_run_images``: as
+    :func:`run_walk`.  Returns
     ``{(experiment, scene): error text}`` of the walks that failed (empty when all ran).
     """
     from emulator.distributed import open_client, run_tasks
@@ -368,7 +376,7 @@ def run_walks(experiments: list[tuple[Path, LiveConfig]], *, scheduler=None, n_w
         return {}
     serial = scheduler in (None, "serial")
     args = [(cfg.to_dict(), s, str(exp), None if cache_dir is None else str(cache_dir), native_loop, command,
-             progress and serial, log if serial else None) for exp, cfg, s in todo]
+             progress and serial, log if serial else None, keep_run_images) for exp, cfg, s in todo]
     keys = [walk_name(s, cfg.seed) for _, cfg, s in todo]
     with _bar(len(todo), "walks", progress and not serial) as bar:
         def tick(done: int, total: int) -> None:
