@@ -300,7 +300,8 @@ def run_walk(config: dict, scene_name: str, experiment: str, cache_dir=None, nat
     ds = exp / "datasets" / scene_name
     with _bar(cfg.n_cycles * 6, f"{tag}: render + record", progress) as bar:
         synthesize(scene, ds, n_cycles=cfg.n_cycles, width=cfg.width, height=cfg.height, spp=cfg.spp, stereo=True,
-                   seed=cfg.seed, render_seed=cfg.seed, noise=cfg.capture_noise, save_radiance=True,
+                   seed=cfg.seed, render_seed=cfg.seed, noise=cfg.capture_noise,
+                   save_radiance=cfg.keep_radiance or scene.is_static,  # a walk's live shots integrate the renders
                    render_per=cfg.render_per, denoise=cfg.denoise, max_window_ms=_live_window_ms(),
                    cache_dir=cache_dir,
                    progress=lambda d, n: bar.update(d - bar.n))
@@ -311,11 +312,14 @@ def run_walk(config: dict, scene_name: str, experiment: str, cache_dir=None, nat
     camera = load_camera(ds)
     synth_model = noise_model_of(camera)
     model = NoiseModel(response, synth_model.gain_e_per_h, synth_model.read_noise_e, synth_model.name)
-    frames = DatasetRadiance(ds)
-    first = seq.cycles[0].frames["left"][seq.cycles[0].available(("left",))[0]].timestamp_ns
-    ratio_input = (frames(first, "left"), camera, response, model)
+    first_ms = seq.cycles[0].available(("left",))[0]
+    first = seq.cycles[0].frames["left"][first_ms].timestamp_ns
     # live shots blurred over their windows; the renders (and depths) of the walk are kept for all its live runs
-    radiance = walk_radiance(ds, scene, cache_dir=cache_dir, keep=_renderers_kept(cfg)) or frames
+    radiance = walk_radiance(ds, scene, cache_dir=cache_dir, keep=_renderers_kept(cfg)) or DatasetRadiance(ds)
+    # the first left shot's radiance, as the recording captured it (the radiance files are written only for a
+    # still scene, whose shots are not integrated, or when they are kept)
+    ratio_input = (radiance(first, "left", first_ms) if getattr(radiance, "exposure_aware", False)
+                   else radiance(first, "left"), camera, response, model)
     native_errors: dict = {}
     cycles = _loops(cfg, seq, radiance, camera, model, response, native_loop, tag, progress, timings, scene_name,
                     native_errors)
