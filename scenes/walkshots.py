@@ -16,7 +16,9 @@ from scenes.errors import SceneError
 
 __all__ = ["WalkShots", "walk_radiance", "shot_time_s"]
 
-_KEEP = 4
+#: Renderers a :class:`WalkShots` keeps by default (each holds its render and depth: the two cameras of two
+#: shots or sweeps).
+KEEP_RENDERERS = 4
 
 
 def shot_time_s(index: int, fps: float) -> float:
@@ -48,12 +50,20 @@ class WalkShots:
         a blurred walk, which shares its render noise (validation.blur's live-versus-emulated table).
     margin_step_px : int
         Render margins are rounded up to a multiple of this (:class:`scenes.blur.ShotRenderer`).
+    keep : int
+        Renderers kept (the most recently used; a renderer dropped and needed again reads its render from the
+        cache and renders its depth again): :data:`KEEP_RENDERERS`, or more for a caller that goes over the
+        walk several times.
     """
 
     def __init__(self, scene, traj, *, render: dict, fps: float, n_brackets: int, max_window_ms: float,
-                 baseline_m: float, render_per: str = "shot", integrate: bool = True, margin_step_px: int = 1):
+                 baseline_m: float, render_per: str = "shot", integrate: bool = True, margin_step_px: int = 1,
+                 keep: int = KEEP_RENDERERS):
         if render_per not in ("shot", "cycle"):
             raise SceneError(f"render_per must be 'shot' or 'cycle', got {render_per!r}")
+        if isinstance(keep, bool) or not isinstance(keep, int) or keep < 1:
+            raise SceneError(f"keep must be an integer >= 1, got {keep!r}")
+        self.keep = keep
         self.scene, self.traj, self.render = scene, traj, dict(render)
         self.fps, self.n_brackets, self.max_window_ms = float(fps), int(n_brackets), float(max_window_ms)
         self.baseline_m, self.render_per, self.integrate = float(baseline_m), render_per, bool(integrate)
@@ -90,7 +100,7 @@ class WalkShots:
         if key not in self._renderers:
             span = self.max_window_ms + (1e3 * (self.n_brackets - 1) / self.fps if self.render_per == "cycle" else 0)
             self._renderers[key] = self._make(first, camera, span)
-            while len(self._renderers) > _KEEP:
+            while len(self._renderers) > self.keep:
                 self._renderers.popitem(last=False)
         return self._renderers[key]
 
@@ -111,12 +121,13 @@ class WalkShots:
                 "margin_step_px": self.margin_step_px}
 
 
-def walk_radiance(dataset, scene, *, cache_dir=None):
+def walk_radiance(dataset, scene, *, cache_dir=None, keep: int = KEEP_RENDERERS):
     """``radiance(timestamp_ns, camera, exposure_ms)`` of a dataset :func:`scenes.synthesize` wrote with blur.
 
     Rebuilt from its ``exposim.json`` (render settings, walk, schedule): the renders are the
     writer's (cache hits).  ``exposure_aware`` is True: a live capture of T ms integrates
-    over ``[t, t + T]``.  Returns None for a dataset written without exposure integration.
+    over ``[t, t + T]``.  ``keep``: renderers kept (:class:`WalkShots`; a caller that goes over the walk
+    several times keeps each sweep's).  Returns None for a dataset written without exposure integration.
     """
     from pathlib import Path
 
@@ -139,7 +150,8 @@ def walk_radiance(dataset, scene, *, cache_dir=None):
                                                render_seed=render["render_seed"], cache_dir=cache_dir),
                       fps=blur["fps"], n_brackets=blur["n_brackets"], max_window_ms=blur["max_window_ms"],
                       baseline_m=blur["baseline_m"], render_per=blur["render_per"],
-                      integrate=bool(blur.get("integrate", True)), margin_step_px=int(blur.get("margin_step_px", 1)))
+                      integrate=bool(blur.get("integrate", True)), margin_step_px=int(blur.get("margin_step_px", 1)),
+                      keep=keep)
     start_ns = int(meta["start_time_ns"])
 
     def radiance(timestamp_ns: int, camera: str, exposure_ms: float) -> np.ndarray:

@@ -78,6 +78,11 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
                    help="denoiser of the renders (default $EXPOSIM_DENOISE when set, else "
                         f"{STUDY_DENOISE})")
     p.add_argument("--keep-radiance", action="store_true", help="keep the datasets' radiance EXRs (large)")
+    p.add_argument("--no-run-images", action="store_true",
+                   help="delete each walk's run images (runs/<scene>/<run>/<method>/images/left and right) once its "
+                        "features and VO are measured: about 180 MB less per walk at the default settings and a "
+                        "faster walk (the images are written uncompressed); the results are the same, the report "
+                        "then has no contact sheets")
     p.add_argument("--cache-dir", help="render cache (default $EXPOSIM_CACHE or ~/.cache/exposim/renders)")
     p.add_argument("--scheduler", default=None, metavar="serial|local|tcp://HOST:PORT",
                    help="where the walks run, each walk (scene x seed, all its conditions) one task: 'serial' (this "
@@ -189,7 +194,8 @@ def run(args, prog: str = "exposim validate live") -> int:
         log(f"live: {args.output} exists and is not empty; writing to {out}")
     t0 = time.perf_counter()
     kw = dict(progress=bars_enabled(args.quiet), command=command_line(args, prog), cache_dir=args.cache_dir,
-              log=None if args.quiet else log, scheduler=scheduler, n_workers=args.workers, resume=args.resume)
+              log=None if args.quiet else log, scheduler=scheduler, n_workers=args.workers, resume=args.resume,
+              keep_run_images=not args.no_run_images)
     if args.replicates > 1:
         results = run_replicated(out, cfg, args.replicates, calibration_studies=args.calibration_studies, **kw)
     else:

@@ -126,12 +126,14 @@ def assemble_raw(experiment, cfg: LiveConfig, failed: dict[str, str], command: s
 
 def run_study(experiments: list[tuple[Path, LiveConfig]], *, command: str | None = None, cache_dir=None,
               log: Callable[[str], None] | None = None, scheduler=None, n_workers: int | None = None,
-              native_loop: Callable | None = None, progress: bool = True) -> list[dict]:
+              native_loop: Callable | None = None, progress: bool = True,
+              keep_run_images: bool = True) -> list[dict]:
     """Every walk of ``experiments`` (folder, configuration) as one batch of tasks
     (:func:`validation.live.walks.run_walks`), then each experiment's ``raw.json`` and
     verdicts (:func:`finish`).  An experiment whose ``raw.json`` exists without failed walks
     is read, not run again.  Returns the experiments' raw records (one whose walks all failed
-    has an empty ``per_scene`` and its ``failed_walks``)."""
+    has an empty ``per_scene`` and its ``failed_walks``).  ``keep_run_images`` False: each walk deletes its runs'
+    images once its benchmarks have read them (:func:`validation.live.walks.run_walk`)."""
     from validation.live.walks import run_walks
 
     done, todo = {}, []
@@ -143,7 +145,7 @@ def run_study(experiments: list[tuple[Path, LiveConfig]], *, command: str | None
             todo.append((exp, cfg))
     failed = run_walks(todo, scheduler=scheduler, n_workers=n_workers, cache_dir=cache_dir,
                        native_loop=_default_native(todo[0][1], native_loop) if todo else None, command=command,
-                       progress=progress, log=log)
+                       progress=progress, log=log, keep_run_images=keep_run_images)
     for exp, cfg in todo:
         raw = assemble_raw(exp, cfg, {s: e for (x, s), e in failed.items() if x == Path(exp)}, command)
         write_results(exp / RAW_FILE, raw)
@@ -156,7 +158,7 @@ def run_study(experiments: list[tuple[Path, LiveConfig]], *, command: str | None
 def run_live_experiment(out, config: LiveConfig | None = None, *, progress: bool = True, command: str | None = None,
                         cache_dir=None, log: Callable[[str], None] | None = None,
                         scheduler=None, native_loop: Callable | None = None, resume: bool = False,
-                        n_workers: int | None = None) -> dict:
+                        n_workers: int | None = None, keep_run_images: bool = True) -> dict:
     """Run the experiment (one seed, a walk per scene) into ``out`` (a new or empty folder; see
     :func:`numbered_output`; ``resume``: finish the study already in ``out``, walks with a record
     are not run again).
@@ -164,7 +166,8 @@ def run_live_experiment(out, config: LiveConfig | None = None, *, progress: bool
     ``config`` defaults to ``CONFIGS["full"]``.  Each walk is one task
     (:func:`validation.live.walks.run_walk`): ``scheduler`` None or ``"serial"`` runs them in
     this process, ``"local"`` on a local Dask cluster (``n_workers``), ``"tcp://HOST:PORT"``
-    on a running scheduler's workers; the same bytes on every path.  A walk that fails is
+    on a running scheduler's workers; the same bytes on every path.  ``keep_run_images`` False: each
+    walk deletes its runs' images once measured (the results are the same).  A walk that fails is
     listed in ``failed_walks`` (results.json) and the others are judged; if every walk fails,
     :class:`LiveError`.  Returns the content of ``results.json``.
 
@@ -181,7 +184,8 @@ def run_live_experiment(out, config: LiveConfig | None = None, *, progress: bool
     out = Path(out)
     _check_output(out, resume, {"config": cfg.to_dict(), "replicates": 1})
     records = run_study([(out, cfg)], command=command, cache_dir=cache_dir, log=log, scheduler=scheduler,
-                        n_workers=n_workers, native_loop=native_loop, progress=progress)
+                        n_workers=n_workers, native_loop=native_loop, progress=progress,
+                        keep_run_images=keep_run_images)
     raw = records[0]
     if not raw["per_scene"]:
         raise LiveError("every walk failed: " + "; ".join(f"{f['walk']}: {f['error']}" for f in raw["failed_walks"]))
@@ -323,7 +327,7 @@ def run_replicated(out, config: LiveConfig | None = None, replicates: int = 1, *
     results.json over its scenes); ``out/results.json`` and ``out/report.md`` hold the
     verdicts over every walk (:func:`finish_replicated`).  Every walk of every replicate is
     one task of one batch (:func:`run_study`); ``kwargs`` (scheduler, n_workers, cache_dir,
-    log, progress, native_loop) go there.  ``resume``: finish the study already in ``out``.
+    log, progress, native_loop, keep_run_images) go there.  ``resume``: finish the study already in ``out``.
     """
     from dataclasses import replace
 
@@ -377,13 +381,15 @@ def finish_replicated(out, records: list[dict], command: str | None = None, powe
 
 
 def _live_sheets(out: Path, scene: str) -> str:
-    """Contact sheets of the first scene: what each method saw in every run (emulated and live)."""
+    """Contact sheets of the first scene: what each method saw in every run (emulated and live); runs whose
+    images were deleted (``--no-run-images``) are left out."""
     from emulator.io.runfolder import read_run_json, read_tables
     from emulator.report.html import run_contact_sheet
+    from validation.live.loops import has_run_images
 
     parts = []
     folder = Path(out) / "runs" / scene
-    for run_dir in sorted(p for p in folder.glob("*") if (p / "run.json").is_file()):
+    for run_dir in sorted(p for p in folder.glob("*") if (p / "run.json").is_file() and has_run_images(p)):
         info = read_run_json(run_dir)
         sheet = run_contact_sheet(run_dir, info["methods"], read_tables(run_dir, info["methods"]),
                                   white_level=info.get("white_level"))

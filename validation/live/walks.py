@@ -101,10 +101,14 @@ def _collect(iterator, n: int, desc: str, progress: bool) -> list:
 def _loops(cfg: LiveConfig, seq, radiance, camera, model, response, native_loop, tag: str, progress: bool,
            timings: dict, scene: str, native_out: dict | None = None) -> dict:
     """Every run of the walk: {run name: [CycleStep with images]}; ``native_out`` gets the native
-    emulation's per-frame errors (:func:`validation.live.native.native_image_errors`)."""
+    emulation's per-frame errors (:func:`validation.live.native.native_image_errors`).
+
+    The cycle-rate live runs advance together, and the native-rate live run with its re-seeded twin, so
+    that the radiance of a shot several of them capture is integrated once
+    (:class:`~validation.live.loops.SharedRadiance`); each run is what it is alone."""
     native_out = {} if native_out is None else native_out
     from emulator.playback import RunConfig
-    from validation.live.loops import iter_emulated, iter_live
+    from validation.live.loops import SharedRadiance, iter_emulated, iter_live, lockstep
 
     names = list(cfg.methods)
     common = dict(config=RunConfig(initial_ms=cfg.initial_ms, selector=cfg.selector), response=response)
@@ -120,25 +124,55 @@ def _loops(cfg: LiveConfig, seq, radiance, camera, model, response, native_loop,
     if cfg.control:  # each cycle-rate live run again, with capture-noise streams of its own
         live_runs += [(RESEEDED[f"live-{v}"].removeprefix("live-"), v,
                        control_seed(cfg.seed, scene, RESEEDED_STREAMS[RESEEDED[f"live-{v}"]])) for v in VARIANTS]
-    for label, timing, seed in live_runs:
-        cycles[f"live-{label}"] = _collect(
-            iter_live(seq, radiance, camera, names, timing=timing, noise=cfg.capture_noise, seed=seed, **common),
-            len(seq.cycles), f"{tag}: live loop ({label})", progress)
+    shared = (SharedRadiance(radiance, keep=2 * len(names) * len(live_runs))
+              if getattr(radiance, "exposure_aware", False) else radiance)
+    with _bar(len(seq.cycles) * len(live_runs), f"{tag}: live loops ({len(live_runs)} runs)", progress) as bar:
+        got = lockstep([iter_live(seq, shared, camera, names, timing=timing, noise=cfg.capture_noise, seed=seed,
+                                  **common) for _, timing, seed in live_runs], on_step=lambda: bar.update(1))
+    for (label, _, _), steps in zip(live_runs, got):
+        cycles[f"live-{label}"] = steps
     if native_loop is not None:
-        every = _collect(
-            native_loop(seq, radiance, camera, names, seed=cfg.seed, noise=cfg.capture_noise,
-                        initial_ms=cfg.initial_ms, selector=cfg.selector, response=response, every_frame=True),
-            len(seq.cycles) * 6, f"{tag}: live loop (native rate)", progress)
-        timings[f"live_{scene}_s"] = time.perf_counter() - t0
-        reseeded = None
-        if cfg.control:  # native-rate live again, with a capture-noise stream of its own
-            reseeded = partial(native_loop, seq, radiance, camera, names, noise=cfg.capture_noise,
-                               initial_ms=cfg.initial_ms, selector=cfg.selector, response=response, every_frame=True,
-                               seed=control_seed(cfg.seed, scene, RESEEDED_STREAMS[RESEEDED[NATIVE_RUN]]))
-        _emulated_native(cfg, seq, response, every, cycles, native_out, timings, scene, reseeded)
+        _native_loops(cfg, seq, radiance, camera, names, native_loop, response, cycles, native_out, timings, scene,
+                      tag, progress, t0)
         return cycles
     timings[f"live_{scene}_s"] = time.perf_counter() - t0
     return cycles
+
+
+def _native_loops(cfg: LiveConfig, seq, radiance, camera, names, native_loop, response, cycles: dict,
+                  native_out: dict, timings: dict, scene: str, tag: str, progress: bool, t0: float) -> None:
+    """The native-rate live run (every frame) and, with the control, its re-seeded twin advanced with it (only
+    the frames the benchmarks use kept); then the emulated native-rate condition (:func:`_emulated_native`)."""
+    from emulator.playback import RunConfig
+    from validation.live.loops import SharedRadiance, lockstep
+    from validation.live.native import cycle_picks, native_provider
+
+    kw = dict(noise=cfg.capture_noise, initial_ms=cfg.initial_ms, selector=cfg.selector, response=response,
+              every_frame=True)
+    seeds = [cfg.seed] + ([control_seed(cfg.seed, scene, RESEEDED_STREAMS[RESEEDED[NATIVE_RUN]])]
+                          if cfg.control else [])
+    shared = (SharedRadiance(radiance, keep=2 * len(names) * len(seeds))
+              if getattr(radiance, "exposure_aware", False) else radiance)
+    loops = [native_loop(seq, shared, camera, names, seed=s, **kw) for s in seeds]
+    if cfg.control:  # the re-seeded frames are streamed: only the benchmarked ones are kept
+        config = RunConfig(initial_ms=cfg.initial_ms, selector=cfg.selector, rate="native",
+                           latency_frames=cfg.latency_frames)
+        loops[1] = _thinned(loops[1], set(cycle_picks(native_provider(seq, response, config))))
+    with _bar(len(seq.cycles) * 6 * len(loops), f"{tag}: live loop (native rate, {len(loops)} runs)",
+              progress) as bar:
+        got = lockstep(loops, on_step=lambda: bar.update(1))
+    timings[f"live_{scene}_s"] = time.perf_counter() - t0
+    _emulated_native(cfg, seq, response, got[0], cycles, native_out, timings, scene,
+                     (lambda: got[1]) if cfg.control else None)
+
+
+def _thinned(frames, keep: set):
+    """Every frame of ``frames``, those whose index is not in ``keep`` without their steps (their images):
+    what :func:`validation.live.native.per_cycle` reads of them (the failures) is left."""
+    from dataclasses import replace
+
+    for cs in frames:
+        yield cs if cs.cycle in keep else replace(cs, steps={})
 
 
 def _emulated_native(cfg: LiveConfig, seq, response, every: list, cycles: dict, native_out: dict, timings: dict,
@@ -219,12 +253,29 @@ def _live_window_ms() -> float:
     return float(RunConfig().range_ms[1])
 
 
+#: Most renderers a walk keeps for its live runs (each holds a render with its margin and its depth: about
+#: 3.4 MB at 480x300).
+MAX_RENDERERS_KEPT = 64
+
+
+def _renderers_kept(cfg: LiveConfig) -> int:
+    """Renderers the walk's live runs keep: one per camera and sweep (or shot) of the walk, at most
+    :data:`MAX_RENDERERS_KEPT`, so that each is prepared once for all the runs."""
+    from scenes.walkshots import KEEP_RENDERERS
+
+    per_sweep = 2 * (1 if cfg.render_per == "cycle" else 6)
+    return max(KEEP_RENDERERS, min(MAX_RENDERERS_KEPT, per_sweep * (cfg.n_cycles + 1)))
+
+
 def run_walk(config: dict, scene_name: str, experiment: str, cache_dir=None, native_loop: Callable | None = None,
-             command: str | None = None, progress: bool = False, log: Callable[[str], None] | None = None) -> dict:
+             command: str | None = None, progress: bool = False, log: Callable[[str], None] | None = None,
+             keep_run_images: bool = True) -> dict:
     """Run one walk (``scene_name`` at ``config``'s seed) into ``experiment``; write and return its record.
 
     ``config``: :meth:`LiveConfig.to_dict` (plain data, so the call can travel to a Dask
     worker).  Folders of an earlier, unfinished attempt at this walk are removed first.
+    ``keep_run_images`` False: the runs' images are written fast (PNG level 0) and deleted once the
+    benchmarks have read them (the record is the same).
     Returns ``{"walk", "seconds"}``; the record itself is ``walks/<scene>.json``.
     """
     import scenes
@@ -235,7 +286,7 @@ def run_walk(config: dict, scene_name: str, experiment: str, cache_dir=None, nat
     from synth.noise_model import noise_model_of
     from synth.sequence import load_camera
     from validation.live.compare import measure_noise_variance_ratio
-    from validation.live.loops import DatasetRadiance, write_run_folder
+    from validation.live.loops import DatasetRadiance, drop_run_images, write_run_folder
 
     cfg = config_from_dict(config)
     exp = Path(experiment)
@@ -249,7 +300,8 @@ def run_walk(config: dict, scene_name: str, experiment: str, cache_dir=None, nat
     ds = exp / "datasets" / scene_name
     with _bar(cfg.n_cycles * 6, f"{tag}: render + record", progress) as bar:
         synthesize(scene, ds, n_cycles=cfg.n_cycles, width=cfg.width, height=cfg.height, spp=cfg.spp, stereo=True,
-                   seed=cfg.seed, render_seed=cfg.seed, noise=cfg.capture_noise, save_radiance=True,
+                   seed=cfg.seed, render_seed=cfg.seed, noise=cfg.capture_noise,
+                   save_radiance=cfg.keep_radiance or scene.is_static,  # a walk's live shots integrate the renders
                    render_per=cfg.render_per, denoise=cfg.denoise, max_window_ms=_live_window_ms(),
                    cache_dir=cache_dir,
                    progress=lambda d, n: bar.update(d - bar.n))
@@ -260,10 +312,14 @@ def run_walk(config: dict, scene_name: str, experiment: str, cache_dir=None, nat
     camera = load_camera(ds)
     synth_model = noise_model_of(camera)
     model = NoiseModel(response, synth_model.gain_e_per_h, synth_model.read_noise_e, synth_model.name)
-    frames = DatasetRadiance(ds)
-    first = seq.cycles[0].frames["left"][seq.cycles[0].available(("left",))[0]].timestamp_ns
-    ratio_input = (frames(first, "left"), camera, response, model)
-    radiance = walk_radiance(ds, scene, cache_dir=cache_dir) or frames  # live shots blurred over their windows
+    first_ms = seq.cycles[0].available(("left",))[0]
+    first = seq.cycles[0].frames["left"][first_ms].timestamp_ns
+    # live shots blurred over their windows; the renders (and depths) of the walk are kept for all its live runs
+    radiance = walk_radiance(ds, scene, cache_dir=cache_dir, keep=_renderers_kept(cfg)) or DatasetRadiance(ds)
+    # the first left shot's radiance, as the recording captured it (the radiance files are written only for a
+    # still scene, whose shots are not integrated, or when they are kept)
+    ratio_input = (radiance(first, "left", first_ms) if getattr(radiance, "exposure_aware", False)
+                   else radiance(first, "left"), camera, response, model)
     native_errors: dict = {}
     cycles = _loops(cfg, seq, radiance, camera, model, response, native_loop, tag, progress, timings, scene_name,
                     native_errors)
@@ -273,7 +329,8 @@ def run_walk(config: dict, scene_name: str, experiment: str, cache_dir=None, nat
     summaries = {}
     for r in runs:
         write_run_folder(exp / "runs" / scene_name / r, ds, cycles[r], names, white_level=seq.white_level,
-                         black_level=seq.black_level, description={"run": r, "scene": scene_name})
+                         black_level=seq.black_level, description={"run": r, "scene": scene_name},
+                         png_level=1 if keep_run_images else 0)
         summaries[r] = _runs_summary(cycles[r], names)
     trajectories = {r: {m: {"timestamp_ns": [cs.steps[m].timestamp_ns for cs in cycles[r] if m in cs.steps],
                             "target_ms": [cs.steps[m].target_ms for cs in cycles[r] if m in cs.steps],
@@ -289,6 +346,9 @@ def run_walk(config: dict, scene_name: str, experiment: str, cache_dir=None, nat
     if not cfg.keep_radiance:
         shutil.rmtree(ds / "ground_truth" / "radiance", ignore_errors=True)
     bench = _benchmarks(cfg, exp, scene_name, runs, progress, command, timings) if cfg.metrics else None
+    if not keep_run_images:  # the benchmarks have read them
+        for r in runs:
+            drop_run_images(exp / "runs" / scene_name / r)
     timings[f"walk_{scene_name}_s"] = time.perf_counter() - t_start
     record = {"walk": tag, "scene": scene_name, "config": cfg.to_dict(), "runs": runs,
               "render_variant": scenes.choose_variant(), "comparison": comp, "trajectories": trajectories,
@@ -302,13 +362,14 @@ def run_walk(config: dict, scene_name: str, experiment: str, cache_dir=None, nat
 
 def run_walks(experiments: list[tuple[Path, LiveConfig]], *, scheduler=None, n_workers: int | None = None,
               cache_dir=None, native_loop: Callable | None = None, command: str | None = None,
-              progress: bool = True, log: Callable[[str], None] | None = None) -> dict:
+              progress: bool = True, log: Callable[[str], None] | None = None, keep_run_images: bool = True) -> dict:
     """Run every walk of ``experiments`` whose record does not exist yet, as one batch of tasks.
 
     ``scheduler``: None or ``"serial"`` (this process, one walk after the other), ``"local"``
     (a local Dask cluster, ``n_workers`` processes), a ``tcp://``/``tls://`` address or a
     :class:`distributed.Client` (:func:`emulator.distributed.open_client`); on Dask the
-    workers must see ``experiments`` and ``cache_dir`` under the same paths.  Returns
+    workers must see ``experiments`` and ``cache_dir`` under the same paths.  ``keep_run_images``: as
+    :func:`run_walk`.  Returns
     ``{(experiment, scene): error text}`` of the walks that failed (empty when all ran).
     """
     from emulator.distributed import open_client, run_tasks
@@ -319,7 +380,7 @@ def run_walks(experiments: list[tuple[Path, LiveConfig]], *, scheduler=None, n_w
         return {}
     serial = scheduler in (None, "serial")
     args = [(cfg.to_dict(), s, str(exp), None if cache_dir is None else str(cache_dir), native_loop, command,
-             progress and serial, log if serial else None) for exp, cfg, s in todo]
+             progress and serial, log if serial else None, keep_run_images) for exp, cfg, s in todo]
     keys = [walk_name(s, cfg.seed) for _, cfg, s in todo]
     with _bar(len(todo), "walks", progress and not serial) as bar:
         def tick(done: int, total: int) -> None:
