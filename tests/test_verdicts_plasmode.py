@@ -56,17 +56,20 @@ def test_control_pairs_and_seed_clusters():
 
 
 def test_a_perfect_copy_agrees_exactly_when_the_rule_can_decide():
-    live, _ = _study(5, seed=1)  # 20 walks, methods 10 noise SDs apart: live separates them in every draw
-    cal = metric_calibration(live, live.copy(), _walks(5), METHODS, n_studies=20, seed=2, omega2s=(5.0,))
+    live, _ = _study(10, seed=1)  # 40 walks, methods 10 noise SDs apart: live separates them in every draw
+    cal = metric_calibration(live, live.copy(), _walks(10), METHODS, n_studies=20, seed=2, omega2s=(5.0,))
     # emulated == re-seeded live exactly: omega2 is 0 with both bounds 0 in every draw, so the rule says agrees
     assert cal["rates"]["perfect"] == {"agrees": 1.0, "disagrees": 0.0, "undetermined": 0.0,
-                                       "complete_walks_median": 20.0}
+                                       "complete_walks_median": 40.0}
     need = cal["walks_needed_for_agrees"]
-    assert need["walks"] == 12 and need["seeds"] == 3 and need["extrapolated"] is False  # the smallest size >= 10
-    # below the rule's 10 walks nothing is decided, however perfect
-    few, _ = _study(2, seed=1)
-    assert metric_calibration(few, few.copy(), _walks(2), METHODS, n_studies=10, seed=2)["rates"]["perfect"][
-        "undetermined"] == 1.0
+    assert need["walks"] == 40 and need["seeds"] == 10 and need["extrapolated"] is False  # the rule's 10 seeds
+    assert [s["agrees"] for s in need["sizes_tried"] if s["seeds"] < 10] == [0.0] * sum(
+        s["seeds"] < 10 for s in need["sizes_tried"])
+    # below the rule's 10 seeds nothing is decided, however perfect: 2 seeds (8 walks) and 5 seeds (20 walks)
+    for n in (2, 5):
+        few, _ = _study(n, seed=1)
+        assert metric_calibration(few, few.copy(), _walks(n), METHODS, n_studies=10, seed=2)["rates"]["perfect"][
+            "undetermined"] == 1.0
 
 
 def test_big_interactions_and_a_random_emulator_are_found():
@@ -184,3 +187,28 @@ def test_validate_live_refuses_a_negative_count(tmp_path, capsys):
 
     assert main(["-o", str(tmp_path), "--redraw", "--calibration-studies", "-1"]) == 1
     assert capsys.readouterr().err.strip() == "live: --calibration-studies must be >= 0, got -1"
+
+
+def test_the_rule_counts_seeds_where_the_walks_are_clustered():
+    live, _ = _study(3, seed=7)  # 12 walks in 3 seeds: enough walks, too few clusters
+    alone = judge(live, live.copy(), methods=METHODS, detail=False)
+    clustered = judge(live, live.copy(), methods=METHODS, detail=False, clusters=_walks(3))
+    assert alone["verdict"] == "agrees" and alone["n_clusters"] is None  # 12 independent walks decide
+    assert clustered["verdict"] == "undetermined" and clustered["n_clusters"] == 3
+    assert clustered["reason"].startswith("12 complete walks in 3 seeds, fewer than 10 seeds")
+    big, _ = _study(10, seed=7)
+    assert judge(big, big.copy(), methods=METHODS, detail=False, clusters=_walks(10))["verdict"] == "agrees"
+
+
+def test_walks_to_decide_never_below_the_rules_seeds():
+    from validation.live.evidence import _seed_floor
+
+    r = {"n_walks": 12, "n_clusters": 3, "walks_to_decide": {"walks": 16, "towards": "agrees"}}
+    _seed_floor(r, 10)
+    assert r["walks_to_decide"]["walks"] == 40 and "10 seeds of 4 walks" in r["walks_to_decide"]["floor"]
+    r = {"n_walks": 12, "n_clusters": 3, "walks_to_decide": {"walks": 60, "towards": "agrees"}}
+    _seed_floor(r, 10)
+    assert r["walks_to_decide"] == {"walks": 60, "towards": "agrees"}  # above the floor: unchanged
+    r = {"n_walks": 12, "n_clusters": None, "walks_to_decide": {"walks": 16}}
+    _seed_floor(r, 10)
+    assert r["walks_to_decide"] == {"walks": 16}  # walks not clustered: the rule counts walks

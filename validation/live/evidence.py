@@ -383,6 +383,19 @@ def _walks_to_decide(tables: dict, comparisons: dict, power_seeds: int, seed: in
             r["walks_to_decide"] = ({"walks": None, "towards": None, "reason": reason} if sc is None else
                                     walks_to_decide(sc, r["omega2_untruncated"], alpha=alpha, n_seeds=power_seeds,
                                                     seed=[seed, 22_004, k, list(JUDGED_METRICS).index(metric)]))
+            _seed_floor(r, MIN_WALKS)
+
+
+def _seed_floor(r: dict, min_units: int) -> None:
+    """Where the walks are clustered by seed, no fewer walks than ``min_units`` seeds of the study's walks each
+    (the rule's minimum counts seeds there), in place."""
+    need, seeds = r["walks_to_decide"].get("walks"), r.get("n_clusters")
+    if need is None or not seeds:
+        return
+    floor = math.ceil(min_units * r["n_walks"] / seeds)
+    if need < floor:
+        r["walks_to_decide"].update(walks=floor, floor=f"at least {min_units} seeds of {r['n_walks'] / seeds:g} "
+                                                      "walks each: the rule's minimum counts seeds")
 
 
 def calibration(tables: dict, walks, methods, *, seed: int = 0, n_studies: int | None = None) -> dict:

@@ -83,7 +83,7 @@ def apply_family(comparisons: dict, alpha: float = 0.05, min_walks: int = 10) ->
     ``agrees`` or ``disagrees`` whose Holm-adjusted p is above ``alpha`` becomes ``undetermined``), with
     ``verdict_alone`` (at its own level), ``p_agrees_adjusted``, ``p_disagrees_adjusted`` and ``family``; every
     other verdict gets its ``family``.  A verdict that cannot be decided at all (fewer than ``min_walks``
-    walks, live not separating the methods) counts in the family with p = 1.  Returns the family's summary."""
+    walks, or seeds where the walks are clustered, live not separating the methods) counts in the family with p = 1.  Returns the family's summary."""
     members = [(label, m) for label in HEADLINE_COMPARISONS if comparisons.get(label, {}).get("status") == "run"
                for m in HEADLINE_METRICS if m in comparisons[label]["metrics"]]
     text = _family_text(len(members), len(HEADLINE_METRICS), len({lab for lab, _ in members}))
@@ -97,7 +97,8 @@ def apply_family(comparisons: dict, alpha: float = 0.05, min_walks: int = 10) ->
 
     def decidable(r) -> bool:
         p = r.get("live_method_p")
-        return r["n_walks"] >= min_walks and p is not None and p < alpha
+        units = r["n_walks"] if r.get("n_clusters") is None else r["n_clusters"]
+        return units >= min_walks and p is not None and p < alpha
 
     pa = holm([r["p_agrees"] if decidable(r) and r.get("p_agrees") is not None else 1.0 for r in res])
     pd = holm([r["p_disagrees"] if decidable(r) and r.get("p_disagrees") is not None else 1.0 for r in res])

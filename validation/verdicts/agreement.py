@@ -25,8 +25,9 @@ Error rates of the rule, measured on simulated studies, are in docs/verdicts.md.
 
 Verdict (:func:`judge`), in this order:
 
-1. ``undetermined`` with fewer than :data:`MIN_WALKS` complete walks (a cluster bootstrap
-   of so few walks has too few distinct resamples to be an interval);
+1. ``undetermined`` with fewer than :data:`MIN_WALKS` complete walks, or, where the walks are
+   clustered by seed, fewer than :data:`MIN_WALKS` seeds (a bootstrap of so few units has too
+   few distinct resamples to be an interval: 3 seeds give 10);
 2. ``undetermined`` when live does not separate the methods (the live method effects are
    not significant: two-way F test, p >= :data:`ALPHA`; every method tied live included):
    there is no ranking to agree with, and a tie never counts as agreement;
@@ -219,7 +220,8 @@ def _live_f_test(live) -> tuple[np.ndarray, np.ndarray]:
 
 
 def judge_batch(live, emulated, *, n_resamples: int = 1000, seed=0, omega2_max: float = OMEGA2_MAX,
-                alpha: float = ALPHA, min_walks: int = MIN_WALKS, chunk: int = 32, plan=None) -> dict[str, np.ndarray]:
+                alpha: float = ALPHA, min_walks: int = MIN_WALKS, chunk: int = 32, plan=None,
+                n_units: int | None = None) -> dict[str, np.ndarray]:
     """The verdict rule of :func:`judge` on many complete studies at once (the calibration's loop).
 
     ``live``, ``emulated``: (studies, walks, methods), every value finite.  Returns arrays
@@ -227,11 +229,13 @@ def judge_batch(live, emulated, *, n_resamples: int = 1000, seed=0, omega2_max: 
     ``omega2_untruncated``, ``lo``, ``hi`` (the one-sided 95 % bounds, :func:`one_sided_bounds`, over
     ``n_resamples`` bootstrap resamples: ``plan`` when given, one plan for every study, else walks drawn
     independently), ``live_p`` (F test of the live method effect), ``tied`` (every method ties live on
-    every walk).
+    every walk).  ``n_units``: the independent units the bootstrap resamples (the seeds of a cluster ``plan``;
+    default the walks): fewer than ``min_walks`` of them is never decidable.
     """
     L = np.asarray(live, dtype=np.float64)
     E = np.asarray(emulated, dtype=np.float64)
     n, w, m = L.shape
+    units = w if n_units is None else int(n_units)
     rng = rng_of(seed)
     raw = omega2_untruncated(L, E)
     est = np.maximum(raw, 0.0)
@@ -252,7 +256,7 @@ def judge_batch(live, emulated, *, n_resamples: int = 1000, seed=0, omega2_max: 
             p_agrees[a + k], p_disagrees[a + k] = bound_pvalues(boot[k], raw[a + k], omega2_max)
     tied = np.all(np.ptp(L, axis=2) == 0, axis=1)
     verdict = np.full(n, VERDICTS.index("undetermined"))
-    decidable = (w >= min_walks) & (p < alpha) & ~tied  # a tie's F is rounding noise: never decidable
+    decidable = (units >= min_walks) & (p < alpha) & ~tied  # a tie's F is rounding noise: never decidable
     verdict[decidable & (hi <= omega2_max)] = VERDICTS.index("agrees")
     verdict[decidable & (lo > omega2_max)] = VERDICTS.index("disagrees")
     return {"verdict": verdict, "omega2": est, "omega2_untruncated": raw, "lo": lo, "hi": hi, "live_p": p,
@@ -321,7 +325,7 @@ def judge(live, emulated, control=None, *, methods=None, margin: float | None = 
     C = None if C is None else C[ok]
     w, m = L.shape
     names = list(methods) if methods is not None else [str(i) for i in range(m)]
-    out = {"n_walks": int(w), "verdict": "undetermined", "reason": "", "family": FAMILY, "omega2": None,
+    out = {"n_walks": int(w), "n_clusters": None, "verdict": "undetermined", "reason": "", "family": FAMILY, "omega2": None,
            "omega2_untruncated": None, "omega2_ci90": [None, None], "omega2_max": omega2_max,
            "omega2_interval": INTERVAL, "live_method_f": None, "live_method_p": None, "p_agrees": None,
            "p_disagrees": None}
@@ -335,9 +339,12 @@ def judge(live, emulated, control=None, *, methods=None, margin: float | None = 
         out["reason"] = f"{w} complete walk(s) x {m} method(s): nothing to compare"
         return out
     rng = rng_of(seed)
-    plan = cluster_plan(w, n_resamples, rng, None if clusters is None else np.asarray(list(clusters))[ok])
+    labels = None if clusters is None else np.asarray(list(clusters))[ok]
+    units = w if labels is None else int(np.unique(labels).size)
+    out["n_clusters"] = None if labels is None else units
+    plan = cluster_plan(w, n_resamples, rng, labels)
     batch = judge_batch(L[None], E[None], n_resamples=n_resamples, seed=rng, omega2_max=omega2_max, alpha=alpha,
-                        min_walks=min_walks, plan=plan)
+                        min_walks=min_walks, plan=plan, n_units=units)
     F, p = _live_f_test(L)
     p = float(p)
     out["live_method_f"], out["live_method_p"] = _finite(F), p
@@ -348,13 +355,12 @@ def judge(live, emulated, control=None, *, methods=None, margin: float | None = 
     out["p_agrees"], out["p_disagrees"] = _finite(batch["p_agrees"][0]), _finite(batch["p_disagrees"][0])
     if detail:
         _details(out, L, E, C, plan, names, margin, higher_is_better, alpha, omega2_max, rng)
-        if w < min_walks:
-            out["pairs_verdict"].update(verdict="undetermined", reason=f"{w} complete walks, fewer than {min_walks}")
+        if units < min_walks:
+            out["pairs_verdict"].update(verdict="undetermined", reason=_too_few(w, units, labels, min_walks))
     out["verdict"] = VERDICTS[int(batch["verdict"][0])]
     bounds = f"omega2 one-sided 95 % bounds [{lo:.3g}, {hi:.3g}]"
-    if w < min_walks:
-        out["reason"] = (f"{w} complete walks, fewer than {min_walks}: a bootstrap over so few walks is "
-                         "no interval")
+    if units < min_walks:
+        out["reason"] = _too_few(w, units, labels, min_walks) + ": a bootstrap over so few is no interval"
     elif not p < alpha:
         out["reason"] = ("every method ties live on every walk: no ranking to agree with" if batch["tied"][0] else
                          f"live does not separate the methods (F test p = {p:.2g} >= {alpha}): no ranking to "
@@ -366,6 +372,13 @@ def judge(live, emulated, control=None, *, methods=None, margin: float | None = 
     else:
         out["reason"] = f"{bounds} straddle {omega2_max}: more walks needed"
     return out
+
+
+def _too_few(w: int, units: int, labels, min_walks: int) -> str:
+    if labels is None:
+        return f"{w} complete walks, fewer than {min_walks}"
+    return (f"{w} complete walks in {units} seeds, fewer than {min_walks} seeds (the bootstrap resamples seeds, "
+            "each with its walks)")
 
 
 #: How the omega2 interval is made, in words (results.json's ``omega2_interval``).

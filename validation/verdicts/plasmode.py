@@ -142,7 +142,7 @@ def _walks_needed(live, reseeded, clusters, n_studies, seed, candidates, target,
     those with more seeds than the study has flagged as extrapolated."""
     per_seed = float(np.mean([c.size for c in clusters]))
     own = len(clusters)
-    ks = sorted({max(2, math.ceil(n / per_seed)) for n in candidates} | {own})
+    ks = sorted({max(2, math.ceil(n / per_seed)) for n in candidates} | {own, MIN_WALKS})  # the rule's fewest seeds
     tried = {ks.index(own): own_rate}
 
     def rate(i):
