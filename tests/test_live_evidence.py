@@ -223,3 +223,27 @@ def test_the_seeds_are_the_bootstrap_clusters():
     t = np.repeat([[0.0], [1.0]], 4, axis=0)
     ci = condition_table(t, ["a"], n_resamples=200, clusters=[0] * 4 + [1] * 4)["a"]["ci95"]
     assert set(ci) <= {0.0, 0.5, 1.0} and ci[0] < ci[1]
+
+
+def test_replicated_study_pools_native_emulation_over_every_seed_and_the_table_redraw_keeps_it(tmp_path):
+    from validation.live.experiment import finish_replicated, redraw
+
+    sim = simulate_tables("live-draw", 40, Scales(sd_method=1.0, sd_walk_method=0.3, sd_noise=0.3), seed=7)
+    tables = {CONDITIONS["cycle-rate live"]: sim["live"][0], CONDITIONS["emulated"]: sim["emulated"][0]}
+    recs = _records(tables, 10)
+    for k, rec in enumerate(recs):  # every walk: 4 frames per method, one served by a neighbour (offset -1)
+        err = 1.0 + 0.1 * k
+        ne = {m: {"rmse_percent": [err, err, err, 2 * err], "rmse_percent_unwarped": [err, err, err, 4 * err],
+                  "rmse_percent_all": [err] * 4, "rmse_percent_own_bracket": [err] * 4,
+                  "source_offset": [0, 0, 0, -1], "warp_deg": [0.0, 0.0, 0.0, 0.5]} for m in METHODS}
+        rec["per_scene"] = {s: {"native_emulation": ne} for s in SCENES}
+    res = finish_replicated(tmp_path, recs, command="test", power_seeds=0, calibration_studies=0)
+    ne = res["native_emulation"]
+    assert len(ne["per_walk"]) == 40 and "forest_winter/seed9" in ne["per_walk"]
+    assert ne["per_walk"]["sun_glare/seed3"]["kim"]["neighbour_fraction"] == 0.25
+    # each walk's median over its frames and methods is its own bracket's error, 1 + 0.1 k: the mean over walks
+    assert ne["median_image_rmse_percent"]["estimate"] == pytest.approx(np.mean([1.0 + 0.1 * k for k in range(10)]))
+    assert "native" in (tmp_path / "report.md").read_text().lower()
+    assert not (tmp_path / "replicates").exists() and not (tmp_path / "raw.json").exists()
+    again = redraw(tmp_path)  # from walks.csv alone: the native figures are kept as they were
+    assert again["native_emulation"] == json.loads(json.dumps(ne))

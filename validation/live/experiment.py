@@ -367,6 +367,13 @@ def finish_replicated(out, records: list[dict], command: str | None = None, powe
                            **({} if wall_s is None else {"wall_s": float(wall_s)})},
                "failed_walks": failed}
     results.update(evidence(cfg, records, power_seeds=power_seeds, folder=out, calibration_studies=calibration_studies))
+    from validation.live.native import native_emulation_summary, native_markdown
+
+    native = native_emulation_summary({f"{s}/seed{r['config']['seed']}": sc.get("native_emulation")
+                                       for r in records for s, sc in (r.get("per_scene") or {}).items()},
+                                      list(cfg.methods), seed=cfg.seed)
+    if native is not None:
+        results["native_emulation"] = native
     results["study_folder"] = folder_check(out)
     write_report(out, "# Live versus emulated, replicated\n\n"
                  + f"{len(records)} replicate(s) of the experiment (seeds "
@@ -374,7 +381,7 @@ def finish_replicated(out, records: list[dict], command: str | None = None, powe
                  + f"Command (paths relative to this folder): `{command}`\n\n"
                  + folder_markdown(results["study_folder"])
                  + "".join(f"Failed walk (not judged; `--resume` runs it again): {f['walk']}: {f['error']}\n\n"
-                           for f in results["failed_walks"]) + evidence_markdown(results))
+                           for f in results["failed_walks"]) + evidence_markdown(results) + native_markdown(results))
     results = _lead(results)
     write_results(out / RESULTS_FILE, results)
     return results
@@ -401,6 +408,7 @@ def verdicts_from_table(out, power_seeds: int = 100, calibration_studies: int | 
     """The verdicts of a study folder that keeps only its per-walk table (and its results.json for the
     configuration): results.json's evidence and report.md recomputed from ``walks.csv``."""
     from validation.live.evidence import parse_walks_table
+    from validation.live.native import native_markdown
     from validation.live.report import evidence_markdown
 
     out = Path(out)
@@ -409,15 +417,15 @@ def verdicts_from_table(out, power_seeds: int = 100, calibration_studies: int | 
         raise LiveError(f"{out / RESULTS_FILE}: needed beside {WALKS_TABLE} for the study's configuration")
     cfg = config_from_dict(prev["config"])
     walks, methods, tables = parse_walks_table(read_text(out / WALKS_TABLE, LiveError), str(out / WALKS_TABLE))
-    results = {k: prev[k] for k in ("experiment", "command", "config", "replicates", "timings", "failed_walks")
-               if k in prev}
+    results = {k: prev[k] for k in ("experiment", "command", "config", "replicates", "timings", "failed_walks",
+                                    "native_emulation") if k in prev}  # native emulation's figures: not in the table
     results.update({"walks": walks, "n_walks": len(walks), "walks_table": WALKS_TABLE})
     results["command"] = relative_command(results.get("command"), out)
     results.update(_judged(cfg, tables, methods, walks, out, power_seeds, calibration_studies))
     results["study_folder"] = folder_check(out)
     write_report(out, f"# Live versus emulated, recomputed from {WALKS_TABLE}\n\n{len(walks)} walks. Command "
                  f"(paths relative to this folder): `{results.get('command')}`\n\n"
-                 + folder_markdown(results["study_folder"]) + evidence_markdown(results))
+                 + folder_markdown(results["study_folder"]) + evidence_markdown(results) + native_markdown(results))
     results = _lead(results)
     write_results(out / RESULTS_FILE, results)
     return results
