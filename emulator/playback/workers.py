@@ -192,9 +192,9 @@ class MethodWorker:
         return self
 
     def _ask(self, msg, sent_at: float | None = None):
-        if msg is not None:
-            self._conn.send(msg)
         try:
+            if msg is not None:  # a worker that died since its last answer: its pipe is broken, say why
+                self._conn.send(msg)
             # a call sent ahead (:meth:`send_ahead`) has been running since it was sent
             left = self.timeout_s if sent_at is None else max(0.0, self.timeout_s - (time.monotonic() - sent_at))
             if not self._conn.poll(left):
