@@ -174,3 +174,26 @@ def test_no_run_images_reaches_every_walk_and_stays_out_of_the_command(tmp_path,
         assert seen[-1] == [keep, keep]
     args = build_parser().parse_args(["-o", "x", "--no-run-images"])
     assert "--no-run-images" not in command_line(args, "exposim validate live")  # the results do not depend on it
+
+
+@pytest.mark.render
+@pytest.mark.slow
+def test_a_walk_that_fails_after_writing_its_runs_leaves_no_run_images(tmp_path, render_cache, monkeypatch):
+    """--no-run-images: a walk that fails once its run folders are written (its benchmarks, here) deletes
+    their images too (written uncompressed, they would stay until the walk is run again)."""
+    import validation.live.walks as walks
+    from test_validation_live import TINY
+    from validation.live.experiment import run_live_experiment
+
+    monkeypatch.setenv("EXPOSIM_DENOISE", "off")
+
+    def disk_full(*args, **kwargs):
+        raise OSError("No space left on device")
+
+    monkeypatch.setattr(walks, "_benchmarks", disk_full)
+    out = tmp_path / "out"
+    with pytest.raises(LiveError, match="forest_winter/seed0: OSError: No space left on device"):
+        run_live_experiment(out, TINY, progress=False, cache_dir=render_cache, keep_run_images=False)
+    runs = out / "runs" / "forest_winter"
+    assert (runs / "live-same-instant" / "classical-50" / "exposures.csv").is_file()  # the walk got that far
+    assert sorted(runs.glob("*/*/images/*/*.png")) == []

@@ -327,28 +327,30 @@ def run_walk(config: dict, scene_name: str, experiment: str, cache_dir=None, nat
     comp = _comparisons(cfg, cycles, seq, response)
     names = list(cfg.methods)
     summaries = {}
-    for r in runs:
-        write_run_folder(exp / "runs" / scene_name / r, ds, cycles[r], names, white_level=seq.white_level,
-                         black_level=seq.black_level, description={"run": r, "scene": scene_name},
-                         png_level=1 if keep_run_images else 0)
-        summaries[r] = _runs_summary(cycles[r], names)
-    trajectories = {r: {m: {"timestamp_ns": [cs.steps[m].timestamp_ns for cs in cycles[r] if m in cs.steps],
-                            "target_ms": [cs.steps[m].target_ms for cs in cycles[r] if m in cs.steps],
-                            "bracket_ms": [cs.steps[m].bracket_ms for cs in cycles[r] if m in cs.steps]}
-                        for m in names} for r in runs}
-    del cycles
-    t0 = time.perf_counter()
-    nvr = measure_noise_variance_ratio(*ratio_input, repeats=cfg.noise_repeats, seed=cfg.seed)
-    nvr_up = measure_noise_variance_ratio(*ratio_input, repeats=cfg.noise_repeats, seed=cfg.seed,
-                                          pairs=BRIGHTENING_PAIRS)
-    nvr["input"] = nvr_up["input"] = f"first left radiance of {scene_name}"
-    timings[f"noise_ratio_{scene_name}_s"] = time.perf_counter() - t0
-    if not cfg.keep_radiance:
-        shutil.rmtree(ds / "ground_truth" / "radiance", ignore_errors=True)
-    bench = _benchmarks(cfg, exp, scene_name, runs, progress, command, timings) if cfg.metrics else None
-    if not keep_run_images:  # the benchmarks have read them
+    try:  # the run images go with --no-run-images whether the walk ends here or fails on its way
         for r in runs:
-            drop_run_images(exp / "runs" / scene_name / r)
+            write_run_folder(exp / "runs" / scene_name / r, ds, cycles[r], names, white_level=seq.white_level,
+                             black_level=seq.black_level, description={"run": r, "scene": scene_name},
+                             png_level=1 if keep_run_images else 0)
+            summaries[r] = _runs_summary(cycles[r], names)
+        trajectories = {r: {m: {"timestamp_ns": [cs.steps[m].timestamp_ns for cs in cycles[r] if m in cs.steps],
+                                "target_ms": [cs.steps[m].target_ms for cs in cycles[r] if m in cs.steps],
+                                "bracket_ms": [cs.steps[m].bracket_ms for cs in cycles[r] if m in cs.steps]}
+                            for m in names} for r in runs}
+        del cycles
+        t0 = time.perf_counter()
+        nvr = measure_noise_variance_ratio(*ratio_input, repeats=cfg.noise_repeats, seed=cfg.seed)
+        nvr_up = measure_noise_variance_ratio(*ratio_input, repeats=cfg.noise_repeats, seed=cfg.seed,
+                                              pairs=BRIGHTENING_PAIRS)
+        nvr["input"] = nvr_up["input"] = f"first left radiance of {scene_name}"
+        timings[f"noise_ratio_{scene_name}_s"] = time.perf_counter() - t0
+        if not cfg.keep_radiance:
+            shutil.rmtree(ds / "ground_truth" / "radiance", ignore_errors=True)
+        bench = _benchmarks(cfg, exp, scene_name, runs, progress, command, timings) if cfg.metrics else None
+    finally:
+        if not keep_run_images:  # the benchmarks have read them (or the walk failed: nothing will)
+            for r in runs:
+                drop_run_images(exp / "runs" / scene_name / r)
     timings[f"walk_{scene_name}_s"] = time.perf_counter() - t_start
     record = {"walk": tag, "scene": scene_name, "config": cfg.to_dict(), "runs": runs,
               "render_variant": scenes.choose_variant(), "comparison": comp, "trajectories": trajectories,
