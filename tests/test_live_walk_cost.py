@@ -128,6 +128,23 @@ def test_a_walk_keeps_one_renderer_per_camera_and_sweep_up_to_a_bound():
     assert _renderers_kept(replace(cfg, n_cycles=3, render_per="cycle")) == 8
 
 
+def test_a_walk_keeps_fewer_renderers_of_a_larger_image():
+    """The renderers a walk keeps are bounded in memory too: at the recorder's 1920x1200 (16 times the
+    study's pixels, about 55 MB a renderer) 64 of them would hold 3.5 GB."""
+    from dataclasses import replace
+
+    from scenes.walkshots import KEEP_RENDERERS
+    from validation.live.config import CONFIGS
+    from validation.live.walks import MAX_RENDERER_BYTES, RENDERER_BYTES_PER_PX, _renderers_kept
+
+    cfg = replace(CONFIGS["full"], n_cycles=40, render_per="cycle")
+    assert _renderers_kept(cfg) == 64  # the study's 480x300: every sweep's, as before
+    big = replace(cfg, width=1920, height=1200)
+    assert _renderers_kept(big) == 9
+    assert _renderers_kept(big) * RENDERER_BYTES_PER_PX * 1920 * 1200 <= MAX_RENDERER_BYTES
+    assert _renderers_kept(replace(cfg, width=4096, height=3072)) == KEEP_RENDERERS  # never below the default
+
+
 def test_run_images_written_fast_read_the_same_and_dropped_after_measuring(static, tmp_path):
     from emulator.io.png import read_image
     from validation.live.experiment import _live_sheets

@@ -256,15 +256,22 @@ def _live_window_ms() -> float:
 #: Most renderers a walk keeps for its live runs (each holds a render with its margin and its depth: about
 #: 3.4 MB at 480x300).
 MAX_RENDERERS_KEPT = 64
+#: Memory the kept renderers of a walk may take, bytes, whatever the image size.
+MAX_RENDERER_BYTES = 512 << 20
+#: A renderer's memory per pixel of the image, bytes (its render with margin and its depth: about 3.4 MB at 480x300).
+RENDERER_BYTES_PER_PX = 24
 
 
 def _renderers_kept(cfg: LiveConfig) -> int:
     """Renderers the walk's live runs keep: one per camera and sweep (or shot) of the walk, at most
-    :data:`MAX_RENDERERS_KEPT`, so that each is prepared once for all the runs."""
+    :data:`MAX_RENDERERS_KEPT` and as many as :data:`MAX_RENDERER_BYTES` holds at the walk's image size
+    (a larger image keeps fewer: a dropped renderer is prepared again), so that each is prepared once for all
+    the runs."""
     from scenes.walkshots import KEEP_RENDERERS
 
     per_sweep = 2 * (1 if cfg.render_per == "cycle" else 6)
-    return max(KEEP_RENDERERS, min(MAX_RENDERERS_KEPT, per_sweep * (cfg.n_cycles + 1)))
+    fit = MAX_RENDERER_BYTES // (RENDERER_BYTES_PER_PX * cfg.width * cfg.height)
+    return max(KEEP_RENDERERS, min(MAX_RENDERERS_KEPT, fit, per_sweep * (cfg.n_cycles + 1)))
 
 
 def run_walk(config: dict, scene_name: str, experiment: str, cache_dir=None, native_loop: Callable | None = None,
