@@ -88,3 +88,25 @@ def test_a_worker_killed_between_calls_fails_alone_saying_how(seq, monkeypatch, 
     res = run(seq, "classical-50,shim", workers="process", jobs=jobs)
     assert res.failed == {"shim": "failed: its process was killed by SIGKILL in next_exposure at cycle 1"}
     assert len(res.steps["classical-50"]) == 3 and len(res.steps["shim"]) == 1
+
+
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_a_call_that_cannot_be_handed_over_fails_its_method_alone(seq, monkeypatch, jobs):
+    """Handing the image to a worker fails (its shared memory cannot be made: /dev/shm full): sent ahead or
+    not, that method fails alone, named, and the others' results are kept."""
+    import errno
+
+    from emulator.playback import workers
+
+    real = workers.MethodWorker._message
+
+    def message(self, raw, exposure_ms):
+        if self.name == "shim":
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(self, raw, exposure_ms)
+
+    monkeypatch.setattr(workers.MethodWorker, "_message", message)
+    res = run(seq, "classical-50,shim", workers="process", jobs=jobs)
+    assert set(res.failed) == {"shim"} and "No space left on device" in res.failed["shim"]
+    assert res.failed["shim"].endswith("at cycle 0")
+    assert len(res.steps["classical-50"]) == 3 and res.steps.get("shim", []) == []

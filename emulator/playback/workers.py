@@ -233,11 +233,10 @@ class MethodWorker:
         its time limit counts from now).  A worker that cannot take it now is left to that call."""
         if self.failed is not None or self._ahead is not None:
             return
-        msg = self._message(raw, exposure_ms)
         try:
-            self._conn.send(msg)
-        except (OSError, ValueError):  # its process is gone: the call itself finds out and says why
-            return
+            self._conn.send(self._message(raw, exposure_ms))
+        except Exception:  # noqa: BLE001 - no shared memory, its process gone: the call meets it again and
+            return  # fails this method alone, saying why, as it does when nothing was sent ahead
         self._ahead = (raw, exposure_ms, time.monotonic())
 
     def next_exposure(self, raw, exposure_ms):
