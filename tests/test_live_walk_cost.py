@@ -75,6 +75,38 @@ def test_lockstep_advances_the_loops_in_turn_and_keeps_each_ones_items():
     assert len(ticks) == 5
 
 
+def test_lockstep_closes_every_loop_when_one_raises(static):
+    """Loops whose methods run in worker processes (the emulated ones) advanced together, one of them
+    failing: the others' workers end with it, not when its error is let go (a Dask worker keeps an erred
+    task's traceback until the whole batch is done)."""
+    import gc
+
+    from emulator.playback.workers import MethodWorker
+
+    seq, cam, resp, frames = static
+
+    def render_fails():
+        yield "cycle 0"
+        yield "cycle 1"
+        raise RuntimeError("render failed")
+
+    def workers_alive():
+        gc.collect()
+        return [w for w in gc.get_objects() if isinstance(w, MethodWorker) and w._proc.is_alive()]
+
+    assert workers_alive() == []
+    held = []
+    from validation.live.loops import iter_emulated
+
+    loops = [iter_emulated(seq, list(METHODS), response=resp) for _ in range(2)]
+    with pytest.raises(RuntimeError, match="render failed") as err:
+        lockstep([render_fails()] + loops)
+    held.append(err.value)  # its traceback holds the loops
+    assert workers_alive() == []
+    assert len(lockstep([iter_emulated(seq, list(METHODS), response=resp)])[0]) == len(seq.cycles)
+    assert workers_alive() == []
+
+
 def _steps(cycles):
     return [(cs.cycle, m, st.timestamp_ns, st.target_ms, st.next_ms, st.left.tobytes(), st.right.tobytes())
             for cs in cycles for m, st in sorted(cs.steps.items())]
