@@ -177,6 +177,22 @@ def test_a_walk_keeps_fewer_renderers_of_a_larger_image():
     assert _renderers_kept(replace(cfg, width=4096, height=3072)) == KEEP_RENDERERS  # never below the default
 
 
+def test_the_shots_a_walk_shares_are_bounded_in_memory():
+    """One round of the runs advanced together at the study's size (7 methods, 4 cycle-rate runs: 56 shots,
+    97 MB); at 1920x1200 (27.6 MB a shot) only what 512 MB holds."""
+    from dataclasses import replace
+
+    from validation.live.config import CONFIGS
+    from validation.live.walks import MAX_SHARED_SHOT_BYTES, _shots_shared
+
+    cfg = CONFIGS["full"]
+    assert _shots_shared(cfg, 7, 4) == 56 and _shots_shared(cfg, 7, 2) == 28
+    big = replace(cfg, width=1920, height=1200)
+    assert _shots_shared(big, 7, 4) == 19
+    assert _shots_shared(big, 7, 4) * 3 * 4 * 1920 * 1200 <= MAX_SHARED_SHOT_BYTES
+    assert _shots_shared(replace(cfg, width=16384, height=16384), 7, 4) == 1
+
+
 def test_run_images_written_fast_read_the_same_and_dropped_after_measuring(static, tmp_path):
     from emulator.io.png import read_image
     from validation.live.experiment import _live_sheets

@@ -124,7 +124,7 @@ def _loops(cfg: LiveConfig, seq, radiance, camera, model, response, native_loop,
     if cfg.control:  # each cycle-rate live run again, with capture-noise streams of its own
         live_runs += [(RESEEDED[f"live-{v}"].removeprefix("live-"), v,
                        control_seed(cfg.seed, scene, RESEEDED_STREAMS[RESEEDED[f"live-{v}"]])) for v in VARIANTS]
-    shared = (SharedRadiance(radiance, keep=2 * len(names) * len(live_runs))
+    shared = (SharedRadiance(radiance, keep=_shots_shared(cfg, len(names), len(live_runs)))
               if getattr(radiance, "exposure_aware", False) else radiance)
     with _bar(len(seq.cycles) * len(live_runs), f"{tag}: live loops ({len(live_runs)} runs)", progress) as bar:
         got = lockstep([iter_live(seq, shared, camera, names, timing=timing, noise=cfg.capture_noise, seed=seed,
@@ -151,7 +151,7 @@ def _native_loops(cfg: LiveConfig, seq, radiance, camera, names, native_loop, re
               every_frame=True)
     seeds = [cfg.seed] + ([control_seed(cfg.seed, scene, RESEEDED_STREAMS[RESEEDED[NATIVE_RUN]])]
                           if cfg.control else [])
-    shared = (SharedRadiance(radiance, keep=2 * len(names) * len(seeds))
+    shared = (SharedRadiance(radiance, keep=_shots_shared(cfg, len(names), len(seeds)))
               if getattr(radiance, "exposure_aware", False) else radiance)
     loops = [native_loop(seq, shared, camera, names, seed=s, **kw) for s in seeds]
     if cfg.control:  # the re-seeded frames are streamed: only the benchmarked ones are kept
@@ -260,6 +260,18 @@ MAX_RENDERERS_KEPT = 64
 MAX_RENDERER_BYTES = 512 << 20
 #: A renderer's memory per pixel of the image, bytes (its render with margin and its depth: about 3.4 MB at 480x300).
 RENDERER_BYTES_PER_PX = 24
+
+
+#: Memory the integrated shots shared by a walk's live runs may take, bytes, whatever the image size.
+MAX_SHARED_SHOT_BYTES = 512 << 20
+
+
+def _shots_shared(cfg: LiveConfig, n_methods: int, n_runs: int) -> int:
+    """Integrated shots the live runs advanced together share (:class:`~validation.live.loops.SharedRadiance`):
+    one round of theirs (two cameras per method and run), at most as many as :data:`MAX_SHARED_SHOT_BYTES` holds
+    at the walk's image size (RGB float32; a shot dropped is integrated again)."""
+    fit = MAX_SHARED_SHOT_BYTES // (3 * 4 * cfg.width * cfg.height)
+    return max(1, min(2 * n_methods * n_runs, fit))
 
 
 def _renderers_kept(cfg: LiveConfig) -> int:
