@@ -75,6 +75,38 @@ def test_lockstep_advances_the_loops_in_turn_and_keeps_each_ones_items():
     assert len(ticks) == 5
 
 
+def test_lockstep_closes_every_loop_when_one_raises(static):
+    """Loops whose methods run in worker processes (the emulated ones) advanced together, one of them
+    failing: the others' workers end with it, not when its error is let go (a Dask worker keeps an erred
+    task's traceback until the whole batch is done)."""
+    import gc
+
+    from emulator.playback.workers import MethodWorker
+
+    seq, cam, resp, frames = static
+
+    def render_fails():
+        yield "cycle 0"
+        yield "cycle 1"
+        raise RuntimeError("render failed")
+
+    def workers_alive():
+        gc.collect()
+        return [w for w in gc.get_objects() if isinstance(w, MethodWorker) and w._proc.is_alive()]
+
+    assert workers_alive() == []
+    held = []
+    from validation.live.loops import iter_emulated
+
+    loops = [iter_emulated(seq, list(METHODS), response=resp) for _ in range(2)]
+    with pytest.raises(RuntimeError, match="render failed") as err:
+        lockstep([render_fails()] + loops)
+    held.append(err.value)  # its traceback holds the loops
+    assert workers_alive() == []
+    assert len(lockstep([iter_emulated(seq, list(METHODS), response=resp)])[0]) == len(seq.cycles)
+    assert workers_alive() == []
+
+
 def _steps(cycles):
     return [(cs.cycle, m, st.timestamp_ns, st.target_ms, st.next_ms, st.left.tobytes(), st.right.tobytes())
             for cs in cycles for m, st in sorted(cs.steps.items())]
@@ -128,6 +160,39 @@ def test_a_walk_keeps_one_renderer_per_camera_and_sweep_up_to_a_bound():
     assert _renderers_kept(replace(cfg, n_cycles=3, render_per="cycle")) == 8
 
 
+def test_a_walk_keeps_fewer_renderers_of_a_larger_image():
+    """The renderers a walk keeps are bounded in memory too: at the recorder's 1920x1200 (16 times the
+    study's pixels, about 55 MB a renderer) 64 of them would hold 3.5 GB."""
+    from dataclasses import replace
+
+    from scenes.walkshots import KEEP_RENDERERS
+    from validation.live.config import CONFIGS
+    from validation.live.walks import MAX_RENDERER_BYTES, RENDERER_BYTES_PER_PX, _renderers_kept
+
+    cfg = replace(CONFIGS["full"], n_cycles=40, render_per="cycle")
+    assert _renderers_kept(cfg) == 64  # the study's 480x300: every sweep's, as before
+    big = replace(cfg, width=1920, height=1200)
+    assert _renderers_kept(big) == 9
+    assert _renderers_kept(big) * RENDERER_BYTES_PER_PX * 1920 * 1200 <= MAX_RENDERER_BYTES
+    assert _renderers_kept(replace(cfg, width=4096, height=3072)) == KEEP_RENDERERS  # never below the default
+
+
+def test_the_shots_a_walk_shares_are_bounded_in_memory():
+    """One round of the runs advanced together at the study's size (7 methods, 4 cycle-rate runs: 56 shots,
+    97 MB); at 1920x1200 (27.6 MB a shot) only what 512 MB holds."""
+    from dataclasses import replace
+
+    from validation.live.config import CONFIGS
+    from validation.live.walks import MAX_SHARED_SHOT_BYTES, _shots_shared
+
+    cfg = CONFIGS["full"]
+    assert _shots_shared(cfg, 7, 4) == 56 and _shots_shared(cfg, 7, 2) == 28
+    big = replace(cfg, width=1920, height=1200)
+    assert _shots_shared(big, 7, 4) == 19
+    assert _shots_shared(big, 7, 4) * 3 * 4 * 1920 * 1200 <= MAX_SHARED_SHOT_BYTES
+    assert _shots_shared(replace(cfg, width=16384, height=16384), 7, 4) == 1
+
+
 def test_run_images_written_fast_read_the_same_and_dropped_after_measuring(static, tmp_path):
     from emulator.io.png import read_image
     from validation.live.experiment import _live_sheets
@@ -174,3 +239,26 @@ def test_no_run_images_reaches_every_walk_and_stays_out_of_the_command(tmp_path,
         assert seen[-1] == [keep, keep]
     args = build_parser().parse_args(["-o", "x", "--no-run-images"])
     assert "--no-run-images" not in command_line(args, "exposim validate live")  # the results do not depend on it
+
+
+@pytest.mark.render
+@pytest.mark.slow
+def test_a_walk_that_fails_after_writing_its_runs_leaves_no_run_images(tmp_path, render_cache, monkeypatch):
+    """--no-run-images: a walk that fails once its run folders are written (its benchmarks, here) deletes
+    their images too (written uncompressed, they would stay until the walk is run again)."""
+    import validation.live.walks as walks
+    from test_validation_live import TINY
+    from validation.live.experiment import run_live_experiment
+
+    monkeypatch.setenv("EXPOSIM_DENOISE", "off")
+
+    def disk_full(*args, **kwargs):
+        raise OSError("No space left on device")
+
+    monkeypatch.setattr(walks, "_benchmarks", disk_full)
+    out = tmp_path / "out"
+    with pytest.raises(LiveError, match="forest_winter/seed0: OSError: No space left on device"):
+        run_live_experiment(out, TINY, progress=False, cache_dir=render_cache, keep_run_images=False)
+    runs = out / "runs" / "forest_winter"
+    assert (runs / "live-same-instant" / "classical-50" / "exposures.csv").is_file()  # the walk got that far
+    assert sorted(runs.glob("*/*/images/*/*.png")) == []

@@ -63,3 +63,50 @@ def test_tables_are_the_same_with_the_second_camera_done_beside_the_method(seq):
         assert {k: [dataclasses.replace(st, left=None, right=None) for st in v] for k, v in res.steps.items()} == \
             {k: [dataclasses.replace(st, left=None, right=None) for st in v] for k, v in base.steps.items()}
         assert all(st.saturated_fraction_right is not None for v in res.steps.values() for st in v)
+
+
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_a_worker_killed_between_calls_fails_alone_saying_how(seq, monkeypatch, jobs):
+    """A worker killed while idle (the OOM killer, an operator): its next call, sent ahead or not, fails its
+    method alone with the signal, not with the broken pipe it meets."""
+    import os
+    import signal
+
+    from emulator.playback import workers
+
+    real = workers.MethodWorker.send_ahead
+    sends = {}
+
+    def send_ahead(self, raw, exposure_ms):
+        sends[self.name] = sends.get(self.name, 0) + 1
+        if self.name == "shim" and sends["shim"] == 2:
+            os.kill(self.pid(), signal.SIGKILL)
+            self._proc.join(5)
+        return real(self, raw, exposure_ms)
+
+    monkeypatch.setattr(workers.MethodWorker, "send_ahead", send_ahead)
+    res = run(seq, "classical-50,shim", workers="process", jobs=jobs)
+    assert res.failed == {"shim": "failed: its process was killed by SIGKILL in next_exposure at cycle 1"}
+    assert len(res.steps["classical-50"]) == 3 and len(res.steps["shim"]) == 1
+
+
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_a_call_that_cannot_be_handed_over_fails_its_method_alone(seq, monkeypatch, jobs):
+    """Handing the image to a worker fails (its shared memory cannot be made: /dev/shm full): sent ahead or
+    not, that method fails alone, named, and the others' results are kept."""
+    import errno
+
+    from emulator.playback import workers
+
+    real = workers.MethodWorker._message
+
+    def message(self, raw, exposure_ms):
+        if self.name == "shim":
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(self, raw, exposure_ms)
+
+    monkeypatch.setattr(workers.MethodWorker, "_message", message)
+    res = run(seq, "classical-50,shim", workers="process", jobs=jobs)
+    assert set(res.failed) == {"shim"} and "No space left on device" in res.failed["shim"]
+    assert res.failed["shim"].endswith("at cycle 0")
+    assert len(res.steps["classical-50"]) == 3 and res.steps.get("shim", []) == []

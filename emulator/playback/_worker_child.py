@@ -59,16 +59,25 @@ def _keep_freed_memory() -> None:
     Zhang call and 1,300 per call of a method that only reads the image, a fifth of Zhang's CPU.
     Served from a heap that is not trimmed, the same blocks are reused; the pixels and every
     result are the same."""
-    import ctypes
-    import ctypes.util
-
-    try:
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
-        mallopt = libc.mallopt
-    except (OSError, AttributeError):  # not glibc
+    if not _glibc():  # the parameters' numbers are glibc's; another C library may read them otherwise
         return
-    mallopt(_M_MMAP_THRESHOLD, HEAP_BLOCK_BYTES)
-    mallopt(_M_TRIM_THRESHOLD, KEEP_FREED_BYTES)
+    try:
+        import ctypes  # a Python built without ctypes: the worker runs as it would without this
+
+        mallopt = ctypes.CDLL("libc.so.6").mallopt
+        mallopt.argtypes, mallopt.restype = (ctypes.c_int, ctypes.c_int), ctypes.c_int
+        mallopt(_M_MMAP_THRESHOLD, HEAP_BLOCK_BYTES)
+        mallopt(_M_TRIM_THRESHOLD, KEEP_FREED_BYTES)
+    except (ImportError, OSError, AttributeError):
+        return
+
+
+def _glibc() -> bool:
+    """Whether this process runs on glibc (its version string, as ``os.confstr`` gives it)."""
+    try:
+        return bool(os.confstr("CS_GNU_LIBC_VERSION"))
+    except (AttributeError, ValueError, OSError):  # not POSIX, or a C library without the name
+        return False
 
 
 def _child_main(conn, run_pid: int) -> None:

@@ -192,9 +192,9 @@ class MethodWorker:
         return self
 
     def _ask(self, msg, sent_at: float | None = None):
-        if msg is not None:
-            self._conn.send(msg)
         try:
+            if msg is not None:  # a worker that died since its last answer: its pipe is broken, say why
+                self._conn.send(msg)
             # a call sent ahead (:meth:`send_ahead`) has been running since it was sent
             left = self.timeout_s if sent_at is None else max(0.0, self.timeout_s - (time.monotonic() - sent_at))
             if not self._conn.poll(left):
@@ -233,11 +233,10 @@ class MethodWorker:
         its time limit counts from now).  A worker that cannot take it now is left to that call."""
         if self.failed is not None or self._ahead is not None:
             return
-        msg = self._message(raw, exposure_ms)
         try:
-            self._conn.send(msg)
-        except (OSError, ValueError):  # its process is gone: the call itself finds out and says why
-            return
+            self._conn.send(self._message(raw, exposure_ms))
+        except Exception:  # noqa: BLE001 - no shared memory, its process gone: the call meets it again and
+            return  # fails this method alone, saying why, as it does when nothing was sent ahead
         self._ahead = (raw, exposure_ms, time.monotonic())
 
     def next_exposure(self, raw, exposure_ms):

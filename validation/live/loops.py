@@ -96,20 +96,28 @@ def lockstep(loops, on_step: Callable[[], None] | None = None) -> list[list]:
     """Every item of each iterator of ``loops``, the iterators advanced together (one item of each in
     turn, an exhausted one left out): ``[items of loops[0], items of loops[1], ...]``.  Independent closed
     loops give what each gives alone; advanced together, they ask for the same instants at about the same
-    time (:class:`SharedRadiance`).  ``on_step`` is called after each item."""
+    time (:class:`SharedRadiance`).  ``on_step`` is called after each item.  When one of them raises (or
+    the walk is interrupted), the others are closed at once, which ends their method workers."""
     out: list[list] = [[] for _ in loops]
-    active = [(i, iter(it)) for i, it in enumerate(loops)]
-    while active:
-        still = []
-        for i, it in active:
-            try:
-                out[i].append(next(it))
-            except StopIteration:
-                continue
-            still.append((i, it))
-            if on_step is not None:
-                on_step()
-        active = still
+    iterators = [iter(it) for it in loops]
+    active = list(enumerate(iterators))
+    try:
+        while active:
+            still = []
+            for i, it in active:
+                try:
+                    out[i].append(next(it))
+                except StopIteration:
+                    continue
+                still.append((i, it))
+                if on_step is not None:
+                    on_step()
+            active = still
+    finally:
+        for it in iterators:  # a closed loop suspended mid-walk stops its workers (its own finally)
+            close = getattr(it, "close", None)
+            if close is not None:
+                close()
     return out
 
 

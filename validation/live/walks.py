@@ -124,7 +124,7 @@ def _loops(cfg: LiveConfig, seq, radiance, camera, model, response, native_loop,
     if cfg.control:  # each cycle-rate live run again, with capture-noise streams of its own
         live_runs += [(RESEEDED[f"live-{v}"].removeprefix("live-"), v,
                        control_seed(cfg.seed, scene, RESEEDED_STREAMS[RESEEDED[f"live-{v}"]])) for v in VARIANTS]
-    shared = (SharedRadiance(radiance, keep=2 * len(names) * len(live_runs))
+    shared = (SharedRadiance(radiance, keep=_shots_shared(cfg, len(names), len(live_runs)))
               if getattr(radiance, "exposure_aware", False) else radiance)
     with _bar(len(seq.cycles) * len(live_runs), f"{tag}: live loops ({len(live_runs)} runs)", progress) as bar:
         got = lockstep([iter_live(seq, shared, camera, names, timing=timing, noise=cfg.capture_noise, seed=seed,
@@ -151,7 +151,7 @@ def _native_loops(cfg: LiveConfig, seq, radiance, camera, names, native_loop, re
               every_frame=True)
     seeds = [cfg.seed] + ([control_seed(cfg.seed, scene, RESEEDED_STREAMS[RESEEDED[NATIVE_RUN]])]
                           if cfg.control else [])
-    shared = (SharedRadiance(radiance, keep=2 * len(names) * len(seeds))
+    shared = (SharedRadiance(radiance, keep=_shots_shared(cfg, len(names), len(seeds)))
               if getattr(radiance, "exposure_aware", False) else radiance)
     loops = [native_loop(seq, shared, camera, names, seed=s, **kw) for s in seeds]
     if cfg.control:  # the re-seeded frames are streamed: only the benchmarked ones are kept
@@ -256,15 +256,34 @@ def _live_window_ms() -> float:
 #: Most renderers a walk keeps for its live runs (each holds a render with its margin and its depth: about
 #: 3.4 MB at 480x300).
 MAX_RENDERERS_KEPT = 64
+#: Memory the kept renderers of a walk may take, bytes, whatever the image size.
+MAX_RENDERER_BYTES = 512 << 20
+#: A renderer's memory per pixel of the image, bytes (its render with margin and its depth: about 3.4 MB at 480x300).
+RENDERER_BYTES_PER_PX = 24
+
+
+#: Memory the integrated shots shared by a walk's live runs may take, bytes, whatever the image size.
+MAX_SHARED_SHOT_BYTES = 512 << 20
+
+
+def _shots_shared(cfg: LiveConfig, n_methods: int, n_runs: int) -> int:
+    """Integrated shots the live runs advanced together share (:class:`~validation.live.loops.SharedRadiance`):
+    one round of theirs (two cameras per method and run), at most as many as :data:`MAX_SHARED_SHOT_BYTES` holds
+    at the walk's image size (RGB float32; a shot dropped is integrated again)."""
+    fit = MAX_SHARED_SHOT_BYTES // (3 * 4 * cfg.width * cfg.height)
+    return max(1, min(2 * n_methods * n_runs, fit))
 
 
 def _renderers_kept(cfg: LiveConfig) -> int:
     """Renderers the walk's live runs keep: one per camera and sweep (or shot) of the walk, at most
-    :data:`MAX_RENDERERS_KEPT`, so that each is prepared once for all the runs."""
+    :data:`MAX_RENDERERS_KEPT` and as many as :data:`MAX_RENDERER_BYTES` holds at the walk's image size
+    (a larger image keeps fewer: a dropped renderer is prepared again), so that each is prepared once for all
+    the runs."""
     from scenes.walkshots import KEEP_RENDERERS
 
     per_sweep = 2 * (1 if cfg.render_per == "cycle" else 6)
-    return max(KEEP_RENDERERS, min(MAX_RENDERERS_KEPT, per_sweep * (cfg.n_cycles + 1)))
+    fit = MAX_RENDERER_BYTES // (RENDERER_BYTES_PER_PX * cfg.width * cfg.height)
+    return max(KEEP_RENDERERS, min(MAX_RENDERERS_KEPT, fit, per_sweep * (cfg.n_cycles + 1)))
 
 
 def run_walk(config: dict, scene_name: str, experiment: str, cache_dir=None, native_loop: Callable | None = None,
@@ -327,28 +346,30 @@ def run_walk(config: dict, scene_name: str, experiment: str, cache_dir=None, nat
     comp = _comparisons(cfg, cycles, seq, response)
     names = list(cfg.methods)
     summaries = {}
-    for r in runs:
-        write_run_folder(exp / "runs" / scene_name / r, ds, cycles[r], names, white_level=seq.white_level,
-                         black_level=seq.black_level, description={"run": r, "scene": scene_name},
-                         png_level=1 if keep_run_images else 0)
-        summaries[r] = _runs_summary(cycles[r], names)
-    trajectories = {r: {m: {"timestamp_ns": [cs.steps[m].timestamp_ns for cs in cycles[r] if m in cs.steps],
-                            "target_ms": [cs.steps[m].target_ms for cs in cycles[r] if m in cs.steps],
-                            "bracket_ms": [cs.steps[m].bracket_ms for cs in cycles[r] if m in cs.steps]}
-                        for m in names} for r in runs}
-    del cycles
-    t0 = time.perf_counter()
-    nvr = measure_noise_variance_ratio(*ratio_input, repeats=cfg.noise_repeats, seed=cfg.seed)
-    nvr_up = measure_noise_variance_ratio(*ratio_input, repeats=cfg.noise_repeats, seed=cfg.seed,
-                                          pairs=BRIGHTENING_PAIRS)
-    nvr["input"] = nvr_up["input"] = f"first left radiance of {scene_name}"
-    timings[f"noise_ratio_{scene_name}_s"] = time.perf_counter() - t0
-    if not cfg.keep_radiance:
-        shutil.rmtree(ds / "ground_truth" / "radiance", ignore_errors=True)
-    bench = _benchmarks(cfg, exp, scene_name, runs, progress, command, timings) if cfg.metrics else None
-    if not keep_run_images:  # the benchmarks have read them
+    try:  # the run images go with --no-run-images whether the walk ends here or fails on its way
         for r in runs:
-            drop_run_images(exp / "runs" / scene_name / r)
+            write_run_folder(exp / "runs" / scene_name / r, ds, cycles[r], names, white_level=seq.white_level,
+                             black_level=seq.black_level, description={"run": r, "scene": scene_name},
+                             png_level=1 if keep_run_images else 0)
+            summaries[r] = _runs_summary(cycles[r], names)
+        trajectories = {r: {m: {"timestamp_ns": [cs.steps[m].timestamp_ns for cs in cycles[r] if m in cs.steps],
+                                "target_ms": [cs.steps[m].target_ms for cs in cycles[r] if m in cs.steps],
+                                "bracket_ms": [cs.steps[m].bracket_ms for cs in cycles[r] if m in cs.steps]}
+                            for m in names} for r in runs}
+        del cycles
+        t0 = time.perf_counter()
+        nvr = measure_noise_variance_ratio(*ratio_input, repeats=cfg.noise_repeats, seed=cfg.seed)
+        nvr_up = measure_noise_variance_ratio(*ratio_input, repeats=cfg.noise_repeats, seed=cfg.seed,
+                                              pairs=BRIGHTENING_PAIRS)
+        nvr["input"] = nvr_up["input"] = f"first left radiance of {scene_name}"
+        timings[f"noise_ratio_{scene_name}_s"] = time.perf_counter() - t0
+        if not cfg.keep_radiance:
+            shutil.rmtree(ds / "ground_truth" / "radiance", ignore_errors=True)
+        bench = _benchmarks(cfg, exp, scene_name, runs, progress, command, timings) if cfg.metrics else None
+    finally:
+        if not keep_run_images:  # the benchmarks have read them (or the walk failed: nothing will)
+            for r in runs:
+                drop_run_images(exp / "runs" / scene_name / r)
     timings[f"walk_{scene_name}_s"] = time.perf_counter() - t_start
     record = {"walk": tag, "scene": scene_name, "config": cfg.to_dict(), "runs": runs,
               "render_variant": scenes.choose_variant(), "comparison": comp, "trajectories": trajectories,
