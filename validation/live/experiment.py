@@ -218,6 +218,18 @@ def _lead(results: dict) -> dict:
     return {**{k: results[k] for k in first}, **{k: v for k, v in results.items() if k not in first}}
 
 
+def _add_native(results: dict, records: list[dict], cfg: LiveConfig) -> None:
+    """results.json's ``native_emulation`` over every walk of ``records`` (one experiment's raw record, or the
+    replicates'), in place; nothing where no walk ran the emulated native-rate condition."""
+    from validation.live.native import native_emulation_summary
+
+    native = native_emulation_summary({f"{s}/seed{r['config']['seed']}": sc.get("native_emulation")
+                                       for r in records for s, sc in (r.get("per_scene") or {}).items()},
+                                      list(cfg.methods), seed=cfg.seed)
+    if native is not None:
+        results["native_emulation"] = native
+
+
 def finish(out, raw: dict) -> dict:
     """Verdicts, figures, ``report.md`` and ``results.json`` from the raw record (see :func:`redraw`)."""
     out = Path(out)
@@ -238,12 +250,9 @@ def finish(out, raw: dict) -> dict:
     results["noise_variance_ratio_brightening"] = {"plain": nvr_up["plain"], "consistent": nvr_up["consistent"]}
     results["noise_variance_ratio_brightening_detail"] = nvr_up
     results["emulation_ratio_use"] = ratio_use(per_scene, list(cfg.methods))
-    from validation.live.native import native_emulation_summary, native_markdown
+    from validation.live.native import native_markdown
 
-    native = native_emulation_summary({f"{s}/seed{cfg.seed}": per_scene[s].get("native_emulation") for s in scenes},
-                                      list(cfg.methods), seed=cfg.seed)
-    if native is not None:
-        results["native_emulation"] = native
+    _add_native(results, [raw], cfg)
     results.update({
         "experiment": "live versus emulated",
         "exposim_version": raw.get("exposim_version"),
@@ -367,13 +376,9 @@ def finish_replicated(out, records: list[dict], command: str | None = None, powe
                            **({} if wall_s is None else {"wall_s": float(wall_s)})},
                "failed_walks": failed}
     results.update(evidence(cfg, records, power_seeds=power_seeds, folder=out, calibration_studies=calibration_studies))
-    from validation.live.native import native_emulation_summary, native_markdown
+    from validation.live.native import native_markdown
 
-    native = native_emulation_summary({f"{s}/seed{r['config']['seed']}": sc.get("native_emulation")
-                                       for r in records for s, sc in (r.get("per_scene") or {}).items()},
-                                      list(cfg.methods), seed=cfg.seed)
-    if native is not None:
-        results["native_emulation"] = native
+    _add_native(results, records, cfg)
     results["study_folder"] = folder_check(out)
     write_report(out, "# Live versus emulated, replicated\n\n"
                  + f"{len(records)} replicate(s) of the experiment (seeds "

@@ -108,7 +108,7 @@ def _loops(cfg: LiveConfig, seq, radiance, camera, model, response, native_loop,
     (:class:`~validation.live.loops.SharedRadiance`); each run is what it is alone."""
     native_out = {} if native_out is None else native_out
     from emulator.playback import RunConfig
-    from validation.live.loops import SharedRadiance, iter_emulated, iter_live, lockstep
+    from validation.live.loops import iter_emulated, iter_live, lockstep
 
     names = list(cfg.methods)
     common = dict(config=RunConfig(initial_ms=cfg.initial_ms, selector=cfg.selector), response=response)
@@ -124,8 +124,7 @@ def _loops(cfg: LiveConfig, seq, radiance, camera, model, response, native_loop,
     if cfg.control:  # each cycle-rate live run again, with capture-noise streams of its own
         live_runs += [(RESEEDED[f"live-{v}"].removeprefix("live-"), v,
                        control_seed(cfg.seed, scene, RESEEDED_STREAMS[RESEEDED[f"live-{v}"]])) for v in VARIANTS]
-    shared = (SharedRadiance(radiance, keep=_shots_shared(cfg, len(names), len(live_runs)))
-              if getattr(radiance, "exposure_aware", False) else radiance)
+    shared = _shared_radiance(radiance, cfg, len(names), len(live_runs))
     with _bar(len(seq.cycles) * len(live_runs), f"{tag}: live loops ({len(live_runs)} runs)", progress) as bar:
         got = lockstep([iter_live(seq, shared, camera, names, timing=timing, noise=cfg.capture_noise, seed=seed,
                                   **common) for _, timing, seed in live_runs], on_step=lambda: bar.update(1))
@@ -144,15 +143,14 @@ def _native_loops(cfg: LiveConfig, seq, radiance, camera, names, native_loop, re
     """The native-rate live run (every frame) and, with the control, its re-seeded twin advanced with it (only
     the frames the benchmarks use kept); then the emulated native-rate condition (:func:`_emulated_native`)."""
     from emulator.playback import RunConfig
-    from validation.live.loops import SharedRadiance, lockstep
+    from validation.live.loops import lockstep
     from validation.live.native import cycle_picks, native_provider
 
     kw = dict(noise=cfg.capture_noise, initial_ms=cfg.initial_ms, selector=cfg.selector, response=response,
               every_frame=True)
     seeds = [cfg.seed] + ([control_seed(cfg.seed, scene, RESEEDED_STREAMS[RESEEDED[NATIVE_RUN]])]
                           if cfg.control else [])
-    shared = (SharedRadiance(radiance, keep=_shots_shared(cfg, len(names), len(seeds)))
-              if getattr(radiance, "exposure_aware", False) else radiance)
+    shared = _shared_radiance(radiance, cfg, len(names), len(seeds))
     loops = [native_loop(seq, shared, camera, names, seed=s, **kw) for s in seeds]
     if cfg.control:  # the re-seeded frames are streamed: only the benchmarked ones are kept
         config = RunConfig(initial_ms=cfg.initial_ms, selector=cfg.selector, rate="native",
@@ -272,6 +270,16 @@ def _shots_shared(cfg: LiveConfig, n_methods: int, n_runs: int) -> int:
     at the walk's image size (RGB float32; a shot dropped is integrated again)."""
     fit = MAX_SHARED_SHOT_BYTES // (3 * 4 * cfg.width * cfg.height)
     return max(1, min(2 * n_methods * n_runs, fit))
+
+
+def _shared_radiance(radiance, cfg: LiveConfig, n_methods: int, n_runs: int):
+    """``radiance`` for live runs advanced together: an exposure-aware one behind a
+    :class:`~validation.live.loops.SharedRadiance` of :func:`_shots_shared` shots, any other as it is."""
+    from validation.live.loops import SharedRadiance
+
+    if not getattr(radiance, "exposure_aware", False):
+        return radiance
+    return SharedRadiance(radiance, keep=_shots_shared(cfg, n_methods, n_runs))
 
 
 def _renderers_kept(cfg: LiveConfig) -> int:
