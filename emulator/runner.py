@@ -29,6 +29,7 @@ from emulator.errors import PlaybackError
 from emulator.gray import bayer_to_gray8
 from emulator.io.runfolder import CSV_COLUMNS, CSV_FILE, RUN_FILE, RunWriter, format_row, tables_from_rows
 from emulator.playback.config import CONFIG_KEYS
+from emulator import numpy_dispatch
 from emulator.playback.workers import effective_timeout_s
 from emulator.playback import METHOD_CAMERA, MethodStep, RunConfig, RunStats, closed_loop, prepare_run, \
     resolve_sequence
@@ -245,6 +246,8 @@ def write_run(sequence, methods, out_dir, config: RunConfig | None = None, *, re
         run_json["jobs"] = cfg.jobs
         run_json["workers"] = cfg.workers  # how the methods ran (results do not depend on it)
         run_json["method_timeout_applied_s"] = effective_timeout_s(cfg)
+        if cfg.workers == "process":  # the same bytes either way; recorded so that a reader knows
+            run_json["worker_numpy"] = numpy_dispatch.describe()
         partial = [{"cycle": c.index, "missing": c.missing_by_camera(seq.cameras)} for c in seq.cycles
                    if c.missing_by_camera(seq.cameras)]
         if partial:  # flagged in the report (emulator.report.run); absent when every cycle is complete

@@ -42,6 +42,7 @@ import numpy as np
 from emulator.autoexposure._base import AutoExposureError, MethodFailed
 from emulator.errors import PlaybackError
 from emulator.playback._worker_child import _child_main, _label
+from emulator.numpy_dispatch import forkserver_env
 
 __all__ = ["MethodWorker", "start_methods", "stop_methods", "effective_timeout_s", "DEFAULT_METHOD_TIMEOUT_S",
            "WORKER_MODES"]
@@ -135,7 +136,8 @@ def _start(proc) -> None:
             if daemon:
                 me._config["daemon"] = False
             spawn.get_preparation_data = without_main
-            proc.start()
+            with forkserver_env():  # NumPy's kernels for the fork server, if this start launches it
+                proc.start()
         finally:
             spawn.get_preparation_data = real
             if daemon:
