@@ -30,10 +30,11 @@ _USER_KEYS = ("NPY_DISABLE_CPU_FEATURES", "NPY_ENABLE_CPU_FEATURES")
 def _cpu(cpuinfo: str | None) -> tuple[str, int | None, set[str]]:
     """(vendor, family, flags) of the first processor in /proc/cpuinfo's text ('' when unknown)."""
     if cpuinfo is None:
+        from emulator.io.files import read_text
+
         try:
-            with open("/proc/cpuinfo", encoding="ascii", errors="replace") as fh:
-                cpuinfo = fh.read(1 << 16)
-        except OSError:
+            cpuinfo = read_text("/proc/cpuinfo")
+        except (OSError, ValueError):  # not Linux, or not text
             return "", None, set()
     vendor, family, flags = "", None, set()
     for line in cpuinfo.splitlines():
