@@ -89,3 +89,24 @@ def test_zhangs_sort_is_numpys_sort_on_either_path(monkeypatch, slow):
     out = zhang.sorted_values(d)
     ref = np.sort(d)
     assert np.array_equal(out, ref, equal_nan=True)
+
+
+@pytest.mark.parametrize("mode", ["borealhdr", "paper"])
+def test_every_methods_table_is_the_same_bytes_with_and_without_numpys_avx512_kernels(sample_seq, tmp_path, mode):
+    """The switch the workers get changes no result: each run here has one kernel set in every
+    process (inline methods; the switch in the environment of the whole run, or no switch)."""
+    import subprocess
+    import sys
+
+    targets = " ".join(nd._avx512_targets())
+    tables = {}
+    for name, extra in (("default", {}), ("avx2", {"NPY_DISABLE_CPU_FEATURES": targets} if targets else {})):
+        env = {k: v for k, v in os.environ.items() if k not in ("NPY_DISABLE_CPU_FEATURES", "NPY_ENABLE_CPU_FEATURES")}
+        env.update(extra)
+        out = tmp_path / name
+        subprocess.run([sys.executable, "-m", "emulator.cli", "run", str(sample_seq), "--methods", "all", "--mode", mode,
+                        "--workers", "inline", "-o", str(out), "--no-progress", "-q"], env=env, check=True,
+                       capture_output=True)
+        tables[name] = {p.parent.name: p.read_bytes() for p in sorted(out.glob("*/exposures.csv"))}
+    assert len(tables["default"]) == 7
+    assert tables["avx2"] == tables["default"]
