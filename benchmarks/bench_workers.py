@@ -3,6 +3,7 @@
 Usage: python benchmarks/bench_workers.py [SEQUENCE] [--cycles 90] [--modes borealhdr,paper]
                                           [--configs process:1,process:2,process:4,inline:1,inline:2]
                                           [--frames png,cache] [--rounds 1]
+                                          [--cache-level 3]
 
 A recording of ``--cycles`` cycles is replayed from the complete stereo cycles of SEQUENCE (the
 shared sample by default; :func:`bench_save.replay_recording`, hard links).  Every configuration
@@ -90,6 +91,8 @@ def main(argv=None) -> int:
     ap.add_argument("--configs", default="process:1,process:2,process:4,inline:1,inline:2")
     ap.add_argument("--frames", default="png")
     ap.add_argument("--rounds", type=int, default=1)
+    ap.add_argument("--cache-level", type=int, default=3,
+                    help="zstandard level of the frame cache (exposim cache --level; -1 reads fastest)")
     ap.add_argument("--replay-dir", type=Path, default=None,
                     help="build the replayed recording here and keep it (default: a temporary folder)")
     args = ap.parse_args(argv)
@@ -100,7 +103,7 @@ def main(argv=None) -> int:
             replay_recording(args.sequence, rec, args.cycles)
         seqs = {"png": load_sequence(rec, frame_cache=False, imu_warning=False)}
         if "cache" in args.frames:
-            build_frame_cache(rec, Path(tmp) / "frames")
+            build_frame_cache(rec, Path(tmp) / "frames", level=args.cache_level)
             seqs["cache"] = load_sequence(rec, frame_cache=Path(tmp) / "frames", imu_warning=False)
         response = sequence_response(load_sequence(args.sequence, imu_warning=False))  # the source's camera
         print(f"{args.cycles} cycles replayed from {args.sequence.name}; {os.cpu_count()} CPUs; load average "

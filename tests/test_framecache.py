@@ -90,3 +90,23 @@ def test_cache_command_builds_then_keeps(tmp_path, capsys):
     assert main(["cache", str(seq)]) == 0
     assert f"(0 written, {n_png} kept" in capsys.readouterr().out
     assert len(list((seq / CACHE_DIRNAME).rglob("*.npy.zst"))) == n_png
+
+
+def test_a_fast_level_reads_the_same_frames_from_larger_entries(tmp_path, capsys):
+    """`exposim cache --level -1` (zstd's fast level): the same arrays, entries at least as large
+    as level 3's; levels outside 1..22 and -1..-100 are refused in one line."""
+    from emulator.cli import main
+
+    seq = _tiny(tmp_path)
+    fast, packed = tmp_path / "fast", tmp_path / "packed"
+    assert main(["cache", str(seq), "--frame-cache", str(fast), "--level", "-1", "-q"]) == 0
+    assert main(["cache", str(seq), "--frame-cache", str(packed), "-q"]) == 0
+    capsys.readouterr()
+    a, b = load_sequence(seq, frame_cache=fast), load_sequence(seq, frame_cache=packed)
+    plain = load_sequence(seq, frame_cache=False)
+    for x, y, z in zip(_frames(a), _frames(b), _frames(plain)):
+        assert x.load().tobytes() == y.load().tobytes() == z.load().tobytes()
+        assert x.cache_path.stat().st_size >= y.cache_path.stat().st_size
+    for bad in ("0", "23", "-101"):
+        with pytest.raises(SystemExit, match=f"--level must be 1..22, or -1..-100 for zstd's fast levels, got {bad}"):
+            main(["cache", str(seq), "--frame-cache", str(tmp_path / "x"), "--level", bad, "-q"])

@@ -30,7 +30,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--cache-dir", dest="frame_cache", type=Path, help=argparse.SUPPRESS)  # old spelling
     add_quiet(p)
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
-    p.add_argument("--level", type=int, default=3, help="zstandard compression level (default: %(default)s)")
+    p.add_argument("--level", type=int, default=3,
+                   help="zstandard level: 1..22 (default %(default)s; higher packs smaller), or one of zstd's fast "
+                        "levels -1..-100 (entries 1.2-1.8x larger, read in about half the time: 2.5-3.7 ms "
+                        "instead of 6.7-7.8 ms for a 1920x1200 frame)")
     p.set_defaults(func=_cache)
 
 
@@ -40,10 +43,12 @@ register.order = 15  # after info
 def _cache(args) -> int:
     from tqdm import tqdm
 
+    from emulator.io.framecache import MIN_FAST_LEVEL
     from emulator.tools.framecache import build_frame_cache
 
-    if not 1 <= args.level <= 22:
-        raise SystemExit(f"exposim cache: error: --level must be 1..22, got {args.level}")
+    if not (1 <= args.level <= 22 or MIN_FAST_LEVEL <= args.level <= -1):
+        raise SystemExit(f"exposim cache: error: --level must be 1..22, or -1..{MIN_FAST_LEVEL} for zstd's fast "
+                         f"levels, got {args.level}")
     with tqdm(total=None, unit="frame", desc="cache", disable=not bars_enabled(args.quiet)) as bar:
         def progress(done, total):
             bar.total = total
