@@ -25,12 +25,12 @@ from __future__ import annotations
 
 import io
 import json
-import zlib
 from pathlib import Path
 
 import numpy as np
 
 from emulator.errors import DatasetError
+from emulator.io.crc import crc32
 
 __all__ = [
     "encode_entry",
@@ -102,7 +102,7 @@ def encode_entry(img: np.ndarray, level: int, key: str) -> bytes:
     img = np.ascontiguousarray(img)
     buf = io.BytesIO()
     buf.write(MAGIC)
-    buf.write(json.dumps({"key": key, "crc32": zlib.crc32(memoryview(img).cast("B"))}).encode() + b"\n")
+    buf.write(json.dumps({"key": key, "crc32": crc32(memoryview(img).cast("B"))}).encode() + b"\n")
     np.lib.format.write_array(buf, img, allow_pickle=False)
     return zstandard.ZstdCompressor(level=level, write_checksum=True).compress(buf.getvalue())
 
@@ -174,7 +174,7 @@ def read_cached_frame(path, *, png_path=None, white_level: int | None = None) ->
     if got != img.nbytes or extra:
         raise FrameCacheEntryError(f"{path}: truncated frame cache entry{source} ({got} of {img.nbytes} bytes); "
                                    "rebuild the cache")
-    if zlib.crc32(memoryview(img).cast("B")) != meta.get("crc32"):
+    if crc32(memoryview(img).cast("B")) != meta.get("crc32"):
         raise FrameCacheEntryError(f"{path}: frame cache entry fails its checksum{source}; rebuild the cache")
     if white_level is not None:
         top = int(img.max())

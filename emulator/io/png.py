@@ -38,13 +38,14 @@ def png_structure_problem(data: bytes) -> str | None:
     """What is wrong with a PNG's chunk structure (lengths, CRCs, IHDR first, image data, IEND last), or None.
 
     Checked before decoding so that a damaged file is one clear error, without the lines
-    libpng prints on stderr.  Costs one CRC pass over the file (about a millisecond per MB).
+    libpng prints on stderr.  Costs one CRC pass over the file (zlib-ng's: about 0.02 ms per MB; zlib's: 0.23).
     """
     import struct
-    import zlib
+
+    from emulator.io.crc import crc32
 
     view = memoryview(data)  # slices without copies
-    unpack, crc32 = struct.unpack_from, zlib.crc32
+    unpack = struct.unpack_from
     pos, n = 8, len(data)
     first, idat = True, False
     while pos + 12 <= n:
