@@ -21,6 +21,7 @@ import warnings
 
 import numpy as np
 
+from scenes._interrupt import render_array
 from scenes.base import Scene, get_scene
 from scenes.cache import KEY_ATTRIBUTE, cache_path, canonical_json, load_entry, render_key, resolve_cache_dir, \
     store_entry
@@ -78,8 +79,8 @@ def _render_uncached(scene: Scene, pose: np.ndarray, *, width: int, height: int,
             mi.set_variant(variant)
         mi_scene = _loaded_scene(scene, variant)
         sensor = mi.load_dict(sensor_dict(pose, width=width, height=height, fov_deg=fov_deg, spp=spp))
-        image = mi.render(mi_scene, sensor=sensor, spp=spp, seed=seed)
-        return np.array(image, dtype=np.float32).reshape(height, width, -1)[..., :3].copy()
+        image = render_array(mi, mi_scene, sensor=sensor, spp=spp, seed=seed)
+        return image.reshape(height, width, -1)[..., :3].copy()
 
 
 def _render_aux_uncached(scene: Scene, pose: np.ndarray, *, width: int, height: int, spp: int, seed: int,
@@ -95,8 +96,8 @@ def _render_aux_uncached(scene: Scene, pose: np.ndarray, *, width: int, height: 
         mi_scene = _loaded_scene(scene, variant)
         sensor = mi.load_dict(sensor_dict(pose, width=width, height=height, fov_deg=fov_deg, spp=spp))
         integrator = mi.load_dict(aov_integrator_dict())
-        image = mi.render(mi_scene, sensor=sensor, integrator=integrator, spp=spp, seed=seed)
-        a = np.array(image, dtype=np.float32).reshape(height, width, -1)
+        a = render_array(mi, mi_scene, sensor=sensor, integrator=integrator, spp=spp, seed=seed)
+        a = a.reshape(height, width, -1)
     if a.shape[2] != 6:  # pragma: no cover - the integrator's channel layout is fixed
         raise RenderError(f"aov pass returned {a.shape[2]} channels, expected 6 (albedo, normal)")
     return np.ascontiguousarray(a[..., :3]), np.ascontiguousarray(a[..., 3:])
@@ -326,6 +327,6 @@ def render_depth(scene: Scene | str, pose, *, width: int, height: int, fov_deg: 
         mi_scene = _loaded_scene(scene, variant)
         sensor = mi.load_dict(sensor_dict(m, width=width, height=height, fov_deg=fov, spp=spp))
         integrator = mi.load_dict({"type": "aov", "aovs": "dd:depth"})
-        image = mi.render(mi_scene, sensor=sensor, integrator=integrator, spp=spp, seed=seed)
-        d = np.array(image, dtype=np.float32).reshape(height, width, -1)[..., 0].copy()
+        d = render_array(mi, mi_scene, sensor=sensor, integrator=integrator, spp=spp, seed=seed)
+        d = d.reshape(height, width, -1)[..., 0].copy()
     return np.where(np.isfinite(d), d, 0.0).astype(np.float32)
