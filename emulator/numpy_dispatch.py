@@ -20,7 +20,7 @@ import contextlib
 import functools
 import os
 
-__all__ = ["worker_numpy_env", "forkserver_env", "describe", "avx512_sort_is_slow"]
+__all__ = ["worker_numpy_env", "forkserver_env", "describe", "avx512_sort_is_slow", "avx512_sort_slow_in_this_process"]
 
 #: CPU family of AMD's Zen 3 and Zen 4 (only Zen 4 has AVX-512); Zen 5 (family 26) fixed the store.
 _SLOW_FAMILY = 25
@@ -52,19 +52,31 @@ def _cpu(cpuinfo: str | None) -> tuple[str, int | None, set[str]]:
     return vendor, family, flags
 
 
+def _multiarray():
+    """NumPy's C module, which lists its CPU features and dispatch targets."""
+    try:
+        from numpy._core import _multiarray_umath
+    except ImportError:  # NumPy < 2
+        from numpy.core import _multiarray_umath
+    return _multiarray_umath
+
+
 def _avx512_targets() -> list[str]:
     """This NumPy's dispatch targets that use AVX-512 (names differ between NumPy versions)."""
-    try:
-        from numpy._core._multiarray_umath import __cpu_dispatch__
-    except ImportError:  # NumPy < 2
-        from numpy.core._multiarray_umath import __cpu_dispatch__
-    return [f for f in __cpu_dispatch__ if f == "X86_V4" or f.startswith("AVX512")]
+    return [f for f in _multiarray().__cpu_dispatch__ if f == "X86_V4" or f.startswith("AVX512")]
 
 
 def avx512_sort_is_slow(cpuinfo: str | None = None) -> bool:
     """True on an AMD CPU of family 25 with AVX-512 (Zen 4), where NumPy's AVX-512 sort is slow."""
     vendor, family, flags = _cpu(cpuinfo)
     return vendor == "AuthenticAMD" and family == _SLOW_FAMILY and "avx512f" in flags
+
+
+@functools.lru_cache(maxsize=1)
+def avx512_sort_slow_in_this_process() -> bool:
+    """NumPy sorts with AVX-512 in this process, on a CPU where that sort is slow: true in the run's own
+    process on Zen 4, false in the method workers (started with those kernels off) and elsewhere."""
+    return bool(_multiarray().__cpu_features__.get("AVX512_SKX")) and avx512_sort_is_slow()
 
 
 def worker_numpy_env(environ=None, cpuinfo: str | None = None) -> dict[str, str]:

@@ -39,6 +39,7 @@ import numpy as np
 from emulator.autoexposure._base import MAX_DN, AutoExposureError, AutoExposureMethod
 from emulator.autoexposure.classical import Classical
 from emulator.autoexposure.shim import _row_blocks
+from emulator.numpy_dispatch import avx512_sort_slow_in_this_process as _avx512_sort_slow_here
 
 __all__ = [
     "Zhang2017",
@@ -128,22 +129,6 @@ def _cumulative_weights(n_pixels: int, p: float, order: int) -> np.ndarray:
     cum = np.concatenate(([0.0], np.cumsum(sine_weights(n_pixels, p, order, "sum"))))
     cum.setflags(write=False)
     return cum
-
-
-@functools.lru_cache(maxsize=1)
-def _avx512_sort_slow_here() -> bool:
-    """NumPy sorts with AVX-512 in this process on a CPU where that sort is slow (AMD Zen 4).
-
-    The method workers start with those kernels off (emulator.numpy_dispatch), where
-    ``np.sort`` takes 23 ms on a frame; only the run's own process (``--workers inline``) keeps them.
-    """
-    from emulator.numpy_dispatch import avx512_sort_is_slow
-
-    try:
-        from numpy._core._multiarray_umath import __cpu_features__
-    except ImportError:  # NumPy < 2
-        from numpy.core._multiarray_umath import __cpu_features__
-    return bool(__cpu_features__.get("AVX512_SKX")) and avx512_sort_is_slow()
 
 
 def sorted_values(d: np.ndarray) -> np.ndarray:
