@@ -110,3 +110,36 @@ def test_every_methods_table_is_the_same_bytes_with_and_without_numpys_avx512_ke
         tables[name] = {p.parent.name: p.read_bytes() for p in sorted(out.glob("*/exposures.csv"))}
     assert len(tables["default"]) == 7
     assert tables["avx2"] == tables["default"]
+
+
+_SHIM_DIGEST = """
+import hashlib, sys
+import numpy as np
+from emulator.autoexposure import shim, to_gray
+from emulator.autoexposure._base import RGGB_BAYER_CODE
+from emulator.io.borealhdr import load_sequence
+cycle = load_sequence(sys.argv[1])[1]
+h = hashlib.sha256(b"".join(t.tobytes() for t in shim._paper_tables(4095.0, shim.GAMMAS)))
+for b in (1.0, 8.0, 32.0):
+    h.update(shim.gamma_metrics_paper(to_gray(cycle.frames["left"][b].load(), RGGB_BAYER_CODE))[0].tobytes())
+print(h.hexdigest())
+"""
+
+
+def test_shims_paper_metric_is_the_same_bits_under_avx2_and_avx512_kernels(sample_seq):
+    """Paper-mode Shim's gamma tables and metrics (float64, every bit) do not depend on the kernels
+    NumPy picks, so a method worker without AVX-512 and the run's own process agree.  (Before, its
+    float32 power and log10 were SVML's under AVX-512 and the C library's otherwise: the metrics
+    moved by about 1e-7 relative between the two.)  On a CPU without AVX-512 both runs use AVX2."""
+    import subprocess
+    import sys
+
+    targets = " ".join(nd._avx512_targets())
+    digests = []
+    for extra in ({}, {"NPY_DISABLE_CPU_FEATURES": targets} if targets else {}):
+        env = {k: v for k, v in os.environ.items() if k not in ("NPY_DISABLE_CPU_FEATURES", "NPY_ENABLE_CPU_FEATURES")}
+        env.update(extra)
+        proc = subprocess.run([sys.executable, "-c", _SHIM_DIGEST, str(sample_seq)], env=env, check=True,
+                              capture_output=True, text=True)
+        digests.append(proc.stdout.strip())
+    assert len(digests[0]) == 64 and digests[0] == digests[1]

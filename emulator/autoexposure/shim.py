@@ -18,6 +18,7 @@ mean < 2048, else 1.9); non-finite metrics return t.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import cv2
@@ -175,18 +176,20 @@ def gamma_metrics_paper(y: np.ndarray, gammas=GAMMAS, *, delta=DELTA, lam=LAMBDA
 
     Returns (M, flat) like :func:`gamma_metrics_ref`; ``flat`` is all False (no division by
     the gradient's spread, so a flat gradient is an ordinary zero metric).  The power is a
-    lookup table per gamma; the gradient magnitude is ``sqrt(Gx^2 + Gy^2)`` by correctly
-    rounded float32 operations (``cv2.magnitude`` rounds some pixels differently depending
-    on the memory alignment of its inputs, so the metric was not a function of the image).
+    lookup table per gamma (:func:`_paper_tables`); the gradient magnitude is
+    ``sqrt(Gx^2 + Gy^2)`` by correctly rounded float32 operations (``cv2.magnitude`` rounds
+    some pixels differently depending on the memory alignment of its inputs, so the metric was
+    not a function of the image).  The logarithm is taken only where it is not 0 (about a tenth
+    of the pixels), as NumPy's float32 natural logarithm, summed in float64 and divided by
+    ln 10 once: NumPy computes that logarithm with its own kernel under AVX2 and AVX-512 alike,
+    so a method worker (AVX2 on some CPUs, see :mod:`emulator.numpy_dispatch`) and the run's
+    own process give the same metric, bit for bit.  ``log10`` in float32 is not such a kernel:
+    it is SVML's under AVX-512 and the C library's otherwise, which differ in the last bit.
     """
     metrics = np.zeros(len(gammas))
     scale = np.float32(lam / (SOBEL_MAX * math.sqrt(2.0)))
-    # min(DN, full) / full in float32, as the image would be normalised.
-    values = np.minimum(np.arange(int(full_dn) + 1), full_dn).astype(np.float32)
-    values *= np.float32(1.0 / full_dn)
-    tables = _gamma_tables(values, gammas)
+    tables = _paper_tables(float(full_dn), tuple(float(g) for g in gammas))
     one = np.float32(1.0)
-    logs = None
     for a0, a1, s0, s1 in _row_blocks(y.shape[0], BLOCK_ROWS):
         block = y[a0:a1]
         for j, table in enumerate(tables):
@@ -197,20 +200,37 @@ def gamma_metrics_paper(y: np.ndarray, gammas=GAMMAS, *, delta=DELTA, lam=LAMBDA
             np.multiply(gy, gy, out=gy)
             u = np.add(gx, gy, out=gx)
             np.sqrt(u, out=u)
-            # lambda (min(m, 1) - delta) + 1, and log10 of max(., 1) is 0 exactly where m < delta.
+            # lambda (min(m, 1) - delta) + 1, and its logarithm is 0 exactly where m < delta (u <= 1).
             u *= scale
             np.minimum(u, np.float32(lam), out=u)
             u += np.float32(1.0 - lam * delta)
-            # log10(max(u, 1)): +0.0 where u <= 1 (log10(1) = +0.0), the float32 log10 elsewhere
-            # (about a tenth of the pixels: the log10, not the Sobel, was most of the cost); the
-            # same values in the same layout, so the same float64 sum
-            if logs is None or logs.shape != u.shape:
-                logs = np.zeros_like(u)
-            else:
-                logs.fill(0.0)
-            np.log10(u, out=logs, where=u > one)
+            logs = u[u > one]  # the pixels whose logarithm is not 0, in the image's order
+            np.log(logs, out=logs)
             metrics[j] += float(np.sum(logs, dtype=np.float64))
-    return metrics / n_norm, np.zeros(len(gammas), dtype=bool)
+    return metrics / (math.log(10.0) * n_norm), np.zeros(len(gammas), dtype=bool)
+
+
+@functools.lru_cache(maxsize=8)
+def _paper_tables(full_dn: float, gammas: tuple[float, ...]) -> tuple[np.ndarray, ...]:
+    """Paper mode's lookup tables: ``(min(DN, full) / full) ** g`` per gamma, in float32.
+
+    The normalised value is float32 arithmetic, as the image would be normalised.  The power is
+    taken in float64 and rounded to float32 once, so the table is the correctly rounded float32
+    power but for a value within 2^-29 of a rounding tie, whichever SIMD kernel NumPy picks
+    (float32 ``np.power`` is SVML's under AVX-512 and the C library's otherwise, and they differ
+    in the last bit).  Read-only: every call shares them.
+    """
+    values = np.minimum(np.arange(int(full_dn) + 1), full_dn).astype(np.float32)
+    values *= np.float32(1.0 / full_dn)
+    wide = values.astype(np.float64)
+    tables = []
+    for g in gammas:
+        t = np.empty(1 << 16, dtype=np.float32)
+        t[: values.size] = np.power(wide, float(np.float32(g)))
+        t[values.size :] = t[values.size - 1]
+        t.setflags(write=False)
+        tables.append(t)
+    return tuple(tables)
 
 
 class Shim2014(AutoExposureMethod):
