@@ -39,8 +39,8 @@ import numpy as np
 from emulator.autoexposure.isolation import readonly_view
 from emulator.dataset import CAMERAS
 from emulator.errors import CalibrationError
-from emulator.native import (MOTION_STOPS_PER_FRAME, SATURATION_LIMIT, WINDOW_CYCLES, NativeCandidate,
-                             invalid_fraction, native_select, rotation_between, warp_to_instant)
+from emulator.native import (MOTION_STOPS_PER_FRAME, SATURATION_LIMIT, WARP_RESAMPLE, WINDOW_CYCLES,
+                             NativeCandidate, invalid_fraction, native_select, rotation_between, warp_to_instant)
 from emulator.playback.config import RunConfig
 from emulator.playback.emulated import METHOD_CAMERA, _CycleImages, _fractions, _Memo
 from emulator.playback.loop import Shot
@@ -232,6 +232,7 @@ class NativeProvider:
         return {"latency_frames": self.latency_ticks, "window_frames": self.window, "n_frames": len(self.frames),
                 "motion_stops_per_frame": self.motion_stops_per_frame, "saturation_limit": self.saturation_limit,
                 "warp": ("rotation from the gyro" if self.motion is not None else "none"),
+                **({"warp_resample": WARP_RESAMPLE} if self.motion is not None else {}),
                 **({"stamp": self.motion.stamp} if self.motion is not None else {}),
                 "benchmarked_frames": sorted(k for k in self.frames.benchmarked if k is not None)}
 
