@@ -3,11 +3,22 @@
 from __future__ import annotations
 
 import os
+import signal
 from pathlib import Path
 
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
+
+# The interrupt tests send SIGINT to an ``exposim`` sub-process, as Ctrl-C reaches a command run in
+# a terminal.  A test run started in the background by a non-interactive shell (``cmd &``, or
+# ``nohup``) inherits SIGINT ignored, every process it starts inherits that through exec, and a
+# Python started with SIGINT ignored keeps ignoring it (the Unix convention that protects
+# background jobs from Ctrl-C, which exposim follows).  The tests then wait for a signal that
+# cannot arrive.  Here the test processes take Python's own SIGINT handler back, so that their
+# sub-processes start as a terminal's foreground command would, whatever started the test run.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def _find_shared() -> Path:
