@@ -222,15 +222,11 @@ def _paper_tables(full_dn: float, gammas: tuple[float, ...]) -> tuple[np.ndarray
     """
     values = np.minimum(np.arange(int(full_dn) + 1), full_dn).astype(np.float32)
     values *= np.float32(1.0 / full_dn)
-    wide = values.astype(np.float64)
-    tables = []
-    for g in gammas:
-        t = np.empty(1 << 16, dtype=np.float32)
-        t[: values.size] = np.power(wide, float(np.float32(g)))
-        t[values.size :] = t[values.size - 1]
+    exponents = [float(np.float32(g)) for g in gammas]  # the float32 gammas, as the float32 power took them
+    tables = tuple(t.astype(np.float32) for t in _gamma_tables(values.astype(np.float64), exponents))
+    for t in tables:
         t.setflags(write=False)
-        tables.append(t)
-    return tuple(tables)
+    return tables
 
 
 class Shim2014(AutoExposureMethod):

@@ -232,8 +232,7 @@ class NativeProvider:
         return {"latency_frames": self.latency_ticks, "window_frames": self.window, "n_frames": len(self.frames),
                 "motion_stops_per_frame": self.motion_stops_per_frame, "saturation_limit": self.saturation_limit,
                 "warp": ("rotation from the gyro" if self.motion is not None else "none"),
-                **({"warp_resample": WARP_RESAMPLE} if self.motion is not None else {}),
-                **({"stamp": self.motion.stamp} if self.motion is not None else {}),
+                **({"warp_resample": WARP_RESAMPLE, "stamp": self.motion.stamp} if self.motion is not None else {}),
                 "benchmarked_frames": sorted(k for k in self.frames.benchmarked if k is not None)}
 
     @property
