@@ -10,7 +10,7 @@ first shot of each recorder cycle (the frames ``bench features`` reads at native
 ``source_offset`` not 0), the difference in median matches and in mean SIFT keypoints per image between
 the emulated-native and the live-native runs (``benchmarks.features``).  Printed: the mean differences
 over all pairs, by neighbour share (none, some, most) and by scene, with a bootstrap 95 % interval over
-pairs (seeded, 2000 resamples), and the correlation of the matches difference with the share.
+pairs (``emulator.stats.statistic_interval``, 2000 resamples, seed 0), and the correlation of the matches difference with the share.
 """
 
 from __future__ import annotations
@@ -21,6 +21,8 @@ import sys
 from pathlib import Path
 
 import numpy as np
+
+from emulator.stats import statistic_interval
 
 SHOTS_PER_CYCLE = 6
 
@@ -54,13 +56,13 @@ def pairs(files) -> list[dict]:
     return out
 
 
-def mean_ci(values, rng) -> str:
-    v = np.asarray(values, dtype=np.float64)
-    if v.size == 0:
+def mean_ci(values) -> str:
+    """The mean with its bootstrap 95 % interval over the pairs (:func:`emulator.stats.statistic_interval`)."""
+    r = statistic_interval(values, "mean", n_resamples=2000, seed=0)
+    if r["estimate"] is None:
         return "-"
-    boots = v[rng.integers(0, v.size, (2000, v.size))].mean(axis=1)
-    lo, hi = np.percentile(boots, [2.5, 97.5])
-    return f"{v.mean():.1f} [{lo:.1f}, {hi:.1f}] (n {v.size})"
+    ci = "[-]" if r["ci95"] is None else f"[{r['ci95'][0]:.1f}, {r['ci95'][1]:.1f}]"
+    return f"{r['estimate']:.1f} {ci} (n {r['n']})"
 
 
 def main(argv=None) -> int:
@@ -68,21 +70,20 @@ def main(argv=None) -> int:
     ap.add_argument("studies", nargs="+", type=Path)
     args = ap.parse_args(argv)
     rows = pairs(walk_files(args.studies))
-    rng = np.random.default_rng(0)
     share = np.array([r["neighbour_share"] for r in rows])
     matches = np.array([r["matches"] for r in rows])
     print(f"{len(rows)} (walk, method) pairs; emulated native minus native live, mean [95 %]")
-    print(f"  all: matches {mean_ci(matches, rng)}; keypoints per image "
-          f"{mean_ci([r['keypoints'] for r in rows], rng)}")
+    print(f"  all: matches {mean_ci(matches)}; keypoints per image "
+          f"{mean_ci([r['keypoints'] for r in rows])}")
     for label, sel in (("no benchmarked frame from a neighbour", share == 0),
                        ("some (under half)", (share > 0) & (share < 0.5)),
                        ("half or more", share >= 0.5)):
         sub = [r for r, s in zip(rows, sel) if s]
-        print(f"  {label}: matches {mean_ci([r['matches'] for r in sub], rng)}; keypoints "
-              f"{mean_ci([r['keypoints'] for r in sub], rng)}")
+        print(f"  {label}: matches {mean_ci([r['matches'] for r in sub])}; keypoints "
+              f"{mean_ci([r['keypoints'] for r in sub])}")
     for scene in sorted({r["scene"] for r in rows}):
         sub = [r for r in rows if r["scene"] == scene]
-        print(f"  {scene}: matches {mean_ci([r['matches'] for r in sub], rng)}; neighbour share "
+        print(f"  {scene}: matches {mean_ci([r['matches'] for r in sub])}; neighbour share "
               f"{np.mean([r['neighbour_share'] for r in sub]):.2f}")
     if share.std() > 0 and matches.std() > 0:
         print(f"  correlation of the matches difference with the neighbour share: {np.corrcoef(matches, share)[0, 1]:.2f}")
