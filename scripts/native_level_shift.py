@@ -10,7 +10,8 @@ first shot of each recorder cycle (the frames ``bench features`` reads at native
 ``source_offset`` not 0), the difference in median matches and in mean SIFT keypoints per image between
 the emulated-native and the live-native runs (``benchmarks.features``).  Printed: the mean differences
 over all pairs, by neighbour share (none, some, most) and by scene, with a bootstrap 95 % interval over
-pairs (``emulator.stats.statistic_interval``, 2000 resamples, seed 0), and the correlation of the matches difference with the share.
+pairs (``emulator.stats.statistic_interval``, 2000 resamples, seed 0), and the correlation of the
+matches difference with the share.
 """
 
 from __future__ import annotations
@@ -86,7 +87,8 @@ def main(argv=None) -> int:
         print(f"  {scene}: matches {mean_ci([r['matches'] for r in sub])}; neighbour share "
               f"{np.mean([r['neighbour_share'] for r in sub]):.2f}")
     if share.std() > 0 and matches.std() > 0:
-        print(f"  correlation of the matches difference with the neighbour share: {np.corrcoef(matches, share)[0, 1]:.2f}")
+        r = np.corrcoef(matches, share)[0, 1]
+        print(f"  correlation of the matches difference with the neighbour share: {r:.2f}")
     return 0
 
 
