@@ -130,6 +130,10 @@ def local_client(n_workers: int | None = None, *, allowed_failures: int = 3):
     The scheduler's HTTP server (health checks only, no dashboard) listens on a free
     localhost port, so a busy 8787 gives no warning; the workers' scratch space (spill
     files and their locks) lives in a temporary folder removed when the cluster closes.
+    The scheduler never removes a silent worker (no ``worker-ttl``): its workers are this
+    machine's processes, so a silence means the machine was suspended or the job paused
+    (``SIGSTOP``), not a lost host. Dask's default of 5 minutes killed a walk's worker after
+    such a pause, and three pauses failed the walk (``KilledWorker``).
     """
     import tempfile
 
@@ -144,6 +148,7 @@ def local_client(n_workers: int | None = None, *, allowed_failures: int = 3):
         raise SchedulerError(f"n_workers must be >= 1, got {n_workers!r}")
     with tempfile.TemporaryDirectory(prefix="exposim-dask-") as scratch, \
             dask.config.set({"distributed.scheduler.allowed-failures": int(allowed_failures),
+                             "distributed.scheduler.worker-ttl": None,
                              "distributed.worker.daemon": False, "temporary-directory": scratch}):
         cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
                                dashboard_address=None, local_directory=scratch,

@@ -107,3 +107,35 @@ def test_run_dataset_by_scheduler_file_by_client_and_by_environment(tmp_path, mo
         assert main(["run", str(root), "--sequences", "all", "--methods", METHODS, "--save", "none",
                      "-o", str(tmp_path / "cli-file"), "--scheduler-file", str(sched_file), "--no-progress"]) == 0
         assert csv_bytes(tmp_path / "cli-file") == expected
+
+
+def _pid_after(seconds):
+    import time
+
+    time.sleep(seconds)
+    return os.getpid()
+
+
+def test_a_local_clusters_worker_survives_a_pause_longer_than_dasks_worker_ttl():
+    """A suspended machine or a SIGSTOPped study pauses every worker; none may be removed for it.
+
+    Dask removes (and its nanny kills) a worker silent for ``worker-ttl`` (5 minutes by
+    default; 5 s here, set as a user's own Dask config would); three such pauses failed a
+    study's walk with ``KilledWorker``. ``local_client`` turns the limit off.
+    """
+    import signal
+    import time
+
+    import dask
+
+    with dask.config.set({"distributed.scheduler.worker-ttl": "5s"}), local_client(1) as client:
+        assert client.run_on_scheduler(lambda dask_scheduler: dask_scheduler.worker_ttl) is None
+        (pid,) = client.run(os.getpid).values()
+        future = client.submit(_pid_after, 6.0, pure=False)
+        time.sleep(1.0)
+        os.kill(pid, signal.SIGSTOP)
+        try:
+            time.sleep(12.0)  # past the 5 s limit and the scheduler's 10-heartbeat floor
+        finally:
+            os.kill(pid, signal.SIGCONT)
+        assert future.result(timeout=60) == pid  # the same worker finished the task, no retry
