@@ -121,6 +121,50 @@ def test_sift_uniformity_on_a_known_blob_layout():
     assert grid_uniformity(flat.points, flat.image_shape) == 0.0
 
 
+def test_an_image_seen_again_gets_the_same_features_and_a_changed_one_its_own(monkeypatch):
+    import emulator.metrics.features as features
+
+    monkeypatch.setattr(features, "_SIFT_MEMO", features._SiftMemo())
+    img = texture((200, 260), seed=3)
+    first = detect_sift(img)
+    again = detect_sift(img.copy())  # the same bytes in another array
+    assert again is first and not first.points.flags.writeable and not first.descriptors.flags.writeable
+    with pytest.raises(ValueError):
+        first.descriptors[0, 0] = 1.0
+    features._SIFT_MEMO.clear()
+    fresh = detect_sift(img)  # a fresh detection finds exactly what the memo gave
+    assert fresh is not first
+    np.testing.assert_array_equal(fresh.points, first.points)
+    np.testing.assert_array_equal(fresh.descriptors, first.descriptors)
+    changed = img.copy()
+    changed[100, 130] ^= 1  # one pixel, one grey level
+    assert detect_sift(changed) is not fresh
+    assert detect_sift(img, n_features=50) is not fresh and len(detect_sift(img, n_features=50)) <= 52
+    mask = np.full(img.shape, 255, np.uint8)
+    masked = detect_sift(img, mask=mask)  # with a mask: always detected
+    assert masked is not fresh and detect_sift(img, mask=mask) is not masked
+    np.testing.assert_array_equal(masked.points, fresh.points)
+
+
+def test_the_sift_memo_drops_the_least_recently_used_past_its_bytes(monkeypatch):
+    import emulator.metrics.features as features
+
+    memo = features._SiftMemo()
+    monkeypatch.setattr(features, "_SIFT_MEMO", memo)
+    a, b, c = (texture((160, 200), seed=s) for s in (4, 5, 6))
+    fa = detect_sift(a)
+    size = fa.points.nbytes + fa.descriptors.nbytes
+    fb = detect_sift(b)
+    monkeypatch.setattr(features, "SIFT_MEMO_BYTES", size + fb.points.nbytes + fb.descriptors.nbytes)
+    assert detect_sift(a) is fa  # a is now the most recent
+    detect_sift(c)  # over the bound: b, the least recently used, goes
+    assert memo._bytes <= features.SIFT_MEMO_BYTES
+    assert detect_sift(b) is not fb
+    monkeypatch.setattr(features, "SIFT_MEMO_BYTES", 16)  # larger than the whole bound: not kept
+    big = detect_sift(texture((160, 200), seed=7))
+    assert detect_sift(texture((160, 200), seed=7)) is not big
+
+
 # --------------------------------------------------------------------------- matches
 
 
