@@ -219,6 +219,36 @@ def test_run_images_written_fast_read_the_same_and_dropped_after_measuring(stati
     assert drop_run_images(fast) == 0
 
 
+def test_a_native_run_folder_has_its_native_columns_in_the_header_as_in_every_row(static, tmp_path):
+    """The study's emulated-native runs: each row carries the native columns, so the header names them."""
+    import csv
+    from dataclasses import replace
+
+    from emulator.io.runcsv import CSV_COLUMNS, EXTRA_COLUMNS, NATIVE_COLUMNS, read_csv_rows
+    from emulator.playback.native import NativeInfo
+    from validation.live.loops import write_run_folder
+
+    seq, cam, resp, frames = static
+    cycles = list(iter_live(seq, CountingRadiance(frames), cam, list(METHODS), timing="fixed-instant", response=resp))
+    native = [replace(cs, steps={name: replace(st, native=NativeInfo(k, True, -1, st.timestamp_ns - 45, 0.25))
+                                 for name, st in cs.steps.items()}) for k, cs in enumerate(cycles)]
+    kw = dict(white_level=seq.white_level, black_level=seq.black_level, png_level=0)
+    folder = write_run_folder(tmp_path / "native", seq.path, native, list(METHODS), **kw)
+    for name in METHODS:
+        with open(folder / name / "exposures.csv", newline="") as fh:
+            table = list(csv.reader(fh))
+        assert table[0] == list(CSV_COLUMNS + EXTRA_COLUMNS + NATIVE_COLUMNS)
+        assert len(table) == len(cycles) + 1 and {len(row) for row in table} == {len(table[0])}
+        assert [row[-5:] for row in table[1:]] == [[str(k), "1", "-1", str(cs.steps[name].timestamp_ns - 45), "0.25"]
+                                                    for k, cs in enumerate(cycles)]
+        assert len(read_csv_rows(folder / name / "exposures.csv")) == len(cycles)
+    plain = write_run_folder(tmp_path / "plain", seq.path, cycles, list(METHODS), **kw)
+    with open(plain / METHODS[0] / "exposures.csv", newline="") as fh:
+        assert next(csv.reader(fh)) == list(CSV_COLUMNS + EXTRA_COLUMNS)
+    with pytest.raises(LiveError, match="either all native-rate or none"):
+        write_run_folder(tmp_path / "mixed", seq.path, native[:1] + cycles[1:], list(METHODS), **kw)
+
+
 def test_no_run_images_reaches_every_walk_and_stays_out_of_the_command(tmp_path, monkeypatch):
     import emulator.distributed
     from conftest import SynthesizeCalled

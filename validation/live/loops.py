@@ -267,16 +267,22 @@ def write_run_folder(folder, sequence_path, cycles, names, *, white_level: int, 
     (:class:`~emulator.errors.OutputExistsError`).  ``png_level``: zlib level of the images (0: about 14x faster to
     write and 6x faster to read, about 1.5x the size; the same pixels at any level).
     """
+    from emulator.io.runcsv import NATIVE_COLUMNS
     from emulator.io.runfolder import RunWriter, format_row
 
     folder = Path(folder)
     cycles = list(cycles)
-    cameras = ["left"] + (["right"] if any(st.right is not None for cs in cycles for st in cs.steps.values()) else [])
+    steps = [st for cs in cycles for st in cs.steps.values()]
+    cameras = ["left"] + (["right"] if any(st.right is not None for st in steps) else [])
+    # steps of native emulation carry their native columns (format_row writes them): so must the header
+    native = [getattr(st, "native", None) is not None for st in steps]
+    if any(native) and not all(native):
+        raise LiveError(f"{folder}: a run folder's steps are either all native-rate or none")
     run_json = {"sequence": _relative_to(sequence_path, folder), "methods": list(names), "save": "png16",
                 "white_level": int(white_level), "black_level": int(black_level), "cameras": cameras,
                 "n_cycles": len(cycles), **(description or {})}
     with RunWriter(folder, png_level=png_level) as writer:
-        writer.start(run_json, list(names), cameras, "png16")
+        writer.start(run_json, list(names), cameras, "png16", columns=NATIVE_COLUMNS if any(native) else ())
         for name in names:
             for cs in cycles:
                 st = cs.steps.get(name)
