@@ -204,6 +204,16 @@ def test_walks_table_round_trip_and_redraw_from_the_table_alone(tmp_path):
     (tmp_path / WALKS_TABLE).write_text(text.replace("walk,scene", "walk;scene"))
     with pytest.raises(LiveError, match="line 1"):
         parse_walks_table((tmp_path / WALKS_TABLE).read_text())
+    # a repeated row (even with another value) or a metric column left out is refused, not read
+    lines = text.splitlines()
+    with pytest.raises(LiveError, match=r"line 3 repeats walk .*, method .*, condition "):
+        parse_walks_table("\n".join(lines[:2] + [lines[1].rsplit(",", 1)[0] + ",0.999"] + lines[2:]) + "\n")
+    cut = "\n".join(",".join(line.split(",")[:-1]) for line in lines) + "\n"  # rpe_trans_pct left out
+    with pytest.raises(LiveError, match="each metric name once"):
+        parse_walks_table(cut)
+    twice = "\n".join(line + "," + line.split(",")[-1] for line in lines) + "\n"
+    with pytest.raises(LiveError, match="each metric name once"):
+        parse_walks_table(twice)
 
 
 def test_the_seeds_are_the_bootstrap_clusters():

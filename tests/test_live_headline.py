@@ -104,3 +104,22 @@ def test_walks_to_decide_points_the_way_the_estimate_does():
     assert edge["walks"] is None and edge["reason"] == "not within 30 walks"
     assert walks_to_decide(Scales(0.0, 0.1, 0.1), 0.0)["walks"] is None
     assert walks_to_decide(sc, None)["reason"].startswith("no measured")
+
+
+def test_the_report_says_when_a_walk_is_one_segment_and_the_level_walks_to_decide_uses():
+    import json
+    from pathlib import Path
+
+    from validation.live.headline import headlines_markdown
+
+    study = Path(__file__).resolve().parents[1] / "docs" / "results" / "live-study-2026-11-28" / "results.json"
+    results = json.loads(study.read_text())  # a study of 8-cycle walks, segments of 10 pairs
+    assert (results["config"]["n_cycles"], results["config"]["segment_pairs"]) == (8, 10)
+    short = headlines_markdown(results)
+    assert ("At this walk length (7 match pairs per walk, segments of 10) a walk is one segment: the segment "
+            "success rate is the sequence success rate." in short)
+    assert "at Holm's strictest level (5 % divided by the family's size)" in short
+    assert "the verdict's own level" not in short
+    for cycles, one in ((11, True), (12, False), (40, False)):  # 11 pairs: segments of 10, the tail dropped
+        text = headlines_markdown({**results, "config": {**results["config"], "n_cycles": cycles}})
+        assert ("a walk is one segment" in text) is one

@@ -189,3 +189,25 @@ def test_pairs_check_exact_cases():
     assert "no pair" in pairs_check(d[:, :0], 1.0)["reason"]
     wide = pairs_check(np.array([[3.0], [-3.0], [2.0], [-2.0]]), 1.0)
     assert wide["verdict"] == "undetermined"
+
+
+def test_a_taus_interval_holds_its_own_estimate():
+    """Kendall tau at its bound of 1: the bootstrap replicates all lie below, and a percentile interval left
+    the estimate out (1.0 [0.24, 0.90] in a 48-walk study); the interval is widened to hold it."""
+    from validation.verdicts.agreement import _covering
+
+    assert _covering(1.0, 0.24, 0.90) == (0.24, 1.0)
+    assert _covering(-1.0, -0.9, 0.2) == (-1.0, 0.2)
+    assert _covering(0.5, 0.2, 0.9) == (0.2, 0.9)
+    assert _covering(float("nan"), 0.2, 0.9) == (0.2, 0.9)
+    # seven methods 0.2 apart under noise of 1, a perfect emulator (a re-drawn live run): this draw's means
+    # order alike (tau 1), while the bootstrap's percentile interval alone would be [0.33, 0.90]
+    rng = np.random.default_rng(29)
+    effects = np.linspace(0.0, 1.2, 7)
+    live, control = effects + rng.normal(0.0, 1.0, (40, 7)), effects + rng.normal(0.0, 1.0, (40, 7))
+    r = judge(live, control.copy(), control, n_resamples=300, seed=0)
+    assert r["tau_live_live"] == 1.0 and r["tau_live_live_ci95"][1] == 1.0
+    assert r["tau_live_live_ci95"][0] == pytest.approx(1 / 3)
+    for key in ("tau_live_emulated", "tau_live_live"):
+        lo, hi = r[key + "_ci95"]
+        assert lo <= r[key] <= hi

@@ -129,10 +129,10 @@ def parse_walks_table(text: str, name: str = WALKS_TABLE) -> tuple[list[str], li
 
     rows = [r for r in text.splitlines() if r.strip()]
     head = tuple(rows[0].split(",")) if rows else ()
-    if head[:len(_TABLE_HEAD)] != _TABLE_HEAD or not set(head[len(_TABLE_HEAD):]) <= set(WALK_METRICS):
-        raise LiveError(f"{name}: line 1 must be {','.join(_TABLE_HEAD)} followed by metric names, got "
-                        f"{rows[0] if rows else 'an empty file'!r}")
     metrics = head[len(_TABLE_HEAD):]
+    if head[:len(_TABLE_HEAD)] != _TABLE_HEAD or sorted(metrics) != sorted(WALK_METRICS):
+        raise LiveError(f"{name}: line 1 must be {','.join(_TABLE_HEAD)} followed by each metric name once "
+                        f"({', '.join(WALK_METRICS)}), got {rows[0] if rows else 'an empty file'!r}")
     walks, methods, runs, cells = [], [], [], {}
     for n, row in enumerate(rows[1:], start=2):
         f = row.split(",")
@@ -145,6 +145,8 @@ def parse_walks_table(text: str, name: str = WALKS_TABLE) -> tuple[list[str], li
         for lst, v in ((walks, f[0]), (methods, f[3]), (runs, f[4])):
             if v not in lst:
                 lst.append(v)
+        if (f[4], f[0], f[3]) in cells:
+            raise LiveError(f"{name}: line {n} repeats walk {f[0]}, method {f[3]}, condition {f[4]}")
         cells[(f[4], f[0], f[3])] = vals
     tables = {}
     for run in runs:

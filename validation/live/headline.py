@@ -212,6 +212,16 @@ def _cell(r: dict) -> str:
     return txt
 
 
+def _one_segment_note(config: dict) -> str:
+    """A sentence where a walk is one segment (its match pairs no more than a segment's): the segment
+    success rate is then the sequence success rate, not a second view of the walks."""
+    cycles, seg = config.get("n_cycles"), config.get("segment_pairs")
+    if not (isinstance(cycles, int) and isinstance(seg, int)) or cycles - 1 > seg:
+        return ""
+    return (f" At this walk length ({cycles - 1} match pairs per walk, segments of {seg}) a walk is one segment: "
+            "the segment success rate is the sequence success rate.")
+
+
 def headlines_markdown(results: dict) -> str:
     """The report's first section: a row per metric, a column per headline comparison."""
     h = results.get("headlines")
@@ -228,7 +238,8 @@ def headlines_markdown(results: dict) -> str:
              "(rpe_trans_rank: per walk the methods' RPE rank, a method that lost its VO ranked last), with the "
              "complete walks alone (rpe_trans_pct) as the sensitivity analysis below the family. Where a verdict "
              "is undetermined, the walks at which a study of this noise and this omega2 decides it in 80 % of "
-             "simulated studies, at the verdict's own level (the family's correction needs more).", ""]
+             "simulated studies, at Holm's strictest level (5 % divided by the family's size), which is enough "
+             f"at any step of Holm's order.{_one_segment_note(results.get('config') or {})}", ""]
     ran = {k: c for k, c in comps.items() if c["status"] == "run"}
     for k, c in comps.items():
         if c["status"] != "run":
