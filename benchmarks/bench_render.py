@@ -32,6 +32,8 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
+from emulator.io.files import strict_json  # noqa: E402
+
 
 def _pose(scene):
     return scene.default_pose() if scene.is_static else scene.trajectory(10.0).pose(0.0)
@@ -187,7 +189,7 @@ def main(argv=None) -> int:
               f"{hit['fresh_process_import_s']:.2f} s + hit {hit['fresh_process_hit_s'] * 1e3:.0f} ms "
               f"(Mitsuba imported: {hit['fresh_process_imported_mitsuba']})")
     if args.json:
-        args.json.write_text(json.dumps(results, indent=2) + "\n")
+        args.json.write_text(strict_json(results, indent=2) + "\n")
     return 0
 
 

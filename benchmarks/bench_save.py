@@ -25,6 +25,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from emulator.io.files import strict_json  # noqa: E402
 from emulator.io.borealhdr import CAMERA_FOLDERS, exposure_folder_name, find_response, load_sequence  # noqa: E402
 from emulator.playback import RunConfig  # noqa: E402
 from emulator.runner import run_to_folder  # noqa: E402
@@ -95,7 +96,7 @@ def main(argv=None) -> int:
                                               / sum(r["steady_cycles_per_s"] for r in by["png8"]))
     print(json.dumps({k: v for k, v in results.items() if k != "runs"}, indent=1))
     if args.out is not None:
-        args.out.write_text(json.dumps(results, indent=1) + "\n")
+        args.out.write_text(strict_json(results, indent=1) + "\n")
     return 0
 
 

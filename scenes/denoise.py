@@ -78,12 +78,14 @@ __all__ = [
 ]
 
 #: Valid values of ``denoise=`` (besides a :class:`DenoiseSettings`).
-DENOISERS = ("oidn", "oidn-fast", "off")
+DENOISERS = ("oidn", "oidn-fast", "oidn-hq", "off")
 #: The settings each named denoiser stands for (besides its name).  ``oidn-fast`` trades a
 #: little error for time: OIDN's ``balanced`` filter and a 16-spp albedo/normal pass
 #: (forest_winter, 480x300, 2 spp: 0.55 s and 3.1 % against 1.2 s and 2.7 % for ``oidn``;
-#: see the render study).
-DENOISER_PRESETS = {"oidn": {}, "oidn-fast": {"quality": "balanced", "aux_spp": 16}}
+#: see the render study).  ``oidn-hq`` spends time for features: a 1024-spp albedo/normal pass,
+#: whose own sampling noise otherwise stays in the denoised image; with 256 spp it is the setting
+#: whose render noise costs SIFT no more than the sensor's (docs/results/render.md).
+DENOISER_PRESETS = {"oidn": {}, "oidn-fast": {"quality": "balanced", "aux_spp": 16}, "oidn-hq": {"aux_spp": 1024}}
 #: What every render uses unless told otherwise (or ``$EXPOSIM_DENOISE`` says otherwise).
 DEFAULT_DENOISER = "oidn"
 #: Environment variable naming the denoiser of renders that do not name one (``oidn`` or ``off``).
@@ -107,7 +109,7 @@ class DenoiseSettings:
     Attributes
     ----------
     name : str
-        ``"oidn"``, ``"oidn-fast"`` (presets of :data:`DENOISER_PRESETS`) or ``"off"``.
+        ``"oidn"``, ``"oidn-fast"``, ``"oidn-hq"`` (presets of :data:`DENOISER_PRESETS`) or ``"off"``.
     quality : str
         OIDN filter quality: ``"fast"``, ``"balanced"`` or ``"high"``.
     hdr_scale : float or None

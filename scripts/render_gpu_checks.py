@@ -16,7 +16,6 @@ comes with the variant and the GPU it ran on.
 """
 
 import argparse
-import json
 import os
 import platform
 import subprocess
@@ -30,6 +29,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import scenes  # noqa: E402
+from emulator.io.files import strict_json  # noqa: E402
 from scenes.image_stats import keypoint_points, keypoint_repeatability, synthetic_camera, synthetic_gray8  # noqa: E402
 from synth import capture  # noqa: E402
 
@@ -126,8 +126,8 @@ def main(argv=None) -> int:
         quality(scene, trajectory, 480, 300, [int(s) for s in args.quality_spp.split(",")], deadline, out)
     finally:
         out["wall_s"] = round(time.perf_counter() - start, 1)
-        args.output.write_text(json.dumps(out, indent=1) + "\n")
-        print(json.dumps(out), flush=True)
+        args.output.write_text(strict_json(out, indent=1) + "\n")
+        print(strict_json(out), flush=True)
     return 0
 
 

@@ -11,11 +11,11 @@ file) and prints one line per setting and exposure.
 """
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
 from emulator.errors import ExposimError
+from emulator.io.files import strict_json, write_text
 from validation.render_study.balance import noise_balance, parse_setting
 
 
@@ -69,7 +69,9 @@ def main(argv=None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     args.output.parent.mkdir(parents=True, exist_ok=True)
-    args.output.write_text(json.dumps({"command": " ".join(sys.argv), "results": results}, indent=1))
+    # strict JSON: one sweep has no interval, written as null with the reason
+    write_text(args.output, strict_json({"command": " ".join(sys.argv), "results": results}, indent=1) + "\n",
+               overwrite=False)
     return 0
 
 

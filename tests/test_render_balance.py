@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 import subprocess
 import sys
 from pathlib import Path
@@ -28,6 +29,9 @@ def _private_cache(tmp_path_factory, monkeypatch):
 def test_settings_are_parsed_and_bad_ones_refused():
     label, spp, s = bal.parse_setting("oidn-fast@2")
     assert (label, spp, s.name, s.quality, s.aux_spp) == ("oidn-fast@2", 2, "oidn-fast", "balanced", 16)
+    _, spp, hq = bal.parse_setting("oidn-hq@256")  # the preset of the measured oidn@256/1024
+    _, _, explicit = bal.parse_setting("oidn@256/1024")
+    assert spp == 256 and hq.aux_spp == 1024 and replace(hq, name="oidn") == explicit
     _, spp, s = bal.parse_setting("oidn@8/32")
     assert (spp, s.name, s.quality, s.aux_spp) == (8, "oidn", "high", 32)
     assert bal.parse_setting("off@64")[2].enabled is False
@@ -103,3 +107,21 @@ def test_script_refuses_bad_input_in_one_line(tmp_path):
     p = run("-o", str(tmp_path / "c.json"), "oidn@two")
     assert p.returncode == 2 and p.stderr.strip().count("\n") == 0 and "oidn@two" in p.stderr
     assert not (tmp_path / "c.json").exists()
+
+
+@pytest.mark.render
+def test_one_sweep_has_no_interval_and_the_file_is_strict_json(tmp_path):
+    import subprocess
+    import sys
+
+    out = tmp_path / "one.json"
+    p = subprocess.run([sys.executable, str(ROOT / "scripts" / "render_noise_balance.py"), "-o", str(out), "off@1",
+                        "--size", "48x32", "--sweeps", "0", "--cache-dir", str(tmp_path / "cache")],
+                       capture_output=True, text=True, cwd=ROOT, env={"PYTHONPATH": str(ROOT), "EXPOSIM_DENOISE": "off"})
+    assert p.returncode == 0, p.stderr
+    text = out.read_text()
+    assert "NaN" not in text
+    doc = json.loads(text, parse_constant=lambda c: pytest.fail(f"non-strict JSON constant {c}"))
+    diff = doc["results"][0]["exposures"]["8"]["difference"]
+    assert isinstance(diff[0], float) and diff[1] is None and diff[2] is None
+    assert doc["null_reasons"]["results[0].exposures.8.difference[1]"].startswith("not a finite number")

@@ -55,13 +55,15 @@ def parse_params(items: list[str] | None) -> dict:
 
 
 def add_denoise_option(parser) -> None:
-    """``--denoise oidn|oidn-fast|off`` (shared by ``exposim render`` and ``exposim synth``)."""
+    """``--denoise oidn|oidn-fast|oidn-hq|off`` (shared by ``exposim render`` and ``exposim synth``)."""
     from scenes.denoise import DEFAULT_DENOISER, DENOISERS, ENV_DENOISE
 
     parser.add_argument("--denoise", choices=DENOISERS, default=None,
                         help=f"'oidn': denoise each render with Intel Open Image Denoise fed Mitsuba's "
                              f"albedo and normal; 'oidn-fast': OIDN's balanced filter and a 16-spp albedo/normal "
-                             f"pass (about half the time, a little more error); 'off': the raw path-traced "
+                             f"pass (about half the time, a little more error); 'oidn-hq': a 1024-spp "
+                             f"albedo/normal pass (with --spp 256: render noise no worse than the sensor's for "
+                             f"SIFT, about 15x the time of 8 spp); 'off': the raw path-traced "
                              f"estimate (default {DEFAULT_DENOISER}, "
                              f"or ${ENV_DENOISE} when set). Without a usable OIDN "
                              "(pyoidn missing, unsupported CPU) a warning says why and renders are raw")
