@@ -49,7 +49,10 @@ def test_settings_validate_and_resolve():
     fast = dn.resolve_denoise("oidn-fast")
     assert fast == dn.DenoiseSettings(name="oidn-fast", quality="balanced", aux_spp=16) and fast.enabled
     assert fast.key_material()["settings"] != dn.DenoiseSettings().key_material()["settings"]
-    with pytest.raises(RenderError, match="valid: oidn, oidn-fast, off"):
+    hq = dn.resolve_denoise("oidn-hq")  # the full filter with a 1024-spp albedo/normal pass: its own cache entries
+    assert hq == dn.DenoiseSettings(name="oidn-hq", aux_spp=1024) and hq.quality == "high" and hq.enabled
+    assert hq.key_material()["settings"] != dn.DenoiseSettings().key_material()["settings"]
+    with pytest.raises(RenderError, match="valid: oidn, oidn-fast, oidn-hq, off"):
         dn.resolve_denoise("bm3d")
     with pytest.raises(RenderError, match="denoise must be"):
         dn.resolve_denoise(3)
@@ -72,7 +75,7 @@ def test_environment_names_the_default_denoiser(monkeypatch, tmp_path):
     assert img.tobytes() == scenes.render(scene, scene.default_pose(), denoise="off", **kw).tobytes()
     assert len(list(tmp_path.rglob("*.exr"))) == 1  # one entry: the raw key
     monkeypatch.setenv("EXPOSIM_DENOISE", "median")
-    with pytest.raises(RenderError, match=r"\$EXPOSIM_DENOISE='median' is not a denoiser; valid: oidn, oidn-fast, off"):
+    with pytest.raises(RenderError, match=r"\$EXPOSIM_DENOISE='median' is not a denoiser; valid: oidn, oidn-fast, oidn-hq, off"):
         scenes.render(scene, scene.default_pose(), **kw)
 
 

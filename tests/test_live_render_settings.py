@@ -25,7 +25,7 @@ def test_the_defaults_are_the_study_render_settings(monkeypatch):
     with pytest.raises(LiveError, match=r"\$EXPOSIM_DENOISE='median' is not a denoiser"):
         LiveConfig()
     monkeypatch.delenv("EXPOSIM_DENOISE")
-    with pytest.raises(LiveError, match="denoise must be one of oidn, oidn-fast, off, got 'nlm'"):
+    with pytest.raises(LiveError, match="denoise must be one of oidn, oidn-fast, oidn-hq, off, got 'nlm'"):
         LiveConfig(denoise="nlm")
     # records from before the options: every shot rendered; a recorded denoiser is kept
     assert config_from_dict({}).render_per == "shot"
