@@ -25,8 +25,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from emulator.io.files import strict_json  # noqa: E402
 from emulator.io.borealhdr import CAMERA_FOLDERS, exposure_folder_name, find_response, load_sequence  # noqa: E402
+from emulator.io.files import strict_json  # noqa: E402
 from emulator.playback import RunConfig  # noqa: E402
 from emulator.runner import run_to_folder  # noqa: E402
 

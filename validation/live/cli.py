@@ -74,7 +74,9 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument("--render-per", choices=("shot", "cycle"),
                    help="one render per shot and camera, or one per bracket sweep and camera warped with depth "
                         f"to every shot (a sixth of the renders) (default {full.render_per})")
-    p.add_argument("--denoise", choices=("oidn", "oidn-fast", "oidn-hq", "off"),
+    from scenes.denoise import DENOISERS  # the names renders take (no renderer imported)
+
+    p.add_argument("--denoise", choices=DENOISERS,
                    help="denoiser of the renders (default $EXPOSIM_DENOISE when set, else "
                         f"{STUDY_DENOISE}); 'oidn-hq' with --spp 256: render noise no worse than the sensor's "
                         "for SIFT (docs/results/render.md), about 15x the render time of the default")

@@ -283,6 +283,14 @@ def _covering(estimate, lo, hi):
     return (min(lo, estimate) if np.isfinite(lo) else lo), (max(hi, estimate) if np.isfinite(hi) else hi)
 
 
+def _tau_interval(L, X, plan, alpha):
+    """Kendall tau between the method means of ``L`` and ``X`` (walks x methods), its replicates over
+    ``plan``, and its interval for results.json (:func:`_covering`: it holds the estimate)."""
+    tau = kendall_tau_b(L.mean(axis=0), X.mean(axis=0))
+    reps = over_plan(lambda a, b: kendall_tau_b(a.mean(axis=-2), b.mean(axis=-2)), plan, L, X)
+    return tau, reps, _interval(*_covering(tau, *_nan_interval(reps, alpha)))
+
+
 def judge(live, emulated, control=None, *, methods=None, margin: float | None = None,
           higher_is_better: bool = True, n_resamples: int = 1000, seed=0, omega2_max: float = OMEGA2_MAX,
           alpha: float = ALPHA, min_walks: int = MIN_WALKS, detail: bool = True, clusters=None) -> dict:
@@ -407,17 +415,12 @@ def _details(out, L, E, C, plan, names, margin, higher_is_better, alpha, omega2_
     w, m = L.shape
     out["disattenuated_correlation"] = _finite(_disattenuated(L, E))
     out["disattenuated_correlation_ci95"] = _interval(*_nan_interval(over_plan(_disattenuated, plan, L, E), alpha))
-    mean_l, mean_e = L.mean(axis=0), E.mean(axis=0)
-    tau_le = kendall_tau_b(mean_l, mean_e)
-    out["tau_live_emulated"] = _finite(tau_le)
-    means = lambda *t: tuple(x.mean(axis=-2) for x in t)  # noqa: E731
-    tle = over_plan(lambda a, b: kendall_tau_b(*means(a, b)), plan, L, E)
-    out["tau_live_emulated_ci95"] = _interval(*_covering(tau_le, *_nan_interval(tle, alpha)))
+    mean_l = L.mean(axis=0)
+    tau, tle, ci = _tau_interval(L, E, plan, alpha)
+    out["tau_live_emulated"], out["tau_live_emulated_ci95"] = _finite(tau), ci
     if C is not None:
-        tau_ll = kendall_tau_b(mean_l, C.mean(axis=0))
-        out["tau_live_live"] = _finite(tau_ll)
-        tll = over_plan(lambda a, b: kendall_tau_b(*means(a, b)), plan, L, C)
-        out["tau_live_live_ci95"] = _interval(*_covering(tau_ll, *_nan_interval(tll, alpha)))
+        tau, tll, ci = _tau_interval(L, C, plan, alpha)
+        out["tau_live_live"], out["tau_live_live_ci95"] = _finite(tau), ci
         both = np.isfinite(tle) & np.isfinite(tll)
         out["tau_emulated_below_control_fraction"] = float(np.mean(tle[both] < tll[both])) if both.any() else None
     out["margin_in_ranking_terms"] = margin_in_ranking_terms(mean_l, omega2_max, higher_is_better=higher_is_better,
