@@ -11,9 +11,13 @@ file) and prints one line per setting and exposure.
 """
 
 import argparse
+import platform
 import sys
 from pathlib import Path
 
+import numpy as np
+
+import scenes
 from emulator.errors import ExposimError
 from emulator.io.files import strict_json, write_text
 from validation.render_study.balance import noise_balance, parse_setting
@@ -31,6 +35,15 @@ def _size(text):
     if not (sep and w.isdigit() and h.isdigit()):
         raise argparse.ArgumentTypeError(f"expected WxH, e.g. 480x300, got {text!r}")
     return int(w), int(h)
+
+
+def _machine() -> dict:
+    """Where the figures were made: the render variant and the versions that shape them."""
+    import cv2
+    import mitsuba
+
+    return {"render_variant": scenes.choose_variant(), "mitsuba": mitsuba.__version__, "python": platform.python_version(),
+            "numpy": np.__version__, "opencv": cv2.__version__, "processor": platform.processor() or platform.machine()}
 
 
 def main(argv=None) -> int:
@@ -70,7 +83,7 @@ def main(argv=None) -> int:
         return 2
     args.output.parent.mkdir(parents=True, exist_ok=True)
     # strict JSON: one sweep has no interval, written as null with the reason
-    write_text(args.output, strict_json({"command": " ".join(sys.argv), "results": results}, indent=1) + "\n",
+    write_text(args.output, strict_json({"command": " ".join(sys.argv), "machine": _machine(), "results": results}, indent=1) + "\n",
                overwrite=False)
     return 0
 

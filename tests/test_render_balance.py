@@ -125,3 +125,7 @@ def test_one_sweep_has_no_interval_and_the_file_is_strict_json(tmp_path):
     diff = doc["results"][0]["exposures"]["8"]["difference"]
     assert isinstance(diff[0], float) and diff[1] is None and diff[2] is None
     assert doc["null_reasons"]["results[0].exposures.8.difference[1]"].startswith("not a finite number")
+    import mitsuba
+
+    assert doc["machine"]["render_variant"] in ("cuda_ad_rgb", "llvm_ad_rgb", "scalar_rgb")
+    assert doc["machine"]["mitsuba"] == mitsuba.__version__ and doc["machine"]["numpy"] == np.__version__
