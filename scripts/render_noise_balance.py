@@ -42,8 +42,9 @@ def _machine() -> dict:
     import cv2
     import mitsuba
 
-    return {"render_variant": scenes.choose_variant(), "mitsuba": mitsuba.__version__, "python": platform.python_version(),
-            "numpy": np.__version__, "opencv": cv2.__version__, "processor": platform.processor() or platform.machine()}
+    return {"render_variant": scenes.choose_variant(), "mitsuba": mitsuba.__version__,
+            "python": platform.python_version(), "numpy": np.__version__, "opencv": cv2.__version__,
+            "processor": platform.processor() or platform.machine()}
 
 
 def main(argv=None) -> int:
@@ -83,8 +84,8 @@ def main(argv=None) -> int:
         return 2
     args.output.parent.mkdir(parents=True, exist_ok=True)
     # strict JSON: one sweep has no interval, written as null with the reason
-    write_text(args.output, strict_json({"command": " ".join(sys.argv), "machine": _machine(), "results": results}, indent=1) + "\n",
-               overwrite=False)
+    doc = {"command": " ".join(sys.argv), "machine": _machine(), "results": results}
+    write_text(args.output, strict_json(doc, indent=1) + "\n", overwrite=False)
     return 0
 
 
