@@ -11,7 +11,10 @@ file) and prints one line per setting and exposure.
 """
 
 import argparse
+import importlib.metadata
+import os
 import platform
+import subprocess
 import sys
 from pathlib import Path
 
@@ -20,6 +23,7 @@ import numpy as np
 import scenes
 from emulator.errors import ExposimError
 from emulator.io.files import strict_json, write_text
+from scenes.variant import ENV_VARIANT
 from validation.render_study.balance import noise_balance, parse_setting
 
 
@@ -37,14 +41,44 @@ def _size(text):
     return int(w), int(h)
 
 
-def _machine() -> dict:
-    """Where the figures were made: the render variant and the versions that shape them."""
-    import cv2
-    import mitsuba
+def _version(dist: str):
+    try:
+        return importlib.metadata.version(dist)
+    except importlib.metadata.PackageNotFoundError:
+        return None
 
-    return {"render_variant": scenes.choose_variant(), "mitsuba": mitsuba.__version__,
+
+def _gpu(variant: str):
+    """The GPU and its driver where the variant renders on one (``nvidia-smi``), else None."""
+    if not variant.startswith("cuda_"):
+        return None
+    try:
+        out = subprocess.run(["nvidia-smi", "--query-gpu=name,driver_version", "--format=csv,noheader"],
+                             capture_output=True, text=True, timeout=30).stdout.strip()
+    except (OSError, subprocess.TimeoutExpired):
+        return None
+    return out or None
+
+
+def _machine() -> dict:
+    """Where the figures are made: the render variant, the GPU it renders on, the cores and the versions that
+    shape the figures (None for a package that is not installed)."""
+    import cv2  # the features' library (the measure imports it anyway)
+
+    variant = scenes.choose_variant()
+    return {"render_variant": variant, "gpu": _gpu(variant), "cpu_count": os.cpu_count(),
             "python": platform.python_version(), "numpy": np.__version__, "opencv": cv2.__version__,
-            "processor": platform.processor() or platform.machine()}
+            "mitsuba": _version("mitsuba"), "drjit": _version("drjit")}
+
+
+def _command(argv) -> str:
+    """The command line as a reader reruns it: the forced variant, if any, and the output file's name alone."""
+    args = list(argv)
+    for i, a in enumerate(args[:-1]):
+        if a in ("-o", "--output"):
+            args[i + 1] = Path(args[i + 1]).name
+    forced = os.environ.get(ENV_VARIANT, "").strip()
+    return " ".join(([f"{ENV_VARIANT}={forced}"] if forced else []) + ["python scripts/render_noise_balance.py"] + args)
 
 
 def main(argv=None) -> int:
@@ -68,6 +102,7 @@ def main(argv=None) -> int:
     try:
         for s in args.settings:
             parse_setting(s)
+        machine = _machine()
         results = []
         for s in args.settings:
             r = noise_balance(s, scene_key=args.scene, width=args.size[0], height=args.size[1],
@@ -84,7 +119,7 @@ def main(argv=None) -> int:
         return 2
     args.output.parent.mkdir(parents=True, exist_ok=True)
     # strict JSON: one sweep has no interval, written as null with the reason
-    doc = {"command": " ".join(sys.argv), "machine": _machine(), "results": results}
+    doc = {"command": _command(sys.argv[1:] if argv is None else argv), "machine": machine, "results": results}
     write_text(args.output, strict_json(doc, indent=1) + "\n", overwrite=False)
     return 0
 

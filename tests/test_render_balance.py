@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import replace
 import subprocess
 import sys
@@ -99,7 +100,8 @@ def test_noise_balance_on_a_tiny_walk_agrees_with_its_rows(tmp_path, render_per)
 def test_script_refuses_bad_input_in_one_line(tmp_path):
     out = tmp_path / "b.json"
     out.write_text("{}")
-    run = lambda *a: subprocess.run([sys.executable, str(ROOT / "scripts" / "render_noise_balance.py"), *a],  # noqa: E731
+    script = str(ROOT / "scripts" / "render_noise_balance.py")
+    run = lambda *a: subprocess.run([sys.executable, script, *a],  # noqa: E731
                                     capture_output=True, text=True, cwd=ROOT, env={"PYTHONPATH": str(ROOT)})
     p = run("-o", str(out), "oidn@2")
     assert p.returncode == 2 and "exists" in p.stderr and str(out) in p.stderr
@@ -117,7 +119,8 @@ def test_one_sweep_has_no_interval_and_the_file_is_strict_json(tmp_path):
     out = tmp_path / "one.json"
     p = subprocess.run([sys.executable, str(ROOT / "scripts" / "render_noise_balance.py"), "-o", str(out), "off@1",
                         "--size", "48x32", "--sweeps", "0", "--cache-dir", str(tmp_path / "cache")],
-                       capture_output=True, text=True, cwd=ROOT, env={"PYTHONPATH": str(ROOT), "EXPOSIM_DENOISE": "off"})
+                       capture_output=True, text=True, cwd=ROOT,
+                       env={"PYTHONPATH": str(ROOT), "EXPOSIM_DENOISE": "off", "EXPOSIM_MITSUBA_VARIANT": "scalar_rgb"})
     assert p.returncode == 0, p.stderr
     text = out.read_text()
     assert "NaN" not in text
@@ -125,7 +128,15 @@ def test_one_sweep_has_no_interval_and_the_file_is_strict_json(tmp_path):
     diff = doc["results"][0]["exposures"]["8"]["difference"]
     assert isinstance(diff[0], float) and diff[1] is None and diff[2] is None
     assert doc["null_reasons"]["results[0].exposures.8.difference[1]"].startswith("not a finite number")
-    import mitsuba
+    import importlib.metadata
+    import platform
 
-    assert doc["machine"]["render_variant"] in ("cuda_ad_rgb", "llvm_ad_rgb", "scalar_rgb")
-    assert doc["machine"]["mitsuba"] == mitsuba.__version__ and doc["machine"]["numpy"] == np.__version__
+    import cv2
+
+    # where the figures were made, and the command as a reader reruns it (the output file's name alone)
+    assert doc["machine"] == {"render_variant": "scalar_rgb", "gpu": None, "cpu_count": os.cpu_count(),
+                              "python": platform.python_version(), "numpy": np.__version__, "opencv": cv2.__version__,
+                              "mitsuba": importlib.metadata.version("mitsuba"),
+                              "drjit": importlib.metadata.version("drjit")}
+    assert doc["command"] == ("EXPOSIM_MITSUBA_VARIANT=scalar_rgb python scripts/render_noise_balance.py "
+                              f"-o one.json off@1 --size 48x32 --sweeps 0 --cache-dir {tmp_path / 'cache'}")
