@@ -10,8 +10,11 @@ method runs with the same kernels whatever ``--jobs`` is.  The run's own process
 kernels (NumPy reads the switch once, at import).
 
 A sort gives the same values whichever kernel sorts, and the other methods' tables were the
-same bytes with and without the switch (tests/test_numpy_dispatch.py states the check).  A user
-who sets ``NPY_DISABLE_CPU_FEATURES`` (or ``NPY_ENABLE_CPU_FEATURES``) keeps their setting.
+same bytes with and without the switch (tests/test_numpy_dispatch.py states the check).  Other
+kernels change with it too (a vectorised sum may round differently), and Kim's closed loop can
+amplify that: over the live study's 48 walks, Kim's emulated runs differed in 2 between code with
+and without the switch (docs/results/live.md, 2026-11-28 night).  A user who sets
+``NPY_DISABLE_CPU_FEATURES`` (or ``NPY_ENABLE_CPU_FEATURES``) keeps their setting.
 """
 
 from __future__ import annotations
