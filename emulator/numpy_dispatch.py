@@ -13,7 +13,9 @@ A sort gives the same values whichever kernel sorts, and the other methods' tabl
 same bytes with and without the switch (tests/test_numpy_dispatch.py states the check).  Other
 kernels change with it too (a vectorised sum may round differently), and Kim's closed loop can
 amplify that: over the live study's 48 walks, Kim's emulated runs differed in 2 between code with
-and without the switch (docs/results/live.md, 2026-11-28 night).  A user who sets
+and without the switch, and one of them, run again, gives either result by the switch alone
+(docs/results/live.md, 2026-11-28 night).  The switch reaches the workers only; methods built in
+the caller's process (the live study's live loops) keep its kernels.  A user who sets
 ``NPY_DISABLE_CPU_FEATURES`` (or ``NPY_ENABLE_CPU_FEATURES``) keeps their setting.
 """
 
