@@ -17,7 +17,7 @@ import threading
 from scenes.errors import RenderError
 
 __all__ = ["VALID_VARIANTS", "PREFERRED_VARIANTS", "ENV_VARIANT", "choose_variant", "probe_variant",
-           "ensure_variant", "check_variant_name"]
+           "ensure_variant", "check_variant_name", "gpu_description"]
 
 #: RGB variants the scenes can render with (radiance is RGB).
 VALID_VARIANTS = ("llvm_ad_rgb", "scalar_rgb", "cuda_ad_rgb")
@@ -72,6 +72,17 @@ def _has_nvidia_driver() -> bool:
     """True where an NVIDIA driver is installed (its device node or ``nvidia-smi``): only then is the CUDA
     variant worth a probe."""
     return os.path.exists("/dev/nvidiactl") or shutil.which("nvidia-smi") is not None
+
+
+def gpu_description() -> str | None:
+    """The NVIDIA GPU and its driver as ``nvidia-smi`` names them (``"NVIDIA H200, 580.159.04"``), for the
+    records of measurements that ran on it; None where it cannot say."""
+    try:
+        out = subprocess.run(["nvidia-smi", "--query-gpu=name,driver_version", "--format=csv,noheader"],
+                             capture_output=True, text=True, timeout=30).stdout.strip()
+    except (OSError, subprocess.TimeoutExpired):
+        return None
+    return out or None
 
 
 def _usable(variant: str) -> bool:

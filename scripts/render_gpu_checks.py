@@ -18,7 +18,6 @@ comes with the variant and the GPU it ran on.
 import argparse
 import os
 import platform
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -31,18 +30,11 @@ sys.path.insert(0, str(ROOT))
 import scenes  # noqa: E402
 from emulator.io.files import strict_json  # noqa: E402
 from scenes.image_stats import keypoint_points, keypoint_repeatability, synthetic_camera, synthetic_gray8  # noqa: E402
+from scenes.variant import gpu_description  # noqa: E402
 from synth import capture  # noqa: E402
 
 SCENE = "forest_winter"
 POSE_TIMES_S = (1.0, 4.0, 7.0)
-
-
-def _gpu_name() -> str:
-    try:
-        return subprocess.run(["nvidia-smi", "--query-gpu=name,driver_version", "--format=csv,noheader"],
-                              capture_output=True, text=True, timeout=30).stdout.strip()
-    except (OSError, subprocess.TimeoutExpired):
-        return "unknown"
 
 
 def _render(scene, pose, w, h, spp, seed):
@@ -107,7 +99,7 @@ def main(argv=None) -> int:
     deadline = start + args.budget_s
     variant = scenes.choose_variant() if hasattr(scenes, "choose_variant") else os.environ.get(
         "EXPOSIM_MITSUBA_VARIANT", "")
-    out = {"variant": variant, "gpu": _gpu_name(), "python": platform.python_version(),
+    out = {"variant": variant, "gpu": gpu_description() or "unknown", "python": platform.python_version(),
            "numpy": np.__version__, "scene": SCENE, "denoise": "off", "warmup_s": {}, "seconds_per_frame": {},
            "quality": {}, "skipped": []}
     import mitsuba

@@ -11,10 +11,8 @@ file) and prints one line per setting and exposure.
 """
 
 import argparse
-import importlib.metadata
 import os
 import platform
-import subprocess
 import sys
 from pathlib import Path
 
@@ -23,7 +21,8 @@ import numpy as np
 import scenes
 from emulator.errors import ExposimError
 from emulator.io.files import strict_json, write_text
-from scenes.variant import ENV_VARIANT
+from scenes.cache import library_versions
+from scenes.variant import ENV_VARIANT, gpu_description
 from validation.render_study.balance import noise_balance, parse_setting
 
 
@@ -41,34 +40,15 @@ def _size(text):
     return int(w), int(h)
 
 
-def _version(dist: str):
-    try:
-        return importlib.metadata.version(dist)
-    except importlib.metadata.PackageNotFoundError:
-        return None
-
-
-def _gpu(variant: str):
-    """The GPU and its driver where the variant renders on one (``nvidia-smi``), else None."""
-    if not variant.startswith("cuda_"):
-        return None
-    try:
-        out = subprocess.run(["nvidia-smi", "--query-gpu=name,driver_version", "--format=csv,noheader"],
-                             capture_output=True, text=True, timeout=30).stdout.strip()
-    except (OSError, subprocess.TimeoutExpired):
-        return None
-    return out or None
-
-
 def _machine() -> dict:
     """Where the figures are made: the render variant, the GPU it renders on, the cores and the versions that
-    shape the figures (None for a package that is not installed)."""
+    shape the figures (Mitsuba's and Dr.Jit's as the render cache keys them: "missing" where not installed)."""
     import cv2  # the features' library (the measure imports it anyway)
 
     variant = scenes.choose_variant()
-    return {"render_variant": variant, "gpu": _gpu(variant), "cpu_count": os.cpu_count(),
-            "python": platform.python_version(), "numpy": np.__version__, "opencv": cv2.__version__,
-            "mitsuba": _version("mitsuba"), "drjit": _version("drjit")}
+    return {"render_variant": variant, "gpu": gpu_description() if variant.startswith("cuda_") else None,
+            "cpu_count": os.cpu_count(), "python": platform.python_version(), "numpy": np.__version__,
+            "opencv": cv2.__version__, **library_versions()}
 
 
 def _command(argv) -> str:

@@ -554,6 +554,19 @@ def test_cuda_variant_chosen_only_with_a_driver_and_a_passing_probe(monkeypatch,
     assert scenes.choose_variant(refresh=True) == "llvm_ad_rgb" and probed == ["cuda_ad_rgb", "llvm_ad_rgb"]
 
 
+def test_gpu_description_is_nvidia_smis_line_or_none(monkeypatch, tmp_path):
+    """What measurement records name as the GPU: nvidia-smi's name and driver, None where it is absent,
+    fails or says nothing."""
+    monkeypatch.setenv("PATH", str(tmp_path))  # no nvidia-smi
+    assert var.gpu_description() is None
+    smi = tmp_path / "nvidia-smi"
+    smi.write_text("#!/bin/sh\necho 'NVIDIA H200, 580.159.04'\n")
+    smi.chmod(0o755)
+    assert var.gpu_description() == "NVIDIA H200, 580.159.04"
+    smi.write_text("#!/bin/sh\nexit 9\n")
+    assert var.gpu_description() is None
+
+
 def test_variant_probe_failure_modes(monkeypatch, _restore_variant_state):
     monkeypatch.setattr(var, "_PROBE_SCRIPT", "raise SystemExit(3)")
     assert var.probe_variant("llvm_ad_rgb") is False
