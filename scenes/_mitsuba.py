@@ -93,14 +93,14 @@ def _bsdf(mat: Material):
     return mi.load_dict(d)
 
 
-def _mesh(name: str, data, bsdf, radiance=None):
+def _mesh(name: str, data, bsdf, radiance=None, weight: float = 1.0):
     import mitsuba as mi
 
     props = mi.Properties()
     props["bsdf"] = bsdf
     if radiance is not None:
         # one-sided: emits on the side the counter-clockwise faces point to
-        props["emitter"] = mi.load_dict({"type": "area", "radiance": _rgb(radiance)})
+        props["emitter"] = mi.load_dict(_weighted({"type": "area", "radiance": _rgb(radiance)}, weight))
     mesh = mi.Mesh(name, int(data.vertices.shape[0]), int(data.faces.shape[0]), props=props,
                    has_vertex_normals=False, has_vertex_texcoords=True)
     params = mi.traverse(mesh)
@@ -116,9 +116,22 @@ def _rgb(v) -> dict:
     return {"type": "rgb", "value": [float(x) for x in np.asarray(v, dtype=np.float64)]}
 
 
-def scene_dict(desc: SceneDescription) -> dict:
-    """Mitsuba scene dictionary (for ``mi.load_dict``) of a description, without a sensor."""
+def _weighted(emitter: dict, weight: float) -> dict:
+    """``emitter`` with Mitsuba's ``sampling_weight`` (omitted at 1, Mitsuba's default: the same scene bytes)."""
+    return emitter if weight == 1.0 else {**emitter, "sampling_weight": float(weight)}
+
+
+def scene_dict(desc: SceneDescription, emitter_weights: dict | None = None) -> dict:
+    """Mitsuba scene dictionary (for ``mi.load_dict``) of a description, without a sensor.
+
+    ``emitter_weights`` maps ``"sun"``, ``"sky"`` and ``"area"`` (every emitting shape) to the
+    relative probability that next-event estimation picks that emitter (Mitsuba's
+    ``sampling_weight``; default 1 each, Mitsuba's uniform choice).  The weights change the
+    noise, not the expected radiance.
+    """
     import mitsuba as mi
+
+    w = {"sun": 1.0, "sky": 1.0, "area": 1.0, **(emitter_weights or {})}
 
     bsdfs = {name: _bsdf(mat) for name, mat in sorted(desc.materials.items())}
     d: dict = {"type": "scene", "integrator": {"type": INTEGRATOR, "max_depth": int(desc.max_depth),
@@ -126,7 +139,7 @@ def scene_dict(desc: SceneDescription) -> dict:
     for i, shape in enumerate(desc.shapes):
         key = f"shape_{i:03d}"
         if shape.kind == "mesh":
-            d[key] = _mesh(key, shape.mesh, bsdfs[shape.material], shape.radiance)
+            d[key] = _mesh(key, shape.mesh, bsdfs[shape.material], shape.radiance, w["area"])
             continue
         entry: dict
         if shape.kind == "rectangle":
@@ -136,7 +149,7 @@ def scene_dict(desc: SceneDescription) -> dict:
         if shape.material is not None:
             entry["bsdf"] = bsdfs[shape.material]
         if shape.radiance is not None:
-            entry["emitter"] = {"type": "area", "radiance": _rgb(shape.radiance)}
+            entry["emitter"] = _weighted({"type": "area", "radiance": _rgb(shape.radiance)}, w["area"])
         d[key] = entry
     if desc.sun is not None:
         sun = desc.sun
@@ -145,13 +158,13 @@ def scene_dict(desc: SceneDescription) -> dict:
             half = math.radians(sun.angular_diameter_deg) / 2.0
             d["sun"] = {"type": "sphere", "center": [float(c) for c in direction * sun.distance_m],
                         "radius": float(sun.distance_m * math.sin(half)),
-                        "emitter": {"type": "area", "radiance": _rgb(sun.disk_radiance_rgb)}}
+                        "emitter": _weighted({"type": "area", "radiance": _rgb(sun.disk_radiance_rgb)}, w["sun"])}
         else:
-            d["sun"] = {"type": "directional", "direction": [float(c) for c in -direction],
-                        "irradiance": _rgb(sun.irradiance_rgb)}
+            d["sun"] = _weighted({"type": "directional", "direction": [float(c) for c in -direction],
+                                  "irradiance": _rgb(sun.irradiance_rgb)}, w["sun"])
     if desc.sky is not None:
-        d["sky"] = {"type": "envmap", "bitmap": mi.Bitmap(np.ascontiguousarray(desc.sky, dtype=np.float32)),
-                    "to_world": _transform(ENVMAP_TO_WORLD)}
+        d["sky"] = _weighted({"type": "envmap", "bitmap": mi.Bitmap(np.ascontiguousarray(desc.sky, dtype=np.float32)),
+                              "to_world": _transform(ENVMAP_TO_WORLD)}, w["sky"])
     return d
 
 

@@ -13,7 +13,7 @@ import hashlib
 import inspect
 import math
 import types
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
@@ -21,7 +21,10 @@ import numpy as np
 
 from scenes.errors import SceneError
 
-__all__ = ["Scene", "SCENES", "get_scene", "register_scene", "code_fingerprint"]
+__all__ = ["Scene", "SCENES", "EMITTER_KINDS", "get_scene", "register_scene", "code_fingerprint"]
+
+#: The lights a scene's emitter weights name (:meth:`Scene.with_emitter_weights`).
+EMITTER_KINDS = ("sun", "sky", "area")
 
 #: name -> public builder ``f(seed=0, **params) -> Scene``; filled by scenes.library.
 SCENES: dict[str, Callable[..., "Scene"]] = {}
@@ -66,6 +69,11 @@ class Scene:
         Default walking direction, degrees from +x towards +y.
     description : str
         One line on what the scene is for.
+    emitter_weights : tuple of (str, float)
+        How next-event estimation picks a light: relative probabilities of ``"sun"``,
+        ``"sky"`` and ``"area"`` (every emitting shape), Mitsuba's ``sampling_weight``;
+        empty (the default) is Mitsuba's uniform choice.  They change the render noise, not
+        the expected radiance (see :meth:`with_emitter_weights`).
     """
 
     name: str
@@ -76,6 +84,7 @@ class Scene:
     heading_deg: float
     description: str = ""
     _describe: Callable = field(default=None, repr=False)
+    emitter_weights: tuple = ()
 
     def __hash__(self) -> int:
         return hash(self.cache_token())
@@ -84,9 +93,45 @@ class Scene:
         return isinstance(other, Scene) and self.cache_token() == other.cache_token()
 
     def key_material(self) -> dict:
-        """Everything about the scene that affects its pixels (JSON-ready)."""
-        return {"scene": self.name, "params": dict(sorted(self.params.items())), "seed": int(self.seed),
-                "code": code_fingerprint()}
+        """Everything about the scene that affects its pixels (JSON-ready).
+
+        ``emitter_weights`` enters only when set, so the keys of uniform sampling are those of
+        renders made before the option existed.
+        """
+        out = {"scene": self.name, "params": dict(sorted(self.params.items())), "seed": int(self.seed),
+               "code": code_fingerprint()}
+        if self.emitter_weights:
+            out["emitter_weights"] = {k: float(v) for k, v in self.emitter_weights}
+        return out
+
+    def with_emitter_weights(self, weights: Mapping | None) -> "Scene":
+        """This scene with next-event estimation weighted by ``weights`` (None or {}: uniform).
+
+        ``weights`` maps ``"sun"``, ``"sky"`` and ``"area"`` to positive finite numbers (missing
+        ones are 1).  Weighting the sun where it dominates the light cuts the noise of sunlit
+        surfaces; the expected radiance is the same (an unbiased choice of light).  The built
+        description is shared, not built again.
+
+        Raises
+        ------
+        SceneError
+            An unknown emitter name or a weight that is not a positive finite number.
+        """
+        items = []
+        for k, v in sorted(dict(weights or {}).items()):
+            if k not in EMITTER_KINDS:
+                raise SceneError(f"{self.name}: unknown emitter {k!r} in emitter weights; valid: "
+                                 f"{', '.join(EMITTER_KINDS)}")
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not (
+                    math.isfinite(float(v)) and float(v) > 0):
+                raise SceneError(f"{self.name}: emitter weight of {k} must be a positive finite number, got {v!r}")
+            if float(v) != 1.0:
+                items.append((k, float(v)))
+        other = replace(self, emitter_weights=tuple(items))
+        cached = self.__dict__.get("_description")
+        if cached is not None:
+            object.__setattr__(other, "_description", cached)
+        return other
 
     def cache_token(self) -> str:
         """Short hash of :meth:`key_material`."""
@@ -111,7 +156,7 @@ class Scene:
         """The Mitsuba scene dictionary (imports Mitsuba; a variant must be set)."""
         from scenes._mitsuba import scene_dict
 
-        return scene_dict(self.describe())
+        return scene_dict(self.describe(), dict(self.emitter_weights))
 
     def default_pose(self, height_m: float = 1.6, pitch_deg: float = -5.0) -> np.ndarray:
         """Camera-to-world pose (4x4, OpenCV camera frame) at the start, looking along the heading."""

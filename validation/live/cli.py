@@ -18,7 +18,7 @@ from emulator.commands.progress import add_json, add_quiet, bars_enabled, print_
 from emulator.commands import argtypes
 from emulator.distributed import check_scheduler
 from emulator.errors import ExposimError
-from validation.live.config import CONFIG_CHANGES, CONFIGS, DEFAULTS, STUDY_DENOISE, LiveConfig
+from validation.live.config import CONFIG_CHANGES, CONFIGS, DEFAULTS, STUDY_DENOISE, LiveConfig, LiveError
 
 __all__ = ["HELP", "DESCRIPTION", "add_arguments", "register", "build_parser", "config_from_args", "command_line",
            "run", "main"]
@@ -81,6 +81,10 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
                         f"{STUDY_DENOISE}); 'oidn-hq' with --spp 256: render noise no worse than the sensor's "
                         "for SIFT (docs/results/render.md), about 15x the render time of the default; on an NVIDIA "
                         "GPU ('cuda_ad_rgb'), 'off' with --spp 2048 meets it (3.2 s a sweep and camera on an H200)")
+    p.add_argument("--render", metavar="PRESET",
+                   help="a render preset of scenes.presets (e.g. study-oidn8, study-hq) or a setting "
+                        "DENOISER@SPP[+LIGHT=WEIGHT,...]: sets --spp, --denoise and the renders' choice of lights "
+                        "together (docs/results/render.md measures them); not with --spp or --denoise")
     p.add_argument("--keep-radiance", action="store_true", help="keep the datasets' radiance EXRs (large)")
     p.add_argument("--no-run-images", action="store_true",
                    help="delete each walk's run images (runs/<scene>/<run>/<method>/images/left and right) once its "
@@ -122,6 +126,25 @@ def build_parser(prog: str = "python -m validation.live") -> argparse.ArgumentPa
     return add_arguments(argparse.ArgumentParser(prog=prog, description=DESCRIPTION))
 
 
+def _render_changes(args) -> dict:
+    """``--render PRESET`` as the configuration's spp, denoiser and emitter weights."""
+    from scenes.errors import RenderError
+    from scenes.presets import parse_setting
+
+    if args.spp is not None or args.denoise is not None:
+        raise LiveError("--render sets spp and the denoiser: give --render, or --spp and --denoise, not both")
+    try:
+        preset = parse_setting(args.render)
+    except RenderError as exc:
+        raise LiveError(f"--render: {exc}") from None
+    from scenes.denoise import resolve_denoise
+
+    if preset.denoise.enabled and preset.denoise != resolve_denoise(preset.denoise.name):
+        raise LiveError(f"--render {args.render}: a study's denoiser is a named one ({preset.denoise.name} with its own "
+                        f"albedo/normal spp); use a preset or DENOISER@SPP without /AUX_SPP")
+    return {"spp": preset.spp, "denoise": preset.denoise.name, "emitter_weights": preset.emitter_weights}
+
+
 def config_from_args(args) -> LiveConfig:
     """The configuration the options ask for (:class:`~validation.live.config.LiveError` if invalid)."""
     changes = {}
@@ -133,6 +156,8 @@ def config_from_args(args) -> LiveConfig:
                 "render_per", "denoise"):
         if getattr(args, key, None) is not None:
             changes[key] = getattr(args, key)
+    if getattr(args, "render", None) is not None:
+        changes.update(_render_changes(args))
     if args.no_control:
         changes["control"] = False
     if args.keep_radiance:
@@ -148,7 +173,7 @@ def command_line(args, prog: str) -> str:
     if args.quick:
         words.append("--quick")
     for key in ("scenes", "cycles", "size", "spp", "seed", "methods", "noise_repeats", "latency_frames",
-                "frame_rate_hz", "render_per", "denoise"):
+                "frame_rate_hz", "render_per", "denoise", "render"):
         value = getattr(args, key, None)
         if value is None:
             continue

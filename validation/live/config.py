@@ -203,6 +203,10 @@ class LiveConfig:
         Denoiser of the renders (``"oidn"``, ``"oidn-fast"`` or ``"off"``, :mod:`scenes.denoise`);
         None: ``$EXPOSIM_DENOISE`` when set, else :data:`STUDY_DENOISE`.  Resolved when the
         configuration is built, so ``results.json`` records the one the walks used.
+    emitter_weights : tuple of (str, float)
+        How the renders' next-event estimation picks a light (:meth:`scenes.Scene.with_emitter_weights`);
+        empty: uniform (recorded in ``results.json`` only when set).  ``--render PRESET`` sets it with
+        ``spp`` and ``denoise`` (:mod:`scenes.presets`).
     """
 
     scenes: tuple[str, ...] = SCENES
@@ -227,6 +231,7 @@ class LiveConfig:
     frame_rate_hz: float = 22.0
     render_per: str = STUDY_RENDER_PER
     denoise: str | None = None
+    emitter_weights: tuple = ()
 
     def __post_init__(self) -> None:
         import os
@@ -274,6 +279,11 @@ class LiveConfig:
                 raise LiveError(f"${ENV_DENOISE}={env!r} is not a denoiser; valid: {', '.join(DENOISERS)}")
         elif self.denoise not in DENOISERS:
             raise LiveError(f"denoise must be one of {', '.join(DENOISERS)}, got {self.denoise!r}")
+        try:  # the scene handle checks the names and values, and orders them
+            weights = scenes.get_scene("forest_winter").with_emitter_weights(dict(self.emitter_weights))
+        except (TypeError, ValueError, ExposimError) as exc:
+            raise LiveError(f"emitter_weights: {exc}") from None
+        object.__setattr__(self, "emitter_weights", weights.emitter_weights)
 
     @property
     def duration_s(self) -> float:
@@ -290,6 +300,9 @@ class LiveConfig:
     def to_dict(self) -> dict:
         d = asdict(self)
         d["scenes"], d["methods"], d["taus"] = list(self.scenes), list(self.methods), [int(t) for t in self.taus]
+        weights = d.pop("emitter_weights")  # recorded only when set: the records of earlier studies stay as they were
+        if weights:
+            d["emitter_weights"] = {k: float(v) for k, v in weights}
         d["scene_parameters"] = {s: self.scene_parameters(s) for s in self.scenes}
         d["renders"] = self.n_cycles * (12 if self.render_per == "shot" else 2) * len(self.scenes)
         d["fixed_instant"] = "timestamp of the cycle's first shot (bracket index 0, the 1 ms bracket)"
@@ -334,4 +347,6 @@ def config_from_dict(d: dict) -> LiveConfig:
     for k in ("scenes", "methods", "taus"):
         if k in kw:
             kw[k] = tuple(kw[k])
+    if "emitter_weights" in kw:
+        kw["emitter_weights"] = tuple(sorted(dict(kw["emitter_weights"]).items()))
     return LiveConfig(**kw)

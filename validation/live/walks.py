@@ -322,6 +322,7 @@ def run_walk(config: dict, scene_name: str, experiment: str, cache_dir=None, nat
     timings: dict[str, float] = {}
     tag = walk_name(scene_name, cfg.seed)
     scene = scenes.get_scene(scene_name, seed=cfg.seed, **cfg.scene_parameters(scene_name))
+    scene = scene.with_emitter_weights(dict(cfg.emitter_weights))
     ds = exp / "datasets" / scene_name
     with _bar(cfg.n_cycles * 6, f"{tag}: render + record", progress) as bar:
         synthesize(scene, ds, n_cycles=cfg.n_cycles, width=cfg.width, height=cfg.height, spp=cfg.spp, stereo=True,
