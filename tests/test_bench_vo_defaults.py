@@ -14,7 +14,7 @@ from emulator.cli import main
 from emulator.metrics.bench import no_reference_note, REFINE_THRESHOLD_FRACTION, bench_vo, evo_result_path
 from emulator.metrics.vo import VOParameters
 
-from conftest import SAMPLE_SEQ
+from conftest import SAMPLE_SEQ, missing_shared
 
 try:
     from test_metrics_vo import make_synthetic_run
@@ -131,7 +131,7 @@ def test_failed_bench_leaves_no_output_folder(parallel, tmp_path, capsys):
 def test_real_sample_with_no_extra_flags(tmp_path, capsys):
     """`exposim run` on the shared sample, then `bench vo RUN -o OUT` with no calibration flag."""
     if not SAMPLE_SEQ.is_dir():
-        pytest.skip("shared BorealHDR sample not available")
+        missing_shared("shared BorealHDR sample not available")
     run = tmp_path / "run"
     assert main(["run", str(SAMPLE_SEQ), "--methods", "fixed", "--save", "png16", "-o", str(run),
                  "--no-progress"]) == 0
