@@ -344,3 +344,40 @@ def test_paper_figures_name_methods_as_the_command_line_does():
     assert "worst (classical-30, classical-70, kim)" in names and "best (classical-50)" in names
     md = report.features_report(_features_results({"fixed": [61, 40, 55], "kim": [30, 12]}), "fig4.png")
     assert "M_fixed" not in md and "Median matches of fixed:" in md and "emulator." not in md
+
+
+def test_trajectories_without_a_reference_are_a_top_view_named_by_its_plane():
+    """Issue 46: a walk that bobs 0.3 m vertically (y) and drifts 0.1 m sideways (x) was drawn as y against z."""
+    t = np.linspace(0.0, 1.0, 30)
+    xyz = np.column_stack([0.1 * t, 0.3 * np.sin(20 * t), 2.0 * t])
+    fig = report.trajectories_figure({"fixed": xyz}, None)
+    (ax,) = fig.axes
+    assert ax.get_xlabel() == "x (m)" and ax.get_ylabel() == "z (m)"
+    assert "top view (plane x-z" in ax.get_title()
+
+
+def _vo_entry(tracked, stereo, inliers, rows):
+    from emulator.metrics.vo_bench import vo_summary
+
+    frames = {"tracked": tracked, "n_stereo_points": stereo, "n_inliers": inliers, "row_offset_px": rows}
+    xyz = np.column_stack([np.zeros(len(tracked)), np.zeros(len(tracked)), 0.1 * np.arange(len(tracked))])
+    return {"status": "success" if all(tracked) else "failed", "n_frames": len(tracked), "n_tracked": sum(tracked),
+            "failures": [], "rpe": None, "rpe_skipped": "no reference", "summary": vo_summary(frames, xyz)}
+
+
+def test_vo_without_a_reference_ranks_methods_on_their_vo_table():
+    from emulator.metrics.vo_bench import vo_ranking
+
+    methods = {"fixed": _vo_entry([True] * 4, [800, 1500, 1900, 1700], [0, 650, 1240, 1330], [0.0, 0.01, None, -0.01]),
+               "kim": _vo_entry([True, False, True, True], [800, 27, 1700, 2700], [0, 21, 21, 1020], [0, 0.08, 0, 0]),
+               "shim": _vo_entry([True] * 4, [790, 850, 970, 800], [0, 630, 650, 660], [0, 0, 0, 0])}
+    s = methods["fixed"]["summary"]
+    assert s == {"n_tracked": 4, "n_frames": 4, "median_stereo_points": 1600.0, "median_inliers": 1240.0,
+                 "median_row_offset_px": 0.0, "path_length_m": pytest.approx(0.3)}
+    assert vo_ranking(methods) == ["fixed", "shim", "kim"]  # kim lost a frame; fixed has more inliers than shim
+    results = {**_vo_results(), "reference": None, "methods": methods, "ranking_without_reference": vo_ranking(methods)}
+    md = report.vo_report(results, {"trajectories": "trajectories.png"})
+    table, _ = _table_and_after(md, "| rank | method |")
+    assert table[2] == "| 1 | fixed | 4/4 | 1600 | 1240 | 0.00 | 0.300 |"
+    assert table[4].startswith("| 3 | kim | 3/4 | 1250 | 21 |")
+    assert "fig6" not in md and "## VO by method, without a reference" in md

@@ -13,7 +13,7 @@ import shutil
 import sys
 from pathlib import Path
 
-from emulator.commands.progress import add_quiet, bars_enabled
+from emulator.commands.progress import add_quiet, progress_for
 
 __all__ = ["register"]
 
@@ -115,7 +115,7 @@ def _bench_features(args, bench_features):
         max_frames=args.max_frames,
         every_frame=args.every_frame,
         force=args.force,
-        progress=bars_enabled(args.quiet),
+        progress=progress_for("exposim bench features", args.quiet),
         command=_command_line(args, ("run_dirs",)),
     )
 
@@ -175,7 +175,7 @@ def _bench_vo(args, bench_vo, params):
         max_frames=args.max_frames,
         every_frame=args.every_frame,
         force=args.force,
-        progress=bars_enabled(args.quiet),
+        progress=progress_for("exposim bench vo", args.quiet),
         command=_command_line(args, ("run_dir",)),
     )
 

@@ -2,7 +2,9 @@
 
 ``-q/--quiet`` turns progress bars off (``--no-progress`` is kept as a hidden alias of
 it).  Bars are drawn on stderr, and only when stderr is a terminal: in a Slurm or CI log
-(stderr redirected to a file or a pipe) there is no bar at all.  A command makes its bar
+(stderr redirected to a file or a pipe) there is no bar; a long command prints plain stage
+lines there instead (:func:`log_lines`): one as each stage (method) starts, one at least every
+:data:`LOG_EVERY_S` seconds within it, one as it ends.  A command makes its bar
 after its arguments have been checked, so an argument error never follows a bar.
 """
 
@@ -11,7 +13,10 @@ from __future__ import annotations
 import argparse
 import sys
 
-__all__ = ["add_quiet", "add_json", "print_json", "bars_enabled", "progress_bar"]
+__all__ = ["add_quiet", "add_json", "print_json", "bars_enabled", "progress_bar", "log_lines", "progress_for", "LOG_EVERY_S"]
+
+#: Most seconds between two progress lines in a log (stderr not a terminal).
+LOG_EVERY_S = 20.0
 
 
 def add_quiet(parser: argparse.ArgumentParser, help: str = "no progress bar") -> None:
@@ -50,3 +55,39 @@ def progress_bar(quiet: bool = False, **kwargs):
     kwargs.setdefault("file", sys.stderr)
     kwargs.setdefault("dynamic_ncols", True)
     return tqdm(disable=not bars_enabled(quiet, kwargs["file"]), **kwargs)
+
+
+
+def log_lines(command: str, quiet: bool = False, stream=None, clock=None):
+    """Where stderr is not a terminal (a log: nohup, CI, Slurm) and not ``quiet``: the callback
+    ``progress(stage, done, total)`` that prints ``COMMAND [12 s]: STAGE done/total`` on stderr as a stage
+    starts (``done == 0`` or a new stage), at least every :data:`LOG_EVERY_S` seconds, and as it ends
+    (``done == total``).  None on a terminal (the bars serve there) or when quiet.
+
+    ``clock`` (default :func:`time.monotonic`) gives seconds; a test passes its own.
+    """
+    import time
+
+    stream = sys.stderr if stream is None else stream
+    if quiet or bars_enabled(False, stream):
+        return None
+    clock = time.monotonic if clock is None else clock
+    start = clock()
+    state = {"stage": None, "last": -float("inf")}
+
+    def progress(stage: str, done: int, total) -> None:
+        now = clock()
+        if stage != state["stage"] or done == 0 or done == total or now - state["last"] >= LOG_EVERY_S:
+            state["stage"], state["last"] = stage, now
+            count = ("" if not done else f" {done}") if total is None else f" {done}/{total}"
+            print(f"{command} [{now - start:.0f} s]: {stage}{count}", file=stream, flush=True)
+
+    return progress
+
+
+def progress_for(command: str, quiet: bool = False):
+    """What a library's ``progress`` argument gets: True (bars) on a terminal, :func:`log_lines` in a log,
+    False when quiet."""
+    if bars_enabled(quiet):
+        return True
+    return log_lines(command, quiet) or False

@@ -7,7 +7,7 @@ import shlex
 import sys
 from pathlib import Path
 
-from emulator.commands.progress import add_quiet, bars_enabled
+from emulator.commands.progress import add_quiet, bars_enabled, log_lines
 from emulator.distributed import SCHEDULER_HELP, resolve_scheduler
 from emulator.errors import ExposimError
 
@@ -311,7 +311,13 @@ def _run(args) -> int:
     _warn_broken_plugins()
     progress = None
     bar = None
-    if bars_enabled(args.quiet):
+    lines = log_lines("exposim run", args.quiet)
+    if lines is not None:  # a log (nohup, CI): a line at the start, every LOG_EVERY_S seconds and at the end
+        unit = "frames" if config.rate == "native" else "cycles"
+
+        def progress(done: int, total: int) -> None:
+            lines(unit, done, total)
+    elif bars_enabled(args.quiet):
         from tqdm import tqdm
 
         def progress(done: int, total: int) -> None:

@@ -38,6 +38,7 @@ __all__ = [
     "features_intervals_markdown",
     "features_verdicts",
     "vo_report",
+    "vo_table_markdown",
     "extrinsics_sentence",
     "vo_verdicts",
     "PAPER_FEATURES",
@@ -137,9 +138,11 @@ def trajectories_figure(trajectories: dict, reference_xyz: np.ndarray | None):
         everything.append(np.asarray(reference_xyz).reshape(-1, 3))
     stacked = np.concatenate(everything) if everything else np.zeros((1, 3))
     stacked = stacked[np.all(np.isfinite(stacked), axis=1)] if np.isfinite(stacked).any() else np.zeros((1, 3))
-    # Top view: the two axes along which the trajectories extend most (x-z for camera
-    # frames with y down, x-y for a z-up lidar map).
-    a, b = sorted(np.argsort(np.ptp(stacked, axis=0))[-2:])
+    # Top view.  Without a reference the poses are in the first left camera's axes (OpenCV: x right,
+    # y down, z forward): the ground plane is x-z.  Aligned to a reference, in the reference's frame:
+    # the two axes along which the trajectories extend most (x-y for a z-up lidar map).
+    no_ref = reference_xyz is None or not len(reference_xyz)
+    a, b = (0, 2) if no_ref else sorted(np.argsort(np.ptp(stacked, axis=0))[-2:])
     if reference_xyz is not None and len(reference_xyz):
         ax.plot(reference_xyz[:, a], reference_xyz[:, b], "k--", lw=2, label="reference")
     for name, xyz in trajectories.items():
@@ -155,14 +158,16 @@ def trajectories_figure(trajectories: dict, reference_xyz: np.ndarray | None):
     if to_scale:
         ax.set_aspect("equal", adjustable="box")
     legend_outside(ax)
-    title = ("VO trajectories (Sim(3)-aligned to the reference)" if reference_xyz is not None
-             else "VO trajectories")
+    plane = f"plane {'xyz'[a]}-{'xyz'[b]}"
+    title = (f"VO trajectories (Sim(3)-aligned to the reference), {plane}" if reference_xyz is not None
+             else f"VO trajectories, top view ({plane}: first left camera, x right, z forward)")
     ax.set_title(title + ("" if to_scale else "\naxes not to scale"))
     return fig
 
 
 def plot_trajectories(trajectories: dict, reference_xyz: np.ndarray | None, path: str | Path) -> Path:
-    """Top view of VO trajectories (the two axes of largest extent), limits from the data.
+    """Top view of VO trajectories, limits from the data: x-z of the first left camera without a reference,
+    the two axes of largest extent of the reference's frame with one; the title names the plane.
 
     Parameters
     ----------
@@ -328,6 +333,32 @@ def extrinsics_sentence(ext: dict) -> str:
             + f". Refinement rule: {ext['criterion']}.")
 
 
+def vo_table_markdown(results: dict) -> list[str]:
+    """The per-method VO table that needs no reference (stereo points, PnP inliers, row offset, path
+    length, frames tracked), ranked as :func:`emulator.metrics.vo_bench.vo_ranking` ranks them when the
+    run has no reference; empty for results written before the table existed."""
+    methods = {n: m["summary"] for n, m in results["methods"].items() if m.get("summary")}
+    if not methods:
+        return []
+    ranking = results.get("ranking_without_reference") or list(methods)
+    ranked = results.get("reference") is None
+    lines = ["", "## VO by method, without a reference" if ranked else "## VO by method", ""]
+    if ranked:
+        lines += ["Without a reference trajectory the RPE cannot tell the methods apart; they are ranked here "
+                  "on the VO itself: most frames tracked, then most PnP inliers per step (median), then most "
+                  "stereo points per frame (median). The path length is the VO's own (not scale-aligned); "
+                  "methods on one recording should agree on it, a method far from the others has drifted.", ""]
+    lines += ["| " + ("rank | " if ranked else "") + "method | frames tracked | median stereo points per frame | "
+              "median PnP inliers per step | median row offset after rectification (px) | VO path length (m) |",
+              "| " + ("--- | " if ranked else "") + "--- | --- | --- | --- | --- | --- |"]
+    for k, name in enumerate([n for n in ranking if n in methods], 1):
+        m = methods[name]
+        lines.append("| " + (f"{k} | " if ranked else "") + f"{name} | {m['n_tracked']}/{m['n_frames']} | "
+                     f"{_fmt(m['median_stereo_points'], '.0f')} | {_fmt(m['median_inliers'], '.0f')} | "
+                     f"{_fmt(m['median_row_offset_px'], '.2f')} | {m['path_length_m']:.3f} |")
+    return lines
+
+
 def vo_report(results: dict, figures: dict[str, str]) -> str:
     """Markdown report of the stereo VO benchmark, beside the paper's Fig. 6 numbers."""
     p = results["parameters"]
@@ -388,6 +419,7 @@ def vo_report(results: dict, figures: dict[str, str]) -> str:
             f"| {name} | {m['status']} | {m['n_frames']} | {m['n_tracked']} | "
             f"{len(m['failures'])}{' (' + ', '.join(reasons) + ')' if reasons else ''} | {scale} | {trans} | {rot} |"
         )
+    lines += vo_table_markdown(results)
     lines += vo_intervals_markdown(results)
     lines += ["", DASH_NOTE + " In the relative pose error figure a dotted line is a method whose VO failed on some frames "
               "(RPE computed anyway); its legend entry says so.", ""]
