@@ -357,7 +357,7 @@ def test_trajectories_without_a_reference_are_a_top_view_named_by_its_plane():
 
 
 def _vo_entry(tracked, stereo, inliers, rows):
-    from emulator.metrics.vo_bench import vo_summary
+    from emulator.metrics.vo_table import vo_summary
 
     frames = {"tracked": tracked, "n_stereo_points": stereo, "n_inliers": inliers, "row_offset_px": rows}
     xyz = np.column_stack([np.zeros(len(tracked)), np.zeros(len(tracked)), 0.1 * np.arange(len(tracked))])
@@ -366,7 +366,7 @@ def _vo_entry(tracked, stereo, inliers, rows):
 
 
 def test_vo_without_a_reference_ranks_methods_on_their_vo_table():
-    from emulator.metrics.vo_bench import vo_ranking
+    from emulator.metrics.vo_table import vo_ranking
 
     methods = {"fixed": _vo_entry([True] * 4, [800, 1500, 1900, 1700], [0, 650, 1240, 1330], [0.0, 0.01, None, -0.01]),
                "kim": _vo_entry([True, False, True, True], [800, 27, 1700, 2700], [0, 21, 21, 1020], [0, 0.08, 0, 0]),

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from emulator.errors import CalibrationError, ExposimError, MetricsError, RunFolderError, TrajectoryError
-from emulator.io.files import RESULTS_FILE, prepare_output, write_results
+from emulator.io.files import RESULTS_FILE, prepare_output
 from emulator.io.runfolder import RunFolder, read_run_folder
 from emulator.io.tum import write_tum
 from emulator.metrics.bench_common import CONVERSION, _features_sheet, _frames, _progress, _version, benchmark_frames
@@ -30,12 +30,10 @@ from emulator.metrics.stereo import (
 )
 from emulator.metrics.trajectory import associate, read_trajectory, trajectory_from_poses
 from emulator.metrics.vo import VOParameters, run_stereo_vo
-from emulator.report.html import write_report
+from emulator.metrics.vo_table import vo_ranking, vo_summary
 
 __all__ = [
     "bench_vo",
-    "vo_summary",
-    "vo_ranking",
     "check_extrinsics",
     "FAILURE_POLICY",
     "DEFAULT_DELTA_FRACTIONS",
@@ -301,37 +299,6 @@ def _vo_method(name, frames, run, rect, parameters, out, progress, ref_traj, ref
     return entry, _aligned_for_plot(est_s, ref_s), ref_s
 
 
-def _median(values) -> float | None:
-    kept = [float(v) for v in values if v is not None and np.isfinite(v)]
-    return float(np.median(kept)) if kept else None
-
-
-def vo_summary(frames: dict, positions_xyz) -> dict:
-    """One method's VO in figures that need no reference: frames tracked, the median stereo points per
-    frame, PnP inliers per step (the first frame has no step) and row offset after rectification (px),
-    and the length of the VO path (m, the sum of the steps)."""
-    xyz = np.asarray(positions_xyz, dtype=np.float64).reshape(-1, 3)
-    steps = np.linalg.norm(np.diff(xyz, axis=0), axis=1) if len(xyz) > 1 else np.zeros(0)
-    return {
-        "n_tracked": int(sum(bool(t) for t in frames["tracked"])),
-        "n_frames": len(frames["tracked"]),
-        "median_stereo_points": _median(frames["n_stereo_points"]),
-        "median_inliers": _median(frames["n_inliers"][1:]),
-        "median_row_offset_px": _median(frames["row_offset_px"]),
-        "path_length_m": float(steps[np.isfinite(steps)].sum()),
-    }
-
-
-def vo_ranking(method_results: dict) -> list[str]:
-    """Methods ranked without a reference: most frames tracked first, then the most PnP inliers per step
-    (median), then the most stereo points per frame (median)."""
-    def key(name):
-        s = method_results[name]["summary"]
-        return (-s["n_tracked"], -(s["median_inliers"] or 0.0), -(s["median_stereo_points"] or 0.0), name)
-
-    return sorted((n for n, e in method_results.items() if e.get("summary")), key=key)
-
-
 def rpe_intervals(method_results: dict, *, seed: int = 0) -> list[dict]:
     """Per RPE pair length: each method's median translation RPE (% of the length) with a 95 % interval
     and its difference from the best (lowest) with an interval, by a circular block bootstrap over
@@ -524,14 +491,8 @@ def bench_vo(
         "figures": ({"fig6": "fig6_rpe.png"} if ref_traj is not None else {}) | {"trajectories": "trajectories.png"},
         "report": "report.md",
     }
-    from emulator.report import bench as report
+    from emulator.report.bench import write_vo_report
 
-    figures = {"trajectories": "trajectories.png"}
-    if ref_traj is not None:  # RPE plots only where there is a reference
-        report.plot_rpe(results, out / "fig6_rpe.png")
-        figures = {"RPE against trajectory length (Fig. 6)": "fig6_rpe.png", **figures}
-    report.plot_trajectories(aligned_xyz, ref_xyz if ref_traj is not None else None, out / "trajectories.png")
-    write_report(out, report.vo_report(results, figures), figures=list(figures.values()),
-                 sheets=[_features_sheet(run, None, max_frames)])
-    write_results(out / RESULTS_FILE, results)
+    write_vo_report(out, results, aligned_xyz, ref_xyz if ref_traj is not None else None,
+                    _features_sheet(run, None, max_frames), with_rpe=ref_traj is not None)
     return results

@@ -39,6 +39,7 @@ __all__ = [
     "features_verdicts",
     "vo_report",
     "vo_table_markdown",
+    "write_vo_report",
     "extrinsics_sentence",
     "vo_verdicts",
     "PAPER_FEATURES",
@@ -335,7 +336,7 @@ def extrinsics_sentence(ext: dict) -> str:
 
 def vo_table_markdown(results: dict) -> list[str]:
     """The per-method VO table that needs no reference (stereo points, PnP inliers, row offset, path
-    length, frames tracked), ranked as :func:`emulator.metrics.vo_bench.vo_ranking` ranks them when the
+    length, frames tracked), ranked as :func:`emulator.metrics.vo_table.vo_ranking` ranks them when the
     run has no reference; empty for results written before the table existed."""
     methods = {n: m["summary"] for n, m in results["methods"].items() if m.get("summary")}
     if not methods:
@@ -430,3 +431,18 @@ def vo_report(results: dict, figures: dict[str, str]) -> str:
     lines += ["", "## Verdicts", ""] + [f"- {v}" for v in vo_verdicts(results)]
     lines += ["", f"Command: `{results.get('command') or '(library call)'}`", ""]
     return "\n".join(lines)
+
+
+def write_vo_report(out: Path, results: dict, aligned_xyz: dict, reference_xyz, sheet, *, with_rpe: bool) -> None:
+    """The VO benchmark's figures (``fig6_rpe.png`` only ``with_rpe``, where there is a reference;
+    ``trajectories.png``), ``report.md``, ``report.html`` (with ``sheet``) and ``results.json`` in ``out``."""
+    from emulator.io.files import RESULTS_FILE, write_results
+    from emulator.report.html import write_report
+
+    figures = {"trajectories": "trajectories.png"}
+    if with_rpe:
+        plot_rpe(results, out / "fig6_rpe.png")
+        figures = {"RPE against trajectory length (Fig. 6)": "fig6_rpe.png", **figures}
+    plot_trajectories(aligned_xyz, reference_xyz, out / "trajectories.png")
+    write_report(out, vo_report(results, figures), figures=list(figures.values()), sheets=[sheet])
+    write_results(out / RESULTS_FILE, results)
