@@ -86,7 +86,7 @@ def test_features_report_units_and_dash_note():
     assert "| 25.0 |" in fixed  # uniformity 0.25 shown in percent
     shim = next(row for row in table if row.startswith("| shim"))
     assert shim.count("| - ") >= 3  # no pair: no figure
-    assert after[1] == DASH_NOTE  # the note directly under the table
+    assert after[1] == report.FEATURES_DASH_NOTE and "RPE" not in after[1]  # the note directly under the table
     assert "## Verdicts" in md
 
 

@@ -82,3 +82,12 @@ def test_latency_zero_keeps_the_cycle_rate_method():
 def test_fixed_freezes_one_exposure_on_the_shared_sample(sample_seq, tmp_path, latency):
     ms = _native_fixed(sample_seq, tmp_path / "run", latency, workers="inline")
     _check_frozen(ms, latency)
+
+
+def test_the_native_report_counts_frames_and_says_where_fixed_differs(recording, tmp_path):
+    _native_fixed(recording, tmp_path / "run", 1, initial_ms=1.0)
+    report = (tmp_path / "run" / "report.md").read_text()
+    assert "| method | mode | frames |" in report and "over the run's frames" in report
+    assert "over the run's cycles" not in report
+    assert "frames from partial cycles" in report or "Flags" not in report
+    assert "on this run the two differ" in report and "identical to classical-50" not in report

@@ -13,7 +13,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-__all__ = ["add_quiet", "add_json", "print_json", "bars_enabled", "progress_bar", "log_lines", "progress_for", "LOG_EVERY_S"]
+__all__ = ["add_quiet", "add_json", "print_json", "bars_enabled", "progress_bar", "log_lines", "progress_for",
+           "LOG_EVERY_S"]
 
 #: Most seconds between two progress lines in a log (stderr not a terminal).
 LOG_EVERY_S = 20.0

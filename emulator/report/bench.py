@@ -285,6 +285,11 @@ def vo_intervals_markdown(results: dict) -> list[str]:
     return lines
 
 
+#: The note under the features table: its "-" cells (no RPE in this benchmark).
+FEATURES_DASH_NOTE = ("A \"-\" cell means the figure does not exist for that row: no image pair (matches, success) "
+                      "or no image (uniformity).")
+
+
 def features_report(results: dict, figure: str) -> str:
     """Markdown report of the feature benchmark, beside the paper's Fig. 4 numbers."""
     p = results["parameters"]
@@ -311,7 +316,7 @@ def features_report(results: dict, figure: str) -> str:
             f"{_fmt(m['median_matches'], '.0f')} | {_fmt(m['min_matches'], 'd')} | "
             f"{_fmt(None if m['success_at_100'] is None else 100 * m['success_at_100'], '.0f')} |"
         )
-    lines += ["", DASH_NOTE, ""]
+    lines += ["", FEATURES_DASH_NOTE, ""]
     lines += features_intervals_markdown(results)
     lines += ["", "Paper (55 trajectories, 1920x1200 images):", ""]
     lines += [f"- {k}: {v}" for k, v in PAPER_FEATURES.items()]
