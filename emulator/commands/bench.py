@@ -1,4 +1,4 @@
-"""``exposim bench features|vo|rpe``: the paper's section V-D benchmarks.
+"""``exposim bench features|vo|rpe|compare``: the paper's section V-D benchmarks, and methods side by side.
 
 Only parses arguments and calls one library function of :mod:`emulator.metrics`;
 OpenCV, evo, tqdm and matplotlib are imported inside the command functions.
@@ -213,6 +213,29 @@ def _vo_summary(args, results) -> int:
     return 0
 
 
+def _compare(args: argparse.Namespace) -> int:
+    from emulator.metrics.compare import bench_compare
+
+    with _removed_on_failure(args.output):
+        results = bench_compare(args.folders, args.output, force=args.force,
+                                command=_command_line(args, ("folders",)))
+    if args.json:
+        _print_json(results)
+    if not args.quiet:
+        cmp = results["comparisons"]
+        primary = cmp[cmp["primary"]]["methods"]
+        scale, unit = (100.0, " %") if cmp["primary"] == "mean_saturated_fraction" else (1.0, "")
+        for k, label in enumerate(results["ranking"], 1):
+            r = primary[label]
+            iv = "" if not r["ci95"] else f" [{scale * r['ci95'][0]:.3g}, {scale * r['ci95'][1]:.3g}]"
+            print(f"{k}. {label}: {cmp['primary'].replace('_', ' ')} {scale * r['estimate']:.3g}{unit}{iv}",
+                  file=sys.stderr)
+        for name, t in (cmp.get("still_trending") or {}).items():
+            print(f"too short to settle: {name} still {t['direction']} at the end", file=sys.stderr)
+        print(f"wrote {args.output}/results.json, report.md, report.html", file=sys.stderr)
+    return 0
+
+
 def _rpe(args: argparse.Namespace) -> int:
     from emulator.metrics.rpe import looks_like_estimate, rpe_files
 
@@ -349,6 +372,22 @@ def register(subparsers) -> None:
                    help="max timestamp difference for association in s (default 0.01, as evo_rpe)")
     r.add_argument("--json", action="store_true", help='print {"rmse": ..., "mean": ..., "median": ...} only')
     r.set_defaults(func=_rpe)
+
+    c = sub.add_parser(
+        "compare",
+        help="methods of several run (or bench features) folders side by side, in one ranking",
+        description="Put the methods of several folders of one recording in one table with 95 % intervals: run "
+        "folders of `exposim run` (mean saturated fraction, mean exposure) or output folders of `exposim bench "
+        "features` (median matches, median uniformity). A plugin-only run and an earlier run of the built-ins "
+        "make one ranking; a cycle-rate and a native-rate run of the same methods stand side by side, judged "
+        "on the same recorder cycles. A method in several folders is named by its rate, else by its folder.",
+    )
+    c.add_argument("folders", nargs="+", metavar="FOLDER", help="run folders, or bench features folders (one kind)")
+    c.add_argument("-o", "--output", required=True, help="output folder (results.json, report.md, report.html)")
+    c.add_argument("--force", action="store_true", help="overwrite an existing results.json")
+    add_quiet(c, "no summary")
+    c.add_argument("--json", action="store_true", help="print results.json to stdout")
+    c.set_defaults(func=_compare)
 
 
 register.order = 40  # place in `exposim --help`

@@ -344,7 +344,10 @@ def run_markdown(info: dict, summary: dict, tables: dict | None = None) -> str:
                   + ", ".join(f"{n} {_fmt(r['estimate'])} ms [{_fmt(r['ci95'][0] if r['ci95'] else None)}, "
                               f"{_fmt(r['ci95'][1] if r['ci95'] else None)}]" for n, r in iv["mean_exposure_ms"].items())
                   + ".", "", "Mean saturated fraction (%), lower is better:", ""]
-        lines += comparison_table(iv["mean_saturated_fraction"], "mean saturated (%)", spec=".2f", scale=100.0)
+        from emulator.report.intervals import mark_trending
+
+        lines += comparison_table(mark_trending(iv["mean_saturated_fraction"], summary.get("still_trending") or {}),
+                                  "mean saturated (%)", spec=".2f", scale=100.0)
     lines += ["", "Saturated: pixels at the black or the white level in the emulated image; valid: pixels the emulation "
               "could reconstruct (not clipped in the source bracket: a black source pixel emulated upwards is not valid). \"-\": no cycle of that method (or no timing recorded)."]
     lines += _fixed_note(info, summary, tables)
