@@ -89,3 +89,27 @@ def test_compare_refuses_mixed_inputs_in_one_line(runs, tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "neither a run folder" in err
     assert not (tmp_path / "o").exists()
+
+
+def test_features_folders_compare_on_matches_and_keep_a_shared_method_apart(tmp_path, capsys):
+    try:
+        from test_metrics_vo import make_synthetic_run
+    except ImportError:  # tests collected as a package
+        from tests.test_metrics_vo import make_synthetic_run
+
+    a = make_synthetic_run(tmp_path / "a", n_frames=4, methods=("fixed", "shim"))["run"]
+    b = make_synthetic_run(tmp_path / "b", n_frames=4, methods=("fixed", "kim"))["run"]
+    for run, out in ((a, "fa"), (b, "fb")):
+        assert main(["bench", "features", str(run), "-o", str(tmp_path / out), "-q"]) == 0
+    assert main(["bench", "compare", str(tmp_path / "fa"), str(tmp_path / "fb"), "-o", str(tmp_path / "c"),
+                 "-q"]) == 0
+    results = json.loads((tmp_path / "c" / "results.json").read_text())
+    assert results["kind"] == "features"
+    matches = results["comparisons"]["median_matches"]["methods"]
+    assert set(matches) == {"fixed (fa)", "shim", "fixed (fb)", "kim"}  # one recording, one rate: by folder
+    fa = json.loads((tmp_path / "fa" / "results.json").read_text())
+    assert matches["shim"]["estimate"] == fa["methods"]["shim"]["median_matches"]
+    assert "| method | median matches, fa | median matches, fb |" in (tmp_path / "c" / "report.md").read_text()
+    # a run folder and a features folder are not compared
+    assert main(["bench", "compare", str(a), str(tmp_path / "fa"), "-o", str(tmp_path / "x")]) == 1
+    assert "not both" in capsys.readouterr().err

@@ -3,6 +3,8 @@ results by rate side by side (:func:`emulator.metrics.compare.bench_compare`).""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from emulator.report.intervals import comparison_table, mark_trending
 
 __all__ = ["compare_markdown", "by_rate_table"]
@@ -32,7 +34,8 @@ def by_rate_table(results: dict, key: str, label: str, spec: str, scale: float) 
     methods = list(dict.fromkeys(r["method"] for r in rows.values()))
     cells = {(r["method"], r["rate"] if _by_rate(results) else r["folder"]): stats.get(lab)
              for lab, r in rows.items()}
-    lines = ["| method | " + " | ".join(f"{label}, {c}" for c in columns) + " |",
+    names = columns if _by_rate(results) else [Path(c).name for c in columns]
+    lines = ["| method | " + " | ".join(f"{label}, {c}" for c in names) + " |",
              "| --- |" + " ---: |" * len(columns)]
     for m in methods:
         lines.append(f"| {m} | " + " | ".join(_cell(cells.get((m, c)), spec, scale) for c in columns) + " |")
