@@ -371,7 +371,7 @@ def run_markdown(info: dict, summary: dict, tables: dict | None = None) -> str:
         lines += [
             "",
             f"Timing: {timing.get('cycles')} {unit} in {_fmt(timing.get('wall_s'))} s "
-            f"({_fmt(timing.get('cycles_per_s'))} cycles/s), {timing.get('decodes')} PNG decodes "
+            f"({_fmt(timing.get('cycles_per_s'))} {unit}/s), {timing.get('decodes')} PNG decodes "
             f"({_fmt(timing.get('decode_ms_per_image'), '.1f')} ms each), {timing.get('emulations')} emulations "
             f"({_fmt(timing.get('emulate_ms_per_image'), '.1f')} ms each).",
         ]
