@@ -193,6 +193,11 @@ def _vo_summary(args, results) -> int:
             print(f"not computed / limited: {note}", file=sys.stderr)
         for name, m in results["methods"].items():
             line = f"{name}: {m['status']}, {m['n_tracked']}/{m['n_frames']} frames tracked"
+            t = m.get("summary")
+            if t:  # the VO table (emulator.metrics.vo_table): what tells methods apart without a reference
+                fmt = lambda v, spec: "-" if v is None else format(v, spec)  # noqa: E731
+                line += (f", median {fmt(t['median_stereo_points'], '.0f')} stereo points, "
+                         f"{fmt(t['median_inliers'], '.0f')} PnP inliers, path {t['path_length_m']:.3f} m")
             if m["rpe"]:
                 first = next((e for e in m["rpe"]["deltas"] if e.get("trans_percent") or e.get("trans_pct")), None)
                 if first:
@@ -207,7 +212,8 @@ def _vo_summary(args, results) -> int:
         for verdict in vo_verdicts(results):
             print(f"verdict: {verdict}", file=sys.stderr)
         print(f"wrote {args.output}/results.json, <method>.txt (TUM; evo_traj tum {args.output}/*.txt), "
-              "fig6_rpe.png, trajectories.png, report.md, report.html"
+              + ("fig6_rpe.png, " if results["reference"] is not None else "")
+              + "trajectories.png, report.md, report.html"
               + (", evo/rpe_*/<method>.zip (evo_res)" if any(m["evo_results"] for m in results["methods"].values())
                  else ""), file=sys.stderr)
     return 0
