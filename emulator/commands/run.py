@@ -377,7 +377,10 @@ def _print_run_summary(args, summary: dict) -> int:
         mean = m["mean_exposure_ms"]
         print(f"  {name:13s} mean {mean:8.3f} ms  next (after last frame) {m['final_exposure_ms']:8.3f} ms  "
               f"sat {m['mean_saturated_fraction']:.2%}" if mean is not None else f"  {name:13s} no cycle")
-    _print_flags(summary.get("flags"))
+    _print_flags(summary.get("flags"), "frame" if native else "cycle")
+    for name, t in (summary.get("still_trending") or {}).items():
+        print(f"unsettled   {name} still {t['direction']} at the end ({100 * abs(t['change_fraction']):.0f} % over the "
+              f"last {t['steps']} recorder cycles): too short a clip to rank it")
     timing = summary.get("timing") or {}
     if timing.get("cycles_per_s"):
         steady = timing.get("steady_cycles_per_s")
@@ -393,8 +396,9 @@ def _print_run_summary(args, summary: dict) -> int:
     return rc
 
 
-def _print_flags(flags: dict | None) -> None:
-    """The report's flags in one or two lines (nothing when nothing was flagged)."""
+def _print_flags(flags: dict | None, unit: str = "cycle") -> None:
+    """The report's flags in one or two lines (nothing when nothing was flagged); ``unit``: a row of the run
+    (``cycle``, or ``frame`` at native rate)."""
     if flags is None:
         return
     partial = flags["partial_cycles"]
@@ -405,7 +409,7 @@ def _print_flags(flags: dict | None) -> None:
     above = {n: m for n, m in flags["methods"].items() if m["cycles_above_ratio_bound"]}
     if above:
         print(f"ratio > {flags['upward_ratio_bound']:g}   " + ", ".join(
-            f"{n}: {m['cycles_above_ratio_bound']} cycle(s), largest {m['worst_upward_ratio']:.3g}"
+            f"{n}: {m['cycles_above_ratio_bound']} {unit}(s), largest {m['worst_upward_ratio']:.3g}"
             for n, m in above.items()))
 
 
