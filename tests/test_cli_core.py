@@ -87,6 +87,19 @@ def test_long_commands_print_stage_lines_in_a_log():
         "exposim bench vo [25 s]: VO fixed 5/5", "exposim bench vo [30 s]: VO kim 0/5",
         "exposim bench vo [50 s]: VO kim 4/5", "exposim bench vo [55 s]: VO kim 5/5"]
     assert log_lines("x", quiet=True, stream=io.StringIO()) is None
+    # the heartbeat: a line when LOG_EVERY_S passes without one (one slow image), from the start
+    log, now[0] = io.StringIO(), 0.0
+    with log_lines("exposim run", stream=log, clock=lambda: now[0]) as lines:
+        lines.beat()
+        now[0] = LOG_EVERY_S
+        lines.beat()
+        lines("frames", 1, 18)
+        now[0] = 1.5 * LOG_EVERY_S
+        lines.beat()
+        now[0] = 2 * LOG_EVERY_S
+        lines.beat()
+    assert log.getvalue().splitlines() == ["exposim run [20 s]: preparing, working", "exposim run [20 s]: frames 1/18",
+                                           "exposim run [40 s]: frames 1/18, working"]
 
     class Tty(io.StringIO):
         def isatty(self):

@@ -103,21 +103,26 @@ def _features(args: argparse.Namespace) -> int:
 
 
 def _bench_features(args, bench_features):
-    return bench_features(
-        args.run_dirs,
-        args.output,
-        methods=_methods(args.methods),
-        grid=(args.grid, args.grid),
-        ratio=_ratio(args),
-        n_features=args.n_features,
-        matcher=args.matcher,
-        scale=args.scale,
-        max_frames=args.max_frames,
-        every_frame=args.every_frame,
-        force=args.force,
-        progress=progress_for("exposim bench features", args.quiet),
-        command=_command_line(args, ("run_dirs",)),
-    )
+    progress = progress_for("exposim bench features", args.quiet)
+    try:
+        return bench_features(
+            args.run_dirs,
+            args.output,
+            methods=_methods(args.methods),
+            grid=(args.grid, args.grid),
+            ratio=_ratio(args),
+            n_features=args.n_features,
+            matcher=args.matcher,
+            scale=args.scale,
+            max_frames=args.max_frames,
+            every_frame=args.every_frame,
+            force=args.force,
+            progress=progress,
+            command=_command_line(args, ("run_dirs",)),
+        )
+    finally:
+        if hasattr(progress, "close"):
+            progress.close()  # the log lines' heartbeat
 
 
 def _features_summary(args, results) -> int:
@@ -158,26 +163,31 @@ def _vo(args: argparse.Namespace) -> int:
 
 
 def _bench_vo(args, bench_vo, params):
-    return bench_vo(
-        args.run_dir,
-        args.output,
-        reference=args.reference,
-        calibration=args.calibration,
-        methods=_methods(args.methods),
-        parameters=params,
-        scale=args.scale,
-        baseline_m=args.baseline_m,
-        refine_extrinsics=args.refine_extrinsics,
-        deltas_m=args.deltas,
-        align_scale=not args.no_align_scale,
-        max_diff_s=args.max_diff,
-        rpe_on_failure=args.rpe_on_failure,
-        max_frames=args.max_frames,
-        every_frame=args.every_frame,
-        force=args.force,
-        progress=progress_for("exposim bench vo", args.quiet),
-        command=_command_line(args, ("run_dir",)),
-    )
+    progress = progress_for("exposim bench vo", args.quiet)
+    try:
+        return bench_vo(
+            args.run_dir,
+            args.output,
+            reference=args.reference,
+            calibration=args.calibration,
+            methods=_methods(args.methods),
+            parameters=params,
+            scale=args.scale,
+            baseline_m=args.baseline_m,
+            refine_extrinsics=args.refine_extrinsics,
+            deltas_m=args.deltas,
+            align_scale=not args.no_align_scale,
+            max_diff_s=args.max_diff,
+            rpe_on_failure=args.rpe_on_failure,
+            max_frames=args.max_frames,
+            every_frame=args.every_frame,
+            force=args.force,
+            progress=progress,
+            command=_command_line(args, ("run_dir",)),
+        )
+    finally:
+        if hasattr(progress, "close"):
+            progress.close()  # the log lines' heartbeat
 
 
 def _vo_summary(args, results) -> int:

@@ -59,31 +59,73 @@ def progress_bar(quiet: bool = False, **kwargs):
 
 
 
-def log_lines(command: str, quiet: bool = False, stream=None, clock=None):
+def log_lines(command: str, quiet: bool = False, stream=None, clock=None, heartbeat: bool = False):
     """Where stderr is not a terminal (a log: nohup, CI, Slurm) and not ``quiet``: the callback
     ``progress(stage, done, total)`` that prints ``COMMAND [12 s]: STAGE done/total`` on stderr as a stage
-    starts (``done == 0`` or a new stage), at least every :data:`LOG_EVERY_S` seconds, and as it ends
-    (``done == total``).  None on a terminal (the bars serve there) or when quiet.
+    starts (``done == 0`` or a new stage), when a report comes :data:`LOG_EVERY_S` seconds or more after
+    the last line, and as it ends (``done == total``).  None on a terminal (the bars serve there) or when
+    quiet.
 
-    ``clock`` (default :func:`time.monotonic`) gives seconds; a test passes its own.
+    ``heartbeat``: a daemon thread also prints ``STAGE done/total, working`` when :data:`LOG_EVERY_S`
+    seconds pass without a line (one slow image), until the callback's ``close()``; use it as a context
+    manager.  ``clock`` (default :func:`time.monotonic`) gives seconds; a test passes its own.
     """
     import time
 
     stream = sys.stderr if stream is None else stream
     if quiet or bars_enabled(False, stream):
         return None
-    clock = time.monotonic if clock is None else clock
-    start = clock()
-    state = {"stage": None, "last": -float("inf")}
+    return _LogLines(command, stream, time.monotonic if clock is None else clock, heartbeat)
 
-    def progress(stage: str, done: int, total) -> None:
-        now = clock()
-        if stage != state["stage"] or done == 0 or done == total or now - state["last"] >= LOG_EVERY_S:
-            state["stage"], state["last"] = stage, now
-            count = ("" if not done else f" {done}") if total is None else f" {done}/{total}"
-            print(f"{command} [{now - start:.0f} s]: {stage}{count}", file=stream, flush=True)
 
-    return progress
+class _LogLines:
+    """The callback of :func:`log_lines`."""
+
+    def __init__(self, command: str, stream, clock, heartbeat: bool) -> None:
+        import threading
+
+        self.command, self.stream, self.clock = command, stream, clock
+        self.start = clock()
+        # before the first report the command is "preparing": the heartbeat's first line comes after LOG_EVERY_S
+        self.stage, self.done, self.total, self.last = "preparing", 0, None, self.start
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        if heartbeat:
+            threading.Thread(target=self._beat, daemon=True, name="exposim-log-lines").start()
+
+    def _line(self, now: float, suffix: str = "") -> None:
+        count = ("" if not self.done else f" {self.done}") if self.total is None else f" {self.done}/{self.total}"
+        print(f"{self.command} [{now - self.start:.0f} s]: {self.stage}{count}{suffix}", file=self.stream, flush=True)
+        self.last = now
+
+    def __call__(self, stage: str, done: int, total) -> None:
+        with self._lock:
+            now = self.clock()
+            new = stage != self.stage
+            self.stage, self.done, self.total = stage, done, total
+            if new or done == 0 or done == total or now - self.last >= LOG_EVERY_S:
+                self._line(now)
+
+    def _beat(self) -> None:
+        while not self._stop.wait(1.0):
+            self.beat()
+
+    def beat(self) -> None:
+        """One heartbeat: a line when :data:`LOG_EVERY_S` seconds passed since the last one."""
+        with self._lock:
+            now = self.clock()
+            if now - self.last >= LOG_EVERY_S:
+                self._line(now, ", working")
+
+    def close(self) -> None:
+        """Stop the heartbeat (if any)."""
+        self._stop.set()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
 
 
 def progress_for(command: str, quiet: bool = False):
@@ -91,4 +133,4 @@ def progress_for(command: str, quiet: bool = False):
     False when quiet."""
     if bars_enabled(quiet):
         return True
-    return log_lines(command, quiet) or False
+    return log_lines(command, quiet, heartbeat=True) or False

@@ -311,7 +311,7 @@ def _run(args) -> int:
     _warn_broken_plugins()
     progress = None
     bar = None
-    lines = log_lines("exposim run", args.quiet)
+    lines = log_lines("exposim run", args.quiet, heartbeat=True)
     if lines is not None:  # a log (nohup, CI): a line at the start, every LOG_EVERY_S seconds and at the end
         unit = "frames" if config.rate == "native" else "cycles"
 
@@ -340,6 +340,8 @@ def _run(args) -> int:
     finally:
         if bar is not None:
             bar.close()
+        if lines is not None:
+            lines.close()
     return _print_run_summary(args, summary)
 
 
