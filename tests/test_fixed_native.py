@@ -91,3 +91,15 @@ def test_the_native_report_counts_frames_and_says_where_fixed_differs(recording,
     assert "over the run's cycles" not in report
     assert "frames from partial cycles" in report or "Flags" not in report
     assert "on this run the two differ" in report and "identical to classical-50" not in report
+
+
+def test_a_native_run_in_a_log_prints_its_frames(recording, tmp_path, capsys):
+    """Issue 46: off a terminal ``run --rate native`` prints stage lines (here stderr is captured, not a tty)."""
+    from emulator.cli import main
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main(["run", str(recording), "--rate", "native", "--methods", "fixed", "-o", str(tmp_path / "r")]) == 0
+    err = capsys.readouterr().err
+    assert "exposim run [" in err and ": frames 1/24" in err and ": frames 24/24" in err
+    assert _exposures(tmp_path / "r")[6:] == [_exposures(tmp_path / "r")[6]] * 18  # frozen from frame 3 x 2

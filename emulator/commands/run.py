@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import functools
 import shlex
 import sys
 from pathlib import Path
@@ -313,10 +314,7 @@ def _run(args) -> int:
     bar = None
     lines = log_lines("exposim run", args.quiet, heartbeat=True)
     if lines is not None:  # a log (nohup, CI): a line at the start, every LOG_EVERY_S seconds and at the end
-        unit = "frames" if config.rate == "native" else "cycles"
-
-        def progress(done: int, total: int) -> None:
-            lines(unit, done, total)
+        progress = functools.partial(lines, "frames" if config.rate == "native" else "cycles")
     elif bars_enabled(args.quiet):
         from tqdm import tqdm
 
@@ -399,8 +397,7 @@ def _print_run_summary(args, summary: dict) -> int:
 
 
 def _print_flags(flags: dict | None, unit: str = "cycle") -> None:
-    """The report's flags in one or two lines (nothing when nothing was flagged); ``unit``: a row of the run
-    (``cycle``, or ``frame`` at native rate)."""
+    """The report's flags in one or two lines (nothing when nothing was flagged); ``unit``: a row of the run."""
     if flags is None:
         return
     partial = flags["partial_cycles"]
