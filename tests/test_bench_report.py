@@ -381,3 +381,29 @@ def test_vo_without_a_reference_ranks_methods_on_their_vo_table():
     assert table[2] == "| 1 | fixed | 4/4 | 1600 | 1240 | 0.00 | 0.300 |"
     assert table[4].startswith("| 3 | kim | 3/4 | 1250 | 21 |")
     assert "fig6" not in md and "## VO by method, without a reference" in md
+
+
+def test_features_report_marks_methods_that_had_not_settled():
+    """Issue 46: on a short clip a method still climbing at the end is marked beside its "best"/"differs"."""
+    res = _features_results({"fixed": [61, 40, 55, 70], "kim": [30, 12, 20, 25]})
+    res["runs"][0]["still_trending"] = {"kim": {"direction": "rising", "change_fraction": 0.4, "steps": 3}}
+    md = report.features_report(res, "fig4.png")
+    table, _ = _table_and_after(md, "| method | median matches |")
+    assert table[3].startswith("| kim (still rising) | 22.5 |")
+    assert "**Too short to settle:**" in md
+    assert "still rising" not in report.features_report(_features_results({"fixed": [61, 40], "kim": [30, 12]}),
+                                                        "fig4.png")
+
+
+def test_bench_features_records_the_methods_still_trending(tmp_path):
+    from emulator.metrics.bench import _still_trending
+
+    run = tmp_path / "run"
+    for name, ms in (("kim", [1.0, 2.0, 4.0, 8.0]), ("fixed", [4.0, 4.0, 4.0, 4.0])):
+        (run / name).mkdir(parents=True)
+        rows = "".join(f"{k},{k},{t},4,1,0,1\n" for k, t in enumerate(ms))
+        (run / name / "exposures.csv").write_text(
+            "cycle,timestamp_ns,target_ms,bracket_ms,ratio,saturated_fraction,valid_fraction\n" + rows)
+    got = _still_trending(run, ["kim", "fixed"])
+    assert got == {"still_trending": {"kim": {"direction": "rising", "change_fraction": 7.0, "steps": 3}}}
+    assert _still_trending(tmp_path / "nothing", ["kim"]) == {}

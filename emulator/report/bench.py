@@ -256,14 +256,22 @@ def features_intervals_markdown(results: dict) -> list[str]:
     """The tables of :func:`features_intervals` (nothing when no method has a pair)."""
     from emulator.report.intervals import comparison_table
 
+    from emulator.report.intervals import mark_trending
+
     iv = features_intervals(results)
     if iv["median_matches"]["best"] is None:
         return []
+    trending = {m: t for run in results["runs"] for m, t in (run.get("still_trending") or {}).items()}
     lines = ["Methods compared with 95 % intervals (circular block bootstrap over consecutive pairs / images; "
              "\"cannot tell apart\": the difference's interval holds 0):", ""]
-    lines += comparison_table(iv["median_matches"], "median matches", spec=".1f")
+    lines += comparison_table(mark_trending(iv["median_matches"], trending), "median matches", spec=".1f")
     if iv["median_uniformity"]["best"] is not None:
-        lines += [""] + comparison_table(iv["median_uniformity"], "median uniformity (%)", spec=".1f", scale=100.0)
+        lines += [""] + comparison_table(mark_trending(iv["median_uniformity"], trending), "median uniformity (%)",
+                                         spec=".1f", scale=100.0)
+    if trending:
+        lines += ["", "**Too short to settle:** the methods marked \"still rising\" or \"still falling\" had not "
+                  "settled at the end of the run (their exposure moved one way by 5 % or more over the last 3 "
+                  "recorder cycles): their \"best\" or \"differs\" describes the approach, not where they settle."]
     return lines
 
 
