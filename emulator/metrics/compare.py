@@ -17,14 +17,13 @@ Intervals: circular block bootstrap over the units (:func:`emulator.stats.compar
 
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 
 import numpy as np
 
 from emulator.errors import MetricsError
-from emulator.io.files import RESULTS_FILE, prepare_output, write_results
+from emulator.io.files import RESULTS_FILE, prepare_output, read_metadata, write_results
 from emulator.io.runcsv import read_tables
 from emulator.io.runfolder import RUN_FILE, read_run_json
 
@@ -79,13 +78,7 @@ def load_inputs(folders) -> list[dict]:
     """Each folder read as a run folder or a ``bench features`` folder (one kind for all, one recording)."""
     inputs = []
     for folder in map(Path, folders):
-        results_path = folder / RESULTS_FILE
-        results = None
-        if results_path.is_file():
-            try:
-                results = json.loads(results_path.read_text())
-            except (OSError, ValueError) as exc:
-                raise MetricsError(f"{results_path}: unreadable ({exc})") from None
+        results = read_metadata(folder / RESULTS_FILE, MetricsError)  # {} where there is none
         if isinstance(results, dict) and results.get("benchmark") == "features":
             inputs.append(_features_input(folder, results))
         elif (folder / RUN_FILE).is_file():
