@@ -13,7 +13,7 @@ import shutil
 import sys
 from pathlib import Path
 
-from emulator.commands.progress import add_quiet, progress_for
+from emulator.commands.progress import add_quiet, progress_arg
 
 __all__ = ["register"]
 
@@ -95,34 +95,29 @@ def _print_json(results: dict) -> None:
 def _features(args: argparse.Namespace) -> int:
     from emulator.metrics.bench import bench_features
 
-    with _removed_on_failure(args.output):
-        results = _bench_features(args, bench_features)
+    with _removed_on_failure(args.output), progress_arg("exposim bench features", args.quiet) as progress:
+        results = _bench_features(args, bench_features, progress)
     if args.json:
         _print_json(results)
     return _features_summary(args, results)
 
 
-def _bench_features(args, bench_features):
-    progress = progress_for("exposim bench features", args.quiet)
-    try:
-        return bench_features(
-            args.run_dirs,
-            args.output,
-            methods=_methods(args.methods),
-            grid=(args.grid, args.grid),
-            ratio=_ratio(args),
-            n_features=args.n_features,
-            matcher=args.matcher,
-            scale=args.scale,
-            max_frames=args.max_frames,
-            every_frame=args.every_frame,
-            force=args.force,
-            progress=progress,
-            command=_command_line(args, ("run_dirs",)),
-        )
-    finally:
-        if hasattr(progress, "close"):
-            progress.close()  # the log lines' heartbeat
+def _bench_features(args, bench_features, progress):
+    return bench_features(
+        args.run_dirs,
+        args.output,
+        methods=_methods(args.methods),
+        grid=(args.grid, args.grid),
+        ratio=_ratio(args),
+        n_features=args.n_features,
+        matcher=args.matcher,
+        scale=args.scale,
+        max_frames=args.max_frames,
+        every_frame=args.every_frame,
+        force=args.force,
+        progress=progress,
+        command=_command_line(args, ("run_dirs",)),
+    )
 
 
 def _features_summary(args, results) -> int:
@@ -155,39 +150,34 @@ def _vo(args: argparse.Namespace) -> int:
         max_step_m=args.max_step_m,
         seed=args.seed,
     )
-    with _removed_on_failure(args.output):
-        results = _bench_vo(args, bench_vo, params)
+    with _removed_on_failure(args.output), progress_arg("exposim bench vo", args.quiet) as progress:
+        results = _bench_vo(args, bench_vo, params, progress)
     if args.json:
         _print_json(results)
     return _vo_summary(args, results)
 
 
-def _bench_vo(args, bench_vo, params):
-    progress = progress_for("exposim bench vo", args.quiet)
-    try:
-        return bench_vo(
-            args.run_dir,
-            args.output,
-            reference=args.reference,
-            calibration=args.calibration,
-            methods=_methods(args.methods),
-            parameters=params,
-            scale=args.scale,
-            baseline_m=args.baseline_m,
-            refine_extrinsics=args.refine_extrinsics,
-            deltas_m=args.deltas,
-            align_scale=not args.no_align_scale,
-            max_diff_s=args.max_diff,
-            rpe_on_failure=args.rpe_on_failure,
-            max_frames=args.max_frames,
-            every_frame=args.every_frame,
-            force=args.force,
-            progress=progress,
-            command=_command_line(args, ("run_dir",)),
-        )
-    finally:
-        if hasattr(progress, "close"):
-            progress.close()  # the log lines' heartbeat
+def _bench_vo(args, bench_vo, params, progress):
+    return bench_vo(
+        args.run_dir,
+        args.output,
+        reference=args.reference,
+        calibration=args.calibration,
+        methods=_methods(args.methods),
+        parameters=params,
+        scale=args.scale,
+        baseline_m=args.baseline_m,
+        refine_extrinsics=args.refine_extrinsics,
+        deltas_m=args.deltas,
+        align_scale=not args.no_align_scale,
+        max_diff_s=args.max_diff,
+        rpe_on_failure=args.rpe_on_failure,
+        max_frames=args.max_frames,
+        every_frame=args.every_frame,
+        force=args.force,
+        progress=progress,
+        command=_command_line(args, ("run_dir",)),
+    )
 
 
 def _vo_summary(args, results) -> int:

@@ -11,9 +11,10 @@ after its arguments have been checked, so an argument error never follows a bar.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 
-__all__ = ["add_quiet", "add_json", "print_json", "bars_enabled", "progress_bar", "log_lines", "progress_for",
+__all__ = ["add_quiet", "add_json", "print_json", "bars_enabled", "progress_bar", "log_lines", "progress_arg",
            "LOG_EVERY_S"]
 
 #: Most seconds between two progress lines in a log (stderr not a terminal).
@@ -128,9 +129,16 @@ class _LogLines:
         self.close()
 
 
-def progress_for(command: str, quiet: bool = False):
-    """What a library's ``progress`` argument gets: True (bars) on a terminal, :func:`log_lines` in a log,
-    False when quiet."""
+@contextlib.contextmanager
+def progress_arg(command: str, quiet: bool = False):
+    """What a library's ``progress`` argument gets, as a context: True (bars) on a terminal, :func:`log_lines`
+    (with its heartbeat, stopped on leaving) in a log, False when quiet."""
     if bars_enabled(quiet):
-        return True
-    return log_lines(command, quiet, heartbeat=True) or False
+        yield True
+        return
+    lines = log_lines(command, quiet, heartbeat=True)
+    if lines is None:
+        yield False
+        return
+    with lines:
+        yield lines
