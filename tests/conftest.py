@@ -39,6 +39,27 @@ PCALIB = SAMPLE / "calibration" / "pcalib_inside1.txt"
 ENV_CACHE_DIR = "EXPOSIM_CACHE"
 
 
+def in_ci() -> bool:
+    """True where the environment variable ``CI`` says a CI service runs the tests (``true``, ``1``, ``yes``)."""
+    return os.environ.get("CI", "").strip().lower() in ("true", "1", "yes")
+
+
+def missing_shared(reason: str):
+    """A test that needs ``../shared`` and does not find it: skipped, or failed under CI (``CI=true``),
+    where a skip would pass a weaker suite without a word."""
+    if in_ci():
+        pytest.fail(f"{reason} (CI is set: the shared data must be present; see tests/conftest.py)", pytrace=False)
+    pytest.skip(reason)
+
+
+def pytest_report_header(config):
+    """One line at the top of every run: where the shared data is, or that the tests needing it skip."""
+    if SAMPLE_SEQ.is_dir():
+        return f"shared data: {SHARED}"
+    return (f"shared data: not found at {SHARED}: the tests that need it "
+            f"{'fail (CI is set)' if in_ci() else 'are skipped (set CI=true to fail them)'}")
+
+
 @pytest.fixture(scope="session", autouse=True)
 def render_cache(tmp_path_factory) -> Path:
     """Every test renders into one temporary cache for the session, never into ``~/.cache``.
@@ -60,14 +81,14 @@ def render_cache(tmp_path_factory) -> Path:
 @pytest.fixture(scope="session")
 def sample_seq() -> Path:
     if not SAMPLE_SEQ.is_dir():
-        pytest.skip(f"shared BorealHDR sample not found at {SAMPLE_SEQ}")
+        missing_shared(f"shared BorealHDR sample not found at {SAMPLE_SEQ}")
     return SAMPLE_SEQ
 
 
 @pytest.fixture(scope="session")
 def pcalib_path() -> Path:
     if not PCALIB.is_file():
-        pytest.skip(f"shared pcalib file not found at {PCALIB}")
+        missing_shared(f"shared pcalib file not found at {PCALIB}")
     return PCALIB
 
 

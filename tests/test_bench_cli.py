@@ -274,7 +274,9 @@ def test_bench_vo_bad_reference(short_run, tmp_path, capsys):
 
 def test_bench_vo_calibration_size_mismatch(short_run, tmp_path, capsys):
     if not SHARED.is_dir():
-        pytest.skip("shared BorealHDR sample not available")
+        from conftest import missing_shared
+
+        missing_shared("shared BorealHDR sample not available")
     code, out, err = run_cli(capsys, "bench", "vo", str(short_run["run"]), "--calibration",
                              str(SHARED / "september_2023"), "-o", str(tmp_path / "out"))
     assert code == 1 and err.count("\n") == 1

@@ -86,7 +86,7 @@ def test_features_report_units_and_dash_note():
     assert "| 25.0 |" in fixed  # uniformity 0.25 shown in percent
     shim = next(row for row in table if row.startswith("| shim"))
     assert shim.count("| - ") >= 3  # no pair: no figure
-    assert after[1] == DASH_NOTE  # the note directly under the table
+    assert after[1] == report.FEATURES_DASH_NOTE and "RPE" not in after[1]  # the note directly under the table
     assert "## Verdicts" in md
 
 
@@ -344,3 +344,66 @@ def test_paper_figures_name_methods_as_the_command_line_does():
     assert "worst (classical-30, classical-70, kim)" in names and "best (classical-50)" in names
     md = report.features_report(_features_results({"fixed": [61, 40, 55], "kim": [30, 12]}), "fig4.png")
     assert "M_fixed" not in md and "Median matches of fixed:" in md and "emulator." not in md
+
+
+def test_trajectories_without_a_reference_are_a_top_view_named_by_its_plane():
+    """Issue 46: a walk that bobs 0.3 m vertically (y) and drifts 0.1 m sideways (x) was drawn as y against z."""
+    t = np.linspace(0.0, 1.0, 30)
+    xyz = np.column_stack([0.1 * t, 0.3 * np.sin(20 * t), 2.0 * t])
+    fig = report.trajectories_figure({"fixed": xyz}, None)
+    (ax,) = fig.axes
+    assert ax.get_xlabel() == "x (m)" and ax.get_ylabel() == "z (m)"
+    assert "top view (plane x-z" in ax.get_title()
+
+
+def _vo_entry(tracked, stereo, inliers, rows):
+    from emulator.metrics.vo_table import vo_summary
+
+    frames = {"tracked": tracked, "n_stereo_points": stereo, "n_inliers": inliers, "row_offset_px": rows}
+    xyz = np.column_stack([np.zeros(len(tracked)), np.zeros(len(tracked)), 0.1 * np.arange(len(tracked))])
+    return {"status": "success" if all(tracked) else "failed", "n_frames": len(tracked), "n_tracked": sum(tracked),
+            "failures": [], "rpe": None, "rpe_skipped": "no reference", "summary": vo_summary(frames, xyz)}
+
+
+def test_vo_without_a_reference_ranks_methods_on_their_vo_table():
+    from emulator.metrics.vo_table import vo_ranking
+
+    methods = {"fixed": _vo_entry([True] * 4, [800, 1500, 1900, 1700], [0, 650, 1240, 1330], [0.0, 0.01, None, -0.01]),
+               "kim": _vo_entry([True, False, True, True], [800, 27, 1700, 2700], [0, 21, 21, 1020], [0, 0.08, 0, 0]),
+               "shim": _vo_entry([True] * 4, [790, 850, 970, 800], [0, 630, 650, 660], [0, 0, 0, 0])}
+    s = methods["fixed"]["summary"]
+    assert s == {"n_tracked": 4, "n_frames": 4, "median_stereo_points": 1600.0, "median_inliers": 1240.0,
+                 "median_row_offset_px": 0.0, "path_length_m": pytest.approx(0.3)}
+    assert vo_ranking(methods) == ["fixed", "shim", "kim"]  # kim lost a frame; fixed has more inliers than shim
+    results = {**_vo_results(), "reference": None, "methods": methods, "ranking_without_reference": vo_ranking(methods)}
+    md = report.vo_report(results, {"trajectories": "trajectories.png"})
+    table, _ = _table_and_after(md, "| rank | method |")
+    assert table[2] == "| 1 | fixed | 4/4 | 1600 | 1240 | 0.00 | 0.300 |"
+    assert table[4].startswith("| 3 | kim | 3/4 | 1250 | 21 |")
+    assert "fig6" not in md and "## VO by method, without a reference" in md
+
+
+def test_features_report_marks_methods_that_had_not_settled():
+    """Issue 46: on a short clip a method still climbing at the end is marked beside its "best"/"differs"."""
+    res = _features_results({"fixed": [61, 40, 55, 70], "kim": [30, 12, 20, 25]})
+    res["runs"][0]["still_trending"] = {"kim": {"direction": "rising", "change_fraction": 0.4, "steps": 3}}
+    md = report.features_report(res, "fig4.png")
+    table, _ = _table_and_after(md, "| method | median matches |")
+    assert table[3].startswith("| kim (still rising) | 22.5 |")
+    assert "**Too short to settle:**" in md
+    assert "still rising" not in report.features_report(_features_results({"fixed": [61, 40], "kim": [30, 12]}),
+                                                        "fig4.png")
+
+
+def test_bench_features_records_the_methods_still_trending(tmp_path):
+    from emulator.metrics.bench import _still_trending
+
+    run = tmp_path / "run"
+    for name, ms in (("kim", [1.0, 2.0, 4.0, 8.0]), ("fixed", [4.0, 4.0, 4.0, 4.0])):
+        (run / name).mkdir(parents=True)
+        rows = "".join(f"{k},{k},{t},4,1,0,1\n" for k, t in enumerate(ms))
+        (run / name / "exposures.csv").write_text(
+            "cycle,timestamp_ns,target_ms,bracket_ms,ratio,saturated_fraction,valid_fraction\n" + rows)
+    got = _still_trending(run, ["kim", "fixed"])
+    assert got == {"still_trending": {"kim": {"direction": "rising", "change_fraction": 7.0, "steps": 3}}}
+    assert _still_trending(tmp_path / "nothing", ["kim"]) == {}

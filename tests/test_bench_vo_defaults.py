@@ -14,7 +14,7 @@ from emulator.cli import main
 from emulator.metrics.bench import no_reference_note, REFINE_THRESHOLD_FRACTION, bench_vo, evo_result_path
 from emulator.metrics.vo import VOParameters
 
-from conftest import SAMPLE_SEQ
+from conftest import SAMPLE_SEQ, missing_shared
 
 try:
     from test_metrics_vo import make_synthetic_run
@@ -117,6 +117,19 @@ def test_no_reference_is_said_once_in_words(parallel, tmp_path, capsys):
     report = (tmp_path / "out" / "report.md").read_text()
     assert "## What could not be computed, and why" in report and "--reference FILE" in report
     assert not (tmp_path / "out" / "evo").exists()
+    # issue 46: without a reference the methods are ranked on the VO table; no empty RPE plot
+    assert not (tmp_path / "out" / "fig6_rpe.png").exists() and (tmp_path / "out" / "trajectories.png").is_file()
+    assert "fig6_rpe.png" not in report and "fig6_rpe.png" not in err
+    assert sorted(results["ranking_without_reference"]) == sorted(results["methods"])
+    row = next(line for line in report.splitlines() if line.startswith("| 1 | "))
+    first = results["methods"][results["ranking_without_reference"][0]]["summary"]
+    assert row.endswith(f"| {first['n_tracked']}/{first['n_frames']} | {first['median_stereo_points']:.0f} | "
+                        f"{first['median_inliers']:.0f} | {first['median_row_offset_px']:.2f} | "
+                        f"{first['path_length_m']:.3f} |")
+    assert first["n_tracked"] == first["n_frames"] == 3 and first["path_length_m"] > 0
+    assert "VO by method, without a reference" in (tmp_path / "out" / "report.html").read_text()
+    # stderr is not a terminal here: one line as each method starts and ends
+    assert "exposim bench vo [" in err and ": VO fixed 0/3" in err and ": VO fixed 3/3" in err
 
 
 def test_failed_bench_leaves_no_output_folder(parallel, tmp_path, capsys):
@@ -131,7 +144,7 @@ def test_failed_bench_leaves_no_output_folder(parallel, tmp_path, capsys):
 def test_real_sample_with_no_extra_flags(tmp_path, capsys):
     """`exposim run` on the shared sample, then `bench vo RUN -o OUT` with no calibration flag."""
     if not SAMPLE_SEQ.is_dir():
-        pytest.skip("shared BorealHDR sample not available")
+        missing_shared("shared BorealHDR sample not available")
     run = tmp_path / "run"
     assert main(["run", str(SAMPLE_SEQ), "--methods", "fixed", "--save", "png16", "-o", str(run),
                  "--no-progress"]) == 0

@@ -10,7 +10,7 @@ import yaml
 from emulator.errors import CalibrationError
 from emulator.io.camera_info import read_camera_info
 
-from conftest import SAMPLE
+from conftest import SAMPLE, missing_shared
 
 SEPT = SAMPLE / "calibration" / "september_2023"
 
@@ -18,7 +18,7 @@ SEPT = SAMPLE / "calibration" / "september_2023"
 @pytest.fixture(scope="module")
 def left_yaml():
     if not (SEPT / "left.yaml").is_file():
-        pytest.skip("shared BorealHDR calibration not available")
+        missing_shared("shared BorealHDR calibration not available")
     return SEPT / "left.yaml"
 
 

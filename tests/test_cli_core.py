@@ -66,3 +66,43 @@ def test_emulate_cli_errors(sample_seq, tmp_path, capsys):
     assert json.loads(capsys.readouterr().out)["bracket_ms"] == 1.0
     assert main(["info", str(tmp_path / "nope")]) == 1
     assert "sequence folder not found" in capsys.readouterr().err
+
+
+def test_long_commands_print_stage_lines_in_a_log():
+    """Issue 46: off a terminal (nohup, CI) a long command prints a line as each stage starts, at least every
+    LOG_EVERY_S seconds of work within it, and as it ends; nothing when quiet or on a terminal."""
+    import io
+
+    from emulator.commands.progress import LOG_EVERY_S, log_lines
+
+    now = [0.0]
+    log = io.StringIO()
+    lines = log_lines("exposim bench vo", stream=log, clock=lambda: now[0])
+    for stage in ("VO fixed", "VO kim"):
+        for done in range(6):
+            lines(stage, done, 5)
+            now[0] += LOG_EVERY_S / 4  # a line at least every LOG_EVERY_S seconds
+    assert log.getvalue().splitlines() == [
+        "exposim bench vo [0 s]: VO fixed 0/5", "exposim bench vo [20 s]: VO fixed 4/5",
+        "exposim bench vo [25 s]: VO fixed 5/5", "exposim bench vo [30 s]: VO kim 0/5",
+        "exposim bench vo [50 s]: VO kim 4/5", "exposim bench vo [55 s]: VO kim 5/5"]
+    assert log_lines("x", quiet=True, stream=io.StringIO()) is None
+    # the heartbeat: a line when LOG_EVERY_S passes without one (one slow image), from the start
+    log, now[0] = io.StringIO(), 0.0
+    with log_lines("exposim run", stream=log, clock=lambda: now[0]) as lines:
+        lines.beat()
+        now[0] = LOG_EVERY_S
+        lines.beat()
+        lines("frames", 1, 18)
+        now[0] = 1.5 * LOG_EVERY_S
+        lines.beat()
+        now[0] = 2 * LOG_EVERY_S
+        lines.beat()
+    assert log.getvalue().splitlines() == ["exposim run [20 s]: preparing, working", "exposim run [20 s]: frames 1/18",
+                                           "exposim run [40 s]: frames 1/18, working"]
+
+    class Tty(io.StringIO):
+        def isatty(self):
+            return True
+
+    assert log_lines("x", stream=Tty()) is None

@@ -25,7 +25,7 @@ from emulator.io.tum import write_tum
 from emulator.metrics.rpe import rpe_by_length
 from emulator.metrics.trajectory import associate, read_trajectory, trajectory_from_poses
 
-from conftest import SHARED as _SHARED  # noqa: E402
+from conftest import SHARED as _SHARED, missing_shared  # noqa: E402
 
 SHARED = _SHARED / "data" / "borealhdr_sample" / "calibration"
 
@@ -185,7 +185,7 @@ def _frames(run: Path, method: str = "fixed"):
 
 def test_read_real_borealhdr_calibration():
     if not SHARED.is_dir():
-        pytest.skip("shared BorealHDR sample not available")
+        missing_shared("shared BorealHDR sample not available")
     left = read_camera_info(SHARED / "september_2023" / "left.yaml")
     assert (left.width, left.height) == (1920, 1200)
     assert left.K[0, 0] == pytest.approx(1180.80514)

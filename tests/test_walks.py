@@ -21,7 +21,9 @@ def _real_imu() -> Path:
     for p in _IMU_CANDIDATES:
         if p.is_file():
             return p
-    pytest.skip("the shared BorealHDR sample's imu/imu.csv is not here")
+    from conftest import missing_shared
+
+    missing_shared("the shared BorealHDR sample's imu/imu.csv is not here")
 
 
 def _rate_percentiles_deg_s(omega) -> np.ndarray:

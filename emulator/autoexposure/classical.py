@@ -108,17 +108,31 @@ class Fixed(AutoExposureMethod):
     REF's counter test ``c <= number_frames_auto`` adjusts on the first ``N + 1 = 4`` calls
     (borealhdr mode); paper mode adjusts on exactly ``n_auto_frames`` calls.  Afterwards the
     input exposure is returned unchanged, whatever the image.
+
+    ``latency_frames`` (L, frames; 0 at cycle rate) is the camera's exposure latency: a
+    proposal made after frame k is applied from frame k + 1 + L (``--rate native``, whose run
+    sets it from ``--latency-frames``).  With L > 0 the method adjusts only on every (L + 1)-th
+    call, on a frame taken at its previous adjustment, and otherwise returns the last
+    adjustment; once frozen it returns that value for ever.  Returning the input exposure
+    instead would re-queue the proposals still in flight, a period-(L + 1) cycle between the
+    last adjustments.  From frame ``n_adjustments * (L + 1)`` on every frame has one exposure.
     """
 
     name = "fixed"
 
-    def __init__(self, *, mode: str = "paper", range_ms="default", n_auto_frames: int = N_AUTO_FRAMES) -> None:
+    def __init__(self, *, mode: str = "paper", range_ms="default", n_auto_frames: int = N_AUTO_FRAMES,
+                 latency_frames: int = 0) -> None:
         super().__init__(mode=mode, range_ms=range_ms)
         if int(n_auto_frames) < 0:
             raise AutoExposureError(f"n_auto_frames must be >= 0, got {n_auto_frames!r}")
+        if isinstance(latency_frames, bool) or int(latency_frames) != latency_frames or int(latency_frames) < 0:
+            raise AutoExposureError(f"latency_frames must be an integer >= 0, got {latency_frames!r}")
         self.n_auto_frames = int(n_auto_frames)
+        self.latency_frames = int(latency_frames)
         self._inner = Classical(FIXED_TARGET_PERCENT, mode=mode, range_ms=None)
         self.count = 0
+        self._seen = 0
+        self._held: float | None = None
 
     @property
     def n_adjustments(self) -> int:
@@ -127,8 +141,12 @@ class Fixed(AutoExposureMethod):
 
     def _reset(self) -> None:
         self.count = 0
+        self._seen = 0
+        self._held = None
 
     def _step(self, raw: np.ndarray, t: float) -> float:
+        if self.latency_frames:
+            return self._step_late(raw, t)
         if self.count < self.n_adjustments:
             self.count += 1
             mean = self.gray_mean(raw)
@@ -137,5 +155,19 @@ class Fixed(AutoExposureMethod):
         self.last["frozen"] = True
         return t
 
+    def _step_late(self, raw: np.ndarray, t: float) -> float:
+        """With proposals in flight: adjust only on a frame taken at the previous adjustment, hold it otherwise."""
+        phase = self._seen % (self.latency_frames + 1)
+        self._seen += 1
+        if self.count < self.n_adjustments and phase == 0:
+            self.count += 1
+            mean = self.gray_mean(raw)
+            self.last["mean_dn"] = mean
+            self._held = self._inner.update(mean, t)
+            return self._held
+        self.last["frozen" if self.count >= self.n_adjustments else "waiting"] = True
+        return t if self._held is None else self._held
+
     def _options(self) -> dict:
-        return {"n_auto_frames": self.n_auto_frames}
+        return {"n_auto_frames": self.n_auto_frames, **({"latency_frames": self.latency_frames}
+                                                        if self.latency_frames else {})}

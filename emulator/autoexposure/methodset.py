@@ -13,7 +13,7 @@ from emulator.autoexposure import METHOD_NAMES, AutoExposureMethod, accepts_opti
 from emulator.autoexposure.registry import build_plugin, installed_methods, is_import_path, plugin_from_path
 from emulator.errors import PlaybackError
 
-__all__ = ["parse_methods", "build_methods"]
+__all__ = ["parse_methods", "build_methods", "latency_options"]
 
 
 def parse_methods(spec, *, plugins: Mapping | None = None) -> list[str]:
@@ -98,4 +98,18 @@ def build_methods(spec, *, mode: str = "paper", response=None, options: Mapping 
         if name in out:
             raise PlaybackError(f"two methods are named {name!r}")
         out[name] = method
+    return out
+
+
+def latency_options(options: Mapping | None, latency_frames: int) -> dict:
+    """``options`` with the camera's exposure latency (frames) given to the methods that need it.
+
+    At a latency of L > 0 frames (``--rate native``) two or more proposals are in flight when
+    ``fixed`` freezes; it gets ``latency_frames=L`` (unless the user set it) so that it freezes one
+    exposure (:class:`~emulator.autoexposure.classical.Fixed`).  At L = 0 (cycle rate) the options
+    are returned as given.
+    """
+    out = {name: dict(opts) for name, opts in (options or {}).items()}
+    if int(latency_frames) > 0:
+        out.setdefault("fixed", {}).setdefault("latency_frames", int(latency_frames))
     return out

@@ -1,4 +1,4 @@
-"""``exposim bench features|vo|rpe``: the paper's section V-D benchmarks.
+"""``exposim bench features|vo|rpe|compare``: the paper's section V-D benchmarks, and methods side by side.
 
 Only parses arguments and calls one library function of :mod:`emulator.metrics`;
 OpenCV, evo, tqdm and matplotlib are imported inside the command functions.
@@ -13,7 +13,7 @@ import shutil
 import sys
 from pathlib import Path
 
-from emulator.commands.progress import add_quiet, bars_enabled
+from emulator.commands.progress import add_quiet, progress_arg
 
 __all__ = ["register"]
 
@@ -95,14 +95,14 @@ def _print_json(results: dict) -> None:
 def _features(args: argparse.Namespace) -> int:
     from emulator.metrics.bench import bench_features
 
-    with _removed_on_failure(args.output):
-        results = _bench_features(args, bench_features)
+    with _removed_on_failure(args.output), progress_arg("exposim bench features", args.quiet) as progress:
+        results = _bench_features(args, bench_features, progress)
     if args.json:
         _print_json(results)
     return _features_summary(args, results)
 
 
-def _bench_features(args, bench_features):
+def _bench_features(args, bench_features, progress):
     return bench_features(
         args.run_dirs,
         args.output,
@@ -115,7 +115,7 @@ def _bench_features(args, bench_features):
         max_frames=args.max_frames,
         every_frame=args.every_frame,
         force=args.force,
-        progress=bars_enabled(args.quiet),
+        progress=progress,
         command=_command_line(args, ("run_dirs",)),
     )
 
@@ -150,14 +150,14 @@ def _vo(args: argparse.Namespace) -> int:
         max_step_m=args.max_step_m,
         seed=args.seed,
     )
-    with _removed_on_failure(args.output):
-        results = _bench_vo(args, bench_vo, params)
+    with _removed_on_failure(args.output), progress_arg("exposim bench vo", args.quiet) as progress:
+        results = _bench_vo(args, bench_vo, params, progress)
     if args.json:
         _print_json(results)
     return _vo_summary(args, results)
 
 
-def _bench_vo(args, bench_vo, params):
+def _bench_vo(args, bench_vo, params, progress):
     return bench_vo(
         args.run_dir,
         args.output,
@@ -175,7 +175,7 @@ def _bench_vo(args, bench_vo, params):
         max_frames=args.max_frames,
         every_frame=args.every_frame,
         force=args.force,
-        progress=bars_enabled(args.quiet),
+        progress=progress,
         command=_command_line(args, ("run_dir",)),
     )
 
@@ -193,6 +193,11 @@ def _vo_summary(args, results) -> int:
             print(f"not computed / limited: {note}", file=sys.stderr)
         for name, m in results["methods"].items():
             line = f"{name}: {m['status']}, {m['n_tracked']}/{m['n_frames']} frames tracked"
+            t = m.get("summary")
+            if t:  # the VO table (emulator.metrics.vo_table): what tells methods apart without a reference
+                fmt = lambda v, spec: "-" if v is None else format(v, spec)  # noqa: E731
+                line += (f", median {fmt(t['median_stereo_points'], '.0f')} stereo points, "
+                         f"{fmt(t['median_inliers'], '.0f')} PnP inliers, path {t['path_length_m']:.3f} m")
             if m["rpe"]:
                 first = next((e for e in m["rpe"]["deltas"] if e.get("trans_percent") or e.get("trans_pct")), None)
                 if first:
@@ -207,9 +212,33 @@ def _vo_summary(args, results) -> int:
         for verdict in vo_verdicts(results):
             print(f"verdict: {verdict}", file=sys.stderr)
         print(f"wrote {args.output}/results.json, <method>.txt (TUM; evo_traj tum {args.output}/*.txt), "
-              "fig6_rpe.png, trajectories.png, report.md, report.html"
+              + ("fig6_rpe.png, " if results["reference"] is not None else "")
+              + "trajectories.png, report.md, report.html"
               + (", evo/rpe_*/<method>.zip (evo_res)" if any(m["evo_results"] for m in results["methods"].values())
                  else ""), file=sys.stderr)
+    return 0
+
+
+def _compare(args: argparse.Namespace) -> int:
+    from emulator.metrics.compare import bench_compare
+
+    with _removed_on_failure(args.output):
+        results = bench_compare(args.folders, args.output, force=args.force,
+                                command=_command_line(args, ("folders",)))
+    if args.json:
+        _print_json(results)
+    if not args.quiet:
+        cmp = results["comparisons"]
+        primary = cmp[cmp["primary"]]["methods"]
+        scale, unit = (100.0, " %") if cmp["primary"] == "mean_saturated_fraction" else (1.0, "")
+        for k, label in enumerate(results["ranking"], 1):
+            r = primary[label]
+            iv = "" if not r["ci95"] else f" [{scale * r['ci95'][0]:.3g}, {scale * r['ci95'][1]:.3g}]"
+            print(f"{k}. {label}: {cmp['primary'].replace('_', ' ')} {scale * r['estimate']:.3g}{unit}{iv}",
+                  file=sys.stderr)
+        for name, t in (cmp.get("still_trending") or {}).items():
+            print(f"too short to settle: {name} still {t['direction']} at the end", file=sys.stderr)
+        print(f"wrote {args.output}/results.json, report.md, report.html", file=sys.stderr)
     return 0
 
 
@@ -349,6 +378,22 @@ def register(subparsers) -> None:
                    help="max timestamp difference for association in s (default 0.01, as evo_rpe)")
     r.add_argument("--json", action="store_true", help='print {"rmse": ..., "mean": ..., "median": ...} only')
     r.set_defaults(func=_rpe)
+
+    c = sub.add_parser(
+        "compare",
+        help="methods of several run (or bench features) folders side by side, in one ranking",
+        description="Put the methods of several folders of one recording in one table with 95 % intervals: run "
+        "folders of `exposim run` (mean saturated fraction, mean exposure) or output folders of `exposim bench "
+        "features` (median matches, median uniformity). A plugin-only run and an earlier run of the built-ins "
+        "make one ranking; a cycle-rate and a native-rate run of the same methods stand side by side, judged "
+        "on the same recorder cycles. A method in several folders is named by its rate, else by its folder.",
+    )
+    c.add_argument("folders", nargs="+", metavar="FOLDER", help="run folders, or bench features folders (one kind)")
+    c.add_argument("-o", "--output", required=True, help="output folder (results.json, report.md, report.html)")
+    c.add_argument("--force", action="store_true", help="overwrite an existing results.json")
+    add_quiet(c, "no summary")
+    c.add_argument("--json", action="store_true", help="print results.json to stdout")
+    c.set_defaults(func=_compare)
 
 
 register.order = 40  # place in `exposim --help`

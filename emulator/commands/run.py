@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import functools
 import shlex
 import sys
 from pathlib import Path
 
-from emulator.commands.progress import add_quiet, bars_enabled
+from emulator.commands.progress import add_quiet, bars_enabled, log_lines
 from emulator.distributed import SCHEDULER_HELP, resolve_scheduler
 from emulator.errors import ExposimError
 
@@ -311,7 +312,10 @@ def _run(args) -> int:
     _warn_broken_plugins()
     progress = None
     bar = None
-    if bars_enabled(args.quiet):
+    lines = log_lines("exposim run", args.quiet, heartbeat=True)
+    if lines is not None:  # a log (nohup, CI): a line at the start, every LOG_EVERY_S seconds and at the end
+        progress = functools.partial(lines, "frames" if config.rate == "native" else "cycles")
+    elif bars_enabled(args.quiet):
         from tqdm import tqdm
 
         def progress(done: int, total: int) -> None:
@@ -334,6 +338,8 @@ def _run(args) -> int:
     finally:
         if bar is not None:
             bar.close()
+        if lines is not None:
+            lines.close()
     return _print_run_summary(args, summary)
 
 
@@ -371,7 +377,10 @@ def _print_run_summary(args, summary: dict) -> int:
         mean = m["mean_exposure_ms"]
         print(f"  {name:13s} mean {mean:8.3f} ms  next (after last frame) {m['final_exposure_ms']:8.3f} ms  "
               f"sat {m['mean_saturated_fraction']:.2%}" if mean is not None else f"  {name:13s} no cycle")
-    _print_flags(summary.get("flags"))
+    _print_flags(summary.get("flags"), "frame" if native else "cycle")
+    for name, t in (summary.get("still_trending") or {}).items():
+        print(f"unsettled   {name} still {t['direction']} at the end ({100 * abs(t['change_fraction']):.0f} % over the "
+              f"last {t['steps']} recorder cycles): too short a clip to rank it")
     timing = summary.get("timing") or {}
     if timing.get("cycles_per_s"):
         steady = timing.get("steady_cycles_per_s")
@@ -387,8 +396,8 @@ def _print_run_summary(args, summary: dict) -> int:
     return rc
 
 
-def _print_flags(flags: dict | None) -> None:
-    """The report's flags in one or two lines (nothing when nothing was flagged)."""
+def _print_flags(flags: dict | None, unit: str = "cycle") -> None:
+    """The report's flags in one or two lines (nothing when nothing was flagged); ``unit``: a row of the run."""
     if flags is None:
         return
     partial = flags["partial_cycles"]
@@ -399,7 +408,7 @@ def _print_flags(flags: dict | None) -> None:
     above = {n: m for n, m in flags["methods"].items() if m["cycles_above_ratio_bound"]}
     if above:
         print(f"ratio > {flags['upward_ratio_bound']:g}   " + ", ".join(
-            f"{n}: {m['cycles_above_ratio_bound']} cycle(s), largest {m['worst_upward_ratio']:.3g}"
+            f"{n}: {m['cycles_above_ratio_bound']} {unit}(s), largest {m['worst_upward_ratio']:.3g}"
             for n, m in above.items()))
 
 

@@ -71,6 +71,21 @@ def tau_grid(max_min_matches: int, *, n: int = 100) -> list[int]:
     return list(range(step, top + step, step))
 
 
+def _still_trending(run_dir, names: list[str]) -> dict:
+    """``{"still_trending": ...}`` of the run's methods whose exposure was still moving one way at its end
+    (:mod:`emulator.settling`, per recorder cycle); empty where all settled or the tables cannot tell."""
+    from emulator.io.runcsv import read_tables
+    from emulator.report.run import per_recorder_cycle
+    from emulator.settling import trending_methods
+
+    try:
+        tables = read_tables(run_dir, names)
+    except (OSError, ValueError, KeyError):  # a folder without usable tables: nothing to say
+        return {}
+    trending = trending_methods({n: per_recorder_cycle(t).get("target_ms", []) for n, t in tables.items()})
+    return {"still_trending": trending} if trending else {}
+
+
 def bench_features(
     run_dirs: str | Path | Sequence[str | Path],
     out_dir: str | Path,
@@ -162,6 +177,7 @@ def bench_features(
             "white_level": run.white_level,
             "black_level": run.black_level,
             "methods": per_method,
+            **_still_trending(run.path, list(per_method)),
         })
     if taus is None:  # to where every curve has reached 0, so the success verdicts are not trivially true
         taus = tau_grid(max((r["methods"][m].get("min_matches") or 0 for r in run_results for m in r["methods"]),

@@ -27,10 +27,24 @@ def _version() -> str:
     return __version__
 
 
-def _progress(iterable, progress: bool, desc: str, total: int):
+def _progress(iterable, progress, desc: str, total: int):
+    """``iterable`` with progress: a tqdm bar when ``progress`` is True; when it is a callable, it is called
+    as ``progress(desc, done, total)`` before each item and after the last (the command line turns that
+    into log lines); nothing when False."""
+    if callable(progress):
+        return _reported(iterable, progress, desc, total)
     from tqdm import tqdm
 
     return tqdm(iterable, desc=desc, total=total, unit="img", disable=not progress, leave=False)
+
+
+def _reported(iterable, progress, desc: str, total: int):
+    done = 0
+    for item in iterable:
+        progress(desc, done, total)
+        yield item
+        done += 1
+    progress(desc, done, total)
 
 
 def benchmark_frames(run, every_frame: bool = False):

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from emulator.errors import CalibrationError, ExposimError, MetricsError, RunFolderError, TrajectoryError
-from emulator.io.files import RESULTS_FILE, prepare_output, write_results
+from emulator.io.files import RESULTS_FILE, prepare_output
 from emulator.io.runfolder import RunFolder, read_run_folder
 from emulator.io.tum import write_tum
 from emulator.metrics.bench_common import CONVERSION, _features_sheet, _frames, _progress, _version, benchmark_frames
@@ -30,7 +30,7 @@ from emulator.metrics.stereo import (
 )
 from emulator.metrics.trajectory import associate, read_trajectory, trajectory_from_poses
 from emulator.metrics.vo import VOParameters, run_stereo_vo
-from emulator.report.html import write_report
+from emulator.metrics.vo_table import vo_ranking, vo_summary
 
 __all__ = [
     "bench_vo",
@@ -269,6 +269,7 @@ def _vo_method(name, frames, run, rect, parameters, out, progress, ref_traj, ref
         "rpe_skipped": None,
     }
     est = trajectory_from_poses(vo.timestamps_ns, vo.poses, name)
+    entry["summary"] = vo_summary(entry["frames"], est.positions_xyz)
     if ref_traj is None:
         entry["rpe_skipped"] = "no reference"
         return entry, est.positions_xyz, None
@@ -486,15 +487,12 @@ def bench_vo(
         "n_failed": sum(1 for m in method_results.values() if m["status"] != "success"),
         "methods": method_results,
         "rpe_intervals": rpe_intervals(method_results, seed=parameters.seed),
-        "figures": {"fig6": "fig6_rpe.png", "trajectories": "trajectories.png"},
+        "ranking_without_reference": vo_ranking(method_results),
+        "figures": ({"fig6": "fig6_rpe.png"} if ref_traj is not None else {}) | {"trajectories": "trajectories.png"},
         "report": "report.md",
     }
-    from emulator.report import bench as report
+    from emulator.report.bench import write_vo_report
 
-    report.plot_rpe(results, out / "fig6_rpe.png")
-    report.plot_trajectories(aligned_xyz, ref_xyz if ref_traj is not None else None, out / "trajectories.png")
-    write_report(out, report.vo_report(results, {"RPE against trajectory length (Fig. 6)": "fig6_rpe.png",
-                                                 "trajectories": "trajectories.png"}),
-                 figures=["fig6_rpe.png", "trajectories.png"], sheets=[_features_sheet(run, None, max_frames)])
-    write_results(out / RESULTS_FILE, results)
+    write_vo_report(out, results, aligned_xyz, ref_xyz if ref_traj is not None else None,
+                    _features_sheet(run, None, max_frames), with_rpe=ref_traj is not None)
     return results

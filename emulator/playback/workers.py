@@ -305,10 +305,12 @@ def start_methods(spec, config, response) -> dict:
     """The run's methods by name: :class:`MethodWorker` s (``config.workers == "process"``), or
     built in this process (``"inline"``); ``spec`` as for :func:`~emulator.autoexposure.methodset.build_methods`."""
     from emulator.autoexposure import METHOD_NAMES
-    from emulator.autoexposure.methodset import build_methods, parse_methods
+    from emulator.autoexposure.methodset import build_methods, latency_options, parse_methods
 
+    latency = config.latency_frames if getattr(config, "rate", "cycle") == "native" else 0
+    options = latency_options(config.options, latency)  # fixed freezes one exposure with proposals in flight
     if getattr(config, "workers", "process") == "inline":
-        return build_methods(spec, mode=config.mode, response=response, options=config.options)
+        return build_methods(spec, mode=config.mode, response=response, options=options)
     items = parse_methods(spec) if isinstance(spec, str) else list(spec)
     for item in items:
         if not isinstance(item, str) and (not getattr(item, "name", None)
@@ -322,7 +324,6 @@ def start_methods(spec, config, response) -> dict:
             plugins = installed_methods() if plugins is None else plugins
             parse_methods([item], plugins=plugins)  # an unknown or broken plugin name: refused here, in one line
             items[i] = (item, plugins[item].value)
-    options = dict(config.options or {})
     timeout = effective_timeout_s(config)
     started: list[MethodWorker] = []
     out: dict = {}

@@ -38,6 +38,8 @@ __all__ = [
     "features_intervals_markdown",
     "features_verdicts",
     "vo_report",
+    "vo_table_markdown",
+    "write_vo_report",
     "extrinsics_sentence",
     "vo_verdicts",
     "PAPER_FEATURES",
@@ -137,9 +139,11 @@ def trajectories_figure(trajectories: dict, reference_xyz: np.ndarray | None):
         everything.append(np.asarray(reference_xyz).reshape(-1, 3))
     stacked = np.concatenate(everything) if everything else np.zeros((1, 3))
     stacked = stacked[np.all(np.isfinite(stacked), axis=1)] if np.isfinite(stacked).any() else np.zeros((1, 3))
-    # Top view: the two axes along which the trajectories extend most (x-z for camera
-    # frames with y down, x-y for a z-up lidar map).
-    a, b = sorted(np.argsort(np.ptp(stacked, axis=0))[-2:])
+    # Top view.  Without a reference the poses are in the first left camera's axes (OpenCV: x right,
+    # y down, z forward): the ground plane is x-z.  Aligned to a reference, in the reference's frame:
+    # the two axes along which the trajectories extend most (x-y for a z-up lidar map).
+    no_ref = reference_xyz is None or not len(reference_xyz)
+    a, b = (0, 2) if no_ref else sorted(np.argsort(np.ptp(stacked, axis=0))[-2:])
     if reference_xyz is not None and len(reference_xyz):
         ax.plot(reference_xyz[:, a], reference_xyz[:, b], "k--", lw=2, label="reference")
     for name, xyz in trajectories.items():
@@ -155,14 +159,16 @@ def trajectories_figure(trajectories: dict, reference_xyz: np.ndarray | None):
     if to_scale:
         ax.set_aspect("equal", adjustable="box")
     legend_outside(ax)
-    title = ("VO trajectories (Sim(3)-aligned to the reference)" if reference_xyz is not None
-             else "VO trajectories")
+    plane = f"plane {'xyz'[a]}-{'xyz'[b]}"
+    title = (f"VO trajectories (Sim(3)-aligned to the reference), {plane}" if reference_xyz is not None
+             else f"VO trajectories, top view ({plane}: first left camera, x right, z forward)")
     ax.set_title(title + ("" if to_scale else "\naxes not to scale"))
     return fig
 
 
 def plot_trajectories(trajectories: dict, reference_xyz: np.ndarray | None, path: str | Path) -> Path:
-    """Top view of VO trajectories (the two axes of largest extent), limits from the data.
+    """Top view of VO trajectories, limits from the data: x-z of the first left camera without a reference,
+    the two axes of largest extent of the reference's frame with one; the title names the plane.
 
     Parameters
     ----------
@@ -250,14 +256,22 @@ def features_intervals_markdown(results: dict) -> list[str]:
     """The tables of :func:`features_intervals` (nothing when no method has a pair)."""
     from emulator.report.intervals import comparison_table
 
+    from emulator.report.intervals import mark_trending
+
     iv = features_intervals(results)
     if iv["median_matches"]["best"] is None:
         return []
+    trending = {m: t for run in results["runs"] for m, t in (run.get("still_trending") or {}).items()}
     lines = ["Methods compared with 95 % intervals (circular block bootstrap over consecutive pairs / images; "
              "\"cannot tell apart\": the difference's interval holds 0):", ""]
-    lines += comparison_table(iv["median_matches"], "median matches", spec=".1f")
+    lines += comparison_table(mark_trending(iv["median_matches"], trending), "median matches", spec=".1f")
     if iv["median_uniformity"]["best"] is not None:
-        lines += [""] + comparison_table(iv["median_uniformity"], "median uniformity (%)", spec=".1f", scale=100.0)
+        lines += [""] + comparison_table(mark_trending(iv["median_uniformity"], trending), "median uniformity (%)",
+                                         spec=".1f", scale=100.0)
+    if trending:
+        lines += ["", "**Too short to settle:** the methods marked \"still rising\" or \"still falling\" had not "
+                  "settled at the end of the run (their exposure moved one way by 5 % or more over the last 3 "
+                  "recorder cycles): their \"best\" or \"differs\" describes the approach, not where they settle."]
     return lines
 
 
@@ -277,6 +291,11 @@ def vo_intervals_markdown(results: dict) -> list[str]:
         lines += ["", f"Pair length {d['delta_m']:.2f} m ({n_seg} segments):", ""]
         lines += comparison_table(d, "median translation error (% of the pair length)", spec=".2f")
     return lines
+
+
+#: The note under the features table: its "-" cells (no RPE in this benchmark).
+FEATURES_DASH_NOTE = ("A \"-\" cell means the figure does not exist for that row: no image pair (matches, success) "
+                      "or no image (uniformity).")
 
 
 def features_report(results: dict, figure: str) -> str:
@@ -305,7 +324,7 @@ def features_report(results: dict, figure: str) -> str:
             f"{_fmt(m['median_matches'], '.0f')} | {_fmt(m['min_matches'], 'd')} | "
             f"{_fmt(None if m['success_at_100'] is None else 100 * m['success_at_100'], '.0f')} |"
         )
-    lines += ["", DASH_NOTE, ""]
+    lines += ["", FEATURES_DASH_NOTE, ""]
     lines += features_intervals_markdown(results)
     lines += ["", "Paper (55 trajectories, 1920x1200 images):", ""]
     lines += [f"- {k}: {v}" for k, v in PAPER_FEATURES.items()]
@@ -326,6 +345,32 @@ def extrinsics_sentence(ext: dict) -> str:
     return (f"Stereo extrinsics ({ext['mode']}): {ext['reason']}. Measured {ext['epipolar_residual_px']:.2f} px"
             + (f", {after:.2f} px after refinement" if after is not None else "")
             + f". Refinement rule: {ext['criterion']}.")
+
+
+def vo_table_markdown(results: dict) -> list[str]:
+    """The per-method VO table that needs no reference (stereo points, PnP inliers, row offset, path
+    length, frames tracked), ranked as :func:`emulator.metrics.vo_table.vo_ranking` ranks them when the
+    run has no reference; empty for results written before the table existed."""
+    methods = {n: m["summary"] for n, m in results["methods"].items() if m.get("summary")}
+    if not methods:
+        return []
+    ranking = results.get("ranking_without_reference") or list(methods)
+    ranked = results.get("reference") is None
+    lines = ["", "## VO by method, without a reference" if ranked else "## VO by method", ""]
+    if ranked:
+        lines += ["Without a reference trajectory the RPE cannot tell the methods apart; they are ranked here "
+                  "on the VO itself: most frames tracked, then most PnP inliers per step (median), then most "
+                  "stereo points per frame (median). The path length is the VO's own (not scale-aligned); "
+                  "methods on one recording should agree on it, a method far from the others has drifted.", ""]
+    lines += ["| " + ("rank | " if ranked else "") + "method | frames tracked | median stereo points per frame | "
+              "median PnP inliers per step | median row offset after rectification (px) | VO path length (m) |",
+              "| " + ("--- | " if ranked else "") + "--- | --- | --- | --- | --- | --- |"]
+    for k, name in enumerate([n for n in ranking if n in methods], 1):
+        m = methods[name]
+        lines.append("| " + (f"{k} | " if ranked else "") + f"{name} | {m['n_tracked']}/{m['n_frames']} | "
+                     f"{_fmt(m['median_stereo_points'], '.0f')} | {_fmt(m['median_inliers'], '.0f')} | "
+                     f"{_fmt(m['median_row_offset_px'], '.2f')} | {m['path_length_m']:.3f} |")
+    return lines
 
 
 def vo_report(results: dict, figures: dict[str, str]) -> str:
@@ -388,9 +433,11 @@ def vo_report(results: dict, figures: dict[str, str]) -> str:
             f"| {name} | {m['status']} | {m['n_frames']} | {m['n_tracked']} | "
             f"{len(m['failures'])}{' (' + ', '.join(reasons) + ')' if reasons else ''} | {scale} | {trans} | {rot} |"
         )
+    lines += vo_table_markdown(results)
     lines += vo_intervals_markdown(results)
-    lines += ["", DASH_NOTE + " In the relative pose error figure a dotted line is a method whose VO failed on some frames "
-              "(RPE computed anyway); its legend entry says so.", ""]
+    rpe_figure_note = (" In the relative pose error figure a dotted line is a method whose VO failed on some frames "
+                       "(RPE computed anyway); its legend entry says so.")
+    lines += ["", DASH_NOTE + (rpe_figure_note if any("fig6" in f for f in figures.values()) else ""), ""]
     for title, fig in figures.items():
         lines += [f"![{title}]({fig})", ""]
     lines += ["Paper (55 trajectories, lidar reference, 1920x1200 images):", ""]
@@ -398,3 +445,18 @@ def vo_report(results: dict, figures: dict[str, str]) -> str:
     lines += ["", "## Verdicts", ""] + [f"- {v}" for v in vo_verdicts(results)]
     lines += ["", f"Command: `{results.get('command') or '(library call)'}`", ""]
     return "\n".join(lines)
+
+
+def write_vo_report(out: Path, results: dict, aligned_xyz: dict, reference_xyz, sheet, *, with_rpe: bool) -> None:
+    """The VO benchmark's figures (``fig6_rpe.png`` only ``with_rpe``, where there is a reference;
+    ``trajectories.png``), ``report.md``, ``report.html`` (with ``sheet``) and ``results.json`` in ``out``."""
+    from emulator.io.files import RESULTS_FILE, write_results
+    from emulator.report.html import write_report
+
+    figures = {"trajectories": "trajectories.png"}
+    if with_rpe:
+        plot_rpe(results, out / "fig6_rpe.png")
+        figures = {"RPE against trajectory length (Fig. 6)": "fig6_rpe.png", **figures}
+    plot_trajectories(aligned_xyz, reference_xyz, out / "trajectories.png")
+    write_report(out, vo_report(results, figures), figures=list(figures.values()), sheets=[sheet])
+    write_results(out / RESULTS_FILE, results)

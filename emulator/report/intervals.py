@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-__all__ = ["comparison_table"]
+__all__ = ["comparison_table", "mark_trending"]
 
 
 def _f(v, spec: str, scale: float) -> str:
@@ -32,3 +32,18 @@ def comparison_table(comparison: dict, label: str, *, spec: str = ".3g", scale: 
                      f"{_f(None if d is None else d['estimate'], spec, scale)} | "
                      f"{_iv(None if d is None else d['ci95'], spec, scale)} | {verdict} |")
     return lines
+
+
+def mark_trending(comparison: dict, trending: dict) -> dict:
+    """``comparison`` with the methods still trending at the end of the run (``{name: {"direction": ...}}``,
+    :func:`emulator.settling.trending_methods`) renamed ``name (still rising)``, so that a "best" or
+    "differs" beside them reads as the transient it is."""
+    if not trending:
+        return comparison
+
+    def name(m):
+        return f"{m} (still {trending[m]['direction']})" if m in trending else m
+
+    best = comparison.get("best")
+    return {**comparison, "best": None if best is None else name(best),
+            "methods": {name(m): r for m, r in comparison["methods"].items()}}

@@ -18,7 +18,7 @@ from emulator.report.figures import legend_outside, log_ticks_at, new_figure, pl
 from emulator.report.words import mode_words, selector_words
 
 __all__ = ["PLOT_FILE", "summarise_run", "run_flags", "exposure_figure", "plot_exposure", "run_markdown",
-           "write_run_report"]
+           "write_run_report", "per_recorder_cycle"]
 
 #: The exposure-against-time figure of a run.
 PLOT_FILE = "exposure.png"
@@ -72,9 +72,10 @@ def summarise_run(run_dir: str | os.PathLike, info: dict | None = None, tables: 
         }
     from emulator.stats import compare_methods, statistic_interval
 
+    unit = "frames" if info.get("rate") == "native" else "cycles"
     intervals = {
-        "definition": "per method over the run's cycles, circular block bootstrap (blocks of n^(1/3) consecutive "
-                      "cycles), 95 %",
+        "definition": f"per method over the run's {unit}, circular block bootstrap (blocks of n^(1/3) consecutive "
+                      f"{unit}), 95 %",
         "mean_exposure_ms": {n: {k: v for k, v in statistic_interval(tables[n]["target_ms"], "mean", block=True,
                                                                      seed=[0, k_]).items() if k != "method"}
                              for k_, n in enumerate(names)},
@@ -101,7 +102,21 @@ def summarise_run(run_dir: str | os.PathLike, info: dict | None = None, tables: 
     flags = run_flags(info, tables)
     if flags is not None:  # only where something is flagged: other runs' results stay as they were
         summary["flags"] = flags
+    from emulator.settling import trending_methods
+
+    trending = trending_methods({n: per_recorder_cycle(tables[n])["target_ms"] for n in names})
+    if trending:  # only where a method had not settled: other runs' results stay as they were
+        summary["still_trending"] = trending
     return summary
+
+
+def per_recorder_cycle(table: dict) -> dict:
+    """A method's table with one row per recorder cycle: at native rate the frames the benchmarks use
+    (column ``benchmarked``), at cycle rate the table itself."""
+    if "benchmarked" not in table:
+        return table
+    keep = np.asarray(table["benchmarked"]).astype(bool)
+    return {k: np.asarray(v)[keep] for k, v in table.items()}
 
 
 def _source_offsets(t: dict) -> dict:
@@ -146,8 +161,9 @@ def run_flags(info: dict, tables: dict) -> dict | None:
     }
 
 
-def _flags_markdown(flags: dict) -> list[str]:
-    """The report's section on partial cycles and large upward ratios."""
+def _flags_markdown(flags: dict, unit: str = "cycles") -> list[str]:
+    """The report's section on partial cycles and large upward ratios (``unit``: what a row of the run is,
+    ``cycles`` or, at native rate, ``frames``)."""
     from emulator.dataset import missing_text
 
     bound = flags["upward_ratio_bound"]
@@ -163,7 +179,7 @@ def _flags_markdown(flags: dict) -> list[str]:
     lines += [f"Emulating up by a ratio k stretches one bracket DN into k DN and raises the noise by about sqrt(k); "
               f"ratios above {bound:g} are flagged (with brackets a factor 2 apart and the default clamp, a "
               "complete sweep never needs more than 2).", "",
-              f"| method | partial cycles used | cycles with ratio > {bound:g} | largest upward ratio |",
+              f"| method | {unit} from partial cycles | {unit} with ratio > {bound:g} | largest upward ratio |",
               "| --- | ---: | ---: | ---: |"]
     lines += [f"| {n} | {m['partial_cycles_used']} | {m['cycles_above_ratio_bound']} | "
               f"{_fmt(m['worst_upward_ratio'], '.3g')} |" for n, m in flags["methods"].items()]
@@ -238,8 +254,45 @@ def _rate_lines(info: dict, summary: dict) -> list[str]:
     return lines + [""]
 
 
-def run_markdown(info: dict, summary: dict) -> str:
-    """The markdown report of a run."""
+def _fixed_note(info: dict, summary: dict, tables: dict | None) -> list[str]:
+    """What ``fixed`` did: identical to classical-50 only where the two runs' exposures are."""
+    if "fixed" not in summary["methods"]:
+        return []
+    opts = info.get("method_options", {}).get("fixed") or {}
+    n = opts.get("n_auto_frames")
+    if n is not None and opts.get("mode") == "borealhdr":
+        n += 1  # the reference code's counter test adjusts on N + 1 calls
+    words = (f"`fixed` runs classical-50 for its first {n if n is not None else 'few'} frames and then "
+             "freezes its exposure")
+    if summary.get("rate") == "native":
+        words += " (with proposals in flight it adjusts only on a frame taken at its previous adjustment)"
+    if tables is None or "classical-50" not in tables or "fixed" not in tables:
+        return ["", words + "."]
+    a, b = np.asarray(tables["fixed"]["target_ms"]), np.asarray(tables["classical-50"]["target_ms"])
+    if a.shape == b.shape and np.array_equal(a, b):
+        return ["", words + ": on this run it is identical to classical-50 (which had not moved after that)."]
+    return ["", words + ": on this run the two differ."]
+
+
+def _trending_note(summary: dict, unit: str) -> list[str]:
+    """The methods whose exposure was still trending at the end (a clip too short for them to settle)."""
+    trending = summary.get("still_trending")
+    if not trending:
+        return []
+    from emulator.settling import TREND_MIN_CHANGE_FRACTION
+
+    k = next(iter(trending.values()))["steps"]
+    return ["", f"**Too short to settle:** {len(trending)} of {len(summary['methods'])} method(s) were still "
+            f"moving one way over the last {k} recorder cycles (by {100 * TREND_MIN_CHANGE_FRACTION:g} % or more): "
+            + ", ".join(f"{n} ({t['direction']} {100 * abs(t['change_fraction']):.0f} %)" for n, t in trending.items())
+            + ". Their figures describe the approach to an operating point, not the point; a longer recording is "
+            "needed before calling them better or worse."]
+
+
+def run_markdown(info: dict, summary: dict, tables: dict | None = None) -> str:
+    """The markdown report of a run (``tables``: the per-method tables, for the note on ``fixed``)."""
+    native = summary.get("rate") == "native"
+    unit = "frames" if native else "cycles"
     flags = summary.get("flags")
     flagged = ""
     if flags is not None:
@@ -272,7 +325,7 @@ def run_markdown(info: dict, summary: dict) -> str:
         "The paper (section V-D) compares the methods through features and VO, and shows no",
         "exposure-against-time figure; this plot is the run's own record.",
         "",
-        "| method | mode | cycles | mean ms | median ms | min ms | max ms | mean saturated (%) | mean valid (%) | "
+        f"| method | mode | {unit} | mean ms | median ms | min ms | max ms | mean saturated (%) | mean valid (%) | "
         "non-finite | ms/frame |",
         "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
     ]
@@ -291,16 +344,14 @@ def run_markdown(info: dict, summary: dict) -> str:
                   + ", ".join(f"{n} {_fmt(r['estimate'])} ms [{_fmt(r['ci95'][0] if r['ci95'] else None)}, "
                               f"{_fmt(r['ci95'][1] if r['ci95'] else None)}]" for n, r in iv["mean_exposure_ms"].items())
                   + ".", "", "Mean saturated fraction (%), lower is better:", ""]
-        lines += comparison_table(iv["mean_saturated_fraction"], "mean saturated (%)", spec=".2f", scale=100.0)
+        from emulator.report.intervals import mark_trending
+
+        lines += comparison_table(mark_trending(iv["mean_saturated_fraction"], summary.get("still_trending") or {}),
+                                  "mean saturated (%)", spec=".2f", scale=100.0)
     lines += ["", "Saturated: pixels at the black or the white level in the emulated image; valid: pixels the emulation "
               "could reconstruct (not clipped in the source bracket: a black source pixel emulated upwards is not valid). \"-\": no cycle of that method (or no timing recorded)."]
-    if "fixed" in summary["methods"]:
-        opts = info.get("method_options", {}).get("fixed") or {}
-        n = opts.get("n_auto_frames")
-        if n is not None and opts.get("mode") == "borealhdr":
-            n += 1  # the reference code's counter test adjusts on N + 1 calls
-        lines += ["", f"`fixed` runs classical-50 for its first {n if n is not None else 'few'} frames and "
-                  "then freezes its exposure: on a run that short it is identical to classical-50."]
+    lines += _fixed_note(info, summary, tables)
+    lines += _trending_note(summary, unit)
     failed = {n: m["status"] for n, m in summary["methods"].items() if m.get("status", "ok").startswith("failed")}
     fell = {n: m["status"] for n, m in summary["methods"].items() if m.get("status", "ok").startswith("fell back")}
     if fell:
@@ -310,17 +361,17 @@ def run_markdown(info: dict, summary: dict) -> str:
         lines += ["", f"Failed methods: {len(failed)} (their rows stop before the cycle named)"]
         lines += [f"- {n}: {why}" for n, why in failed.items()]
     skipped = summary.get("skipped_cycles") or []
-    lines += ["", f"Skipped cycles: {len(skipped)}"]
+    lines += ["", f"Skipped {unit}: {len(skipped)}"]
     for s in skipped:
-        lines.append(f"- cycle {s['cycle']}: {s['reason']}")
+        lines.append(f"- {unit[:-1]} {s['cycle']}: {s['reason']}")
     if flags is not None:
-        lines += _flags_markdown(flags)
+        lines += _flags_markdown(flags, unit)
     timing = summary.get("timing") or {}
     if timing:
         lines += [
             "",
-            f"Timing: {timing.get('cycles')} cycles in {_fmt(timing.get('wall_s'))} s "
-            f"({_fmt(timing.get('cycles_per_s'))} cycles/s), {timing.get('decodes')} PNG decodes "
+            f"Timing: {timing.get('cycles')} {unit} in {_fmt(timing.get('wall_s'))} s "
+            f"({_fmt(timing.get('cycles_per_s'))} {unit}/s), {timing.get('decodes')} PNG decodes "
             f"({_fmt(timing.get('decode_ms_per_image'), '.1f')} ms each), {timing.get('emulations')} emulations "
             f"({_fmt(timing.get('emulate_ms_per_image'), '.1f')} ms each).",
         ]
@@ -341,5 +392,5 @@ def write_run_report(run_dir: str | os.PathLike, info: dict | None = None, table
     plot_exposure(info, tables, run_dir / PLOT_FILE)
     write_results(run_dir / RESULTS_FILE, summary)
     sheet = run_contact_sheet(run_dir, info["methods"], tables, white_level=info.get("white_level"))
-    write_report(run_dir, run_markdown(info, summary), figures=[PLOT_FILE], sheets=[sheet])
+    write_report(run_dir, run_markdown(info, summary, tables), figures=[PLOT_FILE], sheets=[sheet])
     return summary
