@@ -34,6 +34,8 @@ from emulator.playback.workers import effective_timeout_s
 from emulator.playback import METHOD_CAMERA, MethodStep, RunConfig, RunStats, closed_loop, prepare_run, \
     resolve_sequence
 from emulator.io.runcsv import NATIVE_COLUMNS
+from emulator.io.runwatch import watch_run
+from emulator.playback.shmblock import shortage_note
 from emulator.playback.offline import at_rate
 
 __all__ = ["run_to_folder", "write_run", "saved_image", "RUN_JSON_EVERY"]
@@ -228,7 +230,7 @@ def write_run(sequence, methods, out_dir, config: RunConfig | None = None, *, re
     names = list(built)
     identity = {"sequence": str(Path(seq.path).resolve()), "methods": names, "response": cfg.response_name(response)}
 
-    with RunWriter(out, resume=resume, png_level=cfg.png_level) as writer:
+    with RunWriter(out, resume=resume, png_level=cfg.png_level) as writer, watch_run(out):  # a crash: run.json failed
         if resume:
             run_json = writer.run_json
             cfg.resumed(run_json, CONFIG_KEYS if resume_given is None else resume_given, where=str(out / RUN_FILE),
@@ -295,6 +297,11 @@ def _loop_into(writer: RunWriter, provider, built: dict, cfg: RunConfig, stats: 
                     raise PlaybackError(_resume_mismatch(out / name / CSV_FILE, st.cycle, rec, row))
                 rows[name].append(row)
             done += 1
+            short = {n: m.shm_shortage for n, m in built.items() if getattr(m, "shm_shortage", None)}
+            if len(short) != len(run_json.get("shared_memory_pipes", ())):  # /dev/shm full: said at once
+                run_json["shared_memory_pipes"] = list(short)
+                run_json["shared_memory"] = shortage_note(short, len(names))
+                writer.update()
             if done % RUN_JSON_EVERY == 0:
                 writer.update(cycles_done=done, skipped_cycles=skipped, method_status=method_status)
             if progress is not None:

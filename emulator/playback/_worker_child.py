@@ -9,8 +9,8 @@ it also ends once the run's process is gone, even while a call hangs.
 
 from __future__ import annotations
 
+import json
 import os
-import pickle
 import signal
 import sys
 import threading
@@ -112,7 +112,7 @@ class _Child:
             except (EOFError, OSError):
                 os._exit(0)
             except Exception as exc:  # noqa: BLE001 - an object that cannot be rebuilt here (its class in a script)
-                self.conn.send(("error", "handoff", f"{type(exc).__name__}: {exc}"))
+                self._send(("error", "handoff", f"{type(exc).__name__}: {exc}"))
                 continue
             if msg[0] == "stop":
                 os._exit(0)
@@ -121,11 +121,20 @@ class _Child:
             except BaseException as exc:  # noqa: BLE001 - e.g. an exception whose message itself raises
                 reply = ("fatal", f"broke its process ({type(exc).__name__} while reporting its result)", "", 0)
             try:
-                self.conn.send(reply)
+                self._send(reply)
             except (EOFError, OSError):
                 os._exit(0)
             if reply[0] == "fatal":
                 os._exit(0)
+
+    def _send(self, reply) -> None:
+        """Send ``reply`` as data (JSON text): the run never unpickles anything a worker sends, so no
+        plugin class is ever imported, nor any of its code run, in the run's process."""
+        try:
+            data = json.dumps(reply).encode("utf-8", "surrogatepass")
+        except (TypeError, ValueError):  # pragma: no cover - replies hold plain values only
+            data = json.dumps(["fatal", "broke its process (a reply that is not data)", "", 0]).encode()
+        self.conn.send_bytes(data)
 
     def _left_threads(self) -> list[str]:
         from emulator import pools
@@ -151,7 +160,8 @@ class _Child:
         os.environ.update(environ)
         try:
             os.chdir(cwd)
-            self.name, self.method = _build_one(item, mode, response, options)
+            name, self.method = _build_one(item, mode, response, options)
+            self.name = str.__str__(name)  # checked text (registry.check_method_name); its plain str, not a subclass
         except (AutoExposureError, PlaybackError) as exc:
             return ("error", type(exc).__name__, str(exc))
         except BaseException as exc:  # noqa: BLE001 - KeyboardInterrupt included: Ctrl-C never reaches a worker
@@ -168,13 +178,17 @@ class _Child:
         # a built-in's gray image is computed once per image by the run and handed over with it
         code = None if getattr(type(self.method), "private_images", False) else getattr(self.method, "gray_code", None)
         self.gray_code = code if isinstance(code, int) else None
-        try:
-            pickle.dumps(config)
-        except Exception:  # noqa: BLE001 - a plugin's config with objects: their text
-            config = {k: repr(v) for k, v in config.items()}
-        return ("built", self.name, config, self.gray_code)
+        return ("built", self.name, plain(config), self.gray_code)
 
-    def _image(self, shm_name, nbytes, shape, dtype, gray_nbytes):
+    def _image(self, shm_name, nbytes, shape, dtype, gray_nbytes, data=None):
+        if data is not None:  # through the pipe (no room in /dev/shm): already this worker's own bytes
+            raw = np.frombuffer(data, dtype=np.dtype(dtype), count=int(np.prod(shape))).reshape(shape)
+            if gray_nbytes:
+                from emulator.autoexposure._frame import FRAME_MEMO
+
+                gray = np.frombuffer(data[nbytes:nbytes + gray_nbytes], dtype=np.uint16).reshape(shape)
+                FRAME_MEMO.put(raw, ("gray", self.gray_code), gray)
+            return raw
         if self.shm is None or self.shm.name != shm_name:
             if self.shm is not None:
                 self.shm.close()
@@ -193,14 +207,14 @@ class _Child:
 
         return captured_output(self.name, clear=True)
 
-    def do_call(self, shm_name, nbytes, shape, dtype, exposure_ms, raw, gray_nbytes=0):
+    def do_call(self, shm_name, nbytes, shape, dtype, exposure_ms, raw, gray_nbytes=0, data=None):
         from emulator.autoexposure.isolation import _describe, call_method
         from emulator.pools import single_thread_pools
 
         if self.pending is not None:
             return ("fatal", self.pending, "", 0)
         if shape is not None:
-            raw = self._image(shm_name, nbytes, shape, dtype, gray_nbytes)
+            raw = self._image(shm_name, nbytes, shape, dtype, gray_nbytes, data)
         self.forked.clear()
         try:
             with single_thread_pools(user_api="blas"):  # results independent of the machine's cores
@@ -214,17 +228,54 @@ class _Child:
         bad = self._hostile("in next_exposure")  # forks: in the call; threads: still running after it
         if bad:
             return ("fatal", bad, *self._output())
-        try:
-            pickle.dumps(value)
-        except Exception:  # noqa: BLE001 - not a number anyway: the loop's guard replaces it
-            value = None
-        return ("answer", value, guard, *self._output())
+        return ("answer", _number(value), guard, *self._output())
 
     def do_reset(self):
         reset = getattr(self.method, "reset", None)
         if callable(reset):
             reset()
         return ("ok",)
+
+
+#: Longest text kept of one value a plugin's ``config()`` holds that JSON cannot (its repr), characters.
+REPR_CHARS = 200
+
+
+def plain(value, depth: int = 0):
+    """``value`` (a method's ``config()``) as JSON data: mappings with text keys, lists, text, numbers,
+    booleans and None; anything else (a plugin's own object, a subclass) as its ``repr``, cut to
+    :data:`REPR_CHARS`.  Runs in the worker, so a plugin's ``__repr__`` runs there too."""
+    kind = type(value)
+    if value is None or kind in (bool, int, float, str):
+        return value
+    if depth < 8 and kind is dict:
+        return {k if type(k) is str else _text(k): plain(v, depth + 1) for k, v in value.items()}
+    if depth < 8 and kind in (list, tuple):
+        return [plain(v, depth + 1) for v in value]
+    return _text(value)
+
+
+def _text(value) -> str:
+    try:
+        text = repr(value)
+        text = text if type(text) is str else f"<{type(value).__name__}>"
+    except BaseException:  # noqa: BLE001 - a repr that raises: the type's name
+        text = f"<{type(value).__name__}>"
+    return text if len(text) <= REPR_CHARS else text[:REPR_CHARS] + "..."
+
+
+def _number(value):
+    """A method's answer as data: text stays text (the loop's guard reads it as the run did), anything
+    else its ``float`` taken here, in the worker (None where it has none: the guard replaces it)."""
+    if type(value) is str:
+        return value
+    if isinstance(value, str):
+        return str.__str__(value)
+    try:
+        number = float(value)
+    except BaseException:  # noqa: BLE001 - a __float__ that raises or exits: not a number
+        return None
+    return number if type(number) is float else None
 
 
 def _label(item) -> str:

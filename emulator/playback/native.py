@@ -38,7 +38,7 @@ import numpy as np
 
 from emulator.autoexposure.isolation import readonly_view
 from emulator.dataset import CAMERAS
-from emulator.errors import CalibrationError
+from emulator.errors import CalibrationError, PlaybackError
 from emulator.native import (MOTION_STOPS_PER_FRAME, SATURATION_LIMIT, WARP_RESAMPLE, WINDOW_CYCLES,
                              NativeCandidate, invalid_fraction, native_select, rotation_between, warp_to_instant)
 from emulator.playback.config import RunConfig
@@ -201,6 +201,9 @@ class NativeProvider:
         self.motion_stops_per_frame = float(motion_stops_per_frame)
         self.saturation_limit = float(saturation_limit)
         self.frames = _Frames(sequence, self.cameras)
+        if self.latency_ticks >= len(self.frames):  # no proposal would ever be used: refused, not ranked
+            raise PlaybackError(f"latency_frames {self.latency_ticks}: must be below the recording's frame count "
+                                f"({len(self.frames)} frames at native rate; --latency-frames)")
         self.window = WINDOW_CYCLES * max(1, len(sequence.brackets))
         self.motion = self._motion(motion) if warp else None
         self.warp = bool(warp)

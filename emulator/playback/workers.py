@@ -27,6 +27,7 @@ after a call returns).
 from __future__ import annotations
 
 import contextlib
+import json
 import multiprocessing
 import os
 import pickle
@@ -35,13 +36,13 @@ import sys
 import threading
 import time
 import weakref
-from multiprocessing import shared_memory
 
 import numpy as np
 
 from emulator.autoexposure._base import AutoExposureError, MethodFailed
 from emulator.errors import PlaybackError
 from emulator.playback._worker_child import _child_main, _label
+from emulator.playback.shmblock import reserve_block
 from emulator.numpy_dispatch import forkserver_env
 
 __all__ = ["MethodWorker", "start_methods", "stop_methods", "effective_timeout_s", "DEFAULT_METHOD_TIMEOUT_S",
@@ -52,6 +53,8 @@ __all__ = ["MethodWorker", "start_methods", "stop_methods", "effective_timeout_s
 DEFAULT_METHOD_TIMEOUT_S = 120.0
 #: ``process``: each method in its own worker process (the default); ``inline``: in the run's process.
 WORKER_MODES = ("process", "inline")
+#: Largest reply a worker may send, bytes (what a method printed is kept up to 64 KiB, its config's values cut).
+MAX_REPLY_BYTES = 16 << 20
 _PRELOAD = ["emulator.playback._worker_preload"]  # imports the worker side too
 _ctx = None
 _ctx_lock = threading.Lock()
@@ -162,6 +165,7 @@ class MethodWorker:
         self._config: dict = {}
         self._gray_code = None
         self._shm_box: list = [None]
+        self.shm_shortage: int | None = None  # bytes of the image block /dev/shm had no room for
         self._ahead = None  # (raw, exposure_ms, monotonic time) of a call sent ahead
         self._conn, child = ctx.Pipe()
         self._proc = ctx.Process(target=_child_main, args=(child, os.getpid()), daemon=True, name="exposim-method")
@@ -178,7 +182,7 @@ class MethodWorker:
     def built(self) -> "MethodWorker":
         """Wait for the worker to build its method; raise the build's error (naming the method)."""
         try:
-            reply = self._ask(None)
+            reply = self._ask(None, where="while it was built (its import, factory or constructor)")
         except MethodFailed as exc:
             self.close()
             raise AutoExposureError(f"AE method {self.label} could not be built: {exc}") from None
@@ -193,7 +197,7 @@ class MethodWorker:
         _, self.name, self._config, self._gray_code = reply
         return self
 
-    def _ask(self, msg, sent_at: float | None = None):
+    def _ask(self, msg, sent_at: float | None = None, where: str = "in next_exposure"):
         try:
             if msg is not None:  # a worker that died since its last answer: its pipe is broken, say why
                 self._conn.send(msg)
@@ -204,10 +208,15 @@ class MethodWorker:
                                "its process was stopped")
                 self.kill()
                 raise MethodFailed(self.failed)
-            return self._conn.recv()
+            data = self._conn.recv_bytes(MAX_REPLY_BYTES)
         except (EOFError, OSError, ConnectionError):
-            self.failed = f"{_ended(self._proc)} in next_exposure" if msg is None or msg[0] == "call" \
-                else _ended(self._proc)
+            self.failed = f"{_ended(self._proc)} {where}" if msg is None or msg[0] == "call" else _ended(self._proc)
+            self.kill()
+            raise MethodFailed(self.failed) from None
+        try:
+            return json.loads(data)  # data only: nothing a worker sends is unpickled here
+        except ValueError:
+            self.failed = f"its process sent a reply that is not data {where}; it was stopped"
             self.kill()
             raise MethodFailed(self.failed) from None
 
@@ -216,18 +225,32 @@ class MethodWorker:
             a = np.ascontiguousarray(raw)
             gray = self._gray(raw)
             size = a.nbytes + (0 if gray is None else gray.nbytes)
-            shm = self._shm_box[0]
-            if shm is None or shm.size < size:
-                if shm is not None:
-                    shm.close()
-                    shm.unlink()
-                shm = self._shm_box[0] = shared_memory.SharedMemory(create=True, size=max(size, 1))
+            gray_nbytes = 0 if gray is None else gray.nbytes
+            shm = self._block(size)
+            if shm is None:  # no room in /dev/shm: the pixels go through the pipe (the same bytes)
+                data = a.tobytes() + (b"" if gray is None else np.ascontiguousarray(gray).tobytes())
+                return ("call", None, a.nbytes, a.shape, a.dtype.str, exposure_ms, None, gray_nbytes, data)
             np.ndarray(a.shape, a.dtype, buffer=shm.buf)[...] = a
             if gray is not None:
                 np.ndarray(gray.shape, gray.dtype, buffer=shm.buf, offset=a.nbytes)[...] = gray
-            return ("call", shm.name, a.nbytes, a.shape, a.dtype.str, exposure_ms, None,
-                    0 if gray is None else gray.nbytes)
+            return ("call", shm.name, a.nbytes, a.shape, a.dtype.str, exposure_ms, None, gray_nbytes)
         return ("call", None, 0, None, None, exposure_ms, raw)
+
+    def _block(self, size: int):
+        """This worker's image block, reserved in full when made (:func:`reserve_block`); None once
+        ``/dev/shm`` had no room for it (:attr:`shm_shortage` then holds the bytes it needed)."""
+        shm = self._shm_box[0]
+        if self.shm_shortage is not None:
+            return None
+        if shm is None or shm.size < size:
+            if shm is not None:
+                self._shm_box[0] = None
+                shm.close()
+                shm.unlink()
+            shm = self._shm_box[0] = reserve_block(size)
+            if shm is None:
+                self.shm_shortage = size
+        return shm
 
     def send_ahead(self, raw, exposure_ms) -> None:
         """Start the call :meth:`next_exposure` will make with this very ``raw`` and ``exposure_ms``, so
