@@ -104,6 +104,36 @@ class LongName(DataEverywhere):
     name = "n" * 300
 
 
+class LeavesProcess(DataEverywhere):
+    \"\"\"Starts a process that would outlive the call (and another that leaves its session).\"\"\"
+    name = "leaves-process"
+
+    def next_exposure(self, raw, exposure_ms):
+        import subprocess
+        subprocess.Popen(["sleep", "1000"])
+        subprocess.Popen(["sleep", "1001"], start_new_session=True)
+        return float(exposure_ms)
+
+
+class Waits(DataEverywhere):
+    \"\"\"A subprocess that finishes within the call: allowed.\"\"\"
+    name = "waits"
+
+    def next_exposure(self, raw, exposure_ms):
+        import subprocess
+        subprocess.run(["true"], check=True)
+        return float(exposure_ms)
+
+
+class Preexec(DataEverywhere):
+    name = "preexec"
+
+    def next_exposure(self, raw, exposure_ms):
+        import subprocess
+        subprocess.run(["sh", "-c", "touch " + MARK], preexec_fn=lambda: None)
+        return float(exposure_ms)
+
+
 class Unbuildable:
     name = "unbuildable"
 
@@ -270,3 +300,48 @@ def test_a_plugin_name_is_bounded_before_its_folder_is_made(seq, plugin_dir, tmp
                  "--no-progress"]) == 1
     assert "at most 64 characters" in capsys.readouterr().err
     assert not out.exists()
+
+
+def _sleepers() -> set[int]:
+    found = set()
+    for entry in os.listdir("/proc"):
+        try:
+            cmd = Path(f"/proc/{entry}/cmdline").read_bytes()
+        except OSError:
+            continue
+        if cmd in (b"sleep\x001000\x00", b"sleep\x001001\x00"):
+            found.add(int(entry))
+    return found
+
+
+@pytest.mark.parametrize("jobs", ["1", "2"])
+def test_a_process_left_running_after_a_call_fails_the_method_named_and_is_ended(seq, alone, plugin_dir, tmp_path,
+                                                                               monkeypatch, jobs):
+    """subprocess.Popen not waited for (the fork check does not see it): the process could rewrite the
+    other workers' image blocks; it is found in /proc after the call, ended, and the method fails."""
+    monkeypatch.syspath_prepend(str(plugin_dir))
+    before = _sleepers()
+    a, b, c = BUILTINS.split(",")
+    out = tmp_path / "run"
+    assert main(["run", str(seq), "--methods", f"{a},{b},boundary_plugins:LeavesProcess,boundary_plugins:Waits,{c}",
+                 "-o", str(out), "--no-progress", "--jobs", jobs]) == 0
+    for m, data in alone.items():
+        assert (out / m / "exposures.csv").read_bytes() == data, m
+    status = json.loads((out / "run.json").read_text())["method_status"]
+    assert status["waits"] == "ok"
+    assert status["leaves-process"].startswith("failed: left 2 processes running in next_exposure (pid ")
+    assert "leftover_process); they and its process were stopped at cycle 0" in status["leaves-process"]
+    assert _sleepers() <= before  # both ended, the one in its own session too
+
+
+def test_a_subprocess_with_preexec_fn_is_named_as_such(seq, plugin_dir, tmp_path, monkeypatch):
+    mark = tmp_path / "ran"
+    monkeypatch.setenv("BOUNDARY_MARK", str(mark))
+    monkeypatch.syspath_prepend(str(plugin_dir))
+    out = tmp_path / "run"
+    assert main(["run", str(seq), "--methods", "classical-50,boundary_plugins:Preexec", "-o", str(out),
+                 "--no-progress"]) == 0
+    status = json.loads((out / "run.json").read_text())["method_status"]["preexec"]
+    assert status.startswith("failed: started a subprocess with preexec_fn in next_exposure")
+    assert "refused: the command never ran" in status and "os.fork" not in status
+    assert not mark.exists()

@@ -80,7 +80,76 @@ def _glibc() -> bool:
         return False
 
 
+def _fork_call() -> str:
+    """What forked this process: ``subprocess with preexec_fn``, ``multiprocessing (fork)`` or ``os.fork``
+    (read from the stack of the at-fork hook; a plain ``subprocess`` call forks without running it)."""
+    frame = sys._getframe(2)  # the caller of the at-fork hook's lambda
+    while frame is not None:
+        module = frame.f_globals.get("__name__", "")
+        if module == __name__:  # up to this worker's own call: the method's frames only
+            break
+        if module == "subprocess":
+            return "subprocess with preexec_fn"
+        if module.startswith("multiprocessing"):
+            return "multiprocessing (fork start method)"
+        frame = frame.f_back
+    return "os.fork"
+
+
+_PR_SET_CHILD_SUBREAPER = 36  # linux/prctl.h
+
+
+def _adopt_orphans() -> None:
+    """Make this worker the reaper of its orphaned descendants (Linux): a process a method starts and
+    that double-forks (or calls setsid) stays this worker's descendant, where :func:`leftover_processes`
+    finds it."""
+    try:
+        import ctypes
+
+        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0)
+    except (ImportError, OSError, AttributeError):
+        pass
+
+
+def leftover_processes() -> list[tuple[int, str]]:
+    """(pid, command name) of this worker's live descendants (zombies left out), from ``/proc``; empty at
+    once (one system call) when it has no child at all, as after any ordinary call."""
+    try:
+        os.waitid(os.P_ALL, 0, os.WEXITED | os.WNOHANG | os.WNOWAIT)  # leaves a child's status to its waiter
+    except ChildProcessError:
+        return []
+    except (OSError, AttributeError):
+        pass
+    table = {}
+    try:
+        entries = os.listdir("/proc")
+    except OSError:
+        return []
+    for entry in entries:
+        if not entry.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry}/stat", "rb") as fh:
+                stat = fh.read().decode("ascii", "replace")
+        except OSError:
+            continue
+        comm = stat[stat.find("(") + 1:stat.rfind(")")]
+        fields = stat[stat.rfind(")") + 2:].split()
+        if len(fields) > 1:
+            table[int(entry)] = (int(fields[1]), fields[0], comm)
+    found, todo = [], [os.getpid()]
+    while todo:
+        parent = todo.pop()
+        for pid, (ppid, state, comm) in table.items():
+            if ppid == parent:
+                todo.append(pid)
+                if state not in ("Z", "X"):
+                    found.append((pid, comm))
+    return sorted(found)
+
+
 def _child_main(conn, run_pid: int) -> None:
+    _adopt_orphans()
     _keep_freed_memory()
     try:
         os.setsid()  # own process group: stopped with whatever it starts; Ctrl-C goes to the run only
@@ -102,7 +171,7 @@ class _Child:
         self.gray_code = None
         self.forked: list = []
         self.allowed = set(threading.enumerate())
-        os.register_at_fork(after_in_parent=lambda: self.forked.append(True),
+        os.register_at_fork(after_in_parent=lambda: self.forked.append(_fork_call()),
                             after_in_child=lambda: os._exit(_FORK_EXIT))
 
     def serve(self) -> None:
@@ -145,11 +214,25 @@ class _Child:
 
     def _hostile(self, when: str) -> str | None:
         if self.forked:
-            return f"forked a child process (os.fork) {when}; its process was stopped"
+            call = self.forked[0]
+            if call.startswith("subprocess"):
+                return (f"started a {call} {when} (the function would run Python in a forked child; refused: the "
+                        "command never ran); its process was stopped")
+            return f"forked a child process ({call}) {when}; its process was stopped"
         left = self._left_threads()
         if left:
             return (f"left {len(left)} thread{'s' if len(left) > 1 else ''} running {when} ({', '.join(left[:3])}); "
                     "its process was stopped")
+        procs = leftover_processes()
+        if procs:
+            for pid, _ in procs:  # also those that left its process group (setsid): nothing outlives the call
+                try:
+                    os.kill(pid, signal.SIGKILL)
+                except OSError:
+                    pass
+            shown = ", ".join(f"pid {pid} {comm}" for pid, comm in procs[:3])
+            return (f"left {len(procs)} process{'es' if len(procs) > 1 else ''} running {when} ({shown}; "
+                    "leftover_process); they and its process were stopped")
         return None
 
     def do_build(self, item, mode, response, options, sys_path, cwd, environ):
