@@ -320,6 +320,9 @@ def _loop_into(writer: RunWriter, provider, built: dict, cfg: RunConfig, stats: 
                 saver.close()
         if status == "complete":
             run_json.pop("error", None)
+        coverage = getattr(provider, "gyro_coverage", dict)()
+        if coverage and isinstance(run_json.get("native"), dict):
+            run_json["native"].update(coverage)
         writer.update(status=status, cycles_done=done, skipped_cycles=skipped, timing=stats.as_dict(),
                       method_status=method_status)
     return rows

@@ -275,7 +275,7 @@ def test_nothing_a_worker_sends_is_unpickled_no_plugin_module_is_imported_in_the
 
 @pytest.mark.parametrize("flags,said", [
     (["--rate", "native", "--latency-frames", "2000000000"], "--latency-frames 2000000000: latency_frames must be an "
-                                                             "integer in 0..1000000"),
+                                                             "integer >= 0, at most 1000000"),
     (["--rate", "native", "--latency-frames", "24"], "latency_frames 24: must be below the recording's frame count "
                                                      "(24 frames at native rate"),
     (["--method-timeout-s", "3e6"], "--method-timeout-s 3000000.0: method_timeout_s must be at most 2147483 s"),

@@ -251,8 +251,8 @@ class RunConfig:
             raise PlaybackError(f"rate must be one of {', '.join(RATES)}, got {self.rate!r}")
         lat = self.latency_frames
         if isinstance(lat, bool) or not isinstance(lat, (int, np.integer)) or not 0 <= lat <= MAX_LATENCY_FRAMES:
-            raise PlaybackError(f"latency_frames must be an integer in 0..{MAX_LATENCY_FRAMES} (and below the "
-                                f"recording's frame count), got {lat!r}")
+            raise PlaybackError(f"latency_frames must be an integer >= 0, at most {MAX_LATENCY_FRAMES} and below "
+                                f"the recording's frame count, got {lat!r}")
         put(self, "latency_frames", int(lat))
 
     # ------------------------------------------------------------------ derived values
