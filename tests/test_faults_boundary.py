@@ -134,6 +134,31 @@ class Preexec(DataEverywhere):
         return float(exposure_ms)
 
 
+class ExitsWhenBuilt(DataEverywhere):
+    name = "exits-when-built"
+
+    def __init__(self):
+        os._exit(3)
+
+
+class KillSiblings(DataEverywhere):
+    \"\"\"At its second call kills every other worker of the run (the fork server's other children).\"\"\"
+    name = "kill-siblings"
+
+    def next_exposure(self, raw, exposure_ms):
+        self.n += 1
+        if self.n == 2:
+            for entry in filter(str.isdigit, os.listdir("/proc")):
+                try:
+                    with open(f"/proc/{entry}/stat") as fh:
+                        ppid = int(fh.read().rsplit(")", 1)[1].split()[1])
+                except (OSError, ValueError, IndexError):
+                    continue
+                if ppid == os.getppid() and int(entry) != os.getpid():
+                    os.kill(int(entry), signal.SIGKILL)
+        return float(exposure_ms)
+
+
 class Unbuildable:
     name = "unbuildable"
 
@@ -345,3 +370,25 @@ def test_a_subprocess_with_preexec_fn_is_named_as_such(seq, plugin_dir, tmp_path
     assert status.startswith("failed: started a subprocess with preexec_fn in next_exposure")
     assert "refused: the command never ran" in status and "os.fork" not in status
     assert not mark.exists()
+
+
+def test_a_build_that_kills_its_worker_says_built_not_next_exposure(seq, plugin_dir, tmp_path, monkeypatch, capsys):
+    monkeypatch.syspath_prepend(str(plugin_dir))
+    out = tmp_path / "run"
+    assert main(["run", str(seq), "--methods", "classical-50,boundary_plugins:ExitsWhenBuilt", "-o", str(out),
+                 "--no-progress"]) == 1
+    err = capsys.readouterr().err
+    assert ("could not be built: its process exited with status 3 while it was built (its import, factory or "
+            "constructor)") in err and "next_exposure" not in err
+
+
+def test_a_sibling_worker_killed_by_a_plugin_is_reported_as_killed_by_the_signal(seq, plugin_dir, tmp_path,
+                                                                                  monkeypatch):
+    monkeypatch.syspath_prepend(str(plugin_dir))
+    out = tmp_path / "run"
+    assert main(["run", str(seq), "--methods", "classical-50,boundary_plugins:KillSiblings,shim", "-o", str(out),
+                 "--no-progress"]) == 0
+    status = json.loads((out / "run.json").read_text())["method_status"]
+    assert status["kill-siblings"] == "ok"
+    for name in ("classical-50", "shim"):
+        assert status[name].startswith("failed: its process was killed by SIGKILL in next_exposure at cycle "), name
