@@ -17,10 +17,10 @@ from pathlib import Path
 import pytest
 
 from emulator.cli import main
+from test_faults_workers import BUILTINS, alone  # noqa: F401 - the built-ins' bytes without a plugin, on this seq
 from test_playback import write_static_sequence
 
 REPO = Path(__file__).resolve().parents[1]
-BUILTINS = "classical-50,shim,zhang"
 
 PLUGINS = '''
 import enum, os, signal
@@ -178,13 +178,6 @@ def plugin_dir(tmp_path_factory):
     d = tmp_path_factory.mktemp("plugins")
     (d / "boundary_plugins.py").write_text(PLUGINS)
     return d
-
-
-@pytest.fixture(scope="module")
-def alone(seq, tmp_path_factory):
-    out = tmp_path_factory.mktemp("alone") / "run"
-    assert main(["run", str(seq), "--methods", BUILTINS, "-o", str(out), "--no-progress"]) == 0
-    return {m: (out / m / "exposures.csv").read_bytes() for m in BUILTINS.split(",")}
 
 
 def _env(plugin_dir=None) -> dict:
