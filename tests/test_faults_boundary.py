@@ -185,12 +185,25 @@ def _env(plugin_dir=None) -> dict:
     return {**os.environ, "PYTHONPATH": os.pathsep.join(paths)}
 
 
-def test_no_room_in_dev_shm_sends_the_images_through_pipes_with_the_same_bytes(seq, alone, tmp_path, monkeypatch):
+def test_no_room_in_dev_shm_sends_the_images_through_pipes_with_the_same_bytes(seq, alone, tmp_path, monkeypatch,
+                                                                                capsys):
     from emulator.playback import workers
 
     monkeypatch.setattr(workers, "reserve_block", lambda size: None)  # /dev/shm full for every block
     out = tmp_path / "run"
+    progress = []
+    real = workers.MethodWorker.reserve
+
+    def reserve(self, nbytes):  # the blocks are reserved before any call, i.e. before the first cycle
+        progress.append(self._ahead is None and self._shm_box[0] is None)
+        return real(self, nbytes)
+
+    monkeypatch.setattr(workers.MethodWorker, "reserve", reserve)
     assert main(["run", str(seq), "--methods", BUILTINS, "-o", str(out), "--no-progress"]) == 0
+    assert progress == [True, True, True]
+    said = [line for line in capsys.readouterr().err.splitlines() if "/dev/shm" in line]
+    assert len(said) == 1 and said[0].startswith("exposim: warning: /dev/shm had no room for the image blocks of 3 of "
+                                                 "3 methods (classical-50, shim, zhang; 0.3 MB each, 0.9 MB more needed")
     for m, data in alone.items():
         assert (out / m / "exposures.csv").read_bytes() == data, m
     info = json.loads((out / "run.json").read_text())
@@ -234,7 +247,7 @@ def test_eight_methods_run_on_dockers_64_mib_dev_shm(sample_seq, tmp_path):
     proc = subprocess.run(["unshare", "-m", "sh", "-c", script], env=_env(REPO / "examples"), capture_output=True,
                           text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
-    assert "exposim run: warning: /dev/shm had no room for the image blocks of" in proc.stderr
+    assert "exposim: warning: /dev/shm had no room for the image blocks of 1 of 8 methods" in proc.stderr
     info = json.loads((out / "run.json").read_text())
     assert info["status"] == "complete" and set(info["method_status"].values()) == {"ok"}
 

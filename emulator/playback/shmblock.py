@@ -22,10 +22,14 @@ import os
 import secrets
 from multiprocessing import shared_memory
 
-__all__ = ["reserve_block", "block_prefix", "shortage_note", "SHM_DIR"]
+__all__ = ["reserve_block", "block_prefix", "shortage_note", "SHM_DIR", "SharedMemoryWarning"]
 
 #: Where POSIX shared memory lives on Linux (what a shortage names).
 SHM_DIR = "/dev/shm"
+
+
+class SharedMemoryWarning(UserWarning):
+    """``/dev/shm`` had no room for a method's image block: its images go through its pipe."""
 
 
 def block_prefix(pid: int | None = None) -> str:
@@ -77,5 +81,5 @@ def shortage_note(sizes: dict[str, int], total: int) -> str | None:
     each = max(sizes.values())
     return (f"{SHM_DIR} had no room for the image blocks of {len(sizes)} of {total} methods ({', '.join(sizes)}; "
             f"{each / 1e6:.1f} MB each, {need / 1e6:.1f} MB more needed"
-            + (f", {free / 1e6:.1f} MB free after the others" if free is not None else "")
+            + (f", {free / 1e6:.1f} MB free" if free is not None else "")
             + "): their images went through pipes (slower, the same results); enlarge it (docker run --shm-size=256m)")

@@ -252,6 +252,13 @@ class MethodWorker:
                 self.shm_shortage = size
         return shm
 
+    def reserve(self, image_nbytes: int) -> bool:
+        """Reserve this worker's image block for images of ``image_nbytes`` (and their gray image, for a
+        built-in that takes it) before the first call; False where ``/dev/shm`` has no room for it."""
+        if self.failed is not None:
+            return True
+        return self._block(int(image_nbytes) * (2 if self._gray_code is not None else 1)) is not None
+
     def send_ahead(self, raw, exposure_ms) -> None:
         """Start the call :meth:`next_exposure` will make with this very ``raw`` and ``exposure_ms``, so
         that the run can do other work while the method computes (the answer is read by that call;
