@@ -445,3 +445,28 @@ def test_an_invalid_left_yaml_is_named_as_invalid_not_missing(static, tmp_path):
     said = [str(w.message) for w in caught if w.category is NativeWarpWarning]
     assert len(said) == 1 and "invalid camera calibration (" in said[0] and "no camera calibration" not in said[0]
     assert f"{root / 'calibration' / 'left.yaml'}: not valid YAML" in said[0]
+
+
+def test_a_run_says_in_one_line_and_in_run_json_how_many_frames_got_no_warp(static, tmp_path, capsys):
+    """An IMU record that ends after 0.2 s of a 0.7 s recording: ``run.json`` still says "rotation from
+    the gyro" for the frames it covers, and counts those it does not, in one warning line too."""
+    import json
+    import shutil
+
+    from emulator.cli import main
+
+    seq, _, _, _ = static
+    root = tmp_path / "rec"
+    shutil.copytree(seq.path, root)
+    (root / "imu").mkdir()
+    rows = [f"{int(t * 1e9)},{int(t * 1e9)},0.0,0.0,0.01,0.0,0.0,9.81" for t in np.arange(-1.0, 0.2, 0.01)]
+    (root / "imu" / "imu.csv").write_text("timestamp,ros_time,gyro_x,gyro_y,gyro_z,acc_x,acc_y,acc_z\n"
+                                          + "\n".join(rows) + "\n")
+    out = tmp_path / "run"
+    assert main(["run", str(root), "--methods", "classical-50,shim", "--rate", "native", "-o", str(out),
+                 "--no-progress"]) == 0
+    native = json.loads((out / "run.json").read_text())["native"]
+    assert native["warp"] == "rotation from the gyro" and native["frames_not_warped"] > 0
+    said = [line for line in capsys.readouterr().err.splitlines() if "without a warp" in line]
+    assert said == [f"exposim run: warning: {native['gyro_note']}"]
+    assert native["gyro_note"].startswith(f"{native['frames_not_warped']} of 16 frames used a neighbour frame")
