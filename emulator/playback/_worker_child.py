@@ -10,6 +10,7 @@ it also ends once the run's process is gone, even while a call hangs.
 from __future__ import annotations
 
 import json
+import numbers
 import os
 import signal
 import sys
@@ -326,16 +327,33 @@ REPR_CHARS = 200
 
 def plain(value, depth: int = 0):
     """``value`` (a method's ``config()``) as JSON data: mappings with text keys, lists, text, numbers,
-    booleans and None; anything else (a plugin's own object, a subclass) as its ``repr``, cut to
-    :data:`REPR_CHARS`.  Runs in the worker, so a plugin's ``__repr__`` runs there too."""
+    booleans and None (a NumPy scalar or a subclass as its plain value); anything else (a plugin's own
+    object) as its ``repr``, cut to :data:`REPR_CHARS`.  Runs in the worker, so a plugin's code runs
+    there too."""
     kind = type(value)
     if value is None or kind in (bool, int, float, str):
         return value
-    if depth < 8 and kind is dict:
-        return {k if type(k) is str else _text(k): plain(v, depth + 1) for k, v in value.items()}
-    if depth < 8 and kind in (list, tuple):
+    try:  # a subclass or NumPy scalar of those: its plain value (np.float64(0.5) -> 0.5, a str Enum -> its text)
+        if isinstance(value, (bool, np.bool_)):
+            return bool(value)
+        if isinstance(value, numbers.Integral):
+            return int(value)
+        if isinstance(value, numbers.Real):
+            return float(value)
+        if isinstance(value, str):
+            return str.__str__(value)
+    except BaseException:  # noqa: BLE001 - a conversion that raises: its text below
+        pass
+    if depth < 8 and isinstance(value, dict):
+        return {_key(k): plain(v, depth + 1) for k, v in dict.items(value)}
+    if depth < 8 and isinstance(value, (list, tuple)):
         return [plain(v, depth + 1) for v in value]
     return _text(value)
+
+
+def _key(key) -> str:
+    key = plain(key, 8)
+    return key if type(key) is str else _text(key)
 
 
 def _text(value) -> str:
