@@ -37,6 +37,7 @@ from emulator.playback import METHOD_CAMERA, MethodStep, RunConfig, RunStats, cl
 from emulator.io.runcsv import NATIVE_COLUMNS
 from emulator.io.runwatch import watch_run
 from emulator.playback.shmblock import SharedMemoryWarning, shortage_note
+from emulator.playback._worker_child import plain  # inline methods' config() as JSON, as a worker sends it
 from emulator.playback.offline import at_rate
 
 __all__ = ["run_to_folder", "write_run", "saved_image", "RUN_JSON_EVERY"]
@@ -149,7 +150,7 @@ def _new_run_json(config: RunConfig, identity: dict, seq, built, method_specs, m
         "brackets_ms": list(seq.brackets),
         "method_camera": METHOD_CAMERA,
         "selector_camera": METHOD_CAMERA,
-        "method_options": {n: m.config() if hasattr(m, "config") else {} for n, m in built.items()},
+        "method_options": {n: plain(m.config()) if hasattr(m, "config") else {} for n, m in built.items()},
         "method_specs": [s if isinstance(s, str) else n for s, n in zip(method_specs, built)],
         "command": command,
         "version": __version__,

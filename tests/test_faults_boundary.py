@@ -401,3 +401,14 @@ def test_a_sibling_worker_killed_by_a_plugin_is_reported_as_killed_by_the_signal
     assert status["kill-siblings"] == "ok"
     for name in ("classical-50", "shim"):
         assert status[name].startswith("failed: its process was killed by SIGKILL in next_exposure at cycle "), name
+
+
+def test_an_ordinary_object_in_config_is_recorded_inline_too(seq, plugin_dir, tmp_path, monkeypatch):
+    """--workers inline (no worker between): the object's repr in run.json, the run goes on (it ended with rc 1)."""
+    monkeypatch.syspath_prepend(str(plugin_dir))
+    out = tmp_path / "run"
+    assert main(["run", str(seq), "--methods", "classical-50,boundary_plugins:DataEverywhere", "-o", str(out),
+                 "--no-progress", "--workers", "inline"]) == 0
+    config = json.loads((out / "run.json").read_text())["method_options"]["red"]
+    assert config["thing"].startswith("<boundary_plugins.Thing object at") and config["color"] == "red"
+    sys.modules.pop("boundary_plugins", None)

@@ -97,7 +97,7 @@ def check_method_name(name, source: str) -> str:
         raise AutoExposureError(
             f"AE method plugin {source} is named {name!r}, the name of the built-in method {name!r} "
             f"({target.__module__}.{target.__qualname__}); rename the plugin")
-    return name
+    return str.__str__(name)  # its text: a str subclass (an Enum) would print and compare as itself
 
 
 def load_import_path(path: str) -> Callable:
