@@ -1,10 +1,12 @@
 """The worker's side of :mod:`emulator.playback.workers`: one AE method in its own process.
 
 The process builds the method (a plugin's import and factory run here), then answers calls one
-at a time: the image comes from the run's shared memory into an immutable copy of its own, the
-answer goes back with the method's fallback count and what it printed.  A fork (the child
-exits at once) or a thread left running after a call is reported, and the process then exits;
-it also ends once the run's process is gone, even while a call hangs.
+at a time: the image comes from the run's shared memory (or the pipe) into an immutable copy of its
+own, the answer goes back as JSON text with the method's fallback count and what it printed
+(:func:`plain`: its ``config()`` as data).  A fork (the child exits at once; a ``subprocess`` with
+``preexec_fn`` named as such), a thread or a process (:func:`leftover_processes`) left running after
+a call is reported, and the process then exits; it also ends once the run's process is gone, even
+while a call hangs.
 """
 
 from __future__ import annotations

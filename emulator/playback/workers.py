@@ -5,18 +5,20 @@ from Python's fork server (a fresh interpreter started for the purpose, which ho
 the run's open files), builds the method itself (the plugin's import and factory run there,
 never in the run's process), and answers one call at a time:
 
-- the image reaches it through a shared-memory block owned by the run (one per worker,
-  written before each call; the worker copies it into an immutable buffer of its own, so
-  nothing it does reaches the run's arrays or another method);
-- it returns only the proposal, the method's fallback count and what the method printed;
+- the image reaches it through a shared-memory block owned by the run (one per worker, reserved
+  in full before the first cycle, :mod:`emulator.playback.shmblock`, and written before each call;
+  the worker copies it into an immutable buffer of its own, so nothing it does reaches the run's
+  arrays or another method); where ``/dev/shm`` has no room for a block, through the pipe;
+- it returns only the proposal, the method's fallback count and what the method printed, as JSON
+  text (nothing a worker sends is unpickled, so no plugin module is imported in the run's process);
   the run process owns every file;
 - the run waits for the answer at most the method time limit (``--method-timeout-s``,
   default :data:`DEFAULT_METHOD_TIMEOUT_S`), counted from the moment the call was sent (the
   closed loop sends it ahead, :meth:`MethodWorker.send_ahead`, and does the second camera's
   part of the shot meanwhile): past it the worker is killed (with any process it started)
   and the method fails with the reason, while the others go on;
-- a worker that dies, forks (``os.fork``: the child exits at once), or leaves a thread running
-  after a call is killed the same way and its method fails, named.
+- a worker that dies, forks (``os.fork``: the child exits at once), or leaves a thread or a process
+  running after a call is killed the same way and its method fails, named.
 
 A worker runs in its own session (a terminal's Ctrl-C reaches only the run, which stops its
 workers) and dies with the run.  :func:`start_methods` with ``workers="inline"`` builds the
