@@ -412,3 +412,57 @@ def test_an_ordinary_object_in_config_is_recorded_inline_too(seq, plugin_dir, tm
     config = json.loads((out / "run.json").read_text())["method_options"]["red"]
     assert config["thing"].startswith("<boundary_plugins.Thing object at") and config["color"] == "red"
     sys.modules.pop("boundary_plugins", None)
+
+
+PATCHER = """
+import cv2
+_real = cv2.cvtColor
+cv2.cvtColor = lambda *a, **k: _real(*a, **k) // 2  # at import: every gray image of the process it runs in
+
+
+class PatchAE:
+    name = "patch-ae"
+
+    def reset(self):
+        pass
+
+    def next_exposure(self, raw, exposure_ms):
+        return float(exposure_ms)
+"""
+
+
+def test_an_installed_plugin_is_imported_in_its_worker_and_a_checking_process_never_in_the_run(
+        seq, alone, tmp_path, monkeypatch):
+    """An installed plugin whose module patches cv2.cvtColor at import: listing it (--help, --methods) used to
+    import it in the run's process, where the built-ins' gray images are made; the built-ins keep their bytes."""
+    import cv2
+
+    from emulator.autoexposure import registry
+
+    site = tmp_path / "site"
+    (site / "patch_ae").mkdir(parents=True)
+    (site / "patch_ae" / "__init__.py").write_text(PATCHER)
+    info = site / "patch_ae-0.1.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: patch-ae\nVersion: 0.1\n")
+    (site / "exiting_ae.py").write_text("import os\nos._exit(5)\n")
+    (info / "entry_points.txt").write_text("[exposim.methods]\nexits-ae = exiting_ae:X\npatch-ae = patch_ae:PatchAE\n"
+                                           "broken-ae = patch_ae:Nothing\n")
+    monkeypatch.syspath_prepend(str(site))
+    registry._installed.cache_clear()
+    monkeypatch.setattr(registry, "_installed", registry._installed)
+    real = cv2.cvtColor
+    try:
+        plugins = registry.installed_methods()
+        assert plugins["patch-ae"].error is None and plugins["patch-ae"].factory is None
+        assert plugins["broken-ae"].error.startswith("cannot load patch_ae:Nothing: AttributeError")
+        assert plugins["exits-ae"].error == ("cannot load exiting_ae:X: its import ended the checking process "
+                                             "(exit status 5)")
+        out = tmp_path / "run"
+        assert main(["run", str(seq), "--methods", f"{BUILTINS},patch-ae", "-o", str(out), "--no-progress"]) == 0
+        assert "patch_ae" not in sys.modules and cv2.cvtColor is real
+        for m, data in alone.items():
+            assert (out / m / "exposures.csv").read_bytes() == data, m
+        assert json.loads((out / "run.json").read_text())["method_status"]["patch-ae"] == "ok"
+    finally:
+        registry._installed.cache_clear()
