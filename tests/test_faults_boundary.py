@@ -89,7 +89,7 @@ class DataEverywhere:
     def config(self):
         import numpy as np
         return {"color": Color.RED, "evil": Evil(), "thing": Thing(), 3: (1, 2.5), "level": Level.ONE,
-                "scalar": np.float64(0.5), Color.RED: np.arange(3)}
+                "scalar": np.float64(0.5), Color.RED: np.arange(3), "long": list(range(10 ** 6))}
 
     def reset(self):
         pass
@@ -297,7 +297,7 @@ def test_nothing_a_worker_sends_is_unpickled_no_plugin_module_is_imported_in_the
     info = json.loads((out / "run.json").read_text())
     config = info["method_options"]["red"]
     assert config["color"] == "red" and config["3"] == [1, 2.5] and config["level"] == 1 and config["scalar"] == 0.5
-    assert config["red"] == "array([0, 1, 2])"
+    assert config["red"] == "array([0, 1, 2])" and config["long"].startswith("[0, 1, 2,") and len(config["long"]) == 203
     assert config["evil"].startswith("<boundary_plugins.Evil object at") and config["thing"].startswith("<boundary")
     assert info["method_status"]["red"] == "failed: raised PluginError: Color.RED at cycle 2"
     assert (out / "red" / "exposures.csv").read_text().count("\n") == 3  # two cycles, guarded by its count

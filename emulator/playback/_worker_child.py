@@ -325,6 +325,8 @@ class _Child:
 
 #: Longest text kept of one value a plugin's ``config()`` holds that JSON cannot (its repr), characters.
 REPR_CHARS = 200
+#: Most items of one list or mapping of a ``config()`` kept as JSON; a longer one is its (cut) repr.
+CONFIG_ITEMS = 1000
 
 
 def plain(value, depth: int = 0):
@@ -346,6 +348,8 @@ def plain(value, depth: int = 0):
             return str.__str__(value)
     except BaseException:  # noqa: BLE001 - a conversion that raises: its text below
         pass
+    if depth < 8 and isinstance(value, (dict, list, tuple)) and len(value) > CONFIG_ITEMS:
+        return _text(value)
     if depth < 8 and isinstance(value, dict):
         return {_key(k): plain(v, depth + 1) for k, v in dict.items(value)}
     if depth < 8 and isinstance(value, (list, tuple)):
