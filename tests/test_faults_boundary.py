@@ -335,7 +335,7 @@ def test_a_plugin_name_is_bounded_before_its_folder_is_made(seq, plugin_dir, tmp
     out = tmp_path / "run"
     assert main(["run", str(seq), "--methods", "classical-50,boundary_plugins:LongName", "-o", str(out),
                  "--no-progress"]) == 1
-    assert "at most 64 characters" in capsys.readouterr().err
+    assert "at most 200 characters" in capsys.readouterr().err
     assert not out.exists()
 
 

@@ -62,7 +62,7 @@ __all__ = [
 #: The entry-point group installed packages register AE methods under.
 ENTRY_POINT_GROUP = "exposim.methods"
 #: What a method name may hold: it names a folder and the NAME of ``--option NAME.KEY=VALUE``.
-NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,63}$")  # at most 64 characters: a folder name anywhere
+NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,199}$")  # at most 200 characters: a folder name (255 bytes)
 
 
 @dataclass
@@ -90,7 +90,7 @@ def check_method_name(name, source: str) -> str:
 
     if not isinstance(name, str) or not NAME_RE.match(name):
         raise AutoExposureError(f"AE method plugin {source}: bad method name {name!r} (letters, digits, '-' and '_' "
-                                "only, starting with a letter or digit, at most 64 characters)")
+                                "only, starting with a letter or digit, at most 200 characters)")
     if name in METHODS:
         builtin = METHODS[name]
         target = builtin.func if isinstance(builtin, functools.partial) else builtin
