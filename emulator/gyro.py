@@ -30,14 +30,22 @@ __all__ = [
 R_CAM_IMU_FLU = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
 
 
+#: A gap between two gyro samples longer than this (s), or than ten median sample periods, is a hole: an
+#: interval across it is not covered (interpolating over it would guess the rotation).
+GYRO_HOLE_S = 0.1
+
+
 class AngularVelocity:
     """Angular velocity over time in camera axes: ``omega(t_s) -> (N, 3)`` rad/s.
 
     Built from samples ``(t_s, omega_rad_s)`` (linear interpolation; NaN outside the span)
-    or from a callable.  ``span_s`` is the time range covered ((-inf, inf) for a callable).
+    or from a callable.  ``span_s`` is the time range covered ((-inf, inf) for a callable);
+    ``holes_s`` the gaps between samples longer than :data:`GYRO_HOLE_S` (or ten median
+    periods), which :meth:`covers` treats as not covered.
     """
 
     def __init__(self, t_s=None, omega_rad_s=None, *, function: Callable | None = None) -> None:
+        self.holes_s = np.empty((0, 2))
         if function is not None:
             self._f = function
             self.span_s = (-math.inf, math.inf)
@@ -52,6 +60,9 @@ class AngularVelocity:
         self._t, self._w = t, w
         self._f = None
         self.span_s = (float(t[0]), float(t[-1]))
+        dt = np.diff(t)
+        hole = dt > max(GYRO_HOLE_S, 10.0 * float(np.median(dt)))
+        self.holes_s = np.stack([t[:-1][hole], t[1:][hole]], axis=1)
 
     def __call__(self, t_s) -> np.ndarray:
         t = np.atleast_1d(np.asarray(t_s, dtype=np.float64))
@@ -63,7 +74,11 @@ class AngularVelocity:
         return out
 
     def covers(self, t0_s: float, t1_s: float) -> bool:
-        return self.span_s[0] <= min(t0_s, t1_s) and max(t0_s, t1_s) <= self.span_s[1]
+        """Whether samples cover ``[t0_s, t1_s]`` (either order): inside the span and across no hole."""
+        lo, hi = min(t0_s, t1_s), max(t0_s, t1_s)
+        if not (self.span_s[0] <= lo and hi <= self.span_s[1]):
+            return False
+        return not len(self.holes_s) or not bool(np.any((self.holes_s[:, 0] < hi) & (self.holes_s[:, 1] > lo)))
 
 
 def as_angular_velocity(source) -> AngularVelocity:

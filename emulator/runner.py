@@ -17,6 +17,7 @@ from __future__ import annotations
 import contextlib
 import os
 import threading
+import warnings
 from collections import deque
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -34,6 +35,9 @@ from emulator.playback.workers import effective_timeout_s
 from emulator.playback import METHOD_CAMERA, MethodStep, RunConfig, RunStats, closed_loop, prepare_run, \
     resolve_sequence
 from emulator.io.runcsv import NATIVE_COLUMNS
+from emulator.io.runwatch import watch_run
+from emulator.playback.shmblock import SharedMemoryWarning, shortage_note
+from emulator.playback._worker_child import plain  # inline methods' config() as JSON, as a worker sends it
 from emulator.playback.offline import at_rate
 
 __all__ = ["run_to_folder", "write_run", "saved_image", "RUN_JSON_EVERY"]
@@ -146,7 +150,7 @@ def _new_run_json(config: RunConfig, identity: dict, seq, built, method_specs, m
         "brackets_ms": list(seq.brackets),
         "method_camera": METHOD_CAMERA,
         "selector_camera": METHOD_CAMERA,
-        "method_options": {n: m.config() if hasattr(m, "config") else {} for n, m in built.items()},
+        "method_options": {n: plain(m.config()) if hasattr(m, "config") else {} for n, m in built.items()},
         "method_specs": [s if isinstance(s, str) else n for s, n in zip(method_specs, built)],
         "command": command,
         "version": __version__,
@@ -227,8 +231,9 @@ def write_run(sequence, methods, out_dir, config: RunConfig | None = None, *, re
     seq, response, built, provider, model, model_source, hook = prep
     names = list(built)
     identity = {"sequence": str(Path(seq.path).resolve()), "methods": names, "response": cfg.response_name(response)}
+    shm_note = _reserve_image_blocks(seq, built)  # before the first cycle: a full /dev/shm is one line now
 
-    with RunWriter(out, resume=resume, png_level=cfg.png_level) as writer:
+    with RunWriter(out, resume=resume, png_level=cfg.png_level) as writer, watch_run(out):  # a crash: run.json failed
         if resume:
             run_json = writer.run_json
             cfg.resumed(run_json, CONFIG_KEYS if resume_given is None else resume_given, where=str(out / RUN_FILE),
@@ -243,6 +248,8 @@ def write_run(sequence, methods, out_dir, config: RunConfig | None = None, *, re
             run_json.update(run_json_extra or {})
             if cfg.rate == "native":
                 run_json["native"] = provider.describe()  # window, warp, latency, benchmarked frames
+        if shm_note is not None:
+            run_json["shared_memory_pipes"], run_json["shared_memory"] = shm_note
         run_json["jobs"] = cfg.jobs
         run_json["workers"] = cfg.workers  # how the methods ran (results do not depend on it)
         run_json["method_timeout_applied_s"] = effective_timeout_s(cfg)
@@ -295,6 +302,12 @@ def _loop_into(writer: RunWriter, provider, built: dict, cfg: RunConfig, stats: 
                     raise PlaybackError(_resume_mismatch(out / name / CSV_FILE, st.cycle, rec, row))
                 rows[name].append(row)
             done += 1
+            short = {n: m.shm_shortage for n, m in built.items() if getattr(m, "shm_shortage", None)}
+            if len(short) != len(run_json.get("shared_memory_pipes", ())):  # a larger image later: said at once
+                run_json["shared_memory_pipes"] = list(short)
+                run_json["shared_memory"] = shortage_note(short, len(names))
+                warnings.warn(run_json["shared_memory"], SharedMemoryWarning, stacklevel=2)
+                writer.update()
             if done % RUN_JSON_EVERY == 0:
                 writer.update(cycles_done=done, skipped_cycles=skipped, method_status=method_status)
             if progress is not None:
@@ -313,9 +326,35 @@ def _loop_into(writer: RunWriter, provider, built: dict, cfg: RunConfig, stats: 
                 saver.close()
         if status == "complete":
             run_json.pop("error", None)
+        coverage = getattr(provider, "gyro_coverage", dict)()
+        if coverage and isinstance(run_json.get("native"), dict):
+            run_json["native"].update(coverage)
         writer.update(status=status, cycles_done=done, skipped_cycles=skipped, timing=stats.as_dict(),
                       method_status=method_status)
     return rows
+
+
+def _reserve_image_blocks(seq, built: dict) -> tuple[list[str], str] | None:
+    """Reserve every worker's image block for the recording's frame size (its first left frame, decoded)
+    before the first cycle; where ``/dev/shm`` has no room for some, one :class:`SharedMemoryWarning`
+    and ``(methods, note)`` for ``run.json``, else None."""
+    workers = {n: m for n, m in built.items() if callable(getattr(m, "reserve", None))}
+    frames = next((c.frames.get(METHOD_CAMERA) for c in seq.cycles if c.frames.get(METHOD_CAMERA)), None)
+    if not workers or not frames:
+        return None
+    try:
+        nbytes = next(iter(frames.values())).load().nbytes
+    except Exception:  # noqa: BLE001 - a frame that cannot be read now: the loop names it where it reads it
+        return None
+    short = {}
+    for name, worker in workers.items():
+        if not worker.reserve(nbytes):
+            short[name] = worker.shm_shortage
+    if not short:
+        return None
+    note = shortage_note(short, len(built))
+    warnings.warn(note, SharedMemoryWarning, stacklevel=3)
+    return list(short), note
 
 
 def _resume_mismatch(path: Path, cycle: int, recorded: list[str], replayed: list[str]) -> str:

@@ -384,3 +384,89 @@ def test_native_image_errors_on_a_static_scene(static):
     assert d["rmse_percent"] == d["rmse_percent_unwarped"]  # no gyro: nothing to warp
     own = [o for o, s in zip(d["rmse_percent_own_bracket"], off) if s == 0]
     assert own == [r for r, s in zip(d["rmse_percent"], off) if s == 0]
+
+
+@pytest.mark.parametrize("record", ["whole", "ends-early", "hole", "microseconds"])
+def test_frames_the_gyro_does_not_cover_get_no_warp_and_the_run_counts_them(static, record):
+    """An IMU record that ends early, has a 0.2 s hole, or whose stamps are microseconds read as
+    nanoseconds: a neighbour frame whose rotation it does not cover is used unwarped (warp NaN),
+    never warped by a guess, and :meth:`NativeProvider.gyro_coverage` counts the frames in one line."""
+    seq, cam, resp, _ = static
+    from emulator.motion import recording_motion
+
+    t = np.arange(-0.5, 1.5, 0.005)
+    t = {"whole": t, "ends-early": t[t < 0.3], "hole": t[(t < 0.25) | (t > 0.45)], "microseconds": t / 1000}[record]
+    K = np.array([[40.0, 0, 19.5], [0, 40.0, 11.5], [0, 0, 1]])
+    motion = recording_motion(seq, omega=(t, np.tile([0.0, 0.2, 0.0], (t.size, 1))), origin_ns=0,
+                              intrinsics={"left": (K, (W, H)), "right": (K, (W, H))}, stamp="start")
+    config = RunConfig(rate="native", initial_ms=4.0)
+    provider = NativeProvider(seq, config, resp, motion=motion)
+    steps = [cs.steps["constant-3"].native for cs in closed_loop(provider, {"constant-3": Constant(3.0)}, config)]
+    unwarped = [s for s in steps if s.source_offset != 0 and math.isnan(s.warp_deg)]
+    coverage = provider.gyro_coverage()
+    if record == "whole":
+        assert coverage == {} and not unwarped
+        return
+    assert unwarped and coverage["frames_not_warped"] >= len(unwarped)
+    assert coverage["gyro_note"] == (f"{coverage['frames_not_warped']} of 16 frames used a neighbour frame without "
+                                     "a warp: the gyro does not cover the rotation (its record ends early, its stamps "
+                                     "are in another unit, or a hole over 0.1 s)")
+
+
+def test_a_hole_in_the_gyro_record_is_not_covered():
+    from emulator.gyro import AngularVelocity
+
+    t = np.r_[np.arange(0.0, 1.0, 0.01), np.arange(1.6, 3.0, 0.01)]  # a 0.6 s hole
+    omega = AngularVelocity(t, np.zeros((t.size, 3)))
+    assert omega.covers(0.1, 0.9) and omega.covers(1.7, 2.5)
+    assert not omega.covers(0.9, 1.7) and not omega.covers(1.2, 1.3) and not omega.covers(2.9, 3.5)
+
+
+def test_an_invalid_left_yaml_is_named_as_invalid_not_missing(static, tmp_path):
+    """A recording with an IMU and a left.yaml that is not valid YAML: the warning names the file and
+    its problem (it used to say 'no camera calibration (left.yaml)')."""
+    import shutil
+
+    seq, _, resp, _ = static
+    root = tmp_path / "rec"
+    shutil.copytree(seq.path, root)
+    (root / "imu").mkdir(exist_ok=True)
+    rows = [f"{int(t * 1e9)},{int(t * 1e9)},0.0,0.0,0.0,0.0,0.0,9.81" for t in np.arange(-1.0, 2.0, 0.01)]
+    (root / "imu" / "imu.csv").write_text("timestamp,ros_time,gyro_x,gyro_y,gyro_z,acc_x,acc_y,acc_z\n"
+                                          + "\n".join(rows) + "\n")
+    (root / "calibration").mkdir(exist_ok=True)
+    (root / "calibration" / "left.yaml").write_text("image_width: [1, 2\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rec = load_sequence(root)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        NativeProvider(rec, RunConfig(rate="native"), resp)
+    said = [str(w.message) for w in caught if w.category is NativeWarpWarning]
+    assert len(said) == 1 and "invalid camera calibration (" in said[0] and "no camera calibration" not in said[0]
+    assert f"{root / 'calibration' / 'left.yaml'}: not valid YAML" in said[0]
+
+
+def test_a_run_says_in_one_line_and_in_run_json_how_many_frames_got_no_warp(static, tmp_path, capsys):
+    """An IMU record that ends after 0.2 s of a 0.7 s recording: ``run.json`` still says "rotation from
+    the gyro" for the frames it covers, and counts those it does not, in one warning line too."""
+    import json
+    import shutil
+
+    from emulator.cli import main
+
+    seq, _, _, _ = static
+    root = tmp_path / "rec"
+    shutil.copytree(seq.path, root)
+    (root / "imu").mkdir()
+    rows = [f"{int(t * 1e9)},{int(t * 1e9)},0.0,0.0,0.01,0.0,0.0,9.81" for t in np.arange(-1.0, 0.2, 0.01)]
+    (root / "imu" / "imu.csv").write_text("timestamp,ros_time,gyro_x,gyro_y,gyro_z,acc_x,acc_y,acc_z\n"
+                                          + "\n".join(rows) + "\n")
+    out = tmp_path / "run"
+    assert main(["run", str(root), "--methods", "classical-50,shim", "--rate", "native", "-o", str(out),
+                 "--no-progress"]) == 0
+    native = json.loads((out / "run.json").read_text())["native"]
+    assert native["warp"] == "rotation from the gyro" and native["frames_not_warped"] > 0
+    said = [line for line in capsys.readouterr().err.splitlines() if "without a warp" in line]
+    assert said == [f"exposim run: warning: {native['gyro_note']}"]
+    assert native["gyro_note"].startswith(f"{native['frames_not_warped']} of 16 frames used a neighbour frame")

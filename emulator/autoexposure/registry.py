@@ -62,7 +62,7 @@ __all__ = [
 #: The entry-point group installed packages register AE methods under.
 ENTRY_POINT_GROUP = "exposim.methods"
 #: What a method name may hold: it names a folder and the NAME of ``--option NAME.KEY=VALUE``.
-NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]*$")
+NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,199}$")  # at most 200 characters: a folder name (255 bytes)
 
 
 @dataclass
@@ -90,14 +90,14 @@ def check_method_name(name, source: str) -> str:
 
     if not isinstance(name, str) or not NAME_RE.match(name):
         raise AutoExposureError(f"AE method plugin {source}: bad method name {name!r} (letters, digits, '-' and '_' "
-                                "only, starting with a letter or digit)")
+                                "only, starting with a letter or digit, at most 200 characters)")
     if name in METHODS:
         builtin = METHODS[name]
         target = builtin.func if isinstance(builtin, functools.partial) else builtin
         raise AutoExposureError(
             f"AE method plugin {source} is named {name!r}, the name of the built-in method {name!r} "
             f"({target.__module__}.{target.__qualname__}); rename the plugin")
-    return name
+    return str.__str__(name)  # its text: a str subclass (an Enum) would print and compare as itself
 
 
 def load_import_path(path: str) -> Callable:
@@ -141,8 +141,16 @@ def plugin_from_path(path: str) -> MethodPlugin:
     return MethodPlugin(name, path, factory)
 
 
-def _load_entry_points(entry_points: Iterable) -> dict[str, MethodPlugin]:
+def _load_entry_points(entry_points: Iterable, *, here: bool = True) -> dict[str, MethodPlugin]:
+    """Plugins by name; ``here=False``: their imports checked in another process
+    (:mod:`emulator.autoexposure.probe`), none loaded in this one (``factory`` then loads on use)."""
     out: dict[str, MethodPlugin] = {}
+    entry_points = list(entry_points)
+    probed = {}
+    if not here:
+        from emulator.autoexposure.probe import probe_entry_points
+
+        probed = probe_entry_points(list({ep.name: ep for ep in entry_points if NAME_RE.match(ep.name)}.values()))
     for ep in entry_points:
         known = out.get(ep.name)
         if known is not None:
@@ -157,21 +165,28 @@ def _load_entry_points(entry_points: Iterable) -> dict[str, MethodPlugin]:
         except AutoExposureError as exc:
             plugin.error = str(exc)
         else:
-            try:
-                plugin.factory = ep.load()
-            except (Exception, SystemExit) as exc:  # a broken plugin: keep it, with its error, never swallow it
-                plugin.error = f"cannot load {ep.value}: {type(exc).__name__}: {exc}"
+            if not here:
+                plugin.error = probed.get(ep.name)
             else:
-                if not callable(plugin.factory):
-                    plugin.factory = None
-                    plugin.error = f"{ep.value} is not a class or factory"
+                _load_here(plugin, ep)
         out[ep.name] = plugin
     return out
 
 
+def _load_here(plugin: MethodPlugin, ep) -> None:
+    try:
+        plugin.factory = ep.load()
+    except (Exception, SystemExit) as exc:  # a broken plugin: keep it, with its error, never swallow it
+        plugin.error = f"cannot load {ep.value}: {type(exc).__name__}: {exc}"
+    else:
+        if not callable(plugin.factory):
+            plugin.factory = None
+            plugin.error = f"{ep.value} is not a class or factory"
+
+
 @functools.cache
 def _installed() -> dict[str, MethodPlugin]:
-    return _load_entry_points(metadata.entry_points(group=ENTRY_POINT_GROUP))
+    return _load_entry_points(metadata.entry_points(group=ENTRY_POINT_GROUP), here=False)  # imported elsewhere
 
 
 def installed_methods(entry_points: Iterable | None = None) -> dict[str, MethodPlugin]:
@@ -202,6 +217,8 @@ def build_plugin(plugin: MethodPlugin, *, mode: str = "paper", response=None,
     if plugin.error is not None:
         raise AutoExposureError(f"AE method plugin {plugin.name!r} is broken: {plugin.error}")
     factory = plugin.factory
+    if factory is None:  # listed without being imported here (registry._installed): loaded where it is built
+        factory = plugin.factory = load_import_path(plugin.value)
     options = dict(options or {})
     bad = [k for k in options if not takes_option(factory, k)]
     if bad:

@@ -1,16 +1,19 @@
 """The worker's side of :mod:`emulator.playback.workers`: one AE method in its own process.
 
 The process builds the method (a plugin's import and factory run here), then answers calls one
-at a time: the image comes from the run's shared memory into an immutable copy of its own, the
-answer goes back with the method's fallback count and what it printed.  A fork (the child
-exits at once) or a thread left running after a call is reported, and the process then exits;
-it also ends once the run's process is gone, even while a call hangs.
+at a time: the image comes from the run's shared memory (or the pipe) into an immutable copy of its
+own, the answer goes back as JSON text with the method's fallback count and what it printed
+(:func:`plain`: its ``config()`` as data).  A fork (the child exits at once; a ``subprocess`` with
+``preexec_fn`` named as such), a thread or a process (:func:`leftover_processes`) left running after
+a call is reported, and the process then exits; it also ends once the run's process is gone, even
+while a call hangs.
 """
 
 from __future__ import annotations
 
+import json
+import numbers
 import os
-import pickle
 import signal
 import sys
 import threading
@@ -80,7 +83,76 @@ def _glibc() -> bool:
         return False
 
 
+def _fork_call() -> str:
+    """What forked this process: ``subprocess with preexec_fn``, ``multiprocessing (fork)`` or ``os.fork``
+    (read from the stack of the at-fork hook; a plain ``subprocess`` call forks without running it)."""
+    frame = sys._getframe(2)  # the caller of the at-fork hook's lambda
+    while frame is not None:
+        module = frame.f_globals.get("__name__", "")
+        if module == __name__:  # up to this worker's own call: the method's frames only
+            break
+        if module == "subprocess":
+            return "subprocess with preexec_fn"
+        if module.startswith("multiprocessing"):
+            return "multiprocessing (fork start method)"
+        frame = frame.f_back
+    return "os.fork"
+
+
+_PR_SET_CHILD_SUBREAPER = 36  # linux/prctl.h
+
+
+def _adopt_orphans() -> None:
+    """Make this worker the reaper of its orphaned descendants (Linux): a process a method starts and
+    that double-forks (or calls setsid) stays this worker's descendant, where :func:`leftover_processes`
+    finds it."""
+    try:
+        import ctypes
+
+        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0)
+    except (ImportError, OSError, AttributeError):
+        pass
+
+
+def leftover_processes() -> list[tuple[int, str]]:
+    """(pid, command name) of this worker's live descendants (zombies left out), from ``/proc``; empty at
+    once (one system call) when it has no child at all, as after any ordinary call."""
+    try:
+        os.waitid(os.P_ALL, 0, os.WEXITED | os.WNOHANG | os.WNOWAIT)  # leaves a child's status to its waiter
+    except ChildProcessError:
+        return []
+    except (OSError, AttributeError):
+        pass
+    table = {}
+    try:
+        entries = os.listdir("/proc")
+    except OSError:
+        return []
+    for entry in entries:
+        if not entry.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry}/stat", "rb") as fh:
+                stat = fh.read().decode("ascii", "replace")
+        except OSError:
+            continue
+        comm = stat[stat.find("(") + 1:stat.rfind(")")]
+        fields = stat[stat.rfind(")") + 2:].split()
+        if len(fields) > 1:
+            table[int(entry)] = (int(fields[1]), fields[0], comm)
+    found, todo = [], [os.getpid()]
+    while todo:
+        parent = todo.pop()
+        for pid, (ppid, state, comm) in table.items():
+            if ppid == parent:
+                todo.append(pid)
+                if state not in ("Z", "X"):
+                    found.append((pid, comm))
+    return sorted(found)
+
+
 def _child_main(conn, run_pid: int) -> None:
+    _adopt_orphans()
     _keep_freed_memory()
     try:
         os.setsid()  # own process group: stopped with whatever it starts; Ctrl-C goes to the run only
@@ -102,7 +174,7 @@ class _Child:
         self.gray_code = None
         self.forked: list = []
         self.allowed = set(threading.enumerate())
-        os.register_at_fork(after_in_parent=lambda: self.forked.append(True),
+        os.register_at_fork(after_in_parent=lambda: self.forked.append(_fork_call()),
                             after_in_child=lambda: os._exit(_FORK_EXIT))
 
     def serve(self) -> None:
@@ -112,7 +184,7 @@ class _Child:
             except (EOFError, OSError):
                 os._exit(0)
             except Exception as exc:  # noqa: BLE001 - an object that cannot be rebuilt here (its class in a script)
-                self.conn.send(("error", "handoff", f"{type(exc).__name__}: {exc}"))
+                self._send(("error", "handoff", f"{type(exc).__name__}: {exc}"))
                 continue
             if msg[0] == "stop":
                 os._exit(0)
@@ -121,11 +193,20 @@ class _Child:
             except BaseException as exc:  # noqa: BLE001 - e.g. an exception whose message itself raises
                 reply = ("fatal", f"broke its process ({type(exc).__name__} while reporting its result)", "", 0)
             try:
-                self.conn.send(reply)
+                self._send(reply)
             except (EOFError, OSError):
                 os._exit(0)
             if reply[0] == "fatal":
                 os._exit(0)
+
+    def _send(self, reply) -> None:
+        """Send ``reply`` as data (JSON text): the run never unpickles anything a worker sends, so no
+        plugin class is ever imported, nor any of its code run, in the run's process."""
+        try:
+            data = json.dumps(reply).encode("utf-8", "surrogatepass")
+        except (TypeError, ValueError):  # pragma: no cover - replies hold plain values only
+            data = json.dumps(["fatal", "broke its process (a reply that is not data)", "", 0]).encode()
+        self.conn.send_bytes(data)
 
     def _left_threads(self) -> list[str]:
         from emulator import pools
@@ -136,11 +217,25 @@ class _Child:
 
     def _hostile(self, when: str) -> str | None:
         if self.forked:
-            return f"forked a child process (os.fork) {when}; its process was stopped"
+            call = self.forked[0]
+            if call.startswith("subprocess"):
+                return (f"started a {call} {when} (the function would run Python in a forked child; refused: the "
+                        "command never ran); its process was stopped")
+            return f"forked a child process ({call}) {when}; its process was stopped"
         left = self._left_threads()
         if left:
             return (f"left {len(left)} thread{'s' if len(left) > 1 else ''} running {when} ({', '.join(left[:3])}); "
                     "its process was stopped")
+        procs = leftover_processes()
+        if procs:
+            for pid, _ in procs:  # also those that left its process group (setsid): nothing outlives the call
+                try:
+                    os.kill(pid, signal.SIGKILL)
+                except OSError:
+                    pass
+            shown = ", ".join(f"pid {pid} {comm}" for pid, comm in procs[:3])
+            return (f"left {len(procs)} process{'es' if len(procs) > 1 else ''} running {when} ({shown}; "
+                    "leftover_process); they and its process were stopped")
         return None
 
     def do_build(self, item, mode, response, options, sys_path, cwd, environ):
@@ -151,7 +246,8 @@ class _Child:
         os.environ.update(environ)
         try:
             os.chdir(cwd)
-            self.name, self.method = _build_one(item, mode, response, options)
+            name, self.method = _build_one(item, mode, response, options)
+            self.name = str.__str__(name)  # checked text (registry.check_method_name); its plain str, not a subclass
         except (AutoExposureError, PlaybackError) as exc:
             return ("error", type(exc).__name__, str(exc))
         except BaseException as exc:  # noqa: BLE001 - KeyboardInterrupt included: Ctrl-C never reaches a worker
@@ -168,13 +264,17 @@ class _Child:
         # a built-in's gray image is computed once per image by the run and handed over with it
         code = None if getattr(type(self.method), "private_images", False) else getattr(self.method, "gray_code", None)
         self.gray_code = code if isinstance(code, int) else None
-        try:
-            pickle.dumps(config)
-        except Exception:  # noqa: BLE001 - a plugin's config with objects: their text
-            config = {k: repr(v) for k, v in config.items()}
-        return ("built", self.name, config, self.gray_code)
+        return ("built", self.name, plain(config), self.gray_code)
 
-    def _image(self, shm_name, nbytes, shape, dtype, gray_nbytes):
+    def _image(self, shm_name, nbytes, shape, dtype, gray_nbytes, data=None):
+        if data is not None:  # through the pipe (no room in /dev/shm): already this worker's own bytes
+            raw = np.frombuffer(data, dtype=np.dtype(dtype), count=int(np.prod(shape))).reshape(shape)
+            if gray_nbytes:
+                from emulator.autoexposure._frame import FRAME_MEMO
+
+                gray = np.frombuffer(data[nbytes:nbytes + gray_nbytes], dtype=np.uint16).reshape(shape)
+                FRAME_MEMO.put(raw, ("gray", self.gray_code), gray)
+            return raw
         if self.shm is None or self.shm.name != shm_name:
             if self.shm is not None:
                 self.shm.close()
@@ -193,14 +293,14 @@ class _Child:
 
         return captured_output(self.name, clear=True)
 
-    def do_call(self, shm_name, nbytes, shape, dtype, exposure_ms, raw, gray_nbytes=0):
+    def do_call(self, shm_name, nbytes, shape, dtype, exposure_ms, raw, gray_nbytes=0, data=None):
         from emulator.autoexposure.isolation import _describe, call_method
         from emulator.pools import single_thread_pools
 
         if self.pending is not None:
             return ("fatal", self.pending, "", 0)
         if shape is not None:
-            raw = self._image(shm_name, nbytes, shape, dtype, gray_nbytes)
+            raw = self._image(shm_name, nbytes, shape, dtype, gray_nbytes, data)
         self.forked.clear()
         try:
             with single_thread_pools(user_api="blas"):  # results independent of the machine's cores
@@ -214,17 +314,75 @@ class _Child:
         bad = self._hostile("in next_exposure")  # forks: in the call; threads: still running after it
         if bad:
             return ("fatal", bad, *self._output())
-        try:
-            pickle.dumps(value)
-        except Exception:  # noqa: BLE001 - not a number anyway: the loop's guard replaces it
-            value = None
-        return ("answer", value, guard, *self._output())
+        return ("answer", _number(value), guard, *self._output())
 
     def do_reset(self):
         reset = getattr(self.method, "reset", None)
         if callable(reset):
             reset()
         return ("ok",)
+
+
+#: Longest text kept of one value a plugin's ``config()`` holds that JSON cannot (its repr), characters.
+REPR_CHARS = 200
+#: Most items of one list or mapping of a ``config()`` kept as JSON; a longer one is its (cut) repr.
+CONFIG_ITEMS = 1000
+
+
+def plain(value, depth: int = 0):
+    """``value`` (a method's ``config()``) as JSON data: mappings with text keys, lists, text, numbers,
+    booleans and None (a NumPy scalar or a subclass as its plain value); anything else (a plugin's own
+    object) as its ``repr``, cut to :data:`REPR_CHARS`.  Runs in the worker, so a plugin's code runs
+    there too."""
+    kind = type(value)
+    if value is None or kind in (bool, int, float, str):
+        return value
+    try:  # a subclass or NumPy scalar of those: its plain value (np.float64(0.5) -> 0.5, a str Enum -> its text)
+        if isinstance(value, (bool, np.bool_)):
+            return bool(value)
+        if isinstance(value, numbers.Integral):
+            return int(value)
+        if isinstance(value, numbers.Real):
+            return float(value)
+        if isinstance(value, str):
+            return str.__str__(value)
+    except BaseException:  # noqa: BLE001 - a conversion that raises: its text below
+        pass
+    if depth < 8 and isinstance(value, (dict, list, tuple)) and len(value) > CONFIG_ITEMS:
+        return _text(value)
+    if depth < 8 and isinstance(value, dict):
+        return {_key(k): plain(v, depth + 1) for k, v in dict.items(value)}
+    if depth < 8 and isinstance(value, (list, tuple)):
+        return [plain(v, depth + 1) for v in value]
+    return _text(value)
+
+
+def _key(key) -> str:
+    key = plain(key, 8)
+    return key if type(key) is str else _text(key)
+
+
+def _text(value) -> str:
+    try:
+        text = repr(value)
+        text = text if type(text) is str else f"<{type(value).__name__}>"
+    except BaseException:  # noqa: BLE001 - a repr that raises: the type's name
+        text = f"<{type(value).__name__}>"
+    return text if len(text) <= REPR_CHARS else text[:REPR_CHARS] + "..."
+
+
+def _number(value):
+    """A method's answer as data: text stays text (the loop's guard reads it as the run did), anything
+    else its ``float`` taken here, in the worker (None where it has none: the guard replaces it)."""
+    if type(value) is str:
+        return value
+    if isinstance(value, str):
+        return str.__str__(value)
+    try:
+        number = float(value)
+    except BaseException:  # noqa: BLE001 - a __float__ that raises or exits: not a number
+        return None
+    return number if type(number) is float else None
 
 
 def _label(item) -> str:

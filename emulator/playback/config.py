@@ -46,6 +46,10 @@ MODES = ("paper", "borealhdr")
 #: Keys of ``run.json`` that are the configuration (a resume compares these).
 CONFIG_KEYS = ("selector", "initial_ms", "range_ms", "save", "mode", "options", "method_timeout_s", "noise", "blur",
                "skip_partial", "rate", "latency_frames")
+#: Longest per-call limit, s: the longest wait the system's poll() takes (2**31 - 1 ms, 24.8 days).
+MAX_METHOD_TIMEOUT_S = 2_147_483.0
+#: Largest exposure latency, frames (a recording's frame count bounds it further, at native rate).
+MAX_LATENCY_FRAMES = 1_000_000
 #: How often a method proposes: once per bracket sweep (the paper's) or after every recorded frame.
 RATES = ("cycle", "native")
 
@@ -218,6 +222,9 @@ class RunConfig:
             if not (math.isfinite(value) and value > 0):
                 raise PlaybackError(f"method_timeout_s must be finite and positive (seconds), got "
                                     f"{self.method_timeout_s!r}")
+            if value > MAX_METHOD_TIMEOUT_S:
+                raise PlaybackError(f"method_timeout_s must be at most {MAX_METHOD_TIMEOUT_S:.0f} s (24.8 days, the "
+                                    f"longest wait the system's poll() takes), got {self.method_timeout_s!r}")
             put(self, "method_timeout_s", value)
         if self.response_path is not None:
             put(self, "response_path", str(self.response_path))
@@ -243,8 +250,9 @@ class RunConfig:
         if self.rate not in RATES:
             raise PlaybackError(f"rate must be one of {', '.join(RATES)}, got {self.rate!r}")
         lat = self.latency_frames
-        if isinstance(lat, bool) or not isinstance(lat, (int, np.integer)) or lat < 0:
-            raise PlaybackError(f"latency_frames must be an integer >= 0, got {lat!r}")
+        if isinstance(lat, bool) or not isinstance(lat, (int, np.integer)) or not 0 <= lat <= MAX_LATENCY_FRAMES:
+            raise PlaybackError(f"latency_frames must be an integer >= 0, at most {MAX_LATENCY_FRAMES} and below "
+                                f"the recording's frame count, got {lat!r}")
         put(self, "latency_frames", int(lat))
 
     # ------------------------------------------------------------------ derived values
@@ -267,10 +275,12 @@ class RunConfig:
 
         Accepts ``method_timeout`` as the older name of ``method_timeout_s``.
         """
+        legacy = False  # the value came by its older name: an error names both
         if "method_timeout" in kwargs:
             old = kwargs.pop("method_timeout")
             if kwargs.get("method_timeout_s") is None:
                 kwargs["method_timeout_s"] = old
+                legacy = old is not None
         unknown = set(kwargs) - {f.name for f in dataclasses.fields(cls)}
         if unknown:
             raise TypeError(f"unknown run setting(s): {', '.join(sorted(unknown))}")
@@ -281,7 +291,7 @@ class RunConfig:
         try:
             return base.replace(**given)
         except PlaybackError as exc:
-            if "method_timeout_s" in str(exc) and "method_timeout_s" in given:
+            if "method_timeout_s" in str(exc) and legacy:
                 raise PlaybackError(str(exc).replace("method_timeout_s", "method_timeout (method_timeout_s)")) from None
             raise
 

@@ -38,7 +38,8 @@ import numpy as np
 
 from emulator.autoexposure.isolation import readonly_view
 from emulator.dataset import CAMERAS
-from emulator.errors import CalibrationError
+from emulator.errors import CalibrationError, PlaybackError
+from emulator.gyro import GYRO_HOLE_S
 from emulator.native import (MOTION_STOPS_PER_FRAME, SATURATION_LIMIT, WARP_RESAMPLE, WINDOW_CYCLES,
                              NativeCandidate, invalid_fraction, native_select, rotation_between, warp_to_instant)
 from emulator.playback.config import RunConfig
@@ -201,10 +202,14 @@ class NativeProvider:
         self.motion_stops_per_frame = float(motion_stops_per_frame)
         self.saturation_limit = float(saturation_limit)
         self.frames = _Frames(sequence, self.cameras)
+        if self.latency_ticks >= len(self.frames):  # no proposal would ever be used: refused, not ranked
+            raise PlaybackError(f"latency_frames {self.latency_ticks}: must be below the recording's frame count "
+                                f"({len(self.frames)} frames at native rate; --latency-frames)")
         self.window = WINDOW_CYCLES * max(1, len(sequence.brackets))
         self.motion = self._motion(motion) if warp else None
         self.warp = bool(warp)
         self._images: dict = {}
+        self._not_covered: set = set()  # frames whose neighbour went unwarped: the gyro does not cover them
         self._lock = threading.Lock()
         self._shapes: dict = {}
 
@@ -221,8 +226,11 @@ class NativeProvider:
         else:
             try:
                 return recording_motion(self.sequence, stamp=recording_stamp(self.sequence))
-            except CalibrationError:
-                why = "no camera calibration (left.yaml)"
+            except CalibrationError as exc:  # none found, or one that cannot be read: say which
+                from emulator.motion import find_camera_calibration
+
+                why = "no camera calibration (left.yaml)" if find_camera_calibration(self.sequence) is None \
+                    else f"invalid camera calibration ({exc})"
         warnings.warn(f"{self.sequence.path}: {why}; at native rate a neighbour frame is used without undoing the "
                       "camera's rotation since its instant", NativeWarpWarning, stacklevel=2)
         return None
@@ -281,12 +289,23 @@ class NativeProvider:
             return readonly_view(out), 1.0, math.nan
         blurred = self.blur is not None and target_ms > e  # the emulated image stands for the target's window
         R = self.rotation(j, k, target_ms if blurred else e, target_ms)
-        if R is None:
+        if R is None:  # the gyro does not cover it (ends early, another clock, a hole): no warp, counted
+            self._not_covered.add(k)
             return readonly_view(out), 1.0, math.nan
         angle = math.degrees(math.acos(max(-1.0, min(1.0, (np.trace(R) - 1.0) / 2.0))))
         K, _ = self.motion.K(camera, (out.shape[1], out.shape[0]))
         warped, inside = warp_to_instant(out, rotation_homography(K, R), self.response)
         return readonly_view(warped), inside, angle
+
+    def gyro_coverage(self) -> dict:
+        """What ``run.json`` adds under ``"native"`` after the run: how many frames used a neighbour without
+        a warp because the gyro does not cover the rotation, and one line saying so (none: nothing)."""
+        n = len(self._not_covered)
+        if self.motion is None or not n:
+            return {}
+        return {"frames_not_warped": n, "gyro_note": (
+            f"{n} of {len(self.frames)} frames used a neighbour frame without a warp: the gyro does not cover the "
+            f"rotation (its record ends early, its stamps are in another unit, or a hole over {GYRO_HOLE_S:g} s)")}
 
     def ticks(self):
         for k in range(len(self.frames)):

@@ -5,18 +5,20 @@ from Python's fork server (a fresh interpreter started for the purpose, which ho
 the run's open files), builds the method itself (the plugin's import and factory run there,
 never in the run's process), and answers one call at a time:
 
-- the image reaches it through a shared-memory block owned by the run (one per worker,
-  written before each call; the worker copies it into an immutable buffer of its own, so
-  nothing it does reaches the run's arrays or another method);
-- it returns only the proposal, the method's fallback count and what the method printed;
+- the image reaches it through a shared-memory block owned by the run (one per worker, reserved
+  in full before the first cycle, :mod:`emulator.playback.shmblock`, and written before each call;
+  the worker copies it into an immutable buffer of its own, so nothing it does reaches the run's
+  arrays or another method); where ``/dev/shm`` has no room for a block, through the pipe;
+- it returns only the proposal, the method's fallback count and what the method printed, as JSON
+  text (nothing a worker sends is unpickled, so no plugin module is imported in the run's process);
   the run process owns every file;
 - the run waits for the answer at most the method time limit (``--method-timeout-s``,
   default :data:`DEFAULT_METHOD_TIMEOUT_S`), counted from the moment the call was sent (the
   closed loop sends it ahead, :meth:`MethodWorker.send_ahead`, and does the second camera's
   part of the shot meanwhile): past it the worker is killed (with any process it started)
   and the method fails with the reason, while the others go on;
-- a worker that dies, forks (``os.fork``: the child exits at once), or leaves a thread running
-  after a call is killed the same way and its method fails, named.
+- a worker that dies, forks (``os.fork``: the child exits at once), or leaves a thread or a process
+  running after a call is killed the same way and its method fails, named.
 
 A worker runs in its own session (a terminal's Ctrl-C reaches only the run, which stops its
 workers) and dies with the run.  :func:`start_methods` with ``workers="inline"`` builds the
@@ -27,6 +29,7 @@ after a call returns).
 from __future__ import annotations
 
 import contextlib
+import json
 import multiprocessing
 import os
 import pickle
@@ -35,13 +38,13 @@ import sys
 import threading
 import time
 import weakref
-from multiprocessing import shared_memory
 
 import numpy as np
 
 from emulator.autoexposure._base import AutoExposureError, MethodFailed
 from emulator.errors import PlaybackError
 from emulator.playback._worker_child import _child_main, _label
+from emulator.playback.shmblock import reserve_block
 from emulator.numpy_dispatch import forkserver_env
 
 __all__ = ["MethodWorker", "start_methods", "stop_methods", "effective_timeout_s", "DEFAULT_METHOD_TIMEOUT_S",
@@ -52,6 +55,8 @@ __all__ = ["MethodWorker", "start_methods", "stop_methods", "effective_timeout_s
 DEFAULT_METHOD_TIMEOUT_S = 120.0
 #: ``process``: each method in its own worker process (the default); ``inline``: in the run's process.
 WORKER_MODES = ("process", "inline")
+#: Largest reply a worker may send, bytes (what a method printed is kept up to 64 KiB, its config's values cut).
+MAX_REPLY_BYTES = 16 << 20
 _PRELOAD = ["emulator.playback._worker_preload"]  # imports the worker side too
 _ctx = None
 _ctx_lock = threading.Lock()
@@ -162,6 +167,7 @@ class MethodWorker:
         self._config: dict = {}
         self._gray_code = None
         self._shm_box: list = [None]
+        self.shm_shortage: int | None = None  # bytes of the image block /dev/shm had no room for
         self._ahead = None  # (raw, exposure_ms, monotonic time) of a call sent ahead
         self._conn, child = ctx.Pipe()
         self._proc = ctx.Process(target=_child_main, args=(child, os.getpid()), daemon=True, name="exposim-method")
@@ -178,7 +184,7 @@ class MethodWorker:
     def built(self) -> "MethodWorker":
         """Wait for the worker to build its method; raise the build's error (naming the method)."""
         try:
-            reply = self._ask(None)
+            reply = self._ask(None, where="while it was built (its import, factory or constructor)")
         except MethodFailed as exc:
             self.close()
             raise AutoExposureError(f"AE method {self.label} could not be built: {exc}") from None
@@ -193,7 +199,7 @@ class MethodWorker:
         _, self.name, self._config, self._gray_code = reply
         return self
 
-    def _ask(self, msg, sent_at: float | None = None):
+    def _ask(self, msg, sent_at: float | None = None, where: str = "in next_exposure"):
         try:
             if msg is not None:  # a worker that died since its last answer: its pipe is broken, say why
                 self._conn.send(msg)
@@ -204,10 +210,15 @@ class MethodWorker:
                                "its process was stopped")
                 self.kill()
                 raise MethodFailed(self.failed)
-            return self._conn.recv()
+            data = self._conn.recv_bytes(MAX_REPLY_BYTES)
         except (EOFError, OSError, ConnectionError):
-            self.failed = f"{_ended(self._proc)} in next_exposure" if msg is None or msg[0] == "call" \
-                else _ended(self._proc)
+            self.failed = f"{_ended(self._proc)} {where}" if msg is None or msg[0] == "call" else _ended(self._proc)
+            self.kill()
+            raise MethodFailed(self.failed) from None
+        try:
+            return json.loads(data)  # data only: nothing a worker sends is unpickled here
+        except ValueError:
+            self.failed = f"its process sent a reply that is not data {where}; it was stopped"
             self.kill()
             raise MethodFailed(self.failed) from None
 
@@ -216,18 +227,39 @@ class MethodWorker:
             a = np.ascontiguousarray(raw)
             gray = self._gray(raw)
             size = a.nbytes + (0 if gray is None else gray.nbytes)
-            shm = self._shm_box[0]
-            if shm is None or shm.size < size:
-                if shm is not None:
-                    shm.close()
-                    shm.unlink()
-                shm = self._shm_box[0] = shared_memory.SharedMemory(create=True, size=max(size, 1))
+            gray_nbytes = 0 if gray is None else gray.nbytes
+            shm = self._block(size)
+            if shm is None:  # no room in /dev/shm: the pixels go through the pipe (the same bytes)
+                data = a.tobytes() + (b"" if gray is None else np.ascontiguousarray(gray).tobytes())
+                return ("call", None, a.nbytes, a.shape, a.dtype.str, exposure_ms, None, gray_nbytes, data)
             np.ndarray(a.shape, a.dtype, buffer=shm.buf)[...] = a
             if gray is not None:
                 np.ndarray(gray.shape, gray.dtype, buffer=shm.buf, offset=a.nbytes)[...] = gray
-            return ("call", shm.name, a.nbytes, a.shape, a.dtype.str, exposure_ms, None,
-                    0 if gray is None else gray.nbytes)
+            return ("call", shm.name, a.nbytes, a.shape, a.dtype.str, exposure_ms, None, gray_nbytes)
         return ("call", None, 0, None, None, exposure_ms, raw)
+
+    def _block(self, size: int):
+        """This worker's image block, reserved in full when made (:func:`reserve_block`); None once
+        ``/dev/shm`` had no room for it (:attr:`shm_shortage` then holds the bytes it needed)."""
+        shm = self._shm_box[0]
+        if self.shm_shortage is not None:
+            return None
+        if shm is None or shm.size < size:
+            if shm is not None:
+                self._shm_box[0] = None
+                shm.close()
+                shm.unlink()
+            shm = self._shm_box[0] = reserve_block(size)
+            if shm is None:
+                self.shm_shortage = size
+        return shm
+
+    def reserve(self, image_nbytes: int) -> bool:
+        """Reserve this worker's image block for images of ``image_nbytes`` (and their gray image, for a
+        built-in that takes it) before the first call; False where ``/dev/shm`` has no room for it."""
+        if self.failed is not None:
+            return True
+        return self._block(int(image_nbytes) * (2 if self._gray_code is not None else 1)) is not None
 
     def send_ahead(self, raw, exposure_ms) -> None:
         """Start the call :meth:`next_exposure` will make with this very ``raw`` and ``exposure_ms``, so

@@ -96,6 +96,8 @@ def summarise_run(run_dir: str | os.PathLike, info: dict | None = None, tables: 
         "methods": methods,
         "timing": info.get("timing"),
         "rate": info.get("rate") or "cycle",
+        **({"shared_memory": info["shared_memory"]} if info.get("shared_memory") else {}),
+        **({"gyro_note": info["native"]["gyro_note"]} if (info.get("native") or {}).get("gyro_note") else {}),
         **({"latency_frames": info.get("latency_frames"), "n_frames": (info.get("native") or {}).get("n_frames")}
            if info.get("rate") == "native" else {}),
     }
