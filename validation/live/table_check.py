@@ -20,7 +20,7 @@ import math
 
 import numpy as np
 
-__all__ = ["record_walks", "check_walks_table", "walk_key", "canonical_order"]
+__all__ = ["record_walks", "check_walks_table", "walk_key", "canonical_order", "read_folder_table"]
 
 _HEAD = ("walk", "scene", "seed", "method", "condition")
 
@@ -116,3 +116,16 @@ def canonical_order(walks, methods, tables: dict, *, scenes=(), method_order=Non
     wi, mi = np.asarray(w, dtype=np.intp), np.asarray(m, dtype=np.intp)
     out = {run: {metric: np.asarray(t)[np.ix_(wi, mi)] for metric, t in tables[run].items()} for run in sorted(tables)}
     return [walks[i] for i in w], [methods[k] for k in m], out
+
+
+def read_folder_table(folder) -> tuple[list[str], list[str], dict]:
+    """(walks, methods, ``{run: {metric: (walks, methods)}}``) of a study folder's ``walks.csv``, as written (the
+    analyses that read a folder without writing into it)."""
+    from pathlib import Path
+
+    from emulator.io.files import read_text
+    from validation.live.config import LiveError
+    from validation.live.evidence import WALKS_TABLE, parse_walks_table
+
+    path = Path(folder) / WALKS_TABLE
+    return parse_walks_table(read_text(path, LiveError), str(path))

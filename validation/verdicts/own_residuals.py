@@ -270,17 +270,14 @@ def main(argv=None) -> int:
     p.add_argument("--json", type=Path, help="also write the numbers to this new JSON file")
     args = p.parse_args(argv)
     try:
-        from emulator.io.files import read_results, read_text, write_results
-        from validation.live.config import COMPARISONS, HEADLINE_COMPARISONS, HEADLINE_METRICS, RESEEDED, LiveError
-        from validation.live.evidence import WALKS_TABLE, parse_walks_table
+        from emulator.io.files import read_results, write_results
+        from validation.live.config import COMPARISONS, HEADLINE_COMPARISONS, HEADLINE_METRICS, RESEEDED
         from validation.live.headline import with_derived
+        from validation.live.table_check import read_folder_table
+        from validation.verdicts.study_calibration import check_options
 
-        if args.studies < 1:
-            raise ExposimError(f"--studies must be >= 1, got {args.studies}")
-        if args.json is not None and args.json.exists():
-            raise ExposimError(f"{args.json}: exists; give a new file name (results are never overwritten)")
-        walks, _, tables = parse_walks_table(read_text(args.folder / WALKS_TABLE, LiveError),
-                                             str(args.folder / WALKS_TABLE))
+        check_options(args.studies, args.json)
+        walks, _, tables = read_folder_table(args.folder)
         tables = with_derived(tables)
         comps = {label: COMPARISONS[label] for label in HEADLINE_COMPARISONS}
         size = len(HEADLINE_METRICS) * sum(1 for r, o in comps.values() if r in tables and o in tables)
