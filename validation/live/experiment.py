@@ -305,9 +305,17 @@ def _judged(cfg: LiveConfig, tables: dict, methods, walks, folder, power_seeds: 
     """The verdicts over ``walks`` (:func:`validation.live.evidence.judge_metrics`); with ``folder``, the
     calibration and the power analysis are also stored there (their file names in the result)."""
     from validation.live.evidence import judge_metrics, pilot_reason, store_calibration
+    from validation.live.preregistration import PREREG_FILE, interim_reason, read_preregistration
 
+    prereg = None if folder is None else read_preregistration(folder)
+    interim = interim_reason(prereg, len(walks))
+    kw = {} if prereg is None else {"n_resamples": int(prereg["bootstrap_resamples"]),
+                                    "headline_exclusions": prereg["excluded_from_headline"]}
     out = judge_metrics(tables, methods, seed=cfg.seed, power=power_seeds > 0, power_seeds=power_seeds, walks=walks,
-                        pilot=pilot_reason(cfg), calibration_studies=calibration_studies)
+                        pilot=pilot_reason(cfg) or interim, calibration_studies=calibration_studies, **kw)
+    if prereg is not None:  # a pre-registered study (format 3): verdicts at the planned walks only
+        out["preregistration"] = {"file": PREREG_FILE, "format": prereg["format"], "n_walks_planned": prereg["n_walks"],
+                                  "look": "final" if interim is None else "interim: futility only", "reason": interim}
     if folder is not None:
         out["calibration_file"] = store_calibration(folder, out["calibration"])
         out["power_file"] = store_power(folder, out)
@@ -348,6 +356,10 @@ def run_replicated(out, config: LiveConfig | None = None, replicates: int = 1, *
         raise LiveError(f"replicates must be >= 1, got {replicates}")
     out = Path(out)
     _check_output(out, resume, {"config": cfg.to_dict(), "replicates": int(replicates)})
+    from validation.live.preregistration import preregistration, read_preregistration, write_preregistration
+
+    if not resume or read_preregistration(out) is not None:  # before the first walk; a resume may not change it
+        write_preregistration(out, preregistration(cfg, replicates))
     t0 = time.perf_counter()
     experiments = [(out / REPLICATES_DIR / f"seed{cfg.seed + k}", replace(cfg, seed=cfg.seed + k))
                    for k in range(replicates)]
