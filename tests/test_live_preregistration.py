@@ -35,7 +35,7 @@ def test_a_registered_plan_is_never_changed(tmp_path):
     plan = preregistration(LiveConfig(n_cycles=31), 10, draws=3)
     write_preregistration(tmp_path, plan)
     write_preregistration(tmp_path, plan)  # the same plan again: accepted
-    with pytest.raises(LiveError, match="pre-registered with other draws_per_stochastic_method, looks, n_walks, seeds;"):
+    with pytest.raises(LiveError, match="with other draws_per_stochastic_method, looks, n_walks, seeds;"):
         check_preregistration(tmp_path, preregistration(LiveConfig(n_cycles=31), 11, draws=1))
     assert json.loads((tmp_path / PREREG_FILE).read_text())["draws_per_stochastic_method"] == 3
     check_preregistration(tmp_path / "elsewhere", plan)  # no plan registered there: nothing to check
@@ -69,6 +69,10 @@ def test_a_study_writes_its_plan_first_and_decides_at_n_only(tmp_path, monkeypat
     seg = res["comparisons"]["emulated vs cycle-rate live"]["metrics"]["segment_success_rate_tau100"]
     assert seg["family"].startswith("outside the headline family: 1 segment(s)")
     assert res["metrics"]["median_matches"]["verdict"] == "agrees"
+    assert "| segment_success_rate_tau100 (outside the family) |" in (tmp_path / "s" / "report.md").read_text()
+    from validation.live.headline import headline_lines
+
+    assert "segment_success" not in headline_lines(res)[1] and "median_matches agrees" in headline_lines(res)[1]
     # a resume must not change the plan
     (tmp_path / "s" / PREREG_FILE).write_text(json.dumps({**plan, "bootstrap_resamples": 1000}))
     with pytest.raises(LiveError, match="pre-registered with other bootstrap_resamples"):

@@ -61,3 +61,29 @@ def test_the_residual_ratio_to_live_against_live():
     res = metric_own_calibration(live, live + 2.0 * noise, scenes, seeds, reseeded=live + noise, n_studies=5,
                                  walks_to_decide=False)
     assert math.isclose(res["residual_sd"]["ratio"], 2.0, rel_tol=1e-12)
+
+
+def test_the_bisection_finds_the_first_size_that_reaches_the_target():
+    from validation.verdicts.plasmode import first_reaching
+
+    rates = [0.1, 0.5, 0.85, 0.95]
+    asked = []
+
+    def rate(i):
+        asked.append(i)
+        return rates[i]
+
+    assert first_reaching(rate, 0, 3, 0.8) == 2 and 0 not in asked  # bisected, not scanned
+    assert first_reaching(rate, 0, 3, 0.99) is None
+    assert first_reaching(rate, 4, 3, 0.8) is None  # an empty range
+
+
+def test_a_metric_on_which_live_ties_every_method_is_not_computed_and_can_be_written():
+    from emulator.io.files import to_jsonable
+
+    scenes, seeds = _design(12)
+    flat = np.ones((48, 7))
+    res = metric_own_calibration(flat, flat + np.random.default_rng(6).normal(size=(48, 7)), scenes, seeds,
+                                 n_studies=5)
+    assert res["status"] == "not computed" and res["omega2_untruncated"] is None
+    to_jsonable(res)  # every figure finite: a --json file can hold it

@@ -241,8 +241,9 @@ def evaluate_findings(summary: dict, taus=(5, 100)) -> list[dict]:
                   f"below the others' mean), of the other methods mean {_fmt(np.mean(rest))} %")
     else:
         holds, detail = None, "translation RPE missing"
-    out.append(_finding("gradient_ahead_vo", "gradient-based methods (M_Shim, M_Zhang) are ahead in VO (each with a "
-                        "lower translation RPE than the other methods' mean)", "a small advantage for gradient-based methods",
+    out.append(_finding("gradient_ahead_vo", "gradient-based methods (M_Shim, M_Zhang) are ahead in VO (each with "
+                        "a lower translation RPE than the others' mean)",
+                        "a small advantage for gradient-based methods",
                         holds, {"trans": trans}, detail))
     # failed frames, on the scenes that tell the methods apart (not every method failing every frame)
     per_scene = summary["per_scene"]

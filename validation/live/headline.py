@@ -255,7 +255,7 @@ def headlines_markdown(results: dict) -> str:
         metrics = list(next(iter(ran.values()))["metrics"])
         lines += ["| metric | " + " | ".join(ran) + " |", "| --- | " + " | ".join("---" for _ in ran) + " |"]
         for m in metrics:
-            tag = "" if m in HEADLINE_METRICS else " (outside the family)"
+            tag = "" if m in h.get("distinct_metrics", HEADLINE_METRICS) else " (outside the family)"
             lines.append(f"| {m}{tag} | " + " | ".join(_cell(c["metrics"][m]) if m in c["metrics"] else "n/a"
                                                       for c in ran.values()) + " |")
     return "\n".join(lines) + "\n\n"
@@ -272,6 +272,7 @@ def headline_lines(results: dict) -> list[str]:
             lines.append(f"  {label}: not run")
             continue
         cells = [f"{m} {c['metrics'][m]['verdict']} {_fmt(c['metrics'][m]['omega2'])} "
-                 f"{_ci(c['metrics'][m]['omega2_ci90'])}" for m in HEADLINE_METRICS if m in c["metrics"]]
+                 f"{_ci(c['metrics'][m]['omega2_ci90'])}" for m in h.get("distinct_metrics", HEADLINE_METRICS)
+                 if m in c["metrics"]]
         lines.append(f"  {label}: " + "; ".join(cells))
     return lines

@@ -33,7 +33,7 @@ import numpy as np
 
 from emulator.stats import rng_of, variance_components
 from validation.verdicts.agreement import ALPHA, MIN_WALKS, OMEGA2_MAX, judge_batch, omega2_untruncated
-from validation.verdicts.plasmode import TARGET, WALK_CANDIDATES, _residual_sd
+from validation.verdicts.plasmode import TARGET, WALK_CANDIDATES, _residual_sd, first_reaching
 from validation.verdicts.ranking import cluster_plan
 
 __all__ = ["SCENARIOS", "STUDIES", "own_residuals", "scenario_rates", "metric_own_calibration",
@@ -126,14 +126,8 @@ def _walks_to_decide(live, resid, clusters, omega2, live_var, alpha, n_studies, 
             tried[i] = scenario_rates(b, ks[i], {"level": alpha})["level"][towards]
         return tried[i]
 
-    lo, hi = 0, len(ks) - 1
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if rate(mid) >= target:
-            hi = mid
-        else:
-            lo = mid + 1
-    found = ks[lo] if rate(lo) >= target else None
+    i = first_reaching(rate, 0, len(ks) - 1, target)
+    found = None if i is None else ks[i]
     return {"omega2": float(omega2), "towards": towards, "walks": None if found is None else found * per,
             "seeds": found, "extrapolated": None if found is None else found > len(clusters), "alpha": alpha,
             "target": target, "sizes_tried": [{"walks": ks[i] * per, towards: tried[i]} for i in sorted(tried)]}
@@ -171,7 +165,7 @@ def metric_own_calibration(live, emulated, scenes, seeds, *, reseeded=None, fami
     live_var = float(variance_components(L[ok])[0])
     est = float(omega2_untruncated(L[ok], E[ok]))
     own_sd = _residual_sd(L[ok], E[ok])
-    out.update(status="computed", live_method_variance=live_var, omega2_untruncated=est,
+    out.update(status="computed", live_method_variance=live_var, omega2_untruncated=est if math.isfinite(est) else None,
                residual_sd={"emulated": float(np.sqrt(np.mean(own_sd ** 2)))})
     if reseeded is not None:
         R = np.asarray(reseeded, dtype=np.float64)
@@ -239,7 +233,7 @@ def markdown(cal: dict, gaussian: dict | None = None) -> str:
             g = ((gaussian or {}).get(label) or {}).get(metric) or {}
             lines.append(" | ".join([
                 f"| {metric}", str(r["seeds_drawn_from"]), "" if ratio is None else f"{ratio:.2f}",
-                f"{r['omega2_untruncated']:.3g}",
+                "undefined" if r["omega2_untruncated"] is None else f"{r['omega2_untruncated']:.3g}",
                 f"{pct('omega2 0', own, 'agrees')} / {pct('omega2 0', fam, 'agrees')}",
                 f"{pct('omega2 0.1', own, 'agrees')} / {pct('omega2 0.1', fam, 'agrees')}",
                 f"{pct('omega2 0.2', own, 'agrees')} / {pct('omega2 0.2', own, 'disagrees')}",
@@ -270,11 +264,11 @@ def main(argv=None) -> int:
     p.add_argument("--json", type=Path, help="also write the numbers to this new JSON file")
     args = p.parse_args(argv)
     try:
-        from emulator.io.files import read_results, write_results
+        from emulator.io.files import read_results
         from validation.live.config import COMPARISONS, HEADLINE_COMPARISONS, HEADLINE_METRICS, RESEEDED
         from validation.live.headline import with_derived
         from validation.live.table_check import read_folder_table
-        from validation.verdicts.study_calibration import check_options
+        from validation.verdicts.study_calibration import check_options, emit
 
         check_options(args.studies, args.json)
         walks, _, tables = read_folder_table(args.folder)
@@ -290,11 +284,8 @@ def main(argv=None) -> int:
     except (ExposimError, OSError, ValueError) as exc:
         print(f"own_residuals: {exc}", file=sys.stderr)
         return 1
-    print(markdown(cal, gaussian), end="")
-    print(f"{len(walks)} walks, {args.studies} drawn studies per scenario and size: {wall:.1f} s")
-    if args.json is not None:
-        write_results(args.json, cal, overwrite=False)
-    return 0
+    return emit(markdown(cal, gaussian) + f"{len(walks)} walks, {args.studies} drawn studies per scenario and size: "
+                f"{wall:.1f} s\n", args.json, cal)
 
 
 if __name__ == "__main__":

@@ -7,7 +7,17 @@ from __future__ import annotations
 
 from validation.verdicts.plasmode import NOISY_FACTOR, STUDIES, calibrate, calibration_markdown
 
-__all__ = ["check_options", "main"]
+__all__ = ["check_options", "emit", "main"]
+
+
+def emit(text: str, json_path, data: dict) -> int:
+    """Print ``text`` and write ``data`` to the new file ``json_path`` (when given); returns the exit code 0."""
+    from emulator.io.files import write_results
+
+    print(text, end="")
+    if json_path is not None:
+        write_results(json_path, data, overwrite=False)
+    return 0
 
 
 def check_options(studies: int, json_path) -> None:
@@ -42,7 +52,7 @@ def main(argv=None) -> int:
     p.add_argument("--json", type=Path, help="also write the numbers to this new JSON file")
     args = p.parse_args(argv)
     try:
-        from emulator.io.files import read_results, write_results
+        from emulator.io.files import read_results
         from validation.live.config import METRICS
         from validation.live.evidence import walk_labels
         from validation.live.table_check import read_folder_table
@@ -60,11 +70,8 @@ def main(argv=None) -> int:
     except (ExposimError, OSError, ValueError) as exc:
         print(f"study_calibration: {exc}", file=sys.stderr)
         return 1
-    print(calibration_markdown(cal), end="")
-    print(f"{len(walks)} walks, {args.studies} plasmode studies per emulator and size: {wall:.1f} s")
-    if args.json is not None:
-        write_results(args.json, cal, overwrite=False)
-    return 0
+    return emit(calibration_markdown(cal) + f"{len(walks)} walks, {args.studies} plasmode studies per emulator and "
+                f"size: {wall:.1f} s\n", args.json, cal)
 
 
 if __name__ == "__main__":
