@@ -32,7 +32,28 @@ def test_effects_exact_on_a_small_table():
     assert e["rpe_trans_worst_kim"] == pytest.approx(2.0 - 10.0)
     assert e["rpe_rot_best_zhang_50"] == pytest.approx(2.0 - 7.0)
     assert e["fixed_not_best_vo"] == pytest.approx(10.0 - 2.0)
-    assert e["gradient_ahead_vo"] == pytest.approx(np.mean([10, 4, 5, 3, 2]) - 6.5)
+    assert e["gradient_ahead_vo"] == pytest.approx(np.mean([10, 4, 5, 3, 2]) - 7.0)  # the higher of shim, zhang
+
+
+def test_a_finding_that_names_two_methods_tests_each():
+    """gradient_ahead_vo: M_Shim far ahead and M_Zhang behind the others' mean is not "gradient methods ahead"
+    (the old single contrast of their mean held here)."""
+    from validation.verdicts.claims import claim_pvalues
+    from validation.verdicts.findings import claim_of
+
+    rng = np.random.default_rng(1)
+    table = rng.normal(scale=0.1, size=(30, 7)) + 5.0
+    table[:, METHODS.index("shim")] -= 3.0
+    table[:, METHODS.index("zhang")] += 1.0  # behind the others' mean (lower RPE is ahead)
+    for fid in ("gradient_ahead_vo", "gradient_fewer_vo_failures"):
+        claim = claim_of(fid, METHODS)
+        assert claim.kind == "all" and claim.labels == ["shim < the others' mean", "zhang < the others' mean"]
+        p = claim_pvalues(claim, table)
+        assert p["holds"] > 0.5
+    m = table.mean(axis=0)
+    e = finding_effects({k: table for k in ("matches", "uniformity", "success_seq_hi", "success_seg_hi",
+                                            "rpe_trans", "rpe_rot", "vo_failed")}, METHODS)
+    assert e["gradient_ahead_vo"] == pytest.approx(np.delete(m, [4, 5]).mean() - m[5]) and e["gradient_ahead_vo"] < 0
 
 
 def test_unit_tables_from_summaries():

@@ -259,7 +259,7 @@ def _not_run_reason(cname: str, run: str) -> str:
 
 def judge_metrics(tables: dict, methods, *, n_resamples: int = 1000, seed: int = 0, power: bool = True,
                   power_seeds: int = 100, walks=None, pilot: str | None = None,
-                  calibration_studies: int | None = None) -> dict:
+                  calibration_studies: int | None = None, headline_exclusions: dict | None = None) -> dict:
     """results.json's ``metrics``, ``comparisons``, ``conditions``, ``power`` and ``n_walks`` from walk tables.
 
     ``tables``: :func:`walk_values`' second item.  ``walks``: their names (``<scene>/seed<S>``):
@@ -269,7 +269,8 @@ def judge_metrics(tables: dict, methods, *, n_resamples: int = 1000, seed: int =
     study decides nothing (a pipeline check): every verdict is then ``undetermined`` with that reason.
     ``calibration``: the verdict
     rule calibrated on these walks (:func:`calibration`; ``calibration_studies`` plasmode studies per
-    emulator and size, the default where None, none where 0).
+    emulator and size, the default where None, none where 0).  ``headline_exclusions``: headline metrics left out
+    of the family (metric -> reason; a pre-registered study's).
     """
     from validation.verdicts.agreement import ALPHA, MIN_WALKS, judge
     from validation.verdicts.power import power_summary
@@ -301,7 +302,7 @@ def judge_metrics(tables: dict, methods, *, n_resamples: int = 1000, seed: int =
                               "control": RESEEDED.get(ref) if control is not None else None, "metrics": per_metric}
     if pilot:
         _decide_nothing(comparisons, pilot)
-    family = apply_family(comparisons, alpha=ALPHA, min_walks=MIN_WALKS)
+    family = apply_family(comparisons, alpha=ALPHA, min_walks=MIN_WALKS, excluded=headline_exclusions)
     if power:
         _walks_to_decide(tables, comparisons, power_seeds, seed, ALPHA / max(family["size"], 1))
     headline = next(iter(COMPARISONS))

@@ -281,11 +281,14 @@ def evidence(cfg: LiveConfig, records: list[dict], power_seeds: int = 100, folde
              calibration_studies: int | None = None) -> dict:
     """results.json's replicated verdicts (:func:`validation.live.evidence.judge_metrics`) over the walks of
     ``records`` (one experiment, or the replicates of :func:`run_replicated`); with ``folder``, the per-walk
-    table is stored there (:func:`validation.live.evidence.store_walks_table`), and the calibration
+    table is stored there (:func:`validation.live.evidence.store_walks_table`; the walks in their key's order,
+    :func:`validation.live.table_check.canonical_order`, whatever the records' order), and the calibration
     (``calibration_studies`` plasmode studies; :func:`validation.live.evidence.store_calibration`)."""
     from validation.live.evidence import store_walks_table, walk_values
+    from validation.live.table_check import canonical_order
 
     walks, tables = walk_values(records, cfg.methods)
+    walks, _, tables = canonical_order(walks, cfg.methods, tables, scenes=cfg.scenes, method_order=cfg.methods)
     out = {"walks": walks, "n_walks": len(walks)}
     if tables and folder is not None:
         out["walks_table"] = store_walks_table(folder, walks, tables, cfg.methods)
@@ -302,9 +305,17 @@ def _judged(cfg: LiveConfig, tables: dict, methods, walks, folder, power_seeds: 
     """The verdicts over ``walks`` (:func:`validation.live.evidence.judge_metrics`); with ``folder``, the
     calibration and the power analysis are also stored there (their file names in the result)."""
     from validation.live.evidence import judge_metrics, pilot_reason, store_calibration
+    from validation.live.preregistration import PREREG_FILE, interim_reason, read_preregistration
 
+    prereg = None if folder is None else read_preregistration(folder)
+    interim = interim_reason(prereg, len(walks))
+    kw = {} if prereg is None else {"n_resamples": int(prereg["bootstrap_resamples"]),
+                                    "headline_exclusions": prereg["excluded_from_headline"]}
     out = judge_metrics(tables, methods, seed=cfg.seed, power=power_seeds > 0, power_seeds=power_seeds, walks=walks,
-                        pilot=pilot_reason(cfg), calibration_studies=calibration_studies)
+                        pilot=pilot_reason(cfg) or interim, calibration_studies=calibration_studies, **kw)
+    if prereg is not None:  # a pre-registered study (format 3): verdicts at the planned walks only
+        out["preregistration"] = {"file": PREREG_FILE, "format": prereg["format"], "n_walks_planned": prereg["n_walks"],
+                                  "look": "final" if interim is None else "interim: futility only", "reason": interim}
     if folder is not None:
         out["calibration_file"] = store_calibration(folder, out["calibration"])
         out["power_file"] = store_power(folder, out)
@@ -345,6 +356,10 @@ def run_replicated(out, config: LiveConfig | None = None, replicates: int = 1, *
         raise LiveError(f"replicates must be >= 1, got {replicates}")
     out = Path(out)
     _check_output(out, resume, {"config": cfg.to_dict(), "replicates": int(replicates)})
+    from validation.live.preregistration import preregistration, read_preregistration, write_preregistration
+
+    if not resume or read_preregistration(out) is not None:  # before the first walk; a resume may not change it
+        write_preregistration(out, preregistration(cfg, replicates))
     t0 = time.perf_counter()
     experiments = [(out / REPLICATES_DIR / f"seed{cfg.seed + k}", replace(cfg, seed=cfg.seed + k))
                    for k in range(replicates)]
@@ -411,17 +426,23 @@ def _live_sheets(out: Path, scene: str) -> str:
 
 def verdicts_from_table(out, power_seeds: int = 100, calibration_studies: int | None = None) -> dict:
     """The verdicts of a study folder that keeps only its per-walk table (and its results.json for the
-    configuration): results.json's evidence and report.md recomputed from ``walks.csv``."""
-    from validation.live.evidence import parse_walks_table
+    configuration): results.json's evidence and report.md recomputed from ``walks.csv``, read strictly against the
+    study's record and put in the walks' key order first (:mod:`validation.live.table_check`): the same rows in
+    any order give the same bytes."""
+    from validation.live.evidence import WALK_METRICS, parse_walks_table
     from validation.live.native import native_markdown
     from validation.live.report import evidence_markdown
+    from validation.live.table_check import canonical_order, check_walks_table, record_walks
 
     out = Path(out)
     prev = read_results(out / RESULTS_FILE) if (out / RESULTS_FILE).is_file() else {}
     if "config" not in prev:
         raise LiveError(f"{out / RESULTS_FILE}: needed beside {WALKS_TABLE} for the study's configuration")
     cfg = config_from_dict(prev["config"])
-    walks, methods, tables = parse_walks_table(read_text(out / WALKS_TABLE, LiveError), str(out / WALKS_TABLE))
+    text, name = read_text(out / WALKS_TABLE, LiveError), str(out / WALKS_TABLE)
+    check_walks_table(text, name, metrics=WALK_METRICS, methods=cfg.methods, walks=record_walks(prev))
+    walks, methods, tables = canonical_order(*parse_walks_table(text, name), scenes=cfg.scenes,
+                                             method_order=cfg.methods)
     results = {k: prev[k] for k in ("experiment", "command", "config", "replicates", "timings", "failed_walks",
                                     "native_emulation") if k in prev}  # native emulation's figures: not in the table
     results.update({"walks": walks, "n_walks": len(walks), "walks_table": WALKS_TABLE})

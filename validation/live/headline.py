@@ -78,21 +78,27 @@ _NOT_COUNTED = {"success_rate_tau100": "outside the headline family: the same pe
                                  "walks only: every method kept its VO in both conditions), not corrected"}
 
 
-def apply_family(comparisons: dict, alpha: float = 0.05, min_walks: int = 10) -> dict:
+def apply_family(comparisons: dict, alpha: float = 0.05, min_walks: int = 10, excluded: dict | None = None) -> dict:
     """Holm across the headline family, in place: each headline verdict's ``verdict`` becomes the family's (an
     ``agrees`` or ``disagrees`` whose Holm-adjusted p is above ``alpha`` becomes ``undetermined``), with
     ``verdict_alone`` (at its own level), ``p_agrees_adjusted``, ``p_disagrees_adjusted`` and ``family``; every
     other verdict gets its ``family``.  A verdict that cannot be decided at all (fewer than ``min_walks``
-    walks, or seeds where the walks are clustered, live not separating the methods) counts in the family with p = 1.  Returns the family's summary."""
+    walks, or seeds where the walks are clustered, live not separating the methods) counts in the family with p = 1.
+    ``excluded``: headline metrics left out of the family before any data (metric -> reason; a pre-registered
+    study's, :func:`validation.live.preregistration.headline_exclusions`).  Returns the family's summary."""
+    excluded = excluded or {}
+    metrics = [m for m in HEADLINE_METRICS if m not in excluded]
     members = [(label, m) for label in HEADLINE_COMPARISONS if comparisons.get(label, {}).get("status") == "run"
-               for m in HEADLINE_METRICS if m in comparisons[label]["metrics"]]
-    text = _family_text(len(members), len(HEADLINE_METRICS), len({lab for lab, _ in members}))
+               for m in metrics if m in comparisons[label]["metrics"]]
+    text = _family_text(len(members), len(metrics), len({lab for lab, _ in members}))
+    outside = {m: f"outside the headline family: {why}, not corrected" for m, why in excluded.items()}
     for label, c in comparisons.items():
         for metric, r in (c.get("metrics") or {}).items():
             r["family"] = text if (label, metric) in members else (
-                _NOT_COUNTED.get(metric, OWN_FAMILY) if label in HEADLINE_COMPARISONS else OWN_FAMILY)
+                {**_NOT_COUNTED, **outside}.get(metric, OWN_FAMILY) if label in HEADLINE_COMPARISONS else OWN_FAMILY)
+    extra = {"excluded": dict(excluded)} if excluded else {}  # only pre-registered studies leave a metric out
     if not members:
-        return {"size": 0, "definition": text, "members": []}
+        return {"size": 0, "definition": text, "members": [], **extra}
     res = [comparisons[label]["metrics"][m] for label, m in members]
 
     def decidable(r) -> bool:
@@ -110,7 +116,7 @@ def apply_family(comparisons: dict, alpha: float = 0.05, min_walks: int = 10) ->
         elif r["verdict"] == "disagrees" and not d <= alpha:
             r["verdict"] = "undetermined"
             r["reason"] += f"; but not at the family's level (Holm-adjusted p = {d:.2g} > {alpha})"
-    return {"size": len(members), "definition": text, "members": [f"{lab}: {m}" for lab, m in members]}
+    return {"size": len(members), "definition": text, "members": [f"{lab}: {m}" for lab, m in members], **extra}
 
 
 def _decided_rate(scales, n_walks: int, omega2: float, target: str, alpha: float, n_seeds: int,
@@ -167,7 +173,8 @@ def _compact(r: dict) -> dict:
 def headlines(comparisons: dict, family: dict) -> dict:
     """results.json's ``headlines``: per headline comparison (in order) what it answers, and per judged metric
     its verdict, interval and family, with the live-against-live control of its reference beside it."""
-    out = {"family": family, "distinct_metrics": list(HEADLINE_METRICS), "comparisons": {}}
+    out = {"family": family, "distinct_metrics": [m for m in HEADLINE_METRICS if m not in family.get("excluded", {})],
+           "comparisons": {}}
     for label, question in HEADLINE_COMPARISONS.items():
         c = comparisons.get(label) or {"status": "not run"}
         entry = {"answers": question, "status": c["status"], "reference": c.get("reference"),
@@ -248,7 +255,7 @@ def headlines_markdown(results: dict) -> str:
         metrics = list(next(iter(ran.values()))["metrics"])
         lines += ["| metric | " + " | ".join(ran) + " |", "| --- | " + " | ".join("---" for _ in ran) + " |"]
         for m in metrics:
-            tag = "" if m in HEADLINE_METRICS else " (outside the family)"
+            tag = "" if m in h.get("distinct_metrics", HEADLINE_METRICS) else " (outside the family)"
             lines.append(f"| {m}{tag} | " + " | ".join(_cell(c["metrics"][m]) if m in c["metrics"] else "n/a"
                                                       for c in ran.values()) + " |")
     return "\n".join(lines) + "\n\n"
@@ -265,6 +272,7 @@ def headline_lines(results: dict) -> list[str]:
             lines.append(f"  {label}: not run")
             continue
         cells = [f"{m} {c['metrics'][m]['verdict']} {_fmt(c['metrics'][m]['omega2'])} "
-                 f"{_ci(c['metrics'][m]['omega2_ci90'])}" for m in HEADLINE_METRICS if m in c["metrics"]]
+                 f"{_ci(c['metrics'][m]['omega2_ci90'])}" for m in h.get("distinct_metrics", HEADLINE_METRICS)
+                 if m in c["metrics"]]
         lines.append(f"  {label}: " + "; ".join(cells))
     return lines

@@ -65,7 +65,7 @@ from emulator.stats import (
 from validation.verdicts.ranking import cluster_plan, emulation_bias, margin_in_ranking_terms, over_plan, pairs_check
 
 __all__ = ["ALPHA", "OMEGA2_MAX", "MIN_WALKS", "VERDICTS", "complete_walks", "omega2", "omega2_untruncated",
-           "omega2_over_plan", "one_sided_bounds", "bound_pvalues", "judge_batch", "judge"]
+           "omega2_over_plan", "one_sided_bounds", "bound_pvalues", "pvalues_of_fraction", "judge_batch", "judge"]
 
 #: Level of every test (and 1 - confidence of every interval).
 ALPHA = 0.05
@@ -188,11 +188,19 @@ def bound_pvalues(replicates, estimate, omega2_max: float = OMEGA2_MAX) -> tuple
     if n == 0:
         return math.nan, math.nan
     clip = (0.5 / n, 1.0 - 0.5 / n)
-    g = min(max(float(np.mean(r <= omega2_max)), clip[0]), clip[1])
     z0 = 0.0
     if estimate is not None and math.isfinite(float(estimate)):
         frac = (np.sum(r < estimate) + 0.5 * np.sum(r == estimate)) / n
         z0 = float(norm.ppf(min(max(frac, clip[0]), clip[1])))
+    return pvalues_of_fraction(float(np.mean(r <= omega2_max)), z0, n)
+
+
+def pvalues_of_fraction(g: float, z0: float, n: int) -> tuple[float, float]:
+    """(p_agrees, p_disagrees) of :func:`bound_pvalues` from ``g``, the fraction of ``n`` replicates at or below the
+    margin, and the bias correction ``z0`` (``g`` clipped to ``[0.5 / n, 1 - 0.5 / n]``)."""
+    from scipy.stats import norm
+
+    g = min(max(float(g), 0.5 / n), 1.0 - 0.5 / n)
     bc = float(norm.cdf(norm.ppf(g) - 2.0 * z0))
     return max(1.0 - g, 1.0 - bc), bc
 

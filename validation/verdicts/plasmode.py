@@ -42,7 +42,7 @@ from emulator.stats import rng_of, variance_components
 from validation.verdicts.agreement import MIN_WALKS, VERDICTS, judge
 
 __all__ = ["STUDIES", "INJECTED_OMEGA2", "NOISY_FACTOR", "TARGET", "RESEEDED_SUFFIX", "WALK_CANDIDATES",
-           "CALIBRATION_FILE", "control_pairs", "seed_clusters", "draw_study", "scenario_tables",
+           "CALIBRATION_FILE", "first_reaching", "control_pairs", "seed_clusters", "draw_study", "scenario_tables",
            "metric_calibration", "calibrate", "calibration_markdown"]
 
 #: Plasmode studies per emulator and size (``validate live --calibration-studies``).
@@ -135,6 +135,19 @@ def _rates(live, reseeded, clusters, k, scenario, n_studies, seed, **kw) -> dict
     return {**{v: counts[v] / n_studies for v in VERDICTS}, "complete_walks_median": float(np.median(walks))}
 
 
+def first_reaching(rate, lo: int, hi: int, target: float) -> int | None:
+    """The smallest index ``i`` in ``[lo, hi]`` with ``rate(i) >= target``, by bisection (the rate taken to grow with
+    ``i``), or None (none reaches it, or the range is empty)."""
+    top = hi
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if rate(mid) >= target:
+            hi = mid
+        else:
+            lo = mid + 1
+    return lo if lo <= top and rate(lo) >= target else None
+
+
 def _walks_needed(live, reseeded, clusters, n_studies, seed, candidates, target, own_rate) -> dict:
     """Smallest study size (walks: ``candidates`` and the study's own) at which the perfect emulator is judged
     ``agrees`` in at least ``target`` of the plasmode studies: a bisection on the side of the study's own size
@@ -151,13 +164,7 @@ def _walks_needed(live, reseeded, clusters, n_studies, seed, candidates, target,
         return tried[i]
 
     lo, hi = (0, ks.index(own)) if own_rate >= target else (ks.index(own) + 1, len(ks) - 1)
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if rate(mid) >= target:
-            hi = mid
-        else:
-            lo = mid + 1
-    found = lo if lo < len(ks) and rate(lo) >= target else None
+    found = first_reaching(rate, lo, hi, target)
     sizes = [{"seeds": ks[i], "walks": round(ks[i] * per_seed), "agrees": tried[i],
               "extrapolated": ks[i] > own} for i in sorted(tried)]
     return {"walks": None if found is None else round(ks[found] * per_seed),

@@ -7,7 +7,27 @@ from __future__ import annotations
 
 from validation.verdicts.plasmode import NOISY_FACTOR, STUDIES, calibrate, calibration_markdown
 
-__all__ = ["main"]
+__all__ = ["check_options", "emit", "main"]
+
+
+def emit(text: str, json_path, data: dict) -> int:
+    """Print ``text`` and write ``data`` to the new file ``json_path`` (when given); returns the exit code 0."""
+    from emulator.io.files import write_results
+
+    print(text, end="")
+    if json_path is not None:
+        write_results(json_path, data, overwrite=False)
+    return 0
+
+
+def check_options(studies: int, json_path) -> None:
+    """Refuse (:class:`~emulator.errors.ExposimError`) fewer than one study and a ``--json`` file that exists."""
+    from emulator.errors import ExposimError
+
+    if studies < 1:
+        raise ExposimError(f"--studies must be >= 1, got {studies}")
+    if json_path is not None and json_path.exists():
+        raise ExposimError(f"{json_path}: exists; give a new file name (results are never overwritten)")
 
 
 def main(argv=None) -> int:
@@ -32,16 +52,13 @@ def main(argv=None) -> int:
     p.add_argument("--json", type=Path, help="also write the numbers to this new JSON file")
     args = p.parse_args(argv)
     try:
-        from emulator.io.files import read_results, read_text, write_results
-        from validation.live.config import METRICS, LiveError
-        from validation.live.evidence import WALKS_TABLE, parse_walks_table, walk_labels
+        from emulator.io.files import read_results
+        from validation.live.config import METRICS
+        from validation.live.evidence import walk_labels
+        from validation.live.table_check import read_folder_table
 
-        if args.studies < 1:
-            raise ExposimError(f"--studies must be >= 1, got {args.studies}")
-        if args.json is not None and args.json.exists():
-            raise ExposimError(f"{args.json}: exists; give a new file name (results are never overwritten)")
-        walks, methods, tables = parse_walks_table(read_text(args.folder / WALKS_TABLE, LiveError),
-                                                   str(args.folder / WALKS_TABLE))
+        check_options(args.studies, args.json)
+        walks, methods, tables = read_folder_table(args.folder)
         seed = args.seed
         if seed is None:
             res = args.folder / "results.json"
@@ -53,11 +70,8 @@ def main(argv=None) -> int:
     except (ExposimError, OSError, ValueError) as exc:
         print(f"study_calibration: {exc}", file=sys.stderr)
         return 1
-    print(calibration_markdown(cal), end="")
-    print(f"{len(walks)} walks, {args.studies} plasmode studies per emulator and size: {wall:.1f} s")
-    if args.json is not None:
-        write_results(args.json, cal, overwrite=False)
-    return 0
+    return emit(calibration_markdown(cal) + f"{len(walks)} walks, {args.studies} plasmode studies per emulator and "
+                f"size: {wall:.1f} s\n", args.json, cal)
 
 
 if __name__ == "__main__":

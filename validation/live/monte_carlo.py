@@ -1,0 +1,178 @@
+"""The bootstrap's Monte Carlo error in the headline verdicts (issue 44, item C).
+
+A headline verdict is decided by a p-value read from 1000 bootstrap replicates
+(:func:`validation.verdicts.agreement.bound_pvalues`), then Holm across the family; at the margin the
+verdict can depend on which replicates were drawn.  Two measurements:
+
+* :func:`headline_family`: the headline family recomputed exactly as ``validate live`` computes it
+  (the same seeds, so the same verdicts), with each p-value's Monte Carlo interval: the p of
+  the rule at both ends of a Wilson interval (99 %) for the fraction of replicates at or below
+  the margin, the bias correction held; Holm is monotone in every p, so the adjusted p's interval
+  is Holm at both ends.  A verdict whose adjusted p's interval holds the level is
+  ``undetermined (Monte Carlo)``: another draw of the replicates could decide it either way;
+* :func:`verdict_stability`: the family over many bootstrap seeds (the study's seed replaced), and
+  how many of its verdicts change.
+
+``python -m validation.live.monte_carlo OUT [--seeds 20] [--resamples 1000,4000]`` prints both for a
+study folder's ``walks.csv`` without writing into the folder.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from emulator.stats import holm, rng_of
+from validation.live.config import COMPARISONS, HEADLINE_COMPARISONS, HEADLINE_METRICS, JUDGED_METRICS
+from validation.live.headline import apply_family, with_derived
+from validation.verdicts.agreement import ALPHA, MIN_WALKS, OMEGA2_MAX, complete_walks, judge_batch, \
+    omega2_over_plan, pvalues_of_fraction
+from validation.verdicts.ranking import cluster_plan
+
+__all__ = ["MC_CONFIDENCE", "wilson", "pvalue_interval", "headline_family", "verdict_stability"]
+
+#: Confidence of the Monte Carlo interval of a p-value.
+MC_CONFIDENCE = 0.99
+
+
+def wilson(k: float, n: int, confidence: float = MC_CONFIDENCE) -> tuple[float, float]:
+    """Wilson score interval of a binomial proportion ``k / n``."""
+    from scipy.stats import norm
+
+    z = float(norm.ppf(0.5 + confidence / 2))
+    p = k / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return max(centre - half, 0.0), min(centre + half, 1.0)
+
+
+def pvalue_interval(replicates, estimate, omega2_max: float = OMEGA2_MAX,
+                    confidence: float = MC_CONFIDENCE) -> dict:
+    """``{"p_agrees": [lo, hi], "p_disagrees": [lo, hi]}``: the Monte Carlo interval of the rule's p-values
+    (:func:`~validation.verdicts.agreement.pvalues_of_fraction` at the ends of the Wilson interval of the fraction
+    of replicates at or below ``omega2_max``; the bias correction ``z0`` held at its value)."""
+    from scipy.stats import norm
+
+    r = np.asarray(replicates, dtype=np.float64).ravel()
+    r = np.where(np.isnan(r), np.inf, r)
+    n = r.size
+    z0 = 0.0
+    if estimate is not None and math.isfinite(float(estimate)):
+        frac = (np.sum(r < estimate) + 0.5 * np.sum(r == estimate)) / n
+        z0 = float(norm.ppf(min(max(frac, 0.5 / n), 1.0 - 0.5 / n)))
+    g_lo, g_hi = wilson(float(np.sum(r <= omega2_max)), n, confidence)
+    a_hi, d_lo = pvalues_of_fraction(g_lo, z0, n)  # p_agrees falls and p_disagrees grows with the fraction
+    a_lo, d_hi = pvalues_of_fraction(g_hi, z0, n)
+    return {"p_agrees": [a_lo, a_hi], "p_disagrees": [d_lo, d_hi]}
+
+
+def _member(live, emulated, clusters, n_resamples: int, seed) -> dict:
+    """One headline verdict at its own level as :func:`validation.verdicts.agreement.judge` draws it (the same
+    random stream), with its replicates' Monte Carlo interval."""
+    from validation.verdicts.agreement import VERDICTS
+
+    L, E = np.asarray(live, dtype=np.float64), np.asarray(emulated, dtype=np.float64)
+    ok = complete_walks(L, E)
+    L, E = L[ok], E[ok]
+    labels = np.asarray(list(clusters))[ok]
+    units = int(np.unique(labels).size)
+    rng = rng_of(seed)
+    plan = cluster_plan(L.shape[0], n_resamples, rng, labels)
+    b = judge_batch(L[None], E[None], n_resamples=n_resamples, seed=rng, plan=plan, n_units=units)
+    boot = omega2_over_plan(plan, L, E)
+    return {"verdict": VERDICTS[int(b["verdict"][0])], "reason": "", "n_walks": int(L.shape[0]),
+            "n_clusters": units, "live_method_p": float(b["live_p"][0]), "p_agrees": float(b["p_agrees"][0]),
+            "p_disagrees": float(b["p_disagrees"][0]),
+            "mc": pvalue_interval(boot, float(b["omega2_untruncated"][0]))}
+
+
+def headline_family(tables: dict, walks, methods, *, seed: int = 0, n_resamples: int = 1000,
+                    alpha: float = ALPHA) -> dict:
+    """``{"<comparison>: <metric>": {verdict, verdict_alone, p_agrees_adjusted, p_disagrees_adjusted, mc,
+    adjusted_mc, verdict_mc}}`` of the headline family (``seed``: the study's; the same as results.json's
+    headline when it is the study's seed and ``n_resamples`` 1000)."""
+    tables = with_derived(tables)
+    clusters = [int(str(w).rpartition("/seed")[2]) for w in walks]
+    comparisons = {}
+    for label in HEADLINE_COMPARISONS:
+        ref, other = COMPARISONS[label]
+        if ref not in tables or other not in tables:
+            continue
+        c = list(COMPARISONS).index(label)
+        comparisons[label] = {"status": "run", "metrics": {
+            m: _member(tables[ref][m], tables[other][m], clusters, n_resamples,
+                       [seed, 22_001, c, list(JUDGED_METRICS).index(m)])
+            for m in HEADLINE_METRICS if m in tables[ref] and m in tables[other]}}
+    apply_family(comparisons, alpha=alpha, min_walks=MIN_WALKS)
+    members = [(label, m, r) for label, c in comparisons.items() for m, r in c["metrics"].items()]
+
+    def decidable(r):
+        return r["n_clusters"] >= MIN_WALKS and r["live_method_p"] < alpha
+
+    ends = {}
+    for key in ("p_agrees", "p_disagrees"):
+        ends[key] = [holm([r["mc"][key][i] if decidable(r) else 1.0 for _, _, r in members]) for i in (0, 1)]
+    out = {}
+    for j, (label, m, r) in enumerate(members):
+        adj = {key: [float(ends[key][0][j]), float(ends[key][1][j])] for key in ends}
+        key = {"agrees": "p_agrees", "disagrees": "p_disagrees"}.get(r["verdict_alone"])
+        verdict_mc = r["verdict"]
+        if key is not None and adj[key][0] <= alpha < adj[key][1]:
+            verdict_mc = "undetermined (Monte Carlo)"
+        out[f"{label}: {m}"] = {k: r[k] for k in ("verdict", "verdict_alone", "p_agrees", "p_disagrees",
+                                                  "p_agrees_adjusted", "p_disagrees_adjusted", "mc")}
+        out[f"{label}: {m}"].update(adjusted_mc=adj, verdict_mc=verdict_mc)
+    return out
+
+
+def verdict_stability(tables: dict, walks, methods, *, seeds, n_resamples: int = 1000) -> dict:
+    """The headline family over bootstrap ``seeds``: per member the count of each verdict, and the members whose
+    verdict is not the same on every seed (``changed``) or is Monte Carlo undetermined on some seed."""
+    seeds, counts, mc = list(seeds), {}, {}
+    for s in seeds:
+        for key, r in headline_family(tables, walks, methods, seed=int(s), n_resamples=n_resamples).items():
+            counts.setdefault(key, {}).setdefault(r["verdict"], 0)
+            counts[key][r["verdict"]] += 1
+            mc[key] = mc.get(key, 0) + (r["verdict_mc"] == "undetermined (Monte Carlo)")
+    return {"n_seeds": len(seeds), "n_resamples": int(n_resamples), "counts": counts,
+            "changed": sorted(k for k, v in counts.items() if len(v) > 1),
+            "mc_undetermined_on_some_seed": sorted(k for k, v in mc.items() if v)}
+
+
+def main(argv=None) -> int:
+    """``python -m validation.live.monte_carlo OUT``: the headline's Monte Carlo error of a study folder."""
+    import argparse
+    import json
+    import sys
+
+    from emulator.io.files import read_results
+    from validation.live.config import LiveError
+    from validation.live.table_check import read_folder_table
+
+    p = argparse.ArgumentParser(prog="python -m validation.live.monte_carlo", description=__doc__.split("\n")[0])
+    p.add_argument("folder", help="a live study folder with walks.csv and results.json")
+    p.add_argument("--seeds", type=int, default=20, help="bootstrap seeds (default 20: 0..19)")
+    p.add_argument("--resamples", default="1000", help="bootstrap resamples, comma-separated (default 1000)")
+    args = p.parse_args(argv)
+    try:
+        from pathlib import Path
+
+        folder = Path(args.folder)
+        walks, methods, tables = read_folder_table(folder)
+        seed = int(read_results(folder / "results.json")["config"]["seed"])
+        own = headline_family(tables, walks, methods, seed=seed)
+        print(json.dumps({k: {"verdict": r["verdict"], "verdict_mc": r["verdict_mc"], "adjusted_mc": r["adjusted_mc"]}
+                          for k, r in own.items()}, indent=1))
+        for b in (int(x) for x in args.resamples.split(",")):
+            st = verdict_stability(tables, walks, methods, seeds=range(args.seeds), n_resamples=b)
+            print(json.dumps({"n_resamples": b, "changed": {k: st["counts"][k] for k in st["changed"]},
+                              "mc_undetermined_on_some_seed": st["mc_undetermined_on_some_seed"]}, indent=1))
+    except (LiveError, OSError, ValueError, KeyError) as exc:
+        print(f"monte_carlo: {exc}", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
