@@ -130,7 +130,8 @@ def native_cost(target_ms: float, candidate: NativeCandidate, motion_stops_per_f
 
 def native_select(target_ms: float, candidates: Iterable[NativeCandidate], *,
                   motion_stops_per_frame: float = MOTION_STOPS_PER_FRAME,
-                  saturation_limit: float = SATURATION_LIMIT, blur_stops_per_px: float | None = None) -> NativeCandidate:
+                  saturation_limit: float = SATURATION_LIMIT, blur_stops_per_px: float | None = None
+                  ) -> NativeCandidate:
     """The candidate frame that serves ``target_ms`` (see the module notes).
 
     ``blur_stops_per_px``: None (default) leaves blur out; a number makes the selector blur-aware

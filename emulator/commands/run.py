@@ -85,6 +85,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--latency-frames", type=int, default=None, metavar="N",
                    help="with --rate native: a proposal made after reading frame k is first used at frame k + 1 + N "
                         "(default 1, as a live camera)")
+    p.add_argument("--warp", choices=("rotation", "flow", "none"), default=None, help="with --rate native: a "
+                   "neighbour turned by the gyro (rotation, default), then moved by the flow between frames either side")
+    p.add_argument("--native-blur-aware", action="store_true", help="with --rate native: the selector also weighs "
+                   "the motion blur a candidate carries beyond the target's, from the gyro (docs/native.md)")
     p.add_argument("--resume", action="store_true",
                    help="continue an interrupted run in OUTDIR (its run.json gives the configuration)")
     p.add_argument("--sequences", default=None, metavar="all|NAME,...",
@@ -178,9 +182,9 @@ def _command(args) -> str:
         parts.append("--blur-aware")
     if getattr(args, "skip_partial", False):
         parts.append("--skip-partial")
-    for flag, value in (("--rate", getattr(args, "rate", None)), ("--latency-frames", getattr(args, "latency_frames", None))):
-        if value is not None:
-            parts += [flag, str(value)]
+    for flag, value in (("--rate", getattr(args, "rate", None)), ("--latency-frames", getattr(args, "latency_frames", None)),
+                        ("--warp", getattr(args, "warp", None)), ("--native-blur-aware", getattr(args, "native_blur_aware", 0) or None)):
+        parts += [] if value is None else [flag] if value is True else [flag, str(value)]
     if args.resume:
         parts.append("--resume")
     if getattr(args, "method_timeout_s", None) is not None:
@@ -192,7 +196,8 @@ def _command(args) -> str:
 _FLAGS = {"initial_ms": "--initial-ms", "range_ms": "--range-ms", "jobs": "--jobs", "noise_seed": "--noise-seed",
           "png_level": "--png-level", "blur": "--blur", "blur_aware": "--blur-aware",
           "method_timeout_s": "--method-timeout-s", "selector": "--selector", "mode": "--mode", "save": "--save",
-          "noise": "--noise", "skip_partial": "--skip-partial", "rate": "--rate", "latency_frames": "--latency-frames"}
+          "noise": "--noise", "skip_partial": "--skip-partial", "rate": "--rate", "latency_frames": "--latency-frames",
+          "native_warp": "--warp", "native_blur_aware": "--native-blur-aware"}
 
 
 def _given(args) -> dict:
@@ -210,7 +215,8 @@ def _given(args) -> dict:
             "response_path": str(args.response) if args.response is not None else None,
             "png_level": args.png_level, "blur": args.blur, "blur_aware": True if args.blur_aware else None,
             "skip_partial": True if getattr(args, "skip_partial", False) else None,
-            "rate": getattr(args, "rate", None), "latency_frames": getattr(args, "latency_frames", None)}
+            "rate": getattr(args, "rate", None), "latency_frames": getattr(args, "latency_frames", None),
+            "native_warp": getattr(args, "warp", None), "native_blur_aware": getattr(args, "native_blur_aware", 0) or None}
 
 
 def config_from_args(args, base=None):
@@ -244,8 +250,11 @@ def _check_args(args) -> None:
             raise ExposimError(f"{flag} {count}: must be >= 1")
     if args.noise_model is not None and args.noise != "consistent" and not args.resume:
         raise ExposimError("--noise-model is used only with --noise consistent")
-    if getattr(args, "latency_frames", None) is not None and args.rate != "native" and not args.resume:
-        raise ExposimError(f"--latency-frames {args.latency_frames}: used only with --rate native")
+    for dest in ("latency_frames", "warp", "native_blur_aware"):  # the native-only flags
+        given = getattr(args, dest, None)
+        if given not in (None, False) and args.rate != "native" and not args.resume:
+            shown = f"--{dest.replace('_', '-')} {'' if given is True else given}".strip()
+            raise ExposimError(f"{shown}: used only with --rate native")
 
 
 def _progress_bar(desc: str, unit: str):

@@ -45,7 +45,7 @@ DEFAULT_SELECTOR = "higher-no-sat"
 MODES = ("paper", "borealhdr")
 #: Keys of ``run.json`` that are the configuration (a resume compares these).
 CONFIG_KEYS = ("selector", "initial_ms", "range_ms", "save", "mode", "options", "method_timeout_s", "noise", "blur",
-               "skip_partial", "rate", "latency_frames")
+               "skip_partial", "rate", "latency_frames", "native_warp", "native_blur_aware")
 #: How often a method proposes: once per bracket sweep (the paper's) or after every recorded frame.
 RATES = ("cycle", "native")
 
@@ -154,6 +154,11 @@ class RunConfig:
         ``run.json`` records ``"rate"`` and ``"latency_frames"`` for a native run only.
     latency_frames : int
         Native rate: a proposal made after reading frame k is first used at frame k + 1 + N (default 1).
+    native_warp : {"rotation", "flow", "none"}
+        Native rate: how a neighbour frame is moved to frame k's instant (:data:`emulator.native.WARP_MODES`;
+        default rotation).  ``native_blur_aware``: the native selector also weighs the motion blur a
+        candidate's window carries beyond the target's (default False).  ``run.json`` records either only
+        when it is not the default.
     """
 
     initial_ms: float = DEFAULT_INITIAL_MS
@@ -175,6 +180,8 @@ class RunConfig:
     skip_partial: bool = False
     rate: str = "cycle"
     latency_frames: int = 1
+    native_warp: str = "rotation"
+    native_blur_aware: bool = False
 
     def __post_init__(self) -> None:
         from emulator.select import SELECTORS
@@ -246,6 +253,13 @@ class RunConfig:
         if isinstance(lat, bool) or not isinstance(lat, (int, np.integer)) or lat < 0:
             raise PlaybackError(f"latency_frames must be an integer >= 0, got {lat!r}")
         put(self, "latency_frames", int(lat))
+        from emulator.native import WARP_MODES
+
+        if self.native_warp not in WARP_MODES:
+            raise PlaybackError(f"native_warp must be one of {', '.join(WARP_MODES)}, got {self.native_warp!r}")
+        put(self, "native_blur_aware", bool(self.native_blur_aware))
+        if self.rate != "native" and (self.native_warp != "rotation" or self.native_blur_aware):
+            raise PlaybackError("native_warp and native_blur_aware: used only at native rate (--rate native)")
 
     # ------------------------------------------------------------------ derived values
     @property
@@ -369,6 +383,8 @@ class RunConfig:
                       **({"blur_aware": True} if self.blur_aware else {})}),
             **({"skip_partial": True} if self.skip_partial else {}),
             **({"rate": "native", "latency_frames": self.latency_frames} if self.rate == "native" else {}),
+            **({"native_warp": self.native_warp} if self.native_warp != "rotation" else {}),
+            **({"native_blur_aware": True} if self.native_blur_aware else {}),
         })
 
     @classmethod
@@ -400,6 +416,8 @@ class RunConfig:
             skip_partial=bool(run_json.get("skip_partial", False)),
             rate=run_json.get("rate") or "cycle",  # folders from before --rate: cycle
             latency_frames=int(run_json.get("latency_frames", 1)),
+            native_warp=run_json.get("native_warp") or "rotation",
+            native_blur_aware=bool(run_json.get("native_blur_aware", False)),
         )
 
     def resumed(self, recorded: Mapping, given: Iterable[str] = CONFIG_KEYS, *, where: str = "run.json",

@@ -29,7 +29,7 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument("--warps", type=argtypes.names, default=WARP_MODES,
                    help=f"warp modes compared, of {','.join(WARP_MODES)} (default: all)")
     p.add_argument("--blur-aware", action="store_true",
-                   help=f"select with the blur-aware native selector ({BLUR_STOPS_PER_PX:g} stop per px of excess blur)")
+                   help=f"the blur-aware native selector ({BLUR_STOPS_PER_PX:g} stop per px of excess blur)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     return p
 

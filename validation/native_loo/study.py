@@ -87,7 +87,8 @@ def report_markdown(results: dict) -> str:
              "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
     for r in results["summary"]["table"]:
         lines.append(f"| {r['motion_class']} | {r['warp']} | {r['n_frames']} | {_fmt(r['rate_deg_s'], '.1f')} | "
-                     f"{_fmt(r['rmse_percent'])} | {_fmt(r['motion_left_px'])} | {_fmt(r['sift_good_matches'], '.0f')} | "
+                     f"{_fmt(r['rmse_percent'])} | {_fmt(r['motion_left_px'])} | "
+                     f"{_fmt(r['sift_good_matches'], '.0f')} | "
                      f"{_fmt(r['neighbour_offset_abs'], '.0f')} |")
     lines += ["", "| warp | frames | CPU s (selection, emulation, warp) | frames per CPU s | CPU / rotation's |",
               "| --- | ---: | ---: | ---: | ---: |"]
