@@ -2,8 +2,7 @@
 
 Package shape as every study: :mod:`.measure` (the numeric measurements), :mod:`.study` (its
 configuration, runs it, writes ``results.json`` and ``report.md``), :mod:`.cli` (``exposim
-validate native`` and ``python -m validation.native_loo``).  Runs on real recordings; needs no
-synthetic-layer extra.
+validate native``).  Runs on real recordings; needs no synthetic-layer extra.
 """
 
 from validation.native_loo.study import NativeLooConfig, run_study

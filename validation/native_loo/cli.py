@@ -1,4 +1,4 @@
-"""``exposim validate native SEQ -o OUT`` and ``python -m validation.native_loo``."""
+"""``exposim validate native SEQ -o OUT``: the command line of :func:`validation.native_loo.run_study`."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from pathlib import Path
 
 from emulator.commands import argtypes
 
-__all__ = ["HELP", "add_arguments", "register", "run_from_args", "main"]
+__all__ = ["HELP", "add_arguments", "register", "run_from_args"]
 
 HELP = ("native emulation on a real recording, leaving each frame out: every recorded frame is emulated from the "
         "frames around it and compared with itself (image error, motion left after the warp, SIFT good matches) "
@@ -67,17 +67,3 @@ def run_from_args(args) -> int:
     print(f"wrote {args.output / 'results.json'} and {args.output / 'report.md'}")
     return 0
 
-
-def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m validation.native_loo", description=HELP)
-    add_arguments(p)
-    args = p.parse_args(argv)
-    try:
-        return run_from_args(args)
-    except Exception as exc:  # noqa: BLE001 - one clear line, as the exposim CLI does
-        from emulator.errors import ExposimError
-
-        if isinstance(exc, (ExposimError, FileNotFoundError)):
-            print(f"error: {exc}", file=sys.stderr)
-            return 1
-        raise
