@@ -85,8 +85,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--latency-frames", type=int, default=None, metavar="N",
                    help="with --rate native: a proposal made after reading frame k is first used at frame k + 1 + N "
                         "(default 1, as a live camera)")
-    p.add_argument("--warp", choices=("rotation", "flow", "none"), default=None, help="with --rate native: a "
-                   "neighbour turned by the gyro (rotation, default), then moved by the flow between frames either side")
+    p.add_argument("--warp", choices=("rotation", "flow", "none"), default=None, help="with --rate native: rotation "
+                   "(default): a neighbour turned by the gyro; flow: then moved by the flow of the frames either side")
     p.add_argument("--native-blur-aware", action="store_true", help="with --rate native: the selector also weighs "
                    "the motion blur a candidate carries beyond the target's, from the gyro (docs/native.md)")
     p.add_argument("--resume", action="store_true",
@@ -167,7 +167,7 @@ def _command(args) -> str:
                         ("--initial-ms", args.initial_ms), ("--selector", args.selector),
                         ("--response", args.response), ("--seed", args.seed), ("--noise", args.noise),
                         ("--blur", args.blur), ("--noise-model", args.noise_model), ("--noise-seed", args.noise_seed),
-                        ("--png-level", args.png_level)):
+                        ("--png-level", args.png_level), ("--warp", getattr(args, "warp", None))):
         if value is not None:
             parts += [flag, str(value)]
     if args.range_ms is not None:
@@ -178,13 +178,11 @@ def _command(args) -> str:
         parts += ["--jobs", str(args.jobs)]
     if getattr(args, "workers", None) == "inline":
         parts += ["--workers", "inline"]
-    if getattr(args, "blur_aware", False):
-        parts.append("--blur-aware")
-    if getattr(args, "skip_partial", False):
-        parts.append("--skip-partial")
-    for flag, value in (("--rate", getattr(args, "rate", None)), ("--latency-frames", getattr(args, "latency_frames", None)),
-                        ("--warp", getattr(args, "warp", None)), ("--native-blur-aware", getattr(args, "native_blur_aware", 0) or None)):
-        parts += [] if value is None else [flag] if value is True else [flag, str(value)]
+    for flag in ("--blur-aware", "--skip-partial", "--native-blur-aware"):
+        parts += [flag] if getattr(args, flag[2:].replace("-", "_"), False) else []
+    for flag, value in (("--rate", getattr(args, "rate", None)), ("--latency-frames", getattr(args, "latency_frames", None))):
+        if value is not None:
+            parts += [flag, str(value)]
     if args.resume:
         parts.append("--resume")
     if getattr(args, "method_timeout_s", None) is not None:
@@ -216,7 +214,8 @@ def _given(args) -> dict:
             "png_level": args.png_level, "blur": args.blur, "blur_aware": True if args.blur_aware else None,
             "skip_partial": True if getattr(args, "skip_partial", False) else None,
             "rate": getattr(args, "rate", None), "latency_frames": getattr(args, "latency_frames", None),
-            "native_warp": getattr(args, "warp", None), "native_blur_aware": getattr(args, "native_blur_aware", 0) or None}
+            "native_warp": getattr(args, "warp", None),
+            "native_blur_aware": True if getattr(args, "native_blur_aware", False) else None}
 
 
 def config_from_args(args, base=None):
