@@ -134,7 +134,7 @@ class NativeTick(_Memo):
             e = fr.exposures[j]
             _, hist = p.images(j).get(p.cameras[0], e)
             lost = invalid_fraction(hist, target_ms / e, white_level=p.white, black_level=p.black)
-            excess = 0.0 if p.blur_stops_per_px is None else p.excess_blur_px(j, self.index, target_ms, hist)
+            excess = 0.0 if p.blur_stops_per_px is None else p.excess_blur_px(j, self.index, target_ms)
             cands.append(NativeCandidate(j - self.index, e, lost, excess))
         best = native_select(target_ms, cands, motion_stops_per_frame=p.motion_stops_per_frame,
                              saturation_limit=p.saturation_limit, blur_stops_per_px=p.blur_stops_per_px)
@@ -223,7 +223,7 @@ class NativeProvider:
         self.blur_stops_per_px = None if blur_stops_per_px is None else float(blur_stops_per_px)
         needs_motion = mode != "none" or self.blur_stops_per_px is not None
         self.motion = self._motion(motion) if needs_motion else None
-        self.warp = mode != "none"
+        self.warp = mode != "none" and self.motion is not None  #: neighbours are moved (a gyro and a mode)
         self._velocity: dict = {}
         self._blur: dict = {}
         self._images: dict = {}
@@ -253,8 +253,8 @@ class NativeProvider:
         """What ``run.json`` records under ``"native"``."""
         return {"latency_frames": self.latency_ticks, "window_frames": self.window, "n_frames": len(self.frames),
                 "motion_stops_per_frame": self.motion_stops_per_frame, "saturation_limit": self.saturation_limit,
-                "warp": ("rotation from the gyro" if self.motion is not None else "none"),
-                **({"warp_resample": WARP_RESAMPLE, "stamp": self.motion.stamp} if self.motion is not None else {}),
+                "warp": ("rotation from the gyro" if self.warp else "none"),
+                **({"warp_resample": WARP_RESAMPLE, "stamp": self.motion.stamp} if self.warp else {}),
                 **({"warp_mode": self.warp_mode} if self.warp_mode == "flow" else {}),
                 **({"blur_stops_per_px": self.blur_stops_per_px} if self.blur_stops_per_px is not None else {}),
                 "benchmarked_frames": sorted(k for k in self.frames.benchmarked if k is not None)}
@@ -297,43 +297,38 @@ class NativeProvider:
 
     def emulate(self, camera: str, j: int, k: int, ratio: float, table, target_ms: float):
         """Frame ``j``'s bracket emulated at ``ratio`` for frame ``k``: ``(image, inside_fraction, warp_deg)``."""
-        from emulator.blur import rotation_homography
-
         e = self.frames.exposures[j]
         out = self.images(j)._emulate(camera, e, ratio, table, self.stats)  # the cycle rate's emulation
         if j == k:
             return readonly_view(out), 1.0, 0.0
-        if self.motion is None:
-            return readonly_view(out), 1.0, math.nan
-        if self.warp_mode == "none":
-            return readonly_view(out), 1.0, math.nan
         blurred = self.blur is not None and target_ms > e  # the emulated image stands for the target's window
-        R = self.rotation(j, k, target_ms if blurred else e, target_ms)
+        R, H, disp = self._geometry(camera, j, k, target_ms if blurred else e, target_ms, out.shape)
         if R is None:
             return readonly_view(out), 1.0, math.nan
         angle = math.degrees(math.acos(max(-1.0, min(1.0, (np.trace(R) - 1.0) / 2.0))))
-        K, _ = self.motion.K(camera, (out.shape[1], out.shape[0]))
-        disp = self.displacement(camera, j, k, target_ms if blurred else e, target_ms) if self.warp_mode == "flow" \
-            else None
         if disp is not None:
-            warped, inside = warp_with_flow(out, rotation_homography(K, R), disp, self.response)
+            warped, inside = warp_with_flow(out, H, disp, self.response)
         else:  # the rotation warp; also the flow warp's where frame k lacks a neighbour on one side
-            warped, inside = warp_to_instant(out, rotation_homography(K, R), self.response)
+            warped, inside = warp_to_instant(out, H, self.response)
         return readonly_view(warped), inside, angle
 
     def geometry(self, camera: str, j: int, k: int, source_ms: float, target_ms: float, shape):
         """How :meth:`emulate` moves frame ``j``'s image (of ``shape``, standing for ``source_ms``) to frame ``k``:
         ``(H, displacement)`` (:func:`emulator.native.instant_maps`), ``(None, None)`` where it is not moved."""
+        return self._geometry(camera, j, k, source_ms, target_ms, shape)[1:]
+
+    def _geometry(self, camera: str, j: int, k: int, source_ms: float, target_ms: float, shape):
+        """``(R, H, displacement)`` of :meth:`geometry`; ``(None, None, None)`` where the image is not moved."""
         from emulator.blur import rotation_homography
 
         if j == k or self.motion is None or self.warp_mode == "none":
-            return None, None
+            return None, None, None
         R = self.rotation(j, k, source_ms, target_ms)
         if R is None:
-            return None, None
+            return None, None, None
         K, _ = self.motion.K(camera, (shape[1], shape[0]))
         disp = self.displacement(camera, j, k, source_ms, target_ms) if self.warp_mode == "flow" else None
-        return rotation_homography(K, R), disp
+        return R, rotation_homography(K, R), disp
 
     def _middle_s(self, j: int, exposure_ms: float) -> float:
         a, b = self._window_s(j, exposure_ms)
@@ -380,7 +375,7 @@ class NativeProvider:
             self._velocity[key] = v
         return v
 
-    def excess_blur_px(self, j: int, k: int, target_ms: float, hist=None) -> float:
+    def excess_blur_px(self, j: int, k: int, target_ms: float) -> float:
         """Predicted blur of frame ``j``'s window beyond a capture of ``target_ms`` at frame ``k`` (px, largest over
         the image's 3x3 grid, the first camera; 0 without a gyro, or where it does not cover the windows)."""
         from emulator.blur import _window_blur, as_angular_velocity
