@@ -34,6 +34,8 @@ the two numeric parts of that:
   the image motion the rotation leaves (translation parallax, the gyro's errors), measured by a
   dense optical flow (OpenCV's DIS) between the neighbours on either side of frame k, each turned to
   frame k's instant and normalised to radiance, and scaled linearly in time to the source's instant.
+  ``flow-sharp`` (:data:`DEFAULT_NATIVE_WARP`) is the flow warp where that move is at least
+  :data:`SHARP_MOTION_PX` (:func:`median_motion_px`), and no resampling below it.
 """
 
 from __future__ import annotations
@@ -68,6 +70,9 @@ __all__ = [
     "instant_maps",
     "warp_with_flow",
     "move_mask",
+    "SHARP_MOTION_PX",
+    "DEFAULT_NATIVE_WARP",
+    "median_motion_px",
 ]
 
 #: Candidate source frames lie within this many recorder cycles (sweeps) of frame k, each side.
@@ -88,9 +93,16 @@ WARP_RESAMPLE = "lanczos4"
 #: one within it is kept, and weighs each pixel of excess blur as this many stops of upward emulation.
 BLUR_LIMIT_PX = 1.0
 BLUR_STOPS_PER_PX = 1.0
-#: How a neighbour frame is moved to frame k's instant: not at all, by the gyro's rotation (the default),
-#: or by the rotation and then the optical flow between the neighbours on either side of frame k.
-WARP_MODES = ("none", "rotation", "flow")
+#: How a neighbour frame is moved to frame k's instant: not at all, by the gyro's rotation, by the rotation and
+#: then the optical flow between the neighbours on either side of frame k, or as ``flow`` but only where that
+#: move is at least :data:`SHARP_MOTION_PX` (``flow-sharp``, the default of native runs: docs/native.md).
+WARP_MODES = ("none", "rotation", "flow", "flow-sharp")
+#: What ``exposim run --rate native`` uses without ``--warp`` (a NativeProvider's own default is ``rotation``).
+DEFAULT_NATIVE_WARP = "flow-sharp"
+#: ``flow-sharp`` leaves a neighbour as recorded where the median move of its pixels (:func:`median_motion_px`)
+#: is below this (full-resolution px): a resampling at a sub-pixel offset smooths more than it aligns (on the
+#: upstream BorealHDR sample at rest, a Lanczos warp of 0.3-1 px cost SIFT good matches; see docs/native.md).
+SHARP_MOTION_PX = 1.0
 
 
 @dataclass(frozen=True)
@@ -311,6 +323,21 @@ def warp_with_flow(image: np.ndarray, H: np.ndarray, displacement: np.ndarray | 
         out[sl] = cv2.remap(np.ascontiguousarray(h[sl]), mx, my, RESAMPLERS[resample], borderMode=cv2.BORDER_REPLICATE)
         n_in += int(inside.sum())
     return _forward_dn(response, out, _DN_GRID), n_in / float(image.size)
+
+
+def median_motion_px(H: np.ndarray, displacement: np.ndarray | None, shape: tuple[int, int]) -> float:
+    """The median length (full-resolution px) of the move :func:`warp_with_flow` gives a source image of ``shape``:
+    ``H(x) - x`` plus ``displacement`` (None: none), over the 2x2 binned grid (the displacement's)."""
+    height, width = shape
+    ys, xs = np.mgrid[0:height - 1:2, 0:width - 1:2].astype(np.float64) + 0.5
+    H = np.asarray(H, dtype=np.float64)
+    den = H[2, 0] * xs + H[2, 1] * ys + H[2, 2]
+    dx = (H[0, 0] * xs + H[0, 1] * ys + H[0, 2]) / den - xs
+    dy = (H[1, 0] * xs + H[1, 1] * ys + H[1, 2]) / den - ys
+    if displacement is not None:
+        dx = dx + displacement[: dx.shape[0], : dx.shape[1], 0]
+        dy = dy + displacement[: dy.shape[0], : dy.shape[1], 1]
+    return float(np.median(np.hypot(dx, dy)))
 
 
 def move_mask(mask: np.ndarray, H: np.ndarray | None, displacement: np.ndarray | None = None) -> np.ndarray:

@@ -85,8 +85,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--latency-frames", type=int, default=None, metavar="N",
                    help="with --rate native: a proposal made after reading frame k is first used at frame k + 1 + N "
                         "(default 1, as a live camera)")
-    p.add_argument("--warp", choices=("rotation", "flow", "none"), default=None, help="with --rate native: rotation "
-                   "(default): a neighbour turned by the gyro; flow: then moved by the flow of the frames either side")
+    p.add_argument("--warp", choices=("flow-sharp", "rotation", "flow", "none"), default=None, help="--rate native: "
+                   "rotation: gyro; flow: then the neighbours' flow; flow-sharp (default): flow unless under 1 px")
     p.add_argument("--native-blur-aware", action="store_true", help="with --rate native: the selector also weighs "
                    "the motion blur a candidate carries beyond the target's, from the gyro (docs/native.md)")
     p.add_argument("--resume", action="store_true",

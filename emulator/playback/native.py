@@ -21,7 +21,9 @@ same closed loop (:func:`~emulator.playback.loop.closed_loop`); only the images 
   says so;
 * opt-in (the defaults keep the runs as they were): ``warp="flow"`` moves a neighbour by the
   rotation and then by the optical flow between the frames on either side of frame k
-  (:func:`emulator.native.flow_velocity`; frame k's own image never informs its flow), and
+  (:func:`emulator.native.flow_velocity`; frame k's own image never informs its flow),
+  ``warp="flow-sharp"`` (``exposim run``'s default) does so only where the median move is at least
+  :data:`emulator.native.SHARP_MOTION_PX`, and
   ``blur_stops_per_px`` makes the selector weigh the motion blur a candidate's window carries
   beyond the target's (:func:`emulator.native.native_select`);
 * a tick made with ``hidden=True`` (:meth:`NativeProvider.tick`) leaves frame k's own shots out of
@@ -46,9 +48,9 @@ import numpy as np
 from emulator.autoexposure.isolation import readonly_view
 from emulator.dataset import CAMERAS
 from emulator.errors import CalibrationError, PlaybackError
-from emulator.native import (MOTION_STOPS_PER_FRAME, SATURATION_LIMIT, WARP_MODES, WARP_RESAMPLE, WINDOW_CYCLES,
-                             NativeCandidate, flow_velocity, invalid_fraction, native_select, radiance_gray,
-                             rotation_between, warp_to_instant, warp_with_flow)
+from emulator.native import (MOTION_STOPS_PER_FRAME, SATURATION_LIMIT, SHARP_MOTION_PX, WARP_MODES, WARP_RESAMPLE,
+                             WINDOW_CYCLES, NativeCandidate, flow_velocity, invalid_fraction, median_motion_px,
+                             native_select, radiance_gray, rotation_between, warp_to_instant, warp_with_flow)
 from emulator.playback.config import RunConfig
 from emulator.playback.emulated import METHOD_CAMERA, _CycleImages, _fractions, _Memo
 from emulator.playback.loop import Shot
@@ -184,7 +186,8 @@ class NativeProvider:
         False or "none": neighbour frames are used unwarped even where the gyro is known (the
         warp's share of the error is measured so); True or "rotation" (default): the gyro's
         rotation; "flow": the rotation, then the optical flow between the frames on either side of
-        frame k (:data:`emulator.native.WARP_MODES`).
+        frame k; "flow-sharp": as "flow" where the median move is at least
+        :data:`emulator.native.SHARP_MOTION_PX`, else none (:data:`emulator.native.WARP_MODES`).
     motion_stops_per_frame, saturation_limit : float
         The native selector's weight of one frame of offset and its clipping margin
         (:data:`emulator.native.MOTION_STOPS_PER_FRAME`, :data:`emulator.native.SATURATION_LIMIT`).
@@ -255,7 +258,8 @@ class NativeProvider:
                 "motion_stops_per_frame": self.motion_stops_per_frame, "saturation_limit": self.saturation_limit,
                 "warp": ("rotation from the gyro" if self.warp else "none"),
                 **({"warp_resample": WARP_RESAMPLE, "stamp": self.motion.stamp} if self.warp else {}),
-                **({"warp_mode": self.warp_mode} if self.warp_mode == "flow" else {}),
+                **({"warp_mode": self.warp_mode} if self.warp_mode in ("flow", "flow-sharp") else {}),
+                **({"sharp_motion_px": SHARP_MOTION_PX} if self.warp and self.warp_mode == "flow-sharp" else {}),
                 **({"blur_stops_per_px": self.blur_stops_per_px} if self.blur_stops_per_px is not None else {}),
                 "benchmarked_frames": sorted(k for k in self.frames.benchmarked if k is not None)}
 
@@ -327,8 +331,18 @@ class NativeProvider:
         if R is None:
             return None, None, None
         K, _ = self.motion.K(camera, (shape[1], shape[0]))
-        disp = self.displacement(camera, j, k, source_ms, target_ms) if self.warp_mode == "flow" else None
-        return R, rotation_homography(K, R), disp
+        disp = self.displacement(camera, j, k, source_ms, target_ms) if self.warp_mode != "rotation" else None
+        H = rotation_homography(K, R)
+        if self.warp_mode == "flow-sharp":  # decided on the first camera's move, so a stereo pair is warped alike
+            lead = self.cameras[0]
+            if camera != lead:
+                H_lead = rotation_homography(self.motion.K(lead, (shape[1], shape[0]))[0], R)
+                moved = median_motion_px(H_lead, self.displacement(lead, j, k, source_ms, target_ms), shape)
+            else:
+                moved = median_motion_px(H, disp, shape)
+            if moved < SHARP_MOTION_PX:
+                return None, None, None
+        return R, H, disp
 
     def _middle_s(self, j: int, exposure_ms: float) -> float:
         a, b = self._window_s(j, exposure_ms)

@@ -73,7 +73,7 @@ def at_rate(prep: Prepared, config: RunConfig) -> Prepared:
     p = prep.provider
     return prep._replace(provider=NativeProvider(
         prep.sequence, config, prep.response, cameras=p.cameras, noise=p.noise, stats=p.stats, blur=prep.blur,
-        warp=config.native_warp, blur_stops_per_px=BLUR_STOPS_PER_PX if config.native_blur_aware else None))
+        warp=config.warp_mode, blur_stops_per_px=BLUR_STOPS_PER_PX if config.native_blur_aware else None))
 
 
 def iter_run(
