@@ -18,6 +18,10 @@ from emulator.playback.native import recording_stamp
 #: 104.7 s on.  Moved 104.6 s, the gyro puts that turn under the frames.
 TURN_SHIFT_NS = 104_600_000_000
 TARGETS_MS = (0.5, 1.5, 3.0, 6.0, 12.0, 24.0)
+#: The upstream BorealHDR data_sample has the same IMU and 60 frames over 0.17-2.87 s, turning at 4-16 deg/s from
+#: 1.25 s on (it cannot be read by tests).  Moved 1.9 s, the gyro puts its last 0.8 s of frames (its recorded
+#: turn, 5.6-14.6 deg/s at the frames) under the shared sample's.
+RECORDED_TURN_SHIFT_NS = 1_900_000_000
 
 
 def test_blur_breaks_ties_and_drops_blurred_candidates():
@@ -31,18 +35,23 @@ def test_blur_breaks_ties_and_drops_blurred_candidates():
     assert native_select(0.5, [own], blur_stops_per_px=1.0) == own  # nothing within 1 px: the best of the rest
 
 
-@pytest.fixture(scope="module")
-def turn(sample_seq):
+def _shifted(sample_seq, shift_ns):
     seq = load_sequence(sample_seq, imu_warning=False)
     motion = recording_motion(seq, stamp=recording_stamp(seq))
-    motion = dataclasses.replace(motion, origin_ns=motion.origin_ns - TURN_SHIFT_NS)
+    motion = dataclasses.replace(motion, origin_ns=motion.origin_ns - shift_ns)
     response = RunConfig().response_for(seq)
     return [NativeProvider(seq, RunConfig(rate="native"), response, motion=motion, blur_stops_per_px=w)
             for w in (None, 1.0)]
 
 
-def test_on_a_recorded_turn_no_source_blurs_over_a_pixel_more_than_it_must(turn):
-    plain, aware = turn
+@pytest.fixture(scope="module")
+def turn(sample_seq):
+    return _shifted(sample_seq, TURN_SHIFT_NS)
+
+
+def _over(plain, aware):
+    """(frame, target) pairs with a candidate within 1 px of the target's blur, and those whose source (the
+    selector as runs use it, the blur-aware one) blurs more than 1 px beyond it."""
     over_plain, over_aware, cases = [], [], 0
     for k in range(len(aware.frames)):
         tp, ta = plain.tick(k), aware.tick(k)
@@ -53,6 +62,23 @@ def test_on_a_recorded_turn_no_source_blurs_over_a_pixel_more_than_it_must(turn)
             cases += 1
             over_plain += [(k, t)] if aware.excess_blur_px(tp.select(t), k, t) > BLUR_LIMIT_PX else []
             over_aware += [(k, t)] if aware.excess_blur_px(ta.select(t), k, t) > BLUR_LIMIT_PX else []
+    return cases, over_plain, over_aware
+
+
+def test_on_the_upstream_samples_recorded_turn_no_source_blurs_over_a_pixel_more_than_it_must(sample_seq):
+    plain, aware = _shifted(sample_seq, RECORDED_TURN_SHIFT_NS)
+    cases, over_plain, over_aware = _over(plain, aware)
+    assert cases == 108 and over_aware == []
+    # as runs use it, the selector takes a window over 1 px beyond in 66, e.g. frame 0 (frame 2's 8 ms shot)
+    # for 0.5 ms: 3.1 px; the blur-aware one takes frame 5's 1 ms shot (0.3 px)
+    assert len(over_plain) == 66 and (0, 0.5) in over_plain
+    assert plain.tick(0).select(0.5) == 2 and aware.tick(0).select(0.5) == 5
+    assert aware.excess_blur_px(2, 0, 0.5) == pytest.approx(3.1, abs=0.1)
+
+
+def test_on_a_recorded_turn_no_source_blurs_over_a_pixel_more_than_it_must(turn):
+    plain, aware = turn
+    cases, over_plain, over_aware = _over(plain, aware)
     assert cases == 108 and over_aware == []  # every (frame, target) of 18 x 6 has a candidate within 1 px
     # the selector as runs use it takes a blurred window in 76 of them, e.g. frame 4 (its own 32 ms shot) for
     # 0.5 ms: 35 px of blur beyond the target's; the blur-aware one takes the 1 ms shot after it (0.5 px)
