@@ -25,6 +25,17 @@ the two numeric parts of that:
   grid, in linear exposure, resampled by :data:`WARP_RESAMPLE` (Lanczos: a bilinear warp at a
   fractional offset averages neighbouring sites and removes the fine detail SIFT detects).
   Pixels that come from outside the source image are reported through the inside fraction.
+* **the blur-aware selector** (opt-in, ``native_select(..., blur_stops_per_px=w)``): a candidate's
+  cost also counts the motion blur its exposure window carries beyond a capture at the target
+  (:attr:`NativeCandidate.excess_blur_px`, predicted from the gyro), ``w`` stops per pixel; a
+  candidate more than :data:`BLUR_LIMIT_PX` beyond is dropped while one within it is kept; ties go
+  to the less blurred candidate, then the nearer frame.
+* **the flow warp** (:func:`flow_velocity`, :func:`warp_with_flow`): the rotation warp followed by
+  the image motion the rotation leaves (translation parallax, the gyro's errors), measured by a
+  dense optical flow (OpenCV's DIS) between the neighbours on either side of frame k, each turned to
+  frame k's instant and normalised to radiance, and scaled linearly in time to the source's instant.
+  ``flow-sharp`` (:data:`DEFAULT_NATIVE_WARP`) is the flow warp where that move is at least
+  :data:`SHARP_MOTION_PX` (:func:`median_motion_px`), and no resampling below it.
 """
 
 from __future__ import annotations
@@ -51,6 +62,17 @@ __all__ = [
     "warp_to_instant",
     "WARP_RESAMPLE",
     "RESAMPLERS",
+    "BLUR_LIMIT_PX",
+    "BLUR_STOPS_PER_PX",
+    "WARP_MODES",
+    "radiance_gray",
+    "flow_velocity",
+    "instant_maps",
+    "warp_with_flow",
+    "move_mask",
+    "SHARP_MOTION_PX",
+    "DEFAULT_NATIVE_WARP",
+    "median_motion_px",
 ]
 
 #: Candidate source frames lie within this many recorder cycles (sweeps) of frame k, each side.
@@ -67,6 +89,20 @@ SATURATION_LIMIT = 0.2
 #: bilinear warp, all of them on the walks whose benchmarked frames a neighbour served.
 RESAMPLERS = {"linear": cv2.INTER_LINEAR, "cubic": cv2.INTER_CUBIC, "lanczos4": cv2.INTER_LANCZOS4}
 WARP_RESAMPLE = "lanczos4"
+#: The blur-aware selector drops a candidate whose window blurs more than this beyond the target's (px) while
+#: one within it is kept, and weighs each pixel of excess blur as this many stops of upward emulation.
+BLUR_LIMIT_PX = 1.0
+BLUR_STOPS_PER_PX = 1.0
+#: How a neighbour frame is moved to frame k's instant: not at all, by the gyro's rotation, by the rotation and
+#: then the optical flow between the neighbours on either side of frame k, or as ``flow`` but only where that
+#: move is at least :data:`SHARP_MOTION_PX` (``flow-sharp``, the default of native runs: docs/native.md).
+WARP_MODES = ("none", "rotation", "flow", "flow-sharp")
+#: What ``exposim run --rate native`` uses without ``--warp`` (a NativeProvider's own default is ``rotation``).
+DEFAULT_NATIVE_WARP = "flow-sharp"
+#: ``flow-sharp`` leaves a neighbour as recorded where the median move of its pixels (:func:`median_motion_px`)
+#: is below this (full-resolution px): a resampling at a sub-pixel offset smooths more than it aligns (on the
+#: upstream BorealHDR sample at rest, a Lanczos warp of 0.3-1 px cost SIFT good matches; see docs/native.md).
+SHARP_MOTION_PX = 1.0
 
 
 @dataclass(frozen=True)
@@ -80,6 +116,8 @@ class NativeCandidate:
     offset: int
     bracket_ms: float
     invalid_fraction: float
+    #: Blur of the candidate's window beyond a capture at the target, px (blur-aware selector only).
+    excess_blur_px: float = 0.0
 
 
 def invalid_fraction(hist: np.ndarray, ratio: float, *, white_level: int, black_level: int) -> float:
@@ -104,11 +142,15 @@ def native_cost(target_ms: float, candidate: NativeCandidate, motion_stops_per_f
 
 def native_select(target_ms: float, candidates: Iterable[NativeCandidate], *,
                   motion_stops_per_frame: float = MOTION_STOPS_PER_FRAME,
-                  saturation_limit: float = SATURATION_LIMIT) -> NativeCandidate:
+                  saturation_limit: float = SATURATION_LIMIT, blur_stops_per_px: float | None = None
+                  ) -> NativeCandidate:
     """The candidate frame that serves ``target_ms`` (see the module notes).
 
-    Raises :class:`EmulationError` when there is no candidate, or ``target_ms`` or the motion
-    weight is not a finite number of the right sign.
+    ``blur_stops_per_px``: None (default) leaves blur out; a number makes the selector blur-aware
+    (each candidate's ``excess_blur_px`` costs that many stops per pixel, those more than
+    :data:`BLUR_LIMIT_PX` beyond the target are dropped while one within it is kept, ties go to
+    the less blurred).  Raises :class:`EmulationError` when there is no candidate, or
+    ``target_ms`` or a weight is not a finite number of the right sign.
     """
     cands = list(candidates)
     if not cands:
@@ -118,12 +160,23 @@ def native_select(target_ms: float, candidates: Iterable[NativeCandidate], *,
     if not (math.isfinite(float(motion_stops_per_frame)) and float(motion_stops_per_frame) >= 0):
         raise EmulationError(f"native selector: the motion weight must be finite and >= 0, got "
                              f"{motion_stops_per_frame!r}")
-
-    def order(c: NativeCandidate) -> tuple:
-        return (round(native_cost(target_ms, c, motion_stops_per_frame), 12), abs(c.offset), c.offset)
-
     least = min(c.invalid_fraction for c in cands)
-    return min((c for c in cands if c.invalid_fraction <= least + saturation_limit), key=order)
+    kept = [c for c in cands if c.invalid_fraction <= least + saturation_limit]
+    if blur_stops_per_px is None:
+        def order(c: NativeCandidate) -> tuple:
+            return (round(native_cost(target_ms, c, motion_stops_per_frame), 12), abs(c.offset), c.offset)
+
+        return min(kept, key=order)
+    w = float(blur_stops_per_px)
+    if not (math.isfinite(w) and w >= 0):
+        raise EmulationError(f"native selector: the blur weight must be finite and >= 0, got {blur_stops_per_px!r}")
+
+    def excess(c: NativeCandidate) -> float:
+        return max(0.0, float(c.excess_blur_px)) if math.isfinite(float(c.excess_blur_px)) else 0.0
+
+    sharp = [c for c in kept if excess(c) <= BLUR_LIMIT_PX]
+    return min(sharp or kept, key=lambda c: (round(native_cost(target_ms, c, motion_stops_per_frame) + w * excess(c),
+                                                   12), round(excess(c), 12), abs(c.offset), c.offset))
 
 
 # ============================================================================ the warp
@@ -184,3 +237,116 @@ def warp_to_instant(image: np.ndarray, H: np.ndarray, response, *, bayer: bool =
         out[sl] = cv2.warpPerspective(plane, Hp, (plane.shape[1], plane.shape[0]), flags=RESAMPLERS[resample],
                                       borderMode=cv2.BORDER_REPLICATE)
     return _forward_dn(response, out, _DN_GRID), _inside_fraction(H, width, height)
+
+
+# ============================================================================ the flow warp
+#: The flow's input: log2 radiance mapped to 8 bits between these percentiles of the two images.
+_FLOW_PERCENTILES = (1.0, 99.0)
+#: A neighbour's grey is smoothed by this Gaussian (sigma, binned pixels) before the flow: short brackets are noisy.
+_FLOW_SIGMA = 1.0
+
+
+def radiance_gray(image: np.ndarray, exposure_ms: float, response) -> np.ndarray:
+    """log2 radiance (linear exposure over ``exposure_ms``) of a Bayer image, 2x2 binned: (H/2, W/2) float32.
+
+    Binned pixel (u, v) covers the RGGB sites (2u..2u+1, 2v..2v+1), the grid of each Bayer plane.
+    """
+    h = response.inverse(image)
+    hh, ww = (image.shape[0] // 2) * 2, (image.shape[1] // 2) * 2
+    h = h[:hh, :ww]
+    binned = 0.25 * (h[0::2, 0::2] + h[1::2, 0::2] + h[0::2, 1::2] + h[1::2, 1::2]) / float(exposure_ms)
+    return np.log2(np.maximum(binned, 1e-9)).astype(np.float32)
+
+
+def _binned_homography(H: np.ndarray) -> np.ndarray:
+    """``H`` (full-resolution pixels) on the 2x2 binned grid (binned pixel u is centred on full pixel 2u + 0.5)."""
+    A = np.array([[2.0, 0.0, 0.5], [0.0, 2.0, 0.5], [0.0, 0.0, 1.0]])
+    return np.linalg.inv(A) @ H @ A
+
+
+def flow_velocity(gray_a: np.ndarray, H_a: np.ndarray, gray_b: np.ndarray, H_b: np.ndarray, dt_s: float
+                  ) -> np.ndarray:
+    """Image velocity at frame k's instant, full-resolution px/s on the binned grid: (H/2, W/2, 2) float32.
+
+    ``gray_a``, ``gray_b``: :func:`radiance_gray` of the neighbours before and after frame k (never frame
+    k's own image); ``H_a``, ``H_b``: the rotation homographies that turn each to frame k's instant
+    (full-resolution pixels); ``dt_s``: the time from a to b.  The residual motion between the two turned
+    images (OpenCV's DIS optical flow, medium preset) is taken as constant over ``dt_s``.
+    """
+    size = (gray_a.shape[1], gray_a.shape[0])
+    turned = [cv2.warpPerspective(g, _binned_homography(H), size, flags=cv2.INTER_LINEAR,
+                                  borderMode=cv2.BORDER_REPLICATE) for g, H in ((gray_a, H_a), (gray_b, H_b))]
+    both = np.concatenate([t.ravel() for t in turned])
+    lo, hi = np.percentile(both, _FLOW_PERCENTILES)
+    scale = 255.0 / max(float(hi - lo), 1e-6)
+    u8 = [cv2.GaussianBlur(np.clip((t - lo) * scale, 0, 255), (0, 0), _FLOW_SIGMA).round().astype(np.uint8)
+          for t in turned]
+    dis = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)
+    flow = dis.calc(u8[0], u8[1], None)
+    return (flow * (2.0 / float(dt_s))).astype(np.float32)
+
+
+def instant_maps(H: np.ndarray, displacement: np.ndarray | None, shape: tuple[int, int], *, bayer: bool = True
+                 ) -> list[tuple[tuple, np.ndarray, np.ndarray, np.ndarray]]:
+    """Where each destination pixel comes from: the homography ``H`` (source -> destination), after the
+    destination is moved back by ``displacement`` ((H/2, W/2, 2) full-resolution px on the binned grid; None:
+    none).  Returns per Bayer site (or once for the whole image when not ``bayer``) ``(slices, map_x, map_y,
+    inside)``: ``cv2.remap`` maps on that site's grid and where the source pixel lies inside the source."""
+    height, width = shape
+    Hinv = np.linalg.inv(np.asarray(H, dtype=np.float64))
+    out = []
+    for px, py in ([(0, 0), (1, 0), (0, 1), (1, 1)] if bayer else [(None, None)]):
+        step, ox, oy = (1, 0, 0) if px is None else (2, px, py)
+        ys, xs = np.mgrid[oy:height:step, ox:width:step].astype(np.float64)
+        if displacement is not None:
+            d = displacement if px is not None else cv2.resize(displacement, (width, height),
+                                                               interpolation=cv2.INTER_LINEAR)
+            xs = xs - d[: xs.shape[0], : xs.shape[1], 0]
+            ys = ys - d[: ys.shape[0], : ys.shape[1], 1]
+        den = Hinv[2, 0] * xs + Hinv[2, 1] * ys + Hinv[2, 2]
+        zx = (Hinv[0, 0] * xs + Hinv[0, 1] * ys + Hinv[0, 2]) / den
+        zy = (Hinv[1, 0] * xs + Hinv[1, 1] * ys + Hinv[1, 2]) / den
+        inside = (zx >= -0.5) & (zx <= width - 0.5) & (zy >= -0.5) & (zy <= height - 0.5)
+        sl = (slice(None), slice(None)) if px is None else (slice(py, None, 2), slice(px, None, 2))
+        out.append((sl, ((zx - ox) / step).astype(np.float32), ((zy - oy) / step).astype(np.float32), inside))
+    return out
+
+
+def warp_with_flow(image: np.ndarray, H: np.ndarray, displacement: np.ndarray | None, response, *,
+                   resample: str = WARP_RESAMPLE) -> tuple[np.ndarray, float]:
+    """``image`` (DN) moved by ``H`` and then by ``displacement`` (:func:`instant_maps`), each Bayer site on its
+    own grid, in linear exposure, as :func:`warp_to_instant`.  Returns ``(image, inside_fraction)``."""
+    h = response.inverse(image).astype(np.float32)
+    out = np.empty_like(h)
+    n_in = 0
+    for sl, mx, my, inside in instant_maps(H, displacement, image.shape):
+        out[sl] = cv2.remap(np.ascontiguousarray(h[sl]), mx, my, RESAMPLERS[resample], borderMode=cv2.BORDER_REPLICATE)
+        n_in += int(inside.sum())
+    return _forward_dn(response, out, _DN_GRID), n_in / float(image.size)
+
+
+def median_motion_px(H: np.ndarray, displacement: np.ndarray | None, shape: tuple[int, int]) -> float:
+    """The median length (full-resolution px) of the move :func:`warp_with_flow` gives a source image of ``shape``:
+    ``H(x) - x`` plus ``displacement`` (None: none), over the 2x2 binned grid (the displacement's)."""
+    height, width = shape
+    ys, xs = np.mgrid[0:height - 1:2, 0:width - 1:2].astype(np.float64) + 0.5
+    H = np.asarray(H, dtype=np.float64)
+    den = H[2, 0] * xs + H[2, 1] * ys + H[2, 2]
+    dx = (H[0, 0] * xs + H[0, 1] * ys + H[0, 2]) / den - xs
+    dy = (H[1, 0] * xs + H[1, 1] * ys + H[1, 2]) / den - ys
+    if displacement is not None:
+        dx = dx + displacement[: dx.shape[0], : dx.shape[1], 0]
+        dy = dy + displacement[: dy.shape[0], : dy.shape[1], 1]
+    return float(np.median(np.hypot(dx, dy)))
+
+
+def move_mask(mask: np.ndarray, H: np.ndarray | None, displacement: np.ndarray | None = None) -> np.ndarray:
+    """A source's pixel mask moved as :func:`warp_with_flow` moves its image (nearest site; outside: False)."""
+    if H is None:
+        return mask.copy()
+    out = np.zeros(mask.shape, dtype=bool)
+    m8 = mask.astype(np.uint8)
+    for sl, mx, my, inside in instant_maps(H, displacement, mask.shape):
+        out[sl] = (cv2.remap(np.ascontiguousarray(m8[sl]), mx, my, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT,
+                             borderValue=0) > 0) & inside
+    return out

@@ -64,7 +64,8 @@ def main(argv=None) -> int:
         every = list(native_rate_loop(seq, radiance, camera, names, seed=cfg.seed, noise=cfg.capture_noise,
                                       initial_ms=cfg.initial_ms, response=response, every_frame=True,
                                       latency_frames=cfg.latency_frames))
-        config = RunConfig(initial_ms=cfg.initial_ms, rate="native", latency_frames=cfg.latency_frames)
+        config = RunConfig(initial_ms=cfg.initial_ms, rate="native", latency_frames=cfg.latency_frames,
+                           native_warp="rotation")
         if args.attribution and not hasattr(radiance, "shots"):
             raise SystemExit(f"native_terms: --attribution: {ds} has no walk to take the true rotation from "
                              "(written without exposure integration)")

@@ -87,6 +87,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--latency-frames", type=int, default=None, metavar="N",
                    help="with --rate native: a proposal made after reading frame k is first used at frame k + 1 + N "
                         "(default 1, as a live camera)")
+    p.add_argument("--warp", choices=("flow-sharp", "rotation", "flow", "none"), default=None, help="--rate native: "
+                   "rotation: gyro; flow: then the neighbours' flow; flow-sharp (default): flow unless under 1 px")
+    p.add_argument("--native-blur-aware", action="store_true", help="with --rate native: the selector also weighs "
+                   "the motion blur a candidate carries beyond the target's, from the gyro (docs/native.md)")
     p.add_argument("--resume", action="store_true",
                    help="continue an interrupted run in OUTDIR (its run.json gives the configuration)")
     p.add_argument("--sequences", default=None, metavar="all|NAME,...",
@@ -165,7 +169,7 @@ def _command(args) -> str:
                         ("--initial-ms", args.initial_ms), ("--selector", args.selector),
                         ("--response", args.response), ("--seed", args.seed), ("--noise", args.noise),
                         ("--blur", args.blur), ("--noise-model", args.noise_model), ("--noise-seed", args.noise_seed),
-                        ("--png-level", args.png_level)):
+                        ("--png-level", args.png_level), ("--warp", getattr(args, "warp", None))):
         if value is not None:
             parts += [flag, str(value)]
     if args.range_ms is not None:
@@ -176,10 +180,8 @@ def _command(args) -> str:
         parts += ["--jobs", str(args.jobs)]
     if getattr(args, "workers", None) == "inline":
         parts += ["--workers", "inline"]
-    if getattr(args, "blur_aware", False):
-        parts.append("--blur-aware")
-    if getattr(args, "skip_partial", False):
-        parts.append("--skip-partial")
+    for flag in ("--blur-aware", "--skip-partial", "--native-blur-aware"):
+        parts += [flag] if getattr(args, flag[2:].replace("-", "_"), False) else []
     for flag, value in (("--rate", getattr(args, "rate", None)), ("--latency-frames", getattr(args, "latency_frames", None))):
         if value is not None:
             parts += [flag, str(value)]
@@ -194,7 +196,8 @@ def _command(args) -> str:
 _FLAGS = {"initial_ms": "--initial-ms", "range_ms": "--range-ms", "jobs": "--jobs", "noise_seed": "--noise-seed",
           "png_level": "--png-level", "blur": "--blur", "blur_aware": "--blur-aware",
           "method_timeout_s": "--method-timeout-s", "selector": "--selector", "mode": "--mode", "save": "--save",
-          "noise": "--noise", "skip_partial": "--skip-partial", "rate": "--rate", "latency_frames": "--latency-frames"}
+          "noise": "--noise", "skip_partial": "--skip-partial", "rate": "--rate", "latency_frames": "--latency-frames",
+          "native_warp": "--warp", "native_blur_aware": "--native-blur-aware"}
 
 
 def _given(args) -> dict:
@@ -212,7 +215,9 @@ def _given(args) -> dict:
             "response_path": str(args.response) if args.response is not None else None,
             "png_level": args.png_level, "blur": args.blur, "blur_aware": True if args.blur_aware else None,
             "skip_partial": True if getattr(args, "skip_partial", False) else None,
-            "rate": getattr(args, "rate", None), "latency_frames": getattr(args, "latency_frames", None)}
+            "rate": getattr(args, "rate", None), "latency_frames": getattr(args, "latency_frames", None),
+            "native_warp": getattr(args, "warp", None),
+            "native_blur_aware": True if getattr(args, "native_blur_aware", False) else None}
 
 
 def config_from_args(args, base=None):
@@ -246,8 +251,11 @@ def _check_args(args) -> None:
             raise ExposimError(f"{flag} {count}: must be >= 1")
     if args.noise_model is not None and args.noise != "consistent" and not args.resume:
         raise ExposimError("--noise-model is used only with --noise consistent")
-    if getattr(args, "latency_frames", None) is not None and args.rate != "native" and not args.resume:
-        raise ExposimError(f"--latency-frames {args.latency_frames}: used only with --rate native")
+    for dest in ("latency_frames", "warp", "native_blur_aware"):  # the native-only flags
+        given = getattr(args, dest, None)
+        if given not in (None, False) and args.rate != "native" and not args.resume:
+            shown = f"--{dest.replace('_', '-')} {'' if given is True else given}".strip()
+            raise ExposimError(f"{shown}: used only with --rate native")
 
 
 def _progress_bar(desc: str, unit: str):

@@ -45,7 +45,7 @@ DEFAULT_SELECTOR = "higher-no-sat"
 MODES = ("paper", "borealhdr")
 #: Keys of ``run.json`` that are the configuration (a resume compares these).
 CONFIG_KEYS = ("selector", "initial_ms", "range_ms", "save", "mode", "options", "method_timeout_s", "noise", "blur",
-               "skip_partial", "rate", "latency_frames")
+               "skip_partial", "rate", "latency_frames", "native_warp", "native_blur_aware")
 #: Longest per-call limit, s: the longest wait the system's poll() takes (2**31 - 1 ms, 24.8 days).
 MAX_METHOD_TIMEOUT_S = 2_147_483.0
 #: Largest exposure latency, frames (a recording's frame count bounds it further, at native rate).
@@ -158,6 +158,13 @@ class RunConfig:
         ``run.json`` records ``"rate"`` and ``"latency_frames"`` for a native run only.
     latency_frames : int
         Native rate: a proposal made after reading frame k is first used at frame k + 1 + N (default 1).
+    native_warp : {"rotation", "flow", "flow-sharp", "none"} or None
+        Native rate: how a neighbour frame is moved to frame k's instant (:data:`emulator.native.WARP_MODES`);
+        None (default): :data:`emulator.native.DEFAULT_NATIVE_WARP` at native rate (set so on construction;
+        None at cycle rate, where nothing is warped: :attr:`warp_mode` says ``rotation``).
+        ``native_blur_aware``: the native selector also weighs the motion blur a candidate's window carries
+        beyond the target's (default False).  ``run.json`` records the warp where it is not ``rotation`` (a
+        folder without it: rotation, as before the setting), and ``native_blur_aware`` where it is set.
     """
 
     initial_ms: float = DEFAULT_INITIAL_MS
@@ -179,6 +186,8 @@ class RunConfig:
     skip_partial: bool = False
     rate: str = "cycle"
     latency_frames: int = 1
+    native_warp: str | None = None
+    native_blur_aware: bool = False
 
     def __post_init__(self) -> None:
         from emulator.select import SELECTORS
@@ -254,6 +263,15 @@ class RunConfig:
             raise PlaybackError(f"latency_frames must be an integer >= 0, at most {MAX_LATENCY_FRAMES} and below "
                                 f"the recording's frame count, got {lat!r}")
         put(self, "latency_frames", int(lat))
+        from emulator.native import DEFAULT_NATIVE_WARP, WARP_MODES
+
+        if self.native_warp is None and self.rate == "native":
+            put(self, "native_warp", DEFAULT_NATIVE_WARP)
+        if self.native_warp is not None and self.native_warp not in WARP_MODES:
+            raise PlaybackError(f"native_warp must be one of {', '.join(WARP_MODES)}, got {self.native_warp!r}")
+        put(self, "native_blur_aware", bool(self.native_blur_aware))
+        if self.rate != "native" and (self.native_warp not in (None, "rotation") or self.native_blur_aware):
+            raise PlaybackError("native_warp and native_blur_aware: used only at native rate (--rate native)")
 
     # ------------------------------------------------------------------ derived values
     @property
@@ -264,6 +282,16 @@ class RunConfig:
     def clamp(self, value_ms: float) -> float:
         lo, hi = self.range_ms
         return min(max(float(value_ms), lo), hi)
+
+    @property
+    def warp_mode(self) -> str:
+        """The native warp this configuration runs: ``native_warp``, or where None the native default
+        (:data:`emulator.native.DEFAULT_NATIVE_WARP`; ``rotation`` at cycle rate, where nothing is warped)."""
+        from emulator.native import DEFAULT_NATIVE_WARP
+
+        if self.native_warp is not None:
+            return self.native_warp
+        return DEFAULT_NATIVE_WARP if self.rate == "native" else "rotation"
 
     def replace(self, **changes) -> "RunConfig":
         """A copy with ``changes`` (validated again)."""
@@ -379,6 +407,8 @@ class RunConfig:
                       **({"blur_aware": True} if self.blur_aware else {})}),
             **({"skip_partial": True} if self.skip_partial else {}),
             **({"rate": "native", "latency_frames": self.latency_frames} if self.rate == "native" else {}),
+            **({"native_warp": self.warp_mode} if self.warp_mode != "rotation" else {}),
+            **({"native_blur_aware": True} if self.native_blur_aware else {}),
         })
 
     @classmethod
@@ -410,6 +440,8 @@ class RunConfig:
             skip_partial=bool(run_json.get("skip_partial", False)),
             rate=run_json.get("rate") or "cycle",  # folders from before --rate: cycle
             latency_frames=int(run_json.get("latency_frames", 1)),
+            native_warp=run_json.get("native_warp") or "rotation",
+            native_blur_aware=bool(run_json.get("native_blur_aware", False)),
         )
 
     def resumed(self, recorded: Mapping, given: Iterable[str] = CONFIG_KEYS, *, where: str = "run.json",

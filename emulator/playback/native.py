@@ -18,7 +18,16 @@ same closed loop (:func:`~emulator.playback.loop.closed_loop`); only the images 
   its recorded shot started; the timestamp convention is the blur model's,
   :data:`emulator.blur.DEFAULT_STAMP`, or the trigger for a synthetic recording);
 * without an IMU (or a camera calibration) the neighbour is used as it is, and one warning
-  says so.
+  says so;
+* opt-in (the defaults keep the runs as they were): ``warp="flow"`` moves a neighbour by the
+  rotation and then by the optical flow between the frames on either side of frame k
+  (:func:`emulator.native.flow_velocity`; frame k's own image never informs its flow),
+  ``warp="flow-sharp"`` (``exposim run``'s default) does so only where the median move is at least
+  :data:`emulator.native.SHARP_MOTION_PX`, and
+  ``blur_stops_per_px`` makes the selector weigh the motion blur a candidate's window carries
+  beyond the target's (:func:`emulator.native.native_select`);
+* a tick made with ``hidden=True`` (:meth:`NativeProvider.tick`) leaves frame k's own shots out of
+  its candidates: the leave-one-out check, ``exposim validate native``.
 
 Each step carries a :class:`NativeInfo` (``MethodStep.native``): the recorder cycle of
 the frame, whether it is the frame the benchmarks use (the cycle's first shot present for
@@ -40,8 +49,9 @@ from emulator.autoexposure.isolation import readonly_view
 from emulator.dataset import CAMERAS
 from emulator.errors import CalibrationError, PlaybackError
 from emulator.gyro import GYRO_HOLE_S
-from emulator.native import (MOTION_STOPS_PER_FRAME, SATURATION_LIMIT, WARP_RESAMPLE, WINDOW_CYCLES,
-                             NativeCandidate, invalid_fraction, native_select, rotation_between, warp_to_instant)
+from emulator.native import (MOTION_STOPS_PER_FRAME, SATURATION_LIMIT, SHARP_MOTION_PX, WARP_MODES, WARP_RESAMPLE,
+                             WINDOW_CYCLES, NativeCandidate, flow_velocity, invalid_fraction, median_motion_px,
+                             native_select, radiance_gray, rotation_between, warp_to_instant, warp_with_flow)
 from emulator.playback.config import RunConfig
 from emulator.playback.emulated import METHOD_CAMERA, _CycleImages, _fractions, _Memo
 from emulator.playback.loop import Shot
@@ -106,14 +116,14 @@ class _Frames:
 class NativeTick(_Memo):
     """One recorded frame of a :class:`NativeProvider` (see :meth:`shot`)."""
 
-    def __init__(self, provider: "NativeProvider", k: int) -> None:
+    def __init__(self, provider: "NativeProvider", k: int, hidden: bool = False) -> None:
         p = self.provider = provider
         fr = p.frames
         self.index = k
         cycle, e = fr.cycles[k], fr.exposures[k]
         self.missing = {c: [e] for c in p.cameras if not (c in cycle.frames and e in cycle.frames[c])}
         lo, hi = max(0, k - p.window), min(len(fr) - 1, k + p.window)
-        self.sources = [j for j in range(lo, hi + 1) if fr.complete[j]]
+        self.sources = [j for j in range(lo, hi + 1) if fr.complete[j] and not (hidden and j == k)]
         self.skipped = None if self.sources else "no frame within one cycle has every camera's shot"
         if self.skipped is None and p.skip_partial and cycle.missing_by_camera(p.cameras):
             self.skipped = "frame of a partial cycle left out (--skip-partial)"
@@ -126,10 +136,11 @@ class NativeTick(_Memo):
         for j in self.sources:
             e = fr.exposures[j]
             _, hist = p.images(j).get(p.cameras[0], e)
-            cands.append(NativeCandidate(j - self.index, e, invalid_fraction(hist, target_ms / e, white_level=p.white,
-                                                                             black_level=p.black)))
+            lost = invalid_fraction(hist, target_ms / e, white_level=p.white, black_level=p.black)
+            excess = 0.0 if p.blur_stops_per_px is None else p.excess_blur_px(j, self.index, target_ms)
+            cands.append(NativeCandidate(j - self.index, e, lost, excess))
         best = native_select(target_ms, cands, motion_stops_per_frame=p.motion_stops_per_frame,
-                             saturation_limit=p.saturation_limit)
+                             saturation_limit=p.saturation_limit, blur_stops_per_px=p.blur_stops_per_px)
         return self.index + best.offset
 
     def shot(self, target_ms: float, want_right: bool = False) -> Shot:
@@ -172,21 +183,27 @@ class NativeProvider:
         The gyro and intrinsics of the warp: "auto" (default) the blur hook's, else the
         recording's own (:func:`emulator.motion.recording_motion`, timestamps by
         :func:`recording_stamp`); None: no warp.
-    warp : bool
-        False: neighbour frames are used unwarped even where the gyro is known (the warp's
-        share of the error is measured so).
+    warp : bool or {"none", "rotation", "flow"}
+        False or "none": neighbour frames are used unwarped even where the gyro is known (the
+        warp's share of the error is measured so); True or "rotation" (default): the gyro's
+        rotation; "flow": the rotation, then the optical flow between the frames on either side of
+        frame k; "flow-sharp": as "flow" where the median move is at least
+        :data:`emulator.native.SHARP_MOTION_PX`, else none (:data:`emulator.native.WARP_MODES`).
     motion_stops_per_frame, saturation_limit : float
         The native selector's weight of one frame of offset and its clipping margin
         (:data:`emulator.native.MOTION_STOPS_PER_FRAME`, :data:`emulator.native.SATURATION_LIMIT`).
+    blur_stops_per_px : float or None
+        None (default): the selector leaves blur out; a number: it is blur-aware, with this weight
+        per pixel of predicted excess blur (:data:`emulator.native.BLUR_STOPS_PER_PX`).
     """
 
     #: Frames are decoded on demand and memoised per frame, so ticks are independent (see EmulatedProvider).
     ticks_ahead = 2
 
     def __init__(self, sequence, config: RunConfig, response, *, cameras=None, noise=None,
-                 stats: RunStats | None = None, blur=None, motion="auto", warp: bool = True,
+                 stats: RunStats | None = None, blur=None, motion="auto", warp: bool | str = True,
                  motion_stops_per_frame: float = MOTION_STOPS_PER_FRAME,
-                 saturation_limit: float = SATURATION_LIMIT) -> None:
+                 saturation_limit: float = SATURATION_LIMIT, blur_stops_per_px: float | None = None) -> None:
         self.sequence = sequence
         self.response = response
         self.white, self.black = int(sequence.white_level), int(sequence.black_level)
@@ -206,8 +223,16 @@ class NativeProvider:
             raise PlaybackError(f"latency_frames {self.latency_ticks}: must be below the recording's frame count "
                                 f"({len(self.frames)} frames at native rate; --latency-frames)")
         self.window = WINDOW_CYCLES * max(1, len(sequence.brackets))
-        self.motion = self._motion(motion) if warp else None
-        self.warp = bool(warp)
+        mode = {True: "rotation", False: "none"}.get(warp, warp) if isinstance(warp, bool) else str(warp)
+        if mode not in WARP_MODES:
+            raise PlaybackError(f"native warp must be one of {', '.join(WARP_MODES)}, got {warp!r}")
+        self.warp_mode = mode
+        self.blur_stops_per_px = None if blur_stops_per_px is None else float(blur_stops_per_px)
+        needs_motion = mode != "none" or self.blur_stops_per_px is not None
+        self.motion = self._motion(motion) if needs_motion else None
+        self.warp = mode != "none" and self.motion is not None  #: neighbours are moved (a gyro and a mode)
+        self._velocity: dict = {}
+        self._blur: dict = {}
         self._images: dict = {}
         self._not_covered: set = set()  # frames whose neighbour went unwarped: the gyro does not cover them
         self._lock = threading.Lock()
@@ -239,8 +264,11 @@ class NativeProvider:
         """What ``run.json`` records under ``"native"``."""
         return {"latency_frames": self.latency_ticks, "window_frames": self.window, "n_frames": len(self.frames),
                 "motion_stops_per_frame": self.motion_stops_per_frame, "saturation_limit": self.saturation_limit,
-                "warp": ("rotation from the gyro" if self.motion is not None else "none"),
-                **({"warp_resample": WARP_RESAMPLE, "stamp": self.motion.stamp} if self.motion is not None else {}),
+                "warp": ("rotation from the gyro" if self.warp else "none"),
+                **({"warp_resample": WARP_RESAMPLE, "stamp": self.motion.stamp} if self.warp else {}),
+                **({"warp_mode": self.warp_mode} if self.warp_mode in ("flow", "flow-sharp") else {}),
+                **({"sharp_motion_px": SHARP_MOTION_PX} if self.warp and self.warp_mode == "flow-sharp" else {}),
+                **({"blur_stops_per_px": self.blur_stops_per_px} if self.blur_stops_per_px is not None else {}),
                 "benchmarked_frames": sorted(k for k in self.frames.benchmarked if k is not None)}
 
     @property
@@ -263,6 +291,8 @@ class NativeProvider:
         with self._lock:
             for c in [c for c in self._images if c < oldest]:
                 del self._images[c]
+            for key in [key for key in self._velocity if key[1] < k - self.window - self.ticks_ahead - 2]:
+                del self._velocity[key]
 
     def _window_s(self, j: int, exposure_ms: float) -> tuple[float, float]:
         """The window (s, the gyro's clock) of an image of ``exposure_ms`` stamped at frame ``j``'s timestamp."""
@@ -279,22 +309,19 @@ class NativeProvider:
 
     def emulate(self, camera: str, j: int, k: int, ratio: float, table, target_ms: float):
         """Frame ``j``'s bracket emulated at ``ratio`` for frame ``k``: ``(image, inside_fraction, warp_deg)``."""
-        from emulator.blur import rotation_homography
-
         e = self.frames.exposures[j]
         out = self.images(j)._emulate(camera, e, ratio, table, self.stats)  # the cycle rate's emulation
         if j == k:
             return readonly_view(out), 1.0, 0.0
-        if self.motion is None:
-            return readonly_view(out), 1.0, math.nan
         blurred = self.blur is not None and target_ms > e  # the emulated image stands for the target's window
-        R = self.rotation(j, k, target_ms if blurred else e, target_ms)
-        if R is None:  # the gyro does not cover it (ends early, another clock, a hole): no warp, counted
-            self._not_covered.add(k)
+        R, H, disp = self._geometry(camera, j, k, target_ms if blurred else e, target_ms, out.shape)
+        if R is None:
             return readonly_view(out), 1.0, math.nan
         angle = math.degrees(math.acos(max(-1.0, min(1.0, (np.trace(R) - 1.0) / 2.0))))
-        K, _ = self.motion.K(camera, (out.shape[1], out.shape[0]))
-        warped, inside = warp_to_instant(out, rotation_homography(K, R), self.response)
+        if disp is not None:
+            warped, inside = warp_with_flow(out, H, disp, self.response)
+        else:  # the rotation warp; also the flow warp's where frame k lacks a neighbour on one side
+            warped, inside = warp_to_instant(out, H, self.response)
         return readonly_view(warped), inside, angle
 
     def gyro_coverage(self) -> dict:
@@ -307,7 +334,113 @@ class NativeProvider:
             f"{n} of {len(self.frames)} frames used a neighbour frame without a warp: the gyro does not cover the "
             f"rotation (its record ends early, its stamps are in another unit, or a hole over {GYRO_HOLE_S:g} s)")}
 
+    def geometry(self, camera: str, j: int, k: int, source_ms: float, target_ms: float, shape):
+        """How :meth:`emulate` moves frame ``j``'s image (of ``shape``, standing for ``source_ms``) to frame ``k``:
+        ``(H, displacement)`` (:func:`emulator.native.instant_maps`), ``(None, None)`` where it is not moved."""
+        return self._geometry(camera, j, k, source_ms, target_ms, shape)[1:]
+
+    def _geometry(self, camera: str, j: int, k: int, source_ms: float, target_ms: float, shape):
+        """``(R, H, displacement)`` of :meth:`geometry`; ``(None, None, None)`` where the image is not moved."""
+        from emulator.blur import rotation_homography
+
+        if j == k or self.motion is None or self.warp_mode == "none":
+            return None, None, None
+        R = self.rotation(j, k, source_ms, target_ms)
+        if R is None:  # the gyro does not cover it (ends early, another clock, a hole): no warp, counted
+            self._not_covered.add(k)
+            return None, None, None
+        K, _ = self.motion.K(camera, (shape[1], shape[0]))
+        disp = self.displacement(camera, j, k, source_ms, target_ms) if self.warp_mode != "rotation" else None
+        H = rotation_homography(K, R)
+        if self.warp_mode == "flow-sharp":  # decided on the first camera's move, so a stereo pair is warped alike
+            lead = self.cameras[0]
+            if camera != lead:
+                H_lead = rotation_homography(self.motion.K(lead, (shape[1], shape[0]))[0], R)
+                moved = median_motion_px(H_lead, self.displacement(lead, j, k, source_ms, target_ms), shape)
+            else:
+                moved = median_motion_px(H, disp, shape)
+            if moved < SHARP_MOTION_PX:
+                return None, None, None
+        return R, H, disp
+
+    def _middle_s(self, j: int, exposure_ms: float) -> float:
+        a, b = self._window_s(j, exposure_ms)
+        return 0.5 * (a + b)
+
+    def displacement(self, camera: str, j: int, k: int, source_ms: float, target_ms: float):
+        """The flow warp's motion of frame ``j``'s image (standing for ``source_ms``) to frame ``k``'s instant after
+        the rotation: the image velocity at frame k (:meth:`velocity`) times the time between the two, or None."""
+        v = self.velocity(camera, k)
+        if v is None:
+            return None
+        t_k = self._window_s(k, self.frames.exposures[k])[0] + target_ms * 5e-4
+        return v * np.float32(t_k - self._middle_s(j, source_ms))
+
+    def velocity(self, camera: str, k: int):
+        """Image velocity at frame ``k`` (full-resolution px/s on the binned grid) from the nearest frames before and
+        after it present on every camera, each turned to frame k's instant (never frame k's own image); None
+        where one side has none or the gyro does not cover them.  Memoised per camera and frame."""
+        from emulator.blur import rotation_homography
+
+        key = (camera, k)
+        with self._lock:
+            if key in self._velocity:
+                return self._velocity[key]
+        fr = self.frames
+        before = [j for j in range(max(0, k - self.window), k) if fr.complete[j]]
+        after = [j for j in range(k + 1, min(len(fr), k + self.window + 1)) if fr.complete[j]]
+        v = None
+        if before and after:
+            a, b, e_k = before[-1], after[0], fr.exposures[k]
+            grays, Hs = [], []
+            for j in (a, b):
+                raw = self.images(j).get(camera, fr.exposures[j])[0]
+                R = self.rotation(j, k, fr.exposures[j], e_k)
+                if R is None:
+                    break
+                K, _ = self.motion.K(camera, (raw.shape[1], raw.shape[0]))
+                grays.append(radiance_gray(raw, fr.exposures[j], self.response))
+                Hs.append(rotation_homography(K, R))
+            if len(grays) == 2:
+                dt = self._middle_s(b, fr.exposures[b]) - self._middle_s(a, fr.exposures[a])
+                v = flow_velocity(grays[0], Hs[0], grays[1], Hs[1], dt)
+        with self._lock:
+            self._velocity[key] = v
+        return v
+
+    def excess_blur_px(self, j: int, k: int, target_ms: float) -> float:
+        """Predicted blur of frame ``j``'s window beyond a capture of ``target_ms`` at frame ``k`` (px, largest over
+        the image's 3x3 grid, the first camera; 0 without a gyro, or where it does not cover the windows)."""
+        from emulator.blur import _window_blur, as_angular_velocity
+
+        if self.motion is None:
+            return 0.0
+        cam = self.cameras[0]
+        shape = self._shapes.get("shape")
+        K, size = self.motion.K(cam, None if shape is None else (shape[0][1], shape[0][0]))
+        omega = as_angular_velocity(self.motion.omega)
+
+        def blur(key, t0, t1):
+            with self._lock:
+                hit = self._blur.get(key)
+            if hit is None:
+                hit = _window_blur(omega, K, size, t0, t1).max_px
+                with self._lock:
+                    self._blur[key] = hit
+            return hit
+
+        e = self.frames.exposures[j]
+        src = blur(("src", j), *self._window_s(j, e))
+        start = self._window_s(k, self.frames.exposures[k])[0]
+        tgt = blur(("tgt", k, float(target_ms)), start, start + target_ms * 1e-3)
+        out = src - tgt
+        return float(out) if math.isfinite(out) else 0.0
+
+    def tick(self, k: int, *, hidden: bool = False) -> NativeTick:
+        """Frame ``k``'s tick; ``hidden``: without frame k's own shots (on any camera) among its sources."""
+        self._forget(k)
+        return NativeTick(self, k, hidden)
+
     def ticks(self):
         for k in range(len(self.frames)):
-            self._forget(k)
-            yield NativeTick(self, k)
+            yield self.tick(k)

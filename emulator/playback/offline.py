@@ -67,11 +67,13 @@ def at_rate(prep: Prepared, config: RunConfig) -> Prepared:
     or a :class:`~emulator.playback.native.NativeProvider` on the same recording, response, noise and blur."""
     if config.rate != "native":
         return prep
+    from emulator.native import BLUR_STOPS_PER_PX
     from emulator.playback.native import NativeProvider
 
     p = prep.provider
-    return prep._replace(provider=NativeProvider(prep.sequence, config, prep.response, cameras=p.cameras,
-                                                 noise=p.noise, stats=p.stats, blur=prep.blur))
+    return prep._replace(provider=NativeProvider(
+        prep.sequence, config, prep.response, cameras=p.cameras, noise=p.noise, stats=p.stats, blur=prep.blur,
+        warp=config.warp_mode, blur_stops_per_px=BLUR_STOPS_PER_PX if config.native_blur_aware else None))
 
 
 def iter_run(

@@ -242,9 +242,13 @@ def _rate_lines(info: dict, summary: dict) -> list[str]:
     if summary.get("rate") != "native":
         return []
     nat = info.get("native") or {}
+    moved = {"flow": "moved to its instant by the gyro and the optical flow",
+             "flow-sharp": f"moved to its instant by the gyro and the optical flow where that moves it "
+                           f"{nat.get('sharp_motion_px', 1.0):g} px or more"}.get(nat.get("warp_mode"),
+                                                                                 "turned to its instant by the gyro")
     lines = [f"- rate: native (every recorded frame; a proposal made after frame k is used from frame "
              f"k + {1 + int(summary.get('latency_frames') or 0)}); each frame from its own bracket or one within "
-             f"{nat.get('window_frames')} frames, {'turned to its instant by the gyro' if nat.get('warp') != 'none' else 'not warped (no gyro)'}",
+             f"{nat.get('window_frames')} frames, {moved if nat.get('warp') != 'none' else 'not warped (no gyro)'}",
              "", "Source frame of each frame, per method (offset in frames; 0: its own bracket):", ""]
     offsets = sorted({int(o) for m in summary["methods"].values() for o in m.get("source_offsets", {})})
     lines += ["| method | " + " | ".join(f"{o:+d}" if o else "0" for o in offsets) + " | unwarped neighbours |",

@@ -2,7 +2,8 @@
 :func:`validation.report.run_experiment`; ``exposim validate ae-study`` around
 :func:`validation.ae_study.run_study`; ``exposim validate render``: the render study
 (:mod:`validation.render_study`); ``exposim validate live``: :mod:`validation.live`;
-``exposim validate blur``: exposure-time blur (:mod:`validation.blur`).
+``exposim validate blur``: exposure-time blur (:mod:`validation.blur`); ``exposim validate native``:
+native emulation on a real recording, leaving each frame out (:mod:`validation.native_loo`).
 
 Default sizes are the full study; ``--quick`` is the reduced configuration of the tests.
 A folder that already holds a results.json is refused unless ``--force``.
@@ -124,6 +125,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     from validation.blur.cli import register as register_blur  # issue 21: exposure-time blur
 
     register_blur(vsub)
+    from validation.native_loo.cli import register as register_native  # issue 48: leave one frame out
+
+    register_native(vsub)
 
 
 register.order = 80  # place in `exposim --help`

@@ -154,7 +154,7 @@ def _native_loops(cfg: LiveConfig, seq, radiance, camera, names, native_loop, re
     loops = [native_loop(seq, shared, camera, names, seed=s, **kw) for s in seeds]
     if cfg.control:  # the re-seeded frames are streamed: only the benchmarked ones are kept
         config = RunConfig(initial_ms=cfg.initial_ms, selector=cfg.selector, rate="native",
-                           latency_frames=cfg.latency_frames)
+                           latency_frames=cfg.latency_frames, native_warp="rotation")
         loops[1] = _thinned(loops[1], set(cycle_picks(native_provider(seq, response, config))))
     with _bar(len(seq.cycles) * 6 * len(loops), f"{tag}: live loop (native rate, {len(loops)} runs)",
               progress) as bar:
@@ -186,7 +186,7 @@ def _emulated_native(cfg: LiveConfig, seq, response, every: list, cycles: dict, 
     names = list(cfg.methods)
     t0 = time.perf_counter()
     config = RunConfig(initial_ms=cfg.initial_ms, selector=cfg.selector, rate="native",
-                       latency_frames=cfg.latency_frames)
+                       latency_frames=cfg.latency_frames, native_warp="rotation")
     provider, emulated = emulated_native_loop(seq, names, response, config)
     picks = cycle_picks(provider)
     cycles[NATIVE_RUN] = per_cycle(every, picks)
