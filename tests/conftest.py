@@ -78,6 +78,16 @@ def render_cache(tmp_path_factory) -> Path:
         os.environ[ENV_CACHE_DIR] = previous
 
 
+@pytest.fixture
+def default_render_env(render_cache, monkeypatch) -> Path:
+    """The session's render cache, and the default render variant and denoiser (the caller's
+    ``EXPOSIM_MITSUBA_VARIANT`` and ``EXPOSIM_DENOISE`` unset): for tests of the render path itself."""
+    monkeypatch.setenv(ENV_CACHE_DIR, str(render_cache))
+    monkeypatch.delenv("EXPOSIM_MITSUBA_VARIANT", raising=False)
+    monkeypatch.delenv("EXPOSIM_DENOISE", raising=False)
+    return render_cache
+
+
 @pytest.fixture(scope="session")
 def sample_seq() -> Path:
     if not SAMPLE_SEQ.is_dir():

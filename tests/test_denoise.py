@@ -16,11 +16,7 @@ from scenes import denoise as dn
 from scenes.errors import RenderError
 
 
-@pytest.fixture(autouse=True)
-def _private_cache(tmp_path_factory, monkeypatch):
-    monkeypatch.setenv("EXPOSIM_CACHE", str(tmp_path_factory.getbasetemp() / "render-cache"))
-    monkeypatch.delenv("EXPOSIM_MITSUBA_VARIANT", raising=False)
-    monkeypatch.delenv("EXPOSIM_DENOISE", raising=False)
+pytestmark = pytest.mark.usefixtures("default_render_env")
 
 
 @pytest.fixture

@@ -21,11 +21,7 @@ from validation.render_study import balance as bal
 ROOT = Path(__file__).resolve().parents[1]
 
 
-@pytest.fixture(autouse=True)
-def _private_cache(tmp_path_factory, monkeypatch):
-    monkeypatch.setenv("EXPOSIM_CACHE", str(tmp_path_factory.getbasetemp() / "render-cache"))
-    monkeypatch.delenv("EXPOSIM_MITSUBA_VARIANT", raising=False)
-    monkeypatch.delenv("EXPOSIM_DENOISE", raising=False)
+pytestmark = pytest.mark.usefixtures("default_render_env")
 
 
 def test_setting_strings_are_read_and_written_back():

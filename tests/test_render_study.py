@@ -17,11 +17,7 @@ from validation import render_study as rs
 from validation.common import ValidationError
 
 
-@pytest.fixture(autouse=True)
-def _private_cache(tmp_path_factory, monkeypatch):
-    monkeypatch.setenv("EXPOSIM_CACHE", str(tmp_path_factory.getbasetemp() / "render-cache"))
-    monkeypatch.delenv("EXPOSIM_MITSUBA_VARIANT", raising=False)
-    monkeypatch.delenv("EXPOSIM_DENOISE", raising=False)
+pytestmark = pytest.mark.usefixtures("default_render_env")
 
 
 TINY = rs.RenderStudyConfig(scenes=("static_lab",), width=24, height=16, spp_levels=(1, 2), reference_spp=8,
