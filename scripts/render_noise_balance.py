@@ -62,6 +62,8 @@ def _command(argv) -> str:
     for i, a in enumerate(args[:-1]):
         if a in ("-o", "--output"):
             args[i + 1] = Path(args[i + 1]).name
+        elif a == "--cache-dir":  # a folder of this machine: a placeholder
+            args[i + 1] = "CACHE"
     forced = os.environ.get(ENV_VARIANT, "").strip()
     return " ".join(([f"{ENV_VARIANT}={forced}"] if forced else []) + ["python scripts/render_noise_balance.py"] + args)
 
@@ -87,7 +89,8 @@ def main(argv=None) -> int:
                    help="also measure each setting's mean radiance against this deep reference (e.g. off@256) at "
                         "sweeps 0, 22, 44 of the walk (still renders): the radiance bias the setting introduces")
     p.add_argument("--cache-dir", default=None,
-                   help="render cache (default none, so that the seconds are the renders')")
+                   help="render cache: each setting and scene in a folder of its own below it, the bias reference's "
+                        "renders in reference/ (default none, so that the seconds are the renders')")
     args = p.parse_args(argv)
     if args.output.exists():
         print(f"{args.output}: exists; choose another output file", file=sys.stderr)
@@ -106,9 +109,12 @@ def main(argv=None) -> int:
         results = []
         for key in scene_keys:
             for s in settings:
+                # each setting its own cache folder: two settings of one spp share their raw renders there,
+                # and the second would be timed without its path tracing
+                own = Path(args.cache_dir) / f"{key}-{settings.index(s)}" if args.cache_dir else False
                 r = noise_balance(s, scene_key=key, width=args.size[0], height=args.size[1],
                                   exposures_ms=args.exposures, sweeps=tuple(int(x) for x in args.sweeps),
-                                  render_per=args.render_per, cache_dir=args.cache_dir or False)
+                                  render_per=args.render_per, cache_dir=own)
                 if baseline:
                     base = next(x for x in results + [r] if x["scene"] == key and x["setting"] == baseline)
                     r["baseline"] = baseline
@@ -116,8 +122,9 @@ def main(argv=None) -> int:
                                               if base["seconds_per_sweep"] else None)
                 if args.bias_reference:
                     r["radiance"] = radiance_bias(s, scene_key=key, reference=args.bias_reference,
-                                                  width=args.size[0], height=args.size[1],
-                                                  cache_dir=args.cache_dir or False)
+                                                  width=args.size[0], height=args.size[1], cache_dir=own,
+                                                  reference_cache_dir=Path(args.cache_dir) / "reference"
+                                                  if args.cache_dir else False)
                 results.append(r)
                 _print(key, s, r)
     except ExposimError as exc:

@@ -135,4 +135,4 @@ def test_one_sweep_has_no_interval_and_the_file_is_strict_json(tmp_path):
                               "mitsuba": importlib.metadata.version("mitsuba"),
                               "drjit": importlib.metadata.version("drjit")}
     assert doc["command"] == ("EXPOSIM_MITSUBA_VARIANT=scalar_rgb python scripts/render_noise_balance.py "
-                              f"-o one.json off@1 --size 48x32 --sweeps 0 --cache-dir {tmp_path / 'cache'}")
+                              "-o one.json off@1 --size 48x32 --sweeps 0 --cache-dir CACHE")

@@ -148,6 +148,10 @@ def test_the_script_measures_several_scenes_against_a_baseline_in_one_run(tmp_pa
         for x in rows:
             assert x["difference_percent"] == pytest.approx(100 * (x["mean"] / x["reference_mean"] - 1))
     assert doc["results"][1]["emitter_weights"] == {"sun": 16.0} and "emitter_weights" not in doc["results"][0]
+    # each setting renders into a folder of its own (no raw render shared, so each is timed whole)
+    assert sorted(x.name for x in (tmp_path / "c").iterdir()) == ["forest_winter-0", "forest_winter-1", "reference",
+                                                                  "sun_glare-0", "sun_glare-1"]
+    assert doc["command"].endswith("--cache-dir CACHE")  # no path of this machine in the record
     table = out.with_suffix(".md").read_text().splitlines()
     assert len(table) == 2 + 4 and "mean radiance vs reference" in table[0]
     again = subprocess.run([sys.executable, str(ROOT / "scripts" / "render_noise_balance.py"), "-o", str(out),

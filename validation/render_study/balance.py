@@ -226,13 +226,15 @@ def pareto_table(results) -> str:
 
 
 def radiance_bias(setting: str, *, scene_key: str = "forest_winter", reference: str = "off@256", width: int = 480,
-                  height: int = 300, sweeps=(0, 22, 44), walk_seed: int = 0, cache_dir=None) -> dict:
+                  height: int = 300, sweeps=(0, 22, 44), walk_seed: int = 0, cache_dir=None,
+                  reference_cache_dir=None) -> dict:
     """Mean radiance of a render setting against a deep reference, at the walk's poses.
 
     At each of ``sweeps`` (the pose of the sweep's first shot, a still render), the mean
     luminance (Rec. 709) of the setting's render (render seed 1) and of the reference's
     (render seed 2, e.g. raw at 256 spp, whose mean over the frame carries well under 0.1 %
-    of Monte Carlo error).
+    of Monte Carlo error).  ``reference_cache_dir``: where the reference renders are cached
+    (default ``cache_dir``).
 
     Returns
     -------
@@ -256,10 +258,11 @@ def radiance_bias(setting: str, *, scene_key: str = "forest_winter", reference: 
     for sweep in sweeps:
         pose = traj.pose(shot_time_s(int(sweep) * len(_BRACKETS_MS), _FPS))
         means = []
-        for preset, seed in ((test, 1), (ref, 2)):
+        for preset, seed, folder in ((test, 1, cache_dir),
+                                     (ref, 2, cache_dir if reference_cache_dir is None else reference_cache_dir)):
             t0 = time.perf_counter()
             img = scenes.render(preset.scene(base), pose, width=width, height=height, spp=preset.spp, seed=seed,
-                                fov_deg=fov, denoise=preset.denoise, cache_dir=cache_dir)
+                                fov_deg=fov, denoise=preset.denoise, cache_dir=folder)
             if preset is test:
                 seconds.append(time.perf_counter() - t0)
             means.append(float(np.mean(img.astype(np.float64) @ lum)))
