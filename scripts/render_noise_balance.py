@@ -160,9 +160,9 @@ def _print(scene: str, setting: str, r: dict) -> None:
               f"  {'met' if v['met'] else 'NOT met'}  {r['seconds_per_sweep']:.2f} s/sweep"
               + (f" ({ratio:.2f}x)" if ratio is not None else ""), flush=True)
     if "radiance" in r:
-        b = r["radiance"]["difference_percent"]
+        b, d = r["radiance"]["difference_percent"], r["radiance"]["difference_percent_sun_excluded"]
         print(f"{scene:>13} {setting:>22} mean radiance against {r['radiance']['reference']}: {b[0]:+.2f} % "
-              f"[{b[1]:+.2f}, {b[2]:+.2f}]", flush=True)
+              f"[{b[1]:+.2f}, {b[2]:+.2f}]; without the sun disk {d[0]:+.2f} % [{d[1]:+.2f}, {d[2]:+.2f}]", flush=True)
 
 
 if __name__ == "__main__":

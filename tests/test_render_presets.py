@@ -147,6 +147,8 @@ def test_the_script_measures_several_scenes_against_a_baseline_in_one_run(tmp_pa
         assert [x["sweep"] for x in rows] == [0, 22, 44]
         for x in rows:
             assert x["difference_percent"] == pytest.approx(100 * (x["mean"] / x["reference_mean"] - 1))
+            if x["sun_excluded_pixels"] == 0:  # nothing above the pass-through level: the same figure
+                assert x["difference_percent_sun_excluded"] == pytest.approx(x["difference_percent"])
     assert doc["results"][1]["emitter_weights"] == {"sun": 16.0} and "emitter_weights" not in doc["results"][0]
     # each setting renders into a folder of its own (no raw render shared, so each is timed whole)
     assert sorted(x.name for x in (tmp_path / "c").iterdir()) == ["forest_winter-0", "forest_winter-1", "reference",
