@@ -250,6 +250,9 @@ def write_run(sequence, methods, out_dir, config: RunConfig | None = None, *, re
                 run_json["native"] = provider.describe()  # window, warp, latency, benchmarked frames
         if shm_note is not None:
             run_json["shared_memory_pipes"], run_json["shared_memory"] = shm_note
+        else:  # a resumed run whose /dev/shm has room now: no earlier shortage carried over
+            run_json.pop("shared_memory_pipes", None)
+            run_json.pop("shared_memory", None)
         run_json["jobs"] = cfg.jobs
         run_json["workers"] = cfg.workers  # how the methods ran (results do not depend on it)
         run_json["method_timeout_applied_s"] = effective_timeout_s(cfg)
@@ -303,10 +306,11 @@ def _loop_into(writer: RunWriter, provider, built: dict, cfg: RunConfig, stats: 
                 rows[name].append(row)
             done += 1
             short = {n: m.shm_shortage for n, m in built.items() if getattr(m, "shm_shortage", None)}
-            if len(short) != len(run_json.get("shared_memory_pipes", ())):  # a larger image later: said at once
+            if len(short) > len(run_json.get("shared_memory_pipes", ())):  # a larger image later: said at once
                 run_json["shared_memory_pipes"] = list(short)
                 run_json["shared_memory"] = shortage_note(short, len(names))
-                warnings.warn(run_json["shared_memory"], SharedMemoryWarning, stacklevel=2)
+                if run_json["shared_memory"]:
+                    warnings.warn(run_json["shared_memory"], SharedMemoryWarning, stacklevel=2)
                 writer.update()
             if done % RUN_JSON_EVERY == 0:
                 writer.update(cycles_done=done, skipped_cycles=skipped, method_status=method_status)

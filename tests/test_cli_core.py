@@ -100,6 +100,16 @@ def test_long_commands_print_stage_lines_in_a_log():
         lines.beat()
     assert log.getvalue().splitlines() == ["exposim run [20 s]: preparing, working", "exposim run [20 s]: frames 1/18",
                                            "exposim run [40 s]: frames 1/18, working"]
+    # closed: its thread has ended and nothing more is printed, however late a beat comes
+    log, now[0] = io.StringIO(), 0.0
+    lines = log_lines("exposim run", stream=log, clock=lambda: now[0], heartbeat=True)
+    thread = lines._thread
+    assert thread is not None and thread.is_alive()
+    lines.close()
+    assert not thread.is_alive()
+    now[0] = 10 * LOG_EVERY_S
+    lines.beat()
+    assert log.getvalue() == ""
 
     class Tty(io.StringIO):
         def isatty(self):

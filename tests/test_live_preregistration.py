@@ -94,3 +94,16 @@ def test_a_study_without_a_plan_is_judged_as_before(tmp_path):
     assert "preregistration" not in res and "excluded" not in res["headlines"]["family"]
     assert res["headlines"]["distinct_metrics"][2] == "segment_success_rate_tau100"
     assert np.isfinite(res["metrics"]["median_matches"]["omega2"])
+
+
+def test_the_folder_analyses_refuse_a_preregistered_study(tmp_path):
+    """monte_carlo, level_shift, own_residuals and study_calibration read a folder through read_folder_table; they
+    judge the family as the studies before pre-registration did, so a pre-registered folder is refused in words."""
+    from validation.live.config import LiveError
+    from validation.live.preregistration import PREREG_FILE
+    from validation.live.table_check import read_folder_table
+
+    (tmp_path / PREREG_FILE).write_text("{}")
+    with pytest.raises(LiveError, match="pre-registered study") as err:
+        read_folder_table(tmp_path)
+    assert str(tmp_path) in str(err.value)

@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import sys
+import threading
 
 __all__ = ["add_quiet", "add_json", "print_json", "bars_enabled", "progress_bar", "log_lines", "progress_arg",
            "LOG_EVERY_S"]
@@ -83,16 +84,16 @@ class _LogLines:
     """The callback of :func:`log_lines`."""
 
     def __init__(self, command: str, stream, clock, heartbeat: bool) -> None:
-        import threading
-
         self.command, self.stream, self.clock = command, stream, clock
         self.start = clock()
         # before the first report the command is "preparing": the heartbeat's first line comes after LOG_EVERY_S
         self.stage, self.done, self.total, self.last = "preparing", 0, None, self.start
         self._lock = threading.Lock()
         self._stop = threading.Event()
+        self._thread = None
         if heartbeat:
-            threading.Thread(target=self._beat, daemon=True, name="exposim-log-lines").start()
+            self._thread = threading.Thread(target=self._beat, daemon=True, name="exposim-log-lines")
+            self._thread.start()
 
     def _line(self, now: float, suffix: str = "") -> None:
         count = ("" if not self.done else f" {self.done}") if self.total is None else f" {self.done}/{self.total}"
@@ -114,13 +115,19 @@ class _LogLines:
     def beat(self) -> None:
         """One heartbeat: a line when :data:`LOG_EVERY_S` seconds passed since the last one."""
         with self._lock:
+            if self._stop.is_set():  # closed: the command has ended, nothing more is said
+                return
             now = self.clock()
             if now - self.last >= LOG_EVERY_S:
                 self._line(now, ", working")
 
     def close(self) -> None:
-        """Stop the heartbeat (if any)."""
-        self._stop.set()
+        """Stop the heartbeat (if any): no line is printed once this returns."""
+        with self._lock:
+            self._stop.set()
+        thread, self._thread = self._thread, None
+        if thread is not None and thread is not threading.current_thread():
+            thread.join()
 
     def __enter__(self):
         return self

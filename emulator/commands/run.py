@@ -232,7 +232,7 @@ def config_from_args(args, base=None):
     except PlaybackError as exc:
         field = str(exc).split(" ", 1)[0]
         flag = _FLAGS.get(field)
-        if flag is None:
+        if flag is None or given.get(field) is None:  # not given here (a recorded value): no flag to name
             raise
         value = given.get(field)
         shown = " ".join(str(v) for v in value) if isinstance(value, tuple) else str(value)
@@ -318,10 +318,15 @@ def _run(args) -> int:
         print(f"exposim run: warning: --initial-ms {config.initial_ms:g} is outside --range-ms {low:g} {high:g}; "
               f"clamped to {config.start_ms:g} ms (recorded in run.json)", file=sys.stderr)
 
+    source = args.sequence
+    if args.frame_cache is not None:  # a frame cache elsewhere (a read-only recording)
+        from emulator.io.borealhdr import load_sequence
+
+        source = load_sequence(args.sequence, frame_cache=args.frame_cache, imu_warning=config.blur != "none")
     _warn_broken_plugins()
     progress = None
     bar = None
-    lines = log_lines("exposim run", args.quiet, heartbeat=True)
+    lines = log_lines("exposim run", args.quiet, heartbeat=True)  # closed in the finally below
     if lines is not None:  # a log (nohup, CI): a line at the start, every LOG_EVERY_S seconds and at the end
         progress = functools.partial(lines, "frames" if config.rate == "native" else "cycles")
     elif bars_enabled(args.quiet):
@@ -336,11 +341,6 @@ def _run(args) -> int:
             bar.n = done
             bar.refresh()
 
-    source = args.sequence
-    if args.frame_cache is not None:  # a frame cache elsewhere (a read-only recording)
-        from emulator.io.borealhdr import load_sequence
-
-        source = load_sequence(args.sequence, frame_cache=args.frame_cache, imu_warning=config.blur != "none")
     try:
         summary = run_to_folder(source, methods or "all", args.output, config, resume=args.resume,
                                 progress=progress, command=_command(args))

@@ -267,6 +267,8 @@ class RunConfig:
 
         if self.native_warp is None and self.rate == "native":
             put(self, "native_warp", DEFAULT_NATIVE_WARP)
+        elif self.rate != "native" and self.native_warp == DEFAULT_NATIVE_WARP:  # a native run's default, carried
+            put(self, "native_warp", None)  # over (a resume asked at cycle rate is refused for its rate)
         if self.native_warp is not None and self.native_warp not in WARP_MODES:
             raise PlaybackError(f"native_warp must be one of {', '.join(WARP_MODES)}, got {self.native_warp!r}")
         put(self, "native_blur_aware", bool(self.native_blur_aware))

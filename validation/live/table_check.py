@@ -120,12 +120,18 @@ def canonical_order(walks, methods, tables: dict, *, scenes=(), method_order=Non
 
 def read_folder_table(folder) -> tuple[list[str], list[str], dict]:
     """(walks, methods, ``{run: {metric: (walks, methods)}}``) of a study folder's ``walks.csv``, as written (the
-    analyses that read a folder without writing into it)."""
+    analyses that read a folder without writing into it); a pre-registered folder is refused (those analyses do
+    not apply its plan yet)."""
     from pathlib import Path
 
     from emulator.io.files import read_text
     from validation.live.config import LiveError
     from validation.live.evidence import WALKS_TABLE, parse_walks_table
 
+    from validation.live.preregistration import PREREG_FILE
+
+    if (Path(folder) / PREREG_FILE).is_file():  # its family leaves metrics out and resamples 4000 times
+        raise LiveError(f"{folder}: a pre-registered study ({PREREG_FILE}); these analyses judge the headline family "
+                        f"as the studies before pre-registration did and would not match its results.json")
     path = Path(folder) / WALKS_TABLE
     return parse_walks_table(read_text(path, LiveError), str(path))
