@@ -330,12 +330,36 @@ def _loop_into(writer: RunWriter, provider, built: dict, cfg: RunConfig, stats: 
                 saver.close()
         if status == "complete":
             run_json.pop("error", None)
+            changed = _tables_changed(out, rows)
+            if changed:  # a process running as the user (a plugin's) wrote into the folder: said, not hidden
+                run_json["tables_changed"] = changed
+                warnings.warn(f"{out}: the table of {', '.join(changed)} differs from the rows this run wrote: a "
+                              f"process besides the run (a plugin's?) wrote into the run folder; its results are "
+                              f"not this run's", TablesChangedWarning, stacklevel=2)
         coverage = getattr(provider, "gyro_coverage", dict)()
         if coverage and isinstance(run_json.get("native"), dict):
             run_json["native"].update(coverage)
         writer.update(status=status, cycles_done=done, skipped_cycles=skipped, timing=stats.as_dict(),
                       method_status=method_status)
     return rows
+
+
+class TablesChangedWarning(UserWarning):
+    """A method's ``exposures.csv`` differs at the end of a run from the rows the run wrote into it."""
+
+
+def _tables_changed(out: Path, rows: dict) -> list[str]:
+    """The methods whose ``exposures.csv`` no longer holds exactly the rows of ``rows`` (what the run wrote)."""
+    from emulator.io.runcsv import read_csv_rows
+
+    changed = []
+    for name, written in rows.items():
+        try:
+            if read_csv_rows(out / name / CSV_FILE) != [list(r) for r in written]:
+                changed.append(name)
+        except (OSError, ValueError, PlaybackError):  # unreadable now: changed as well
+            changed.append(name)
+    return changed
 
 
 def _reserve_image_blocks(seq, built: dict) -> tuple[list[str], str] | None:

@@ -170,6 +170,23 @@ class Unbuildable:
 
     def __init__(self):
         raise PluginError(Evil())
+
+
+class RewritesTable:
+    """Appends a row to another method's table (BOUNDARY_TABLE) at its first call: what a process of the user can do."""
+
+    def __init__(self):
+        self.done = False
+
+    def reset(self):
+        pass
+
+    def next_exposure(self, raw, exposure_ms):
+        if not self.done:
+            with open(os.environ["BOUNDARY_TABLE"], "a") as fh:
+                fh.write("99,1,1.0,1.0,ok\\n")
+            self.done = True
+        return exposure_ms
 '''
 
 
@@ -469,3 +486,17 @@ def test_an_installed_plugin_is_imported_in_its_worker_and_a_checking_process_ne
         assert json.loads((out / "run.json").read_text())["method_status"]["patch-ae"] == "ok"
     finally:
         registry._installed.cache_clear()
+
+
+def test_a_table_rewritten_by_a_plugin_is_named_at_the_end_of_the_run(seq, plugin_dir, tmp_path, monkeypatch,
+                                                                        capsys):
+    """A plugin running as the user can write into the run folder (docs/faults.md); the run compares each table
+    with the rows it wrote, and names the one that differs in run.json and in one warning."""
+    out = tmp_path / "run"
+    monkeypatch.setenv("BOUNDARY_TABLE", str(out / "classical-50" / "exposures.csv"))
+    monkeypatch.syspath_prepend(str(plugin_dir))
+    assert main(["run", str(seq), "--methods", "classical-50,shim,boundary_plugins:RewritesTable", "-o", str(out),
+                 "--no-progress"]) == 0
+    said = [ln for ln in capsys.readouterr().err.splitlines() if "differs from the rows this run wrote" in ln]
+    assert len(said) == 1 and "the table of classical-50 differs" in said[0] and "shim" not in said[0]
+    assert json.loads((out / "run.json").read_text())["tables_changed"] == ["classical-50"]
