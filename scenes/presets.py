@@ -135,6 +135,9 @@ for _p in (
                                            "about 10 points more repeatability than sensor noise"),
     _preset("study-hq", "oidn-hq@256", "render noise no worse for SIFT than sensor noise on forest_winter "
                                           "(docs/results/render.md); about 14x the time of study-oidn8"),
+    _preset("study-sun64", "oidn-hq@64+sun=16", "the weighted sun at 64 spp: within 3 points of sensor noise at 8 ms "
+                                                 "on the study's scenes, 3-9 points short at 32 ms; about 7x the "
+                                                 "time of study-oidn8 (docs/results/render.md)"),
 ):
     RENDER_PRESETS[_p.name] = _p
 del _p

@@ -82,7 +82,7 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
                         "for SIFT (docs/results/render.md), about 15x the render time of the default; on an NVIDIA "
                         "GPU ('cuda_ad_rgb'), 'off' with --spp 2048 meets it (3.2 s a sweep and camera on an H200)")
     p.add_argument("--render", metavar="PRESET",
-                   help="a render preset (study-oidn8: the default settings; study-hq) or a setting "
+                   help="a render preset (study-oidn8: the default settings; study-sun64; study-hq) or a setting "
                         "DENOISER@SPP[+LIGHT=WEIGHT,...]: sets --spp, --denoise and the renders' choice of lights "
                         "together (docs/results/render.md measures them); not with --spp or --denoise")
     p.add_argument("--keep-radiance", action="store_true", help="keep the datasets' radiance EXRs (large)")
