@@ -126,3 +126,19 @@ def test_dataset_run_on_threads_with_a_zip_gives_the_single_runs_tables(tmp_path
         assert len(unit.decode().splitlines()) == 1 + 18  # 3 sweeps of 6 frames, one row each
         assert len((out / "seqA" / m / m / "exposures.csv").read_text().splitlines()) == 1 + 24
     assert json.loads((out / "dataset.json").read_text())["config"]["rate"] == "native"
+
+
+def test_the_native_report_says_why_neighbours_went_unwarped():
+    """--warp none is said as asked, not as a missing gyro; flow-sharp's on-purpose skips are said under the table."""
+    from emulator.report.run import _rate_lines
+
+    summary = {"rate": "native", "latency_frames": 1,
+               "methods": {"a": {"source_offsets": {"0": 3, "1": 2}, "unwarped_neighbours": 2}}}
+    asked = "\n".join(_rate_lines({"native_warp": "none", "native": {"warp": "none", "window_frames": 12}}, summary))
+    assert "not warped (--warp none)" in asked and "no gyro" not in asked
+    nogyro = "\n".join(_rate_lines({"native_warp": "rotation", "native": {"warp": "none", "window_frames": 12}}, summary))
+    assert "not warped (no gyro)" in nogyro and "on purpose" not in nogyro
+    sharp = {"native_warp": "flow-sharp", "native": {"warp": "rotation from the gyro", "warp_mode": "flow-sharp",
+                                                     "sharp_motion_px": 1.0, "window_frames": 12}}
+    said = "\n".join(_rate_lines(sharp, summary))
+    assert "where that moves it 1 px or more" in said and "moved less than 1 px (used as recorded, on purpose)" in said

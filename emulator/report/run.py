@@ -123,7 +123,8 @@ def per_recorder_cycle(table: dict) -> dict:
 
 def _source_offsets(t: dict) -> dict:
     """Native rate: how often each source offset served (frames; 0: the frame's own bracket), and how
-    many neighbours were used without a warp (no gyro); nothing at cycle rate."""
+    many neighbours were used without a warp (no gyro, a gyro that does not cover them, ``--warp none``, or
+    with ``flow-sharp`` a move under its threshold); nothing at cycle rate."""
     if "source_offset" not in t:
         return {}
     offsets, counts = np.unique(t["source_offset"], return_counts=True)
@@ -248,7 +249,8 @@ def _rate_lines(info: dict, summary: dict) -> list[str]:
                                                                                  "turned to its instant by the gyro")
     lines = [f"- rate: native (every recorded frame; a proposal made after frame k is used from frame "
              f"k + {1 + int(summary.get('latency_frames') or 0)}); each frame from its own bracket or one within "
-             f"{nat.get('window_frames')} frames, {moved if nat.get('warp') != 'none' else 'not warped (no gyro)'}",
+             f"{nat.get('window_frames')} frames, "
+             f"{moved if nat.get('warp') != 'none' else _unwarped_why(info)}",
              "", "Source frame of each frame, per method (offset in frames; 0: its own bracket):", ""]
     offsets = sorted({int(o) for m in summary["methods"].values() for o in m.get("source_offsets", {})})
     lines += ["| method | " + " | ".join(f"{o:+d}" if o else "0" for o in offsets) + " | unwarped neighbours |",
@@ -257,7 +259,15 @@ def _rate_lines(info: dict, summary: dict) -> list[str]:
         got = m.get("source_offsets", {})
         lines.append(f"| {name} | " + " | ".join(str(got.get(str(o), 0)) for o in offsets)
                      + f" | {m.get('unwarped_neighbours', 0)} |")
+    if nat.get("warp_mode") == "flow-sharp":
+        lines += ["", f"Unwarped neighbours include those that moved less than {nat.get('sharp_motion_px', 1.0):g} px "
+                      "(used as recorded, on purpose) besides any the gyro does not cover."]
     return lines + [""]
+
+
+def _unwarped_why(info: dict) -> str:
+    """Why a native run's neighbours were not warped: asked (``--warp none``, run.json's ``native_warp``) or no gyro."""
+    return "not warped (--warp none)" if info.get("native_warp") == "none" else "not warped (no gyro)"
 
 
 def _fixed_note(info: dict, summary: dict, tables: dict | None) -> list[str]:
