@@ -24,6 +24,7 @@ import numpy as np
 
 from emulator.autoexposure._base import AutoExposureError, MethodFailed
 from emulator.errors import PlaybackError
+from emulator.io.files import read_bytes
 
 _FORK_EXIT = 70  # exit status of the child of an os.fork inside a worker (it exits at once)
 
@@ -132,8 +133,7 @@ def leftover_processes() -> list[tuple[int, str]]:
         if not entry.isdigit():
             continue
         try:
-            with open(f"/proc/{entry}/stat", "rb") as fh:
-                stat = fh.read().decode("ascii", "replace")
+            stat = read_bytes(f"/proc/{entry}/stat").decode("ascii", "replace")
         except OSError:
             continue
         comm = stat[stat.find("(") + 1:stat.rfind(")")]

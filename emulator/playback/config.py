@@ -442,7 +442,8 @@ class RunConfig:
             skip_partial=bool(run_json.get("skip_partial", False)),
             rate=run_json.get("rate") or "cycle",  # folders from before --rate: cycle
             latency_frames=int(run_json.get("latency_frames", 1)),
-            native_warp=run_json.get("native_warp") or "rotation",
+            # native folders from before the warp modes: rotation; cycle rate has none
+            native_warp=run_json.get("native_warp") or ("rotation" if run_json.get("rate") == "native" else None),
             native_blur_aware=bool(run_json.get("native_blur_aware", False)),
         )
 

@@ -151,6 +151,10 @@ STUDY_DENOISE = "oidn"
 STUDY_RENDER_PER = "cycle"
 
 
+#: A pre-registered study's plan, written into its folder before the first walk (validation.live.preregistration).
+PREREG_FILE = "preregistration.json"
+
+
 class LiveError(ExposimError):
     """An invalid configuration of the live-versus-emulated experiment, or missing ground truth."""
 

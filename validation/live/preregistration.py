@@ -22,6 +22,7 @@ from validation.live.config import (
     EQUIVALENCE_MARGINS,
     HEADLINE_COMPARISONS,
     HEADLINE_METRICS,
+    PREREG_FILE,
     LiveConfig,
     LiveError,
 )
@@ -31,7 +32,6 @@ __all__ = ["PREREG_FILE", "FORMAT", "MIN_SEGMENTS", "PLANNED_RESAMPLES", "segmen
            "interim_reason"]
 
 #: The pre-registration's file in the study folder.
-PREREG_FILE = "preregistration.json"
 #: The study format a pre-registered folder is judged by.
 FORMAT = 3
 #: Fewest segments per walk for the segment success rate to stay in the headline.

@@ -125,10 +125,8 @@ def read_folder_table(folder) -> tuple[list[str], list[str], dict]:
     from pathlib import Path
 
     from emulator.io.files import read_text
-    from validation.live.config import LiveError
+    from validation.live.config import PREREG_FILE, LiveError
     from validation.live.evidence import WALKS_TABLE, parse_walks_table
-
-    from validation.live.preregistration import PREREG_FILE
 
     if (Path(folder) / PREREG_FILE).is_file():  # its family leaves metrics out and resamples 4000 times
         raise LiveError(f"{folder}: a pre-registered study ({PREREG_FILE}); these analyses judge the headline family "
