@@ -27,6 +27,7 @@ attempt leaves no rows behind and a repeated one writes nothing twice.  Nothing 
 
 from __future__ import annotations
 
+import gc
 import logging
 import os
 from collections.abc import Callable, Mapping, Sequence
@@ -146,6 +147,10 @@ def local_client(n_workers: int | None = None, *, allowed_failures: int = 3):
     n = int(n_workers or default_workers())
     if n < 1:
         raise SchedulerError(f"n_workers must be >= 1, got {n_workers!r}")
+    # An unclosed Client left for the garbage collector closes itself in __del__, which takes the loop runner's
+    # lock; collected inside the thread LocalCluster starts, it waits on the lock the starting thread holds
+    # (seen once: a test process hung there). Collected here, before any lock is taken.
+    gc.collect()
     with tempfile.TemporaryDirectory(prefix="exposim-dask-") as scratch, \
             dask.config.set({"distributed.scheduler.allowed-failures": int(allowed_failures),
                              "distributed.scheduler.worker-ttl": None,
