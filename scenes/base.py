@@ -21,7 +21,7 @@ import numpy as np
 
 from scenes.errors import SceneError
 
-__all__ = ["Scene", "SCENES", "EMITTER_KINDS", "get_scene", "register_scene", "code_fingerprint"]
+__all__ = ["Scene", "SCENES", "EMITTER_KINDS", "check_emitter_weights", "get_scene", "register_scene", "code_fingerprint"]
 
 #: The lights a scene's emitter weights name (:meth:`Scene.with_emitter_weights`).
 EMITTER_KINDS = ("sun", "sky", "area")
@@ -117,17 +117,7 @@ class Scene:
         SceneError
             An unknown emitter name or a weight that is not a positive finite number.
         """
-        items = []
-        for k, v in sorted(dict(weights or {}).items()):
-            if k not in EMITTER_KINDS:
-                raise SceneError(f"{self.name}: unknown emitter {k!r} in emitter weights; valid: "
-                                 f"{', '.join(EMITTER_KINDS)}")
-            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not (
-                    math.isfinite(float(v)) and float(v) > 0):
-                raise SceneError(f"{self.name}: emitter weight of {k} must be a positive finite number, got {v!r}")
-            if float(v) != 1.0:
-                items.append((k, float(v)))
-        other = replace(self, emitter_weights=tuple(items))
+        other = replace(self, emitter_weights=check_emitter_weights(weights, self.name))
         cached = self.__dict__.get("_description")
         if cached is not None:
             object.__setattr__(other, "_description", cached)
@@ -183,6 +173,28 @@ class Scene:
         kwargs.setdefault("stream", self.name)
         return make_walk(DEFAULT_WALK if walk is None else walk, duration_s,
                          seed=self.seed if seed is None else seed, **kwargs)
+
+
+def check_emitter_weights(weights: Mapping | None, owner: str = "emitter weights") -> tuple:
+    """``weights`` (light -> positive finite number; None or {}: uniform) as the sorted tuple a
+    :class:`Scene` holds, weights of 1 left out.
+
+    Raises
+    ------
+    SceneError
+        An unknown light (not in :data:`EMITTER_KINDS`) or a weight that is not a positive finite number;
+        the message starts with ``owner``.
+    """
+    items = []
+    for k, v in sorted(dict(weights or {}).items()):
+        if k not in EMITTER_KINDS:
+            raise SceneError(f"{owner}: unknown emitter {k!r} in emitter weights; valid: {', '.join(EMITTER_KINDS)}")
+        if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not (
+                math.isfinite(float(v)) and float(v) > 0):
+            raise SceneError(f"{owner}: emitter weight of {k} must be a positive finite number, got {v!r}")
+        if float(v) != 1.0:
+            items.append((k, float(v)))
+    return tuple(items)
 
 
 def _check_value(scene: str, key: str, value: Any, default: Any) -> Any:

@@ -26,7 +26,7 @@ from scenes.base import EMITTER_KINDS, Scene
 from scenes.denoise import DenoiseSettings, resolve_denoise
 from scenes.errors import RenderError
 
-__all__ = ["RenderPreset", "RENDER_PRESETS", "LEGACY_STUDY_PRESET", "get_preset", "parse_setting"]
+__all__ = ["RenderPreset", "RENDER_PRESETS", "LEGACY_STUDY_PRESET", "parse_setting"]
 
 
 @dataclass(frozen=True)
@@ -61,7 +61,7 @@ class RenderPreset:
         if self.denoise.enabled and self.denoise.aux_spp != default_aux:
             text += f"/{self.denoise.aux_spp}"
         if self.emitter_weights:
-            text += "+" + ",".join(f"{k}={_number(v)}" for k, v in self.emitter_weights)
+            text += "+" + ",".join(f"{k}={v:g}" for k, v in self.emitter_weights)
         return text
 
     def scene(self, scene: Scene) -> Scene:
@@ -73,10 +73,6 @@ class RenderPreset:
         return {"name": self.name, "setting": self.setting, "spp": int(self.spp),
                 "denoise": self.denoise.key_material() if self.denoise.enabled else {"name": "off"},
                 "emitter_weights": {k: float(v) for k, v in self.emitter_weights}}
-
-
-def _number(v: float) -> str:
-    return f"{v:g}"
 
 
 def _weights(text: str, setting: str) -> tuple:
@@ -142,13 +138,3 @@ for _p in (
     RENDER_PRESETS[_p.name] = _p
 del _p
 
-
-def get_preset(name: str) -> RenderPreset:
-    """The preset called ``name`` (or a setting string); the error lists the presets.
-
-    Raises
-    ------
-    RenderError
-        Neither a preset name nor a valid setting string.
-    """
-    return parse_setting(name)

@@ -15,7 +15,7 @@ import scenes
 from scenes.cache import render_key
 from scenes.denoise import DenoiseSettings, resolve_denoise
 from scenes.errors import RenderError, SceneError
-from scenes.presets import LEGACY_STUDY_PRESET, RENDER_PRESETS, get_preset, parse_setting
+from scenes.presets import LEGACY_STUDY_PRESET, RENDER_PRESETS, parse_setting
 from validation.render_study import balance as bal
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -32,7 +32,7 @@ def test_setting_strings_are_read_and_written_back():
         name=p.setting, spp=64, denoise=p.denoise, emitter_weights=p.emitter_weights)
     assert parse_setting("off@2+sun=1").emitter_weights == ()  # a weight of 1 is the default: not kept
     assert parse_setting("oidn-fast@2").setting == "oidn-fast@2"  # the preset's own aux spp is not repeated
-    legacy = get_preset(LEGACY_STUDY_PRESET)
+    legacy = parse_setting(LEGACY_STUDY_PRESET)
     assert (legacy.spp, legacy.denoise, legacy.emitter_weights) == (8, resolve_denoise("oidn"), ())
     assert legacy.setting == "oidn@8"
     hq = RENDER_PRESETS["study-hq"]

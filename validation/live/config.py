@@ -241,6 +241,7 @@ class LiveConfig:
         import os
 
         import scenes
+        from scenes.base import check_emitter_weights
         from scenes.denoise import DENOISERS, ENV_DENOISE
 
         from emulator.autoexposure.methodset import parse_methods
@@ -283,11 +284,11 @@ class LiveConfig:
                 raise LiveError(f"${ENV_DENOISE}={env!r} is not a denoiser; valid: {', '.join(DENOISERS)}")
         elif self.denoise not in DENOISERS:
             raise LiveError(f"denoise must be one of {', '.join(DENOISERS)}, got {self.denoise!r}")
-        try:  # the scene handle checks the names and values, and orders them
-            weights = scenes.get_scene("forest_winter").with_emitter_weights(dict(self.emitter_weights))
+        try:
+            weights = check_emitter_weights(dict(self.emitter_weights), "emitter_weights")
         except (TypeError, ValueError, ExposimError) as exc:
-            raise LiveError(f"emitter_weights: {exc}") from None
-        object.__setattr__(self, "emitter_weights", weights.emitter_weights)
+            raise LiveError(str(exc)) from None
+        object.__setattr__(self, "emitter_weights", weights)
 
     @property
     def duration_s(self) -> float:
