@@ -236,7 +236,7 @@ def evaluate_findings(summary: dict, taus=(5, 100)) -> list[dict]:
     grad = [trans[k] for k in GRADIENT_METHODS if k in trans]
     rest = [v for k, v in trans.items() if k not in GRADIENT_METHODS]
     if len(grad) == len(GRADIENT_METHODS) and rest:
-        holds = float(np.max(grad)) < float(np.mean(rest))  # each of them ahead, not their mean (issue 44)
+        holds = float(np.max(grad)) < float(np.mean(rest))  # each of them ahead, not their mean
         detail = (f"translation RPE of M_Shim and M_Zhang {', '.join(_fmt(g) for g in grad)} % (each must lie "
                   f"below the others' mean), of the other methods mean {_fmt(np.mean(rest))} %")
     else:
@@ -255,7 +255,7 @@ def evaluate_findings(summary: dict, taus=(5, 100)) -> list[dict]:
     grad_f = [fails[k] for k in GRADIENT_METHODS if k in fails]
     rest_f = [v for k, v in fails.items() if k not in GRADIENT_METHODS]
     if len(grad_f) == len(GRADIENT_METHODS) and rest_f:
-        holds = float(np.max(grad_f)) < float(np.mean(rest_f))  # each of them, not their mean (issue 44)
+        holds = float(np.max(grad_f)) < float(np.mean(rest_f))  # each of them, not their mean
         left_out = [s for s in per_scene if s not in telling]
         detail = (f"failed VO frames on {', '.join(telling)}"
                   + (f" ({', '.join(left_out)} left out: every method failed on every frame)" if left_out else "")

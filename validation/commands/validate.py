@@ -125,7 +125,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     from validation.blur.cli import register as register_blur  # issue 21: exposure-time blur
 
     register_blur(vsub)
-    from validation.native_loo.cli import register as register_native  # issue 48: leave one frame out
+    from validation.native_loo.cli import register as register_native  # leave one frame out
 
     register_native(vsub)
 

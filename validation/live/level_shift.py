@@ -1,4 +1,4 @@
-"""Level shifts, scenes, and the scene that carries a verdict (issue 44, item D).
+"""Level shifts, scenes, and the scene that carries a verdict.
 
 omega2 compares the methods' effects: an emulator that moves every method by the same amount
 (emulated native's matches 48-109 below live in the committed studies) scores 0.  Beside it:

@@ -1,4 +1,4 @@
-"""The bootstrap's Monte Carlo error in the headline verdicts (issue 44, item C).
+"""The bootstrap's Monte Carlo error in the headline verdicts.
 
 A headline verdict is decided by a p-value read from 1000 bootstrap replicates
 (:func:`validation.verdicts.agreement.bound_pvalues`), then Holm across the family; at the margin the

@@ -1,4 +1,4 @@
-"""The pre-registration of a live study (issue 44, item F): what it will decide, fixed before its first walk.
+"""The pre-registration of a live study: what it will decide, fixed before its first walk.
 
 :func:`preregistration` states the study's plan from its configuration: the headline's metrics and
 comparisons, the margin (omega2 0.2), the level (5 %, Holm across the family), the number of walks

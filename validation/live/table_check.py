@@ -1,4 +1,4 @@
-"""The walks table read strictly, in one order whatever its rows' order (issue 45, item 6).
+"""The walks table read strictly, in one order whatever its rows' order.
 
 ``--redraw`` recomputes a study's verdicts from ``walks.csv`` alone; these helpers make that
 recomputation a function of the table's *content*:

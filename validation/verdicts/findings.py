@@ -61,7 +61,7 @@ SIMILAR_RATIO = 1.5
 #: Tested findings: id -> (metric, form, claimed methods, what a positive effect says).  Forms:
 #: ``above_every`` (each claimed method above every other), ``below_every`` (each below every other),
 #: ``below_mean`` (each below the mean of the others), ``not_lowest`` (some other method below the claimed one).
-#: A finding that names several methods tests every one of them (issue 44: the gradient findings were one
+#: A finding that names several methods tests every one of them (the gradient findings were one
 #: contrast of the two methods' mean, which held when one of them alone was ahead).
 SPECS = {
     "fixed_most_matches": ("matches", "above_every", ("fixed",), "M_fixed's median matches minus the best other's"),

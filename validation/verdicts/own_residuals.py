@@ -1,4 +1,4 @@
-"""The verdict rule calibrated on the emulator's own residuals (issue 44, item B).
+"""The verdict rule calibrated on the emulator's own residuals.
 
 The plasmode (:mod:`validation.verdicts.plasmode`) takes the re-seeded live run as its perfect
 emulator; on the committed 48-walk studies the emulator's own walk x method residuals are 1.2-1.5
@@ -256,7 +256,7 @@ def main(argv=None) -> int:
 
     p = argparse.ArgumentParser(prog="python -m validation.verdicts.own_residuals",
                                 description="How often the live-versus-emulated verdict rule is right when the "
-                                            "emulator's own residuals are the noise (issue 44).")
+                                            "emulator's own residuals are the noise.")
     p.add_argument("folder", type=Path, help="a live study folder with walks.csv")
     p.add_argument("--studies", type=int, default=STUDIES, help=f"drawn studies per scenario and size "
                    f"(default {STUDIES})")
