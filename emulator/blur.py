@@ -41,6 +41,7 @@ import cv2
 import numpy as np
 
 from emulator.errors import EmulationError
+from emulator.lut import apply_lut, check_exposure, forward_dn
 from emulator.structure import STRUCTURE_FILTERS, STRUCTURE_SIGMA_PX, structure_of
 from emulator.gyro import (  # re-exported: the IMU side lives in emulator.gyro
     GYRO_SMOOTH_S,
@@ -277,8 +278,6 @@ def blur_homographies(omega, K, size, t_s: float, source_ms: float, target_ms: f
     """
     if placement not in PLACEMENTS:
         raise EmulationError(f"placement must be one of {', '.join(PLACEMENTS)}, got {placement!r}")
-    from emulator.emulate import check_exposure
-
     source_ms = check_exposure(source_ms, "source_ms")
     target_ms = check_exposure(target_ms, "target_ms")
     omega = as_angular_velocity(omega)
@@ -323,46 +322,6 @@ def blur_homographies(omega, K, size, t_s: float, source_ms: float, target_ms: f
     return Hs, ws
 
 
-_DN_TABLES: dict = {}
-#: Cells of the uniform grid over linear exposure :func:`_forward_dn` looks DN up in; a finer grid leaves
-#: fewer cells holding a decision level (a real response packs many below DN 100), so fewer pixels need a
-#: search (native-rate warps use 2**20), at the cost of a larger table.  The result is the same for any grid.
-_DN_GRID = 1 << 16
-
-
-def _dn_tables(response, grid: int = _DN_GRID):
-    """Decision levels of ``rint(f(h))`` and a uniform grid over h that resolves most of them (cached)."""
-    key = (id(response), int(grid))
-    hit = _DN_TABLES.get(key)
-    if hit is not None and hit[0] is response:
-        return hit[1]
-    g = np.asarray(response.g[: response.white_level + 1], dtype=np.float64)
-    thr = 0.5 * (g[:-1] + g[1:])  # f is linear between knots: rint(f(h)) steps up at the mid-points
-    lo, hi = float(g[0]), float(g[-1])
-    scale = (grid - 1) / (hi - lo)
-    edges = lo + np.arange(grid + 1) / scale
-    d_lo = np.searchsorted(thr, edges[:-1], side="right").astype(np.uint16)
-    ambiguous = np.searchsorted(thr, edges[1:], side="right") != d_lo
-    tables = (thr, lo, scale, d_lo, ambiguous)
-    if len(_DN_TABLES) > 8:
-        _DN_TABLES.clear()
-    _DN_TABLES[key] = (response, tables)
-    return tables
-
-
-def _forward_dn(response, h: np.ndarray, grid: int = _DN_GRID) -> np.ndarray:
-    """``clip(rint(f(h)), black, white)`` as uint16, through a uniform grid (3x faster than np.interp;
-    cells holding a decision level fall back to a binary search, so the result is the same)."""
-    thr, lo, scale, d_lo, ambiguous = _dn_tables(response, grid)
-    h64 = h.astype(np.float64, copy=False)
-    cells = np.clip((h64 - lo) * scale, 0, grid - 1).astype(np.int64)
-    dn = d_lo[cells]
-    amb = ambiguous[cells]
-    if amb.any():
-        dn[amb] = np.searchsorted(thr, h64[amb], side="right")
-    return np.clip(dn, response.black_level, response.white_level).astype(np.uint16)
-
-
 def _bayer_plane_homography(H: np.ndarray, px: int, py: int) -> np.ndarray:
     A = np.array([[2.0, 0.0, px], [0.0, 2.0, py], [0.0, 0.0, 1.0]])
     return np.linalg.inv(A) @ H @ A
@@ -375,6 +334,9 @@ def _is_identity(H: np.ndarray, size) -> bool:
 
 #: Resamplers of :func:`emulate_blur_consistent`'s warps: name -> OpenCV flag.
 _RESAMPLE = {"linear": "INTER_LINEAR", "cubic": "INTER_CUBIC"}
+
+#: The DN lookup after a warp, under the name emulator.native imported before it moved to emulator.lut.
+_forward_dn = forward_dn
 
 
 def emulate_blur_consistent(raw: np.ndarray, source_ms: float, target_ms: float, response,
@@ -418,8 +380,6 @@ def emulate_blur_consistent(raw: np.ndarray, source_ms: float, target_ms: float,
         clipped source pixel blurs into.  Without homographies, or when they are all the
         identity, exactly :func:`emulator.emulate.emulate`'s output.
     """
-    from emulator.emulate import apply_lut, check_exposure
-
     source_ms = check_exposure(source_ms, "source_ms")
     target_ms = check_exposure(target_ms, "target_ms")
     if resample not in _RESAMPLE:
@@ -459,7 +419,7 @@ def emulate_blur_consistent(raw: np.ndarray, source_ms: float, target_ms: float,
                 plane, Hp, dsize, flags=flag, borderMode=cv2.BORDER_REPLICATE) - plane)
             touched[sl] = np.maximum(touched[sl], cv2.warpPerspective(
                 clip_site, Hp, dsize, flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE))
-    out = _forward_dn(response, acc)
+    out = forward_dn(response, acc)
     all_high = raw >= response.white_level
     valid = valid & ((touched == 0) | (all_high & (out >= response.white_level)))
     return out, valid

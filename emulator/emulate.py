@@ -22,13 +22,10 @@ the target would have had beyond that, from a :class:`emulator.noise.NoiseModel`
 
 from __future__ import annotations
 
-import math
-
-import cv2
 import numpy as np
 
 from emulator.errors import EmulationError
-from emulator.pools import lut_pool
+from emulator.lut import apply_lut, check_exposure, check_raw  # re-exported: the DN lookups live in emulator.lut
 from emulator.response import CameraResponse
 
 __all__ = [
@@ -49,100 +46,6 @@ NOISE_MODES = ("none", "consistent")
 #: step (error about k/2 = 4 DN) and the shot noise is sqrt(8) = 2.8 times a capture's at the target;
 #: a complete sweep of brackets a factor 2 apart never needs more than 2 (docs/commands.md, Reports).
 UPWARD_RATIO_FLAG = 8.0
-
-#: Rows per gather block: the index conversion of a block stays in the CPU cache.
-_BLOCK_ROWS = 16
-#: Images with at least this many pixels are split across two threads.
-_THREAD_MIN_PIXELS = 1 << 20
-
-
-def check_exposure(value, name: str) -> float:
-    """Return ``value`` as float, refusing non-finite or non-positive exposures, and values that
-    are not numbers (``True``, ``"8"``)."""
-    if isinstance(value, (bool, np.bool_, str, bytes)):
-        raise EmulationError(f"{name} must be a number of milliseconds, got {value!r}")
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise EmulationError(f"{name} must be a number of milliseconds, got {value!r}") from None
-    if not math.isfinite(v) or v <= 0.0:
-        raise EmulationError(f"{name} must be finite and positive (milliseconds), got {value!r}")
-    return v
-
-
-def check_raw(raw, white_level: int, name: str = "raw") -> np.ndarray:
-    """Check that ``raw`` is a 2-D uint16 image with values <= white_level."""
-    if not isinstance(raw, np.ndarray):
-        raise EmulationError(f"{name} must be a numpy array, got {type(raw).__name__}")
-    if raw.dtype != np.uint16:
-        raise EmulationError(f"{name} must be uint16 (12-bit DN), got dtype {raw.dtype}")
-    if raw.ndim != 2:
-        raise EmulationError(f"{name} must be a 2-D Bayer mosaic, got shape {raw.shape}")
-    if raw.size == 0:
-        raise EmulationError(f"{name} is empty (shape {raw.shape})")
-    top = int(raw.max())
-    if top > white_level:
-        n = int(np.count_nonzero(raw > white_level))
-        first = np.unravel_index(int(np.argmax(raw > white_level)), raw.shape)
-        raise EmulationError(
-            f"{name} has {n} pixel(s) above white_level={white_level} (max {top}, first at row "
-            f"{first[0]}, col {first[1]}): wrong bit depth or wrong camera response?"
-        )
-    return raw
-
-
-def _padded_u16_table(table: np.ndarray) -> np.ndarray:
-    """A uint16 table extended to all 65536 inputs (entries above its end repeat the last)."""
-    full = np.empty(1 << 16, dtype=np.uint16)
-    full[: table.size] = table
-    full[table.size :] = table[-1]
-    return full
-
-
-def _opencv_lut_u16() -> bool:
-    """Whether this OpenCV's ``cv2.LUT`` maps uint16 images (OpenCV >= 5), checked once."""
-    global _CV_LUT_U16
-    if _CV_LUT_U16 is None:
-        try:
-            probe = np.arange(4, dtype=np.uint16).reshape(2, 2)
-            table = np.arange(1 << 16, dtype=np.uint16)[::-1].copy()
-            _CV_LUT_U16 = bool(np.array_equal(cv2.LUT(probe, table), table[probe]))
-        except cv2.error:
-            _CV_LUT_U16 = False
-    return _CV_LUT_U16
-
-
-_CV_LUT_U16: bool | None = None
-
-
-def apply_lut(table: np.ndarray, raw: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-    """``table[raw]`` for a uint16 image: one native gather.
-
-    With OpenCV >= 5, ``cv2.LUT`` on a uint16 image and a 65536-entry table (about 2 ms for
-    1920x1200 on this project's machine); otherwise a blocked ``np.take`` whose index
-    conversion stays in the CPU cache, on two threads for large images.  Both are exact.
-    """
-    if table.dtype == np.uint16 and raw.dtype == np.uint16 and _opencv_lut_u16():
-        result = cv2.LUT(raw, _padded_u16_table(table))
-        if out is None:
-            return result
-        out[...] = result
-        return out
-    if out is None:
-        out = np.empty(raw.shape, dtype=table.dtype)
-    rows = raw.shape[0]
-
-    def work(start: int, stop: int) -> None:
-        for i in range(start, stop, _BLOCK_ROWS):
-            j = min(i + _BLOCK_ROWS, stop)
-            np.take(table, raw[i:j], out=out[i:j], mode="clip")
-
-    if raw.size >= _THREAD_MIN_PIXELS and rows >= 2 * _BLOCK_ROWS:
-        half = rows // 2
-        list(lut_pool().map(lambda ab: work(*ab), [(0, half), (half, rows)]))
-    else:
-        work(0, rows)
-    return out
 
 
 def emulation_lut(response: CameraResponse, source_ms: float, target_ms: float) -> tuple[np.ndarray, np.ndarray]:

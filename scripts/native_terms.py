@@ -126,7 +126,7 @@ def _flow_warp(src_dn, ref_dn, H, response):
     """``src_dn`` moved by ``H`` and then onto ``ref_dn`` by a dense flow (DIS on the RGGB quads' log gray)."""
     import cv2
 
-    from emulator.blur import _forward_dn
+    from emulator.lut import forward_dn
     from emulator.native import _plane_homography
 
     ls, lr = (response.inverse(x).astype(np.float32) for x in (src_dn, ref_dn))
@@ -147,7 +147,7 @@ def _flow_warp(src_dn, ref_dn, H, response):
         sx, sy = (((Hi[i, 0] * mx + Hi[i, 1] * my + Hi[i, 2]) / den).astype(np.float32) for i in (0, 1))
         out[py::2, px::2] = cv2.remap(np.ascontiguousarray(ls[py::2, px::2]), sx, sy, cv2.INTER_LINEAR,
                                       borderMode=cv2.BORDER_REPLICATE)
-    return _forward_dn(response, out, 1 << 20)
+    return forward_dn(response, out, 1 << 20)
 
 
 def attribution(seq, live_frames, response, config, names, traj, into) -> None:

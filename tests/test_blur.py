@@ -257,12 +257,12 @@ def test_hook_outside_the_gyro_span_emulates_plainly():
 
 @pytest.mark.parametrize("resp", [CameraResponse.linear(4095), CameraResponse.gamma(2.2, 4094)])
 def test_forward_dn_is_rint_of_f(resp):
-    from emulator.blur import _forward_dn
+    from emulator.lut import forward_dn
 
     h = np.random.default_rng(5).uniform(-1.0, 1.2 * resp.g[resp.white_level], size=200_000).astype(np.float32)
     h[:5] = [resp.g[0], resp.g[resp.white_level], 0.0, resp.g[100], resp.g[3000]]  # knots and ends
     expect = np.clip(np.rint(resp.forward(h)), resp.black_level, resp.white_level).astype(np.uint16)
-    got = _forward_dn(resp, h)
+    got = forward_dn(resp, h)
     # identical but for exact .5 ties (rint rounds them to even, the grid up)
     assert got.dtype == np.uint16 and np.count_nonzero(got != expect) <= 2
 

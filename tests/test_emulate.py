@@ -199,7 +199,7 @@ def test_lut_cache_is_thread_safe_under_eviction(monkeypatch):
 def test_both_gather_paths_agree(monkeypatch):
     import importlib
 
-    em = importlib.import_module("emulator.emulate")  # the module, not the re-exported function
+    em = importlib.import_module("emulator.lut")  # the module that holds the gather
 
     rng = np.random.default_rng(9)
     raw = rng.integers(0, 4096, (1200, 1920), dtype=np.uint16)
