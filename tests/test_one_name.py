@@ -94,7 +94,7 @@ OWNED = {
     "read_times": "emulator.io.stack",
     "write_times": "emulator.io.stack",
     "read_camera_info": "emulator.io.camera_info",
-    "read_run_folder": "emulator.io.runfolder",
+    "read_run_folder": "emulator.io.runread",
     "load_sequence": "emulator.io.borealhdr",
     "write_frame": "emulator.io.borealhdr",
     "bayer_to_gray8": "emulator.gray",
