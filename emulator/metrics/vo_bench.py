@@ -13,24 +13,26 @@ from pathlib import Path
 
 import numpy as np
 
-from emulator.errors import CalibrationError, ExposimError, MetricsError, RunFolderError, TrajectoryError
+from emulator.errors import ExposimError, MetricsError, RunFolderError, TrajectoryError
+from emulator.io.borealhdr import read_recording_metadata
 from emulator.io.files import RESULTS_FILE, prepare_output
 from emulator.io.runfolder import RunFolder, read_run_folder
 from emulator.io.tum import write_tum
 from emulator.metrics.bench_common import CONVERSION, _features_sheet, _frames, _progress, _version, benchmark_frames
 from emulator.metrics.features import load_gray8
-from emulator.metrics.rpe import ESTIMATE_HEADER, rpe_by_length
-from emulator.metrics.stereo import (
-    choose_calibration,
-    epipolar_residual_px,
-    estimate_stereo_extrinsics,
-    load_stereo_calibration,
-    stereo_matches,
-    stereo_rectification,
-)
+from emulator.metrics.rpe import ESTIMATE_HEADER, pair_segments, rpe_by_length
+from emulator.metrics.stereo import choose_calibration, load_stereo_calibration, stereo_rectification
 from emulator.metrics.trajectory import associate, read_trajectory, trajectory_from_poses
 from emulator.metrics.vo import VOParameters, run_stereo_vo
+from emulator.metrics.vo_extrinsics import (  # re-exported: the extrinsics check lives in emulator.metrics.vo_extrinsics
+    REFINE_PAIRS,
+    REFINE_THRESHOLD_FRACTION,
+    check_extrinsics,
+    decide_extrinsics,
+)
 from emulator.metrics.vo_table import vo_ranking, vo_summary
+from emulator.report.bench import write_vo_report
+from emulator.stats import compare_methods_by_segment
 
 __all__ = [
     "bench_vo",
@@ -61,14 +63,6 @@ DEFAULT_DELTA_FRACTIONS = (0.1, 0.2, 0.3, 0.4, 0.5)
 REFERENCE_MAX_DIFF_S = 0.06
 #: Reference that synthetic sequences write, used when no reference is given.
 SYNTHETIC_REFERENCE = Path("ground_truth") / "poses_left.txt"
-#: Stereo pairs (spread over the first method's frames) used to measure the calibration's
-#: epipolar residual and, where needed, to re-estimate the extrinsics.
-REFINE_PAIRS = 2
-#: ``refine_extrinsics="auto"`` refines when the median epipolar residual of left-right
-#: matches under the given calibration exceeds this fraction of the VO's row tolerance
-#: (``VOParameters.max_row_diff_px``): beyond it, most true matches fall outside the
-#: stereo row check and the VO loses its depth points.
-REFINE_THRESHOLD_FRACTION = 0.5
 
 
 def no_reference_note(sequence: str | Path | None) -> str:
@@ -87,8 +81,6 @@ def no_reference_note(sequence: str | Path | None) -> str:
 def _choice_record(choice, sequence) -> dict:
     """The calibration choice as results.json keeps it; a synthetic recording (written by exposim
     synth) has no recording date, whatever its timestamps decode to, and is marked ``synthetic``."""
-    from emulator.io.borealhdr import read_recording_metadata
-
     record = choice.to_dict()
     generator = {}
     if sequence is not None and Path(sequence).is_dir():
@@ -124,74 +116,6 @@ def evo_result_path(out: Path, relation: str, delta_m: float, method: str) -> Pa
     ``evo/rpe_<relation>_<delta>m/<method>.zip`` (``evo_res evo/rpe_trans_1.00m/*.zip``
     compares the methods at one pair length)."""
     return out / "evo" / f"rpe_{relation}_{delta_m:.2f}m" / f"{method}.zip"
-
-
-def check_extrinsics(calib, frames, run: RunFolder, mode="auto", parameters: VOParameters | None = None):
-    """``bench vo``'s extrinsics check and refinement (the same code): ``(calibration, record)``.
-
-    ``frames``: a method's run frames (stereo pairs); ``mode``: ``"auto"``, 0 or a number of
-    pairs.  ``record`` holds ``epipolar_residual_px``, ``refined``, ``reason`` and, when
-    refined, ``estimate`` (with ``epipolar_residual_after_px``); ``limitations`` when refinement
-    was needed and failed.
-    """
-    limitations: list[str] = []
-    calib, record = _refine(calib, frames, run, mode, parameters or VOParameters(), limitations)
-    if limitations:
-        record["limitations"] = limitations
-    return calib, record
-
-
-def _refine(calib, frames, run: RunFolder, mode, parameters: VOParameters, limitations: list[str]):
-    """The calibration to rectify with, and the record of the extrinsics decision."""
-    if mode in (0, "0", "never", None):
-        return calib, {"mode": "never", "refined": False, "reason": "refinement disabled (--refine-extrinsics 0)"}
-    auto = mode == "auto"
-    if not auto:
-        try:
-            n_pairs = int(mode)
-        except (TypeError, ValueError):
-            raise MetricsError(f"refine_extrinsics must be 'auto', 0 or a number of stereo pairs, got {mode!r}") from None
-        if n_pairs < 0:
-            raise MetricsError(f"refine_extrinsics must be 'auto', 0 or a positive number of pairs, got {n_pairs}")
-    else:
-        n_pairs = REFINE_PAIRS
-    picks = np.unique(np.linspace(0, len(frames) - 1, min(n_pairs, len(frames))).round().astype(int))
-    pairs = (
-        (load_gray8(frames[i].left, white_level=run.white_level, black_level=run.black_level),
-         load_gray8(frames[i].right, white_level=run.white_level, black_level=run.black_level))
-        for i in picks
-    )
-    matches = stereo_matches(calib, pairs, seed=parameters.seed)
-    residual = epipolar_residual_px(calib, matches)
-    threshold = REFINE_THRESHOLD_FRACTION * parameters.max_row_diff_px
-    record = {
-        "mode": "auto" if auto else f"always ({n_pairs} pairs)",
-        "n_pairs": int(len(picks)),
-        "n_matches": matches.n_matches,
-        "epipolar_residual_px": None if not np.isfinite(residual) else round(residual, 4),
-        "threshold_px": threshold,
-        "criterion": (f"median epipolar distance of left-right SIFT matches (ratio 0.7) of {len(picks)} stereo pair(s) "
-                      f"under the given calibration > {threshold:g} px ({REFINE_THRESHOLD_FRACTION:g} x the VO's row "
-                      f"tolerance of {parameters.max_row_diff_px:g} px)"),
-        "refined": False,
-    }
-    if auto and not (np.isfinite(residual) and residual > threshold):
-        record["reason"] = ("the given calibration fits the images" if np.isfinite(residual)
-                            else "no left-right match to measure the residual; calibration used as given")
-        return calib, record
-    try:
-        est = estimate_stereo_extrinsics(calib, matches, seed=parameters.seed)
-    except CalibrationError as exc:
-        if not auto:
-            raise
-        record["reason"] = f"refinement needed but failed ({exc}); calibration used as given"
-        limitations.append(f"Stereo extrinsics: the calibration leaves a {residual:.1f} px epipolar residual and "
-                           f"could not be refined ({exc}); stereo depth will be poor.")
-        return calib, record
-    record.update(refined=True, estimate=est.to_dict(),
-                  reason=(f"re-estimated, as the residual exceeds {threshold:g} px" if auto
-                          else f"re-estimated, as asked (--refine-extrinsics {n_pairs})"))
-    return calib.with_extrinsics(est.R, est.T), record
 
 
 def _check_inputs(run_dir, out_dir, methods, max_frames, calibration, baseline_m, force, every_frame=False):
@@ -305,9 +229,6 @@ def rpe_intervals(method_results: dict, *, seed: int = 0) -> list[dict]:
     segments of the run (:func:`emulator.metrics.rpe.pair_segments`,
     :func:`emulator.stats.compare_methods_by_segment`; methods on the same reference pairs paired).
     Methods without an RPE at that length are left out; a length no method has is left out."""
-    from emulator.metrics.rpe import pair_segments
-    from emulator.stats import compare_methods_by_segment
-
     by_delta: dict[float, dict] = {}
     for name, entry in method_results.items():
         for d in (entry.get("rpe") or {}).get("deltas", []):
@@ -336,6 +257,31 @@ def _note_failures(method_results: dict, has_reference: bool, limitations: list[
     limitations.append(f"VO lost track on {len(failed)} of {len(method_results)} method run(s) ({shown})"
                        + (f"; their RPE is not computed ({', '.join(no_rpe)}): pass --rpe-on-failure to compute it "
                           "anyway" if no_rpe else "") + ".")
+
+
+def _calibration_record(calib, rect, choice, run: RunFolder, extrinsics_record: dict) -> dict:
+    """``results["calibration"]``: the folder, the rectification and the extrinsics decision."""
+    return {
+        "folder": str(choice.folder),
+        "baseline_m": calib.baseline_m,
+        "rectified_fx_px": float(rect.K[0, 0]),
+        "rectified_size": list(rect.size),
+        "image_size": list(calib.image_size),
+        "method": "cv2.stereoRectify from K, D of both cameras, R = R_r^T R_l, T = -R_r^T [b, 0, 0], alpha 0"
+        + ("; R (pitch, roll) and the baseline direction re-estimated from left-right matches (yaw and "
+           "baseline length as calibrated)" if extrinsics_record.get("estimate") else ""),
+        "choice": _choice_record(choice, run.sequence),
+        "extrinsics": extrinsics_record,
+        "refined_extrinsics": extrinsics_record.get("estimate"),
+    }
+
+
+def _reference_over_run(ref_traj, method_results: dict, max_diff_s: float) -> np.ndarray:
+    """The reference's positions over the run's time span (all methods' frames), for the top view."""
+    t0 = min(float(vo_e["frames"]["timestamps_ns"][0]) for vo_e in method_results.values()) / 1e9
+    t1 = max(float(vo_e["frames"]["timestamps_ns"][-1]) for vo_e in method_results.values()) / 1e9
+    keep = (ref_traj.timestamps >= t0 - max_diff_s) & (ref_traj.timestamps <= t1 + max_diff_s)
+    return ref_traj.positions_xyz[keep]
 
 
 def bench_vo(
@@ -420,14 +366,12 @@ def bench_vo(
         The content of ``results.json``.
     """
     run, selected, choice, calib = _check_inputs(run_dir, out_dir, methods, max_frames, calibration, baseline_m, force, every_frame)
-    calib_dir = choice.folder
     limitations: list[str] = []
     ref_path, ref_source = _reference_path(run, reference)
     ref_traj, deltas = _reference_and_deltas(ref_path, run, selected, max_diff_s, deltas_m, delta_fractions,
                                              limitations)
-    calib, extrinsics_record = _refine(calib, next(iter(selected.values())), run, refine_extrinsics, parameters,
-                                       limitations)
-    extrinsics = extrinsics_record.get("estimate")
+    calib, extrinsics_record = decide_extrinsics(calib, next(iter(selected.values())), run, refine_extrinsics,
+                                                 parameters, limitations)
     rect = stereo_rectification(calib, scale=scale)
     out = prepare_output(out_dir, force=force)
 
@@ -443,10 +387,7 @@ def bench_vo(
 
     _note_failures(method_results, ref_traj is not None, limitations)
     if ref_xyz is not None:  # plot the whole reference over the run's span, in its own frame
-        t0 = min(float(vo_e["frames"]["timestamps_ns"][0]) for vo_e in method_results.values()) / 1e9
-        t1 = max(float(vo_e["frames"]["timestamps_ns"][-1]) for vo_e in method_results.values()) / 1e9
-        keep = (ref_traj.timestamps >= t0 - max_diff_s) & (ref_traj.timestamps <= t1 + max_diff_s)
-        ref_xyz = ref_traj.positions_xyz[keep]
+        ref_xyz = _reference_over_run(ref_traj, method_results, max_diff_s)
     results = {
         "benchmark": "vo",
         "exposim_version": _version(),
@@ -455,19 +396,7 @@ def bench_vo(
         "sequence": None if run.sequence is None else str(run.sequence),
         "reference": None if ref_path is None else str(ref_path),
         "reference_source": ref_source,
-        "calibration": {
-            "folder": str(calib_dir),
-            "baseline_m": calib.baseline_m,
-            "rectified_fx_px": float(rect.K[0, 0]),
-            "rectified_size": list(rect.size),
-            "image_size": list(calib.image_size),
-            "method": "cv2.stereoRectify from K, D of both cameras, R = R_r^T R_l, T = -R_r^T [b, 0, 0], alpha 0"
-            + ("; R (pitch, roll) and the baseline direction re-estimated from left-right matches (yaw and "
-               "baseline length as calibrated)" if extrinsics else ""),
-            "choice": _choice_record(choice, run.sequence),
-            "extrinsics": extrinsics_record,
-            "refined_extrinsics": extrinsics,
-        },
+        "calibration": _calibration_record(calib, rect, choice, run, extrinsics_record),
         "parameters": {
             "vo": asdict(parameters),
             "scale": scale,
@@ -491,8 +420,6 @@ def bench_vo(
         "figures": ({"fig6": "fig6_rpe.png"} if ref_traj is not None else {}) | {"trajectories": "trajectories.png"},
         "report": "report.md",
     }
-    from emulator.report.bench import write_vo_report
-
     write_vo_report(out, results, aligned_xyz, ref_xyz if ref_traj is not None else None,
                     _features_sheet(run, None, max_frames), with_rpe=ref_traj is not None)
     return results
