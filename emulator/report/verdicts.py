@@ -20,6 +20,7 @@ __all__ = [
     "PAPER_VO_FAILED",
     "DASH_NOTE",
     "dash_note",
+    "dash_cell",
     "success_verdict",
     "matches_verdict",
     "uniformity_verdict",
@@ -53,6 +54,11 @@ def dash_note(symbol: str = "-") -> str:
 
 #: The note under every table that may hold a "-" cell.
 DASH_NOTE = dash_note("-")
+
+
+def dash_cell(value, spec: str = ".1f") -> str:
+    """A table cell: ``value`` formatted by ``spec``, or ``-`` where it is missing (None; :data:`DASH_NOTE`)."""
+    return "-" if value is None else format(value, spec)
 
 
 def _pixels(wh) -> int:
