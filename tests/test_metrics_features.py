@@ -122,16 +122,16 @@ def test_sift_uniformity_on_a_known_blob_layout():
 
 
 def test_an_image_seen_again_gets_the_same_features_and_a_changed_one_its_own(monkeypatch):
-    import emulator.metrics.features as features
+    import emulator.metrics.sift as sift
 
-    monkeypatch.setattr(features, "_SIFT_MEMO", features._SiftMemo())
+    monkeypatch.setattr(sift, "_SIFT_MEMO", sift.SiftMemo())
     img = texture((200, 260), seed=3)
     first = detect_sift(img)
     again = detect_sift(img.copy())  # the same bytes in another array
     assert again is first and not first.points.flags.writeable and not first.descriptors.flags.writeable
     with pytest.raises(ValueError):
         first.descriptors[0, 0] = 1.0
-    features._SIFT_MEMO.clear()
+    sift._SIFT_MEMO.clear()
     fresh = detect_sift(img)  # a fresh detection finds exactly what the memo gave
     assert fresh is not first
     np.testing.assert_array_equal(fresh.points, first.points)
@@ -147,20 +147,20 @@ def test_an_image_seen_again_gets_the_same_features_and_a_changed_one_its_own(mo
 
 
 def test_the_sift_memo_drops_the_least_recently_used_past_its_bytes(monkeypatch):
-    import emulator.metrics.features as features
+    import emulator.metrics.sift as sift
 
-    memo = features._SiftMemo()
-    monkeypatch.setattr(features, "_SIFT_MEMO", memo)
+    memo = sift.SiftMemo()
+    monkeypatch.setattr(sift, "_SIFT_MEMO", memo)
     a, b, c = (texture((160, 200), seed=s) for s in (4, 5, 6))
     fa = detect_sift(a)
     size = fa.points.nbytes + fa.descriptors.nbytes
     fb = detect_sift(b)
-    monkeypatch.setattr(features, "SIFT_MEMO_BYTES", size + fb.points.nbytes + fb.descriptors.nbytes)
+    monkeypatch.setattr(sift, "SIFT_MEMO_BYTES", size + fb.points.nbytes + fb.descriptors.nbytes)
     assert detect_sift(a) is fa  # a is now the most recent
     detect_sift(c)  # over the bound: b, the least recently used, goes
-    assert memo._bytes <= features.SIFT_MEMO_BYTES
+    assert memo._bytes <= sift.SIFT_MEMO_BYTES
     assert detect_sift(b) is not fb
-    monkeypatch.setattr(features, "SIFT_MEMO_BYTES", 16)  # larger than the whole bound: not kept
+    monkeypatch.setattr(sift, "SIFT_MEMO_BYTES", 16)  # larger than the whole bound: not kept
     big = detect_sift(texture((160, 200), seed=7))
     assert detect_sift(texture((160, 200), seed=7)) is not big
 
