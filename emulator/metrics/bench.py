@@ -40,6 +40,7 @@ from emulator.metrics.vo_bench import (  # re-exported: the VO benchmark lives i
     bench_vo,
     evo_result_path,
 )
+from emulator.report import bench as report
 from emulator.report.html import write_report
 
 __all__ = [
@@ -84,6 +85,28 @@ def _still_trending(run_dir, names: list[str]) -> dict:
         return {}
     trending = trending_methods({n: per_recorder_cycle(t).get("target_ms", []) for n, t in tables.items()})
     return {"still_trending": trending} if trending else {}
+
+
+def _run_features(run: RunFolder, max_frames: int | None, progress, **analysis) -> dict:
+    """One run folder's entry of ``results["runs"]``: each method's :func:`analyse_sequence` (``analysis``:
+    its keywords) on the left images, and whether the method was still trending."""
+    per_method = {}
+    for name, method in run.methods.items():
+        frames = _frames(method, max_frames)
+        images = (
+            (f.timestamp_ns, f.exposure_ms, load_gray8(f.left, white_level=run.white_level,
+                                                       black_level=run.black_level))
+            for f in _progress(frames, progress, f"features {name}", len(frames))
+        )
+        per_method[name] = analyse_sequence(images, **analysis).to_dict()
+    return {
+        "run_dir": str(run.path),
+        "sequence": None if run.sequence is None else str(run.sequence),
+        "white_level": run.white_level,
+        "black_level": run.black_level,
+        "methods": per_method,
+        **_still_trending(run.path, list(per_method)),
+    }
 
 
 def bench_features(
@@ -158,27 +181,8 @@ def bench_features(
         "conversion": CONVERSION,
         "sift": "cv2.SIFT_create defaults: nOctaveLayers=3, contrastThreshold=0.04, edgeThreshold=10, sigma=1.6",
     }
-    run_results = []
-    for run in runs:
-        per_method = {}
-        for name, method in run.methods.items():
-            frames = _frames(method, max_frames)
-            images = (
-                (f.timestamp_ns, f.exposure_ms, load_gray8(f.left, white_level=run.white_level,
-                                                           black_level=run.black_level))
-                for f in _progress(frames, progress, f"features {name}", len(frames))
-            )
-            seq = analyse_sequence(images, grid=grid, ratio=ratio, n_features=n_features, matcher=matcher,
-                                   scale=scale, seed=seed)
-            per_method[name] = seq.to_dict()
-        run_results.append({
-            "run_dir": str(run.path),
-            "sequence": None if run.sequence is None else str(run.sequence),
-            "white_level": run.white_level,
-            "black_level": run.black_level,
-            "methods": per_method,
-            **_still_trending(run.path, list(per_method)),
-        })
+    run_results = [_run_features(run, max_frames, progress, grid=grid, ratio=ratio, n_features=n_features,
+                                 matcher=matcher, scale=scale, seed=seed) for run in runs]
     if taus is None:  # to where every curve has reached 0, so the success verdicts are not trivially true
         taus = tau_grid(max((r["methods"][m].get("min_matches") or 0 for r in run_results for m in r["methods"]),
                             default=0))
@@ -196,8 +200,6 @@ def bench_features(
         "figures": {"fig4": "fig4_features.png"},
         "report": "report.md",
     }
-    from emulator.report import bench as report
-
     report.plot_features(results, out / "fig4_features.png")
     sheet = _features_sheet(runs[0], run_results[0], max_frames)
     write_report(out, report.features_report(results, "fig4_features.png"), figures=["fig4_features.png"],
