@@ -62,11 +62,10 @@ from emulator.calibration.result import (
     CalibrationResult,
     Progress,
     _report,
-    bayer_subsample,
     origin_warnings,
-    table_top_for,
 )
 from emulator.calibration.solver import _blas_single_thread, _finish, _Knots, _robust_scale, _solve_als, _solve_varpro
+from emulator.calibration.stack_checks import check_stack, estimate_noise_dn, stack_warnings
 from emulator.errors import CalibrationError
 from emulator.io.pcalib import PCALIB_SAMPLES
 from emulator.io.stack import Stack, read_stack
@@ -75,106 +74,68 @@ from emulator.levels import BOREALHDR_LEVELS
 __all__ = ["estimate_noise_dn", "fit_inverse_response", "calibrate_stack"]
 
 
-def estimate_noise_dn(
-    raw: np.ndarray,
-    *,
-    black_level: int = BOREALHDR_LEVELS.black,
-    white_level: int = BOREALHDR_LEVELS.white,
-    margin: int = 8,
-) -> float:
-    """Temporal noise in DN estimated from one image (Immerkaer 1996, robust variant).
-
-    The Laplacian-like kernel [[1,-2,1],[-2,4,-2],[1,-2,1]] is applied to each Bayer plane
-    (so a mosaic's colours do not mix); sigma = 1.4826 * median|response| / 6 over pixels
-    whose 3x3 neighbourhood is unclipped.  Texture inflates the estimate, so it is an upper
-    bound in textured scenes; NaN when fewer than 100 pixels are usable.
-    """
-    vals = []
-    for p in bayer_subsample(np.asarray(raw), 1):
-        if p.shape[0] < 3 or p.shape[1] < 3:
-            continue
-        x = p.astype(np.float64)
-        lap = (
-            x[:-2, :-2] - 2 * x[:-2, 1:-1] + x[:-2, 2:]
-            - 2 * x[1:-1, :-2] + 4 * x[1:-1, 1:-1] - 2 * x[1:-1, 2:]
-            + x[2:, :-2] - 2 * x[2:, 1:-1] + x[2:, 2:]
-        )
-        ok = (p > black_level + margin) & (p < white_level - margin)
-        ok3 = ok[:-2, :-2] & ok[:-2, 2:] & ok[2:, :-2] & ok[2:, 2:] & ok[1:-1, 1:-1]
-        vals.append(lap[ok3])
-    v = np.concatenate(vals) if vals else np.empty(0)
-    if v.size < 100:
-        return float("nan")
-    return 1.4826 * float(np.median(np.abs(v))) / 6.0
+def _flat_samples(dn: np.ndarray, valid: np.ndarray, ts: np.ndarray):
+    """The unclipped samples in pixel-major order (chunks of pixels are contiguous): ``(DN, pixel index,
+    image index, relative exposure)``, one entry per sample."""
+    n_img, n_pix = dn.shape
+    d_flat = dn.T[valid.T]
+    pix_idx = np.broadcast_to(np.arange(n_pix)[:, None], (n_pix, n_img))[valid.T]
+    img_idx = np.broadcast_to(np.arange(n_img)[None, :], (n_pix, n_img))[valid.T]
+    return d_flat, pix_idx, img_idx, ts[img_idx]
 
 
-def _stack_warnings(t: np.ndarray, observed: tuple[int, int], lo: int, hi: int) -> list[str]:
-    """Conditions under which the result is less constrained than it looks."""
-    out = []
-    lt = np.log(np.unique(t))
-    if lt.size >= 3:
-        step = float(np.min(np.diff(lt)))
-        k = (lt - lt[0]) / step
-        if np.all(np.abs(k - np.round(k)) < 0.02):
-            out.append(
-                f"exposure times lie on a geometric progression (ratio {math.exp(step):.4g}): such a stack "
-                f"determines f^-1 only up to a factor periodic in log exposure, which the smoothness prior "
-                f"resolves approximately; exposure times off the progression (jittered) constrain it"
-            )
-    span = hi - lo
-    if observed[1] - observed[0] < 0.5 * span:
-        out.append(
-            f"only DN {observed[0]}..{observed[1]} were observed unclipped; f^-1 is extrapolated outside, "
-            f"extend the exposure range"
+def _run_solver(solver: str, knots, d_flat, pix_idx, t_flat, n_pix, *, smoothness, huber_k, max_iter, tol, progress,
+                init):
+    """The knots of U fitted by ``solver`` (``"varpro"`` or ``"als"``) on one BLAS thread:
+    ``(knots, sample weights, knot weights, iterations, converged)``."""
+    with _blas_single_thread():
+        return (_solve_varpro if solver == "varpro" else _solve_als)(
+            knots, d_flat, pix_idx, t_flat, n_pix, smoothness=smoothness, huber_k=huber_k,
+            max_iter=max_iter, tol=tol, progress=progress, c0=init,
         )
-    return out
 
 
-def _checked_stack(dn, exposures_ms, white_level: int, black_level: int, margin_dn: int, source: str):
-    """The samples of :func:`fit_inverse_response` checked: ``(dn int64 of the kept pixels, valid mask,
-    exposures, distinct exposures, unclipped samples per image, low, high, table top)``."""
-    dn = np.asarray(dn)
-    if dn.ndim != 2:
-        raise CalibrationError(f"{source}: samples must be (images, pixels), got shape {dn.shape}")
-    if dn.dtype.kind not in "ui":
-        if dn.dtype.kind != "f" or not np.all(np.isfinite(dn)):
-            raise CalibrationError(f"{source}: dn must be finite digital numbers, got {dn.dtype} "
-                                   f"{'with NaN or infinity' if dn.dtype.kind == 'f' else ''}".rstrip())
-    t = np.asarray(exposures_ms, dtype=np.float64)
-    if t.shape != (dn.shape[0],):
-        raise CalibrationError(f"{source}: {dn.shape[0]} images but {t.size} exposure times")
-    if not np.all(np.isfinite(t) & (t > 0)):
-        raise CalibrationError(f"{source}: exposure times must be positive and finite")
-    distinct = np.unique(t)
-    if distinct.size < 2:
-        raise CalibrationError(
-            f"{source}: needs at least two distinct exposure times, got {distinct.size} "
-            f"({', '.join(f'{e:g}' for e in distinct)} ms)"
-        )
-    white, black = int(white_level), int(black_level)
-    top = table_top_for(white)
-    if dn.size and int(dn.max()) > top:
-        raise CalibrationError(f"{source}: DN {int(dn.max())} exceeds the {top} of a {white.bit_length()}-bit table")
-    lo, hi = black + int(margin_dn), white - int(margin_dn)
-    if hi <= lo + 1:
-        raise CalibrationError(f"{source}: margin {margin_dn} DN leaves no unclipped range in {black}..{white}")
-    valid = (dn > lo) & (dn < hi)
-    n_valid_img = valid.sum(axis=1)
-    if not valid.any():
-        raise CalibrationError(
-            f"{source}: every sampled pixel of all {dn.shape[0]} images is clipped "
-            f"(<= {lo} or >= {hi} DN): all images saturated or black"
-        )
-    # a pixel needs unclipped readings at two different exposures
-    t_max = np.where(valid, t[:, None], -np.inf).max(axis=0)
-    t_min = np.where(valid, t[:, None], np.inf).min(axis=0)
-    keep = t_max > t_min
-    if keep.sum() < 16:
-        raise CalibrationError(
-            f"{source}: only {int(keep.sum())} sampled pixel(s) are unclipped at two or more distinct "
-            f"exposures (need 16); the stack does not span the exposure range (mostly saturated or black)"
-        )
-    return dn[:, keep].astype(np.int64), valid[:, keep], t, distinct, n_valid_img, lo, hi, top
+def _fit_residuals(resp, d_flat, pix_idx, t_flat, w, n_pix):
+    """The final residual in DN with the finished response (B refitted per pixel) and the predicted
+    exposures ``g`` of the samples: ``(residual, g)``."""
+    u = resp.g[d_flat]
+    num = np.bincount(pix_idx, w * t_flat * u, n_pix)
+    den = np.bincount(pix_idx, w * t_flat * t_flat, n_pix)
+    b = num / np.maximum(den, 1e-300)
+    pred_g = t_flat * b[pix_idx]
+    return d_flat - resp.forward(pred_g), pred_g
+
+
+def _checked_solver(solver: str, max_iter: int | None) -> int:
+    """``max_iter`` or the solver's default (10 reweightings for varpro, 500 alternations for als)."""
+    if solver not in ("varpro", "als"):
+        raise ValueError(f"solver must be 'varpro' or 'als', got {solver!r}")
+    if max_iter is None:
+        max_iter = 10 if solver == "varpro" else 500
+    return max_iter
+
+
+def _solver_info(solver, iterations, converged, knots, margin_dn, smoothness, huber_k) -> dict:
+    """How the fit was made, as ``info`` records it."""
+    return {
+        "solver": solver,
+        "iterations": int(iterations),
+        "converged": bool(converged),
+        "n_knots": int(knots.n),
+        "margin_dn": int(margin_dn),
+        "smoothness": float(smoothness),
+        "huber_k": float(huber_k),
+    }
+
+
+def _per_image_info(n_valid_img, per_image_rms, scales, outliers) -> dict:
+    """Each image's unclipped samples, residual and exposure factor, and the outlier, as ``info`` records them."""
+    return {
+        "unclipped_samples_per_image": [int(v) for v in n_valid_img],
+        "residual_rms_dn_per_image": [None if not math.isfinite(v) else float(v) for v in per_image_rms],
+        "exposure_scale_per_image": [None if not math.isfinite(v) else float(v) for v in scales],
+        "outlier_images": outliers,
+    }
 
 
 def _per_image_rms(img_idx: np.ndarray, r: np.ndarray, n_img: int) -> np.ndarray:
@@ -192,11 +153,8 @@ def _outliers(knots, solver, d_flat, pix_idx, img_idx, t_flat, t, n_img, n_pix, 
     outliers: list[dict] = []
 
     def solve(d_sub, pix_sub, t_sub):
-        with _blas_single_thread():
-            return (_solve_varpro if solver == "varpro" else _solve_als)(
-                knots, d_sub, pix_sub, t_sub, n_pix, smoothness=smoothness, huber_k=huber_k,
-                max_iter=max_iter, tol=tol, progress=None, c0=init,
-            )
+        return _run_solver(solver, knots, d_sub, pix_sub, t_sub, n_pix, smoothness=smoothness, huber_k=huber_k,
+                           max_iter=max_iter, tol=tol, progress=None, init=init)
 
     def finish(c_sub):
         return _finish(c_sub, knots, np.ones(knots.n), "refit", black)[0]
@@ -298,43 +256,27 @@ def fit_inverse_response(
     -------
     CalibrationResult
     """
-    dn, valid, t, distinct, n_valid_img, lo, hi, top = _checked_stack(dn, exposures_ms, white_level, black_level,
+    dn, valid, t, distinct, n_valid_img, lo, hi, top = check_stack(dn, exposures_ms, white_level, black_level,
                                                                        margin_dn, source)
     white, black = int(white_level), int(black_level)
     n_img, n_pix = dn.shape
     ts = t / t.max()
 
     knots = _Knots(n_knots, top)
-    # samples in pixel-major order (chunks of pixels are contiguous)
-    d_flat = dn.T[valid.T]
-    pix_idx = np.broadcast_to(np.arange(n_pix)[:, None], (n_pix, n_img))[valid.T]
-    img_idx = np.broadcast_to(np.arange(n_img)[None, :], (n_pix, n_img))[valid.T]
-    t_flat = ts[img_idx]
-    if solver not in ("varpro", "als"):
-        raise ValueError(f"solver must be 'varpro' or 'als', got {solver!r}")
-    if max_iter is None:
-        max_iter = 10 if solver == "varpro" else 500
-    with _blas_single_thread():
-        c, w, w_knot, it, converged = (_solve_varpro if solver == "varpro" else _solve_als)(
-            knots, d_flat, pix_idx, t_flat, n_pix, smoothness=smoothness, huber_k=huber_k,
-            max_iter=max_iter, tol=tol, progress=progress, c0=init,
-        )
+    d_flat, pix_idx, img_idx, t_flat = _flat_samples(dn, valid, ts)
+    max_iter = _checked_solver(solver, max_iter)
+    c, w, w_knot, it, converged = _run_solver(solver, knots, d_flat, pix_idx, t_flat, n_pix, smoothness=smoothness,
+                                              huber_k=huber_k, max_iter=max_iter, tol=tol, progress=progress,
+                                              init=init)
 
     resp, g = _finish(c, knots, w_knot, f"calibrated:{source}", black)
-    # final residual in DN with the finished response
     table = resp.g
-    u = table[d_flat]
-    num = np.bincount(pix_idx, w * t_flat * u, n_pix)
-    den = np.bincount(pix_idx, w * t_flat * t_flat, n_pix)
-    b = num / np.maximum(den, 1e-300)
-    pred_g = t_flat * b[pix_idx]
-    r = d_flat - resp.forward(pred_g)
+    r, pred_g = _fit_residuals(resp, d_flat, pix_idx, t_flat, w, n_pix)
     rms = float(np.sqrt(np.mean(r * r)))
     robust = _robust_scale(r)
-    gen = np.random.default_rng(rng)
-    pick = gen.choice(d_flat.size, size=min(n_plot_samples, d_flat.size), replace=False)
+    pick = np.random.default_rng(rng).choice(d_flat.size, size=min(n_plot_samples, d_flat.size), replace=False)
     observed = (int(d_flat.min()), int(d_flat.max()))
-    warnings = _stack_warnings(t, observed, lo, hi)
+    warnings = stack_warnings(t, observed, lo, hi)
     per_image_rms = _per_image_rms(img_idx, r, n_img)
     scales = exposure_scales(table, d_flat, pix_idx, img_idx, t_flat, w, n_img, n_pix,
                               min_g=OUTLIER_MIN_G * float(table[-1]))
@@ -352,17 +294,8 @@ def fit_inverse_response(
         "n_pixels": int(n_pix),
         "n_samples": int(d_flat.size),
         "clipped_fraction": float(1 - valid.mean()),
-        "solver": solver,
-        "iterations": int(it),
-        "converged": bool(converged),
-        "n_knots": int(knots.n),
-        "margin_dn": int(margin_dn),
-        "smoothness": float(smoothness),
-        "huber_k": float(huber_k),
-        "unclipped_samples_per_image": [int(v) for v in n_valid_img],
-        "residual_rms_dn_per_image": [None if not math.isfinite(v) else float(v) for v in per_image_rms],
-        "exposure_scale_per_image": [None if not math.isfinite(v) else float(v) for v in scales],
-        "outlier_images": outliers,
+        **_solver_info(solver, it, converged, knots, margin_dn, smoothness, huber_k),
+        **_per_image_info(n_valid_img, per_image_rms, scales, outliers),
         "vignetting": "not recovered (a static stack has no views that separate V(x) from E(x))",
     }
     return CalibrationResult(
