@@ -1,6 +1,6 @@
 """In-situ noise estimate from a recording's own brackets (photon transfer from cross-bracket differences).
 
-:func:`bracket_groups` collects pairs or triples of consecutive shots of each sweep;
+:func:`bracket_groups` (:mod:`emulator.noise.groups`) collects pairs or triples of consecutive shots of each sweep;
 :func:`estimate_noise_model` fits the conversion gain and read noise from them
 (:class:`NoiseEstimate`).  Against synth's known camera the gain error is +3.1 % for a
 static scene, -1.1 % at 1.5 px motion per shot and -13.6 % at the worst case (half a Bayer
@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from emulator.noise.groups import BracketGroup, checked_groups
+from emulator.noise.groups import BracketGroup, bracket_groups, checked_groups  # re-exported: groups live there
 from emulator.noise.model import PHASES, NoiseModel, NoiseModelError
 from emulator.noise.photon_transfer import (_fit_bins, _gain_read, _group_points, _percentiles, per_group_fits,
                                              per_phase_fits)
@@ -30,95 +30,6 @@ from emulator.noise.tables import _slope
 from emulator.response import CameraResponse
 
 __all__ = ["BracketGroup", "bracket_groups", "NoiseEstimate", "estimate_noise_model", "bootstrap_gain", "noise_strata"]
-
-
-
-def bracket_groups(sequence, *, size: int = 3, cameras=None, cycles=None, max_groups: int | None = None,
-                   max_gap: float = 1.5, progress=None, motion=None, max_motion_px: float | None = None
-                   ) -> list[BracketGroup]:
-    """Groups of ``size`` (2 or 3) consecutive shots of every sweep of a recording, images loaded.
-
-    Parameters
-    ----------
-    sequence : emulator.dataset.Sequence
-        The recording (:func:`emulator.io.borealhdr.load_sequence`).
-    size : int
-        3 (default): triples, whose time-interpolated difference cancels motion linear in
-        time; 2: pairs of neighbouring brackets.
-    cameras : sequence of str or None
-        Cameras to use (default: all of the sequence's).
-    cycles : iterable of int or None
-        Cycle indices to use (default: all).
-    max_groups : int or None
-        At most this many groups, spread evenly over the candidates (deterministic).
-    max_gap : float
-        Shots of a group must follow each other within ``max_gap`` shot periods (the median
-        interval between shots): a missing bracket breaks a group.
-    progress : callable(done, total, label), optional
-        Called after each group's images are loaded.
-    motion, max_motion_px : emulator.motion.RecordingMotion, float, optional
-        Keep only groups over whose whole span (first shot's start to last shot's end) the
-        gyro turns the image by at most ``max_motion_px`` pixels (largest over the image):
-        the still frames, for a fit robust to motion.  A group the gyro does not cover is kept.
-
-    Returns
-    -------
-    list of BracketGroup
-        Capture order within a group; ``times_s`` from the file timestamps.
-    """
-    from emulator.dataset import Sequence
-
-    if not isinstance(sequence, Sequence):
-        raise NoiseModelError(f"sequence must be an emulator.dataset.Sequence, got {type(sequence).__name__}")
-    if size not in (2, 3):
-        raise NoiseModelError(f"size must be 2 (pairs) or 3 (triples), got {size!r}")
-    cams = tuple(sequence.cameras if cameras is None else cameras)
-    unknown = [c for c in cams if c not in sequence.cameras]
-    if unknown:
-        raise NoiseModelError(f"{sequence.path}: no camera {', '.join(map(repr, unknown))} "
-                              f"(has {', '.join(sequence.cameras)})")
-    wanted = None if cycles is None else {int(c) for c in cycles}
-    stamps = sorted({f.timestamp_ns for c in sequence for cam in cams for f in c.frames.get(cam, {}).values()})
-    period = float(np.median(np.diff(stamps))) if len(stamps) > 1 else 0.0
-    candidates = []
-    for cycle in sequence:
-        if wanted is not None and cycle.index not in wanted:
-            continue
-        for cam in cams:
-            shots = sorted(cycle.frames.get(cam, {}).values(), key=lambda f: f.timestamp_ns)
-            for k in range(len(shots) - size + 1):
-                win = shots[k: k + size]
-                gaps = np.diff([f.timestamp_ns for f in win])
-                if period > 0 and np.any(gaps > max_gap * period):
-                    continue
-                if motion is not None and max_motion_px is not None and \
-                        _span_motion_px(motion, cam, win) > max_motion_px:
-                    continue
-                candidates.append((cam, cycle.index, win))
-    if max_groups is not None and len(candidates) > max_groups:
-        pick = np.unique(np.round(np.linspace(0, len(candidates) - 1, int(max_groups))).astype(int))
-        candidates = [candidates[i] for i in pick]
-    groups = []
-    for cam, index, win in candidates:
-        t0 = win[0].timestamp_ns
-        groups.append(BracketGroup(
-            tuple(f.load() for f in win), tuple(float(f.exposure_ms) for f in win),
-            tuple((f.timestamp_ns - t0) * 1e-9 for f in win),
-            f"{cam} c{index} " + "-".join(f"{f.exposure_ms:g}" for f in win)))
-        if progress is not None:
-            progress(len(groups), len(candidates), f"loading {groups[-1].label}")
-    return groups
-
-
-def _span_motion_px(motion, camera: str, shots) -> float:
-    """Image motion (px, path length, largest over the image) over a group's span; 0 where unknown."""
-    from emulator.blur import exposure_window_s, predict_blur
-
-    t0 = min(exposure_window_s(motion.t_s(f.timestamp_ns), f.exposure_ms, motion.stamp)[0] for f in shots)
-    t1 = max(exposure_window_s(motion.t_s(f.timestamp_ns), f.exposure_ms, motion.stamp)[1] for f in shots)
-    K, size = motion.K(camera)
-    px = predict_blur(motion.omega, K, size, t0, (t1 - t0) * 1e3, "start").max_px
-    return px if math.isfinite(px) else 0.0
 
 
 @dataclass
@@ -192,6 +103,53 @@ def _phase_names(bayer_pattern: str | None) -> list[str]:
         seen[c] = seen.get(c, 0) + 1
         names.append(c if pattern.count(c) == 1 else f"{c}{seen[c]}")
     return names
+
+
+def _pass_points(groups, response: CameraResponse, slope, limits, *, n_bins, flat_fraction, min_pixels, align,
+                 highpass, done: list, progress) -> tuple[dict, list]:
+    """One pass of :func:`estimate_noise_model`: the photon-transfer points of every group within ``limits``
+    (signal limits per shortest and longest exposure), as columns, and each group's shift; ``done[0]`` counts
+    the groups both passes have done, for ``progress``."""
+    pts, shifts = [], []
+    for i, gr in enumerate(groups):
+        g_pts, shift = _group_points(gr, response, slope, limits=limits, n_bins=n_bins,
+                                     flat_fraction=flat_fraction, min_pixels=min_pixels, align=align,
+                                     highpass=highpass, clip=4.0)
+        pts += [(i,) + t for t in g_pts]
+        shifts.append(shift)
+        done[0] += 1
+        if progress is not None:
+            progress(done[0], 2 * len(groups), f"noise: pass {1 + (done[0] - 1) // len(groups)} {gr.label}")
+    if len(pts) < 3:
+        raise NoiseModelError(
+            f"only {len(pts)} usable intensity bin(s) in {len(groups)} bracket group(s): too few unclipped, "
+            f"flat pixels (min_pixels={min_pixels})"
+        )
+    arr = np.array(pts, dtype=np.float64)
+    cols = dict(group=arr[:, 0].astype(int), phase=arr[:, 1].astype(int), signal=arr[:, 2], x_shot=arr[:, 3],
+                x_read=arr[:, 4], variance=arr[:, 5], quantisation=arr[:, 6], n=arr[:, 7], signal2=arr[:, 8])
+    return cols, shifts
+
+
+def _pass_two_limits(gain1: float, read1: float, e_lo: float, e_hi: float, clip_sigmas: float):
+    """The second pass's signal limits (per shortest and longest exposure) from the first pass's gain and read
+    noise: expected electrons ``clip_sigmas`` standard deviations inside those of the clip levels."""
+
+    def pass_two(t_lo, t_hi):
+        # smallest signal s with G s t - c sqrt(G s t + r^2) >= e_lo for the shortest shot,
+        # largest with G s t + c sqrt(G s t + r^2) <= e_hi for the longest (solved on a grid)
+        c = clip_sigmas
+        e = np.geomspace(max(e_lo, 1e-3) + 1e-3, max(e_hi, 1.0), 4096)
+        sd = np.sqrt(e + read1**2)
+        ok_lo = e - c * sd >= e_lo
+        ok_hi = e + c * sd <= e_hi
+        if not ok_lo.any() or not ok_hi.any():
+            return np.inf, -np.inf
+        lo_e = e[np.argmax(ok_lo)]
+        hi_e = e[len(e) - 1 - np.argmax(ok_hi[::-1])]
+        return lo_e / (gain1 * t_lo), hi_e / (gain1 * t_hi)
+
+    return pass_two
 
 
 def estimate_noise_model(
@@ -311,29 +269,10 @@ def estimate_noise_model(
         return lo, hi
 
     done = [0]
+    opts = dict(n_bins=n_bins, flat_fraction=flat_fraction, min_pixels=min_pixels, align=align, highpass=highpass,
+                done=done, progress=progress)
 
-    def run(limits):
-        pts, shifts = [], []
-        for i, gr in enumerate(groups):
-            g_pts, shift = _group_points(gr, response, slope, limits=limits, n_bins=n_bins,
-                                         flat_fraction=flat_fraction, min_pixels=min_pixels, align=align,
-                                         highpass=highpass, clip=4.0)
-            pts += [(i,) + t for t in g_pts]
-            shifts.append(shift)
-            done[0] += 1
-            if progress is not None:
-                progress(done[0], 2 * len(groups), f"noise: pass {1 + (done[0] - 1) // len(groups)} {gr.label}")
-        if len(pts) < 3:
-            raise NoiseModelError(
-                f"only {len(pts)} usable intensity bin(s) in {len(groups)} bracket group(s): too few unclipped, "
-                f"flat pixels (min_pixels={min_pixels})"
-            )
-        arr = np.array(pts, dtype=np.float64)
-        cols = dict(group=arr[:, 0].astype(int), phase=arr[:, 1].astype(int), signal=arr[:, 2], x_shot=arr[:, 3],
-                    x_read=arr[:, 4], variance=arr[:, 5], quantisation=arr[:, 6], n=arr[:, 7], signal2=arr[:, 8])
-        return cols, shifts
-
-    cols, _ = run(pass_one)
+    cols, _ = _pass_points(groups, response, slope, pass_one, **opts)
     alpha, beta, _, _ = _fit_bins(cols, motion_term=motion_term)
     if not alpha > 0:
         raise NoiseModelError(f"first pass found no positive shot-noise slope (alpha = {alpha:.3g}): "
@@ -342,21 +281,8 @@ def estimate_noise_model(
     read1 = math.sqrt(beta) / alpha if beta > 0 else 0.0
     e_lo, e_hi = gain1 * theta_lo, gain1 * theta_hi
 
-    def pass_two(t_lo, t_hi):
-        # smallest signal s with G s t - c sqrt(G s t + r^2) >= e_lo for the shortest shot,
-        # largest with G s t + c sqrt(G s t + r^2) <= e_hi for the longest (solved on a grid)
-        c = clip_sigmas
-        e = np.geomspace(max(e_lo, 1e-3) + 1e-3, max(e_hi, 1.0), 4096)
-        sd = np.sqrt(e + read1**2)
-        ok_lo = e - c * sd >= e_lo
-        ok_hi = e + c * sd <= e_hi
-        if not ok_lo.any() or not ok_hi.any():
-            return np.inf, -np.inf
-        lo_e = e[np.argmax(ok_lo)]
-        hi_e = e[len(e) - 1 - np.argmax(ok_hi[::-1])]
-        return lo_e / (gain1 * t_lo), hi_e / (gain1 * t_hi)
-
-    cols, shifts = run(pass_two)
+    pass_two = _pass_two_limits(gain1, read1, e_lo, e_hi, clip_sigmas)
+    cols, shifts = _pass_points(groups, response, slope, pass_two, **opts)
     alpha, beta, cov, weights = _fit_bins(cols, motion_term=motion_term)
     gain, read, sg, sr = _gain_read(alpha, beta, cov)
     if not math.isfinite(gain):
