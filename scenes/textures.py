@@ -1,4 +1,4 @@
-"""Procedural textures as numpy arrays (no Mitsuba here).
+"""Procedural textures as numpy arrays (no Mitsuba here), made of the primitives of :mod:`scenes.texture_base`.
 
 Every texture is a deterministic function of its arguments and a seed: spectral
 (1/f^beta) fractal noise synthesised with an FFT, hence periodic, so it tiles
@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from scenes.errors import SceneError
+from scenes.texture_base import albedo_map, as_rng, fractal_noise, sprinkle  # re-exported: the primitives live there
 
 __all__ = [
     "fractal_noise",
@@ -33,142 +34,12 @@ __all__ = [
 ]
 
 
-def _rng(seed: int | np.random.Generator) -> np.random.Generator:
-    return seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
-
-
-def fractal_noise(
-    shape: tuple[int, int],
-    seed: int | np.random.Generator,
-    *,
-    beta: float = 2.0,
-    stretch: tuple[float, float] = (1.0, 1.0),
-    min_wavelength_px: float = 2.0,
-) -> np.ndarray:
-    """Periodic fractal noise, ranked to a uniform distribution on [0, 1].
-
-    Parameters
-    ----------
-    shape : tuple of int
-        (rows, columns) of the texture, each >= 4.
-    seed : int or numpy.random.Generator
-        Source of the white noise.
-    beta : float
-        Spectral exponent: the power spectrum falls as ``1 / f**beta``
-        (2 gives brown-ish, natural-looking noise; 1 is rougher).
-    stretch : tuple of float
-        Anisotropy (rows, columns): a factor > 1 stretches the features along
-        that axis (bark fissures are long along the trunk).
-    min_wavelength_px : float
-        Frequencies with a wavelength shorter than this are removed (anti-aliasing
-        of the texture itself).
-
-    Returns
-    -------
-    numpy.ndarray
-        float32, shape ``shape``, values in (0, 1), close to uniformly
-        distributed (Gaussian field through an approximate normal CDF, so the
-        histogram does not depend on ``beta``).
-    """
-    rows, cols = (int(s) for s in shape)
-    if rows < 4 or cols < 4:
-        raise SceneError(f"fractal_noise: shape must be at least 4x4, got {shape!r}")
-    rng = _rng(seed)
-    white = rng.standard_normal((rows, cols))
-    fy = np.fft.fftfreq(rows)[:, None] * stretch[0]
-    fx = np.fft.rfftfreq(cols)[None, :] * stretch[1]
-    f = np.hypot(fy, fx)
-    f[0, 0] = 1.0
-    amplitude = f ** (-beta / 2.0)
-    amplitude[0, 0] = 0.0
-    amplitude[f > 1.0 / min_wavelength_px] = 0.0
-    field = np.fft.irfft2(np.fft.rfft2(white) * amplitude, s=(rows, cols))
-    field = (field - field.mean()) / max(float(field.std()), 1e-300)
-    # The field is a linear filter of Gaussian white noise, hence Gaussian: its
-    # normal CDF is uniform on [0, 1].  The logistic approximation
-    # 1 / (1 + exp(-1.702 x)) is within 0.01 of the CDF and needs no scipy.
-    return (1.0 / (1.0 + np.exp(-1.702 * field))).astype(np.float32)
-
-
-def albedo_map(
-    noise: np.ndarray, low: float, high: float, colour: tuple[float, float, float], *, gamma: float = 1.0
-) -> np.ndarray:
-    """Map noise in [0, 1] to an RGB albedo texture with a logarithmic ramp.
-
-    Parameters
-    ----------
-    noise : numpy.ndarray
-        (H, W) values in [0, 1].
-    low, high : float
-        Albedo (luminance) at noise 0 and 1, 0 < low <= high <= 1.
-    colour : tuple of float
-        Relative RGB tint; it is normalised to Rec.709 luminance 1.
-    gamma : float
-        Exponent applied to the noise before the ramp (> 1 favours dark values).
-
-    Returns
-    -------
-    numpy.ndarray
-        float32, (H, W, 3), linear RGB albedo in (0, 1].
-    """
-    if not 0.0 < low <= high <= 1.0:
-        raise SceneError(f"albedo_map: need 0 < low <= high <= 1, got low={low}, high={high}")
-    tint = np.asarray(colour, dtype=np.float64)
-    tint = tint / float(np.dot(tint, (0.2126, 0.7152, 0.0722)))
-    y = low * (high / low) ** (np.asarray(noise, dtype=np.float64) ** gamma)
-    rgb = y[..., None] * tint
-    return np.clip(rgb, 1e-4, 1.0).astype(np.float32)
-
-
-def sprinkle(
-    texture: np.ndarray, seed: int | np.random.Generator, *, density: float, albedo: float, radius_px: float = 1.5
-) -> np.ndarray:
-    """Scatter small dark specks (needles, twigs, grit) over a texture.
-
-    Parameters
-    ----------
-    texture : numpy.ndarray
-        float32 (H, W, 3) albedo; not modified.
-    seed : int or numpy.random.Generator
-        Positions and sizes of the specks.
-    density : float
-        Specks per texel (e.g. 0.002).
-    albedo : float
-        Luminance albedo of a speck.
-    radius_px : float
-        Mean speck radius in texels.
-
-    Returns
-    -------
-    numpy.ndarray
-        float32 (H, W, 3), a copy with the specks blended in (periodic wrap).
-    """
-    rng = _rng(seed)
-    rows, cols = texture.shape[:2]
-    count = int(round(density * rows * cols))
-    cy = rng.integers(0, rows, count)[:, None]
-    cx = rng.integers(0, cols, count)[:, None]
-    r = (radius_px * rng.uniform(0.5, 1.5, count))[:, None]
-    a = rng.uniform(0.0, np.pi, count)[:, None]
-    yy, xx = (g.ravel()[None, :] for g in np.mgrid[-4:5, -4:5])
-    # elongated specks (needles): anisotropic gaussian footprints, wrapped at the edges
-    u = xx * np.cos(a) + yy * np.sin(a)
-    v = -xx * np.sin(a) + yy * np.cos(a)
-    w = np.exp(-0.5 * ((u / (2.0 * r)) ** 2 + (v / (0.6 * r)) ** 2))
-    index = ((cy + yy) % rows) * cols + (cx + xx) % cols
-    weight = np.zeros(rows * cols)
-    np.maximum.at(weight, index.ravel(), w.ravel())
-    weight = weight.reshape(rows, cols, 1)
-    out = texture.astype(np.float64) * (1.0 - weight) + albedo * weight
-    return out.astype(np.float32)
-
-
 def snow_texture(seed: int | np.random.Generator, size: int = 512) -> np.ndarray:
     """Snow albedo: bright (0.72..0.95), wind-packed ripples, fallen needles.
 
     Returns float32 (size, size, 3).
     """
-    rng = _rng(seed)
+    rng = as_rng(seed)
     coarse = fractal_noise((size, size), rng, beta=2.4, stretch=(1.0, 2.5))
     fine = fractal_noise((size, size), rng, beta=1.2)
     tex = albedo_map(0.65 * coarse + 0.35 * fine, 0.72, 0.95, (0.97, 0.99, 1.0))
@@ -180,7 +51,7 @@ def litter_texture(seed: int | np.random.Generator, size: int = 512) -> np.ndarr
 
     Returns float32 (size, size, 3).
     """
-    rng = _rng(seed)
+    rng = as_rng(seed)
     coarse = fractal_noise((size, size), rng, beta=2.2)
     fine = fractal_noise((size, size), rng, beta=1.0)
     tex = albedo_map(0.5 * coarse + 0.5 * fine, 0.03, 0.25, (1.0, 0.85, 0.6))
@@ -193,7 +64,7 @@ def bark_texture(seed: int | np.random.Generator, shape: tuple[int, int] = (512,
 
     Returns float32 (rows, cols, 3).
     """
-    rng = _rng(seed)
+    rng = as_rng(seed)
     fissures = fractal_noise(shape, rng, beta=1.8, stretch=(0.15, 1.0))
     grain = fractal_noise(shape, rng, beta=1.0)
     return albedo_map(0.7 * fissures + 0.3 * grain, low, high, (1.0, 0.85, 0.7))
@@ -205,7 +76,7 @@ def foliage_texture(seed: int | np.random.Generator, size: int = 256, *, low: fl
 
     Returns float32 (size, size, 3).
     """
-    rng = _rng(seed)
+    rng = as_rng(seed)
     blotch = fractal_noise((size, size), rng, beta=1.4)
     return albedo_map(blotch, low, high, colour, gamma=1.3)
 
@@ -215,7 +86,7 @@ def rock_texture(seed: int | np.random.Generator, size: int = 256) -> np.ndarray
 
     Returns float32 (size, size, 3).
     """
-    rng = _rng(seed)
+    rng = as_rng(seed)
     noise = 0.6 * fractal_noise((size, size), rng, beta=2.0) + 0.4 * fractal_noise((size, size), rng, beta=0.8)
     return albedo_map(noise, 0.08, 0.35, (1.0, 1.0, 0.95))
 
@@ -249,7 +120,7 @@ def chart_texture(
     numpy.ndarray
         float32 (rows*(patch+gap)+gap, cols*(patch+gap)+gap, 3), neutral grey.
     """
-    rng = _rng(seed)
+    rng = as_rng(seed)
     albedos = np.asarray(albedos, dtype=np.float64)
     if albedos.ndim != 2 or np.any(albedos <= 0) or np.any(albedos > 1):
         raise SceneError("chart_texture: albedos must be a 2-D array of values in (0, 1]")
@@ -307,7 +178,7 @@ def specks(
     numpy.ndarray
         float32 ``shape``, coverage in [0, 1].
     """
-    rng = _rng(seed)
+    rng = as_rng(seed)
     rows, cols = (int(v) for v in shape)
     if count <= 0:
         return np.zeros((rows, cols), np.float32)
@@ -378,7 +249,7 @@ def snow_detail(seed: int | np.random.Generator, size: int = 2048, *, tile_m: fl
     numpy.ndarray
         float32 (size, size) in [0, 1].
     """
-    rng = _rng(seed)
+    rng = as_rng(seed)
     mm = tile_m * 1000.0 / size  # millimetres per texel
     area = tile_m * tile_m
     cluster = fractal_noise((size // 8, size // 8), rng, beta=2.2) ** 3
@@ -410,7 +281,7 @@ def litter_detail(seed: int | np.random.Generator, size: int = 2048, *, tile_m: 
     Returns float32 (size, size) in [0, 1]: bright on leaf and needle tops, dark
     in the gaps between them.
     """
-    rng = _rng(seed)
+    rng = as_rng(seed)
     mm = tile_m * 1000.0 / size
     area = tile_m * tile_m
     base = fractal_noise((size, size), rng, beta=1.8)
@@ -437,7 +308,7 @@ def needle_clumps(seed: int | np.random.Generator, size: int = 512, *, tile_m: f
 
     Returns float32 (size, size) in [0, 1]: 1 on lit shoot tips, 0 in the deepest gaps.
     """
-    rng = _rng(seed)
+    rng = as_rng(seed)
     mm = tile_m * 1000.0 / size
     field = fractal_noise((size, size), rng, beta=1.6, min_wavelength_px=max(2.0, clump_cm * 10 / mm / 4))
     shoots = specks((size, size), rng, count=int(400 * tile_m * tile_m), length_px=(40 / mm, 90 / mm),
@@ -452,7 +323,7 @@ def bark_detail(seed: int | np.random.Generator, shape: tuple[int, int] = (512, 
 
     Returns float32 ``shape`` (rows along the trunk) in [0, 1].
     """
-    rng = _rng(seed)
+    rng = as_rng(seed)
     plates = fractal_noise(shape, rng, beta=1.6, stretch=(0.5, 1.0))
     cracks = specks(shape, rng, count=int(0.01 * shape[0] * shape[1]), length_px=(6.0, 14.0),
                     width_px=(1.0, 2.0), orientation=np.pi / 2)
@@ -466,5 +337,5 @@ def relief(seed: int | np.random.Generator, size: int = 512, *, beta: float = 3.
     ``beta`` 3 gives relief dominated by the larger bumps (trampled snow, wind
     crust) with finer ones on top.  Returns float32 (size, size).
     """
-    rng = _rng(seed)
+    rng = as_rng(seed)
     return fractal_noise((size, size), rng, beta=beta, stretch=stretch)
