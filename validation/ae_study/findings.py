@@ -110,24 +110,9 @@ def _named(values: dict[str, float], spec: str = ".3g") -> str:
     return ", ".join(f"{PAPER_NAMES.get(k, k)} {_fmt(v, spec)}" for k, v in sorted(values.items(), key=lambda kv: kv[1]))
 
 
-def evaluate_findings(summary: dict, taus=(5, 100)) -> list[dict]:
-    """Test the paper's qualitative findings of section V-D on the study's numbers.
-
-    Every finding is a comparison of measured values with a stated rule; ``holds`` is
-    True, False, or None when the numbers needed are missing.  Ties count for the claim
-    (a method tied for the highest value "has the highest", and the detail names the
-    ties); a ranking claim is undecided (None) when every method has the same value.
-
-    Returns
-    -------
-    list of dict
-        ``id``, ``claim``, ``paper`` (the paper's evidence), ``holds``, ``measured`` (the
-        numbers compared) and ``detail`` (one sentence with the numbers).
-    """
-    overall = summary["overall"]
-    lo_tau, hi_tau = str(min(taus)), str(max(taus))
+def _tracking_findings(overall: dict) -> list[dict]:
+    """F1 and F2: M_fixed tracks the most features; M_70% and M_Kim have a lower uniformity."""
     out = []
-
     # F1 -- M_fixed tracks the most features
     matches = _values(overall, "median_matches")
     holds = None if "fixed" not in matches or len(matches) < 2 else matches["fixed"] >= max(matches.values())
@@ -152,7 +137,13 @@ def evaluate_findings(summary: dict, taus=(5, 100)) -> list[dict]:
         "uniformity_70_kim_lower", "M_70% and M_Kim have a lower keypoint uniformity than the other methods (both below "
         "the others' mean)", "median uniformity 67.3 % (M_70%) and 66.0 % (M_Kim), the others slightly higher", holds,
         uni, detail), uni))
+    return out
 
+
+def _success_findings(overall: dict, lo_tau: str, hi_tau: str) -> list[dict]:
+    """F3 and F4, on sequences and on segments: success falls with tau; at the higher tau M_fixed is the most
+    successful, M_30%, M_70% and M_Kim the least."""
+    out = []
     # F3 -- success rate falls with tau, on sequences and on segments
     for basis, key in (("sequences", ("sequence_success_rate",)), ("segments", ("segment_success",))):
         lo = _values(overall, key + ((lo_tau, "rate") if basis == "segments" else (lo_tau,)))
@@ -193,18 +184,26 @@ def evaluate_findings(summary: dict, taus=(5, 100)) -> list[dict]:
             f"poorest_success_30_70_kim_{basis}", f"M_30%, M_70% and M_Kim have the poorest success rate at tau = {hi_tau} "
             f"({basis}; each below the others' mean)", "M_30%, M_70% and M_Kim succeed on 20 % of the sequences, the least",
             holds, rate, detail), rate))
+    return out
 
-    # VO findings on a stated basis
-    basis, trans, rot = _vo_basis(summary)
+
+def _vo_run_failures(overall: dict) -> dict:
+    """The VO fails on part of the method runs."""
     failed_runs = {k: o["vo_failed_runs"] for k, o in overall.items()}
     n_runs = sum(o["n_sequences"] for o in overall.values())
     total_failed = sum(failed_runs.values())
-    out.append(_finding(
+    return _finding(
         "vo_fails_on_some_runs", "the stereo VO fails on part of the runs (paper: 20 % of the trajectories)",
         "11 of 55 trajectories failed", (total_failed > 0) if n_runs else None,
         {"failed_runs": failed_runs, "runs": n_runs},
         f"{total_failed} of {n_runs} method runs had at least one failed VO frame "
-        f"({_fmt(100 * total_failed / n_runs if n_runs else None, '.0f')} %)"))
+        f"({_fmt(100 * total_failed / n_runs if n_runs else None, '.0f')} %)")
+
+
+def _vo_rpe_findings(trans: dict[str, float], rot: dict[str, float]) -> list[dict]:
+    """The RPE rankings: M_50% lowest and M_Kim highest translation RPE, M_Zhang and M_50% the two lowest
+    rotation RPE, M_fixed not the best in VO, the gradient-based methods ahead."""
+    out = []
 
     def vo_rank(fid, claim, paper, values, target, best=True, unit="%"):
         if target not in values or len(values) < 2:
@@ -245,6 +244,11 @@ def evaluate_findings(summary: dict, taus=(5, 100)) -> list[dict]:
                         "a lower translation RPE than the others' mean)",
                         "a small advantage for gradient-based methods",
                         holds, {"trans": trans}, detail))
+    return out
+
+
+def _vo_frame_failures(summary: dict, overall: dict) -> dict:
+    """The gradient-based methods lose VO tracking less often, on the scenes that tell the methods apart."""
     # failed frames, on the scenes that tell the methods apart (not every method failing every frame)
     per_scene = summary["per_scene"]
     telling = [s for s, rows in per_scene.items()
@@ -264,18 +268,46 @@ def evaluate_findings(summary: dict, taus=(5, 100)) -> list[dict]:
                   f"({', '.join(f'{PAPER_NAMES.get(k, k)} {v:.0f}' for k, v in fails.items() if k not in GRADIENT_METHODS)})")
     else:
         holds, detail = None, "no scene where the VO failure counts tell the methods apart"
-    out.append(_undecided_if_equal(_finding(
+    return _undecided_if_equal(_finding(
         "gradient_fewer_vo_failures", "gradient-based methods (M_Shim, M_Zhang) lose VO tracking less often (fewer "
         "failed frames on average than the other methods; not a paper figure, the paper's claim is on RPE)",
-        "a small advantage for gradient-based methods", holds, fails, detail), fails))
+        "a small advantage for gradient-based methods", holds, fails, detail), fails)
+
+
+def _vo_similar(trans: dict[str, float]) -> dict:
+    """All methods perform similarly in VO (largest / smallest translation RPE within the paper's ratio)."""
     if len(trans) > 1 and min(trans.values()) > 0:
         spread = max(trans.values()) / min(trans.values())
         holds = spread <= SIMILAR_RPE_RATIO
         detail = f"largest / smallest translation RPE = {_fmt(spread)} (paper 5.75 / 4.21 = 1.37)"
     else:
         spread, holds, detail = None, None, "translation RPE missing"
-    out.append(_finding("vo_similar", f"all methods perform similarly in VO (largest / smallest translation RPE <= "
-                        f"{SIMILAR_RPE_RATIO})", "4.21 % to 5.75 %", holds, {"ratio": spread}, detail))
+    return _finding("vo_similar", f"all methods perform similarly in VO (largest / smallest translation RPE <= "
+                    f"{SIMILAR_RPE_RATIO})", "4.21 % to 5.75 %", holds, {"ratio": spread}, detail)
+
+
+def evaluate_findings(summary: dict, taus=(5, 100)) -> list[dict]:
+    """Test the paper's qualitative findings of section V-D on the study's numbers.
+
+    Every finding is a comparison of measured values with a stated rule; ``holds`` is
+    True, False, or None when the numbers needed are missing.  Ties count for the claim
+    (a method tied for the highest value "has the highest", and the detail names the
+    ties); a ranking claim is undecided (None) when every method has the same value.
+
+    Returns
+    -------
+    list of dict
+        ``id``, ``claim``, ``paper`` (the paper's evidence), ``holds``, ``measured`` (the
+        numbers compared) and ``detail`` (one sentence with the numbers).
+    """
+    overall = summary["overall"]
+    lo_tau, hi_tau = str(min(taus)), str(max(taus))
+    out = _tracking_findings(overall) + _success_findings(overall, lo_tau, hi_tau)
+    # VO findings on a stated basis
+    basis, trans, rot = _vo_basis(summary)
+    out.append(_vo_run_failures(overall))
+    out += _vo_rpe_findings(trans, rot)
+    out += [_vo_frame_failures(summary, overall), _vo_similar(trans)]
     for f in out:
         f["vo_basis"] = basis if f["id"].startswith(("rpe_", "fixed_not", "gradient_ahead", "vo_similar")) else None
     return out
