@@ -18,7 +18,7 @@ from emulator.report.verdicts import (
     vo_failure_verdict,
 )
 from validation.ae_study.config import PAPER, PAPER_NAMES, VO_CONFIGURATION_NOTE
-from validation.ae_study.findings import _fmt
+from validation.ae_study.findings import fmt_cell
 
 __all__ = ["report_markdown", "plot_summary", "study_verdicts", "WALK_COMPARISONS", "method_intervals",
            "method_intervals_markdown"]
@@ -75,13 +75,10 @@ def method_intervals_markdown(per_scene: dict, seed: int = 0) -> list[str]:
     return lines
 
 
-def report_markdown(results: dict) -> str:
-    """``report.md``: configuration, a table per scene, pooled table, findings, figures."""
+def _config_lines(results: dict) -> list[str]:
+    """The report's title and the study's configuration, in words."""
     cfg = results["config"]
-    taus = [str(t) for t in cfg["taus"]]
-    lo, hi = taus[0], taus[-1]
-    summary = results["summary"]
-    lines = [
+    return [
         "# Synthetic AE study: the paper's section V-D on synthetic stereo walks",
         "",
         f"Scenes {', '.join(cfg['scenes'])}; {cfg['n_cycles']} bracket cycles each (1..32 ms, 22 frames/s, "
@@ -97,97 +94,130 @@ def report_markdown(results: dict) -> str:
         f"the segment rate cuts each run into segments of {cfg['segment_pairs']} consecutive pairs.",
         "",
     ]
+
+
+def _scene_section(scene: str, rows: dict, lo: str, hi: str, results: dict) -> list[str]:
+    """One scene's table (a row per method), its VO failure reasons and missing RPE, and its figures."""
     head = ("| method | median exposure (ms) | median uniformity (%) | median matches | "
             f"success tau={lo} | success tau={hi} | segments ok tau={lo} | segments ok tau={hi} | "
             "VO failed frames | RPE trans. (% of delta; minimal median @ its pair length delta) | "
             "RPE rot. (deg/m; minimal median @ its pair length delta) |")
     sep = "|" + " --- |" * 11
-    for scene, rows in summary["per_scene"].items():
-        lines += [f"## {scene}", "", head, sep]
-        for name, e in rows.items():
-            v = e["vo"] or {}
-            dagger = " †" if v.get("rpe_on_failed_run") else ""
-            seg = e["segment_success"]
-            lines.append(
-                f"| {PAPER_NAMES.get(name, name)} | {_fmt(e['median_exposure_ms'])} | "
-                f"{_fmt(None if e['median_uniformity'] is None else 100 * e['median_uniformity'], '.1f')}"
-                f"{_paper_cell('median_uniformity_pct', name)} | {_fmt(e['median_matches'], '.0f')}"
-                f"{_paper_cell('median_matches', name)} | {_fmt(e['sequence_success'][lo])} | "
-                f"{_fmt(e['sequence_success'][hi])} | {seg[lo]['succeeded']}/{seg[lo]['segments']} | "
-                f"{seg[hi]['succeeded']}/{seg[hi]['segments']} | "
-                f"{v.get('n_failed_frames', 'n/a')} of {max(0, v.get('n_frames', 1) - 1)} | "
-                f"{_at(v.get('rpe_trans_pct'), v.get('rpe_trans_delta_m'), '.2f')}{dagger} | "
-                f"{_at(v.get('rpe_rot_deg_per_m'), v.get('rpe_rot_delta_m'), '.3f')}{dagger} |")
-        vos = [e["vo"] for e in rows.values() if e["vo"] is not None]
-        reasons = Counter()
-        for v in vos:
-            reasons.update(v["failure_reasons"])
-        stereo = [v["median_stereo_points"] for v in vos if v["median_stereo_points"] is not None]
-        missing = sorted({v["rpe_missing_reason"] for v in vos if v.get("rpe_missing_reason")})
-        lines += ["", dash_note("n/a") + " † = RPE of a run whose VO failed on some frames.", ""]
-        if reasons:
-            lines.append("VO failures by reason, all methods: " + ", ".join(f"{k} {n}" for k, n in reasons.most_common())
-                         + (f"; median stereo points per frame {_fmt(min(stereo), '.0f')}..{_fmt(max(stereo), '.0f')} "
-                            f"(tracking needs {results.get('vo_parameters', {}).get('min_stereo_points', 20)})"
-                            if stereo else "") + ".")
-        for reason in missing:
-            lines.append(f"RPE n/a: {reason}.")
-        lines += ["", f"![exposure per cycle](runs/{scene}/exposure.png) ![VO RPE](vo/{scene}/fig6_rpe.png) "
-                      f"![trajectories](vo/{scene}/trajectories.png)", ""]
+    lines = [f"## {scene}", "", head, sep]
+    for name, e in rows.items():
+        v = e["vo"] or {}
+        dagger = " †" if v.get("rpe_on_failed_run") else ""
+        seg = e["segment_success"]
+        lines.append(
+            f"| {PAPER_NAMES.get(name, name)} | {fmt_cell(e['median_exposure_ms'])} | "
+            f"{fmt_cell(None if e['median_uniformity'] is None else 100 * e['median_uniformity'], '.1f')}"
+            f"{_paper_cell('median_uniformity_pct', name)} | {fmt_cell(e['median_matches'], '.0f')}"
+            f"{_paper_cell('median_matches', name)} | {fmt_cell(e['sequence_success'][lo])} | "
+            f"{fmt_cell(e['sequence_success'][hi])} | {seg[lo]['succeeded']}/{seg[lo]['segments']} | "
+            f"{seg[hi]['succeeded']}/{seg[hi]['segments']} | "
+            f"{v.get('n_failed_frames', 'n/a')} of {max(0, v.get('n_frames', 1) - 1)} | "
+            f"{_at(v.get('rpe_trans_pct'), v.get('rpe_trans_delta_m'), '.2f')}{dagger} | "
+            f"{_at(v.get('rpe_rot_deg_per_m'), v.get('rpe_rot_delta_m'), '.3f')}{dagger} |")
+    vos = [e["vo"] for e in rows.values() if e["vo"] is not None]
+    reasons = Counter()
+    for v in vos:
+        reasons.update(v["failure_reasons"])
+    stereo = [v["median_stereo_points"] for v in vos if v["median_stereo_points"] is not None]
+    missing = sorted({v["rpe_missing_reason"] for v in vos if v.get("rpe_missing_reason")})
+    lines += ["", dash_note("n/a") + " † = RPE of a run whose VO failed on some frames.", ""]
+    if reasons:
+        lines.append("VO failures by reason, all methods: " + ", ".join(f"{k} {n}" for k, n in reasons.most_common())
+                     + (f"; median stereo points per frame {fmt_cell(min(stereo), '.0f')}..{fmt_cell(max(stereo), '.0f')} "
+                        f"(tracking needs {results.get('vo_parameters', {}).get('min_stereo_points', 20)})"
+                        if stereo else "") + ".")
+    for reason in missing:
+        lines.append(f"RPE n/a: {reason}.")
+    lines += ["", f"![exposure per cycle](runs/{scene}/exposure.png) ![VO RPE](vo/{scene}/fig6_rpe.png) "
+                  f"![trajectories](vo/{scene}/trajectories.png)", ""]
+    return lines
+
+
+def _pooled_section(summary: dict, lo: str, hi: str) -> list[str]:
+    """The table pooled over the scenes (a row per method)."""
     deltas = [v[k] for rows in summary["per_scene"].values() for e in rows.values() if (v := e["vo"])
-              for k in ("rpe_trans_delta_m", "rpe_rot_delta_m") if v.get(k) is not None]
+             for k in ("rpe_trans_delta_m", "rpe_rot_delta_m") if v.get(k) is not None]
     delta_range = (f"{min(deltas):.2g}..{max(deltas):.2g} m" if deltas and min(deltas) != max(deltas)
                    else f"{deltas[0]:.2g} m" if deltas else "n/a")
-    lines += ["## All scenes together", "",
-              f"| method | median uniformity (%) | median matches | success rate tau={lo} (sequences) | "
-              f"success rate tau={hi} (sequences) | success rate tau={lo} (segments) | success rate tau={hi} "
-              f"(segments) | VO failed runs | VO failed frames | RPE trans. (% of delta), mean over scenes of the "
-              f"minimal medians (delta {delta_range}) | RPE rot. (deg/m), mean over scenes of the minimal medians "
-              f"(delta {delta_range}) |", "|" + " --- |" * 11]
+    lines = ["## All scenes together", "",
+             f"| method | median uniformity (%) | median matches | success rate tau={lo} (sequences) | "
+             f"success rate tau={hi} (sequences) | success rate tau={lo} (segments) | success rate tau={hi} "
+             f"(segments) | VO failed runs | VO failed frames | RPE trans. (% of delta), mean over scenes of the "
+             f"minimal medians (delta {delta_range}) | RPE rot. (deg/m), mean over scenes of the minimal medians "
+             f"(delta {delta_range}) |", "|" + " --- |" * 11]
     for name, o in summary["overall"].items():
         sr, sg = o["sequence_success_rate"], o["segment_success"]
         lines.append(
             f"| {PAPER_NAMES.get(name, name)} | "
-            f"{_fmt(None if o['median_uniformity'] is None else 100 * o['median_uniformity'], '.1f')}"
-            f"{_paper_cell('median_uniformity_pct', name)} | {_fmt(o['median_matches'], '.0f')}"
-            f"{_paper_cell('median_matches', name)} | {_fmt(None if sr[lo] is None else 100 * sr[lo], '.0f')} | "
-            f"{_fmt(None if sr[hi] is None else 100 * sr[hi], '.0f')}{_paper_cell('success_rate_tau100_pct', name)} | "
-            f"{_fmt(None if sg[lo]['rate'] is None else 100 * sg[lo]['rate'], '.0f')} | "
-            f"{_fmt(None if sg[hi]['rate'] is None else 100 * sg[hi]['rate'], '.0f')} | "
+            f"{fmt_cell(None if o['median_uniformity'] is None else 100 * o['median_uniformity'], '.1f')}"
+            f"{_paper_cell('median_uniformity_pct', name)} | {fmt_cell(o['median_matches'], '.0f')}"
+            f"{_paper_cell('median_matches', name)} | {fmt_cell(None if sr[lo] is None else 100 * sr[lo], '.0f')} | "
+            f"{fmt_cell(None if sr[hi] is None else 100 * sr[hi], '.0f')}{_paper_cell('success_rate_tau100_pct', name)} | "
+            f"{fmt_cell(None if sg[lo]['rate'] is None else 100 * sg[lo]['rate'], '.0f')} | "
+            f"{fmt_cell(None if sg[hi]['rate'] is None else 100 * sg[hi]['rate'], '.0f')} | "
             f"{o['vo_failed_runs']} of {o['n_sequences']} | {o['vo_failed_frames']} | "
-            f"{_fmt(o['rpe_trans_pct_mean_over_scenes'], '.2f')}{_paper_cell('rpe_trans_pct', name)} | "
-            f"{_fmt(o['rpe_rot_deg_per_m_mean_over_scenes'], '.3f')}{_paper_cell('rpe_rot_deg_per_m', name)} |")
+            f"{fmt_cell(o['rpe_trans_pct_mean_over_scenes'], '.2f')}{_paper_cell('rpe_trans_pct', name)} | "
+            f"{fmt_cell(o['rpe_rot_deg_per_m_mean_over_scenes'], '.3f')}{_paper_cell('rpe_rot_deg_per_m', name)} |")
     lines += ["", dash_note("n/a") + " These are point figures pooled over the scenes; the intervals follow.", ""]
-    lines += method_intervals_markdown(summary["per_scene"])
-    lines += ["", f"Paper: VO failed on {PAPER['vo_failed_runs']}.", "",
-              _tau_note(summary, int(hi)), "", "## Verdicts beside the paper's numbers", ""]
-    lines += [f"- {v}" for v in study_verdicts(results)]
-    lines += ["",
-              "## Which of the paper's qualitative findings hold", "", results["findings_paragraph"], "",
-              "| finding | paper | verdict | effect (95 % interval) | adjusted p | point comparison | measured |",
-              "| --- | --- | --- | --- | --- | --- | --- |"]
+    return lines
+
+
+def _findings_section(results: dict) -> list[str]:
+    """The findings' paragraph, their table (verdict, effect, interval, adjusted p, point comparison) and how
+    they were tested."""
+    lines = ["",
+             "## Which of the paper's qualitative findings hold", "", results["findings_paragraph"], "",
+             "| finding | paper | verdict | effect (95 % interval) | adjusted p | point comparison | measured |",
+             "| --- | --- | --- | --- | --- | --- | --- |"]
     for f in results["findings"]:
         ci = f.get("ci95") or [None, None]
-        lines.append(f"| {f['claim']} | {f['paper']} | {f.get('verdict', 'n/a')} | {_fmt(f.get('effect'))} "
-                     f"({_fmt(ci[0])}..{_fmt(ci[1])}) | {_fmt(f.get('p_adjusted'), '.2g')} | "
-                     f"{_fmt(f['holds']) if f['holds'] is not None else 'undecided'} | {f['detail']} |")
+        lines.append(f"| {f['claim']} | {f['paper']} | {f.get('verdict', 'n/a')} | {fmt_cell(f.get('effect'))} "
+                     f"({fmt_cell(ci[0])}..{fmt_cell(ci[1])}) | {fmt_cell(f.get('p_adjusted'), '.2g')} | "
+                     f"{fmt_cell(f['holds']) if f['holds'] is not None else 'undecided'} | {f['detail']} |")
     lines += ["", "Verdict: each claim tested as the paper states it (a \"best\" or \"poorest\" method against each "
               "other method: every one-sided paired comparison over walks must reject); family: Holm across the "
               "tested claims for holds, and across their opposites for contradicted; undetermined with fewer than 10 "
               "walks; by-construction findings cannot fail and are not counted. The effect is signed, positive = the "
               "paper's claim (see `effect_definition` in results.json). The point comparison is the single-number "
               "test, without evidence."]
-    lines += ["", "## Figures", "", "![summary](ae_study_summary.png)", "",
-              "![features (Fig. 4)](features/fig4_features.png)", "",
-              "## Why this size and VO ratio", "", f"- symptom: {VO_CONFIGURATION_NOTE['symptom']}",
-              f"- cause: {VO_CONFIGURATION_NOTE['cause']}",
-              "- fraction of failed VO steps (forest_winter, 12 cycles, 7 methods), ratio 0.8 then 0.9: "
-              + "; ".join(f"{k}: {v[0]:.2f}, {v[1]:.2f}" for k, v in VO_CONFIGURATION_NOTE['failed_steps_ratio_0.8_then_0.9'].items()),
-              f"- forest_edge: {VO_CONFIGURATION_NOTE['forest_edge']}",
-              "- on the study's own runs (256x160, 8 spp, 100 cycles, 7 methods), failed VO frames with ratio 0.8 then "
-              "0.9: " + "; ".join(f"{k}: {v[0]}, {v[1]}" for k, v in
-                                 VO_CONFIGURATION_NOTE["study_100_cycles_failed_frames_ratio_0.8_then_0.9"].items()),
-              "", f"Command: `{results.get('command') or ''}`", ""]
+    return lines
+
+
+def _appendix_lines(results: dict) -> list[str]:
+    """The figures, why the study's size and VO ratio, and the command."""
+    return ["", "## Figures", "", "![summary](ae_study_summary.png)", "",
+           "![features (Fig. 4)](features/fig4_features.png)", "",
+           "## Why this size and VO ratio", "", f"- symptom: {VO_CONFIGURATION_NOTE['symptom']}",
+           f"- cause: {VO_CONFIGURATION_NOTE['cause']}",
+           "- fraction of failed VO steps (forest_winter, 12 cycles, 7 methods), ratio 0.8 then 0.9: "
+           + "; ".join(f"{k}: {v[0]:.2f}, {v[1]:.2f}" for k, v in VO_CONFIGURATION_NOTE['failed_steps_ratio_0.8_then_0.9'].items()),
+           f"- forest_edge: {VO_CONFIGURATION_NOTE['forest_edge']}",
+           "- on the study's own runs (256x160, 8 spp, 100 cycles, 7 methods), failed VO frames with ratio 0.8 then "
+           "0.9: " + "; ".join(f"{k}: {v[0]}, {v[1]}" for k, v in
+                              VO_CONFIGURATION_NOTE["study_100_cycles_failed_frames_ratio_0.8_then_0.9"].items()),
+           "", f"Command: `{results.get('command') or ''}`", ""]
+
+
+def report_markdown(results: dict) -> str:
+    """``report.md``: configuration, a table per scene, pooled table, findings, figures."""
+    cfg = results["config"]
+    taus = [str(t) for t in cfg["taus"]]
+    lo, hi = taus[0], taus[-1]
+    summary = results["summary"]
+    lines = _config_lines(results)
+    for scene, rows in summary["per_scene"].items():
+        lines += _scene_section(scene, rows, lo, hi, results)
+    lines += _pooled_section(summary, lo, hi)
+    lines += method_intervals_markdown(summary["per_scene"])
+    lines += ["", f"Paper: VO failed on {PAPER['vo_failed_runs']}.", "",
+              _tau_note(summary, int(hi)), "", "## Verdicts beside the paper's numbers", ""]
+    lines += [f"- {v}" for v in study_verdicts(results)]
+    lines += _findings_section(results)
+    lines += _appendix_lines(results)
     return "\n".join(lines)
 
 
@@ -195,7 +225,7 @@ def _at(value, delta_m, spec: str) -> str:
     """``value @ delta m`` (the pair length the minimal median was found at), or n/a."""
     if value is None:
         return "n/a"
-    return f"{_fmt(value, spec)} @ {delta_m:.2g} m" if delta_m is not None else _fmt(value, spec)
+    return f"{fmt_cell(value, spec)} @ {delta_m:.2g} m" if delta_m is not None else fmt_cell(value, spec)
 
 
 def study_verdicts(results: dict) -> list[str]:
@@ -239,9 +269,9 @@ def _tau_note(summary: dict, tau: int) -> str:
     above_q1 = [PAPER_NAMES.get(k, k) for k, v in q1.items() if tau > v]
     above_med = [PAPER_NAMES.get(k, k) for k, v in med.items() if tau > v]
     text = (f"The paper set tau = 100 \"largely under any first quartile\" of its match counts (median 674 for "
-            f"M_fixed at 1920x1200). Here the first quartiles of the matches are {_fmt(min(q1.values()), '.0f')}.."
-            f"{_fmt(max(q1.values()), '.0f')} and the medians {_fmt(min(med.values()), '.0f')}.."
-            f"{_fmt(max(med.values()), '.0f')}: tau = {tau} is ")
+            f"M_fixed at 1920x1200). Here the first quartiles of the matches are {fmt_cell(min(q1.values()), '.0f')}.."
+            f"{fmt_cell(max(q1.values()), '.0f')} and the medians {fmt_cell(min(med.values()), '.0f')}.."
+            f"{fmt_cell(max(med.values()), '.0f')}: tau = {tau} is ")
     if not above_q1:
         return text + "under every first quartile, as in the paper."
     return text + (f"above the first quartile of {len(above_q1)} of {len(q1)} methods"

@@ -11,7 +11,7 @@ from pathlib import Path
 from emulator.io.files import REPORT_FILE, RESULTS_FILE, prepare_output, read_results, write_results, write_text
 from emulator.report.html import run_folder_pages, write_report
 from validation.ae_study.config import CONFIGS, PAPER, VO_CONFIGURATION_NOTE, StudyConfig, StudyError, config_from_dict
-from validation.ae_study.findings import evaluate_findings, findings_paragraph, findings_with_evidence
+from validation.ae_study.findings import evaluate_findings, findings_paragraph, findings_with_evidence, fmt_cell
 from validation.ae_study.report import plot_summary, report_markdown
 from validation.ae_study.summary import summarise
 
@@ -172,8 +172,6 @@ def run_replicated_study(out, config: StudyConfig = CONFIGS["full"], replicates:
 
 def finish_replicated_study(out, studies: list[dict], command: str | None = None) -> dict:
     """``results.json`` and ``report.md`` of the findings over the walks of several studies' results."""
-    from validation.ae_study.findings import _fmt
-
     out = Path(out)
     per_scene = {f"{scene}/seed{st['config']['scene_seed']}": rows for st in studies
                  for scene, rows in st["summary"]["per_scene"].items()}
@@ -195,8 +193,8 @@ def finish_replicated_study(out, studies: list[dict], command: str | None = None
              "| --- | --- | ---: | --- | ---: | ---: | --- |"]
     for f in findings:
         ci = f.get("ci95") or [None, None]
-        lines.append(f"| {f['id']} | {f['verdict']} | {_fmt(f['effect'])} | {_fmt(ci[0])}..{_fmt(ci[1])} | "
-                     f"{_fmt(f['p_adjusted'], '.2g')} | {f.get('n_walks') if f.get('n_walks') is not None else '-'} | "
+        lines.append(f"| {f['id']} | {f['verdict']} | {fmt_cell(f['effect'])} | {fmt_cell(ci[0])}..{fmt_cell(ci[1])} | "
+                     f"{fmt_cell(f['p_adjusted'], '.2g')} | {f.get('n_walks') if f.get('n_walks') is not None else '-'} | "
                      f"{f.get('effect_definition') or f.get('verdict_reason')} |")
     from validation.ae_study.report import method_intervals, method_intervals_markdown
     from validation.verdicts.findings import FAMILY
