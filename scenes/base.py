@@ -31,8 +31,8 @@ SCENES: dict[str, Callable[..., "Scene"]] = {}
 
 # Modules whose source decides the pixels of a render; their hash is part of the
 # render cache key, so editing a scene invalidates its cached renders.
-_PIXEL_MODULES = ("textures.py", "geometry.py", "lighting.py", "description.py", "library", "_mitsuba.py",
-                  "camera.py")
+_PIXEL_MODULES = ("textures.py", "texture_base.py", "geometry.py", "lighting.py", "description.py", "library",
+                  "_mitsuba.py", "camera.py")
 
 
 @functools.lru_cache(maxsize=1)

@@ -60,6 +60,34 @@ def _mean(values) -> float | None:
     return float(np.mean(vals)) if vals else None
 
 
+def _vo_entry(v: dict) -> dict:
+    """One method's VO figures on one scene from its entry in the VO benchmark's ``results.json``: status,
+    failures, the minimal median RPE (translation and rotation) at its pair length, and why it is missing."""
+    trans, trans_delta = _minimal_median(v.get("rpe"), "trans_pct")
+    rot, rot_delta = _minimal_median(v.get("rpe"), "rot_deg_per_m")
+    return {
+        "status": v["status"],
+        "n_frames": v["n_frames"],
+        "n_failed_frames": len(v["failures"]),
+        "failure_reasons": dict(Counter(fl["reason"] for fl in v["failures"])),
+        "median_stereo_points": _median(v["frames"]["n_stereo_points"]),
+        "median_inliers": _median(v["frames"]["n_inliers"][1:]),
+        "rpe_trans_pct": trans,
+        "rpe_trans_delta_m": trans_delta,
+        "rpe_rot_deg_per_m": rot,
+        "rpe_rot_delta_m": rot_delta,
+        "rpe_on_failed_run": v["status"] != "success" and v.get("rpe") is not None,
+        "rpe_missing_reason": None if trans is not None else (
+            v.get("rpe_skipped") or "no pose pair of the tested lengths (see rpe_by_delta)"),
+        "rpe_by_delta": [
+            {"delta_m": d["delta_m"], "n_pairs": d["n_pairs"],
+             "trans_pct_median": (d["trans_pct"] or {}).get("median"),
+             "rot_deg_per_m_median": (d["rot_deg_per_m"] or {}).get("median")}
+            for d in ((v.get("rpe") or {}).get("deltas") or [])
+        ],
+    }
+
+
 def summarise(config: StudyConfig, features: dict, vo: dict[str, dict], runs: dict[str, dict]) -> dict:
     """Per scene and per method figures, and the figures pooled over the scenes.
 
@@ -102,32 +130,7 @@ def summarise(config: StudyConfig, features: dict, vo: dict[str, dict], runs: di
                 "segment_success": {k: {"succeeded": a, "segments": b, "rate": (a / b if b else None)}
                                     for k, (a, b) in seg.items()},
             }
-            if v is None:
-                entry["vo"] = None
-            else:
-                trans, trans_delta = _minimal_median(v.get("rpe"), "trans_pct")
-                rot, rot_delta = _minimal_median(v.get("rpe"), "rot_deg_per_m")
-                entry["vo"] = {
-                    "status": v["status"],
-                    "n_frames": v["n_frames"],
-                    "n_failed_frames": len(v["failures"]),
-                    "failure_reasons": dict(Counter(fl["reason"] for fl in v["failures"])),
-                    "median_stereo_points": _median(v["frames"]["n_stereo_points"]),
-                    "median_inliers": _median(v["frames"]["n_inliers"][1:]),
-                    "rpe_trans_pct": trans,
-                    "rpe_trans_delta_m": trans_delta,
-                    "rpe_rot_deg_per_m": rot,
-                    "rpe_rot_delta_m": rot_delta,
-                    "rpe_on_failed_run": v["status"] != "success" and v.get("rpe") is not None,
-                    "rpe_missing_reason": None if trans is not None else (
-                        v.get("rpe_skipped") or "no pose pair of the tested lengths (see rpe_by_delta)"),
-                    "rpe_by_delta": [
-                        {"delta_m": d["delta_m"], "n_pairs": d["n_pairs"],
-                         "trans_pct_median": (d["trans_pct"] or {}).get("median"),
-                         "rot_deg_per_m_median": (d["rot_deg_per_m"] or {}).get("median")}
-                        for d in ((v.get("rpe") or {}).get("deltas") or [])
-                    ],
-                }
+            entry["vo"] = None if v is None else _vo_entry(v)
             rows[name] = entry
         per_scene[scene] = rows
 
