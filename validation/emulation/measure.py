@@ -64,6 +64,45 @@ def _rmse_masked(d2: np.ndarray, mask: np.ndarray) -> float:
     return float(np.sqrt(d2[mask].sum() / n)) if n else float("nan")
 
 
+def _noisy_metrics(metrics: dict, i: int, j: int, emu, valid, gt, gt_clean, var_map) -> None:
+    """Exposure ``i``, bracket ``j`` of the noisy emulation's metrics: against the noisy ground truth (with the
+    camera noise measured over the same pixels) and against the exact one."""
+    inval = ~valid
+    d2 = (emu - gt) ** 2
+    metrics["raw_valid"][i, j] = _rmse_masked(d2, valid)
+    metrics["raw_all"][i, j] = math.sqrt(d2.mean())
+    metrics["sigma_valid"][i, j] = math.sqrt(var_map[valid].mean()) if valid.any() else np.nan
+    metrics["sigma_all"][i, j] = math.sqrt(var_map.mean())
+    # the paper's "error between consecutive images": sqrt(2) sigma over the same pixels
+    metrics["pair_valid"][i, j] = math.sqrt(2.0) * metrics["sigma_valid"][i, j]
+    metrics["pair_all"][i, j] = math.sqrt(2.0) * metrics["sigma_all"][i, j]
+    e2 = (emu - gt_clean) ** 2
+    metrics["exact_valid"][i, j] = _rmse_masked(e2, valid)
+    metrics["exact_all"][i, j] = math.sqrt(e2.mean())
+    metrics["exact_invalid"][i, j] = _rmse_masked(e2, inval)
+
+
+def _clean_metrics(metrics: dict, i: int, j: int, emu_c, valid_c, gt_clean, bracket_clean, response, k: float
+                   ) -> float:
+    """Exposure ``i``, bracket ``j`` of the noiseless emulation's metrics; returns the largest excess of its
+    error over the per-DN quantisation bound on valid pixels (-inf without one)."""
+    err = np.abs(emu_c.astype(np.float64) - gt_clean)
+    c2 = err * err
+    metrics["clean_valid"][i, j] = _rmse_masked(c2, valid_c)
+    metrics["clean_all"][i, j] = math.sqrt(c2.mean())
+    metrics["clean_invalid"][i, j] = _rmse_masked(c2, ~valid_c)
+    if not valid_c.any():
+        return -np.inf
+    # per-DN bound table (see validation.common.quantisation_bound), gathered
+    dn = np.arange(response.white_level + 1, dtype=np.float64)
+    top = float(response.white_level)
+    lo = response.forward(k * response.inverse(np.clip(dn - 0.5, 0.0, top)))
+    hi = response.forward(k * response.inverse(np.clip(dn + 0.5, 0.0, top)))
+    mid = response.forward(k * response.g)
+    bound = np.maximum(hi - mid, mid - lo) + 1.0
+    return float((err - bound[bracket_clean])[valid_c].max())
+
+
 def sweep_static(
     radiance: np.ndarray,
     camera,
@@ -125,8 +164,6 @@ def sweep_static(
     edges = np.linspace(black, white + 1, HIST_BINS + 1)
     hist = {}
     hist_indices = set(int(i) for i in hist_indices)
-    dn = np.arange(response.white_level + 1, dtype=np.float64)
-    top = float(response.white_level)
 
     for i, t in enumerate(exposures):
         gt_clean = capture(radiance, t, camera, seed=0, noise=False).astype(np.float64)
@@ -141,37 +178,14 @@ def sweep_static(
             k = t / b
             emu, valid = emulate(br_noisy[j], b, t, response, return_mask=True)
             emu = emu.astype(np.float64)
-            inval = ~valid
-            d2 = (emu - gt) ** 2
-            metrics["raw_valid"][i, j] = _rmse_masked(d2, valid)
-            metrics["raw_all"][i, j] = math.sqrt(d2.mean())
-            metrics["sigma_valid"][i, j] = math.sqrt(var_map[valid].mean()) if valid.any() else np.nan
-            metrics["sigma_all"][i, j] = math.sqrt(var_map.mean())
-            # the paper's "error between consecutive images": sqrt(2) sigma over the same pixels
-            metrics["pair_valid"][i, j] = math.sqrt(2.0) * metrics["sigma_valid"][i, j]
-            metrics["pair_all"][i, j] = math.sqrt(2.0) * metrics["sigma_all"][i, j]
-            e2 = (emu - gt_clean) ** 2
-            metrics["exact_valid"][i, j] = _rmse_masked(e2, valid)
-            metrics["exact_all"][i, j] = math.sqrt(e2.mean())
-            metrics["exact_invalid"][i, j] = _rmse_masked(e2, inval)
+            _noisy_metrics(metrics, i, j, emu, valid, gt, gt_clean, var_map)
             vf_noisy[i, j] = valid.mean()
             if i in hist_indices:
                 hist[i]["emulated"][j] = np.histogram(emu, edges)[0]
 
             emu_c, valid_c = emulate(br_clean[j], b, t, response, return_mask=True)
-            err = np.abs(emu_c.astype(np.float64) - gt_clean)
-            c2 = err * err
-            metrics["clean_valid"][i, j] = _rmse_masked(c2, valid_c)
-            metrics["clean_all"][i, j] = math.sqrt(c2.mean())
-            metrics["clean_invalid"][i, j] = _rmse_masked(c2, ~valid_c)
             vf_clean[i, j] = valid_c.mean()
-            if valid_c.any():
-                # per-DN bound table (see validation.common.quantisation_bound), gathered
-                lo = response.forward(k * response.inverse(np.clip(dn - 0.5, 0.0, top)))
-                hi = response.forward(k * response.inverse(np.clip(dn + 0.5, 0.0, top)))
-                mid = response.forward(k * response.g)
-                bound = np.maximum(hi - mid, mid - lo) + 1.0
-                excess[i, j] = float((err - bound[br_clean[j]])[valid_c].max())
+            excess[i, j] = _clean_metrics(metrics, i, j, emu_c, valid_c, gt_clean, br_clean[j], response, k)
         tick(1)
 
     return SweepResult(exposures_ms=exposures, brackets_ms=brackets, white_level=white, black_level=black,

@@ -124,6 +124,41 @@ def _pool(per: dict, keys, field_: str) -> list:
     return vals
 
 
+#: What the figures of the study's results mean (``results["definitions"]``).
+_DEFINITIONS = {
+    "rmse_percent": "100 * RMSE(DN) / (white_level - black_level)",
+    "valid": "over the validity mask of the emulated image (emulator.emulate return_mask)",
+    "all": "over all pixels",
+    "invalid": "over the pixels outside the validity mask",
+    "ground_truth": "one noisy capture (repeat 0 of the repeats) at the target exposure",
+    "noise_estimator": "per-pixel variance sigma^2 = mean over the consecutive repeat pairs of "
+                       "(c[i+1] - c[i])^2 / 2, averaged over the same pixels as the RMSE; "
+                       "pair = sqrt(2) sigma, the RMSE between two captures (the paper's camera noise)",
+    "sub": "sqrt(max(raw^2 - sigma^2, 0)): the ground truth's noise removed in quadrature; estimates "
+           "'exact' (headline)",
+    "sub_pair": "sqrt(max(raw^2 - pair^2, 0)): the paper's 'error between consecutive images' removed in "
+                "quadrature; clamps to 0 wherever the emulated image is less noisy than a capture",
+    "sub_linear": "max(raw - pair, 0): the paper's 'subtract this noise' taken literally",
+    "exact": "noisy emulation against the exact noiseless ground truth",
+    "clean": "noiseless bracket against noiseless ground truth (emulation error only)",
+}
+
+
+def _extreme_exposures(config, per, labels, exposures) -> dict:
+    """Per scene and camera, the figures at the shortest and the longest target exposure."""
+    extremes = {}
+    for s in config.scenes:
+        for lbl in labels:
+            ser = per[(s, lbl)]["series"]
+            for pos, name in ((0, "shortest"), (-1, "longest")):
+                extremes.setdefault(s, {}).setdefault(lbl, {})[name] = {
+                    "target_ms": float(exposures[pos]), "bracket_ms": ser["bracket_ms"][pos],
+                    "valid_fraction": ser["valid_fraction"][pos], "sub_valid": ser["sub_valid"][pos],
+                    "sub_all": ser["sub_all"][pos], "exact_invalid": ser["exact_invalid"][pos],
+                    "clean_valid": ser["clean_valid"][pos], "clean_all": ser["clean_all"][pos]}
+    return extremes
+
+
 def _assemble(config, exposures, hist_idx, per, scene_info, hard, main_label) -> dict:
     labels = list(dict.fromkeys(lbl for (_, lbl) in per))
     main_keys = [(s, main_label) for s in config.scenes]
@@ -158,16 +193,7 @@ def _assemble(config, exposures, hist_idx, per, scene_info, hard, main_label) ->
         per_scene[s]["info"] = scene_info[s]
     series = {s: {lbl: per[(s, lbl)]["series"] for lbl in labels} for s in config.scenes}
     bound_ok = all(v["bound_ok"] for v in by_camera.values())
-    extremes = {}
-    for s in config.scenes:
-        for lbl in labels:
-            ser = per[(s, lbl)]["series"]
-            for pos, name in ((0, "shortest"), (-1, "longest")):
-                extremes.setdefault(s, {}).setdefault(lbl, {})[name] = {
-                    "target_ms": float(exposures[pos]), "bracket_ms": ser["bracket_ms"][pos],
-                    "valid_fraction": ser["valid_fraction"][pos], "sub_valid": ser["sub_valid"][pos],
-                    "sub_all": ser["sub_all"][pos], "exact_invalid": ser["exact_invalid"][pos],
-                    "clean_valid": ser["clean_valid"][pos], "clean_all": ser["clean_all"][pos]}
+    extremes = _extreme_exposures(config, per, labels, exposures)
     return {
         # headline: the selector, noise subtracted, valid pixels, main camera, all scenes and exposures
         "median_rmse_percent": pooled["sub_valid"]["median"],
@@ -192,21 +218,5 @@ def _assemble(config, exposures, hist_idx, per, scene_info, hard, main_label) ->
         "exposures_ms": [float(t) for t in exposures],
         "hist_exposures_ms": [float(exposures[i]) for i in hist_idx],
         "series": series,
-        "definitions": {
-            "rmse_percent": "100 * RMSE(DN) / (white_level - black_level)",
-            "valid": "over the validity mask of the emulated image (emulator.emulate return_mask)",
-            "all": "over all pixels",
-            "invalid": "over the pixels outside the validity mask",
-            "ground_truth": "one noisy capture (repeat 0 of the repeats) at the target exposure",
-            "noise_estimator": "per-pixel variance sigma^2 = mean over the consecutive repeat pairs of "
-                               "(c[i+1] - c[i])^2 / 2, averaged over the same pixels as the RMSE; "
-                               "pair = sqrt(2) sigma, the RMSE between two captures (the paper's camera noise)",
-            "sub": "sqrt(max(raw^2 - sigma^2, 0)): the ground truth's noise removed in quadrature; estimates "
-                   "'exact' (headline)",
-            "sub_pair": "sqrt(max(raw^2 - pair^2, 0)): the paper's 'error between consecutive images' removed in "
-                        "quadrature; clamps to 0 wherever the emulated image is less noisy than a capture",
-            "sub_linear": "max(raw - pair, 0): the paper's 'subtract this noise' taken literally",
-            "exact": "noisy emulation against the exact noiseless ground truth",
-            "clean": "noiseless bracket against noiseless ground truth (emulation error only)",
-        },
+        "definitions": dict(_DEFINITIONS),
     }
