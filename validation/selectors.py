@@ -152,6 +152,42 @@ def _selector_choices(sweep, response, noise, clip_weight: float) -> dict:
     return out
 
 
+def _err_of(sw, metric: str) -> np.ndarray:
+    """A sweep's error table (% of the DN range, exposure x bracket): ``exact_all`` or noise-subtracted ``sub_all``."""
+    if metric == "exact_all":
+        return sw.percent("exact_all")
+    return to_percent(sw.subtracted("all"), sw.white_level, sw.black_level)
+
+
+def _tune_clip_weight(config: SelectorsConfig, sweeps: dict, cams: dict, noise: dict) -> tuple[dict, float]:
+    """The clip weight tuned on the training scenes: the mean excess over the oracle (exact_all) per weight, and
+    the weight with the smallest (the smaller weight on a tie)."""
+    tuning = {}
+    for w in CLIP_WEIGHTS:
+        excess = []
+        for key in config.train_scenes:
+            for resp in config.responses:
+                sw = sweeps[(key, resp)]
+                idx = _selector_choices_predicted_only(sw, cams[resp].response, noise[resp], w)
+                err = _err_of(sw, "exact_all")
+                best = err[np.arange(err.shape[0]), _oracle(err)]
+                excess.extend(err[np.arange(err.shape[0]), idx] - best)
+        tuning[f"{w:g}"] = float(np.mean(excess))
+    return tuning, min(CLIP_WEIGHTS, key=lambda w: (tuning[f"{w:g}"], w))
+
+
+def _pooled_summary(pooled: dict) -> dict:
+    """Per split, metric and selector: RMSE and excess over the oracle summarised, agreement with the oracle."""
+    summary = {}
+    for split in ("train", "test"):
+        for metric in ("exact_all", "sub_all"):
+            summary.setdefault(split, {})[metric] = {
+                name: {"rmse": summary_stats(v["rmse"]), "excess_over_oracle": summary_stats(v["excess"]),
+                       "agreement_with_oracle": float(np.mean(v["agree"]))}
+                for name, v in pooled[split][metric].items()}
+    return summary
+
+
 def run_selectors(config: SelectorsConfig, *, progress=None) -> dict:
     """Run the selector study: sweeps, tuning on the training scenes, held-out evaluation.
 
@@ -174,25 +210,8 @@ def run_selectors(config: SelectorsConfig, *, progress=None) -> dict:
                                                repeats=config.repeats, seed=seed_for(config.seed, "sel", key, resp),
                                                progress=tick)
 
-    def err_of(sw, metric):
-        if metric == "exact_all":
-            return sw.percent("exact_all")
-        return to_percent(sw.subtracted("all"), sw.white_level, sw.black_level)
-
-    # tune the clip weight on the training scenes (mean excess over the oracle, exact_all)
     noise = {resp: noise_model_from_camera(cams[resp]) for resp in config.responses}
-    tuning = {}
-    for w in CLIP_WEIGHTS:
-        excess = []
-        for key in config.train_scenes:
-            for resp in config.responses:
-                sw = sweeps[(key, resp)]
-                idx = _selector_choices_predicted_only(sw, cams[resp].response, noise[resp], w)
-                err = err_of(sw, "exact_all")
-                best = err[np.arange(err.shape[0]), _oracle(err)]
-                excess.extend(err[np.arange(err.shape[0]), idx] - best)
-        tuning[f"{w:g}"] = float(np.mean(excess))
-    best_w = min(CLIP_WEIGHTS, key=lambda w: (tuning[f"{w:g}"], w))
+    tuning, best_w = _tune_clip_weight(config, sweeps, cams, noise)
 
     per = {}
     arrays = {"exposures_ms": exposures, "brackets_ms": np.asarray(config.brackets_ms)}
@@ -204,7 +223,7 @@ def run_selectors(config: SelectorsConfig, *, progress=None) -> dict:
             choices = _selector_choices(sw, cams[resp].response, noise[resp], best_w)
             block = {}
             for metric in ("exact_all", "sub_all"):
-                err = err_of(sw, metric)
+                err = _err_of(sw, metric)
                 choices_m = dict(choices, oracle=_oracle(err))
                 ev = evaluate_choices(err, choices_m)
                 block[metric] = ev
@@ -224,13 +243,7 @@ def run_selectors(config: SelectorsConfig, *, progress=None) -> dict:
                 "chosen_bracket_ms": {n: [float(sw.brackets_ms[j]) for j in idx] for n, idx in choices.items()},
             }
 
-    summary = {}
-    for split in ("train", "test"):
-        for metric in ("exact_all", "sub_all"):
-            summary.setdefault(split, {})[metric] = {
-                name: {"rmse": summary_stats(v["rmse"]), "excess_over_oracle": summary_stats(v["excess"]),
-                       "agreement_with_oracle": float(np.mean(v["agree"]))}
-                for name, v in pooled[split][metric].items()}
+    summary = _pooled_summary(pooled)
     test = summary["test"]["exact_all"]
     hns, new = test["higher-no-sat"], test["predicted-error"]
     wins = (new["excess_over_oracle"]["mean"] < hns["excess_over_oracle"]["mean"]

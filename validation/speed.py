@@ -146,10 +146,54 @@ def _tile(img: np.ndarray, shape) -> np.ndarray:
     return np.ascontiguousarray(np.tile(img, reps)[: shape[0], : shape[1]])
 
 
-def run_speed(config: SpeedConfig, *, progress=None) -> dict:
-    """Run the speed study; returns ``{"results": JSON-ready dict, "arrays": {...}}``."""
+def _render_rows(key: str, config: SpeedConfig, camera, cases: list, tick) -> list[dict]:
+    """Ground-truth renders of one scene at each of the study's spp against a high-spp reference (uncached
+    renders): seconds per render and the RMSE of their captures at the ``cases``' exposures."""
     import scenes
 
+    white, black = int(camera.white_level), int(camera.black_level)
+    rows = []
+    spec = study_scene(key)
+    scene = spec.build()
+    pose = spec.pose(scene)
+    kw = dict(width=config.width, height=config.height, seed=0, cache_dir=False)
+    ref = scenes.render(scene, pose, spp=config.reference_spp, **{**kw, "cache_dir": config.cache_dir})
+    tick(1)
+    ref_caps = {t: capture(ref, t, camera, seed=0, noise=False) for t, _, _ in cases}
+    for spp in config.spp_levels:
+        scenes.render(scene, pose, spp=spp, **{**kw, "seed": 1})  # warm-up: kernels compiled for this spp
+        t0 = time.perf_counter()
+        img = scenes.render(scene, pose, spp=spp, **kw)
+        dt = time.perf_counter() - t0
+        errs = [to_percent(rmse_dn(capture(img, t, camera, seed=0, noise=False), ref_caps[t]), white, black)
+                for t, _, _ in cases]
+        rows.append({"scene": key, "spp": int(spp), "seconds": dt, "rmse": summary_stats(errs)})
+        tick(1)
+    return rows
+
+
+def _speed_table(config: SpeedConfig, errors: dict, times_full: dict, times_small: dict, render_rows: list) -> list:
+    """One row per emulation path (median times, RMSE) and per render spp (median seconds, RMSE)."""
+    table = []
+    for name in EMULATION_PATHS:
+        table.append({
+            "config": name, "kind": "emulation",
+            "ms_per_full_frame": 1000.0 * float(np.median(times_full[name])),
+            "ms_per_study_image": 1000.0 * float(np.median(times_small[name])),
+            "rmse_all": summary_stats(errors[name]["all"]), "rmse_valid": summary_stats(errors[name]["valid"]),
+        })
+    for spp in config.spp_levels:
+        sel = [r for r in render_rows if r["spp"] == spp]
+        table.append({
+            "config": f"render spp {spp}", "kind": "render", "spp": int(spp),
+            "ms_per_study_image": 1000.0 * float(np.median([r["seconds"] for r in sel])),
+            "rmse_all": summary_stats([r["rmse"]["median"] for r in sel]),
+        })
+    return table
+
+
+def run_speed(config: SpeedConfig, *, progress=None) -> dict:
+    """Run the speed study; returns ``{"results": JSON-ready dict, "arrays": {...}}``."""
     tick = Progress(progress)
     camera = make_camera(config.response, width=config.width, height=config.height)
     response = camera.response
@@ -196,39 +240,9 @@ def run_speed(config: SpeedConfig, *, progress=None) -> dict:
                 times_small[name].append(_time(lambda: fn(brackets[b], b, t), config.timing_repeats))
             tick(1)
 
-        # ground-truth renders at several spp against a high-spp reference (uncached renders)
-        spec = study_scene(key)
-        scene = spec.build()
-        pose = spec.pose(scene)
-        kw = dict(width=config.width, height=config.height, seed=0, cache_dir=False)
-        ref = scenes.render(scene, pose, spp=config.reference_spp, **{**kw, "cache_dir": config.cache_dir})
-        tick(1)
-        ref_caps = {t: capture(ref, t, camera, seed=0, noise=False) for t, _, _ in cases}
-        for spp in config.spp_levels:
-            scenes.render(scene, pose, spp=spp, **{**kw, "seed": 1})  # warm-up: kernels compiled for this spp
-            t0 = time.perf_counter()
-            img = scenes.render(scene, pose, spp=spp, **kw)
-            dt = time.perf_counter() - t0
-            errs = [to_percent(rmse_dn(capture(img, t, camera, seed=0, noise=False), ref_caps[t]), white, black)
-                    for t, _, _ in cases]
-            render_rows.append({"scene": key, "spp": int(spp), "seconds": dt, "rmse": summary_stats(errs)})
-            tick(1)
+        render_rows += _render_rows(key, config, camera, cases, tick)
 
-    table = []
-    for name in EMULATION_PATHS:
-        table.append({
-            "config": name, "kind": "emulation",
-            "ms_per_full_frame": 1000.0 * float(np.median(times_full[name])),
-            "ms_per_study_image": 1000.0 * float(np.median(times_small[name])),
-            "rmse_all": summary_stats(errors[name]["all"]), "rmse_valid": summary_stats(errors[name]["valid"]),
-        })
-    for spp in config.spp_levels:
-        sel = [r for r in render_rows if r["spp"] == spp]
-        table.append({
-            "config": f"render spp {spp}", "kind": "render", "spp": int(spp),
-            "ms_per_study_image": 1000.0 * float(np.median([r["seconds"] for r in sel])),
-            "rmse_all": summary_stats([r["rmse"]["median"] for r in sel]),
-        })
+    table = _speed_table(config, errors, times_full, times_small, render_rows)
     results = {
         "table": table,
         "render_rows": render_rows,
