@@ -85,23 +85,13 @@ def emulate_cycle(
     ``blur_mismatch_px`` (source minus target: > 0 is blur the emulated image keeps; with
     ``consistent`` the added blur makes it 0 where the target is longer).
     """
-    from emulator.emulate import check_exposure, emulate
+    from emulator.emulate import check_exposure
     from emulator.errors import DatasetError
     from emulator.io.borealhdr import sequence_response
-    from emulator.select import saturated_fraction, select
+    from emulator.select import saturated_fraction
 
     exposure_ms = check_exposure(exposure_ms, "--exposure-ms")
-    if not 0 <= cycle_index < len(sequence):
-        raise ExposimError(f"cycle {cycle_index} out of range: {sequence.path} has cycles 0..{len(sequence) - 1}")
-    missing = [c for c in cameras if c not in sequence.cameras]
-    if missing:
-        raise ExposimError(f"{sequence.path}: no {', '.join(missing)} camera in this recording")
-    cycle = sequence[cycle_index]
-    available = cycle.available(cameras)
-    if not available:
-        raise ExposimError(
-            f"{sequence.path}: cycle {cycle_index} has no bracket present for {' and '.join(cameras)}"
-        )
+    cycle, available = _cycle_brackets(sequence, cycle_index, cameras)
     response = response or sequence_response(sequence)
     lead = cameras[0]
     levels = dict(white_level=sequence.white_level, black_level=sequence.black_level)
@@ -128,17 +118,9 @@ def emulate_cycle(
     motion = hook.motion if hook is not None else (
         recording_motion(sequence, calibration, stamp=stamp) if sequence.imu is not None and (
             selector == "blur-aware" or _has_calibration(sequence, calibration)) else None)
-    if from_ms is not None:
-        pass
-    elif selector == "blur-aware":
-        from emulator.select import blur_aware
-
-        if motion is None:
-            raise ExposimError(f"--selector blur-aware needs the recording's gyro (imu/imu.csv); {sequence.path} has none")
-        chosen = blur_aware(exposure_ms, {b: frac(b) for b in available}, **levels, excess_blur_px=lambda b: (
-            motion.mismatch_px(lead, cycle.frames[lead][b].timestamp_ns, b, exposure_ms)))
-    else:
-        chosen = select(selector, exposure_ms, {b: frac(b) for b in available}, **levels)
+    if from_ms is None:
+        chosen = _select_bracket(selector, exposure_ms, {b: frac(b) for b in available}, levels, motion, sequence,
+                                 cycle, lead)
     info = {
         "sequence": str(sequence.path),
         "cycle": cycle_index,
@@ -157,27 +139,63 @@ def emulate_cycle(
         raise DatasetError(f"{cycle.frames[other][chosen].path}: stereo pair mismatch, {other} timestamp "
                            f"{stamps[other]} != {lead} timestamp {stamps[lead]} for bracket {chosen:g} ms")
     for cam in cameras:
-        frame = cycle.frames[cam][chosen]
-        raw = _load(cam, chosen)
-        if hook is not None:
-            from emulator.blur import emulate_blur_consistent
-
-            Hs, ws = motion.homographies(cam, frame.timestamp_ns, chosen, exposure_ms, (raw.shape[1], raw.shape[0]))
-            img, valid = emulate_blur_consistent(raw, chosen, exposure_ms, response, Hs, ws)
-        else:
-            img, valid = emulate(raw, chosen, exposure_ms, response, return_mask=True)
-        out[cam] = img
-        info["cameras"][cam] = {
-            "source": str(frame.path),
-            "timestamp_ns": frame.timestamp_ns,
-            "valid_fraction": float(valid.mean()),
-            "saturated_fraction_source": saturated_fraction(raw, **levels),
-        }
-        if motion is not None:
-            info["cameras"][cam].update(_blur_info(motion, cam, frame.timestamp_ns, chosen, exposure_ms, raw.shape,
-                                                   consistent=hook is not None))
+        out[cam], info["cameras"][cam] = _emulate_camera(cam, cycle.frames[cam][chosen], _load(cam, chosen), chosen,
+                                                         exposure_ms, response, levels, hook, motion)
     info["valid_fraction"] = min(c["valid_fraction"] for c in info["cameras"].values())
     return info, out
+
+
+def _cycle_brackets(sequence, cycle_index: int, cameras: tuple[str, ...]):
+    """The cycle and the brackets present for every camera of ``cameras``, checked: ``(cycle, brackets)``."""
+    if not 0 <= cycle_index < len(sequence):
+        raise ExposimError(f"cycle {cycle_index} out of range: {sequence.path} has cycles 0..{len(sequence) - 1}")
+    missing = [c for c in cameras if c not in sequence.cameras]
+    if missing:
+        raise ExposimError(f"{sequence.path}: no {', '.join(missing)} camera in this recording")
+    cycle = sequence[cycle_index]
+    available = cycle.available(cameras)
+    if not available:
+        raise ExposimError(
+            f"{sequence.path}: cycle {cycle_index} has no bracket present for {' and '.join(cameras)}"
+        )
+    return cycle, available
+
+
+def _select_bracket(selector: str, exposure_ms: float, fractions: dict, levels: dict, motion, sequence, cycle,
+                    lead: str) -> float:
+    """The bracket ``selector`` picks from the lead camera's saturated ``fractions`` (bracket -> callable);
+    ``blur-aware`` weighs each bracket's excess blur from the recording's gyro (``motion``)."""
+    from emulator.select import blur_aware, select
+
+    if selector == "blur-aware":
+        if motion is None:
+            raise ExposimError(f"--selector blur-aware needs the recording's gyro (imu/imu.csv); {sequence.path} has none")
+        return blur_aware(exposure_ms, fractions, **levels, excess_blur_px=lambda b: (
+            motion.mismatch_px(lead, cycle.frames[lead][b].timestamp_ns, b, exposure_ms)))
+    return select(selector, exposure_ms, fractions, **levels)
+
+
+def _emulate_camera(cam: str, frame, raw, chosen: float, exposure_ms: float, response, levels: dict, hook, motion):
+    """One camera's emulated image (blur-consistent with a blur ``hook``) and its entry of ``info["cameras"]``."""
+    from emulator.blur import emulate_blur_consistent
+    from emulator.emulate import emulate
+    from emulator.select import saturated_fraction
+
+    if hook is not None:
+        Hs, ws = motion.homographies(cam, frame.timestamp_ns, chosen, exposure_ms, (raw.shape[1], raw.shape[0]))
+        img, valid = emulate_blur_consistent(raw, chosen, exposure_ms, response, Hs, ws)
+    else:
+        img, valid = emulate(raw, chosen, exposure_ms, response, return_mask=True)
+    entry = {
+        "source": str(frame.path),
+        "timestamp_ns": frame.timestamp_ns,
+        "valid_fraction": float(valid.mean()),
+        "saturated_fraction_source": saturated_fraction(raw, **levels),
+    }
+    if motion is not None:
+        entry.update(_blur_info(motion, cam, frame.timestamp_ns, chosen, exposure_ms, raw.shape,
+                                consistent=hook is not None))
+    return img, entry
 
 
 def _blur_info(motion, cam: str, timestamp_ns: int, source_ms: float, target_ms: float, shape, *,
