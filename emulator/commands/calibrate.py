@@ -114,79 +114,51 @@ def _check_levels(args) -> None:
                            "(--from-recording, --noise) gives its levels in its exposim.json")
 
 
-def _calibrate(args) -> int:
+def _fit_response(args, progress):
+    """The response fitted from ``args.stack`` or ``args.from_recording``, with the recording's cross-bracket
+    scores (recovered and existing response; None with --no-score or a stack) and the existing response:
+    ``(result, score, reference)``."""
     from emulator.calibration import calibrate_from_recording, calibrate_stack, cross_bracket_error
-    from emulator.errors import ExposimError, OutputExistsError
-    from emulator.io.pcalib import write_response
-    from emulator.report.calibration import plot_calibration
 
-    if sum(x is not None for x in (args.stack, args.from_recording, args.noise)) != 1:
-        raise ExposimError("give one of a STACK folder, --from-recording SEQ or --noise SEQ")
-    _check_levels(args)
-    if args.noise is not None:
-        return _calibrate_noise(args)
-    out = args.output
-    plot_path = out.with_name(out.stem + ".png")
-    if not args.force:
-        for p in (out, plot_path):
-            if p.exists():
-                raise OutputExistsError(f"{p}: exists; refusing to overwrite (use --force)")
-
-    progress, close = _progress_bar(bars_enabled(args.quiet or args.json))
     score = None
     reference = None
-    try:
-        if args.stack is not None:
-            kw = {"margin_dn": args.margin}
-            if args.knots is not None:
-                kw["n_knots"] = args.knots
-            if args.smoothness is not None:
-                kw["smoothness"] = args.smoothness
-            from emulator.io.stack import read_stack
+    if args.stack is not None:
+        kw = {"margin_dn": args.margin}
+        if args.knots is not None:
+            kw["n_knots"] = args.knots
+        if args.smoothness is not None:
+            kw["smoothness"] = args.smoothness
+        from emulator.io.stack import read_stack
 
-            stack = read_stack(args.stack, white_level=args.white_level, black_level=args.black_level)
-            result = calibrate_stack(
-                stack, max_pixels=args.pixels, check_static=not args.no_static_check, rng=args.seed,
-                progress=progress, **kw,
-            )
-        else:
-            from emulator.io.borealhdr import find_response, load_sequence, sequence_response
+        stack = read_stack(args.stack, white_level=args.white_level, black_level=args.black_level)
+        result = calibrate_stack(
+            stack, max_pixels=args.pixels, check_static=not args.no_static_check, rng=args.seed,
+            progress=progress, **kw,
+        )
+    else:
+        from emulator.io.borealhdr import find_response, load_sequence, sequence_response
 
-            seq = load_sequence(args.from_recording)
-            cams = None if args.camera == "both" else (args.camera,)
-            kw = {"margin_dn": args.margin, "stride": args.stride}
-            if args.knots is not None:
-                kw["n_knots"] = args.knots
-            if args.smoothness is not None:
-                kw["smoothness"] = args.smoothness
-            result = calibrate_from_recording(seq, cameras=cams, rng=args.seed, progress=progress, **kw)
-            if not args.no_score:
-                score = {"recovered": cross_bracket_error(seq, result.response, cameras=cams, stride=args.stride,
-                                                          progress=progress)}
-                found = find_response(seq.path)
-                if found is not None:
-                    reference = sequence_response(seq, found)
-                    score["existing"] = cross_bracket_error(seq, reference, cameras=cams, stride=args.stride,
-                                                            progress=progress)
-    finally:
-        close()
+        seq = load_sequence(args.from_recording)
+        cams = None if args.camera == "both" else (args.camera,)
+        kw = {"margin_dn": args.margin, "stride": args.stride}
+        if args.knots is not None:
+            kw["n_knots"] = args.knots
+        if args.smoothness is not None:
+            kw["smoothness"] = args.smoothness
+        result = calibrate_from_recording(seq, cameras=cams, rng=args.seed, progress=progress, **kw)
+        if not args.no_score:
+            score = {"recovered": cross_bracket_error(seq, result.response, cameras=cams, stride=args.stride,
+                                                      progress=progress)}
+            found = find_response(seq.path)
+            if found is not None:
+                reference = sequence_response(seq, found)
+                score["existing"] = cross_bracket_error(seq, reference, cameras=cams, stride=args.stride,
+                                                        progress=progress)
+    return result, score, reference
 
-    write_response(out, result.response, overwrite=args.force)
-    plot_calibration(result, plot_path, reference=reference,
-                     reference_label=f"existing {reference.name}" if reference is not None else "reference",
-                     overwrite=args.force)
 
-    if args.json:
-        d = result.to_dict()
-        d["output"] = str(out)
-        d["plot"] = str(plot_path)
-        if score:
-            d["cross_bracket"] = {k: {"response": v.response_name, "median_pct": v.median_pct,
-                                      "mean_pct": v.mean_pct, "n_pairs": len(v.pairs)} for k, v in score.items()}
-        from emulator.io.files import strict_json
-
-        print(strict_json(d))
-        return 0
+def _print_result(args, result, score) -> None:
+    """What ``exposim calibrate`` prints without --json: the fit, its samples, residual, warnings and scores."""
     info = result.info
     print(f"method      {result.method}")
     if args.stack is not None:
@@ -211,6 +183,48 @@ def _calibrate(args) -> int:
         for k, v in score.items():
             print(f"cross-bracket error ({k}: {v.response_name}): median {v.median_pct:.3f} %, "
                   f"mean {v.mean_pct:.3f} % over {len(v.pairs)} emulations")
+
+
+def _calibrate(args) -> int:
+    from emulator.errors import ExposimError, OutputExistsError
+    from emulator.io.pcalib import write_response
+    from emulator.report.calibration import plot_calibration
+
+    if sum(x is not None for x in (args.stack, args.from_recording, args.noise)) != 1:
+        raise ExposimError("give one of a STACK folder, --from-recording SEQ or --noise SEQ")
+    _check_levels(args)
+    if args.noise is not None:
+        return _calibrate_noise(args)
+    out = args.output
+    plot_path = out.with_name(out.stem + ".png")
+    if not args.force:
+        for p in (out, plot_path):
+            if p.exists():
+                raise OutputExistsError(f"{p}: exists; refusing to overwrite (use --force)")
+
+    progress, close = _progress_bar(bars_enabled(args.quiet or args.json))
+    try:
+        result, score, reference = _fit_response(args, progress)
+    finally:
+        close()
+
+    write_response(out, result.response, overwrite=args.force)
+    plot_calibration(result, plot_path, reference=reference,
+                     reference_label=f"existing {reference.name}" if reference is not None else "reference",
+                     overwrite=args.force)
+
+    if args.json:
+        d = result.to_dict()
+        d["output"] = str(out)
+        d["plot"] = str(plot_path)
+        if score:
+            d["cross_bracket"] = {k: {"response": v.response_name, "median_pct": v.median_pct,
+                                      "mean_pct": v.mean_pct, "n_pairs": len(v.pairs)} for k, v in score.items()}
+        from emulator.io.files import strict_json
+
+        print(strict_json(d))
+        return 0
+    _print_result(args, result, score)
     print(f"wrote       {out} and {plot_path}")
     return 0
 
