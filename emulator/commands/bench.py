@@ -306,16 +306,8 @@ def _common_sift(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print results.json to stdout")
 
 
-def register(subparsers) -> None:
-    """Add ``bench`` with ``features``, ``vo`` and ``rpe`` to the ``exposim`` parser."""
-    bench = subparsers.add_parser(
-        "bench",
-        help="benchmarks of paper section V-D: SIFT features, stereo VO, RPE",
-        description="Measure what each AE method does to a VSLAM pipeline (paper section V-D).",
-    )
-    bench.set_defaults(func=_help(bench))
-    sub = bench.add_subparsers(dest="bench_command", metavar="BENCHMARK")
-
+def _add_features(sub) -> None:
+    """``exposim bench features``."""
     f = sub.add_parser(
         "features",
         help="SIFT uniformity, matches and success rate (Fig. 4)",
@@ -329,6 +321,9 @@ def register(subparsers) -> None:
     _common_sift(f)
     f.set_defaults(func=_features)
 
+
+def _add_vo(sub) -> None:
+    """``exposim bench vo``."""
     v = sub.add_parser(
         "vo",
         help="stereo VO per method and RPE against a reference (Fig. 6)",
@@ -361,6 +356,9 @@ def register(subparsers) -> None:
     _common_sift(v)
     v.set_defaults(func=_vo)
 
+
+def _add_rpe(sub) -> None:
+    """``exposim bench rpe``."""
     r = sub.add_parser(
         "rpe",
         help="translation RPE of two TUM files, REF then EST, as evo_rpe computes it",
@@ -379,6 +377,9 @@ def register(subparsers) -> None:
     r.add_argument("--json", action="store_true", help='print {"rmse": ..., "mean": ..., "median": ...} only')
     r.set_defaults(func=_rpe)
 
+
+def _add_compare(sub) -> None:
+    """``exposim bench compare``."""
     c = sub.add_parser(
         "compare",
         help="methods of several run (or bench features) folders side by side, in one ranking",
@@ -394,6 +395,22 @@ def register(subparsers) -> None:
     add_quiet(c, "no summary")
     c.add_argument("--json", action="store_true", help="print results.json to stdout")
     c.set_defaults(func=_compare)
+
+
+def register(subparsers) -> None:
+    """Add ``bench`` with ``features``, ``vo`` and ``rpe`` to the ``exposim`` parser."""
+    bench = subparsers.add_parser(
+        "bench",
+        help="benchmarks of paper section V-D: SIFT features, stereo VO, RPE",
+        description="Measure what each AE method does to a VSLAM pipeline (paper section V-D).",
+    )
+    bench.set_defaults(func=_help(bench))
+    sub = bench.add_subparsers(dest="bench_command", metavar="BENCHMARK")
+
+    _add_features(sub)
+    _add_vo(sub)
+    _add_rpe(sub)
+    _add_compare(sub)
 
 
 register.order = 40  # place in `exposim --help`
