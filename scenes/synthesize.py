@@ -134,14 +134,7 @@ def synthesize(
     import synth
     from scenes import trajectory as tr
 
-    if isinstance(scene, str):
-        scene = scenes.get_scene(scene)
-    if n_cycles < 1:
-        raise ExposimError(f"n_cycles must be >= 1, got {n_cycles}")
-    if not (math.isfinite(saturate_ms) and saturate_ms > 0):
-        raise ExposimError(f"saturate_ms must be finite and positive, got {saturate_ms!r}")
-    cam = synth.Camera.preset(camera, width=width, height=height) if isinstance(camera, str) else camera
-    cam = cam.replace(width=width, height=height).saturating_at(scene.reference_radiance, saturate_ms)
+    scene, cam = _scene_and_camera(scene, camera, width, height, n_cycles, saturate_ms)
     baseline = tr.BASELINE_M if baseline_m is None else float(baseline_m)
 
     n_shots = n_cycles * len(brackets_ms)
@@ -154,16 +147,13 @@ def synthesize(
         raise ExposimError(f"render_per must be 'shot' or 'cycle', got {render_per!r}")
     render_variant = variant or scenes.choose_variant()
     settings, fallback = effective_denoise(denoise)
-    shots = WalkShots(scene, traj, render=dict(width=width, height=height, spp=spp, fov_deg=cam.fov_x_deg,
-                                               cache_dir=cache_dir, variant=render_variant, denoise=settings,
-                                               render_seed=render_seed),
-                      fps=fps, n_brackets=len(brackets_ms),
-                      max_window_ms=_window_ms(brackets_ms, gt_exposures_ms, max_window_ms), baseline_m=baseline, render_per=render_per, integrate=integrate,
-                      margin_step_px=margin_step_px)
+    render = dict(width=width, height=height, spp=spp, fov_deg=cam.fov_x_deg, cache_dir=cache_dir,
+                  variant=render_variant, denoise=settings)
+    shots = WalkShots(scene, traj, render=dict(render, render_seed=render_seed), fps=fps, n_brackets=len(brackets_ms),
+                      max_window_ms=_window_ms(brackets_ms, gt_exposures_ms, max_window_ms), baseline_m=baseline,
+                      render_per=render_per, integrate=integrate, margin_step_px=margin_step_px)
     source, blurred_source, render_job, shot_renderer, prefetched = _providers(
-        scene, traj, shots, baseline_m=baseline, render_seed=render_seed,
-        render=dict(width=width, height=height, spp=spp, fov_deg=cam.fov_x_deg, cache_dir=cache_dir,
-                    variant=render_variant, denoise=settings))
+        scene, traj, shots, baseline_m=baseline, render_seed=render_seed, render=render)
     if scheduler is not None:
         job_of = (lambda t, side, idx: shot_renderer(t, side).render_job()) if blur else render_job
         _prefetch(job_of, prefetched, keep=not blur, scheduler=scheduler, cache_dir=cache_dir, n_shots=n_shots,
@@ -174,26 +164,27 @@ def synthesize(
                                render_per=render_per, saturate_ms=saturate_ms, speed_mps=speed_mps, walk=walk,
                                imu=imu, imu_rate_hz=imu_rate_hz)
     return synth.capture_sequence(
-        blurred_source if blur else source,
-        out_dir,
-        cam,
-        brackets_ms=tuple(brackets_ms),
-        fps=fps,
-        n_cycles=n_cycles,
-        stereo=stereo,
-        baseline_m=baseline,
-        seed=seed,
-        noise=noise,
-        gt_exposures_ms=tuple(gt_exposures_ms),
-        gt_captures=gt_captures,
-        gt_cameras=gt_cameras,
-        save_radiance=save_radiance,
-        overwrite=overwrite,
-        progress=progress,
-        start_time_ns=start_time_ns,
-        source_description=description,
-        imu=imu,
+        blurred_source if blur else source, out_dir, cam, brackets_ms=tuple(brackets_ms), fps=fps, n_cycles=n_cycles,
+        stereo=stereo, baseline_m=baseline, seed=seed, noise=noise, gt_exposures_ms=tuple(gt_exposures_ms),
+        gt_captures=gt_captures, gt_cameras=gt_cameras, save_radiance=save_radiance, overwrite=overwrite,
+        progress=progress, start_time_ns=start_time_ns, source_description=description, imu=imu,
     )
+
+
+def _scene_and_camera(scene, camera, width: int, height: int, n_cycles: int, saturate_ms: float):
+    """The scene (a name takes its defaults) and the camera resized to ``width`` x ``height`` and scaled to
+    saturate on the scene's reference radiance at ``saturate_ms``, the arguments checked."""
+    import scenes
+    import synth
+
+    if isinstance(scene, str):
+        scene = scenes.get_scene(scene)
+    if n_cycles < 1:
+        raise ExposimError(f"n_cycles must be >= 1, got {n_cycles}")
+    if not (math.isfinite(saturate_ms) and saturate_ms > 0):
+        raise ExposimError(f"saturate_ms must be finite and positive, got {saturate_ms!r}")
+    cam = synth.Camera.preset(camera, width=width, height=height) if isinstance(camera, str) else camera
+    return scene, cam.replace(width=width, height=height).saturating_at(scene.reference_radiance, saturate_ms)
 
 
 def _window_ms(brackets_ms, gt_exposures_ms, max_window_ms) -> float:
