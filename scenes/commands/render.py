@@ -159,12 +159,44 @@ def _timestamps_and_poses(scene, args):
     return ts, traj.poses(ts)
 
 
+def _checked_output(out: Path, cameras: list[str], stamps_ns: list[int], *, stereo: bool, force: bool) -> Path:
+    """``out``, refused when it is a file, or when it holds an output file of this render and not ``force``."""
+    from emulator.errors import OutputExistsError
+
+    if out.exists() and not out.is_dir():
+        raise NotADirectoryError(f"-o: {out} exists and is not a folder")
+    targets = [out / "scene.json", out / "poses_left.txt"] + ([out / "poses_right.txt"] if stereo else [])
+    targets += [out / "frames" / cam / f"{ns}.exr" for cam in cameras for ns in stamps_ns]
+    existing = [t for t in targets if t.exists()]
+    if existing and not force:
+        raise OutputExistsError(f"{existing[0]} exists ({len(existing)} output file(s) in {out}); "
+                                f"use --force to overwrite")
+    return out
+
+
+def _spp(value, scene, pose, width: int, height: int, fov: float, variant: str, cache_dir):
+    """``--spp``: an integer, or ``auto`` (:func:`scenes.select_spp` on ``pose``): ``(spp, selection record or
+    None)``."""
+    import scenes
+
+    if str(value).lower() == "auto":
+        # measured on the first pose, at no more than 160 px wide to keep it affordable
+        sel_w = min(width, 160)
+        sel_h = max(1, round(height * sel_w / width))
+        selection = scenes.select_spp(scene, pose, width=sel_w, height=sel_h, fov_deg=fov, variant=variant,
+                                      candidates=(4, 9, 16, 36, 64, 144, 256), cache_dir=cache_dir)
+        return selection.spp, selection.to_dict()
+    try:
+        return int(value), None
+    except ValueError:
+        raise RenderError(f"--spp must be an integer or 'auto', got {value!r}") from None
+
+
 def run_render(args: argparse.Namespace) -> int:
     """Body of ``exposim render``."""
     import numpy as np
 
     import scenes
-    from emulator.errors import OutputExistsError
     from emulator.io.exr import write_exr
     from emulator.io.files import write_metadata
     from emulator.io.tum import write_tum
@@ -183,15 +215,7 @@ def run_render(args: argparse.Namespace) -> int:
     if len(set(stamps_ns)) != len(stamps_ns):
         raise SceneError("--trajectory: timestamps must be distinct (after rounding to ns)")
 
-    out = Path(args.output)
-    if out.exists() and not out.is_dir():
-        raise NotADirectoryError(f"-o: {out} exists and is not a folder")
-    targets = [out / "scene.json", out / "poses_left.txt"] + ([out / "poses_right.txt"] if args.stereo else [])
-    targets += [out / "frames" / cam / f"{ns}.exr" for cam in cameras for ns in stamps_ns]
-    existing = [t for t in targets if t.exists()]
-    if existing and not args.force:
-        raise OutputExistsError(f"{existing[0]} exists ({len(existing)} output file(s) in {out}); "
-                                f"use --force to overwrite")
+    out = _checked_output(Path(args.output), cameras, stamps_ns, stereo=args.stereo, force=args.force)
 
     from scenes.parallel import check_scheduler, render_many
 
@@ -199,20 +223,7 @@ def run_render(args: argparse.Namespace) -> int:
     cache_dir = False if args.no_cache else args.cache
     denoise, denoise_fallback = effective_denoise(args.denoise)
     variant = check_variant_name(args.variant) if args.variant else scenes.choose_variant()
-    if str(args.spp).lower() == "auto":
-        # measured on the first pose, at no more than 160 px wide to keep it affordable
-        sel_w = min(width, 160)
-        sel_h = max(1, round(height * sel_w / width))
-        selection = scenes.select_spp(scene, poses[0], width=sel_w, height=sel_h, fov_deg=fov, variant=variant,
-                                      candidates=(4, 9, 16, 36, 64, 144, 256), cache_dir=cache_dir)
-        spp = selection.spp
-        spp_info = selection.to_dict()
-    else:
-        try:
-            spp = int(args.spp)
-        except ValueError:
-            raise RenderError(f"--spp must be an integer or 'auto', got {args.spp!r}") from None
-        spp_info = None
+    spp, spp_info = _spp(args.spp, scene, poses[0], width, height, fov, variant, cache_dir)
 
     for cam in cameras:
         (out / "frames" / cam).mkdir(parents=True, exist_ok=True)
