@@ -141,20 +141,7 @@ def main(argv=None):
     for mode in modes:
         exposim_loop(seqs["png"], response, mode, 1)
 
-    results: dict = {}
-    for rep in range(max(1, args.repeat)):
-        for label, mode, jobs, frames, runner in configs:
-            if label == "published" and rep > 0:
-                continue
-            wall, cpu, traj, stats = measure(runner)
-            key = (label, mode, jobs, frames)
-            old = results.get(key)
-            if old is None:
-                results[key] = (wall, cpu, traj, stats)
-            else:  # best wall time; least CPU time (and that run's per-method timers)
-                results[key] = (min(wall, old[0]), min(cpu, old[1]), traj if wall < old[0] else old[2],
-                                stats if cpu < old[1] else old[3])
-        print(f"  round {rep + 1}/{args.repeat} done, load average {os.getloadavg()[0]:.1f}", flush=True)
+    results = _measure_all(configs, args.repeat)
 
     print(f"\n{'loop':11s} {'mode':9s} {'jobs':>4s} {'frames':6s} {'cycles/s':>8s} {'images/s':>8s} "
           f"{'CPU s/cycle':>11s} {'2/CPU bound':>11s} {'vs pre-change':>13s} {'CPU vs pre':>10s}  same trajectories")
@@ -166,6 +153,41 @@ def main(argv=None):
         same = "yes" if traj == ref_traj else _diff(traj, ref_traj)
         print(f"{label:11s} {mode:9s} {jobs:4d} {frames:6s} {n_cycles / wall:8.2f} {2 * 7 * n_cycles / wall:8.1f} "
               f"{cpu / n_cycles:11.3f} {2 * n_cycles / cpu:11.2f} {speed:>13s} {cpu_speed:>10s}  {same}")
+    _print_method_table(results, modes)
+    cache_rows = [(m, j) for m in modes for j in jobs_list if ("exposim", m, j, "cache") in results]
+    for m, j in cache_rows:
+        d = results[("exposim", m, j, "cache")][3].as_dict()
+        print(f"cache read ({m}, jobs={j}): {d['decode_ms_per_image']:.1f} ms per image")
+    best = max(n_cycles / results[(lab, m, j, f)][0] for (lab, m, j, f) in results if lab == "exposim")
+    print(f"\nbest exposim rate {best:.2f} cycles/s; recorder {RECORDER_CYCLES_PER_S} cycles/s; "
+          f"load average {os.getloadavg()[0]:.1f} at the end")
+    if tmp is not None:
+        tmp.cleanup()
+    return results
+
+
+def _measure_all(configs: list, repeat: int) -> dict:
+    """Every configuration's loop measured ``repeat`` times (the published loop once): per (label, mode, jobs,
+    frames), the best wall time, the least CPU time and their runs' trajectories and per-method timers."""
+    results: dict = {}
+    for rep in range(max(1, repeat)):
+        for label, mode, jobs, frames, runner in configs:
+            if label == "published" and rep > 0:
+                continue
+            wall, cpu, traj, stats = measure(runner)
+            key = (label, mode, jobs, frames)
+            old = results.get(key)
+            if old is None:
+                results[key] = (wall, cpu, traj, stats)
+            else:  # best wall time; least CPU time (and that run's per-method timers)
+                results[key] = (min(wall, old[0]), min(cpu, old[1]), traj if wall < old[0] else old[2],
+                                stats if cpu < old[1] else old[3])
+        print(f"  round {rep + 1}/{repeat} done, load average {os.getloadavg()[0]:.1f}", flush=True)
+    return results
+
+
+def _print_method_table(results: dict, modes: list[str]) -> None:
+    """Per method (and decode, emulate), ms per frame inside the loop: jobs=1, PNG frames, the least-CPU run."""
     print("\nper-method ms per frame inside the loop (jobs=1, PNG frames, the least-CPU run; decode is per image):")
     names = list(METHOD_NAMES) + ["(decode)", "(emulate)"]
     cols = [(label, mode) for label in ("pre-change", "exposim") for mode in modes]
@@ -182,16 +204,6 @@ def main(argv=None):
                  else d["method_ms_per_frame"].get(name))
             row.append(f"{v:17.1f}" if v is not None else f"{'-':>17s}")
         print(f"{name:13s} " + " ".join(row))
-    cache_rows = [(m, j) for m in modes for j in jobs_list if ("exposim", m, j, "cache") in results]
-    for m, j in cache_rows:
-        d = results[("exposim", m, j, "cache")][3].as_dict()
-        print(f"cache read ({m}, jobs={j}): {d['decode_ms_per_image']:.1f} ms per image")
-    best = max(n_cycles / results[(lab, m, j, f)][0] for (lab, m, j, f) in results if lab == "exposim")
-    print(f"\nbest exposim rate {best:.2f} cycles/s; recorder {RECORDER_CYCLES_PER_S} cycles/s; "
-          f"load average {os.getloadavg()[0]:.1f} at the end")
-    if tmp is not None:
-        tmp.cleanup()
-    return results
 
 
 def _pre(fn):

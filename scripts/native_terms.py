@@ -32,6 +32,53 @@ from pathlib import Path
 import numpy as np
 
 
+def _pool(errs: dict, names: list[str], into: dict) -> None:
+    """Each method's per-frame errors of one walk added to the pooled lists ``into`` (warped, unwarped, every
+    pixel, by source offset, and on the frames a neighbour bracket served)."""
+    for m in names:
+        d = errs[m]
+        for rw, ro, ru, ra, off in zip(d["rmse_percent"], d["rmse_percent_own_bracket"],
+                                       d["rmse_percent_unwarped"], d["rmse_percent_all"], d["source_offset"]):
+            if off != 0:
+                into["nb warped"].append(rw)
+                into["nb own"].append(ro)
+                into["nb unwarped"].append(ru)
+            into["warped"].append(rw)
+            into["all"].append(ra)
+            into["unwarped"].append(ru)
+            into[f"offset {off:+d}"].append(rw)
+            into["neighbour"].append(off != 0)
+
+
+def _print_weight(w: tuple[float, float], d: dict, per_walk: dict, names: list[str], seed: int) -> None:
+    """The pooled errors ``d`` of one (motion weight, clipping margin) and, over the walks ``per_walk``, each
+    walk's median with a bootstrap interval."""
+    from validation.live.native import native_emulation_summary
+
+    by_offset = ", ".join(f"{k[7:]}: {np.median(v):.2f} (n={len(v)})" for k, v in sorted(
+        d.items(), key=lambda kv: kv[0]) if k.startswith("offset"))
+    nb = (f"{np.median(d['nb warped']):.2f} / {np.median(d['nb unwarped']):.2f} / {np.median(d['nb own']):.2f}"
+          if d["nb warped"] else "-")
+    print(f"weight {w[0]:g}, clipping margin {w[1]:g}: median error {np.median(d['warped']):.2f} % warped, "
+          f"{np.median(d['unwarped']):.2f} % unwarped, {np.median(d['all']):.2f} % over every pixel in view, "
+          f"neighbour served {np.mean(d['neighbour']):.2f} (on those frames warped / unwarped / own bracket: "
+          f"{nb} %); by offset {by_offset}")
+    summary = native_emulation_summary(per_walk, names, seed=seed)
+    nbf = summary["neighbour_frames"]
+    print("  over walks, mean of each walk's median [bootstrap 95 %]: " + "; ".join(
+        f"{label} {_iv(summary_d)}" for label, summary_d in (
+            ("error %", summary["median_image_rmse_percent"]),
+            ("unwarped %", summary["median_image_rmse_percent_unwarped"]),
+            ("warp's share, every frame", summary["warp_cut_fraction"]),
+            ("a perfect warp's share, every frame", summary["warp_cut_fraction_perfect_warp"]),
+            ("neighbour frames: error %", nbf["median_image_rmse_percent"]),
+            ("unwarped %", nbf["median_image_rmse_percent_unwarped"]),
+            ("own bracket %", nbf["median_image_rmse_percent_own_bracket"]),
+            ("warp's share", summary["warp_cut_fraction_neighbour_frames"]),
+            ("warp's share of the excess over the own bracket",
+             summary["warp_cut_fraction_of_excess_neighbour_frames"]))))
+
+
 def main(argv=None) -> int:
     import scenes
     from emulator.io.borealhdr import load_sequence, sequence_response
@@ -40,7 +87,7 @@ def main(argv=None) -> int:
     from synth.sequence import load_camera
     from validation.live.config import config_from_dict
     from validation.live.loops import DatasetRadiance
-    from validation.live.native import native_emulation_summary, native_image_errors, native_rate_loop
+    from validation.live.native import native_image_errors, native_rate_loop
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("study", type=Path)
@@ -75,19 +122,7 @@ def main(argv=None) -> int:
             errs = native_image_errors(seq, every, response, config, names, motion_stops_per_frame=w[0],
                                        saturation_limit=w[1])
             per_walk[w][scene_name] = errs
-            for m in names:
-                d = errs[m]
-                for rw, ro, ru, ra, off in zip(d["rmse_percent"], d["rmse_percent_own_bracket"],
-                                               d["rmse_percent_unwarped"], d["rmse_percent_all"], d["source_offset"]):
-                    if off != 0:
-                        pooled[w]["nb warped"].append(rw)
-                        pooled[w]["nb own"].append(ro)
-                        pooled[w]["nb unwarped"].append(ru)
-                    pooled[w]["warped"].append(rw)
-                    pooled[w]["all"].append(ra)
-                    pooled[w]["unwarped"].append(ru)
-                    pooled[w][f"offset {off:+d}"].append(rw)
-                    pooled[w]["neighbour"].append(off != 0)
+            _pool(errs, names, pooled[w])
     print(f"study {args.study} ({cfg.width}x{cfg.height}, {len(cfg.scenes)} walk(s), noise {cfg.capture_noise})")
     att = pooled.pop("attribution", None)
     if att:
@@ -96,29 +131,7 @@ def main(argv=None) -> int:
               + "; ".join(f"{k} {np.median(v):.2f} / {np.median(np.asarray(v)[same]):.2f} / "
                           f"{np.median(np.asarray(v)[~same]):.2f}" for k, v in att.items()))
     for w in weights:
-        d = pooled[w]
-        by_offset = ", ".join(f"{k[7:]}: {np.median(v):.2f} (n={len(v)})" for k, v in sorted(
-            d.items(), key=lambda kv: kv[0]) if k.startswith("offset"))
-        nb = (f"{np.median(d['nb warped']):.2f} / {np.median(d['nb unwarped']):.2f} / {np.median(d['nb own']):.2f}"
-              if d["nb warped"] else "-")
-        print(f"weight {w[0]:g}, clipping margin {w[1]:g}: median error {np.median(d['warped']):.2f} % warped, "
-              f"{np.median(d['unwarped']):.2f} % unwarped, {np.median(d['all']):.2f} % over every pixel in view, "
-              f"neighbour served {np.mean(d['neighbour']):.2f} (on those frames warped / unwarped / own bracket: "
-              f"{nb} %); by offset {by_offset}")
-        summary = native_emulation_summary(per_walk[w], names, seed=cfg.seed)
-        nbf = summary["neighbour_frames"]
-        print("  over walks, mean of each walk's median [bootstrap 95 %]: " + "; ".join(
-            f"{label} {_iv(summary_d)}" for label, summary_d in (
-                ("error %", summary["median_image_rmse_percent"]),
-                ("unwarped %", summary["median_image_rmse_percent_unwarped"]),
-                ("warp's share, every frame", summary["warp_cut_fraction"]),
-                ("a perfect warp's share, every frame", summary["warp_cut_fraction_perfect_warp"]),
-                ("neighbour frames: error %", nbf["median_image_rmse_percent"]),
-                ("unwarped %", nbf["median_image_rmse_percent_unwarped"]),
-                ("own bracket %", nbf["median_image_rmse_percent_own_bracket"]),
-                ("warp's share", summary["warp_cut_fraction_neighbour_frames"]),
-                ("warp's share of the excess over the own bracket",
-                 summary["warp_cut_fraction_of_excess_neighbour_frames"]))))
+        _print_weight(w, pooled[w], per_walk[w], names, cfg.seed)
     return 0
 
 
