@@ -29,9 +29,7 @@ from emulator.autoexposure.methodset import parse_methods
 from emulator.errors import PlaybackError
 from emulator.gray import bayer_to_gray8
 from emulator.io.runfolder import CSV_COLUMNS, CSV_FILE, RUN_FILE, RunWriter, format_row, tables_from_rows
-from emulator.playback.config import CONFIG_KEYS
 from emulator import numpy_dispatch
-from emulator.playback.workers import effective_timeout_s
 from emulator.playback import METHOD_CAMERA, MethodStep, RunConfig, RunStats, closed_loop, prepare_run, \
     resolve_sequence
 from emulator.io.runcsv import NATIVE_COLUMNS
@@ -236,8 +234,8 @@ def write_run(sequence, methods, out_dir, config: RunConfig | None = None, *, re
     with RunWriter(out, resume=resume, png_level=cfg.png_level) as writer, watch_run(out):  # a crash: run.json failed
         if resume:
             run_json = writer.run_json
-            cfg.resumed(run_json, CONFIG_KEYS if resume_given is None else resume_given, where=str(out / RUN_FILE),
-                        noise_model=model, blur_hook=hook, identity=identity)
+            cfg.check_resume(run_json, resume_given, where=str(out / RUN_FILE), noise_model=model, blur_hook=hook,
+                             identity=identity)
             run_json["resumed"] = run_json.get("resumed", 0) + 1
             run_json.setdefault("resume_commands", []).append(command)
             if writer.lock.stale_owner:
@@ -253,9 +251,7 @@ def write_run(sequence, methods, out_dir, config: RunConfig | None = None, *, re
         else:  # a resumed run whose /dev/shm has room now: no earlier shortage carried over
             run_json.pop("shared_memory_pipes", None)
             run_json.pop("shared_memory", None)
-        run_json["jobs"] = cfg.jobs
-        run_json["workers"] = cfg.workers  # how the methods ran (results do not depend on it)
-        run_json["method_timeout_applied_s"] = effective_timeout_s(cfg)
+        run_json.update(cfg.per_run_json())  # how the methods ran (results do not depend on it): also on resume
         if cfg.workers == "process":  # the same bytes either way; recorded so that a reader knows
             run_json["worker_numpy"] = numpy_dispatch.describe()
         partial = [{"cycle": c.index, "missing": c.missing_by_camera(seq.cameras)} for c in seq.cycles

@@ -44,29 +44,18 @@ import numpy as np
 from emulator.autoexposure._base import AutoExposureError, MethodFailed
 from emulator.errors import PlaybackError
 from emulator.playback._worker_child import _child_main, _label
+from emulator.playback.config import DEFAULT_METHOD_TIMEOUT_S, WORKER_MODES
 from emulator.playback.shmblock import reserve_block
 from emulator.numpy_dispatch import forkserver_env
 
-__all__ = ["MethodWorker", "start_methods", "stop_methods", "effective_timeout_s", "DEFAULT_METHOD_TIMEOUT_S",
+__all__ = ["MethodWorker", "start_methods", "stop_methods", "DEFAULT_METHOD_TIMEOUT_S",
            "WORKER_MODES"]
 
-#: Per-call limit of a method in a worker when ``--method-timeout-s`` is not given, seconds: far
-#: above any built-in's call (under 0.1 s on a 1920x1200 frame), so only a stuck method meets it.
-DEFAULT_METHOD_TIMEOUT_S = 120.0
-#: ``process``: each method in its own worker process (the default); ``inline``: in the run's process.
-WORKER_MODES = ("process", "inline")
 #: Largest reply a worker may send, bytes (what a method printed is kept up to 64 KiB, its config's values cut).
 MAX_REPLY_BYTES = 16 << 20
 _PRELOAD = ["emulator.playback._worker_preload"]  # imports the worker side too
 _ctx = None
 _ctx_lock = threading.Lock()
-
-
-def effective_timeout_s(config) -> float | None:
-    """The per-call limit a run applies: ``config.method_timeout_s``, else the default (workers only)."""
-    if config.method_timeout_s is not None:
-        return float(config.method_timeout_s)
-    return DEFAULT_METHOD_TIMEOUT_S if getattr(config, "workers", "process") == "process" else None
 
 
 def _context():
@@ -356,7 +345,7 @@ def start_methods(spec, config, response) -> dict:
             plugins = installed_methods() if plugins is None else plugins
             parse_methods([item], plugins=plugins)  # an unknown or broken plugin name: refused here, in one line
             items[i] = (item, plugins[item].value)
-    timeout = effective_timeout_s(config)
+    timeout = config.method_timeout_applied_s
     started: list[MethodWorker] = []
     out: dict = {}
     try:
