@@ -12,7 +12,8 @@ from emulator.commands.progress import add_quiet, bars_enabled, log_lines
 from emulator.commands.run_summary import print_run_summary
 from emulator.distributed import SCHEDULER_HELP, resolve_scheduler
 from emulator.errors import ExposimError, PlaybackError
-from emulator.playback.config import RATES, WORKER_MODES, RunConfig, parse_options
+from emulator.native import NATIVE_RATE
+from emulator.playback.config import WORKER_MODES, RunConfig, parse_options
 from emulator.playback.settings import add_arguments, command_words, flag_of, given, settings_of, values_from_json
 
 __all__ = ["register", "config_from_args"]
@@ -183,7 +184,7 @@ def _check_args(args) -> None:
         raise ExposimError("--noise-model is used only with --noise consistent")
     for f, s in settings_of(RunConfig):  # the native-only flags
         value = getattr(args, f.name, None)
-        if s.native_only and value is not None and args.rate != RATES[1] and not args.resume:
+        if s.native_only and value is not None and args.rate != NATIVE_RATE and not args.resume:
             raise ExposimError(f"{s.flag} {'' if value is True else value}".strip() + ": used only with --rate native")
 
 
@@ -256,7 +257,7 @@ def _run(args) -> int:
     bar = None
     lines = log_lines("exposim run", args.quiet, heartbeat=True)  # closed in the finally below
     if lines is not None:  # a log (nohup, CI): a line at the start, every LOG_EVERY_S seconds and at the end
-        progress = functools.partial(lines, "frames" if config.rate == RATES[1] else "cycles")
+        progress = functools.partial(lines, config.provider_class.unit)
     elif bars_enabled(args.quiet):
         from tqdm import tqdm
 

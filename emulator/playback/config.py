@@ -29,6 +29,7 @@ import numpy as np
 from emulator.autoexposure import DEFAULT_RANGE_MS
 from emulator.errors import PlaybackError
 from emulator.io.runfolder import SAVE_MODES
+from emulator.native import DEFAULT_NATIVE_WARP, NATIVE_RATE, RATES, WARP_MODES, is_native_run
 from emulator.playback import settings
 from emulator.playback.runjson import (blur_json, common_figures, noise_json, recorded_blur, recorded_noise_model,
                                        recorded_response)
@@ -56,8 +57,6 @@ WORKER_MODES = ("process", "inline")
 MAX_METHOD_TIMEOUT_S = 2_147_483.0
 #: Largest exposure latency, frames (a recording's frame count bounds it further, at native rate).
 MAX_LATENCY_FRAMES = 1_000_000
-#: How often a method proposes: once per bracket sweep (the paper's) or after every recorded frame.
-RATES = ("cycle", "native")
 
 
 def parse_option(text: str) -> tuple[str, str, object]:
@@ -105,7 +104,7 @@ def _number(value, name: str) -> float:
 
 
 def _is_native(config) -> bool:
-    return config.rate == RATES[1]
+    return config.rate == NATIVE_RATE
 
 
 _NATIVE = "with --rate native: "
@@ -225,7 +224,7 @@ class RunConfig:
         cli={"choices": ("flow-sharp", "rotation", "flow", "none")},
         encode=lambda c, ctx: {"native_warp": c.warp_mode} if c.warp_mode != "rotation" else {},
         # native folders from before the warp modes: rotation; cycle rate has none
-        decode=lambda j: j.get("native_warp") or ("rotation" if j.get("rate") == RATES[1] else None),
+        decode=lambda j: j.get("native_warp") or ("rotation" if is_native_run(j) else None),
         help="--rate native: rotation: gyro; flow: then the neighbours' flow; flow-sharp (default): flow unless "
              "under 1 px")
     native_blur_aware: bool = setting(
@@ -308,8 +307,6 @@ class RunConfig:
             raise PlaybackError(f"latency_frames must be an integer >= 0, at most {MAX_LATENCY_FRAMES} and below "
                                 f"the recording's frame count, got {lat!r}")
         put(self, "latency_frames", int(lat))
-        from emulator.native import DEFAULT_NATIVE_WARP, WARP_MODES
-
         if self.native_warp is None and _is_native(self):
             put(self, "native_warp", DEFAULT_NATIVE_WARP)
         elif not _is_native(self) and self.native_warp == DEFAULT_NATIVE_WARP:  # a native run's default, carried
@@ -342,11 +339,27 @@ class RunConfig:
     def warp_mode(self) -> str:
         """The native warp this configuration runs: ``native_warp``, or where None the native default
         (:data:`emulator.native.DEFAULT_NATIVE_WARP`; ``rotation`` at cycle rate, where nothing is warped)."""
-        from emulator.native import DEFAULT_NATIVE_WARP
-
         if self.native_warp is not None:
             return self.native_warp
         return DEFAULT_NATIVE_WARP if _is_native(self) else "rotation"
+
+    @property
+    def latency_ticks(self) -> int:
+        """Ticks between a proposal and its use beyond the next one: ``latency_frames`` at native rate, else 0."""
+        return self.latency_frames if _is_native(self) else 0
+
+    @property
+    def provider_class(self):
+        """The image provider of this rate: :class:`~emulator.playback.emulated.EmulatedProvider` (a tick per
+        bracket sweep) or :class:`~emulator.playback.native.NativeProvider` (a tick per recorded frame)."""
+        from emulator.playback.emulated import EmulatedProvider
+        from emulator.playback.native import NativeProvider
+
+        return NativeProvider if _is_native(self) else EmulatedProvider
+
+    def provider_for(self, sequence, response, *, noise=None, stats=None, blur=None):
+        """This run's image provider on ``sequence`` (:attr:`provider_class`, configured by this run)."""
+        return self.provider_class.for_run(sequence, self, response, noise=noise, stats=stats, blur=blur)
 
     def replace(self, **changes) -> "RunConfig":
         """A copy with ``changes`` (validated again)."""
