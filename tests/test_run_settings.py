@@ -81,15 +81,20 @@ def test_old_folders_read_with_their_defaults():
     assert (config.png_level, config.method_timeout_s, config.native_warp, config.noise) == (1, 9.0, "rotation", "none")
 
 
-def test_a_dataset_run_builds_its_configuration_once(tmp_path, monkeypatch, capsys):
+def test_a_run_builds_its_configuration_once(tmp_path, monkeypatch, capsys):
     root = tmp_path / "data"
     write_static_sequence(root / "a", n_cycles=3, shape=(16, 24))
     built = []
     real = RunConfig.__post_init__
     monkeypatch.setattr(RunConfig, "__post_init__", lambda self: (built.append(1), real(self))[1])
-    assert main(["run", str(root), "--sequences", "all", "--scheduler", "serial", "--methods", "classical-50",
-                 "--isolation", "inline", "--initial-ms", "2", "-o", str(tmp_path / "out"), "-q"]) == 0
-    assert len(built) == 1
+    common = ["--methods", "classical-50", "--isolation", "inline", "--initial-ms", "2", "-q"]
+    assert main(["run", str(root), "--sequences", "all", "--scheduler", "serial", *common,
+                 "-o", str(tmp_path / "out")]) == 0
+    assert len(built) == 1  # a dataset run, its unit included
+    for extra in ([], ["--resume"]):
+        built.clear()
+        assert main(["run", str(root / "a"), *common, "-o", str(tmp_path / "one"), *extra]) == 0
+        assert len(built) == 1
 
 
 def test_the_older_workers_flag_is_read_with_a_notice(tmp_path, capsys):

@@ -235,7 +235,7 @@ def _run(args) -> int:
     methods = args.methods
     recorded = None
     if args.resume:
-        # The one resume rule (RunConfig.resumed): the recorded configuration wins, values given must equal it.
+        # The one resume rule (RunConfig.check_resume): the recorded configuration wins, values given must equal it.
         if not (args.output / RUN_FILE).is_file():
             raise ExposimError(f"{args.output / RUN_FILE}: no run to resume (run.json missing)")
         recorded = read_run_json(args.output)

@@ -8,10 +8,10 @@ other place repeats these checks.  What the configuration cannot know alone (the
 recording's levels, its response and noise model) is resolved by :meth:`RunConfig.response_for`
 and :meth:`RunConfig.noise_for`, once per run.
 
-The ``--resume`` rule lives here too (:meth:`RunConfig.resumed`): **the recorded
-configuration wins, and any value given again must equal it**; a difference raises and
-names the keys.  ``run.json`` keys: :meth:`RunConfig.to_json` (``method_timeout_s``; the
-older ``method_timeout`` key reads back as the same field).
+Each setting is one field, declared once with its flag, help, ``run.json`` key and resume rule
+(:mod:`emulator.playback.settings`).  The ``--resume`` rule lives here too
+(:meth:`RunConfig.check_resume`): **the recorded configuration wins, and any value given again
+must equal it**; a difference raises and names the keys.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ import dataclasses
 import json
 import math
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -32,8 +32,8 @@ from emulator.io.runfolder import SAVE_MODES
 from emulator.native import DEFAULT_NATIVE_WARP, NATIVE_RATE, RATES, WARP_MODES, is_native_run
 from emulator.playback import settings
 from emulator.playback.runjson import (blur_json, common_figures, noise_json, recorded_blur, recorded_noise_model,
-                                       recorded_response)
-from emulator.playback.settings import setting
+                                       recorded_response, same_file)
+from emulator.playback.settings import parse_option, parse_options, setting
 
 __all__ = [
     "RunConfig",
@@ -59,39 +59,9 @@ MAX_METHOD_TIMEOUT_S = 2_147_483.0
 MAX_LATENCY_FRAMES = 1_000_000
 
 
-def parse_option(text: str) -> tuple[str, str, object]:
-    """``METHOD.KEY=VALUE`` -> (method, key, value); VALUE parsed as JSON when it can be."""
-    head, sep, value = str(text).partition("=")
-    method, dot, key = head.partition(".")
-    if not sep or not dot or not method.strip() or not key.strip():
-        raise PlaybackError(f"--option {text!r}: expected METHOD.KEY=VALUE, e.g. kim.seed=3")
-    try:
-        parsed = json.loads(value)
-    except json.JSONDecodeError:
-        parsed = value
-    return method.strip(), key.strip(), parsed
-
-
-def parse_options(texts: Iterable[str], base: Mapping | None = None) -> dict[str, dict]:
-    """Every ``--option`` text folded into ``{method: {key: value}}`` (over ``base``)."""
-    out = {str(k): dict(v) for k, v in dict(base or {}).items()}
-    for text in texts:
-        method, key, value = parse_option(text)
-        out.setdefault(method, {})[key] = value
-    return out
-
-
 def _plain(value):
     """``value`` as it reads back from JSON (tuples -> lists), for comparing configurations."""
     return json.loads(json.dumps(value, sort_keys=True, default=str))
-
-
-def _same_file(a, b) -> bool:
-    """Two recorded paths (relative ones to the working directory) name one existing file."""
-    try:
-        return bool(a) and bool(b) and Path(a).is_file() and Path(a).resolve() == Path(b).resolve()
-    except OSError:
-        return False
 
 
 def _number(value, name: str) -> float:
@@ -486,7 +456,7 @@ class RunConfig:
                 diff.append(key)
         for key, a in dict(identity or {}).items():
             b = theirs[key] = recorded.get(key)
-            if _plain(a) != _plain(b) and not (key == "response" and _same_file(a, b)):
+            if _plain(a) != _plain(b) and not (key == "response" and same_file(a, b)):
                 diff.append(key)
         if diff:
             raise PlaybackError(f"{where}: --resume with a different configuration ({', '.join(diff)}): recorded "

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["noise_json", "blur_json", "recorded_blur", "common_figures", "recorded_noise_model", "recorded_response"]
+__all__ = ["noise_json", "blur_json", "recorded_blur", "common_figures", "recorded_noise_model", "recorded_response", "same_file"]
 
 
 def noise_json(config, ctx) -> dict:
@@ -55,3 +55,11 @@ def recorded_noise_model(run_json):
 def recorded_response(run_json):
     response = run_json.get("response_path") or run_json.get("response")
     return response if response and Path(response).is_file() else None
+
+
+def same_file(a, b) -> bool:
+    """Two recorded paths (relative ones to the working directory) name one existing file."""
+    try:
+        return bool(a) and bool(b) and Path(a).is_file() and Path(a).resolve() == Path(b).resolve()
+    except OSError:
+        return False

@@ -20,12 +20,15 @@ served the same way.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Mapping
+import json
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from emulator.errors import PlaybackError
+
 __all__ = ["Setting", "setting", "settings_of", "add_arguments", "given", "flag_of", "to_json", "values_from_json",
-           "resume_keys", "recorded_value", "command_words", "METADATA_KEY"]
+           "resume_keys", "recorded_value", "compared", "command_words", "parse_option", "parse_options", "METADATA_KEY"]
 
 #: The key of a field's metadata that holds its :class:`Setting`.
 METADATA_KEY = "setting"
@@ -189,3 +192,26 @@ def compared(cls, key: str, mine, theirs):
     """``(mine, theirs)`` as a resume compares them."""
     s = next(s for _, s in settings_of(cls) if s.key == key)
     return s.compare(mine, theirs) if s.compare is not None else (mine, theirs)
+
+
+# ------------------------------------------------------------------ --option METHOD.KEY=VALUE
+def parse_option(text: str) -> tuple[str, str, object]:
+    """``METHOD.KEY=VALUE`` -> (method, key, value); VALUE parsed as JSON when it can be."""
+    head, sep, value = str(text).partition("=")
+    method, dot, key = head.partition(".")
+    if not sep or not dot or not method.strip() or not key.strip():
+        raise PlaybackError(f"--option {text!r}: expected METHOD.KEY=VALUE, e.g. kim.seed=3")
+    try:
+        parsed = json.loads(value)
+    except json.JSONDecodeError:
+        parsed = value
+    return method.strip(), key.strip(), parsed
+
+
+def parse_options(texts: Iterable[str], base: Mapping | None = None) -> dict[str, dict]:
+    """Every ``--option`` text folded into ``{method: {key: value}}`` (over ``base``)."""
+    out = {str(k): dict(v) for k, v in dict(base or {}).items()}
+    for text in texts:
+        method, key, value = parse_option(text)
+        out.setdefault(method, {})[key] = value
+    return out
