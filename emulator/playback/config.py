@@ -73,6 +73,23 @@ def _number(value, name: str) -> float:
         raise PlaybackError(f"{name} must be a number, got {value!r}") from None
 
 
+#: The image provider of each rate; each provider's module declares its own (:func:`provides_rate`), so that
+#: this module imports none of them.
+PROVIDERS: dict[str, type] = {}
+
+
+def provides_rate(rate: str):
+    """Class decorator: the decorated image provider is the one of ``rate`` (:attr:`RunConfig.provider_class`)."""
+    if rate not in RATES:
+        raise ValueError(f"rate must be one of {', '.join(RATES)}, got {rate!r}")
+
+    def declare(cls):
+        PROVIDERS[rate] = cls
+        return cls
+
+    return declare
+
+
 def _is_native(config) -> bool:
     return config.rate == NATIVE_RATE
 
@@ -320,12 +337,9 @@ class RunConfig:
 
     @property
     def provider_class(self):
-        """The image provider of this rate: :class:`~emulator.playback.emulated.EmulatedProvider` (a tick per
-        bracket sweep) or :class:`~emulator.playback.native.NativeProvider` (a tick per recorded frame)."""
-        from emulator.playback.emulated import EmulatedProvider
-        from emulator.playback.native import NativeProvider
-
-        return NativeProvider if _is_native(self) else EmulatedProvider
+        """The image provider of this rate (:data:`PROVIDERS`): :class:`~emulator.playback.emulated.EmulatedProvider`
+        (a tick per bracket sweep) or :class:`~emulator.playback.native.NativeProvider` (a tick per recorded frame)."""
+        return PROVIDERS[self.rate]
 
     def provider_for(self, sequence, response, *, noise=None, stats=None, blur=None):
         """This run's image provider on ``sequence`` (:attr:`provider_class`, configured by this run)."""

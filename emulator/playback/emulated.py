@@ -25,7 +25,7 @@ from emulator.autoexposure.isolation import readonly_view
 from emulator.dataset import CAMERAS, missing_text
 from emulator.emulate import apply_lut
 from emulator.errors import DatasetError
-from emulator.playback.config import RunConfig
+from emulator.playback.config import RATES, RunConfig, provides_rate
 from emulator.playback.loop import Shot
 from emulator.playback.records import RunStats
 from emulator.select import select
@@ -210,6 +210,7 @@ def _nothing() -> None:
     return None
 
 
+@provides_rate(RATES[0])
 class EmulatedProvider:
     """A recording's cycles as ticks whose shots are emulated from the brackets.
 

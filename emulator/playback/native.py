@@ -53,7 +53,7 @@ from emulator.io.runcsv import NATIVE_COLUMNS
 from emulator.native import (BLUR_STOPS_PER_PX, MOTION_STOPS_PER_FRAME, NATIVE_RATE, SATURATION_LIMIT, SHARP_MOTION_PX, WARP_MODES, WARP_RESAMPLE,
                              WINDOW_CYCLES, NativeCandidate, flow_velocity, invalid_fraction, median_motion_px,
                              native_select, radiance_gray, rotation_between, warp_to_instant, warp_with_flow)
-from emulator.playback.config import RunConfig
+from emulator.playback.config import RunConfig, provides_rate
 from emulator.playback.emulated import METHOD_CAMERA, _CycleImages, _fractions, _Memo
 from emulator.playback.loop import Shot
 from emulator.playback.records import RunStats
@@ -172,6 +172,7 @@ class NativeTick(_Memo):
         return shot
 
 
+@provides_rate(NATIVE_RATE)
 class NativeProvider:
     """A recording's frames as ticks, each emulated from its own or a nearby frame's bracket.
 
