@@ -438,7 +438,7 @@ class RunConfig:
     def per_run_json(self) -> dict:
         """The ``run.json`` keys of how this run computes (``jobs``, ``workers``, the applied limit), written
         again by a resume (results do not depend on them)."""
-        return _plain(settings.to_json(self, per_run=True))
+        return json.loads(json.dumps(settings.to_json(self, per_run=True)))  # in field order: jobs, workers, limit
 
     @classmethod
     def from_json(cls, run_json: Mapping) -> "RunConfig":

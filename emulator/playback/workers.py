@@ -141,7 +141,7 @@ def _start(proc) -> None:
 
 def _handoff(label: str, why) -> str:
     return (f"AE method {label} cannot be handed to a worker process ({why}); define its class at the top level "
-            "of an importable module, or run it in the run's process (workers='inline', --workers inline)")
+            "of an importable module, or run it in the run's process (workers='inline', --isolation inline)")
 
 
 class MethodWorker(MethodHandle):
