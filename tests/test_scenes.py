@@ -239,11 +239,11 @@ def test_effective_spp_matches_the_mitsuba_sampler():
 
 
 def test_bad_pose_is_refused():
-    with pytest.raises(RenderError, match="pose"):
+    with pytest.raises(PoseError, match=r"pose must be a finite 4x4 matrix, got shape \(3, 3\)"):
         scenes.render("static_lab", np.eye(3), width=8, height=8, spp=1, cache_dir=False)
     skew = np.eye(4)
     skew[0, 1] = 0.5
-    with pytest.raises(RenderError, match="rotation"):
+    with pytest.raises(PoseError, match="rotation"):
         scenes.render("static_lab", skew, width=8, height=8, spp=1, cache_dir=False)
     with pytest.raises(RenderError, match="spp"):
         scenes.render("static_lab", np.eye(4), width=8, height=8, spp=0, cache_dir=False)
