@@ -29,6 +29,7 @@ from emulator.io.exr import read_exr, write_exr
 from emulator.io.tum import read_tum, write_tum
 from scenes.cache import store_entry
 from scenes.errors import RenderError, SceneError
+from synth.errors import PoseError
 
 SCENE_NAMES = ("forest_winter", "forest_summer", "sun_glare", "forest_edge", "static_lab")
 
