@@ -62,7 +62,8 @@ def test_each_reference_page_that_lost_its_measurements_links_its_results_pages(
                           "native.md": ["native-2026-11-28.md"],
                           "blur.md": ["blur-real-2026-11-25.md", "blur-real-2026-11-26.md"],
                           "verdicts.md": ["verdicts-2026-11-25.md", "verdicts-2026-11-28.md", "verdicts-2026-12-04.md"],
-                          "loop.md": ["loop-2026-11-25.md"], "real-data.md": ["real-data-2026-11-28.md"]}.items():
+                          "loop.md": ["loop-2026-11-25.md"], "design.md": ["response-table-2026-11-25.md"],
+                          "real-data.md": ["real-data-2026-11-25.md", "real-data-2026-11-28.md"]}.items():
         text = (DOCS / name).read_text(encoding="utf-8")
         for page in results:
             assert f"](results/{page})" in text, (name, page)
