@@ -172,7 +172,7 @@ def run_replicated_study(out, config: StudyConfig = CONFIGS["full"], replicates:
 
 def finish_replicated_study(out, studies: list[dict], command: str | None = None) -> dict:
     """``results.json`` and ``report.md`` of the findings over the walks of several studies' results."""
-    from validation.ae_study.findings import _fmt
+    from emulator.cells import format_number
 
     out = Path(out)
     per_scene = {f"{scene}/seed{st['config']['scene_seed']}": rows for st in studies
@@ -195,8 +195,8 @@ def finish_replicated_study(out, studies: list[dict], command: str | None = None
              "| --- | --- | ---: | --- | ---: | ---: | --- |"]
     for f in findings:
         ci = f.get("ci95") or [None, None]
-        lines.append(f"| {f['id']} | {f['verdict']} | {_fmt(f['effect'])} | {_fmt(ci[0])}..{_fmt(ci[1])} | "
-                     f"{_fmt(f['p_adjusted'], '.2g')} | {f.get('n_walks') if f.get('n_walks') is not None else '-'} | "
+        lines.append(f"| {f['id']} | {f['verdict']} | {format_number(f['effect'])} | {format_number(ci[0])}..{format_number(ci[1])} | "
+                     f"{format_number(f['p_adjusted'], '.2g')} | {f.get('n_walks') if f.get('n_walks') is not None else '-'} | "
                      f"{f.get('effect_definition') or f.get('verdict_reason')} |")
     from validation.ae_study.report import method_intervals, method_intervals_markdown
     from validation.verdicts.findings import FAMILY

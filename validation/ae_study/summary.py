@@ -8,6 +8,7 @@ from collections import Counter
 import numpy as np
 
 from validation.ae_study.config import METHODS, StudyConfig
+from emulator.cells import median_finite
 
 __all__ = ["segment_success", "summarise"]
 
@@ -48,11 +49,6 @@ def _minimal_median(rpe: dict | None, key: str) -> tuple[float | None, float | N
             if best is None or stats["median"] < best[0]:
                 best = (float(stats["median"]), float(d["delta_m"]))
     return best if best is not None else (None, None)
-
-
-def _median(values) -> float | None:
-    vals = [float(v) for v in values if v is not None and math.isfinite(float(v))]
-    return float(np.median(vals)) if vals else None
 
 
 def _mean(values) -> float | None:
@@ -112,8 +108,8 @@ def summarise(config: StudyConfig, features: dict, vo: dict[str, dict], runs: di
                     "n_frames": v["n_frames"],
                     "n_failed_frames": len(v["failures"]),
                     "failure_reasons": dict(Counter(fl["reason"] for fl in v["failures"])),
-                    "median_stereo_points": _median(v["frames"]["n_stereo_points"]),
-                    "median_inliers": _median(v["frames"]["n_inliers"][1:]),
+                    "median_stereo_points": median_finite(v["frames"]["n_stereo_points"]),
+                    "median_inliers": median_finite(v["frames"]["n_inliers"][1:]),
                     "rpe_trans_pct": trans,
                     "rpe_trans_delta_m": trans_delta,
                     "rpe_rot_deg_per_m": rot,
@@ -157,7 +153,7 @@ def summarise(config: StudyConfig, features: dict, vo: dict[str, dict], runs: di
             "quartiles_matches": f.get("quartiles_matches"),
             "min_matches": min((e["min_matches"] for e in entries if e["min_matches"] is not None), default=None),
             "max_matches": max((e["max_matches"] for e in entries if e["max_matches"] is not None), default=None),
-            "median_keypoints": _median(e["median_keypoints"] for e in entries),
+            "median_keypoints": median_finite(e["median_keypoints"] for e in entries),
             "sequence_success_rate": seq_rate,
             "segment_success": seg,
             "vo_failed_frames": sum(x["n_failed_frames"] for x in vos),
