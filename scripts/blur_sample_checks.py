@@ -140,10 +140,10 @@ def seq_h(seq):
 
 def rest(seq, resp):
     from emulator.noise import NoiseModel
-    from emulator.noise.tables import _slope
+    from emulator.noise.tables import response_slope
 
     hook = blur_hook("consistent", seq, resp)
-    dfdh = 1.0 / np.maximum(_slope(resp)[: resp.white_level + 1], 1e-12)
+    dfdh = 1.0 / np.maximum(response_slope(resp)[: resp.white_level + 1], 1e-12)
     dn = np.arange(resp.white_level + 1)
     sig = {fw: np.sqrt(NoiseModel.from_full_well(resp, fw).variance_e(dn)) / (fw / resp.g[resp.white_level])
            for fw in (2005.0, 10500.0)}
