@@ -22,7 +22,7 @@ import numpy as np
 
 __all__ = ["SEEDS_TABLE", "SEED_MARK", "stochastic_methods", "seeded_name", "loop_names", "loop_items",
            "split_seeds", "residual_shares", "seed_noise", "recommended_seeds", "SHARES_FILE", "store_seeds_table",
-           "read_seeds_table", "shares_summary", "store_shares"]
+           "read_seeds_table", "shares_summary", "shares_by_seeds", "store_shares"]
 
 #: The per-seed rows of the stochastic methods in a study folder (the layout of ``walks.csv``).
 SEEDS_TABLE = "walks_seeds.csv"
@@ -139,12 +139,12 @@ def recommended_seeds(seed_sd: float | None, residual_sd_others: float | None, k
     residual SD; None where either is unknown or the other methods have no residual, ``k_max + 1`` past ``k_max``."""
     if seed_sd is None or residual_sd_others is None or residual_sd_others <= 0:
         return None
-    k = max(1, math.ceil((seed_sd / residual_sd_others) ** 2 + 1e-12))
+    k = math.floor((seed_sd / residual_sd_others) ** 2) + 1  # k > (sd / residual)^2, then the rounding checked
     while k > 1 and seed_sd / math.sqrt(k - 1) < residual_sd_others:
         k -= 1
-    while seed_sd / math.sqrt(k) >= residual_sd_others and k <= k_max:
+    while seed_sd / math.sqrt(k) >= residual_sd_others:
         k += 1
-    return k
+    return min(k, int(k_max) + 1)
 
 
 #: The residual shares of a study folder (new folders only: pre-registered, or with k > 1).
@@ -204,6 +204,30 @@ def shares_summary(cfg, tables: dict, methods, folder=None) -> dict:
                     "seed_sd": sd, "residual_sd_others": entry["residual_sd_others"],
                     "k": recommended_seeds(sd, entry["residual_sd_others"])}
     out["recommended_seeds"] = rec
+    out["share_by_seeds"] = shares_by_seeds(tables, methods, seed_names, seed_tables, k)
+    return out
+
+
+def shares_by_seeds(tables: dict, methods, seed_names, seed_tables: dict, k: int) -> dict:
+    """Per stochastic method, comparison and metric: its residual share (:func:`residual_shares`, RPE rank derived)
+    when its per-walk value is the mean of its first j seeds, j = 1 .. k (j = k: the study's own table)."""
+    from validation.live.config import COMPARISONS
+    from validation.live.headline import with_derived
+
+    methods, seed_names = list(methods), list(seed_names)
+    out: dict = {}
+    for m in stochastic_methods(methods):
+        col = methods.index(m)
+        for j in range(1, int(k) + 1):
+            cols = [seed_names.index(seeded_name(m, s)) for s in range(j)]
+            part = {run: {metric: t.copy() for metric, t in per.items()} for run, per in tables.items()}
+            for run, per in part.items():
+                for metric, t in per.items():
+                    if run in seed_tables and metric in seed_tables[run]:
+                        t[:, col] = np.asarray(seed_tables[run][metric], float)[:, cols].mean(axis=1)
+            for label, per in residual_shares(with_derived(part), methods, COMPARISONS).items():
+                for metric, e in per.items():
+                    out.setdefault(m, {}).setdefault(label, {}).setdefault(metric, []).append(e["share"][m])
     return out
 
 
