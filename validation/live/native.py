@@ -122,10 +122,12 @@ def native_rate_loop(sequence, radiance: Callable, camera, methods, *, seed: int
         Images kept (left and right where the recording is stereo). Methods that failed at a
         frame not yielded are named in the next yielded step's ``failed``.
     """
-    from emulator.autoexposure.methodset import build_methods, latency_options
     from emulator.dataset import CAMERAS
     from emulator.errors import PlaybackError
+    from dataclasses import replace
+
     from emulator.playback import LiveRateProvider, closed_loop
+    from emulator.playback.workers import start_methods
     from validation.live.loops import live_setup, make_shoot
 
     if isinstance(latency_frames, bool) or not isinstance(latency_frames, (int, np.integer)) or latency_frames < 0:
@@ -144,8 +146,8 @@ def native_rate_loop(sequence, radiance: Callable, camera, methods, *, seed: int
         raise LiveError(f"{seq.path if hasattr(seq, 'path') else 'recording'}: no shots")
     start_ns, last_ns = shots_ns[0], shots_ns[-1]
     n_frames = int(np.floor((last_ns - start_ns) * rate / 1e9 + 1e-6)) + 1
-    built = build_methods(methods, mode=cfg.mode, response=response,
-                          options=latency_options(cfg.options, int(latency_frames)))
+    # in worker processes, as every loop of the study runs its methods (fixed freezes one exposure in flight)
+    built = start_methods(methods, replace(cfg, rate="native", latency_frames=int(latency_frames)), response)
     shoot = window_start_shoot(make_shoot(radiance, camera, cams, seed=seed, noise=noise), shots_ns)
     try:
         provider = LiveRateProvider(shoot, n_frames=n_frames, white_level=int(seq.white_level),
@@ -214,12 +216,14 @@ def native_provider(seq, response, config, *, warp: bool = True, **kw):
 def emulated_native_loop(seq, methods, response, config) -> tuple[object, list]:
     """The emulated native-rate closed loop of ``methods`` on a walk's recording: ``(provider, every frame's
     CycleStep with images)``."""
-    from emulator.autoexposure.methodset import build_methods, latency_options
+    from dataclasses import replace
+
     from emulator.playback import closed_loop
+    from emulator.playback.workers import start_methods
 
     provider = native_provider(seq, response, config)
-    built = build_methods(methods, mode=config.mode, response=response,
-                          options=latency_options(config.options, provider.latency_ticks))
+    # in worker processes, as every loop of the study runs its methods (fixed freezes one exposure in flight)
+    built = start_methods(methods, replace(config, latency_frames=provider.latency_ticks), response)
     return provider, list(closed_loop(provider, built, config, want_right=True, keep_images=True))
 
 
