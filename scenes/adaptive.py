@@ -13,7 +13,8 @@ variance relative to its radiance, which does not depend on the exposure:
    sensor's read noise rules, do not win on a tiny denominator);
 3. the ``fraction`` of tiles with the highest scores get ``(factor - 1) * spp`` more samples,
    rendered through the film's crop window (Mitsuba ``crop_offset_x/y``, ``crop_width/height``),
-   one crop per tile row spanning its selected tiles, so that a frame takes few renders;
+   one crop per tile row spanning its selected tiles, neighbours merged where that costs fewer
+   samples than a render's fixed cost, so that a frame takes few renders;
 4. every pixel is the mean of all its samples (each pass weighted by its spp).
 
 The selection looks at the samples it then keeps, which biases a selected tile's mean by far
@@ -33,12 +34,15 @@ import numpy as np
 from scenes.errors import RenderError
 
 __all__ = ["AdaptiveSampling", "parse_adaptive", "pass_seed", "tile_scores", "select_tiles", "tile_crops",
-           "combine_passes", "render_adaptive", "DEFAULT_TILE", "FLOOR_FRACTION"]
+           "combine_passes", "render_adaptive", "DEFAULT_TILE", "FLOOR_FRACTION", "MERGE_SAMPLES"]
 
 #: Tile side in render pixels (16 x 10 tiles at the study's 480x300).
 DEFAULT_TILE = 30
 #: The score's radiance floor, as a fraction of the frame's mean luminance.
 FLOOR_FRACTION = 0.05
+#: Extra samples (pixels times spp) worth one more crop: two crops are merged into their bounding
+#: box when it adds fewer (a crop's fixed cost, about 1.2 s on two cores, is about 1.5 M samples).
+MERGE_SAMPLES = 1_500_000
 _LUM = np.array([0.2126, 0.7152, 0.0722])
 
 
@@ -116,16 +120,33 @@ def select_tiles(scores: np.ndarray, fraction: float) -> np.ndarray:
     return mask.reshape(s.shape)
 
 
-def tile_crops(mask: np.ndarray, tile: int, width: int, height: int) -> list[tuple[int, int, int, int]]:
-    """``(x, y, w, h)`` crops: per tile row, one spanning its first to its last selected tile (clipped to the frame)."""
-    out = []
+def tile_crops(mask: np.ndarray, tile: int, width: int, height: int, merge_px: int = 0) -> list[tuple[int, int, int, int]]:
+    """``(x, y, w, h)`` crops covering the selected tiles (clipped to the frame).
+
+    One crop per tile row, spanning its first to its last selected tile; then, while the two
+    crops next to each other (in row order) whose bounding box adds the fewest pixels add fewer
+    than ``merge_px``, they become that box: each crop is a render of its own, whose fixed cost
+    (Dr.Jit compiles a kernel for each crop's geometry: about a second on two CPU cores) buys
+    ``merge_px`` pixels of extra samples.
+    """
+    crops = []
     for r, row in enumerate(np.asarray(mask, dtype=bool)):
         cols = np.flatnonzero(row)
         if cols.size:
             x0, y0 = int(cols[0]) * tile, r * tile
-            x1, y1 = min(width, (int(cols[-1]) + 1) * tile), min(height, (r + 1) * tile)
-            out.append((x0, y0, x1 - x0, y1 - y0))
-    return out
+            crops.append((x0, y0, min(width, (int(cols[-1]) + 1) * tile) - x0, min(height, (r + 1) * tile) - y0))
+
+    def box(a, b):
+        x0, y0 = min(a[0], b[0]), min(a[1], b[1])
+        return x0, y0, max(a[0] + a[2], b[0] + b[2]) - x0, max(a[1] + a[3], b[1] + b[3]) - y0
+
+    while len(crops) > 1:
+        added = [box(a, b)[2] * box(a, b)[3] - a[2] * a[3] - b[2] * b[3] for a, b in zip(crops, crops[1:])]
+        i = int(np.argmin(added))
+        if added[i] >= merge_px:
+            break
+        crops[i:i + 2] = [box(crops[i], crops[i + 1])]
+    return crops
 
 
 def combine_passes(width: int, height: int, passes) -> np.ndarray:
@@ -153,8 +174,8 @@ def render_adaptive(render_pass, spec: AdaptiveSampling, *, width: int, height: 
     a = render_pass(half, pass_seed(seed, 0), None)
     b = render_pass(half, pass_seed(seed, 1), None)
     mask = select_tiles(tile_scores(a, b, spec.tile), spec.fraction)
-    crops = tile_crops(mask, spec.tile, width, height)
     extra = effective_spp(max(1, (int(spec.factor) - 1) * int(spp)))
+    crops = tile_crops(mask, spec.tile, width, height, merge_px=MERGE_SAMPLES // extra)
     passes = [(a, half, None), (b, half, None)]
     for i, crop in enumerate(crops):
         passes.append((render_pass(extra, pass_seed(seed, 2 + i), crop), extra, crop))

@@ -227,6 +227,9 @@ def test_tiles_are_chosen_where_the_variance_against_radiance_is_highest():
     assert np.array_equal(select_tiles(np.zeros((2, 2)), 0.5), [[True, True], [False, False]])  # ties: row-major
     mask = np.array([[True, False, True], [False, False, False], [False, True, False]])
     assert tile_crops(mask, 10, 25, 28) == [(0, 0, 25, 10), (10, 20, 10, 8)]  # clipped to the frame
+    # merged into their bounding box (25 x 28) when that adds fewer pixels (370) than one more render is worth
+    assert tile_crops(mask, 10, 25, 28, merge_px=370) == [(0, 0, 25, 10), (10, 20, 10, 8)]
+    assert tile_crops(mask, 10, 25, 28, merge_px=371) == [(0, 0, 25, 28)]
 
 
 def test_adaptive_render_is_the_spp_weighted_mean_of_its_passes(monkeypatch):
