@@ -287,7 +287,7 @@ def render_with_info(
         ensure_variant(variant)
         t0 = time.perf_counter()
         raw = _render_uncached(scene, m, width=width, height=height, spp=spp, seed=seed, fov_deg=fov,
-                               variant=variant, adaptive=adaptive)
+                               variant=variant, **({} if adaptive is None else {"adaptive": adaptive}))
         info["render_s"] = time.perf_counter() - t0
         _check_image(raw, scene, variant, "render")
         _write_cached(raw_path, raw, raw_material)
