@@ -146,6 +146,9 @@ def _render_changes(args) -> dict:
     if preset.denoise.enabled and preset.denoise != resolve_denoise(preset.denoise.name):
         raise LiveError(f"--render {args.render}: a study's denoiser is a named one ({preset.denoise.name} with its own "
                         f"albedo/normal spp); use a preset or DENOISER@SPP without /AUX_SPP")
+    if preset.adaptive is not None:
+        raise LiveError(f"--render {args.render}: the live study does not carry adaptive sampling (~{preset.adaptive.text}); "
+                        f"it is measured with scripts/render_noise_balance.py")
     return {"spp": preset.spp, "denoise": preset.denoise.name, "emitter_weights": preset.emitter_weights}
 
 
