@@ -51,6 +51,12 @@ from emulator.blur import _forward_dn
 from emulator.errors import EmulationError
 
 __all__ = [
+    "NATIVE_RATE",
+    "RATES",
+    "run_rate",
+    "is_native_run",
+    "native_record",
+    "tick_unit",
     "WINDOW_CYCLES",
     "MOTION_STOPS_PER_FRAME",
     "SATURATION_LIMIT",
@@ -93,6 +99,33 @@ WARP_RESAMPLE = "lanczos4"
 #: one within it is kept, and weighs each pixel of excess blur as this many stops of upward emulation.
 BLUR_LIMIT_PX = 1.0
 BLUR_STOPS_PER_PX = 1.0
+#: ``run.json``'s ``rate`` of a run after every recorded frame, and the key of its record of the native provider.
+NATIVE_RATE = "native"
+#: How often a method proposes: once per bracket sweep (the paper's, the default) or after every recorded frame.
+RATES = ("cycle", NATIVE_RATE)
+
+
+def run_rate(info) -> str:
+    """The rate a ``run.json`` (or a run's summary) records: a folder from before ``--rate`` is at cycle rate."""
+    return (info or {}).get("rate") or RATES[0]
+
+
+def is_native_run(info) -> bool:
+    """Whether a ``run.json`` (or a run's summary, or a comparison's input) is of a native-rate run."""
+    return run_rate(info) == NATIVE_RATE
+
+
+def native_record(info) -> dict:
+    """What a native-rate ``run.json`` records of its provider (window, warp, frames; empty at cycle rate)."""
+    record = (info or {}).get(NATIVE_RATE)
+    return record if isinstance(record, dict) else {}
+
+
+def tick_unit(info) -> str:
+    """What one row of a run's tables is: ``frames`` at native rate, else ``cycles``."""
+    return "frames" if is_native_run(info) else "cycles"
+
+
 #: How a neighbour frame is moved to frame k's instant: not at all, by the gyro's rotation, by the rotation and
 #: then the optical flow between the neighbours on either side of frame k, or as ``flow`` but only where that
 #: move is at least :data:`SHARP_MOTION_PX` (``flow-sharp``, the default of native runs: docs/native.md).

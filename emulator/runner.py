@@ -29,16 +29,12 @@ from emulator.autoexposure.methodset import parse_methods
 from emulator.errors import PlaybackError
 from emulator.gray import bayer_to_gray8
 from emulator.io.runfolder import CSV_COLUMNS, CSV_FILE, RUN_FILE, RunWriter, format_row, tables_from_rows
-from emulator.playback.config import CONFIG_KEYS
 from emulator import numpy_dispatch
-from emulator.playback.workers import effective_timeout_s
 from emulator.playback import METHOD_CAMERA, MethodStep, RunConfig, RunStats, closed_loop, prepare_run, \
     resolve_sequence
-from emulator.io.runcsv import NATIVE_COLUMNS
 from emulator.io.runwatch import watch_run
 from emulator.playback.shmblock import SharedMemoryWarning, shortage_note
 from emulator.playback._worker_child import plain  # inline methods' config() as JSON, as a worker sends it
-from emulator.playback.offline import at_rate
 
 __all__ = ["run_to_folder", "write_run", "saved_image", "RUN_JSON_EVERY"]
 
@@ -227,7 +223,7 @@ def write_run(sequence, methods, out_dir, config: RunConfig | None = None, *, re
     seq = resolve_sequence(sequence, imu_warning=cfg.blur != "none")  # the IMU is read only for blur
     method_specs = parse_methods(methods) if isinstance(methods, str) else list(methods)
     stats = RunStats()
-    prep = at_rate(prepare_run(seq, method_specs, cfg, response, stats=stats), cfg)  # native: every frame a tick
+    prep = prepare_run(seq, method_specs, cfg, response, stats=stats)  # the provider of cfg.rate
     seq, response, built, provider, model, model_source, hook = prep
     names = list(built)
     identity = {"sequence": str(Path(seq.path).resolve()), "methods": names, "response": cfg.response_name(response)}
@@ -236,8 +232,8 @@ def write_run(sequence, methods, out_dir, config: RunConfig | None = None, *, re
     with RunWriter(out, resume=resume, png_level=cfg.png_level) as writer, watch_run(out):  # a crash: run.json failed
         if resume:
             run_json = writer.run_json
-            cfg.resumed(run_json, CONFIG_KEYS if resume_given is None else resume_given, where=str(out / RUN_FILE),
-                        noise_model=model, blur_hook=hook, identity=identity)
+            cfg.check_resume(run_json, resume_given, where=str(out / RUN_FILE), noise_model=model, blur_hook=hook,
+                             identity=identity)
             run_json["resumed"] = run_json.get("resumed", 0) + 1
             run_json.setdefault("resume_commands", []).append(command)
             if writer.lock.stale_owner:
@@ -246,25 +242,21 @@ def write_run(sequence, methods, out_dir, config: RunConfig | None = None, *, re
             run_json = _new_run_json(cfg, identity, seq, built, method_specs, model, model_source, command,
                                      writer.lock.owner["started"], hook)
             run_json.update(run_json_extra or {})
-            if cfg.rate == "native":
-                run_json["native"] = provider.describe()  # window, warp, latency, benchmarked frames
+            run_json.update(provider.run_json())  # native rate: window, warp, latency, benchmarked frames
         if shm_note is not None:
             run_json["shared_memory_pipes"], run_json["shared_memory"] = shm_note
         else:  # a resumed run whose /dev/shm has room now: no earlier shortage carried over
             run_json.pop("shared_memory_pipes", None)
             run_json.pop("shared_memory", None)
-        run_json["jobs"] = cfg.jobs
-        run_json["workers"] = cfg.workers  # how the methods ran (results do not depend on it)
-        run_json["method_timeout_applied_s"] = effective_timeout_s(cfg)
+        run_json.update(cfg.per_run_json())  # how the methods ran (results do not depend on it): also on resume
         if cfg.workers == "process":  # the same bytes either way; recorded so that a reader knows
             run_json["worker_numpy"] = numpy_dispatch.describe()
         partial = [{"cycle": c.index, "missing": c.missing_by_camera(seq.cameras)} for c in seq.cycles
                    if c.missing_by_camera(seq.cameras)]
         if partial:  # flagged in the report (emulator.report.run); absent when every cycle is complete
             run_json["partial_cycles"] = partial
-        ticks = getattr(provider, "tick_indices", None) or [c.index for c in seq.cycles]  # native: frames
-        writer.start(run_json, names, seq.cameras, cfg.save, cycles=ticks,  # resume: validated
-                     columns=NATIVE_COLUMNS if cfg.rate == "native" else ())
+        ticks = provider.tick_indices  # cycles, or frames at native rate
+        writer.start(run_json, names, seq.cameras, cfg.save, cycles=ticks, columns=provider.columns)  # resume: validated
         rows = _loop_into(writer, provider, built, cfg, stats, out, progress, len(ticks))
         if hook is not None:
             hook.write_table(out)  # blur.csv: each emulated image's blur
@@ -336,9 +328,7 @@ def _loop_into(writer: RunWriter, provider, built: dict, cfg: RunConfig, stats: 
                 warnings.warn(f"{out}: the table of {', '.join(changed)} differs from the rows this run wrote: a "
                               f"process besides the run (a plugin's?) wrote into the run folder; its results are "
                               f"not this run's", TablesChangedWarning, stacklevel=2)
-        coverage = getattr(provider, "gyro_coverage", dict)()
-        if coverage and isinstance(run_json.get("native"), dict):
-            run_json["native"].update(coverage)
+        provider.finish_run_json(run_json)  # native rate: the frames the gyro did not cover
         writer.update(status=status, cycles_done=done, skipped_cycles=skipped, timing=stats.as_dict(),
                       method_status=method_status)
     return rows

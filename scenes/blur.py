@@ -175,14 +175,15 @@ class ShotRenderer:
     :meth:`radiance` then warps it to the sub-instants of any window ``[t0_s, t0_s + T]``,
     ``T <= max_exposure_ms``.  When even the longest window is at rest (predicted blur below
     a quarter pixel) the render is a plain :func:`scenes.render` at the anchor, returned for
-    every exposure: a still frame costs what it costs without blur.
+    every exposure: a still frame costs what it costs without blur.  ``adaptive``: as
+    :func:`scenes.render` (left out of the render's arguments when None).
     """
 
     def __init__(self, scene, pose_at, t0_s: float, max_exposure_ms: float, *, width: int, height: int,
                  spp: int, seed: int = 0, fov_deg: float = DEFAULT_FOV_DEG, cache_dir=None, variant=None,
                  denoise=None, samples_per_px: float = SUBINSTANTS_PER_PX, near_depth_m: float = NEAR_DEPTH_M,
                  anchor_s: float | None = None, interpolation: str = "linear", supersample: int = 1,
-                 margin_step_px: int = 1):
+                 margin_step_px: int = 1, adaptive=None):
         if isinstance(margin_step_px, bool) or not isinstance(margin_step_px, int) or margin_step_px < 1:
             raise RenderError(f"margin_step_px must be an integer >= 1, got {margin_step_px!r}")
         self.margin_step_px = margin_step_px
@@ -197,7 +198,8 @@ class ShotRenderer:
         self.scene, self.pose_at, self.t0_s = scene, pose_at, float(t0_s)
         self.max_exposure_ms = float(max_exposure_ms)
         self.width, self.height, self.fov_deg = int(width), int(height), float(fov_deg)
-        self.render_args = dict(spp=spp, seed=seed, cache_dir=cache_dir, variant=variant, denoise=denoise)
+        self.render_args = dict(spp=spp, seed=seed, cache_dir=cache_dir, variant=variant, denoise=denoise,
+                                **({} if adaptive is None else {"adaptive": adaptive}))
         self.samples_per_px, self.near_depth_m = float(samples_per_px), float(near_depth_m)
         t1 = self.t0_s + 1e-3 * self.max_exposure_ms
         self.anchor_s = 0.5 * (self.t0_s + t1) if anchor_s is None else float(anchor_s)

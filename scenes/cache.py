@@ -107,11 +107,12 @@ def library_versions() -> dict:
 
 
 def render_key(scene, pose, *, width: int, height: int, spp: int, seed: int, fov_deg: float,
-               variant: str, denoise: dict | None = None) -> tuple[str, dict]:
+               variant: str, denoise: dict | None = None, adaptive: dict | None = None) -> tuple[str, dict]:
     """(hex SHA-256 key, the JSON-ready material it hashes) of one render.
 
     ``denoise`` is :meth:`scenes.denoise.DenoiseSettings.key_material` (None: the raw
-    estimate, ``{"name": "off"}``).
+    estimate, ``{"name": "off"}``).  ``adaptive`` is :meth:`scenes.adaptive.AdaptiveSampling.key_material`;
+    it joins the material only when given, so every other render keeps its key.
     """
     material = {
         "v": KEY_VERSION,
@@ -126,6 +127,8 @@ def render_key(scene, pose, *, width: int, height: int, spp: int, seed: int, fov
         "versions": library_versions(),
         "denoise": {"name": "off"} if denoise is None else dict(denoise),
     }
+    if adaptive is not None:
+        material["adaptive"] = dict(adaptive)
     return hashlib.sha256(canonical_json(material).encode()).hexdigest(), material
 
 

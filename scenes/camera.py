@@ -16,6 +16,7 @@ import math
 import numpy as np
 
 from scenes.errors import RenderError
+from synth.pose import check_pose
 
 __all__ = ["DEFAULT_FOV_DEG", "intrinsics", "intrinsics_matrix", "pose_to_mitsuba", "check_pose", "project"]
 
@@ -72,26 +73,6 @@ def intrinsics_matrix(width: int, height: int, fov_deg: float = DEFAULT_FOV_DEG)
     """The 3x3 camera matrix K (float64) of :func:`intrinsics`."""
     fx, fy, cx, cy = intrinsics(width, height, fov_deg)
     return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
-
-
-def check_pose(pose, name: str = "pose") -> np.ndarray:
-    """Validate a 4x4 rigid camera-to-world pose; return it as float64.
-
-    Raises
-    ------
-    RenderError
-        Wrong shape, non-finite, bottom row not (0, 0, 0, 1), or a rotation
-        block that is not orthonormal with determinant +1 (tolerance 1e-6).
-    """
-    m = np.asarray(pose, dtype=np.float64)
-    if m.shape != (4, 4) or not np.all(np.isfinite(m)):
-        raise RenderError(f"{name} must be a finite 4x4 matrix, got shape {m.shape}")
-    if not np.allclose(m[3], (0.0, 0.0, 0.0, 1.0), atol=1e-12):
-        raise RenderError(f"{name}: bottom row must be (0, 0, 0, 1), got {m[3].tolist()}")
-    r = m[:3, :3]
-    if not np.allclose(r.T @ r, np.eye(3), atol=1e-6) or np.linalg.det(r) < 0:
-        raise RenderError(f"{name}: the 3x3 block is not a rotation")
-    return m
 
 
 def pose_to_mitsuba(pose) -> np.ndarray:

@@ -6,10 +6,12 @@ next-event estimation picks a light (:meth:`scenes.Scene.with_emitter_weights`).
 names one combination, so that a study, the measurement of render noise and the docs speak of
 the same thing.  Each is written as a setting string too::
 
-    DENOISER@SPP[/AUX_SPP][+LIGHT=WEIGHT[,LIGHT=WEIGHT...]]
+    DENOISER@SPP[/AUX_SPP][+LIGHT=WEIGHT[,LIGHT=WEIGHT...]][~xFACTOR:PERCENT%[/TILE]]
 
-e.g. ``oidn@8`` (the live study's renders until 2026-12), ``oidn@256/1024`` or
-``oidn@64/1024+sun=16``.  :func:`parse_setting` reads that form and preset names alike.
+e.g. ``oidn@8`` (the live study's renders until 2026-12), ``oidn@256/1024``,
+``oidn@64/1024+sun=16`` or ``oidn-hq@64+sun=16~x4:25%`` (``FACTOR`` times the samples in the
+``PERCENT`` of ``TILE``-pixel tiles whose render noise is worst against their radiance, see
+:mod:`scenes.adaptive`).  :func:`parse_setting` reads that form and preset names alike.
 
 Why a weighted sun: Mitsuba picks one light per next-event sample, uniformly by default.
 In the daylight scenes the sun is a directional light whose shadow ray either carries half or
@@ -22,6 +24,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
+from scenes.adaptive import AdaptiveSampling, parse_adaptive
 from scenes.base import EMITTER_KINDS, Scene
 from scenes.denoise import DenoiseSettings, resolve_denoise
 from scenes.errors import RenderError
@@ -45,6 +48,8 @@ class RenderPreset:
         Next-event estimation's relative choice of ``sun``, ``sky`` and ``area`` lights (empty: uniform).
     summary : str
         One line on what it is for.
+    adaptive : scenes.adaptive.AdaptiveSampling or None
+        More samples where render noise is worst (None: ``spp`` everywhere).
     """
 
     name: str
@@ -52,16 +57,19 @@ class RenderPreset:
     denoise: DenoiseSettings
     emitter_weights: tuple = ()
     summary: str = ""
+    adaptive: AdaptiveSampling | None = None
 
     @property
     def setting(self) -> str:
-        """The preset as a setting string (``DENOISER@SPP[/AUX][+LIGHT=W,...]``), which :func:`parse_setting` reads back."""
+        """The preset as a setting string (``DENOISER@SPP[/AUX][+LIGHT=W,...][~xF:P%]``), which :func:`parse_setting` reads back."""
         text = f"{self.denoise.name}@{self.spp}"
         default_aux = resolve_denoise(self.denoise.name).aux_spp if self.denoise.enabled else None
         if self.denoise.enabled and self.denoise.aux_spp != default_aux:
             text += f"/{self.denoise.aux_spp}"
         if self.emitter_weights:
             text += "+" + ",".join(f"{k}={v:g}" for k, v in self.emitter_weights)
+        if self.adaptive is not None:
+            text += "~" + self.adaptive.text
         return text
 
     def scene(self, scene: Scene) -> Scene:
@@ -69,10 +77,13 @@ class RenderPreset:
         return scene.with_emitter_weights(dict(self.emitter_weights))
 
     def record(self) -> dict:
-        """JSON-ready: name, setting, spp, denoiser settings and emitter weights."""
-        return {"name": self.name, "setting": self.setting, "spp": int(self.spp),
-                "denoise": self.denoise.key_material() if self.denoise.enabled else {"name": "off"},
-                "emitter_weights": {k: float(v) for k, v in self.emitter_weights}}
+        """JSON-ready: name, setting, spp, denoiser settings, emitter weights (and adaptive sampling when set)."""
+        out = {"name": self.name, "setting": self.setting, "spp": int(self.spp),
+               "denoise": self.denoise.key_material() if self.denoise.enabled else {"name": "off"},
+               "emitter_weights": {k: float(v) for k, v in self.emitter_weights}}
+        if self.adaptive is not None:
+            out["adaptive"] = self.adaptive.key_material()
+        return out
 
 
 def _weights(text: str, setting: str) -> tuple:
@@ -102,20 +113,23 @@ def parse_setting(text: str) -> RenderPreset:
     text = str(text).strip()
     if text in RENDER_PRESETS:
         return RENDER_PRESETS[text]
-    head, plus, tail = text.partition("+")
+    body, tilde, adaptive_text = text.partition("~")
+    head, plus, tail = body.partition("+")
     name, at, rest = head.partition("@")
     spp_text, slash, aux_text = rest.partition("/")
     if not at or not spp_text.isdigit() or int(spp_text) < 1 or (slash and not aux_text.isdigit()) or (
             plus and not tail):
         raise RenderError(f"render setting {text!r}: expected a preset ({', '.join(RENDER_PRESETS)}) or "
-                          f"DENOISER@SPP[/AUX_SPP][+LIGHT=WEIGHT,...], e.g. oidn@8 or oidn@64/1024+sun=16")
+                          f"DENOISER@SPP[/AUX_SPP][+LIGHT=WEIGHT,...][~xFACTOR:PERCENT%], e.g. oidn@8, "
+                          f"oidn@64/1024+sun=16 or oidn-hq@64+sun=16~x4:25%")
     settings = resolve_denoise(name)
     if slash and not settings.enabled:
         raise RenderError(f"render setting {text!r}: an albedo/normal spp needs a denoiser")
     if slash:
         settings = replace(settings, aux_spp=int(aux_text))
     return RenderPreset(name=text, spp=int(spp_text), denoise=settings,
-                        emitter_weights=_weights(tail, text) if plus else ())
+                        emitter_weights=_weights(tail, text) if plus else (),
+                        adaptive=parse_adaptive(adaptive_text, text) if tilde else None)
 
 
 def _preset(name: str, setting: str, summary: str) -> RenderPreset:

@@ -22,6 +22,7 @@ import warnings
 import numpy as np
 
 from scenes._interrupt import render_array
+from scenes.adaptive import AdaptiveSampling, parse_adaptive, render_adaptive
 from scenes.base import Scene, get_scene
 from scenes.cache import KEY_ATTRIBUTE, cache_path, canonical_json, load_entry, render_key, resolve_cache_dir, \
     store_entry
@@ -69,7 +70,7 @@ def _loaded_scene(scene: Scene, variant: str):
 
 
 def _render_uncached(scene: Scene, pose: np.ndarray, *, width: int, height: int, spp: int, seed: int,
-                     fov_deg: float, variant: str) -> np.ndarray:
+                     fov_deg: float, variant: str, adaptive: AdaptiveSampling | None = None) -> np.ndarray:
     import mitsuba as mi
 
     from scenes._mitsuba import sensor_dict
@@ -78,9 +79,19 @@ def _render_uncached(scene: Scene, pose: np.ndarray, *, width: int, height: int,
         if mi.variant() != variant:
             mi.set_variant(variant)
         mi_scene = _loaded_scene(scene, variant)
-        sensor = mi.load_dict(sensor_dict(pose, width=width, height=height, fov_deg=fov_deg, spp=spp))
-        image = render_array(mi, mi_scene, sensor=sensor, spp=spp, seed=seed)
-        return image.reshape(height, width, -1)[..., :3].copy()
+
+        def one(n: int, s: int, crop) -> np.ndarray:
+            d = sensor_dict(pose, width=width, height=height, fov_deg=fov_deg, spp=n)
+            x, y, w, h = (0, 0, width, height) if crop is None else crop
+            if crop is not None:  # the film's crop window: only these pixels are sampled
+                d["film"].update(crop_offset_x=x, crop_offset_y=y, crop_width=w, crop_height=h)
+            image = render_array(mi, mi_scene, sensor=mi.load_dict(d), spp=n, seed=s)
+            return image.reshape(h, w, -1)[..., :3].copy()
+
+        if adaptive is None:
+            return one(spp, seed, None)
+        return render_adaptive(one, adaptive, width=width, height=height, spp=spp, seed=seed,
+                               effective_spp=effective_spp)[0]
 
 
 def _render_aux_uncached(scene: Scene, pose: np.ndarray, *, width: int, height: int, spp: int, seed: int,
@@ -141,6 +152,7 @@ def render(
     cache_dir=None,
     variant: str | None = None,
     denoise: str | DenoiseSettings | None = None,
+    adaptive: str | AdaptiveSampling | None = None,
 ) -> np.ndarray:
     """Render the HDR radiance a pinhole camera sees.
 
@@ -196,7 +208,7 @@ def render(
         Unknown scene name.
     """
     image, _ = render_with_info(scene, pose, width=width, height=height, spp=spp, seed=seed, fov_deg=fov_deg,
-                                cache_dir=cache_dir, variant=variant, denoise=denoise)
+                                cache_dir=cache_dir, variant=variant, denoise=denoise, adaptive=adaptive)
     return image
 
 
@@ -212,6 +224,7 @@ def render_with_info(
     cache_dir=None,
     variant: str | None = None,
     denoise: str | DenoiseSettings | None = None,
+    adaptive: str | AdaptiveSampling | None = None,
 ) -> tuple[np.ndarray, dict]:
     """:func:`render`, also returning what happened.
 
@@ -239,6 +252,10 @@ def render_with_info(
     fov = _check_fov(fov_deg)
     m = check_pose(pose)
     settings = resolve_denoise(denoise)  # bad names raise before anything else happens
+    if isinstance(adaptive, str):
+        adaptive = parse_adaptive(adaptive)
+    if adaptive is not None and not isinstance(adaptive, AdaptiveSampling):
+        raise RenderError(f"adaptive must be None, a string like 'x4:25%' or an AdaptiveSampling, got {adaptive!r}")
     # The variant only names the cache entry here; it is probed (for JIT variants, in a
     # child process) before this process loads it, i.e. on a cache miss.
     variant = check_variant_name(variant) if variant is not None else choose_variant()
@@ -249,7 +266,8 @@ def render_with_info(
         info.update(denoise="off", fallback=fallback)
 
     folder = resolve_cache_dir(cache_dir)
-    common = dict(width=width, height=height, spp=spp, seed=seed, fov_deg=fov, variant=variant)
+    common = dict(width=width, height=height, spp=spp, seed=seed, fov_deg=fov, variant=variant,
+                  **({} if adaptive is None else {"adaptive": adaptive.key_material()}))
 
     def entry(material_denoise):
         if folder is None:
@@ -269,7 +287,7 @@ def render_with_info(
         ensure_variant(variant)
         t0 = time.perf_counter()
         raw = _render_uncached(scene, m, width=width, height=height, spp=spp, seed=seed, fov_deg=fov,
-                               variant=variant)
+                               variant=variant, **({} if adaptive is None else {"adaptive": adaptive}))
         info["render_s"] = time.perf_counter() - t0
         _check_image(raw, scene, variant, "render")
         _write_cached(raw_path, raw, raw_material)

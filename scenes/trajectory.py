@@ -25,6 +25,7 @@ __all__ = [
     "static",
     "look_pose",
     "stereo_right",
+    "rotation_matrices",
 ]
 
 #: 2 km/h, the BorealHDR walking pace, in m/s.
@@ -54,8 +55,9 @@ def _rotation(yaw: float, pitch: float, roll: float) -> np.ndarray:
     return r
 
 
-def _rotations(yaw, pitch, roll) -> np.ndarray:
-    """:func:`_rotation` for arrays of angles (radians): float64 (N, 3, 3)."""
+def rotation_matrices(yaw, pitch, roll) -> np.ndarray:
+    """Camera-to-world rotations (OpenCV camera frame) for arrays of heading, pitch and roll (radians),
+    broadcast together: float64 (N, 3, 3); :func:`_rotation` for one pose."""
     yaw, pitch, roll = np.broadcast_arrays(*(np.atleast_1d(np.asarray(a, dtype=np.float64)) for a in (yaw, pitch, roll)))
     cy, sy, cp, sp = np.cos(yaw), np.sin(yaw), np.cos(pitch), np.sin(pitch)
     forward = np.stack([cp * cy, cp * sy, sp], axis=-1)

@@ -107,12 +107,12 @@ class _BodyPath:
 
 def _head_pose(body: _BodyPath, t: np.ndarray, yaw_rad, pitch_rad, roll_rad, z_m, lateral_m) -> np.ndarray:
     """(N, 4, 4) head poses: body position and heading plus head angles and offsets."""
-    from scenes.trajectory import _rotations
+    from scenes.trajectory import rotation_matrices
 
     xy, heading = body.at(t)
     out = np.zeros((t.size, 4, 4))
     out[:, 3, 3] = 1.0
-    out[:, :3, :3] = _rotations(heading + yaw_rad, pitch_rad, roll_rad)
+    out[:, :3, :3] = rotation_matrices(heading + yaw_rad, pitch_rad, roll_rad)
     out[:, 0, 3] = xy[:, 0] - lateral_m * np.sin(heading)
     out[:, 1, 3] = xy[:, 1] + lateral_m * np.cos(heading)
     out[:, 2, 3] = z_m

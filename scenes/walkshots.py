@@ -35,7 +35,7 @@ class WalkShots:
         The scene and its trajectory (left camera).
     render : dict
         ``width``, ``height``, ``spp``, ``fov_deg``, ``cache_dir``, ``variant``, ``denoise``
-        (as :func:`scenes.render`) and ``render_seed``.
+        (as :func:`scenes.render`) and ``render_seed``; optionally ``adaptive`` (as :func:`scenes.render`).
     fps, n_brackets : float, int
         The shot schedule.
     max_window_ms : float
@@ -91,7 +91,7 @@ class WalkShots:
         return ShotRenderer(self.scene, self.poses(camera), shot_time_s(first, self.fps), span_ms, width=r["width"],
                             height=r["height"], spp=r["spp"], seed=self.seed(first, camera), fov_deg=r["fov_deg"],
                             cache_dir=r["cache_dir"], variant=r["variant"], denoise=r["denoise"],
-                            margin_step_px=self.margin_step_px)
+                            margin_step_px=self.margin_step_px, adaptive=r.get("adaptive"))
 
     def renderer(self, index: int, camera: str):
         """The renderer serving shot ``index`` (its sweep's with ``render_per="cycle"``)."""

@@ -30,6 +30,7 @@ from emulator.blur import integrate_rotation, rotation_homography
 from emulator.emulate import emulate
 from emulator.io.borealhdr import load_sequence, sequence_response
 from emulator.motion import blur_hook, recording_motion
+from validation.blur.measure import sharpness as sharpness_of
 
 SAMPLE = "/work/shared/data/borealhdr_sample/backpack_2023-09-25-15-05-03"
 
@@ -139,10 +140,10 @@ def seq_h(seq):
 
 def rest(seq, resp):
     from emulator.noise import NoiseModel
-    from emulator.noise.tables import _slope
+    from emulator.noise.tables import response_slope
 
     hook = blur_hook("consistent", seq, resp)
-    dfdh = 1.0 / np.maximum(_slope(resp)[: resp.white_level + 1], 1e-12)
+    dfdh = 1.0 / np.maximum(response_slope(resp)[: resp.white_level + 1], 1e-12)
     dn = np.arange(resp.white_level + 1)
     sig = {fw: np.sqrt(NoiseModel.from_full_well(resp, fw).variance_e(dn)) / (fw / resp.g[resp.white_level])
            for fw in (2005.0, 10500.0)}
@@ -181,24 +182,19 @@ def rest(seq, resp):
 def sharpness(seq, resp):
     hook = blur_hook("consistent", seq, resp)
 
-    def sharp(raw):
-        g = raw[0::2, 1::2].astype(np.float64)
-        gy, gx = np.gradient(g)
-        return float(np.percentile(np.hypot(gx, gy), 95) / np.median(g))
-
     rows = []
     for c in seq.cycles:
         for cam in seq.cameras:
             fr = c.frames.get(cam, {})
             if 32.0 not in fr:
                 continue
-            real = sharp(fr[32.0].load())
+            real = sharpness_of(fr[32.0].load())
             for src in (4.0, 8.0, 16.0):
                 if src not in fr:
                     continue
                 raw = fr[src].load()
-                plain = sharp(emulate(raw, src, 32.0, resp))
-                cons = sharp(hook.emulate(cam, fr[src].timestamp_ns, raw, src, 32.0)[0])
+                plain = sharpness_of(emulate(raw, src, 32.0, resp))
+                cons = sharpness_of(hook.emulate(cam, fr[src].timestamp_ns, raw, src, 32.0)[0])
                 rows.append({"cycle": c.index, "camera": cam, "source_ms": src, "real": real,
                              "plain_error_percent": 100 * (plain / real - 1),
                              "consistent_error_percent": 100 * (cons / real - 1)})

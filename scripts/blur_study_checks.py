@@ -1,4 +1,4 @@
-"""Measurements behind docs/motion.md (2026-11-25) that go beyond one ``exposim validate blur`` run.
+"""Measurements behind docs/results/motion-2026-11-25.md and motion-2026-11-26.md that go beyond one ``exposim validate blur`` run.
 
     python scripts/blur_study_checks.py sharpness OUT.json        # 4 fastest + 4 median-rate instants
     python scripts/blur_study_checks.py variants T0 [T0 ...]      # consistent emulation: smoothing x resampler

@@ -1,4 +1,4 @@
-"""Render flicker and keypoint repeatability of denoiser presets at one walk pose (docs/motion.md).
+"""Render flicker and keypoint repeatability of denoiser presets at one walk pose (docs/results/motion-2026-11-25.md).
 
 Usage: python scripts/render_noise_presets.py oidn-fast@2 oidn@16 oidn@36   (REFSPP=64 by default)
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from emulator.errors import ExposimError
 
-__all__ = ["SynthError", "CameraError", "RadianceError", "SourceError"]
+__all__ = ["SynthError", "CameraError", "RadianceError", "SourceError", "PoseError"]
 
 
 class SynthError(ExposimError):
@@ -25,3 +25,7 @@ class RadianceError(SynthError):
 
 class SourceError(SynthError):
     """A radiance source returned something unusable (pose, frame count, stereo geometry)."""
+
+
+class PoseError(SynthError):
+    """A camera pose is not a finite rigid 4x4 camera-to-world matrix (shape, values, bottom row, rotation)."""

@@ -59,6 +59,7 @@ from synth.dataset import (
 )
 from synth.errors import RadianceError, SourceError, SynthError
 from synth.imaging import capture
+from synth.pose import check_pose
 from synth.presets import response_table
 
 __all__ = [
@@ -173,18 +174,6 @@ def shot_schedule(
 
 
 # ---------------------------------------------------------------------------- sources
-def _check_pose(pose, where: str) -> np.ndarray:
-    m = np.asarray(pose, dtype=np.float64) if isinstance(pose, (np.ndarray, list, tuple)) else None
-    if m is None or m.shape != (4, 4) or not np.all(np.isfinite(m)):
-        raise SourceError(f"{where}: pose must be a finite 4x4 matrix, got {getattr(m, 'shape', type(pose).__name__)}")
-    if not np.allclose(m[3], (0.0, 0.0, 0.0, 1.0), atol=1e-12):
-        raise SourceError(f"{where}: pose bottom row must be (0, 0, 0, 1), got {m[3].tolist()}")
-    r = m[:3, :3]
-    if not np.allclose(r.T @ r, np.eye(3), atol=1e-6) or np.linalg.det(r) < 0:
-        raise SourceError(f"{where}: the pose's 3x3 block is not a rotation")
-    return m
-
-
 def _frame_getter(source, stereo: bool):
     """``get(shot, side) -> (radiance, pose)`` and the number of frames (None: unbounded)."""
     if callable(source):
@@ -408,7 +397,7 @@ def _source_frame(get_frame, shot, side: str, where: str) -> tuple:
         raise SourceError(
             f"{where}: the source must return (radiance, pose), got {type(item).__name__}"
         ) from None
-    return radiance, _check_pose(pose, where)
+    return radiance, check_pose(pose, where)
 
 
 def _write_shot(staging: Path, shot, side: str, c: int, radiance, where: str, *, camera: Camera, seed: int,

@@ -87,6 +87,7 @@ def test_kim_seed_at_the_bounds_is_taken():
     (["--option", "kim.gamma_mi=true"], ["kim.gamma_mi", "number"]),
     (["--jobs", "0"], ["--jobs 0", ">= 1"]),
     (["--workers", "0"], ["--workers 0", ">= 1"]),
+    (["--dataset-workers", "0"], ["--dataset-workers 0", ">= 1"]),
     (["--group-size", "0"], ["--group-size 0", ">= 1"]),
 ])
 def test_bad_run_arguments_are_refused_in_one_line_and_write_nothing(seq, tmp_path, capsys, args, words):

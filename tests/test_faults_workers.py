@@ -264,7 +264,7 @@ def test_a_local_class_is_refused_in_one_line_unless_inline(seq):
         def next_exposure(self, raw, t):
             return 5.0
 
-    with pytest.raises(Exception, match=r"AE method 'local' cannot be handed to a worker process .*--workers inline"):
+    with pytest.raises(Exception, match=r"AE method 'local' cannot be handed to a worker process .*--isolation inline"):
         run(seq, [Local()])
     assert len(run(seq, [Local()], workers="inline").steps["local"]) == N_CYCLES
 

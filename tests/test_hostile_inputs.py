@@ -81,7 +81,7 @@ def test_bad_range(seq, tmp_path, capsys, low, high):
     assert not out.exists() or not any(out.iterdir())
 
 
-@pytest.mark.parametrize("flag", ["--workers", "--group-size"])
+@pytest.mark.parametrize("flag", ["--workers", "--dataset-workers", "--group-size"])
 @pytest.mark.parametrize("value", ["0", "-2"])
 def test_bad_dataset_flags_write_nothing(seq, tmp_path, capsys, flag, value):
     out = tmp_path / "run"

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 
+from emulator.playback import RunConfig
 from emulator.io.borealhdr import load_sequence, sequence_response
 from synth.sequence import load_camera
 from validation.live import DatasetRadiance, iter_live
@@ -70,7 +71,8 @@ def test_latency_applies_the_proposal_made_after_frame_k_minus_1_minus_latency(s
     seq, cam, resp, rad = static
     m = Counter()
     frames = list(native_rate_loop(seq, rad, cam, [m], response=resp, noise=False, initial_ms=4.0,
-                                   latency_frames=latency, every_frame=True))
+                                   latency_frames=latency, every_frame=True,
+                                   config=RunConfig(workers="inline")))  # m is read after the loop: in this process
     n_shots = len(shot_timestamps(seq))
     assert [cs.cycle for cs in frames] == list(range(n_shots))  # one frame per recorder shot at 22 fps
     steps = [cs.steps["counter"] for cs in frames]

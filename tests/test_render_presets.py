@@ -166,3 +166,103 @@ def test_denoise_settings_of_a_preset_are_the_named_ones():
     for preset in RENDER_PRESETS.values():
         assert parse_setting(preset.name) is preset and preset.summary
         assert parse_setting(preset.setting).denoise == preset.denoise
+
+
+def test_adaptive_sampling_is_read_and_written_back_and_refused_when_malformed():
+    from scenes.adaptive import DEFAULT_TILE, AdaptiveSampling
+
+    p = parse_setting("oidn-hq@64+sun=16~x4:25%")
+    assert (p.spp, p.denoise.name, p.emitter_weights) == (64, "oidn-hq", (("sun", 16.0),))
+    assert p.adaptive == AdaptiveSampling(4, 0.25, DEFAULT_TILE) and p.setting == "oidn-hq@64+sun=16~x4:25%"
+    assert p.record()["adaptive"] == {"factor": 4, "fraction": 0.25, "tile": 30, "floor": 0.05, "scheme": 1}
+    q = parse_setting("off@16~x2:12.5%/60")
+    assert (q.adaptive.factor, q.adaptive.fraction, q.adaptive.tile) == (2, 0.125, 60)
+    for text in ("oidn@8~x3:50%", "off@4~x2:100%/8", q.setting, p.setting):
+        assert parse_setting(parse_setting(text).setting) == parse_setting(text)
+    assert parse_setting("oidn@8").adaptive is None and "adaptive" not in parse_setting("oidn@8").record()
+    for bad, words in (("oidn@8~", "~xFACTOR:PERCENT%"), ("oidn@8~x1:25%", "factor"), ("oidn@8~x4:0%", "fraction"),
+                       ("oidn@8~x4:25", "~xFACTOR"), ("oidn@8~4:25%", "~xFACTOR"), ("oidn@8~x4:25%/2", "tile")):
+        with pytest.raises(RenderError, match=words) as err:
+            parse_setting(bad)
+        assert repr(bad) in str(err.value)
+    from validation.live.cli import build_parser, config_from_args
+    from validation.live.config import LiveError
+
+    with pytest.raises(LiveError, match="adaptive"):  # not silently dropped by the live study
+        config_from_args(build_parser().parse_args(["-o", "OUT", "--render", "oidn@8~x4:25%"]))
+
+
+def test_adaptive_sampling_enters_the_cache_key_only_when_set():
+    from scenes.adaptive import AdaptiveSampling
+
+    scene = scenes.get_scene("forest_winter")
+    pose = scene.default_pose()
+    common = dict(width=8, height=6, spp=4, seed=0, fov_deg=70.0, variant="scalar_rgb")
+    key, material = render_key(scene, pose, **common)
+    assert "adaptive" not in material and render_key(scene, pose, adaptive=None, **common)[0] == key
+    k4, m4 = render_key(scene, pose, adaptive=AdaptiveSampling(4, 0.25).key_material(), **common)
+    assert k4 != key and m4["adaptive"]["factor"] == 4
+    assert render_key(scene, pose, adaptive=AdaptiveSampling(4, 0.5).key_material(), **common)[0] != k4
+
+
+def test_tiles_are_chosen_where_the_variance_against_radiance_is_highest():
+    from scenes.adaptive import select_tiles, tile_crops, tile_scores
+
+    rng = np.random.default_rng(7)
+    mean = np.full((20, 30, 3), 2.0)
+    noise = np.full((20, 30, 1), 0.01)
+    noise[0:10, 20:30] = 0.5   # tile (0, 2): the noisiest
+    noise[10:20, 0:10] = 0.2   # tile (1, 0): next
+    mean[10:20, 10:20] = 0.01  # tile (1, 1): dark, its noise is large against its radiance but not against the
+    noise[10:20, 10:20] = 0.02  # floor (5 % of the frame's mean): without the floor it would come second
+    d = rng.choice([-1.0, 1.0], size=(20, 30, 1)) * noise  # random signs, known size
+    scores = tile_scores(mean + d, mean - d, 10)
+    assert scores.shape == (2, 3)
+    assert np.array_equal(select_tiles(scores, 1 / 6), [[False, False, True], [False, False, False]])
+    assert np.array_equal(select_tiles(scores, 2 / 6), [[False, False, True], [True, False, False]])
+    # variance (2 d)^2 / 4 = d^2 over luminance: the scores are the constructed ratios
+    assert scores[0, 2] == pytest.approx(0.25 / 2.0) and scores[1, 0] == pytest.approx(0.04 / 2.0)
+    floor = 0.05 * (5 * 2.0 + 0.01) / 6
+    assert scores[1, 1] == pytest.approx(0.0004 / floor) and scores[0, 0] == pytest.approx(0.0001 / 2.0)
+    assert np.array_equal(select_tiles(np.zeros((2, 2)), 0.5), [[True, True], [False, False]])  # ties: row-major
+    mask = np.array([[True, False, True], [False, False, False], [False, True, False]])
+    assert tile_crops(mask, 10, 25, 28) == [(0, 0, 25, 10), (10, 20, 10, 8)]  # clipped to the frame
+    # merged into their bounding box (25 x 28) when that adds fewer pixels (370) than one more render is worth
+    assert tile_crops(mask, 10, 25, 28, merge_px=370) == [(0, 0, 25, 10), (10, 20, 10, 8)]
+    assert tile_crops(mask, 10, 25, 28, merge_px=371) == [(0, 0, 25, 28)]
+
+
+def test_adaptive_render_is_the_spp_weighted_mean_of_its_passes(monkeypatch):
+    from scenes import adaptive
+
+    sr = sys.modules["scenes.render"]  # the module (scenes.render is also the function)
+
+    passes = []
+    real = adaptive.render_adaptive
+
+    def recording(render_pass, spec, **kw):
+        def rec(n, s, crop):
+            img = render_pass(n, s, crop)
+            passes.append((img, n, crop, s))
+            return img
+        return real(rec, spec, **kw)
+
+    monkeypatch.setattr(sr, "render_adaptive", recording)
+    scene = scenes.get_scene("forest_winter")
+    pose = scene.trajectory(5.0).pose(2.0)
+    kw = dict(width=24, height=16, spp=4, seed=5, denoise="off", cache_dir=False, variant="scalar_rgb")
+    img = scenes.render(scene, pose, adaptive="x3:25%/8", **kw)
+    assert [p[1] for p in passes[:2]] == [2, 2] and passes[0][2] is None and passes[1][2] is None
+    crops = [p[2] for p in passes[2:]]
+    assert crops and all(p[1] == 8 for p in passes[2:])  # (3 - 1) x 4 more samples in the crops
+    assert sum(c[2] * c[3] for c in crops) >= 0.25 * 24 * 16 and len({p[3] for p in passes}) == len(passes)
+    acc, cnt = np.zeros((16, 24, 3)), np.zeros((16, 24, 1))
+    for image, n, crop, _ in passes:
+        x, y, w, h = (0, 0, 24, 16) if crop is None else crop
+        acc[y:y + h, x:x + w] += n * image
+        cnt[y:y + h, x:x + w] += n
+    np.testing.assert_allclose(img, acc / cnt, rtol=1e-6)
+    again = scenes.render(scene, pose, adaptive="x3:25%/8", **kw)
+    assert np.array_equal(img, again)  # deterministic seeds: the same bytes
+    x, y, w, h = crops[0]
+    assert passes[2][0].shape == (h, w, 3)

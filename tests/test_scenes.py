@@ -29,6 +29,7 @@ from emulator.io.exr import read_exr, write_exr
 from emulator.io.tum import read_tum, write_tum
 from scenes.cache import store_entry
 from scenes.errors import RenderError, SceneError
+from synth.errors import PoseError
 
 SCENE_NAMES = ("forest_winter", "forest_summer", "sun_glare", "forest_edge", "static_lab")
 
@@ -239,11 +240,11 @@ def test_effective_spp_matches_the_mitsuba_sampler():
 
 
 def test_bad_pose_is_refused():
-    with pytest.raises(RenderError, match="pose"):
+    with pytest.raises(PoseError, match=r"pose must be a finite 4x4 matrix, got shape \(3, 3\)"):
         scenes.render("static_lab", np.eye(3), width=8, height=8, spp=1, cache_dir=False)
     skew = np.eye(4)
     skew[0, 1] = 0.5
-    with pytest.raises(RenderError, match="rotation"):
+    with pytest.raises(PoseError, match="rotation"):
         scenes.render("static_lab", skew, width=8, height=8, spp=1, cache_dir=False)
     with pytest.raises(RenderError, match="spp"):
         scenes.render("static_lab", np.eye(4), width=8, height=8, spp=0, cache_dir=False)

@@ -25,7 +25,7 @@ from emulator.io.exr import read_exr
 from emulator.io.files import atomic_write_bytes, make_staging_dir
 from synth import Camera, capture_sequence, shot_schedule
 from synth.dataset import MANIFEST_FILE, foreign_files
-from synth.errors import RadianceError, SourceError, SynthError
+from synth.errors import PoseError, RadianceError, SourceError, SynthError
 from synth.procedural import TranslatingChart
 
 H, W = 48, 64
@@ -384,7 +384,7 @@ def test_source_errors_name_the_shot(tmp_path, camera, chart):
 
     with pytest.raises(RadianceError, match=r"shot 2 \(left camera, t = 0.0909.*NaN.*row 1, column 2"):
         capture_sequence(bad_radiance, tmp_path / "b", camera, n_shots=4)
-    with pytest.raises(SourceError, match="not a rotation"):
+    with pytest.raises(PoseError, match="not a rotation"):
         capture_sequence(lambda t, s: (chart(t, s)[0], np.diag([1.0, 1.0, -1.0, 1.0])), tmp_path / "c", camera,
                          n_shots=1, stereo=False)
     with pytest.raises(SourceError, match=r"must return \(radiance, pose\)"):

@@ -226,6 +226,10 @@ def test_tiny_experiment_end_to_end(tmp_path, render_cache, monkeypatch):
         assert (tmp_path / "out" / f).is_file(), f
     assert not (tmp_path / "out" / "datasets" / "forest_winter" / "ground_truth" / "radiance").exists()
     assert res["headline_noise"] == "plain"  # declared, never selected
+    # one seed per method (the default): the study's files and configuration as before
+    assert not any((tmp_path / "out" / f).exists() for f in ("walks_seeds.csv", "residual_shares.json"))
+    assert "stochastic_seeds" not in on_disk["config"]
+    assert on_disk["method_processes"]["workers"] == "process"
     # issue 22's contract: one walk (one scene, one seed) cannot resolve the methods
     assert on_disk["n_walks"] == 1
     assert set(on_disk["metrics"]) == set(JUDGED_METRICS)

@@ -26,6 +26,7 @@ import numpy as np
 from emulator.io.files import REPORT_FILE, RESULTS_FILE, first_free, read_results, write_results, write_text
 from emulator.report.figures import plural
 from emulator.report.html import write_report
+from emulator.cells import format_number
 
 __all__ = ["run_demo", "demo_config", "emulation_check", "new_output_dir", "demo_dataset", "demo_dataset_key"]
 
@@ -328,11 +329,11 @@ def _method_rows(feats: dict, vo: dict, run_summary_path: Path) -> list[str]:
         f = fm.get(name, {})
         v = vm.get(name, {})
         lines.append(
-            f"| {name} | {_fmt(m.get('median_exposure_ms'))} | {_fmt(100 * m['mean_saturated_fraction'] if 'mean_saturated_fraction' in m else None)} "
-            f"| {_fmt(None if f.get('median_uniformity') is None else 100 * f['median_uniformity'])} "
-            f"| {_fmt(f.get('median_matches'))} "
+            f"| {name} | {format_number(m.get('median_exposure_ms'))} | {format_number(100 * m['mean_saturated_fraction'] if 'mean_saturated_fraction' in m else None)} "
+            f"| {format_number(None if f.get('median_uniformity') is None else 100 * f['median_uniformity'])} "
+            f"| {format_number(f.get('median_matches'))} "
             f"| {len(v.get('failures', []))} of {plural(v['n_frames'], 'frame') if 'n_frames' in v else '- frames'} "
-            f"| {_fmt(_rpe_median(v))} |"
+            f"| {format_number(_rpe_median(v))} |"
         )
     return lines
 
@@ -361,15 +362,6 @@ def _rpe_median(v: dict):
     """Median translation RPE (%) at the longest pair length that has pairs, or None."""
     entry = _longest(v)
     return None if entry is None else _trans(entry).get("median")
-
-
-def _fmt(v) -> str:
-    if v is None:
-        return "-"
-    try:
-        return f"{float(v):.3g}"
-    except (TypeError, ValueError):
-        return str(v)
 
 
 def _rendering_note(dataset: Path) -> str:

@@ -26,7 +26,8 @@ from emulator.io.files import (
 from emulator.report.figures import subplots
 from emulator.report.html import write_report
 from validation.common import ValidationError, provenance
-from validation.emulation.report import _emulation_figures, _emulation_md, _fmt, emulation_verdict
+from validation.emulation.report import _emulation_figures, _emulation_md, emulation_verdict
+from emulator.cells import format_number
 
 __all__ = ["EXPERIMENTS", "make_config", "run_experiment", "emulation_verdict"]
 
@@ -164,8 +165,8 @@ def _selectors_md(r: dict, figures: list[str]) -> str:
               "| selector | median RMSE | mean RMSE | max RMSE | mean excess over oracle | max excess | "
               "agrees with oracle |", "| --- | --- | --- | --- | --- | --- | --- |"]
         for name, d in r["summary"][split]["exact_all"].items():
-            L.append(f"| {name} | {_fmt(d['rmse']['median'])} | {_fmt(d['rmse']['mean'])} | {_fmt(d['rmse']['max'])} | "
-                     f"{_fmt(d['excess_over_oracle']['mean'], 4)} | {_fmt(d['excess_over_oracle']['max'])} | "
+            L.append(f"| {name} | {format_number(d['rmse']['median'], '.3f')} | {format_number(d['rmse']['mean'], '.3f')} | {format_number(d['rmse']['max'], '.3f')} | "
+                     f"{format_number(d['excess_over_oracle']['mean'], '.4f')} | {format_number(d['excess_over_oracle']['max'], '.3f')} | "
                      f"{100 * d['agreement_with_oracle']:.1f} % |")
         L.append("")
     L += ["## The proposed selector (predicted-error)", "",
@@ -235,20 +236,20 @@ def _motion_md(r: dict, figures: list[str]) -> str:
     for source, d in r["sources"].items():
         first = next(iter(d["by_speed_and_abs_offset"].values()))
         L += [f"## {_SOURCE_TITLE.get(source, source)}", "",
-              f"Static baseline (offset 0): median {_fmt(d['static_baseline_clean_all']['median'])} %; one shot away "
-              f"(45 ms): median {_fmt(d['one_shot_offset_clean_all']['median'])} %; largest offset: median "
-              f"{_fmt(d['largest_offset_clean_all']['median'])} %, max {_fmt(d['largest_offset_clean_all']['max'])} %"
-              + (f"; floor-subtracted median {_fmt(d['largest_offset_floor_subtracted']['median'])} %; render-noise "
-                 f"floor median {_fmt(d['render_noise_floor_all']['median'])} %" if source == "mitsuba" else "")
-              + f"; least-squares growth {_fmt(d['error_per_metre_percent'])} % per metre.", "",
+              f"Static baseline (offset 0): median {format_number(d['static_baseline_clean_all']['median'], '.3f')} %; one shot away "
+              f"(45 ms): median {format_number(d['one_shot_offset_clean_all']['median'], '.3f')} %; largest offset: median "
+              f"{format_number(d['largest_offset_clean_all']['median'], '.3f')} %, max {format_number(d['largest_offset_clean_all']['max'], '.3f')} %"
+              + (f"; floor-subtracted median {format_number(d['largest_offset_floor_subtracted']['median'], '.3f')} %; render-noise "
+                 f"floor median {format_number(d['render_noise_floor_all']['median'], '.3f')} %" if source == "mitsuba" else "")
+              + f"; least-squares growth {format_number(d['error_per_metre_percent'], '.3f')} % per metre.", "",
               "| speed (m/s) | " + " | ".join(f"{x['offset_ms']:.0f} ms" for x in first.values()) + " |",
               "| --- |" + " --- |" * len(first)]
         for v, row in d["by_speed_and_abs_offset"].items():
             cells = []
             for x in row.values():
-                c = _fmt(x["median_clean_all"])
+                c = format_number(x["median_clean_all"], '.3f')
                 if source == "mitsuba" and x["median_clean_all_floor_subtracted"] is not None:
-                    c += f" ({_fmt(x['median_clean_all_floor_subtracted'])})"
+                    c += f" ({format_number(x['median_clean_all_floor_subtracted'], '.3f')})"
                 if source == "chart" and x["shift_px"] is not None:
                     c += f" [{x['shift_px']:.2f} px]"
                 cells.append(c)
@@ -290,9 +291,9 @@ def _speed_md(r: dict, figures: list[str]) -> str:
     for row in r["table"]:
         full = row.get("ms_per_full_frame")
         valid = row.get("rmse_valid", {}).get("median") if "rmse_valid" in row else None
-        L.append(f"| {row['config']} | {_fmt(full, 2) if full is not None else '-'} | "
-                 f"{_fmt(row['ms_per_study_image'], 3)} | {_fmt(row['rmse_all']['median'], 4)} | "
-                 f"{_fmt(row['rmse_all']['max'], 4)} | {_fmt(valid, 4) if valid is not None else '-'} |")
+        L.append(f"| {row['config']} | {format_number(full, '.2f') if full is not None else '-'} | "
+                 f"{format_number(row['ms_per_study_image'], '.3f')} | {format_number(row['rmse_all']['median'], '.4f')} | "
+                 f"{format_number(row['rmse_all']['max'], '.4f')} | {format_number(valid, '.4f') if valid is not None else '-'} |")
     L += ["", f"Render rows: RMSE of noiseless captures against those of a {r['reference_spp']}-spp render.", "",
           "## Figures", ""] + [f"![{f}]({f})" for f in figures]
     return "\n".join(L) + "\n"

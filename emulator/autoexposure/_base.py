@@ -194,6 +194,9 @@ class AutoExposureMethod:
     """
 
     name: str = "method"
+    #: The keyword option that seeds the random numbers the method draws (a stochastic method declares it:
+    #: a study runs it with several seeds, :func:`emulator.autoexposure.builtin.seed_option`); None: draws none.
+    seed_option: str | None = None
 
     def __init__(self, *, mode: str = "paper", range_ms="default") -> None:
         self.mode = check_mode(mode)

@@ -14,7 +14,7 @@ from emulator.autoexposure.kim import Kim2018
 from emulator.autoexposure.shim import Shim2014
 from emulator.autoexposure.zhang import Zhang2017
 
-__all__ = ["METHODS", "METHOD_NAMES", "make_method", "accepts_option"]
+__all__ = ["METHODS", "METHOD_NAMES", "make_method", "accepts_option", "seed_option"]
 
 
 def _classical(percent: int) -> Callable[..., Classical]:
@@ -41,6 +41,16 @@ def accepts_option(name: str, option: str) -> bool:
     factory = METHODS[name]
     target = factory.func if isinstance(factory, functools.partial) else factory
     return option in inspect.signature(target).parameters
+
+
+def seed_option(name: str) -> str | None:
+    """The option that seeds the random draws of built-in method ``name`` (its class's ``seed_option``), or None for
+    a method that draws no random numbers (or a name that is not a built-in)."""
+    factory = METHODS.get(name)
+    if factory is None:
+        return None
+    target = factory.func if isinstance(factory, functools.partial) else factory
+    return getattr(target, "seed_option", None)
 
 
 def make_method(name: str, **options) -> AutoExposureMethod:

@@ -356,6 +356,7 @@ class Kim2018(AutoExposureMethod):
     """
 
     name = "kim"
+    seed_option = "seed"  # its GP's optimizer restarts are random draws
 
     def __init__(
         self,

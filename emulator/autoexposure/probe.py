@@ -6,7 +6,7 @@ change the process that imports it (patch ``cv2.cvtColor`` at import, which the 
 for the built-ins' gray images).  So the imports run in a short-lived Python process started for the
 purpose, which answers with JSON text (nothing is unpickled); the run's process keeps only the names,
 the import paths and the errors.  A method is loaded in the run's process only where it is built
-there (``--workers inline``).
+there (``--isolation inline``).
 """
 
 from __future__ import annotations

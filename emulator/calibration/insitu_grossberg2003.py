@@ -29,7 +29,7 @@ from emulator.calibration.result import (
     sweep_neighbours,
     table_top_for,
 )
-from emulator.calibration.solver import _blas_single_thread, _comparametric_irls, _finish, _Knots, _robust_scale
+from emulator.calibration.solver import Knots, blas_single_thread, comparametric_irls, finish_response, robust_scale
 from emulator.errors import CalibrationError
 from emulator.levels import BOREALHDR_LEVELS
 
@@ -135,7 +135,7 @@ def fit_comparametric(
         )
     white, black = int(white_level), int(black_level)
     top = table_top_for(white)
-    knots = _Knots(n_knots, top)
+    knots = Knots(n_knots, top)
     d_lo = np.concatenate([p["d_lo"] for p in pairs])
     d_hi = np.concatenate([p["d_hi"] for p in pairs])
     ratio = np.concatenate([np.full(p["d_lo"].size, p["ratio"]) for p in pairs])
@@ -153,9 +153,9 @@ def fit_comparametric(
         shape=(n, knots.n),
     )
     presence = np.abs(a_mat).T @ np.ones(n)
-    with _blas_single_thread():
-        c = _comparametric_irls(a_mat, b_mat, d_lo, ratio, knots, presence, smoothness, huber_k, n_iter)
-    resp, g = _finish(c, knots, presence, f"comparametric:{source}", black)
+    with blas_single_thread():
+        c = comparametric_irls(a_mat, b_mat, d_lo, ratio, knots, presence, smoothness, huber_k, n_iter)
+    resp, g = finish_response(c, knots, presence, f"comparametric:{source}", black)
     pred = resp.forward(ratio * resp.inverse(d_lo))
     r = d_hi - pred
     rms = float(np.sqrt(np.mean(r * r)))
@@ -180,7 +180,7 @@ def fit_comparametric(
         method="comparametric_grossberg2003",
         observed_dn=observed,
         residual_rms_dn=rms,
-        residual_robust_dn=_robust_scale(r),
+        residual_robust_dn=robust_scale(r),
         residual_rms_percent=100.0 * rms / (white - black),
         noise_dn=float("nan"),
         samples_dn=d_hi.copy(),

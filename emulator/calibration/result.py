@@ -17,12 +17,13 @@ from emulator.io.pcalib import check_origin
 from emulator.response import CameraResponse
 
 __all__ = ["CalibrationResult", "Progress", "bayer_subsample", "table_top_for", "origin_warnings", "planes_of",
-           "sweep_neighbours"]
+           "sweep_neighbours", "report_progress"]
 
 Progress = Callable[[int, int, str], None] | None
 
 
-def _report(progress: Progress, done: int, total: int, label: str) -> None:
+def report_progress(progress: Progress, done: int, total: int, label: str) -> None:
+    """Call ``progress(done, total, label)`` unless ``progress`` is None."""
     if progress is not None:
         progress(done, total, label)
 
@@ -59,7 +60,7 @@ def sweep_neighbours(sequence, cameras, max_ratio: float, prepare: Callable[[np.
             if (cyc.index, cam, e) not in cache:
                 cache[(cyc.index, cam, e)] = prepare(cyc.frames[cam][e].load())
         yield cyc, cam, a, b, cache[(cyc.index, cam, a)], cache[(cyc.index, cam, b)]
-        _report(progress, k + 1, len(jobs), f"{label} {cam} cycle {cyc.index} {a:g}->{b:g} ms")
+        report_progress(progress, k + 1, len(jobs), f"{label} {cam} cycle {cyc.index} {a:g}->{b:g} ms")
 
 
 def origin_warnings(response: CameraResponse, black_level: int, source: str) -> list[str]:
@@ -142,3 +143,6 @@ class CalibrationResult:
             "knots_g": self.knots_g.tolist(),
             **self.info,
         }
+
+
+_report = report_progress  # old name, for emulator.calibration.stack_engel2016 (remove once it imports report_progress)

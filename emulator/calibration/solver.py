@@ -1,13 +1,14 @@
 """The numerics both estimators share: the piecewise-linear basis, monotone projection, robust weights, solvers.
 
 U (the inverse response) is piecewise linear on knots evenly spaced over DN
-``0..table_top`` (:class:`_Knots`).  The static-stack objective (Engel et al. 2016) is
-solved by variable projection (:func:`_solve_varpro`: B eliminated in closed form, one
+``0..table_top`` (:class:`Knots`).  The static-stack objective (Engel et al. 2016) is
+solved by variable projection (:func:`solve_varpro`: B eliminated in closed form, one
 smallest generalised eigenvector per Huber reweighting) or by the plain alternation
-(:func:`_solve_als`); the comparametric system (Grossberg and Nayar 2003) by reweighted
-smallest-eigenvector solves (:func:`_comparametric_irls`).  Every solution is projected
+(:func:`solve_als`); the comparametric system (Grossberg and Nayar 2003) by reweighted
+smallest-eigenvector solves (:func:`comparametric_irls`).  Every solution is projected
 onto the monotone functions (:func:`_monotone`) and scaled to g(table_top) = 255
-(:func:`_finish`).  These names are private to :mod:`emulator.calibration`.
+(:func:`finish_response`).  The estimators in :mod:`emulator.calibration` import the names in
+``__all__``; the package's own API does not re-export them.
 """
 
 from __future__ import annotations
@@ -16,14 +17,17 @@ import math
 
 import numpy as np
 
-from emulator.calibration.result import _report
+from emulator.calibration.result import report_progress
 from emulator.errors import CalibrationError
 from emulator.io.pcalib import PCALIB_TOP_VALUE
 from emulator.pools import single_thread_pools
 from emulator.response import CameraResponse
 
+__all__ = ["Knots", "blas_single_thread", "robust_scale", "finish_response", "solve_varpro", "solve_als",
+           "comparametric_irls"]
 
-def _blas_single_thread():
+
+def blas_single_thread():
     """One BLAS thread: the systems here are small (256 knots), and on a loaded machine
     OpenBLAS threads spin-waiting cost 50x the work (:func:`emulator.pools.single_thread_pools`,
     with SciPy's BLAS loaded)."""
@@ -31,7 +35,7 @@ def _blas_single_thread():
 
 
 # ============================================================================ numerics
-class _Knots:
+class Knots:
     """Piecewise-linear basis on ``n`` knots evenly spaced over DN ``0..table_top``."""
 
     def __init__(self, n_knots: int, table_top: int):
@@ -133,15 +137,16 @@ def _huber(r: np.ndarray, k: float) -> np.ndarray:
     return w
 
 
-def _robust_scale(r: np.ndarray) -> float:
+def robust_scale(r: np.ndarray) -> float:
+    """1.4826 x the median absolute residual (0 for no residuals)."""
     if r.size == 0:
         return 0.0
     return 1.4826 * float(np.median(np.abs(r)))
 
 
-def _finish(
+def finish_response(
     c: np.ndarray,
-    knots: _Knots,
+    knots: Knots,
     w_knot: np.ndarray,
     name: str,
     black_level: int,
@@ -156,7 +161,7 @@ def _finish(
     return resp, c
 
 
-def _knot_system(knots: _Knots, d_flat: np.ndarray, w: np.ndarray, y: np.ndarray | None):
+def _knot_system(knots: Knots, d_flat: np.ndarray, w: np.ndarray, y: np.ndarray | None):
     """Per-DN sums -> tridiagonal sum of w * phi phi^T (diag, off), rhs sum of w * y * phi, knot weights."""
     top = knots.top
     j, f = knots.j_int, knots.f_int
@@ -170,7 +175,7 @@ def _knot_system(knots: _Knots, d_flat: np.ndarray, w: np.ndarray, y: np.ndarray
     return diag, off, rhs, knots.weight_per_knot(w_dn)
 
 
-def _irradiance(knots: _Knots, c: np.ndarray, d_flat, pix_idx, t_flat, w, n_pix) -> np.ndarray:
+def _irradiance(knots: Knots, c: np.ndarray, d_flat, pix_idx, t_flat, w, n_pix) -> np.ndarray:
     """Closed-form B(x) = sum w t U(I) / sum w t^2 per pixel."""
     u = knots.table(c)[d_flat]
     num = np.bincount(pix_idx, w * t_flat * u, n_pix)
@@ -178,12 +183,12 @@ def _irradiance(knots: _Knots, c: np.ndarray, d_flat, pix_idx, t_flat, w, n_pix)
     return num / np.maximum(den, 1e-300)
 
 
-def _huber_weights(knots: _Knots, c, d_flat, pix_idx, t_flat, b, huber_k) -> tuple[np.ndarray, float]:
+def _huber_weights(knots: Knots, c, d_flat, pix_idx, t_flat, b, huber_k) -> tuple[np.ndarray, float]:
     """Huber weights of the residuals, measured in DN through the local slope of U."""
     u = knots.table(c)[d_flat]
     slope = np.maximum(knots.slope_table(c), 1e-12)
     r_dn = (u - t_flat * b[pix_idx]) / slope[d_flat]
-    sigma = _robust_scale(r_dn)
+    sigma = robust_scale(r_dn)
     return _huber(r_dn, huber_k * max(sigma, 0.5)), sigma
 
 
@@ -212,7 +217,7 @@ def _smallest_eigvec(q: np.ndarray, q1: np.ndarray, x0: np.ndarray, *, max_iter:
     return x
 
 
-def _solve_varpro(
+def solve_varpro(
     knots, d_flat, pix_idx, t_flat, n_pix, *, smoothness, huber_k, max_iter, tol, progress, c0=None
 ):
     """Minimise over U with B eliminated: c^T (Q1 - Q2 + lam P) c subject to c^T Q1 c = 1.
@@ -254,14 +259,14 @@ def _solve_varpro(
         c = c_new
         b = _irradiance(knots, c, d_flat, pix_idx, t_flat, w, n_pix)
         w, sigma = _huber_weights(knots, c, d_flat, pix_idx, t_flat, b, huber_k)
-        _report(progress, it, max_iter, f"fit: robust residual {sigma:.3g} DN")
+        report_progress(progress, it, max_iter, f"fit: robust residual {sigma:.3g} DN")
         if change < tol:
             converged = True
             break
     return c, w, w_knot, it, converged
 
 
-def _solve_als(knots, d_flat, pix_idx, t_flat, n_pix, *, smoothness, huber_k, max_iter, tol, progress, c0=None):
+def solve_als(knots, d_flat, pix_idx, t_flat, n_pix, *, smoothness, huber_k, max_iter, tol, progress, c0=None):
     """Engel et al. 2016: alternate B = closed form, U = banded least squares, with Huber weights."""
     from scipy.linalg import solveh_banded
 
@@ -285,14 +290,14 @@ def _solve_als(knots, d_flat, pix_idx, t_flat, n_pix, *, smoothness, huber_k, ma
         c_new = c_new / math.sqrt(float(w_knot @ (c_new * c_new)) / float(w_knot.sum()))
         change = float(np.max(np.abs(c_new - c))) / float(c_new[-1])
         c = c_new
-        _report(progress, it, max_iter, f"ALS: robust residual {sigma:.3g} DN")
+        report_progress(progress, it, max_iter, f"ALS: robust residual {sigma:.3g} DN")
         if change < tol:
             converged = True
             break
     return c, w, w_knot, it, converged
 
 
-def _comparametric_irls(a_mat, b_mat, d_lo, ratio, knots, presence, smoothness, huber_k, n_iter):
+def comparametric_irls(a_mat, b_mat, d_lo, ratio, knots, presence, smoothness, huber_k, n_iter):
     """Reweighted (relative residuals, Huber) smallest-eigenvector solves of the comparagram system."""
     from scipy import sparse
 
@@ -319,6 +324,11 @@ def _comparametric_irls(a_mat, b_mat, d_lo, ratio, knots, presence, smoothness, 
         c = _monotone(sol, presence, floor=0.0)
         c = c / c[-1]
         rel = (a_mat @ c) / np.maximum(scale, 1e-12)
-        sigma = _robust_scale(rel)
+        sigma = robust_scale(rel)
         w_rob = _huber(rel, huber_k * max(sigma, 1e-6))
     return c
+
+
+# old names, for emulator.calibration.stack_engel2016 (remove once it imports the public names)
+_blas_single_thread, _finish, _Knots = blas_single_thread, finish_response, Knots
+_robust_scale, _solve_als, _solve_varpro = robust_scale, solve_als, solve_varpro

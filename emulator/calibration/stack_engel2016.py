@@ -61,10 +61,10 @@ from emulator.calibration.exposure_check import OUTLIER_MIN_G, exposure_scales, 
 from emulator.calibration.result import (
     CalibrationResult,
     Progress,
-    _report,
     origin_warnings,
+    report_progress,
 )
-from emulator.calibration.solver import _blas_single_thread, _finish, _Knots, _robust_scale, _solve_als, _solve_varpro
+from emulator.calibration.solver import Knots, blas_single_thread, finish_response, robust_scale, solve_als, solve_varpro
 from emulator.calibration.stack_checks import check_stack, estimate_noise_dn, stack_warnings
 from emulator.errors import CalibrationError
 from emulator.io.pcalib import PCALIB_SAMPLES
@@ -88,8 +88,8 @@ def _run_solver(solver: str, knots, d_flat, pix_idx, t_flat, n_pix, *, smoothnes
                 init):
     """The knots of U fitted by ``solver`` (``"varpro"`` or ``"als"``) on one BLAS thread:
     ``(knots, sample weights, knot weights, iterations, converged)``."""
-    with _blas_single_thread():
-        return (_solve_varpro if solver == "varpro" else _solve_als)(
+    with blas_single_thread():
+        return (solve_varpro if solver == "varpro" else solve_als)(
             knots, d_flat, pix_idx, t_flat, n_pix, smoothness=smoothness, huber_k=huber_k,
             max_iter=max_iter, tol=tol, progress=progress, c0=init,
         )
@@ -157,7 +157,7 @@ def _outliers(knots, solver, d_flat, pix_idx, img_idx, t_flat, t, n_img, n_pix, 
                            max_iter=max_iter, tol=tol, progress=None, init=init)
 
     def finish(c_sub):
-        return _finish(c_sub, knots, np.ones(knots.n), "refit", black)[0]
+        return finish_response(c_sub, knots, np.ones(knots.n), "refit", black)[0]
 
     found = outlier_image(solve, finish, d_flat, pix_idx, img_idx, t_flat, n_img, n_pix, scales, rms,
                            tol=float(outlier_tol), min_g=OUTLIER_MIN_G * float(table[-1]))
@@ -262,18 +262,18 @@ def fit_inverse_response(
     n_img, n_pix = dn.shape
     ts = t / t.max()
 
-    knots = _Knots(n_knots, top)
+    knots = Knots(n_knots, top)
     d_flat, pix_idx, img_idx, t_flat = _flat_samples(dn, valid, ts)
     max_iter = _checked_solver(solver, max_iter)
     c, w, w_knot, it, converged = _run_solver(solver, knots, d_flat, pix_idx, t_flat, n_pix, smoothness=smoothness,
                                               huber_k=huber_k, max_iter=max_iter, tol=tol, progress=progress,
                                               init=init)
 
-    resp, g = _finish(c, knots, w_knot, f"calibrated:{source}", black)
+    resp, g = finish_response(c, knots, w_knot, f"calibrated:{source}", black)
     table = resp.g
     r, pred_g = _fit_residuals(resp, d_flat, pix_idx, t_flat, w, n_pix)
     rms = float(np.sqrt(np.mean(r * r)))
-    robust = _robust_scale(r)
+    robust = robust_scale(r)
     pick = np.random.default_rng(rng).choice(d_flat.size, size=min(n_plot_samples, d_flat.size), replace=False)
     observed = (int(d_flat.min()), int(d_flat.max()))
     warnings = stack_warnings(t, observed, lo, hi)
@@ -370,7 +370,7 @@ def calibrate_stack(
             )
         samples.append(img.reshape(-1)[idx])
         noise.append(estimate_noise_dn(img, black_level=st.black_level, white_level=st.white_level, margin=margin))
-        _report(progress, i + 1, total, f"reading {st.names[i]}")
+        report_progress(progress, i + 1, total, f"reading {st.names[i]}")
     dn = np.stack(samples)
     result = fit_inverse_response(
         dn,

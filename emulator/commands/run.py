@@ -11,13 +11,16 @@ from pathlib import Path
 from emulator.commands.progress import add_quiet, bars_enabled, log_lines
 from emulator.commands.run_summary import print_run_summary
 from emulator.distributed import SCHEDULER_HELP, resolve_scheduler
-from emulator.errors import ExposimError
+from emulator.errors import ExposimError, PlaybackError
+from emulator.native import NATIVE_RATE
+from emulator.playback.config import WORKER_MODES, RunConfig, parse_options
+from emulator.playback.settings import add_arguments, command_words, flag_of, given, settings_of, values_from_json
 
 __all__ = ["register", "config_from_args"]
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from emulator.autoexposure import DEFAULT_RANGE_MS, METHOD_NAMES
+    from emulator.autoexposure import METHOD_NAMES
     from emulator.autoexposure.classical import N_AUTO_FRAMES
 
     p = sub.add_parser(
@@ -38,59 +41,13 @@ def register(sub: argparse._SubParsersAction) -> None:
                         f"'fixed' runs classical-50 for its first {N_AUTO_FRAMES} frames ({N_AUTO_FRAMES + 1} with "
                         "--mode borealhdr) and then freezes the exposure, so on a short run it looks like classical-50")
     p.add_argument("-o", "--output", type=Path, required=True, help="run folder to create (must not exist or be empty)")
-    p.add_argument("--save", choices=("none", "png16", "png8"), default=None,
-                   help="save emulated images: none (default), png16 (12-bit Bayer DN) or png8 (8-bit gray)")
-    p.add_argument("--png-level", type=int, default=None, metavar="0..9",
-                   help="zlib level of the saved images (default 0: stored, the fastest; 1..9 smaller files, the "
-                        "same decoded images)")
-    p.add_argument("--jobs", type=int, default=1,
-                   help="how many methods compute at once, each in its own process (same output for any value)")
-    p.add_argument("--mode", choices=("paper", "borealhdr"), default=None,
-                   help="method behaviour: paper (default, reference defects corrected) or borealhdr (reference code)")
-    p.add_argument("--initial-ms", type=float, default=None,
-                   help="initial exposure of every method, ms (default 4.0; clamped to --range-ms, with a warning)")
-    p.add_argument("--range-ms", type=float, nargs=2, metavar=("LOW", "HIGH"), default=None,
-                   help="clamp of every proposal, ms (default %s %s)" % DEFAULT_RANGE_MS)
-    p.add_argument("--selector", choices=("higher-no-sat", "closest", "reference"), default=None,
-                   help="bracket selector (default higher-no-sat)")
-    p.add_argument("--response", type=Path, default=None, help="pcalib file (default: found beside the recording)")
     p.add_argument("--frame-cache", type=Path, default=None, metavar="DIR",
                    help="read decoded frames from this frame cache (made by 'exposim cache SEQ --frame-cache DIR'; "
                         "default: SEQUENCE/.exposim-frames when it exists)")
     p.add_argument("--seed", type=int, default=None, help="seed of kim's Gaussian-process optimizer (default 0)")
     p.add_argument("--option", action="append", default=[], metavar="METHOD.KEY=VALUE",
                    help="a method option, e.g. zhang.percentile_fraction=0.7 or kim.window=8 (VALUE is JSON or text); repeatable")
-    p.add_argument("--noise", choices=("none", "consistent"), default=None,
-                   help="none (default): exact emulation (eq. 2); consistent: add the noise a capture at the "
-                        "target exposure would have where the source bracket is cleaner (needs a noise model)")
-    p.add_argument("--blur", choices=("none", "consistent"), default=None,
-                   help="none (default): exact emulation; consistent: add the gyro's blur of the extra exposure time "
-                        "where the target is longer than the bracket, and record each image's excess blur in blur.csv "
-                        "(needs imu/imu.csv and a camera calibration; docs/blur.md)")
-    p.add_argument("--blur-aware", action="store_true",
-                   help="with --blur consistent and --selector higher-no-sat: of the two brackets around the "
-                        "target, take the shorter one when the longer one's extra motion blur (predicted from the "
-                        "gyro) costs more than the shorter one's extra noise; one pixel of blur weighs as much as "
-                        "twice the relative noise of a capture at the target (docs/blur.md)")
-    p.add_argument("--noise-model", type=Path, default=None, metavar="FILE.json",
-                   help="noise model for --noise consistent (`exposim calibrate --noise`); default: the model "
-                        "a synthetic recording's exposim.json carries")
-    p.add_argument("--noise-seed", type=int, default=None,
-                   help="seed of the added noise (default 0); the same seed gives the same bytes")
-    p.add_argument("--skip-partial", action="store_true",
-                   help="leave out every cycle missing a bracket on either camera (default: use the brackets that are "
-                        "there; partial cycles and upward ratios above 8 are flagged in the report either way)")
-    p.add_argument("--rate", choices=("cycle", "native"), default=None,
-                   help="cycle (default): each method proposes once per bracket sweep, as in the paper; native: after "
-                        "every recorded frame, at the recorder's frame rate, each frame emulated from its own bracket "
-                        "or a nearby frame's, turned to its instant with the gyro (docs/native.md)")
-    p.add_argument("--latency-frames", type=int, default=None, metavar="N",
-                   help="with --rate native: a proposal made after reading frame k is first used at frame k + 1 + N "
-                        "(default 1, as a live camera)")
-    p.add_argument("--warp", choices=("flow-sharp", "rotation", "flow", "none"), default=None, help="--rate native: "
-                   "rotation: gyro; flow: then the neighbours' flow; flow-sharp (default): flow unless under 1 px")
-    p.add_argument("--native-blur-aware", action="store_true", help="with --rate native: the selector also weighs "
-                   "the motion blur a candidate carries beyond the target's, from the gyro (docs/native.md)")
+    add_arguments(p, RunConfig)  # every run setting, declared once as a RunConfig field
     p.add_argument("--resume", action="store_true",
                    help="continue an interrupted run in OUTDIR (its run.json gives the configuration)")
     p.add_argument("--sequences", default=None, metavar="all|NAME,...",
@@ -98,16 +55,15 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "ones (folders or trajectory .zip files, a zip named by its stem); OUTDIR gets one folder per "
                         "sequence and a dataset summary (results.json, report.md, methods.png)")
     p.add_argument("--scheduler", default=None, metavar="serial|threads|local|tcp://HOST:PORT|tls://HOST:PORT",
-                   help="dataset runs: " + SCHEDULER_HELP + ", or threads (--workers threads of this process), else "
+                   help="dataset runs: " + SCHEDULER_HELP + ", or threads (--dataset-workers threads of this process), else "
                         "local (serial without the dask extra); every path gives the same bytes and the same error "
                         "rows; single sequences always run serially")
     p.add_argument("--scheduler-file", type=Path, default=None, metavar="PATH",
                    help="dataset runs: the scheduler file of a running Dask cluster (dask scheduler "
                         "--scheduler-file PATH, dask-jobqueue)")
-    p.add_argument("--workers", type=_workers_arg, default=None, metavar="N|process|inline",
-                   help="process (default): every AE method in its own process, stopped past --method-timeout-s; "
-                        "inline: in the run's process (debugging only: a method can then stall or change the run); "
-                        "dataset runs: N worker processes (--scheduler local) or threads (--scheduler threads)")
+    p.add_argument("--dataset-workers", type=int, default=None, metavar="N",
+                   help="dataset runs: N worker processes (--scheduler local) or threads (--scheduler threads)")
+    p.add_argument("--workers", type=_workers_arg, default=None, dest="legacy_workers", help=argparse.SUPPRESS)
     p.add_argument("--group-size", type=int, default=None,
                    help="dataset runs: methods per unit of work (default: all, one unit per sequence, the methods "
                         "sharing decoded images; 1: one (sequence, method) per unit, the finest parallelism)")
@@ -134,11 +90,6 @@ def _add_plugin_arguments(p: argparse.ArgumentParser) -> None:
              + (f"; BROKEN plugins: {'; '.join(broken)}" if broken else ""))
     action = p._option_string_actions["--methods"]  # noqa: SLF001 - argparse has no public accessor
     action.help += extra.replace("%", "%%")
-    p.add_argument("--method-timeout-s", "--method-timeout", dest="method_timeout_s", type=float, default=None,
-                   metavar="S",
-                   help="per-call wall-time limit of a method, s: a call still running then is stopped and the method "
-                   "fails (its rows stop, the others go on); default 120 (--workers inline: checked only after the "
-                   "call returns, no default; --method-timeout: deprecated alias)")
     p.add_argument("--strict", action="store_true",
                    help="exit with code 1 when a method failed (default: 0, failures named in the summary)")
 
@@ -153,8 +104,8 @@ def _warn_broken_plugins() -> None:
 
 
 def _workers_arg(text: str):
-    """``--workers``: a count (dataset runs) or how methods run (process, inline)."""
-    if text in ("process", "inline"):
+    """``--workers`` (the older spelling of ``--isolation`` and ``--dataset-workers``): process, inline or a count."""
+    if text in WORKER_MODES:
         return text
     try:
         return int(text)
@@ -162,79 +113,59 @@ def _workers_arg(text: str):
         raise argparse.ArgumentTypeError(f"expected a number of workers, process or inline, got {text!r}") from None
 
 
+def _legacy_workers(args) -> None:
+    """``--workers X``: ``--isolation X`` (process, inline) or ``--dataset-workers X`` (a count), with a notice."""
+    value = getattr(args, "legacy_workers", None)
+    if value is None:
+        return
+    new = "--isolation" if isinstance(value, str) else "--dataset-workers"
+    if isinstance(value, int) and value < 1:
+        raise ExposimError(f"--workers {value}: must be >= 1")
+    print(f"exposim run: note: --workers {value} is now spelled {new} {value}", file=sys.stderr)
+    dest = "workers" if isinstance(value, str) else "dataset_workers"
+    if getattr(args, dest) not in (None, value):
+        raise ExposimError(f"--workers {value} and {new} {getattr(args, dest)}: give one")
+    setattr(args, dest, value)
+
+
+#: Rank in the rebuilt command line of the flags that are not run settings (theirs: their Setting's).
+_OWN_RANKS = {"--methods": 0, "--seed": 6, "--option": 14, "--resume": 22}
+
+
 def _command(args) -> str:
     """The command line that reproduces this run (rebuilt from the parsed arguments)."""
+    words = [(_OWN_RANKS["--methods"], ["--methods", str(args.methods)] if args.methods is not None else []),
+             (_OWN_RANKS["--seed"], ["--seed", str(args.seed)] if args.seed is not None else []),
+             (_OWN_RANKS["--option"], [w for text in args.option for w in ("--option", text)]),
+             (_OWN_RANKS["--resume"], ["--resume"] if args.resume else [])]
     parts = ["exposim", "run", str(args.sequence), "-o", str(args.output)]
-    for flag, value in (("--methods", args.methods), ("--save", args.save), ("--mode", args.mode),
-                        ("--initial-ms", args.initial_ms), ("--selector", args.selector),
-                        ("--response", args.response), ("--seed", args.seed), ("--noise", args.noise),
-                        ("--blur", args.blur), ("--noise-model", args.noise_model), ("--noise-seed", args.noise_seed),
-                        ("--png-level", args.png_level), ("--warp", getattr(args, "warp", None))):
-        if value is not None:
-            parts += [flag, str(value)]
-    if args.range_ms is not None:
-        parts += ["--range-ms", *(str(v) for v in args.range_ms)]
-    for text in args.option:
-        parts += ["--option", text]
-    if args.jobs != 1:
-        parts += ["--jobs", str(args.jobs)]
-    if getattr(args, "workers", None) == "inline":
-        parts += ["--workers", "inline"]
-    for flag in ("--blur-aware", "--skip-partial", "--native-blur-aware"):
-        parts += [flag] if getattr(args, flag[2:].replace("-", "_"), False) else []
-    for flag, value in (("--rate", getattr(args, "rate", None)), ("--latency-frames", getattr(args, "latency_frames", None))):
-        if value is not None:
-            parts += [flag, str(value)]
-    if args.resume:
-        parts.append("--resume")
-    if getattr(args, "method_timeout_s", None) is not None:
-        parts += ["--method-timeout-s", str(args.method_timeout_s)]
+    for _, more in sorted(words + command_words(args, RunConfig), key=lambda w: w[0]):
+        parts += more
     return shlex.join(parts)
-
-
-#: RunConfig field -> the flag that sets it (errors name the flag).
-_FLAGS = {"initial_ms": "--initial-ms", "range_ms": "--range-ms", "jobs": "--jobs", "noise_seed": "--noise-seed",
-          "png_level": "--png-level", "blur": "--blur", "blur_aware": "--blur-aware",
-          "method_timeout_s": "--method-timeout-s", "selector": "--selector", "mode": "--mode", "save": "--save",
-          "noise": "--noise", "skip_partial": "--skip-partial", "rate": "--rate", "latency_frames": "--latency-frames",
-          "native_warp": "--warp", "native_blur_aware": "--native-blur-aware"}
 
 
 def _given(args) -> dict:
     """The run settings given on the command line (None: not given)."""
-    from emulator.playback import parse_options
-
     options = parse_options(args.option)
     if args.seed is not None:
         options.setdefault("kim", {})["seed"] = args.seed
-    return {"initial_ms": args.initial_ms, "range_ms": tuple(args.range_ms) if args.range_ms else None,
-            "selector": args.selector, "mode": args.mode, "options": options or None, "jobs": args.jobs,
-            "save": args.save, "noise": args.noise, "noise_model": args.noise_model, "noise_seed": args.noise_seed,
-            "method_timeout_s": args.method_timeout_s,
-            "workers": args.workers if isinstance(getattr(args, "workers", None), str) else None,
-            "response_path": str(args.response) if args.response is not None else None,
-            "png_level": args.png_level, "blur": args.blur, "blur_aware": True if args.blur_aware else None,
-            "skip_partial": True if getattr(args, "skip_partial", False) else None,
-            "rate": getattr(args, "rate", None), "latency_frames": getattr(args, "latency_frames", None),
-            "native_warp": getattr(args, "warp", None),
-            "native_blur_aware": True if getattr(args, "native_blur_aware", False) else None}
+    return {**given(args, RunConfig), "options": options or None}
 
 
-def config_from_args(args, base=None):
-    """The :class:`~emulator.playback.RunConfig` of the command line over ``base`` (a recorded one, on
-    ``--resume``); a bad value is refused by RunConfig, named here by its flag."""
-    from emulator.errors import PlaybackError
-    from emulator.playback import RunConfig
-
-    given = _given(args)
+def config_from_args(args, recorded=None):
+    """The :class:`~emulator.playback.RunConfig` of the command line over ``recorded`` (a recorded
+    ``run.json`` or dataset configuration, on ``--resume``), built once; a bad value is refused by
+    RunConfig, named here by its flag."""
+    values = _given(args)
+    base = values_from_json(RunConfig, recorded) if recorded else {}
     try:
-        return RunConfig.from_kwargs(base, **given)
+        return RunConfig(**{**base, **{k: v for k, v in values.items() if v is not None}})
     except PlaybackError as exc:
         field = str(exc).split(" ", 1)[0]
-        flag = _FLAGS.get(field)
-        if flag is None or given.get(field) is None:  # not given here (a recorded value): no flag to name
+        flag = flag_of(RunConfig, field)
+        if flag is None or values.get(field) is None:  # not given here (a recorded value): no flag to name
             raise
-        value = given.get(field)
+        value = values.get(field)
         shown = " ".join(str(v) for v in value) if isinstance(value, tuple) else str(value)
         raise ExposimError(f"{flag} {shown}: {exc}") from None
 
@@ -246,16 +177,15 @@ def _check_args(args) -> None:
     for flag, seed in (("--seed", args.seed), ("--noise-seed", args.noise_seed)):
         if seed is not None and not 0 <= seed <= SEED_MAX:
             raise ExposimError(f"{flag} {seed}: must be in 0..{SEED_MAX}")
-    for flag, count in (("--workers", args.workers), ("--group-size", args.group_size)):
-        if isinstance(count, int) and count < 1:  # 0 would silently mean "default"
+    for flag, count in (("--dataset-workers", args.dataset_workers), ("--group-size", args.group_size)):
+        if count is not None and count < 1:  # 0 would silently mean "default"
             raise ExposimError(f"{flag} {count}: must be >= 1")
     if args.noise_model is not None and args.noise != "consistent" and not args.resume:
         raise ExposimError("--noise-model is used only with --noise consistent")
-    for dest in ("latency_frames", "warp", "native_blur_aware"):  # the native-only flags
-        given = getattr(args, dest, None)
-        if given not in (None, False) and args.rate != "native" and not args.resume:
-            shown = f"--{dest.replace('_', '-')} {'' if given is True else given}".strip()
-            raise ExposimError(f"{shown}: used only with --rate native")
+    for f, s in settings_of(RunConfig):  # the native-only flags
+        value = getattr(args, f.name, None)
+        if s.native_only and value is not None and args.rate != NATIVE_RATE and not args.resume:
+            raise ExposimError(f"{s.flag} {'' if value is True else value}".strip() + ": used only with --rate native")
 
 
 def _progress_bar(desc: str, unit: str):
@@ -288,6 +218,7 @@ def _run_json_safe(args) -> int:
 
 
 def _run(args) -> int:
+    _legacy_workers(args)
     _check_args(args)
     if args.sequences is not None and args.frame_cache is not None:
         raise ExposimError("--frame-cache applies to one sequence; a dataset run reads each sequence's own "
@@ -299,20 +230,18 @@ def _run(args) -> int:
                            "pass --sequences all for a dataset run")
     _refuse_dataset_root(args.sequence)
     from emulator.io.runfolder import RUN_FILE, read_run_json
-    from emulator.playback import RunConfig
     from emulator.runner import run_to_folder
 
     methods = args.methods
-    base = None
+    recorded = None
     if args.resume:
-        # The one resume rule (RunConfig.resumed): the recorded configuration wins, values given must equal it.
+        # The one resume rule (RunConfig.check_resume): the recorded configuration wins, values given must equal it.
         if not (args.output / RUN_FILE).is_file():
             raise ExposimError(f"{args.output / RUN_FILE}: no run to resume (run.json missing)")
         recorded = read_run_json(args.output)
-        base = RunConfig.from_json(recorded)
         if methods is None and recorded.get("method_specs"):
             methods = ",".join(recorded["method_specs"])  # import-path plugins by their path
-    config = config_from_args(args, base)
+    config = config_from_args(args, recorded)
     if config.start_ms != config.initial_ms:
         low, high = config.range_ms
         print(f"exposim run: warning: --initial-ms {config.initial_ms:g} is outside --range-ms {low:g} {high:g}; "
@@ -328,7 +257,7 @@ def _run(args) -> int:
     bar = None
     lines = log_lines("exposim run", args.quiet, heartbeat=True)  # closed in the finally below
     if lines is not None:  # a log (nohup, CI): a line at the start, every LOG_EVERY_S seconds and at the end
-        progress = functools.partial(lines, "frames" if config.rate == "native" else "cycles")
+        progress = functools.partial(lines, config.provider_class.unit)
     elif bars_enabled(args.quiet):
         from tqdm import tqdm
 
@@ -369,7 +298,7 @@ def _refuse_dataset_root(path: Path) -> None:
                        f"--sequences all (or --sequences NAME,...) to run them, or give the recording's own folder")
 
 
-def _check_methods_once(methods: str, run_options: dict) -> None:
+def _check_methods_once(methods: str, config: RunConfig) -> None:
     """Build every method once with the run's options (no response: only the options are checked),
     so that a bad ``--option`` or a plugin that cannot be built is refused before a dataset run
     writes anything (it would otherwise fail in every unit and leave a dataset.json behind)."""
@@ -379,14 +308,11 @@ def _check_methods_once(methods: str, run_options: dict) -> None:
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        if run_options.get("workers") == "inline":
-            build_methods(methods, mode=run_options.get("mode") or "paper", response=None,
-                          options=run_options.get("options"))
+        if config.workers == WORKER_MODES[1]:
+            build_methods(methods, mode=config.mode, response=None, options=config.options)
             return
-        from emulator.playback import RunConfig
         from emulator.playback.workers import start_methods, stop_methods
 
-        config = RunConfig(mode=run_options.get("mode") or "paper", options=run_options.get("options") or {})
         stop_methods(start_methods(methods, config, None))  # built in worker processes, as the run builds them
 
 
@@ -394,17 +320,14 @@ def _run_dataset(args) -> int:
     """``exposim run ROOT --sequences ...``: every (sequence, method group) unit, then the dataset summary."""
     from emulator.datasetrun import DATASET_FILE, run_dataset
     from emulator.io.files import read_metadata
-    from emulator.playback import RunConfig
 
     recorded = read_metadata(args.output / DATASET_FILE) if args.resume else {}
-    base = RunConfig.from_json(recorded["config"]) if recorded.get("config") else None
-    config = config_from_args(args, base)
+    config = config_from_args(args, recorded.get("config"))
     methods = args.methods or ",".join(recorded.get("methods", [])) or "all"
     group_size = args.group_size or recorded.get("group_size")
     scheduler, scheduler_file = (("threads", None) if args.scheduler == "threads" and args.scheduler_file is None
                                  else resolve_scheduler(args.scheduler, args.scheduler_file))
-    _check_methods_once(methods, {"mode": config.mode, "options": config.options,  # before dataset.json exists
-                                  "workers": config.workers})
+    _check_methods_once(methods, config)  # before dataset.json exists
 
     bar = None
     progress = None
@@ -420,7 +343,8 @@ def _run_dataset(args) -> int:
     try:
         summary = run_dataset(args.sequence, args.output, config, sequences=args.sequences, methods=methods,
                               group_size=group_size, scheduler=scheduler, scheduler_file=scheduler_file,
-                              n_workers=args.workers if isinstance(args.workers, int) else None, retries=args.retries, resume=args.resume, progress=progress)
+                              n_workers=args.dataset_workers, retries=args.retries, resume=args.resume,
+                              progress=progress)
     finally:
         if bar is not None:
             bar.close()

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import sys
 
+from emulator.native import is_native_run
+
 __all__ = ["print_run_summary"]
 
 
@@ -17,7 +19,7 @@ def print_run_summary(args, summary: dict) -> int:
         print(strict_json(summary, indent=1), file=getattr(args, "json_stream", None) or sys.stdout)
         return rc
     print(f"run folder  {args.output}")
-    native = summary.get("rate") == "native"
+    native = is_native_run(summary)
     print(f"frames      {summary['cycles_done']}/{summary.get('n_frames')} (native rate)" if native else
           f"cycles      {summary['cycles_done']}/{summary['n_cycles']}"
           + (f" ({len(summary['skipped_cycles'])} skipped)" if summary["skipped_cycles"] else ""))

@@ -52,7 +52,7 @@ def format_row(step) -> list[str]:
     step (``step.native`` set) adds :data:`NATIVE_COLUMNS`.
     """
     out = []
-    native = getattr(step, "native", None)
+    native = step.native
     for col in CSV_COLUMNS + EXTRA_COLUMNS + (NATIVE_COLUMNS if native is not None else ()):
         v = getattr(native, col) if col in NATIVE_COLUMNS else getattr(step, col)
         if v is None or (col == "warp_deg" and math.isnan(v)):

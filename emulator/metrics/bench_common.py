@@ -10,6 +10,7 @@ from __future__ import annotations
 from emulator.errors import MetricsError
 from emulator.io.runfolder import MethodRun
 from emulator.metrics.features import load_gray8
+from emulator.native import is_native_run
 
 __all__ = ["CONVERSION", "benchmark_frames"]
 
@@ -59,7 +60,7 @@ def benchmark_frames(run, every_frame: bool = False):
 
     from emulator.io.runcsv import read_tables
 
-    if every_frame or run.meta.get("rate") != "native":
+    if every_frame or not is_native_run(run.meta):
         return run
     tables = read_tables(run.path, list(run.methods))
     methods = {}

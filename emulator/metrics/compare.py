@@ -26,6 +26,7 @@ from emulator.errors import MetricsError
 from emulator.io.files import RESULTS_FILE, prepare_output, read_metadata, write_results
 from emulator.io.runcsv import read_tables
 from emulator.io.runfolder import RUN_FILE, read_run_json
+from emulator.native import is_native_run, run_rate
 
 __all__ = ["bench_compare", "load_inputs", "row_labels"]
 
@@ -48,9 +49,8 @@ def _run_input(folder: Path) -> dict:
         methods[name] = {"units": [int(u) for u in units],
                          "saturated_fraction": np.asarray(t["saturated_fraction"], dtype=np.float64),
                          "exposure_ms": np.asarray(t["target_ms"], dtype=np.float64)}
-    rate = info.get("rate") or "cycle"
-    return {"folder": str(folder), "kind": "run", "rate": rate, "mode": info.get("mode"),
-            "latency_frames": info.get("latency_frames") if rate == "native" else None,
+    return {"folder": str(folder), "kind": "run", "rate": run_rate(info), "mode": info.get("mode"),
+            "latency_frames": info.get("latency_frames") if is_native_run(info) else None,
             "recording": _recording(info), "methods": methods}
 
 

@@ -24,9 +24,9 @@ import numpy as np
 
 from emulator.noise.groups import BracketGroup, bracket_groups, checked_groups  # re-exported: groups live there
 from emulator.noise.model import PHASES, NoiseModel, NoiseModelError
-from emulator.noise.photon_transfer import (_fit_bins, _gain_read, _group_points, _percentiles, per_group_fits,
+from emulator.noise.photon_transfer import (finite_percentiles, fit_bins, gain_read, group_points, per_group_fits,
                                              per_phase_fits)
-from emulator.noise.tables import _slope
+from emulator.noise.tables import response_slope
 from emulator.response import CameraResponse
 
 __all__ = ["BracketGroup", "bracket_groups", "NoiseEstimate", "estimate_noise_model", "bootstrap_gain", "noise_strata"]
@@ -112,7 +112,7 @@ def _pass_points(groups, response: CameraResponse, slope, limits, *, n_bins, fla
     the groups both passes have done, for ``progress``."""
     pts, shifts = [], []
     for i, gr in enumerate(groups):
-        g_pts, shift = _group_points(gr, response, slope, limits=limits, n_bins=n_bins,
+        g_pts, shift = group_points(gr, response, slope, limits=limits, n_bins=n_bins,
                                      flat_fraction=flat_fraction, min_pixels=min_pixels, align=align,
                                      highpass=highpass, clip=4.0)
         pts += [(i,) + t for t in g_pts]
@@ -255,7 +255,7 @@ def estimate_noise_model(
     if not 0 < flat_fraction <= 1:
         raise NoiseModelError(f"flat_fraction must be in (0, 1], got {flat_fraction!r}")
     names = _phase_names(bayer_pattern)
-    slope = _slope(response)
+    slope = response_slope(response)
     g = response.g
     b, w = response.black_level, response.white_level
     theta_lo = 0.5 * (g[b] + g[b + 1])
@@ -273,7 +273,7 @@ def estimate_noise_model(
                 done=done, progress=progress)
 
     cols, _ = _pass_points(groups, response, slope, pass_one, **opts)
-    alpha, beta, _, _ = _fit_bins(cols, motion_term=motion_term)
+    alpha, beta, _, _ = fit_bins(cols, motion_term=motion_term)
     if not alpha > 0:
         raise NoiseModelError(f"first pass found no positive shot-noise slope (alpha = {alpha:.3g}): "
                               "the differences do not grow with the signal")
@@ -283,8 +283,8 @@ def estimate_noise_model(
 
     pass_two = _pass_two_limits(gain1, read1, e_lo, e_hi, clip_sigmas)
     cols, shifts = _pass_points(groups, response, slope, pass_two, **opts)
-    alpha, beta, cov, weights = _fit_bins(cols, motion_term=motion_term)
-    gain, read, sg, sr = _gain_read(alpha, beta, cov)
+    alpha, beta, cov, weights = fit_bins(cols, motion_term=motion_term)
+    gain, read, sg, sr = gain_read(alpha, beta, cov)
     if not math.isfinite(gain):
         raise NoiseModelError(f"no positive shot-noise slope (alpha = {alpha:.3g})")
     if beta <= 0:
@@ -295,8 +295,8 @@ def estimate_noise_model(
     per_channel, phase_gain, phase_read = per_phase_fits(cols, names, gain, read, motion_term)
 
     per_group = per_group_fits(groups, cols, shifts, motion_term)
-    spread = {"gain_e_per_h": _percentiles(e.get("gain_e_per_h", float("nan")) for e in per_group),
-              "read_noise_e": _percentiles(e.get("read_noise_e", float("nan")) for e in per_group)}
+    spread = {"gain_e_per_h": finite_percentiles(e.get("gain_e_per_h", float("nan")) for e in per_group),
+              "read_noise_e": finite_percentiles(e.get("read_noise_e", float("nan")) for e in per_group)}
 
     if per_phase:
         tile = lambda v: ((v[0], v[1]), (v[2], v[3]))  # noqa: E731
@@ -321,10 +321,10 @@ def _gain_fit(bins: dict, motion_term: bool) -> tuple[float, float]:
     if bins["n"].size < 3:
         return math.nan, math.nan
     try:
-        a, b, cov, _ = _fit_bins(bins, motion_term=motion_term)
+        a, b, cov, _ = fit_bins(bins, motion_term=motion_term)
     except np.linalg.LinAlgError:
         return math.nan, math.nan
-    gain, _, sg, _ = _gain_read(a, b, cov)
+    gain, _, sg, _ = gain_read(a, b, cov)
     return gain, sg
 
 

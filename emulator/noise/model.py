@@ -41,7 +41,7 @@ import cv2
 import numpy as np
 
 from emulator.errors import EmulationError, ExposimError
-from emulator.noise.tables import NoiseTables, _build_tables, _slope
+from emulator.noise.tables import NoiseTables, build_tables, response_slope
 from emulator.response import CameraResponse
 
 __all__ = ["NoiseModel", "NoiseModelError", "response_fingerprint", "json_safe", "PHASES",
@@ -256,7 +256,7 @@ class NoiseModel:
         ``e + r^2 + (G g'(d))^2 / 12`` with ``e = G max(g(d), 0)``; one phase's values
         (the first) are used: call per phase for a per-phase model.
         """
-        g, slope = self.response.g, _slope(self.response)
+        g, slope = self.response.g, response_slope(self.response)
         d = np.clip(np.asarray(dn), 0, self.white_level).astype(np.intp)
         gain, read = self._gains[0], self._reads[0]
         return gain * np.maximum(g[d], 0.0) + read**2 + (gain * slope[d]) ** 2 / 12.0
@@ -273,7 +273,7 @@ class NoiseModel:
             if hit is not None:
                 cache.move_to_end(k)
                 return hit
-        tables = _build_tables(self, k)
+        tables = build_tables(self, k)
         with lock:
             cache[k] = tables
             cache.move_to_end(k)

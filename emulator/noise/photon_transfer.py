@@ -17,7 +17,8 @@ from emulator.noise.groups import BracketGroup
 from emulator.noise.model import PHASES
 from emulator.response import CameraResponse
 
-__all__ = ["robust_variance", "per_phase_fits", "per_group_fits"]
+__all__ = ["robust_variance", "per_phase_fits", "per_group_fits", "group_points", "gain_read", "finite_percentiles",
+           "fit_bins"]
 
 # ---------------------------------------------------------------------------- in-situ estimation
 #: The high-pass applied to difference images (separable second difference, [1, -2, 1] in
@@ -99,8 +100,8 @@ def _texture(signal: np.ndarray) -> np.ndarray:
     return cv2.boxFilter(gx * gx + gy * gy, cv2.CV_32F, (3, 3))
 
 
-def _group_points(group: BracketGroup, response: CameraResponse, slope: np.ndarray, *, limits, n_bins: int,
-                  flat_fraction: float, min_pixels: int, align: bool, highpass: bool, clip: float):
+def group_points(group: BracketGroup, response: CameraResponse, slope: np.ndarray, *, limits, n_bins: int,
+                 flat_fraction: float, min_pixels: int, align: bool, highpass: bool, clip: float):
     """Photon-transfer points of one group: per phase and intensity bin (see estimate_noise_model)."""
     ts = [float(t) for t in group.exposures_ms]
     w = group.weights()
@@ -202,7 +203,7 @@ def _fit(x_shot, x_read, y, q, n, *, extra=None, huber: float = 3.0, iterations:
     return float(coef[0]), float(coef[1]), cov[:2, :2], ww
 
 
-def _gain_read(alpha: float, beta: float, cov: np.ndarray) -> tuple[float, float, float, float]:
+def gain_read(alpha: float, beta: float, cov: np.ndarray) -> tuple[float, float, float, float]:
     """(G, r, std G, std r) from alpha = 1/G, beta = r^2/G^2 (delta method); r = 0 if beta <= 0."""
     if not alpha > 0:
         return float("nan"), float("nan"), float("nan"), float("nan")
@@ -216,7 +217,9 @@ def _gain_read(alpha: float, beta: float, cov: np.ndarray) -> tuple[float, float
     return gain, r, sg, sr
 
 
-def _percentiles(values) -> dict:
+def finite_percentiles(values) -> dict:
+    """n, median, 16th/84th percentiles, min, max and relative half-width of the finite ``values``
+    (``{"n": 0}`` when none is finite)."""
     v = np.asarray([x for x in values if math.isfinite(x)], dtype=np.float64)
     if v.size == 0:
         return {"n": 0}
@@ -225,7 +228,7 @@ def _percentiles(values) -> dict:
             "max": float(v.max()), "relative_half_width": (p84 - p16) / 2 / med if med else float("nan")}
 
 
-def _fit_bins(cols: dict, mask=None, *, motion_term: bool):
+def fit_bins(cols: dict, mask=None, *, motion_term: bool):
     """:func:`_fit` on the photon-transfer points ``cols`` (a boolean ``mask`` selects some),
     with one ``S^2`` column per bracket group when ``motion_term``."""
     m = np.ones(cols["n"].size, dtype=bool) if mask is None else mask
@@ -249,8 +252,8 @@ def per_phase_fits(cols: dict, names, gain: float, read: float, motion_term: boo
             phase_gain.append(gain)
             phase_read.append(read)
             continue
-        a_p, b_p, c_p, _ = _fit_bins(cols, m, motion_term=motion_term)
-        gp, rp, sgp, srp = _gain_read(a_p, b_p, c_p)
+        a_p, b_p, c_p, _ = fit_bins(cols, m, motion_term=motion_term)
+        gp, rp, sgp, srp = gain_read(a_p, b_p, c_p)
         per_channel[nm] = {"gain_e_per_h": gp, "read_noise_e": rp, "gain_std": sgp, "read_noise_std": srp,
                            "n_bins": int(np.count_nonzero(m))}
         phase_gain.append(gp if math.isfinite(gp) else gain)
@@ -267,8 +270,12 @@ def per_group_fits(groups, cols: dict, shifts, motion_term: bool) -> list[dict]:
                  "shift_px": [[2 * a, 2 * b_] for a, b_ in shifts[i]], "n_bins": int(np.count_nonzero(m)),
                  "n_pixels": int(cols["n"][m].sum())}
         if np.count_nonzero(m) >= 3:
-            a_i, b_i, c_i, _ = _fit_bins(cols, m, motion_term=motion_term)
-            gi, ri, sgi, sri = _gain_read(a_i, b_i, c_i)
+            a_i, b_i, c_i, _ = fit_bins(cols, m, motion_term=motion_term)
+            gi, ri, sgi, sri = gain_read(a_i, b_i, c_i)
             entry.update(gain_e_per_h=gi, read_noise_e=ri, gain_std=sgi, read_noise_std=sri)
         per_group.append(entry)
     return per_group
+
+
+# old names, for emulator.noise.insitu (remove once it imports the public names)
+_group_points, _gain_read, _percentiles, _fit_bins = group_points, gain_read, finite_percentiles, fit_bins

@@ -28,7 +28,7 @@ if TYPE_CHECKING:
     from emulator.noise.model import NoiseModel
 
 __all__ = ["NoiseTables", "check_rng", "standard_normal", "quantise", "consistent_noise", "excess_map",
-           "NORMAL_LEVELS", "QUANTISER_BINS"]
+           "NORMAL_LEVELS", "QUANTISER_BINS", "response_slope", "build_tables"]
 
 #: Quantile levels of the fast standard-normal sampler (16 random bits per draw).
 NORMAL_LEVELS = 1 << 16
@@ -242,7 +242,7 @@ class NoiseTables:
         return hit
 
 
-def _slope(response: CameraResponse) -> np.ndarray:
+def response_slope(response: CameraResponse) -> np.ndarray:
     """g'(d) per DN (central differences, one-sided at the ends), float64, cached by identity."""
     key = id(response)
     hit = _SLOPES.get(key)
@@ -257,13 +257,14 @@ def _slope(response: CameraResponse) -> np.ndarray:
 
 
 _SLOPES: dict = {}
+_slope = response_slope  # old name, for emulator.noise.insitu (remove once it imports response_slope)
 
 
-def _build_tables(model: NoiseModel, k: float) -> NoiseTables:
+def build_tables(model: NoiseModel, k: float) -> NoiseTables:
     """Per-DN noise tables for ratio k (derivation: :func:`emulator.emulate`, Notes)."""
     response = model.response
     g = response.g
-    slope = _slope(response)
+    slope = response_slope(response)
     dn = np.arange(response.white_level + 1, dtype=np.float64)
     target_dn = response.forward(k * g)
     slope_t = np.interp(target_dn, dn, slope)

@@ -7,7 +7,7 @@
   place a method is asked;
 * providers: :mod:`~emulator.playback.emulated` (the brackets of a recording, emulated at
   each target: offline, once per cycle), :mod:`~emulator.playback.native` (every recorded frame,
-  from its own or a nearby frame's bracket, warped by the gyro: ``rate="native"``),
+  from its own or a nearby frame's bracket, warped by the gyro: ``--rate native``),
   :mod:`~emulator.playback.live` (live shots once per cycle, or at a
   camera's own frame rate with an exposure latency);
 * :mod:`~emulator.playback.offline`: :func:`iter_run` and :func:`run` on a recording;

@@ -8,10 +8,10 @@ other place repeats these checks.  What the configuration cannot know alone (the
 recording's levels, its response and noise model) is resolved by :meth:`RunConfig.response_for`
 and :meth:`RunConfig.noise_for`, once per run.
 
-The ``--resume`` rule lives here too (:meth:`RunConfig.resumed`): **the recorded
-configuration wins, and any value given again must equal it**; a difference raises and
-names the keys.  ``run.json`` keys: :meth:`RunConfig.to_json` (``method_timeout_s``; the
-older ``method_timeout`` key reads back as the same field).
+Each setting is one field, declared once with its flag, help, ``run.json`` key and resume rule
+(:mod:`emulator.playback.settings`).  The ``--resume`` rule lives here too
+(:meth:`RunConfig.check_resume`): **the recorded configuration wins, and any value given again
+must equal it**; a difference raises and names the keys.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ import dataclasses
 import json
 import math
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -29,6 +29,11 @@ import numpy as np
 from emulator.autoexposure import DEFAULT_RANGE_MS
 from emulator.errors import PlaybackError
 from emulator.io.runfolder import SAVE_MODES
+from emulator.native import DEFAULT_NATIVE_WARP, NATIVE_RATE, RATES, WARP_MODES, is_native_run
+from emulator.playback import settings
+from emulator.playback.runjson import (blur_json, common_figures, noise_json, recorded_blur, recorded_noise_model,
+                                       recorded_response, same_file)
+from emulator.playback.settings import parse_option, parse_options, setting
 
 __all__ = [
     "RunConfig",
@@ -43,56 +48,20 @@ __all__ = [
 DEFAULT_INITIAL_MS = 4.0
 DEFAULT_SELECTOR = "higher-no-sat"
 MODES = ("paper", "borealhdr")
-#: Keys of ``run.json`` that are the configuration (a resume compares these).
-CONFIG_KEYS = ("selector", "initial_ms", "range_ms", "save", "mode", "options", "method_timeout_s", "noise", "blur",
-               "skip_partial", "rate", "latency_frames", "native_warp", "native_blur_aware")
+#: Per-call limit of a method in a worker when ``--method-timeout-s`` is not given, seconds: far
+#: above any built-in's call (under 0.1 s on a 1920x1200 frame), so only a stuck method meets it.
+DEFAULT_METHOD_TIMEOUT_S = 120.0
+#: ``process``: each method in its own worker process (the default); ``inline``: in the run's process.
+WORKER_MODES = ("process", "inline")
 #: Longest per-call limit, s: the longest wait the system's poll() takes (2**31 - 1 ms, 24.8 days).
 MAX_METHOD_TIMEOUT_S = 2_147_483.0
 #: Largest exposure latency, frames (a recording's frame count bounds it further, at native rate).
 MAX_LATENCY_FRAMES = 1_000_000
-#: How often a method proposes: once per bracket sweep (the paper's) or after every recorded frame.
-RATES = ("cycle", "native")
-
-
-def parse_option(text: str) -> tuple[str, str, object]:
-    """``METHOD.KEY=VALUE`` -> (method, key, value); VALUE parsed as JSON when it can be."""
-    head, sep, value = str(text).partition("=")
-    method, dot, key = head.partition(".")
-    if not sep or not dot or not method.strip() or not key.strip():
-        raise PlaybackError(f"--option {text!r}: expected METHOD.KEY=VALUE, e.g. kim.seed=3")
-    try:
-        parsed = json.loads(value)
-    except json.JSONDecodeError:
-        parsed = value
-    return method.strip(), key.strip(), parsed
-
-
-def parse_options(texts: Iterable[str], base: Mapping | None = None) -> dict[str, dict]:
-    """Every ``--option`` text folded into ``{method: {key: value}}`` (over ``base``)."""
-    out = {str(k): dict(v) for k, v in dict(base or {}).items()}
-    for text in texts:
-        method, key, value = parse_option(text)
-        out.setdefault(method, {})[key] = value
-    return out
 
 
 def _plain(value):
     """``value`` as it reads back from JSON (tuples -> lists), for comparing configurations."""
     return json.loads(json.dumps(value, sort_keys=True, default=str))
-
-
-def _same_file(a, b) -> bool:
-    """Two recorded paths (relative ones to the working directory) name one existing file."""
-    try:
-        return bool(a) and bool(b) and Path(a).is_file() and Path(a).resolve() == Path(b).resolve()
-    except OSError:
-        return False
-
-
-def _applied_timeout(config) -> float | None:
-    from emulator.playback.workers import effective_timeout_s
-
-    return effective_timeout_s(config)
 
 
 def _number(value, name: str) -> float:
@@ -104,90 +73,152 @@ def _number(value, name: str) -> float:
         raise PlaybackError(f"{name} must be a number, got {value!r}") from None
 
 
+#: The image provider of each rate; each provider's module declares its own (:func:`provides_rate`), so that
+#: this module imports none of them.
+PROVIDERS: dict[str, type] = {}
+
+
+def provides_rate(rate: str):
+    """Class decorator: the decorated image provider is the one of ``rate`` (:attr:`RunConfig.provider_class`)."""
+    if rate not in RATES:
+        raise ValueError(f"rate must be one of {', '.join(RATES)}, got {rate!r}")
+
+    def declare(cls):
+        PROVIDERS[rate] = cls
+        return cls
+
+    return declare
+
+
+def _is_native(config) -> bool:
+    return config.rate == NATIVE_RATE
+
+
+_NATIVE = "with --rate native: "
+
+
 @dataclass(frozen=True)
 class RunConfig:
     """The settings of a closed-loop run (not the recording nor the methods).
 
-    Parameters
-    ----------
-    initial_ms : float
-        First exposure of every method, ms (finite, > 0).  Outside ``range_ms`` it is
-        clamped (:attr:`start_ms`; ``run.json`` records ``initial_ms_clamped``).
-    range_ms : (float, float)
-        Clamp of every proposal, ms: finite ``0 < low <= high``.
-    selector : str
-        Bracket selector (:data:`emulator.select.SELECTORS`).
-    mode : {"paper", "borealhdr"}
-        Method behaviour (paper: reference defects corrected).
-    options : mapping
-        Per-method options, ``{method: {key: value}}`` (``--option METHOD.KEY=VALUE``).
-    jobs : int
-        How many methods compute at once (each in its own worker process; results do not depend on it).
-    workers : {"process", "inline"}
-        ``process`` (the default): every method in its own worker process, with a time limit that
-        interrupts; ``inline``: in the run's own process (for debugging; no isolation from the run).
-    save : {"none", "png16", "png8"}
-        What a run folder keeps of the emulated images.
-    noise : {"none", "consistent"}
-        Noise-consistent emulation (needs a noise model, :meth:`noise_for`).
-    noise_model : str, path, NoiseModel or None
-        A noise-model JSON, a model, or None for the one the recording carries.
-    noise_seed : int
-        Seed of the added noise (>= 0).
-    method_timeout_s : float or None
-        Per-call wall-time limit of ``next_exposure``, s (> 0), or None: with workers, the default
-        limit (:data:`emulator.playback.workers.DEFAULT_METHOD_TIMEOUT_S`); inline, none.
-    response_path : str, path or None
-        A pcalib file; None: the one found beside the recording.
-    blur : {"none", "consistent"}
-        Blur-consistent emulation from the recording's gyro (:func:`emulator.motion.blur_hook`;
-        ``run.json`` ``"blur"``, ``blur.csv``).
-    blur_aware : bool
-        With ``blur="consistent"`` and the ``higher-no-sat`` selector: the hook also selects
-        brackets, weighing the higher bracket's excess blur against the lower one's noise.
-    png_level : int
-        zlib level of the saved images, 0..9 (default 0: stored, the fastest to write and read;
-        the decoded images are the same for any level, :func:`emulator.io.png.encode_png`).
-    skip_partial : bool
-        Leave out every cycle missing a bracket on either camera (``--skip-partial``; skipped
-        cycles are listed with what was missing).  ``run.json`` records ``"skip_partial": true``
-        when set (absent: false, as in folders from before the setting).
-    rate : {"cycle", "native"}
-        ``cycle`` (default): a method proposes once per bracket sweep; ``native``: after every
-        recorded frame, at the recorder's rate (:mod:`emulator.playback.native`, docs/native.md).
-        ``run.json`` records ``"rate"`` and ``"latency_frames"`` for a native run only.
-    latency_frames : int
-        Native rate: a proposal made after reading frame k is first used at frame k + 1 + N (default 1).
-    native_warp : {"rotation", "flow", "flow-sharp", "none"} or None
-        Native rate: how a neighbour frame is moved to frame k's instant (:data:`emulator.native.WARP_MODES`);
-        None (default): :data:`emulator.native.DEFAULT_NATIVE_WARP` at native rate (set so on construction;
-        None at cycle rate, where nothing is warped: :attr:`warp_mode` says ``rotation``).
-        ``native_blur_aware``: the native selector also weighs the motion blur a candidate's window carries
-        beyond the target's (default False).  ``run.json`` records the warp where it is not ``rotation`` (a
-        folder without it: rotation, as before the setting), and ``native_blur_aware`` where it is set.
+    Each field is one setting, declared once with its :class:`~emulator.playback.settings.Setting`
+    (flag and help of ``exposim run``, ``run.json`` key, resume rule; the help says what it does).
+    The constructor checks every field (:class:`PlaybackError` naming it).  Notes:
+
+    * ``initial_ms`` outside ``range_ms`` is clamped (:attr:`start_ms`; ``run.json`` records
+      ``initial_ms_clamped``); ``range_ms`` is finite ``0 < low <= high``.
+    * ``method_timeout_s`` None: with workers the default limit (:data:`DEFAULT_METHOD_TIMEOUT_S`),
+      inline none; :attr:`method_timeout_applied_s` is the limit applied.
+    * ``noise_model``: a noise-model JSON, a NoiseModel, or None for the one the recording carries.
+    * ``run.json`` records ``skip_partial``, ``native_blur_aware`` only where set, ``rate`` and
+      ``latency_frames`` for a native run only, ``native_warp`` where it is not ``rotation`` (a
+      folder without it: rotation, as before the setting); ``png_level`` absent reads as 1.
+    * ``native_warp`` None: :data:`emulator.native.DEFAULT_NATIVE_WARP` at native rate (set so on
+      construction), None at cycle rate (nothing is warped: :attr:`warp_mode` says ``rotation``).
     """
 
-    initial_ms: float = DEFAULT_INITIAL_MS
-    range_ms: tuple[float, float] = DEFAULT_RANGE_MS
-    selector: str = DEFAULT_SELECTOR
-    mode: str = "paper"
-    options: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
-    jobs: int = 1
-    workers: str = "process"
-    save: str = "none"
-    noise: str = "none"
-    noise_model: Any = None
-    noise_seed: int = 0
-    method_timeout_s: float | None = None
-    response_path: str | None = None
-    png_level: int = 0
-    blur: str = "none"
-    blur_aware: bool = False
-    skip_partial: bool = False
-    rate: str = "cycle"
-    latency_frames: int = 1
-    native_warp: str | None = None
-    native_blur_aware: bool = False
+    initial_ms: float = setting(
+        DEFAULT_INITIAL_MS, flag="--initial-ms", key="initial_ms", resume=True, command=3, cli={"type": float},
+        help="initial exposure of every method, ms (default 4.0; clamped to --range-ms, with a warning)")
+    range_ms: tuple[float, float] = setting(
+        DEFAULT_RANGE_MS, flag="--range-ms", key="range_ms", resume=True, command=13,
+        cli={"type": float, "nargs": 2, "metavar": ("LOW", "HIGH")},
+        help="clamp of every proposal, ms (default %s %s)" % DEFAULT_RANGE_MS)
+    selector: str = setting(
+        DEFAULT_SELECTOR, flag="--selector", key="selector", resume=True, command=4,
+        cli={"choices": ("higher-no-sat", "closest", "reference")}, help="bracket selector (default higher-no-sat)")
+    mode: str = setting(
+        "paper", flag="--mode", key="mode", resume=True, command=2, cli={"choices": MODES},
+        help="method behaviour: paper (default, reference defects corrected) or borealhdr (reference code)")
+    #: per-method options ``{method: {key: value}}`` (``--option METHOD.KEY=VALUE``, ``--seed``: exposim run's own)
+    options: Mapping[str, Mapping[str, Any]] = setting(default_factory=dict, key="options", resume=True)
+    jobs: int = setting(
+        1, flag="--jobs", key="jobs", per_run=True, command=15, shown_unless_default=True,
+        cli={"type": int, "default": 1},
+        help="how many methods compute at once, each in its own process (same output for any value)")
+    #: ``process``: every method in its own worker process, with a limit that interrupts; ``inline``: in the run's
+    #: process (debugging; no isolation).  ``run.json`` writes the applied limit beside it (it depends on both).
+    workers: str = setting(
+        "process", flag="--isolation", key="workers", per_run=True, command=16, shown_unless_default=True,
+        cli={"choices": WORKER_MODES},
+        encode=lambda c, ctx: {"workers": c.workers, "method_timeout_applied_s": c.method_timeout_applied_s},
+        help="process (default): every AE method in its own process, stopped past --method-timeout-s; "
+             "inline: in the run's process (debugging only: a method can then stall or change the run)")
+    save: str = setting(
+        "none", flag="--save", key="save", resume=True, command=1, cli={"choices": SAVE_MODES},
+        help="save emulated images: none (default), png16 (12-bit Bayer DN) or png8 (8-bit gray)")
+    noise: str = setting(
+        "none", flag="--noise", key="noise", resume=True, command=7, cli={"choices": ("none", "consistent")},
+        encode=noise_json, decode=lambda j: (j.get("noise") or {"mode": "none"}).get("mode", "none"),
+        recorded=lambda j: j.get("noise") or {"mode": "none"}, compare=common_figures,
+        help="none (default): exact emulation (eq. 2); consistent: add the noise a capture at the "
+             "target exposure would have where the source bracket is cleaner (needs a noise model)")
+    noise_model: Any = setting(
+        None, flag="--noise-model", command=9, cli={"type": Path, "metavar": "FILE.json"}, decode=recorded_noise_model,
+        help="noise model for --noise consistent (`exposim calibrate --noise`); default: the model "
+             "a synthetic recording's exposim.json carries")
+    noise_seed: int = setting(
+        0, flag="--noise-seed", command=10, cli={"type": int}, decode=lambda j: int((j.get("noise") or {}).get("seed", 0)),
+        help="seed of the added noise (default 0); the same seed gives the same bytes")
+    method_timeout_s: float | None = setting(
+        None, flag="--method-timeout-s", aliases=("--method-timeout",), key="method_timeout_s", resume=True,
+        command=23, cli={"type": float, "metavar": "S"},
+        decode=lambda j: j.get("method_timeout_s", j.get("method_timeout")),
+        recorded=lambda j: j.get("method_timeout_s", j.get("method_timeout")),
+        help="per-call wall-time limit of a method, s: a call still running then is stopped and the method "
+             "fails (its rows stop, the others go on); default 120 (--isolation inline: checked only after the "
+             "call returns, no default; --method-timeout: deprecated alias)")
+    response_path: str | None = setting(
+        None, flag="--response", command=5, cli={"type": Path}, decode=recorded_response,
+        help="pcalib file (default: found beside the recording)")
+    png_level: int = setting(
+        0, flag="--png-level", key="png_level", old=1, command=11, cli={"type": int, "metavar": "0..9"},
+        help="zlib level of the saved images (default 0: stored, the fastest; 1..9 smaller files, the "
+             "same decoded images)")
+    blur: str = setting(
+        "none", flag="--blur", key="blur", resume=True, command=8, cli={"choices": ("none", "consistent")},
+        encode=blur_json, decode=lambda j: (j.get("blur") or {}).get("mode", "none"), recorded=recorded_blur,
+        compare=common_figures,
+        help="none (default): exact emulation; consistent: add the gyro's blur of the extra exposure time "
+             "where the target is longer than the bracket, and record each image's excess blur in blur.csv "
+             "(needs imu/imu.csv and a camera calibration; docs/blur.md)")
+    blur_aware: bool = setting(
+        False, flag="--blur-aware", command=17, cli={"action": "store_true"},
+        decode=lambda j: bool((j.get("blur") or {}).get("blur_aware", False)),
+        help="with --blur consistent and --selector higher-no-sat: of the two brackets around the "
+             "target, take the shorter one when the longer one's extra motion blur (predicted from the "
+             "gyro) costs more than the shorter one's extra noise; one pixel of blur weighs as much as "
+             "twice the relative noise of a capture at the target (docs/blur.md)")
+    skip_partial: bool = setting(
+        False, flag="--skip-partial", key="skip_partial", resume=True, command=18, cli={"action": "store_true"},
+        encode=lambda c, ctx: {"skip_partial": True} if c.skip_partial else {},
+        help="leave out every cycle missing a bracket on either camera (default: use the brackets that are "
+             "there; partial cycles and upward ratios above 8 are flagged in the report either way)")
+    rate: str = setting(
+        RATES[0], flag="--rate", key="rate", resume=True, command=20, cli={"choices": RATES},
+        encode=lambda c, ctx: {"rate": c.rate} if _is_native(c) else {},
+        help="cycle (default): each method proposes once per bracket sweep, as in the paper; native: after "
+             "every recorded frame, at the recorder's frame rate, each frame emulated from its own bracket "
+             "or a nearby frame's, turned to its instant with the gyro (docs/native.md)")
+    latency_frames: int = setting(
+        1, flag="--latency-frames", key="latency_frames", resume=True, command=21, native_only=True,
+        cli={"type": int, "metavar": "N"},
+        encode=lambda c, ctx: {"latency_frames": c.latency_frames} if _is_native(c) else {},
+        help=_NATIVE + "a proposal made after reading frame k is first used at frame k + 1 + N "
+             "(default 1, as a live camera)")
+    native_warp: str | None = setting(
+        None, flag="--warp", key="native_warp", resume=True, command=12, native_only=True,
+        cli={"choices": ("flow-sharp", "rotation", "flow", "none")},
+        encode=lambda c, ctx: {"native_warp": c.warp_mode} if c.warp_mode != "rotation" else {},
+        # native folders from before the warp modes: rotation; cycle rate has none
+        decode=lambda j: j.get("native_warp") or ("rotation" if is_native_run(j) else None),
+        help="--rate native: rotation: gyro; flow: then the neighbours' flow; flow-sharp (default): flow unless "
+             "under 1 px")
+    native_blur_aware: bool = setting(
+        False, flag="--native-blur-aware", key="native_blur_aware", resume=True, command=19, native_only=True,
+        cli={"action": "store_true"}, encode=lambda c, ctx: {"native_blur_aware": True} if c.native_blur_aware else {},
+        help=_NATIVE + "the selector also weighs the motion blur a candidate carries beyond the target's, from "
+             "the gyro (docs/native.md)")
 
     def __post_init__(self) -> None:
         from emulator.select import SELECTORS
@@ -214,7 +245,7 @@ class RunConfig:
         if isinstance(self.jobs, bool) or not isinstance(self.jobs, (int, np.integer)) or int(self.jobs) < 1:
             raise PlaybackError(f"jobs must be an integer >= 1, got {self.jobs!r}")
         put(self, "jobs", int(self.jobs))
-        if self.workers not in ("process", "inline"):
+        if self.workers not in WORKER_MODES:
             raise PlaybackError(f"workers must be process or inline, got {self.workers!r}")
         if self.save not in SAVE_MODES:
             raise PlaybackError(f"save must be one of {', '.join(SAVE_MODES)}, got {self.save!r}")
@@ -263,16 +294,14 @@ class RunConfig:
             raise PlaybackError(f"latency_frames must be an integer >= 0, at most {MAX_LATENCY_FRAMES} and below "
                                 f"the recording's frame count, got {lat!r}")
         put(self, "latency_frames", int(lat))
-        from emulator.native import DEFAULT_NATIVE_WARP, WARP_MODES
-
-        if self.native_warp is None and self.rate == "native":
+        if self.native_warp is None and _is_native(self):
             put(self, "native_warp", DEFAULT_NATIVE_WARP)
-        elif self.rate != "native" and self.native_warp == DEFAULT_NATIVE_WARP:  # a native run's default, carried
+        elif not _is_native(self) and self.native_warp == DEFAULT_NATIVE_WARP:  # a native run's default, carried
             put(self, "native_warp", None)  # over (a resume asked at cycle rate is refused for its rate)
         if self.native_warp is not None and self.native_warp not in WARP_MODES:
             raise PlaybackError(f"native_warp must be one of {', '.join(WARP_MODES)}, got {self.native_warp!r}")
         put(self, "native_blur_aware", bool(self.native_blur_aware))
-        if self.rate != "native" and (self.native_warp not in (None, "rotation") or self.native_blur_aware):
+        if not _is_native(self) and (self.native_warp not in (None, "rotation") or self.native_blur_aware):
             raise PlaybackError("native_warp and native_blur_aware: used only at native rate (--rate native)")
 
     # ------------------------------------------------------------------ derived values
@@ -286,14 +315,35 @@ class RunConfig:
         return min(max(float(value_ms), lo), hi)
 
     @property
+    def method_timeout_applied_s(self) -> float | None:
+        """The per-call limit this run applies: :attr:`method_timeout_s`, else the default with workers
+        (:data:`DEFAULT_METHOD_TIMEOUT_S`), none inline."""
+        if self.method_timeout_s is not None:
+            return float(self.method_timeout_s)
+        return DEFAULT_METHOD_TIMEOUT_S if self.workers == WORKER_MODES[0] else None
+
+    @property
     def warp_mode(self) -> str:
         """The native warp this configuration runs: ``native_warp``, or where None the native default
         (:data:`emulator.native.DEFAULT_NATIVE_WARP`; ``rotation`` at cycle rate, where nothing is warped)."""
-        from emulator.native import DEFAULT_NATIVE_WARP
-
         if self.native_warp is not None:
             return self.native_warp
-        return DEFAULT_NATIVE_WARP if self.rate == "native" else "rotation"
+        return DEFAULT_NATIVE_WARP if _is_native(self) else "rotation"
+
+    @property
+    def latency_ticks(self) -> int:
+        """Ticks between a proposal and its use beyond the next one: ``latency_frames`` at native rate, else 0."""
+        return self.latency_frames if _is_native(self) else 0
+
+    @property
+    def provider_class(self):
+        """The image provider of this rate (:data:`PROVIDERS`): :class:`~emulator.playback.emulated.EmulatedProvider`
+        (a tick per bracket sweep) or :class:`~emulator.playback.native.NativeProvider` (a tick per recorded frame)."""
+        return PROVIDERS[self.rate]
+
+    def provider_for(self, sequence, response, *, noise=None, stats=None, blur=None):
+        """This run's image provider on ``sequence`` (:attr:`provider_class`, configured by this run)."""
+        return self.provider_class.for_run(sequence, self, response, noise=noise, stats=stats, blur=blur)
 
     def replace(self, **changes) -> "RunConfig":
         """A copy with ``changes`` (validated again)."""
@@ -371,7 +421,6 @@ class RunConfig:
             source = str(meta_path.resolve())
         return _check_noise_model(model, response, self.noise, False), source
 
-    # ------------------------------------------------------------------ run.json
     def blur_for(self, sequence, response):
         """The run's blur hook (:class:`emulator.motion.BlurHook`), or None for ``blur="none"``."""
         if self.blur == "none":
@@ -380,110 +429,63 @@ class RunConfig:
 
         return blur_hook(self.blur, sequence, response, blur_aware=self.blur_aware)
 
+    # ------------------------------------------------------------------ run.json
     def to_json(self, noise_model=None, blur_hook=None) -> dict:
-        """The configuration keys of ``run.json`` (``noise`` holds the model's figures when given,
-        ``blur`` the hook's description)."""
-        from emulator.blur import DEFAULT_PLACEMENT
+        """The configuration keys of ``run.json``, in field order (``noise`` holds the model's figures
+        when given, ``blur`` the hook's description): each setting's :class:`~emulator.playback.settings.Setting`."""
+        return _plain(settings.to_json(self, {"noise_model": noise_model, "blur_hook": blur_hook}))
 
-        if self.noise == "none":
-            noise = {"mode": "none"}
-        else:
-            noise = {"mode": self.noise, "seed": self.noise_seed}
-            if noise_model is not None:
-                noise["model"] = {k: v for k, v in noise_model.to_dict().items() if k != "response"}
-        return _plain({
-            "selector": self.selector,
-            "initial_ms": self.initial_ms,
-            "range_ms": list(self.range_ms),
-            "save": self.save,
-            "mode": self.mode,
-            "options": self.options,
-            "method_timeout_s": self.method_timeout_s,
-            "noise": noise,
-            "jobs": self.jobs,
-            "workers": self.workers,
-            "method_timeout_applied_s": _applied_timeout(self),
-            "png_level": self.png_level,
-            "blur": (blur_hook.describe() if blur_hook is not None else
-                     {"mode": self.blur, **({"placement": DEFAULT_PLACEMENT} if self.blur == "consistent" else {}),
-                      **({"blur_aware": True} if self.blur_aware else {})}),
-            **({"skip_partial": True} if self.skip_partial else {}),
-            **({"rate": "native", "latency_frames": self.latency_frames} if self.rate == "native" else {}),
-            **({"native_warp": self.warp_mode} if self.warp_mode != "rotation" else {}),
-            **({"native_blur_aware": True} if self.native_blur_aware else {}),
-        })
+    def per_run_json(self) -> dict:
+        """The ``run.json`` keys of how this run computes (``jobs``, ``workers``, the applied limit), written
+        again by a resume (results do not depend on them)."""
+        return json.loads(json.dumps(settings.to_json(self, per_run=True)))  # in field order: jobs, workers, limit
 
     @classmethod
     def from_json(cls, run_json: Mapping) -> "RunConfig":
         """The configuration a ``run.json`` (or ``dataset.json``'s ``config``) records."""
-        noise = run_json.get("noise") or {"mode": "none"}
-        response = run_json.get("response_path") or run_json.get("response")
-        timeout = run_json.get("method_timeout_s", run_json.get("method_timeout"))
-        model = run_json.get("noise_model_file") or run_json.get("noise_model")
-        if model is not None and Path(model).name == "exposim.json":
-            model = None  # the recording's own: found again from the recording
-        return cls(
-            initial_ms=run_json.get("initial_ms", DEFAULT_INITIAL_MS),
-            range_ms=tuple(run_json.get("range_ms") or DEFAULT_RANGE_MS),
-            selector=run_json.get("selector") or DEFAULT_SELECTOR,
-            mode=run_json.get("mode") or "paper",
-            options=run_json.get("options") or {},
-            jobs=int(run_json.get("jobs") or 1),
-            workers=run_json.get("workers") or "process",
-            save=run_json.get("save") or "none",
-            noise=noise.get("mode", "none"),
-            noise_model=model if model and Path(model).is_file() else None,
-            noise_seed=int(noise.get("seed", 0)),
-            method_timeout_s=timeout,
-            response_path=response if response and Path(response).is_file() else None,
-            png_level=int(run_json.get("png_level", 1)),  # folders from before the setting: level 1
-            blur=(run_json.get("blur") or {}).get("mode", "none"),  # folders from before --blur: none
-            blur_aware=bool((run_json.get("blur") or {}).get("blur_aware", False)),
-            skip_partial=bool(run_json.get("skip_partial", False)),
-            rate=run_json.get("rate") or "cycle",  # folders from before --rate: cycle
-            latency_frames=int(run_json.get("latency_frames", 1)),
-            # native folders from before the warp modes: rotation; cycle rate has none
-            native_warp=run_json.get("native_warp") or ("rotation" if run_json.get("rate") == "native" else None),
-            native_blur_aware=bool(run_json.get("native_blur_aware", False)),
-        )
+        return cls(**settings.values_from_json(cls, run_json))
 
-    def resumed(self, recorded: Mapping, given: Iterable[str] = CONFIG_KEYS, *, where: str = "run.json",
-                noise_model=None, blur_hook=None, identity: Mapping | None = None) -> "RunConfig":
-        """The one ``--resume`` rule: the recorded configuration wins; values given must equal it.
+    def check_resume(self, recorded: Mapping, given: Iterable[str] | None = None, *, where: str = "run.json",
+                     noise_model=None, blur_hook=None, identity: Mapping | None = None) -> None:
+        """The one ``--resume`` rule: values given must equal the recorded ones; a difference raises.
 
-        ``recorded`` is the ``run.json`` of the folder; ``given`` names the fields of this
-        configuration that were set explicitly (all of :data:`CONFIG_KEYS` when it came
-        whole, as from the library).  ``identity`` adds what the run is of (``sequence``,
-        ``methods``, ``response``), compared the same way (a response path naming the
-        same file as the recorded one agrees).  ``jobs`` may differ (results do not depend on it).
-        Returns the recorded configuration (with this one's ``jobs``); a difference raises
-        :class:`PlaybackError` naming the keys.
+        ``recorded`` is the ``run.json`` of the folder; ``given`` names the keys of this
+        configuration that were set explicitly (default: every key a resume compares,
+        :func:`~emulator.playback.settings.resume_keys`, as for a configuration from the library).
+        ``identity`` adds what the run is of (``sequence``, ``methods``, ``response``), compared the
+        same way (a response path naming the same file as the recorded one agrees).  A difference
+        raises :class:`PlaybackError` naming the keys.
         """
-        old = RunConfig.from_json(recorded)
+        cls = type(self)
+        keys = settings.resume_keys(cls)
+        given = set(keys if given is None else given)
         mine = self.to_json(noise_model, blur_hook)
-        theirs = dict(recorded)
-        theirs.setdefault("method_timeout_s", theirs.get("method_timeout"))
-        theirs["noise"] = theirs.get("noise") or {"mode": "none"}
-        theirs["blur"] = dict(theirs.get("blur") or {"mode": "none"})
-        if theirs["blur"].get("mode") == "consistent":  # folders from before tiled copies: uniform sub-instants
-            theirs["blur"].setdefault("placement", "uniform")
-        given = set(given)
+        theirs = {key: settings.recorded_value(cls, key, recorded) for key in keys}
         diff = []
-        for key in CONFIG_KEYS:
+        for key in keys:
             if key not in given:
                 continue
-            a, b = mine.get(key), theirs.get(key)
-            if key in ("noise", "blur"):  # the figures of a model or hook only where both sides have them
-                a, b = ({k: v for k, v in (x or {}).items() if k in ("mode", "seed", "blur_aware", "placement") or k in (y or {})}
-                        for x, y in ((a, b), (b, a)))
+            a, b = settings.compared(cls, key, mine.get(key), theirs.get(key))
             if _plain(a) != _plain(b):
                 diff.append(key)
         for key, a in dict(identity or {}).items():
-            b = theirs.get(key)
-            if _plain(a) != _plain(b) and not (key == "response" and _same_file(a, b)):
+            b = theirs[key] = recorded.get(key)
+            if _plain(a) != _plain(b) and not (key == "response" and same_file(a, b)):
                 diff.append(key)
         if diff:
             raise PlaybackError(f"{where}: --resume with a different configuration ({', '.join(diff)}): recorded "
                                 + "; ".join(f"{k}={theirs.get(k)!r}" for k in diff))
-        keep = {k: getattr(self, k) for k in ("response_path", "noise_model") if getattr(self, k) is not None}
-        return old.replace(jobs=self.jobs, workers=self.workers, **keep)
+
+    def resumed(self, recorded: Mapping, given: Iterable[str] | None = None, **kwargs) -> "RunConfig":
+        """:meth:`check_resume`, then the recorded configuration (with this one's per-run settings,
+        ``jobs`` and ``workers``, and its response and noise-model files where given)."""
+        self.check_resume(recorded, given, **kwargs)
+        cls = type(self)
+        values = settings.values_from_json(cls, recorded)
+        values.update({f.name: getattr(self, f.name) for f, s in settings.settings_of(cls) if s.per_run})
+        values.update({k: getattr(self, k) for k in ("response_path", "noise_model") if getattr(self, k) is not None})
+        return cls(**values)
+
+
+#: Keys of ``run.json`` that are the configuration (a resume compares these).
+CONFIG_KEYS = settings.resume_keys(RunConfig)

@@ -25,7 +25,7 @@ from emulator.autoexposure.isolation import readonly_view
 from emulator.dataset import CAMERAS, missing_text
 from emulator.emulate import apply_lut
 from emulator.errors import DatasetError
-from emulator.playback.config import RunConfig
+from emulator.playback.config import RATES, RunConfig, provides_rate
 from emulator.playback.loop import Shot
 from emulator.playback.records import RunStats
 from emulator.select import select
@@ -210,6 +210,7 @@ def _nothing() -> None:
     return None
 
 
+@provides_rate(RATES[0])
 class EmulatedProvider:
     """A recording's cycles as ticks whose shots are emulated from the brackets.
 
@@ -233,6 +234,9 @@ class EmulatedProvider:
     """
 
     latency_ticks = 0
+    #: What a tick is (progress, reports), and the columns it adds to ``exposures.csv`` (none).
+    unit = "cycles"
+    columns = ()
     #: A method may run this many cycles ahead of the slowest (:func:`~emulator.playback.loop.closed_loop`
     #: with ``jobs > 1``): a cycle's images are decoded on demand and memoised per tick, so ticks are
     #: independent.  Each tick in flight keeps its decoded images (up to ~55 MB at 1920x1200).
@@ -255,6 +259,23 @@ class EmulatedProvider:
         self.skip_partial = bool(getattr(config, "skip_partial", False))
         self.stats = stats if stats is not None else RunStats()
         self._cycles = None if cycles is None else list(cycles)
+
+    @classmethod
+    def for_run(cls, sequence, config: RunConfig, response, *, noise=None, stats=None, blur=None):
+        """The provider of a cycle-rate run (:meth:`RunConfig.provider_for`)."""
+        return cls(sequence, config, response, noise=noise, stats=stats, blur=blur)
+
+    @property
+    def tick_indices(self) -> list[int]:
+        """The index of every tick (the cycles visited)."""
+        return [c.index for c in self.sequence.cycles] if self._cycles is None else list(self._cycles)
+
+    def run_json(self) -> dict:
+        """What ``run.json`` records of this provider (nothing at cycle rate)."""
+        return {}
+
+    def finish_run_json(self, run_json: dict) -> None:
+        """Add what the run found out to ``run.json`` (nothing at cycle rate)."""
 
     def ticks(self):
         shapes: dict = {}

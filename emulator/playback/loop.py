@@ -30,8 +30,10 @@ exposure, asks it through :func:`emulator.playback.seam.call_method` (the one ca
 and records a :class:`MethodStep`.  A method that fails (raises
 :class:`~emulator.autoexposure.registry.MethodFailed`, including a call over the time
 limit) gets no step from that tick on and is named in :attr:`CycleStep.failed`.  A method
-given as a :class:`~emulator.playback.workers.MethodWorker` (what :func:`~emulator.playback.prepare_run`
-builds by default) computes in its own process, which ends with the loop.  Methods
+is a handle (:class:`~emulator.playback.seam.MethodHandle`) that keeps its own time limit: a
+:class:`~emulator.playback.workers.MethodWorker` (what :func:`~emulator.playback.prepare_run`
+builds by default) computes in its own process, which ends with the loop; a plain method is
+called inline (:class:`~emulator.playback.seam.InlineMethod`, ``config.method_timeout_s`` checked after the call).  Methods
 are asked from ``config.jobs`` threads (so that many workers compute at once), under one
 BLAS thread each (:mod:`emulator.pools`); with
 more than one job a method may run up to ``provider.ticks_ahead`` ticks (default 0) ahead of
@@ -53,8 +55,7 @@ import numpy as np
 from emulator.autoexposure.registry import MethodFailed
 from emulator.playback.config import RunConfig
 from emulator.playback.records import CycleStep, MethodStep, RunStats
-from emulator.playback.seam import call_method
-from emulator.playback.workers import MethodWorker, stop_methods
+from emulator.playback.seam import as_handle, call_method, stop_methods
 from emulator.pools import single_thread_pools
 
 __all__ = ["Shot", "closed_loop"]
@@ -98,6 +99,8 @@ def closed_loop(
     are dropped after ``on_step``, which is called in the worker right after each step).
     """
     stats = stats if stats is not None else RunStats()
+    # every method as a handle that keeps its own limit (a worker's, or an inline call checked after it returns)
+    methods = {name: as_handle(m, config.method_timeout_s) for name, m in methods.items()}
     latency = int(getattr(provider, "latency_ticks", 0))
     if latency < 0:
         raise ValueError(f"latency_ticks must be >= 0, got {latency}")
@@ -106,18 +109,10 @@ def closed_loop(
     last_s: dict[str, float] = {}  # each method's last call, wall seconds (the pool's order)
 
     def step_one(name: str, tick) -> MethodStep | MethodFailed:
-        target = pending[name][0]
         method = methods[name]
-        split = getattr(tick, "split_shot", None)
-        if split is not None and isinstance(method, MethodWorker):
-            shot, rest = split(target, want_right)
-            method.send_ahead(shot.left, shot.exposure_ms)  # the method computes in its process ...
-            rest()  # ... while this thread does the second camera's part of the shot
-        else:
-            shot = tick.shot(target, want_right)
-        try:  # a worker enforces its own limit (it interrupts); inline, the limit is checked after the call
-            answer = call_method(method, shot.left, shot.exposure_ms, range_ms=config.range_ms,
-                                 timeout_s=None if isinstance(method, MethodWorker) else config.method_timeout_s)
+        shot = method.shot(tick, pending[name][0], want_right)  # a worker computes while the shot is finished
+        try:  # the handle keeps its limit (a worker's interrupts; inline, it is checked after the call)
+            answer = call_method(method, shot.left, shot.exposure_ms, range_ms=config.range_ms)
         except MethodFailed as exc:
             return exc
         stats.add_method(name, answer.elapsed_s)

@@ -49,10 +49,11 @@ from emulator.autoexposure.isolation import readonly_view
 from emulator.dataset import CAMERAS
 from emulator.errors import CalibrationError, PlaybackError
 from emulator.gyro import GYRO_HOLE_S
-from emulator.native import (MOTION_STOPS_PER_FRAME, SATURATION_LIMIT, SHARP_MOTION_PX, WARP_MODES, WARP_RESAMPLE,
+from emulator.io.runcsv import NATIVE_COLUMNS
+from emulator.native import (BLUR_STOPS_PER_PX, MOTION_STOPS_PER_FRAME, NATIVE_RATE, SATURATION_LIMIT, SHARP_MOTION_PX, WARP_MODES, WARP_RESAMPLE,
                              WINDOW_CYCLES, NativeCandidate, flow_velocity, invalid_fraction, median_motion_px,
                              native_select, radiance_gray, rotation_between, warp_to_instant, warp_with_flow)
-from emulator.playback.config import RunConfig
+from emulator.playback.config import RunConfig, provides_rate
 from emulator.playback.emulated import METHOD_CAMERA, _CycleImages, _fractions, _Memo
 from emulator.playback.loop import Shot
 from emulator.playback.records import RunStats
@@ -171,6 +172,7 @@ class NativeTick(_Memo):
         return shot
 
 
+@provides_rate(NATIVE_RATE)
 class NativeProvider:
     """A recording's frames as ticks, each emulated from its own or a nearby frame's bracket.
 
@@ -199,6 +201,16 @@ class NativeProvider:
 
     #: Frames are decoded on demand and memoised per frame, so ticks are independent (see EmulatedProvider).
     ticks_ahead = 2
+    #: What a tick is (progress, reports), and the columns it adds to ``exposures.csv``.
+    unit = "frames"
+    columns = NATIVE_COLUMNS
+
+    @classmethod
+    def for_run(cls, sequence, config: RunConfig, response, *, noise=None, stats=None, blur=None):
+        """The provider of a native-rate run (:meth:`RunConfig.provider_for`): ``config``'s warp, and the
+        blur-aware selector's weight where ``config.native_blur_aware``."""
+        return cls(sequence, config, response, noise=noise, stats=stats, blur=blur, warp=config.warp_mode,
+                   blur_stops_per_px=BLUR_STOPS_PER_PX if config.native_blur_aware else None)
 
     def __init__(self, sequence, config: RunConfig, response, *, cameras=None, noise=None,
                  stats: RunStats | None = None, blur=None, motion="auto", warp: bool | str = True,
@@ -260,8 +272,18 @@ class NativeProvider:
                       "camera's rotation since its instant", NativeWarpWarning, stacklevel=2)
         return None
 
+    def run_json(self) -> dict:
+        """What ``run.json`` records of this provider: :meth:`describe` under ``native``."""
+        return {NATIVE_RATE: self.describe()}
+
+    def finish_run_json(self, run_json: dict) -> None:
+        """Add what the run found out to ``run.json``'s native record (:meth:`gyro_coverage`)."""
+        coverage = self.gyro_coverage()
+        if coverage and isinstance(run_json.get(NATIVE_RATE), dict):
+            run_json[NATIVE_RATE].update(coverage)
+
     def describe(self) -> dict:
-        """What ``run.json`` records under ``"native"``."""
+        """What ``run.json`` records under ``native``."""
         return {"latency_frames": self.latency_ticks, "window_frames": self.window, "n_frames": len(self.frames),
                 "motion_stops_per_frame": self.motion_stops_per_frame, "saturation_limit": self.saturation_limit,
                 "warp": ("rotation from the gyro" if self.warp else "none"),
@@ -325,7 +347,7 @@ class NativeProvider:
         return readonly_view(warped), inside, angle
 
     def gyro_coverage(self) -> dict:
-        """What ``run.json`` adds under ``"native"`` after the run: how many frames used a neighbour without
+        """What ``run.json`` adds under ``native`` after the run: how many frames used a neighbour without
         a warp because the gyro does not cover the rotation, and one line saying so (none: nothing)."""
         n = len(self._not_covered)
         if self.motion is None or not n:

@@ -12,7 +12,6 @@ from typing import NamedTuple
 
 from emulator.dataset import Sequence
 from emulator.playback.config import RunConfig
-from emulator.playback.emulated import EmulatedProvider
 from emulator.playback.loop import closed_loop
 from emulator.playback.records import CycleStep, MethodStep, RunResult, RunStats
 
@@ -33,7 +32,7 @@ class Prepared(NamedTuple):
     sequence: Sequence
     response: object
     methods: dict
-    provider: EmulatedProvider
+    provider: object  #: :class:`EmulatedProvider` or :class:`~emulator.playback.native.NativeProvider`
     noise_model: object
     noise_source: str | None
     blur: object
@@ -44,7 +43,7 @@ def prepare_run(sequence, methods, config: RunConfig, response=None, *, stats: R
     """Resolve the recording's side of a run: the response at the recording's levels, the methods
     (built by name with ``config.mode``, ``config.options[name]`` and that response, each in its
     own worker process unless ``config.workers == "inline"``; :mod:`emulator.playback.workers`),
-    the noise model, the blur hook (``blur``, else ``config``'s), and the emulated provider.  The
+    the noise model, the blur hook (``blur``, else ``config``'s), and the image provider of ``config.rate``.  The
     workers stop when the closed loop over them ends (or :func:`~emulator.playback.workers.stop_methods`)."""
     from emulator.playback.workers import start_methods, stop_methods
 
@@ -54,8 +53,8 @@ def prepare_run(sequence, methods, config: RunConfig, response=None, *, stats: R
     try:
         model, source = config.noise_for(seq, response)
         hook = blur if blur is not None else config.blur_for(seq, response)
-        provider = EmulatedProvider(seq, config, response, noise=None if model is None else (model, config.noise_seed),
-                                    stats=stats, blur=hook)
+        provider = config.provider_for(seq, response, noise=None if model is None else (model, config.noise_seed),
+                                       stats=stats, blur=hook)  # a tick per bracket sweep, or per recorded frame
     except BaseException:
         stop_methods(built)
         raise
@@ -63,17 +62,9 @@ def prepare_run(sequence, methods, config: RunConfig, response=None, *, stats: R
 
 
 def at_rate(prep: Prepared, config: RunConfig) -> Prepared:
-    """``prep`` with the image provider of ``config.rate``: the cycle-rate one :func:`prepare_run` made,
-    or a :class:`~emulator.playback.native.NativeProvider` on the same recording, response, noise and blur."""
-    if config.rate != "native":
-        return prep
-    from emulator.native import BLUR_STOPS_PER_PX
-    from emulator.playback.native import NativeProvider
-
-    p = prep.provider
-    return prep._replace(provider=NativeProvider(
-        prep.sequence, config, prep.response, cameras=p.cameras, noise=p.noise, stats=p.stats, blur=prep.blur,
-        warp=config.warp_mode, blur_stops_per_px=BLUR_STOPS_PER_PX if config.native_blur_aware else None))
+    """``prep`` as it is: :func:`prepare_run` makes the provider of ``config.rate`` already
+    (:meth:`RunConfig.provider_for`); kept for callers written before it did."""
+    return prep
 
 
 def iter_run(
@@ -120,7 +111,7 @@ def iter_run(
     """
     cfg = RunConfig.from_kwargs(config, **settings)
     stats = stats if stats is not None else RunStats()
-    prep = at_rate(prepare_run(sequence, methods, cfg, response, stats=stats, blur=blur), cfg)
+    prep = prepare_run(sequence, methods, cfg, response, stats=stats, blur=blur)
     return closed_loop(prep.provider, prep.methods, cfg, want_right=emulate_right, keep_images=keep_images, on_step=on_step,
                        stats=stats)
 
@@ -140,7 +131,7 @@ def run(
     """
     cfg = RunConfig.from_kwargs(config, **settings)
     stats = RunStats()
-    prep = at_rate(prepare_run(sequence, methods, cfg, response, stats=stats), cfg)
+    prep = prepare_run(sequence, methods, cfg, response, stats=stats)
     seq, built = prep.sequence, prep.methods
     steps: dict[str, list[MethodStep]] = {name: [] for name in built}
     skipped: list[tuple[int, str]] = []
@@ -152,5 +143,5 @@ def run(
         for name, st in cs.steps.items():
             steps[name].append(st)
         if progress is not None:
-            progress(i, len(getattr(prep.provider, "tick_indices", seq.cycles)))
+            progress(i, len(prep.provider.tick_indices))
     return RunResult(steps, skipped, built, stats, failed)

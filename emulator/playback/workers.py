@@ -44,29 +44,19 @@ import numpy as np
 from emulator.autoexposure._base import AutoExposureError, MethodFailed
 from emulator.errors import PlaybackError
 from emulator.playback._worker_child import _child_main, _label
+from emulator.playback.config import DEFAULT_METHOD_TIMEOUT_S, WORKER_MODES
+from emulator.playback.seam import InlineMethod, MethodHandle, stop_methods
 from emulator.playback.shmblock import reserve_block
 from emulator.numpy_dispatch import forkserver_env
 
-__all__ = ["MethodWorker", "start_methods", "stop_methods", "effective_timeout_s", "DEFAULT_METHOD_TIMEOUT_S",
+__all__ = ["MethodWorker", "start_methods", "stop_methods", "DEFAULT_METHOD_TIMEOUT_S",
            "WORKER_MODES"]
 
-#: Per-call limit of a method in a worker when ``--method-timeout-s`` is not given, seconds: far
-#: above any built-in's call (under 0.1 s on a 1920x1200 frame), so only a stuck method meets it.
-DEFAULT_METHOD_TIMEOUT_S = 120.0
-#: ``process``: each method in its own worker process (the default); ``inline``: in the run's process.
-WORKER_MODES = ("process", "inline")
 #: Largest reply a worker may send, bytes (what a method printed is kept up to 64 KiB, its config's values cut).
 MAX_REPLY_BYTES = 16 << 20
 _PRELOAD = ["emulator.playback._worker_preload"]  # imports the worker side too
 _ctx = None
 _ctx_lock = threading.Lock()
-
-
-def effective_timeout_s(config) -> float | None:
-    """The per-call limit a run applies: ``config.method_timeout_s``, else the default (workers only)."""
-    if config.method_timeout_s is not None:
-        return float(config.method_timeout_s)
-    return DEFAULT_METHOD_TIMEOUT_S if getattr(config, "workers", "process") == "process" else None
 
 
 def _context():
@@ -151,11 +141,12 @@ def _start(proc) -> None:
 
 def _handoff(label: str, why) -> str:
     return (f"AE method {label} cannot be handed to a worker process ({why}); define its class at the top level "
-            "of an importable module, or run it in the run's process (workers='inline', --workers inline)")
+            "of an importable module, or run it in the run's process (workers='inline', --isolation inline)")
 
 
-class MethodWorker:
-    """One AE method running in its own process; called by the closed loop like the method itself."""
+class MethodWorker(MethodHandle):
+    """One AE method running in its own process: a :class:`~emulator.playback.seam.MethodHandle` whose
+    limit interrupts (its process is stopped past it)."""
 
     def __init__(self, item, *, mode: str, response, options: dict, timeout_s: float) -> None:
         ctx = _context()
@@ -273,6 +264,22 @@ class MethodWorker:
             return  # fails this method alone, saying why, as it does when nothing was sent ahead
         self._ahead = (raw, exposure_ms, time.monotonic())
 
+    def shot(self, tick, target_ms: float, want_right: bool):
+        """The tick's shot at ``target_ms``; where the tick can split it, the call is sent ahead on the first
+        camera's image and the method computes in its process while this thread adds the second camera's part."""
+        split = getattr(tick, "split_shot", None)
+        if split is None:
+            return tick.shot(target_ms, want_right)
+        shot, rest = split(target_ms, want_right)
+        self.send_ahead(shot.left, shot.exposure_ms)
+        rest()
+        return shot
+
+    def propose(self, raw, exposure_ms: float):
+        from emulator.autoexposure.isolation import call_method as isolated_call
+
+        return isolated_call(self, raw, exposure_ms)
+
     def next_exposure(self, raw, exposure_ms):
         if self.failed is not None:
             raise MethodFailed(self.failed)
@@ -334,15 +341,18 @@ class MethodWorker:
 
 
 def start_methods(spec, config, response) -> dict:
-    """The run's methods by name: :class:`MethodWorker` s (``config.workers == "process"``), or
-    built in this process (``"inline"``); ``spec`` as for :func:`~emulator.autoexposure.methodset.build_methods`."""
+    """The run's methods by name, as handles that keep the run's limit (:attr:`RunConfig.method_timeout_applied_s`):
+    :class:`MethodWorker` s (``config.workers`` ``process``), or :class:`~emulator.playback.seam.InlineMethod` s
+    built in this process (``inline``); ``spec`` as for :func:`~emulator.autoexposure.methodset.build_methods`."""
     from emulator.autoexposure import METHOD_NAMES
     from emulator.autoexposure.methodset import build_methods, latency_options, parse_methods
 
-    latency = config.latency_frames if getattr(config, "rate", "cycle") == "native" else 0
+    latency = config.latency_ticks
     options = latency_options(config.options, latency)  # fixed freezes one exposure with proposals in flight
-    if getattr(config, "workers", "process") == "inline":
-        return build_methods(spec, mode=config.mode, response=response, options=options)
+    timeout = config.method_timeout_applied_s
+    if config.workers == WORKER_MODES[1]:
+        built = build_methods(spec, mode=config.mode, response=response, options=options)
+        return {name: InlineMethod(method, timeout) for name, method in built.items()}
     items = parse_methods(spec) if isinstance(spec, str) else list(spec)
     for item in items:
         if not isinstance(item, str) and (not getattr(item, "name", None)
@@ -356,7 +366,6 @@ def start_methods(spec, config, response) -> dict:
             plugins = installed_methods() if plugins is None else plugins
             parse_methods([item], plugins=plugins)  # an unknown or broken plugin name: refused here, in one line
             items[i] = (item, plugins[item].value)
-    timeout = effective_timeout_s(config)
     started: list[MethodWorker] = []
     out: dict = {}
     try:
@@ -374,11 +383,3 @@ def start_methods(spec, config, response) -> dict:
         stop_methods({str(i): w for i, w in enumerate(started)})
         raise
     return out
-
-
-def stop_methods(methods, *, kill_only: bool = False) -> None:
-    """Stop every worker among ``methods`` (``kill_only``: their processes, keeping the shared memory
-    for calls still returning); built-in-process methods are left alone."""
-    for m in list(methods.values()):
-        if isinstance(m, MethodWorker):
-            m.kill() if kill_only else m.close()

@@ -14,6 +14,7 @@ import numpy as np
 from emulator.io.files import REPORT_FILE, RESULTS_FILE, write_results, write_text
 from emulator.report.html import run_contact_sheet, write_report
 from emulator.io.runfolder import read_run_json, read_tables
+from emulator.native import is_native_run, native_record, run_rate, tick_unit
 from emulator.report.figures import legend_outside, log_ticks_at, new_figure, plural, same_as, save
 from emulator.report.words import mode_words, selector_words
 
@@ -72,7 +73,7 @@ def summarise_run(run_dir: str | os.PathLike, info: dict | None = None, tables: 
         }
     from emulator.stats import compare_methods, statistic_interval
 
-    unit = "frames" if info.get("rate") == "native" else "cycles"
+    unit = tick_unit(info)
     intervals = {
         "definition": f"per method over the run's {unit}, circular block bootstrap (blocks of n^(1/3) consecutive "
                       f"{unit}), 95 %",
@@ -95,11 +96,11 @@ def summarise_run(run_dir: str | os.PathLike, info: dict | None = None, tables: 
         "range_ms": info.get("range_ms"),
         "methods": methods,
         "timing": info.get("timing"),
-        "rate": info.get("rate") or "cycle",
+        "rate": run_rate(info),
         **({"shared_memory": info["shared_memory"]} if info.get("shared_memory") else {}),
-        **({"gyro_note": info["native"]["gyro_note"]} if (info.get("native") or {}).get("gyro_note") else {}),
-        **({"latency_frames": info.get("latency_frames"), "n_frames": (info.get("native") or {}).get("n_frames")}
-           if info.get("rate") == "native" else {}),
+        **({"gyro_note": native_record(info)["gyro_note"]} if native_record(info).get("gyro_note") else {}),
+        **({"latency_frames": info.get("latency_frames"), "n_frames": native_record(info).get("n_frames")}
+           if is_native_run(info) else {}),
     }
     flags = run_flags(info, tables)
     if flags is not None:  # only where something is flagged: other runs' results stay as they were
@@ -240,9 +241,9 @@ def _fmt(v, spec=".3g"):
 
 def _rate_lines(info: dict, summary: dict) -> list[str]:
     """The report's words on the rate; at native rate, how often each source offset served."""
-    if summary.get("rate") != "native":
+    if not is_native_run(summary):
         return []
-    nat = info.get("native") or {}
+    nat = native_record(info)
     moved = {"flow": "moved to its instant by the gyro and the optical flow",
              "flow-sharp": f"moved to its instant by the gyro and the optical flow where that moves it "
                            f"{nat.get('sharp_motion_px', 1.0):g} px or more"}.get(nat.get("warp_mode"),
@@ -280,7 +281,7 @@ def _fixed_note(info: dict, summary: dict, tables: dict | None) -> list[str]:
         n += 1  # the reference code's counter test adjusts on N + 1 calls
     words = (f"`fixed` runs classical-50 for its first {n if n is not None else 'few'} frames and then "
              "freezes its exposure")
-    if summary.get("rate") == "native":
+    if is_native_run(summary):
         words += " (with proposals in flight it adjusts only on a frame taken at its previous adjustment)"
     if tables is None or "classical-50" not in tables or "fixed" not in tables:
         return ["", words + "."]
@@ -307,8 +308,8 @@ def _trending_note(summary: dict, unit: str) -> list[str]:
 
 def run_markdown(info: dict, summary: dict, tables: dict | None = None) -> str:
     """The markdown report of a run (``tables``: the per-method tables, for the note on ``fixed``)."""
-    native = summary.get("rate") == "native"
-    unit = "frames" if native else "cycles"
+    native = is_native_run(summary)
+    unit = tick_unit(summary)
     flags = summary.get("flags")
     flagged = ""
     if flags is not None:
@@ -322,13 +323,13 @@ def run_markdown(info: dict, summary: dict, tables: dict | None = None) -> str:
         "",
         f"- sequence: `{info.get('sequence')}`",
         f"- status: {info.get('status')}, cycles {info.get('cycles_done')}/{info.get('n_cycles')}{flagged}"
-        if summary.get("rate") != "native" else
+        if not native else
         f"- status: {info.get('status')}, frames {info.get('cycles_done')}/{summary.get('n_frames')} of "
         f"{info.get('n_cycles')} recorder cycles{flagged}",
         *_rate_lines(info, summary),
         f"- methods: {mode_words(info.get('mode'))} (`--mode {info.get('mode')}`)",
         f"- brackets chosen by {selector_words(info.get('selector'))} (`--selector {info.get('selector')}`; the left "
-        "camera's saturation decides for both)" if summary.get("rate") != "native" else
+        "camera's saturation decides for both)" if not native else
         "- source frames chosen by the native selector (upward ratio against time offset and clipping; the left "
         "camera decides for both)",
         f"- initial exposure {info.get('initial_ms')} ms, clamp {info.get('range_ms')} ms, response `{info.get('response')}`",

@@ -13,15 +13,15 @@ from scenes.errors import SceneError
 from scenes.geometry import merge, prisms, quad, scatter_points
 from scenes.lighting import daylight_rgb
 from scenes.library.parts import (
-    _CANOPY,
-    _TEXTURES,
-    _TREES,
-    _conifer_stand,
-    _daylight,
-    _ground,
-    _require,
-    _rng,
-    _shapes,
+    STREAM_CANOPY,
+    STREAM_TEXTURES,
+    STREAM_TREES,
+    conifer_stand,
+    ground_mesh,
+    named_shapes,
+    require_param,
+    stream_rng,
+    sun_and_sky,
 )
 
 __all__ = ["forest_edge"]
@@ -33,17 +33,17 @@ __all__ = ["forest_edge"]
 
 def _describe_forest_edge(seed: int, p: dict) -> SceneDescription:
     name = "forest_edge"
-    sun, sky, ref = _daylight(name, p)
-    _require(name, p, "exit_x_m", 1.0, 500.0)
-    _require(name, p, "tunnel_length_m", 5.0, 500.0)
-    _require(name, p, "roof_gap_fraction", 0.0, 0.5)
-    _require(name, p, "tunnel_half_width_m", 1.0, 20.0)
-    _require(name, p, "canopy_height_m", 2.5, 30.0)
-    _require(name, p, "canopy_transmittance", 0.0, 0.2)
+    sun, sky, ref = sun_and_sky(name, p)
+    require_param(name, p, "exit_x_m", 1.0, 500.0)
+    require_param(name, p, "tunnel_length_m", 5.0, 500.0)
+    require_param(name, p, "roof_gap_fraction", 0.0, 0.5)
+    require_param(name, p, "tunnel_half_width_m", 1.0, 20.0)
+    require_param(name, p, "canopy_height_m", 2.5, 30.0)
+    require_param(name, p, "canopy_transmittance", 0.0, 0.2)
     px = p["texture_px"]
     if px < 64 or px > 4096:
         raise SceneError(f"{name}: parameter texture_px must be in [64, 4096], got {px}")
-    rt = _rng(seed, _TEXTURES)
+    rt = stream_rng(seed, STREAM_TEXTURES)
     materials = {
         "snow": Material("diffuse", tx.snow_texture(rt, px)),
         "litter": Material("diffuse", tx.albedo_map(tx.fractal_noise((px // 2, px // 2), rt, beta=1.3),
@@ -54,8 +54,8 @@ def _describe_forest_edge(seed: int, p: dict) -> SceneDescription:
     ex, length, w, h = p["exit_x_m"], p["tunnel_length_m"], p["tunnel_half_width_m"], p["canopy_height_m"]
     x_back = ex - length
     # floor: needle litter inside the stand, snow outside
-    litter = _ground(60.0, 6.0, x0=x_back - 5.0, x1=ex)
-    snow = _ground(300.0, 12.0, x0=ex, x1=ex + 300.0)
+    litter = ground_mesh(60.0, 6.0, x0=x_back - 5.0, x1=ex)
+    snow = ground_mesh(300.0, 12.0, x0=ex, x1=ex + 300.0)
     # dense canopy: side walls, back wall, the forest edge face around the opening
     foliage = [
         quad((x_back, -w, 0.0), (length, 0.0, 0.0), (0.0, 0.0, h), texture_scale_m=1.5),  # right wall (y = -w)
@@ -67,7 +67,7 @@ def _describe_forest_edge(seed: int, p: dict) -> SceneDescription:
     ]
     # roof of 1 m cells, a few left open (sun flecks); the closed ones glow faintly downwards with
     # the daylight the dense canopy lets through (transmittance x open-sky irradiance, diffused)
-    rr = _rng(seed, _CANOPY)
+    rr = stream_rng(seed, STREAM_CANOPY)
     cell = 1.0
     nx, ny = int(math.ceil(length / cell)), int(math.ceil((2 * w + 2.0) / cell))
     open_cells = rr.random((nx, ny)) < p["roof_gap_fraction"]
@@ -82,7 +82,7 @@ def _describe_forest_edge(seed: int, p: dict) -> SceneDescription:
     leak = p["canopy_transmittance"] * open_sky / math.pi
     leak_rgb = tuple(float(v) * leak for v in daylight_rgb(p["sun_cct_k"]))
     # trunks lining the tunnel, and a distant tree line beyond the snowfield
-    rt2 = _rng(seed, _TREES)
+    rt2 = stream_rng(seed, STREAM_TREES)
     trunks = []
     for side in (-1.0, 1.0):
         xy = scatter_points(rt2, x_range=(x_back + 1.0, ex - 0.5), y_range=(1.4, w - 0.3), density_per_m2=0.25,
@@ -91,11 +91,11 @@ def _describe_forest_edge(seed: int, p: dict) -> SceneDescription:
             trunks.append(prisms(np.stack([xy[:, 0], side * xy[:, 1], np.full(len(xy), -0.1)], -1),
                                  rt2.uniform(0.08, 0.22, len(xy)), h + 0.2, tapers=0.8,
                                  phases=rt2.uniform(0, 2 * np.pi, len(xy)), texture_scale_m=1.0))
-    far_trunks, far_crowns, _ = _conifer_stand(rt2, density_per_ha=300.0, x_range=(ex + 60.0, ex + 110.0),
-                                               y_range=(-80.0, 80.0), trail_half_width_m=0.0,
-                                               keep=lambda xy: np.ones(len(xy), bool))
-    shapes = _shapes(litter=litter, snow=snow, needles=merge(foliage + ([far_crowns] if far_crowns else [])),
-                     bark=merge(trunks + ([far_trunks] if far_trunks else [])))
+    far_trunks, far_crowns, _ = conifer_stand(rt2, density_per_ha=300.0, x_range=(ex + 60.0, ex + 110.0),
+                                              y_range=(-80.0, 80.0), trail_half_width_m=0.0,
+                                              keep=lambda xy: np.ones(len(xy), bool))
+    shapes = named_shapes(litter=litter, snow=snow, needles=merge(foliage + ([far_crowns] if far_crowns else [])),
+                          bark=merge(trunks + ([far_trunks] if far_trunks else [])))
     if roof:
         shapes.append(Shape("mesh", material="needles", mesh=merge(roof), radiance=leak_rgb if leak > 0 else None))
     return SceneDescription(materials=materials, shapes=tuple(shapes), sun=sun, sky=sky,

@@ -10,17 +10,17 @@ from scenes.description import Material, SceneDescription
 from scenes.errors import SceneError
 from scenes.geometry import icosphere, merge, prisms, scatter_points
 from scenes.library.parts import (
-    _CANOPY,
-    _ROCKS,
-    _TEXTURES,
-    _TREES,
-    _backdrop,
-    _daylight,
-    _ground,
-    _require,
-    _rng,
-    _rocks,
-    _shapes,
+    STREAM_CANOPY,
+    STREAM_ROCKS,
+    STREAM_TEXTURES,
+    STREAM_TREES,
+    backdrop_mesh,
+    ground_mesh,
+    named_shapes,
+    require_param,
+    rock_meshes,
+    stream_rng,
+    sun_and_sky,
 )
 
 __all__ = ["forest_summer"]
@@ -32,13 +32,13 @@ __all__ = ["forest_summer"]
 
 def _describe_forest_summer(seed: int, p: dict) -> SceneDescription:
     name = "forest_summer"
-    sun, sky, ref = _daylight(name, p)
-    _require(name, p, "canopy_density_per_ha", 0.0, 3000.0)
-    _require(name, p, "trail_half_width_m", 0.5, 20.0)
+    sun, sky, ref = sun_and_sky(name, p)
+    require_param(name, p, "canopy_density_per_ha", 0.0, 3000.0)
+    require_param(name, p, "trail_half_width_m", 0.5, 20.0)
     px = p["texture_px"]
     if px < 64 or px > 4096:
         raise SceneError(f"{name}: parameter texture_px must be in [64, 4096], got {px}")
-    rt = _rng(seed, _TEXTURES)
+    rt = stream_rng(seed, STREAM_TEXTURES)
     materials = {
         "litter": Material("diffuse", tx.litter_texture(rt, px)),
         "bark": Material("diffuse", tx.bark_texture(rt, low=0.05, high=0.25)),
@@ -46,7 +46,7 @@ def _describe_forest_summer(seed: int, p: dict) -> SceneDescription:
         "shrub": Material("diffuse", tx.foliage_texture(rt, low=0.03, high=0.12, colour=(0.45, 1.0, 0.3))),
         "rock": Material("diffuse", tx.rock_texture(rt)),
     }
-    rng = _rng(seed, _TREES)
+    rng = stream_rng(seed, STREAM_TREES)
     half = p["trail_half_width_m"]
     pts = scatter_points(rng, x_range=(-20.0, 105.0), y_range=(-35.0, 35.0),
                          density_per_m2=p["canopy_density_per_ha"] / 1e4, min_distance_m=3.0,
@@ -63,22 +63,22 @@ def _describe_forest_summer(seed: int, p: dict) -> SceneDescription:
             a = rng.uniform(0, 2 * np.pi)
             clumps.append(icosphere((x + spread * np.cos(a), y + spread * np.sin(a), cz), r, subdivisions=1,
                                     roughness=0.3, rng=rng, squash=0.7, texture_scale_m=1.0))
-    rs = _rng(seed, _CANOPY)
+    rs = stream_rng(seed, STREAM_CANOPY)
     for x, y in scatter_points(rs, x_range=(-10.0, 85.0), y_range=(-15.0, 15.0), density_per_m2=0.02,
                                min_distance_m=1.5, keep=lambda xy: np.abs(xy[:, 1]) > half + 0.6):
         r = rs.uniform(0.3, 0.8)
         shrubs.append(icosphere((x, y, 0.6 * r), r, subdivisions=1, roughness=0.35, rng=rs, squash=0.8,
                                 texture_scale_m=0.7))
-    rocks = _rocks(_rng(seed, _ROCKS), 10, (-5.0, 80.0), (-10.0, 10.0), half)
-    backdrop = _backdrop((-25.0, 110.0), (-40.0, 40.0), 10.0)
+    rocks = rock_meshes(stream_rng(seed, STREAM_ROCKS), 10, (-5.0, 80.0), (-10.0, 10.0), half)
+    backdrop = backdrop_mesh((-25.0, 110.0), (-40.0, 40.0), 10.0)
     trunks = None
     if trunk_rows:
         t = np.array(trunk_rows)
         trunks = prisms(np.stack([t[:, 0], t[:, 1], np.full(len(t), -0.1)], -1), t[:, 2], t[:, 3], tapers=0.5,
                         phases=t[:, 4], texture_scale_m=1.0)
-    shapes = _shapes(litter=_ground(300.0, 10.0), bark=trunks,
-                     leaves=merge(clumps + [backdrop]), shrub=merge(shrubs) if shrubs else None,
-                     rock=rocks)
+    shapes = named_shapes(litter=ground_mesh(300.0, 10.0), bark=trunks,
+                          leaves=merge(clumps + [backdrop]), shrub=merge(shrubs) if shrubs else None,
+                          rock=rocks)
     return SceneDescription(materials=materials, shapes=tuple(shapes), sun=sun, sky=sky,
                             max_depth=p["max_depth"], reference_radiance=ref)
 

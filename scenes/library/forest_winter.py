@@ -8,20 +8,20 @@ from scenes.description import Material, SceneDescription
 from scenes.errors import SceneError
 from scenes.library.parts import (
     NEEDLE_ALBEDO,
-    _DETAIL,
-    _ROCKS,
-    _TEXTURES,
-    _TREES,
-    _bark_material,
-    _conifer_stand,
-    _daylight,
-    _ground,
-    _needle_material,
-    _require,
-    _rng,
-    _rocks,
-    _shapes,
-    _snow_material,
+    STREAM_DETAIL,
+    STREAM_ROCKS,
+    STREAM_TEXTURES,
+    STREAM_TREES,
+    bark_material,
+    conifer_stand,
+    ground_mesh,
+    named_shapes,
+    needle_material,
+    require_param,
+    rock_meshes,
+    snow_material,
+    stream_rng,
+    sun_and_sky,
 )
 
 __all__ = ["forest_winter"]
@@ -33,25 +33,25 @@ __all__ = ["forest_winter"]
 
 def _describe_forest_winter(seed: int, p: dict) -> SceneDescription:
     name = "forest_winter"
-    sun, sky, ref = _daylight(name, p)
-    _require(name, p, "tree_density_per_ha", 0.0, 3000.0)
-    _require(name, p, "trail_half_width_m", 0.5, 20.0)
+    sun, sky, ref = sun_and_sky(name, p)
+    require_param(name, p, "tree_density_per_ha", 0.0, 3000.0)
+    require_param(name, p, "trail_half_width_m", 0.5, 20.0)
     px = p["texture_px"]
     if px < 64 or px > 4096:
         raise SceneError(f"{name}: parameter texture_px must be in [64, 4096], got {px}")
-    rt = _rng(seed, _TEXTURES)
-    rd = _rng(seed, _DETAIL)
+    rt = stream_rng(seed, STREAM_TEXTURES)
+    rd = stream_rng(seed, STREAM_DETAIL)
     materials = {
-        "snow": _snow_material(tx.snow_texture(rt, px), rd, p["detail_px"]),
-        "bark": _bark_material(tx.bark_texture(rt), rd),
-        "needles": _needle_material(tx.foliage_texture(rt, low=NEEDLE_ALBEDO[0], high=NEEDLE_ALBEDO[1]), rd),
+        "snow": snow_material(tx.snow_texture(rt, px), rd, p["detail_px"]),
+        "bark": bark_material(tx.bark_texture(rt), rd),
+        "needles": needle_material(tx.foliage_texture(rt, low=NEEDLE_ALBEDO[0], high=NEEDLE_ALBEDO[1]), rd),
         "rock": Material("diffuse", tx.rock_texture(rt)),
     }
-    trunks, crowns, _ = _conifer_stand(_rng(seed, _TREES), density_per_ha=p["tree_density_per_ha"],
-                                       x_range=(-15.0, 90.0), y_range=(-35.0, 35.0),
-                                       trail_half_width_m=p["trail_half_width_m"])
-    rocks = _rocks(_rng(seed, _ROCKS), 12, (-5.0, 80.0), (-12.0, 12.0), p["trail_half_width_m"])
-    shapes = _shapes(snow=_ground(300.0, 12.0), bark=trunks, needles=crowns, rock=rocks)
+    trunks, crowns, _ = conifer_stand(stream_rng(seed, STREAM_TREES), density_per_ha=p["tree_density_per_ha"],
+                                      x_range=(-15.0, 90.0), y_range=(-35.0, 35.0),
+                                      trail_half_width_m=p["trail_half_width_m"])
+    rocks = rock_meshes(stream_rng(seed, STREAM_ROCKS), 12, (-5.0, 80.0), (-12.0, 12.0), p["trail_half_width_m"])
+    shapes = named_shapes(snow=ground_mesh(300.0, 12.0), bark=trunks, needles=crowns, rock=rocks)
     return SceneDescription(materials=materials, shapes=tuple(shapes), sun=sun, sky=sky,
                             max_depth=p["max_depth"], reference_radiance=ref)
 

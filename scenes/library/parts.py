@@ -14,11 +14,16 @@ from scenes.geometry import MeshData, icosphere, merge, prisms, quad, scatter_po
 from scenes.geometry import whorls as branch_whorls
 from scenes.lighting import SUN_ANGULAR_DIAMETER_DEG, daylight_rgb, sky_envmap, sun_direction
 
-__all__ = ["SNOW_DETAIL", "SNOW_DETAIL_RANGE", "SNOW_RELIEF", "BARK_DETAIL_RANGE", "NEEDLE_DETAIL", "NEEDLE_DETAIL_RANGE", "NEEDLE_ALBEDO"]
+__all__ = [
+    "SNOW_DETAIL", "SNOW_DETAIL_RANGE", "SNOW_RELIEF", "BARK_DETAIL_RANGE", "NEEDLE_DETAIL", "NEEDLE_DETAIL_RANGE",
+    "NEEDLE_ALBEDO", "STREAM_TEXTURES", "STREAM_TREES", "STREAM_ROCKS", "STREAM_CANOPY", "STREAM_DETAIL",
+    "stream_rng", "require_param", "sun_and_sky", "snow_material", "bark_material", "needle_material", "ground_mesh",
+    "conifer_stand", "rock_meshes", "backdrop_mesh", "named_shapes",
+]
 
 # Purposes of the independent random streams of a scene: changing the tree
 # density must not change the snow texture, and so on.
-_TEXTURES, _TREES, _ROCKS, _CANOPY, _DETAIL = 1, 2, 3, 4, 5
+STREAM_TEXTURES, STREAM_TREES, STREAM_ROCKS, STREAM_CANOPY, STREAM_DETAIL = 1, 2, 3, 4, 5
 
 #: Ground textures cover this many metres per repeat; their detail layers 3 m.
 _GROUND_TILE_M, _DETAIL_TILE_M = 12.0, 3.0
@@ -37,7 +42,7 @@ NEEDLE_DETAIL_RANGE = (0.03, 4.0)
 #: Luminance albedo range of the spruce foliage (before the needle-clump detail).
 NEEDLE_ALBEDO = (0.03, 0.13)
 
-def _snow_material(albedo: np.ndarray, rng: np.random.Generator, detail_px: int) -> Material:
+def snow_material(albedo: np.ndarray, rng: np.random.Generator, detail_px: int) -> Material:
     """Snow: metre-scale albedo, centimetre-scale litter and grain, bump-mapped crust."""
     if detail_px < 64 or detail_px > 4096:
         raise SceneError(f"detail_px must be in [64, 4096], got {detail_px}")
@@ -48,34 +53,36 @@ def _snow_material(albedo: np.ndarray, rng: np.random.Generator, detail_px: int)
                     bump_amplitude=float(SNOW_RELIEF["amplitude_m"]))
 
 
-def _bark_material(albedo: np.ndarray, rng: np.random.Generator) -> Material:
+def bark_material(albedo: np.ndarray, rng: np.random.Generator) -> Material:
     """Bark (1 m texture repeats): plates and cracks."""
     return Material("diffuse", albedo, detail=tx.bark_detail(rng), detail_repeat=2.0, detail_range=BARK_DETAIL_RANGE)
 
 
-def _needle_material(albedo: np.ndarray, rng: np.random.Generator) -> Material:
+def needle_material(albedo: np.ndarray, rng: np.random.Generator) -> Material:
     """Spruce foliage (1 m texture repeats): needle clumps over 2 m tiles, dark gaps."""
     return Material("diffuse", albedo, detail=tx.needle_clumps(rng, 512, tile_m=2.0, **NEEDLE_DETAIL),
                     detail_repeat=0.5, detail_range=NEEDLE_DETAIL_RANGE)
 
 
-def _rng(seed: int, purpose: int) -> np.random.Generator:
+def stream_rng(seed: int, purpose: int) -> np.random.Generator:
+    """The scene's independent random stream for one purpose (a ``STREAM_*`` constant)."""
     return np.random.default_rng([int(seed), purpose])
 
 
-def _require(scene: str, p: dict, key: str, lo: float, hi: float) -> float:
+def require_param(scene: str, p: dict, key: str, lo: float, hi: float) -> float:
+    """``p[key]``, or a :class:`SceneError` naming the scene and parameter when it is outside [lo, hi]."""
     v = p[key]
     if not lo <= v <= hi:
         raise SceneError(f"{scene}: parameter {key} must be in [{lo}, {hi}], got {v!r}")
     return v
 
 
-def _daylight(scene: str, p: dict, *, disk_visible: bool = False) -> tuple[Sun, np.ndarray, float]:
-    _require(scene, p, "sun_elevation_deg", 0.5, 90.0)
-    _require(scene, p, "sun_irradiance_w_m2", 1e-3, 1e5)
-    _require(scene, p, "sky_fraction", 0.0, 1.0)
-    _require(scene, p, "sun_cct_k", 4000.0, 25000.0)
-    _require(scene, p, "sky_cct_k", 4000.0, 25000.0)
+def sun_and_sky(scene: str, p: dict, *, disk_visible: bool = False) -> tuple[Sun, np.ndarray, float]:
+    require_param(scene, p, "sun_elevation_deg", 0.5, 90.0)
+    require_param(scene, p, "sun_irradiance_w_m2", 1e-3, 1e5)
+    require_param(scene, p, "sky_fraction", 0.0, 1.0)
+    require_param(scene, p, "sun_cct_k", 4000.0, 25000.0)
+    require_param(scene, p, "sky_cct_k", 4000.0, 25000.0)
     direction = sun_direction(p["sun_elevation_deg"], p["sun_azimuth_deg"])
     sun = Sun(
         direction=direction,
@@ -91,7 +98,7 @@ def _daylight(scene: str, p: dict, *, disk_visible: bool = False) -> tuple[Sun, 
     return sun, sky, p["sun_irradiance_w_m2"] / math.pi
 
 
-def _ground(half_size_m: float, texture_scale_m: float, x0: float = 0.0, x1: float | None = None) -> MeshData:
+def ground_mesh(half_size_m: float, texture_scale_m: float, x0: float = 0.0, x1: float | None = None) -> MeshData:
     """Horizontal ground quad (normal +z) over x in [x0 - half, x1 or x0 + half], |y| <= half."""
     xa = x0 - half_size_m if x1 is None else x0
     xb = x0 + half_size_m if x1 is None else x1
@@ -99,8 +106,8 @@ def _ground(half_size_m: float, texture_scale_m: float, x0: float = 0.0, x1: flo
                 texture_scale_m=texture_scale_m)
 
 
-def _conifer_stand(rng: np.random.Generator, *, density_per_ha: float, x_range: tuple, y_range: tuple,
-                   trail_half_width_m: float, height_range: tuple = (8.0, 17.0), whorls: int = 5, keep=None
+def conifer_stand(rng: np.random.Generator, *, density_per_ha: float, x_range: tuple, y_range: tuple,
+                  trail_half_width_m: float, height_range: tuple = (8.0, 17.0), whorls: int = 5, keep=None
                    ) -> tuple[MeshData | None, MeshData | None, np.ndarray]:
     """Spruces scattered around a trail along the x axis; crowns never reach into the trail.
 
@@ -136,8 +143,8 @@ def _conifer_stand(rng: np.random.Generator, *, density_per_ha: float, x_range: 
     return trunks, crowns, pts
 
 
-def _rocks(rng: np.random.Generator, count: int, x_range: tuple, y_range: tuple, trail_half_width_m: float,
-           size_range: tuple = (0.3, 1.0)) -> MeshData | None:
+def rock_meshes(rng: np.random.Generator, count: int, x_range: tuple, y_range: tuple, trail_half_width_m: float,
+                size_range: tuple = (0.3, 1.0)) -> MeshData | None:
     meshes = []
     for _ in range(count):
         x = rng.uniform(*x_range)
@@ -148,7 +155,7 @@ def _rocks(rng: np.random.Generator, count: int, x_range: tuple, y_range: tuple,
     return merge(meshes) if meshes else None
 
 
-def _backdrop(x_range: tuple, y_range: tuple, height_m: float) -> MeshData:
+def backdrop_mesh(x_range: tuple, y_range: tuple, height_m: float) -> MeshData:
     """Four inward-facing walls of foliage closing the horizon around a stand (the forest goes on)."""
     (x0, x1), (y0, y1) = x_range, y_range
     return merge([
@@ -159,5 +166,6 @@ def _backdrop(x_range: tuple, y_range: tuple, height_m: float) -> MeshData:
     ])
 
 
-def _shapes(**named) -> list[Shape]:
+def named_shapes(**named) -> list[Shape]:
+    """One mesh shape per ``material=mesh`` keyword, skipping meshes that are None."""
     return [Shape("mesh", material=mat, mesh=mesh) for mat, mesh in named.items() if mesh is not None]

@@ -12,7 +12,7 @@ from scenes.description import Material, SceneDescription, Shape
 from scenes.errors import SceneError
 from scenes.geometry import box, icosphere, merge, quad
 from scenes.lighting import daylight_rgb
-from scenes.library.parts import _TEXTURES, _require, _rng
+from scenes.library.parts import STREAM_TEXTURES, require_param, stream_rng
 
 __all__ = ["static_lab"]
 
@@ -36,16 +36,16 @@ def _look_at_rect(center, target, size_m: float) -> np.ndarray:
 
 def _describe_static_lab(seed: int, p: dict) -> SceneDescription:
     name = "static_lab"
-    _require(name, p, "light_irradiance_w_m2", 1e-3, 1e5)
-    _require(name, p, "light_cct_k", 4000.0, 25000.0)
-    _require(name, p, "albedo_min", 0.002, 0.5)
-    _require(name, p, "albedo_max", 0.05, 1.0)
+    require_param(name, p, "light_irradiance_w_m2", 1e-3, 1e5)
+    require_param(name, p, "light_cct_k", 4000.0, 25000.0)
+    require_param(name, p, "albedo_min", 0.002, 0.5)
+    require_param(name, p, "albedo_max", 0.05, 1.0)
     if p["albedo_min"] >= p["albedo_max"]:
         raise SceneError(f"{name}: albedo_min must be below albedo_max")
     rows, cols = p["chart_rows"], p["chart_cols"]
     if not (1 <= rows <= 16 and 1 <= cols <= 16):
         raise SceneError(f"{name}: chart_rows and chart_cols must be in 1..16, got {rows}, {cols}")
-    rt = _rng(seed, _TEXTURES)
+    rt = stream_rng(seed, STREAM_TEXTURES)
     n = rows * cols
     ramp = p["albedo_max"] * (p["albedo_min"] / p["albedo_max"]) ** (np.arange(n) / max(n - 1, 1))
     # a fixed scrambled layout (stride coprime with n): every region of the chart, the

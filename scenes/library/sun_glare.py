@@ -10,14 +10,14 @@ from scenes.description import Material, SceneDescription
 from scenes.errors import SceneError
 from scenes.geometry import quad
 from scenes.library.parts import (
-    _TEXTURES,
-    _TREES,
-    _conifer_stand,
-    _daylight,
-    _ground,
-    _require,
-    _rng,
-    _shapes,
+    STREAM_TEXTURES,
+    STREAM_TREES,
+    conifer_stand,
+    ground_mesh,
+    named_shapes,
+    require_param,
+    stream_rng,
+    sun_and_sky,
 )
 
 __all__ = ["sun_glare"]
@@ -29,13 +29,13 @@ __all__ = ["sun_glare"]
 
 def _describe_sun_glare(seed: int, p: dict) -> SceneDescription:
     name = "sun_glare"
-    sun, sky, ref = _daylight(name, p, disk_visible=True)
-    _require(name, p, "tree_density_per_ha", 0.0, 3000.0)
-    _require(name, p, "ice_roughness", 0.005, 1.0)
+    sun, sky, ref = sun_and_sky(name, p, disk_visible=True)
+    require_param(name, p, "tree_density_per_ha", 0.0, 3000.0)
+    require_param(name, p, "ice_roughness", 0.005, 1.0)
     px = p["texture_px"]
     if px < 64 or px > 4096:
         raise SceneError(f"{name}: parameter texture_px must be in [64, 4096], got {px}")
-    rt = _rng(seed, _TEXTURES)
+    rt = stream_rng(seed, STREAM_TEXTURES)
     ice_noise = tx.fractal_noise((256, 256), rt, beta=2.0)
     materials = {
         "snow": Material("diffuse", tx.snow_texture(rt, px)),
@@ -44,14 +44,14 @@ def _describe_sun_glare(seed: int, p: dict) -> SceneDescription:
         "ice": Material("roughplastic", tx.albedo_map(ice_noise, 0.04, 0.2, (0.85, 0.95, 1.0)),
                         roughness=p["ice_roughness"], ior=1.31),
     }
-    trunks, crowns, _ = _conifer_stand(_rng(seed, _TREES), density_per_ha=p["tree_density_per_ha"],
-                                       x_range=(-15.0, 120.0), y_range=(-35.0, 35.0), trail_half_width_m=1.5,
-                                       keep=lambda xy: (np.abs(xy[:, 1]) > 1.9)
-                                       & ~((xy[:, 0] > p["ice_start_m"] - 2) & (xy[:, 0] < p["ice_start_m"] + 27)
+    trunks, crowns, _ = conifer_stand(stream_rng(seed, STREAM_TREES), density_per_ha=p["tree_density_per_ha"],
+                                      x_range=(-15.0, 120.0), y_range=(-35.0, 35.0), trail_half_width_m=1.5,
+                                      keep=lambda xy: (np.abs(xy[:, 1]) > 1.9)
+                                      & ~((xy[:, 0] > p["ice_start_m"] - 2) & (xy[:, 0] < p["ice_start_m"] + 27)
                                            & (np.abs(xy[:, 1]) < 10)))
     x0 = p["ice_start_m"]
     pond = quad((x0, -7.0, 0.005), (25.0, 0.0, 0.0), (0.0, 14.0, 0.0), texture_scale_m=6.0)
-    shapes = _shapes(snow=_ground(300.0, 12.0), bark=trunks, needles=crowns, ice=pond)
+    shapes = named_shapes(snow=ground_mesh(300.0, 12.0), bark=trunks, needles=crowns, ice=pond)
     return SceneDescription(materials=materials, shapes=tuple(shapes), sun=sun, sky=sky,
                             max_depth=p["max_depth"], reference_radiance=ref)
 

@@ -10,21 +10,10 @@ import math
 
 import numpy as np
 
+from emulator.cells import format_number
 from validation.ae_study.config import GRADIENT_METHODS, PAPER_NAMES, SIMILAR_RPE_RATIO
 
-__all__ = ["evaluate_findings", "findings_with_evidence", "findings_paragraph", "fmt_cell"]
-
-
-def fmt_cell(v, spec: str = ".3g") -> str:
-    """A number by ``spec``, a bool as yes/no, None as n/a (the study's tables and sentences)."""
-    if v is None:
-        return "n/a"
-    if isinstance(v, bool):
-        return "yes" if v else "no"
-    try:
-        return format(float(v), spec)
-    except (TypeError, ValueError):
-        return str(v)
+__all__ = ["evaluate_findings", "findings_with_evidence", "findings_paragraph"]
 
 
 def _values(overall: dict, key, methods=None) -> dict[str, float]:
@@ -108,7 +97,7 @@ def _undecided_if_equal(finding: dict, values: dict[str, float]) -> dict:
 
 
 def _named(values: dict[str, float], spec: str = ".3g") -> str:
-    return ", ".join(f"{PAPER_NAMES.get(k, k)} {fmt_cell(v, spec)}" for k, v in sorted(values.items(), key=lambda kv: kv[1]))
+    return ", ".join(f"{PAPER_NAMES.get(k, k)} {format_number(v, spec)}" for k, v in sorted(values.items(), key=lambda kv: kv[1]))
 
 
 def _tracking_findings(overall: dict) -> list[dict]:
@@ -129,9 +118,9 @@ def _tracking_findings(overall: dict) -> list[dict]:
         others = [v for k, v in uni.items() if k not in pair]
         mean_others = float(np.mean(others))
         holds = all(uni[p] < mean_others for p in pair)
-        detail = (f"median uniformity {PAPER_NAMES['classical-70']} {fmt_cell(100 * uni['classical-70'])} %, "
-                  f"{PAPER_NAMES['kim']} {fmt_cell(100 * uni['kim'])} %, mean of the other methods "
-                  f"{fmt_cell(100 * mean_others)} %")
+        detail = (f"median uniformity {PAPER_NAMES['classical-70']} {format_number(100 * uni['classical-70'])} %, "
+                  f"{PAPER_NAMES['kim']} {format_number(100 * uni['kim'])} %, mean of the other methods "
+                  f"{format_number(100 * mean_others)} %")
     else:
         holds, detail = None, "uniformity of M_70% or M_Kim missing"
     out.append(_undecided_if_equal(_finding(
@@ -153,8 +142,8 @@ def _success_findings(overall: dict, lo_tau: str, hi_tau: str) -> list[dict]:
         if common:
             m_lo, m_hi = float(np.mean([lo[k] for k in common])), float(np.mean([hi[k] for k in common]))
             holds = m_hi < m_lo
-            detail = (f"mean success rate over the methods ({basis}): {fmt_cell(100 * m_lo, '.0f')} % at tau = {lo_tau}, "
-                      f"{fmt_cell(100 * m_hi, '.0f')} % at tau = {hi_tau}")
+            detail = (f"mean success rate over the methods ({basis}): {format_number(100 * m_lo, '.0f')} % at tau = {lo_tau}, "
+                      f"{format_number(100 * m_hi, '.0f')} % at tau = {hi_tau}")
         else:
             holds, detail = None, f"no success rate on {basis}"
         out.append(_finding(
@@ -177,8 +166,8 @@ def _success_findings(overall: dict, lo_tau: str, hi_tau: str) -> list[dict]:
             # each of the three strictly below the mean of the other methods
             holds = all(rate[p] < float(np.mean(rest)) for p in poor)
             detail = (f"at tau = {hi_tau} on {basis}: M_30%, M_70%, M_Kim "
-                      f"{', '.join(fmt_cell(100 * rate[p], '.0f') for p in poor)} %, mean of the others "
-                      f"{fmt_cell(100 * float(np.mean(rest)), '.0f')} %")
+                      f"{', '.join(format_number(100 * rate[p], '.0f') for p in poor)} %, mean of the others "
+                      f"{format_number(100 * float(np.mean(rest)), '.0f')} %")
         else:
             holds, detail = None, f"success rates missing ({basis})"
         out.append(_undecided_if_equal(_finding(
@@ -198,7 +187,7 @@ def _vo_run_failures(overall: dict) -> dict:
         "11 of 55 trajectories failed", (total_failed > 0) if n_runs else None,
         {"failed_runs": failed_runs, "runs": n_runs},
         f"{total_failed} of {n_runs} method runs had at least one failed VO frame "
-        f"({fmt_cell(100 * total_failed / n_runs if n_runs else None, '.0f')} %)")
+        f"({format_number(100 * total_failed / n_runs if n_runs else None, '.0f')} %)")
 
 
 def _vo_rpe_findings(trans: dict[str, float], rot: dict[str, float]) -> list[dict]:
@@ -228,7 +217,7 @@ def _vo_rpe_findings(trans: dict[str, float], rot: dict[str, float]) -> list[dic
                                             "RPE", "0.07 deg/m for both, the lowest", holds, rot, detail), rot))
     if "fixed" in trans and len(trans) > 1:
         holds = trans["fixed"] > min(trans.values())
-        detail = f"M_fixed {fmt_cell(trans['fixed'])} %, best {fmt_cell(min(trans.values()))} %"
+        detail = f"M_fixed {format_number(trans['fixed'])} %, best {format_number(min(trans.values()))} %"
     else:
         holds, detail = None, "translation RPE of M_fixed missing"
     out.append(_finding("fixed_not_best_vo", "M_fixed, the best at feature tracking, is not the best in VO",
@@ -237,8 +226,8 @@ def _vo_rpe_findings(trans: dict[str, float], rot: dict[str, float]) -> list[dic
     rest = [v for k, v in trans.items() if k not in GRADIENT_METHODS]
     if len(grad) == len(GRADIENT_METHODS) and rest:
         holds = float(np.max(grad)) < float(np.mean(rest))  # each of them ahead, not their mean
-        detail = (f"translation RPE of M_Shim and M_Zhang {', '.join(fmt_cell(g) for g in grad)} % (each must lie "
-                  f"below the others' mean), of the other methods mean {fmt_cell(np.mean(rest))} %")
+        detail = (f"translation RPE of M_Shim and M_Zhang {', '.join(format_number(g) for g in grad)} % (each must lie "
+                  f"below the others' mean), of the other methods mean {format_number(np.mean(rest))} %")
     else:
         holds, detail = None, "translation RPE missing"
     out.append(_finding("gradient_ahead_vo", "gradient-based methods (M_Shim, M_Zhang) are ahead in VO (each with "
@@ -264,8 +253,8 @@ def _vo_frame_failures(summary: dict, overall: dict) -> dict:
         left_out = [s for s in per_scene if s not in telling]
         detail = (f"failed VO frames on {', '.join(telling)}"
                   + (f" ({', '.join(left_out)} left out: every method failed on every frame)" if left_out else "")
-                  + f": M_Shim {fmt_cell(fails['shim'], '.0f')}, M_Zhang {fmt_cell(fails['zhang'], '.0f')} (mean "
-                  f"{fmt_cell(np.mean(grad_f))}), the other methods mean {fmt_cell(np.mean(rest_f))} "
+                  + f": M_Shim {format_number(fails['shim'], '.0f')}, M_Zhang {format_number(fails['zhang'], '.0f')} (mean "
+                  f"{format_number(np.mean(grad_f))}), the other methods mean {format_number(np.mean(rest_f))} "
                   f"({', '.join(f'{PAPER_NAMES.get(k, k)} {v:.0f}' for k, v in fails.items() if k not in GRADIENT_METHODS)})")
     else:
         holds, detail = None, "no scene where the VO failure counts tell the methods apart"
@@ -280,7 +269,7 @@ def _vo_similar(trans: dict[str, float]) -> dict:
     if len(trans) > 1 and min(trans.values()) > 0:
         spread = max(trans.values()) / min(trans.values())
         holds = spread <= SIMILAR_RPE_RATIO
-        detail = f"largest / smallest translation RPE = {fmt_cell(spread)} (paper 5.75 / 4.21 = 1.37)"
+        detail = f"largest / smallest translation RPE = {format_number(spread)} (paper 5.75 / 4.21 = 1.37)"
     else:
         spread, holds, detail = None, None, "translation RPE missing"
     return _finding("vo_similar", f"all methods perform similarly in VO (largest / smallest translation RPE <= "
@@ -380,8 +369,8 @@ def _verdicts_paragraph(findings: list[dict]) -> str:
     for v in ("holds", "contradicted"):
         if by[v]:
             parts.append(f"{v.capitalize()}: " + "; ".join(
-                f"{f['claim']} (effect {fmt_cell(f['effect'])}, 95 % interval {fmt_cell(f['ci95'][0])}..{fmt_cell(f['ci95'][1])}, "
-                f"adjusted p {fmt_cell(f['p_adjusted'], '.2g')})" for f in by[v]) + ".")
+                f"{f['claim']} (effect {format_number(f['effect'])}, 95 % interval {format_number(f['ci95'][0])}..{format_number(f['ci95'][1])}, "
+                f"adjusted p {format_number(f['p_adjusted'], '.2g')})" for f in by[v]) + ".")
     if by["undetermined"]:
         reasons = sorted({f["verdict_reason"].split(":")[0] for f in by["undetermined"]})
         parts.append("Undetermined (" + "; ".join(reasons) + "): "

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from emulator.cells import format_number
 from emulator.io.files import save_figure
 from emulator.metrics.features import GRID_CELLS
 from emulator.report.verdicts import (
@@ -18,7 +19,6 @@ from emulator.report.verdicts import (
     vo_failure_verdict,
 )
 from validation.ae_study.config import PAPER, PAPER_NAMES, VO_CONFIGURATION_NOTE
-from validation.ae_study.findings import fmt_cell
 
 __all__ = ["report_markdown", "plot_summary", "study_verdicts", "WALK_COMPARISONS", "method_intervals",
            "method_intervals_markdown"]
@@ -109,11 +109,11 @@ def _scene_section(scene: str, rows: dict, lo: str, hi: str, results: dict) -> l
         dagger = " †" if v.get("rpe_on_failed_run") else ""
         seg = e["segment_success"]
         lines.append(
-            f"| {PAPER_NAMES.get(name, name)} | {fmt_cell(e['median_exposure_ms'])} | "
-            f"{fmt_cell(None if e['median_uniformity'] is None else 100 * e['median_uniformity'], '.1f')}"
-            f"{_paper_cell('median_uniformity_pct', name)} | {fmt_cell(e['median_matches'], '.0f')}"
-            f"{_paper_cell('median_matches', name)} | {fmt_cell(e['sequence_success'][lo])} | "
-            f"{fmt_cell(e['sequence_success'][hi])} | {seg[lo]['succeeded']}/{seg[lo]['segments']} | "
+            f"| {PAPER_NAMES.get(name, name)} | {format_number(e['median_exposure_ms'])} | "
+            f"{format_number(None if e['median_uniformity'] is None else 100 * e['median_uniformity'], '.1f')}"
+            f"{_paper_cell('median_uniformity_pct', name)} | {format_number(e['median_matches'], '.0f')}"
+            f"{_paper_cell('median_matches', name)} | {format_number(e['sequence_success'][lo])} | "
+            f"{format_number(e['sequence_success'][hi])} | {seg[lo]['succeeded']}/{seg[lo]['segments']} | "
             f"{seg[hi]['succeeded']}/{seg[hi]['segments']} | "
             f"{v.get('n_failed_frames', 'n/a')} of {max(0, v.get('n_frames', 1) - 1)} | "
             f"{_at(v.get('rpe_trans_pct'), v.get('rpe_trans_delta_m'), '.2f')}{dagger} | "
@@ -127,7 +127,7 @@ def _scene_section(scene: str, rows: dict, lo: str, hi: str, results: dict) -> l
     lines += ["", dash_note("n/a") + " † = RPE of a run whose VO failed on some frames.", ""]
     if reasons:
         lines.append("VO failures by reason, all methods: " + ", ".join(f"{k} {n}" for k, n in reasons.most_common())
-                     + (f"; median stereo points per frame {fmt_cell(min(stereo), '.0f')}..{fmt_cell(max(stereo), '.0f')} "
+                     + (f"; median stereo points per frame {format_number(min(stereo), '.0f')}..{format_number(max(stereo), '.0f')} "
                         f"(tracking needs {results.get('vo_parameters', {}).get('min_stereo_points', 20)})"
                         if stereo else "") + ".")
     for reason in missing:
@@ -153,15 +153,15 @@ def _pooled_section(summary: dict, lo: str, hi: str) -> list[str]:
         sr, sg = o["sequence_success_rate"], o["segment_success"]
         lines.append(
             f"| {PAPER_NAMES.get(name, name)} | "
-            f"{fmt_cell(None if o['median_uniformity'] is None else 100 * o['median_uniformity'], '.1f')}"
-            f"{_paper_cell('median_uniformity_pct', name)} | {fmt_cell(o['median_matches'], '.0f')}"
-            f"{_paper_cell('median_matches', name)} | {fmt_cell(None if sr[lo] is None else 100 * sr[lo], '.0f')} | "
-            f"{fmt_cell(None if sr[hi] is None else 100 * sr[hi], '.0f')}{_paper_cell('success_rate_tau100_pct', name)} | "
-            f"{fmt_cell(None if sg[lo]['rate'] is None else 100 * sg[lo]['rate'], '.0f')} | "
-            f"{fmt_cell(None if sg[hi]['rate'] is None else 100 * sg[hi]['rate'], '.0f')} | "
+            f"{format_number(None if o['median_uniformity'] is None else 100 * o['median_uniformity'], '.1f')}"
+            f"{_paper_cell('median_uniformity_pct', name)} | {format_number(o['median_matches'], '.0f')}"
+            f"{_paper_cell('median_matches', name)} | {format_number(None if sr[lo] is None else 100 * sr[lo], '.0f')} | "
+            f"{format_number(None if sr[hi] is None else 100 * sr[hi], '.0f')}{_paper_cell('success_rate_tau100_pct', name)} | "
+            f"{format_number(None if sg[lo]['rate'] is None else 100 * sg[lo]['rate'], '.0f')} | "
+            f"{format_number(None if sg[hi]['rate'] is None else 100 * sg[hi]['rate'], '.0f')} | "
             f"{o['vo_failed_runs']} of {o['n_sequences']} | {o['vo_failed_frames']} | "
-            f"{fmt_cell(o['rpe_trans_pct_mean_over_scenes'], '.2f')}{_paper_cell('rpe_trans_pct', name)} | "
-            f"{fmt_cell(o['rpe_rot_deg_per_m_mean_over_scenes'], '.3f')}{_paper_cell('rpe_rot_deg_per_m', name)} |")
+            f"{format_number(o['rpe_trans_pct_mean_over_scenes'], '.2f')}{_paper_cell('rpe_trans_pct', name)} | "
+            f"{format_number(o['rpe_rot_deg_per_m_mean_over_scenes'], '.3f')}{_paper_cell('rpe_rot_deg_per_m', name)} |")
     lines += ["", dash_note("n/a") + " These are point figures pooled over the scenes; the intervals follow.", ""]
     return lines
 
@@ -175,9 +175,9 @@ def _findings_section(results: dict) -> list[str]:
              "| --- | --- | --- | --- | --- | --- | --- |"]
     for f in results["findings"]:
         ci = f.get("ci95") or [None, None]
-        lines.append(f"| {f['claim']} | {f['paper']} | {f.get('verdict', 'n/a')} | {fmt_cell(f.get('effect'))} "
-                     f"({fmt_cell(ci[0])}..{fmt_cell(ci[1])}) | {fmt_cell(f.get('p_adjusted'), '.2g')} | "
-                     f"{fmt_cell(f['holds']) if f['holds'] is not None else 'undecided'} | {f['detail']} |")
+        lines.append(f"| {f['claim']} | {f['paper']} | {f.get('verdict', 'n/a')} | {format_number(f.get('effect'))} "
+                     f"({format_number(ci[0])}..{format_number(ci[1])}) | {format_number(f.get('p_adjusted'), '.2g')} | "
+                     f"{format_number(f['holds']) if f['holds'] is not None else 'undecided'} | {f['detail']} |")
     lines += ["", "Verdict: each claim tested as the paper states it (a \"best\" or \"poorest\" method against each "
               "other method: every one-sided paired comparison over walks must reject); family: Holm across the "
               "tested claims for holds, and across their opposites for contradicted; undetermined with fewer than 10 "
@@ -225,7 +225,7 @@ def _at(value, delta_m, spec: str) -> str:
     """``value @ delta m`` (the pair length the minimal median was found at), or n/a."""
     if value is None:
         return "n/a"
-    return f"{fmt_cell(value, spec)} @ {delta_m:.2g} m" if delta_m is not None else fmt_cell(value, spec)
+    return f"{format_number(value, spec)} @ {delta_m:.2g} m" if delta_m is not None else format_number(value, spec)
 
 
 def study_verdicts(results: dict) -> list[str]:
@@ -269,9 +269,9 @@ def _tau_note(summary: dict, tau: int) -> str:
     above_q1 = [PAPER_NAMES.get(k, k) for k, v in q1.items() if tau > v]
     above_med = [PAPER_NAMES.get(k, k) for k, v in med.items() if tau > v]
     text = (f"The paper set tau = 100 \"largely under any first quartile\" of its match counts (median 674 for "
-            f"M_fixed at 1920x1200). Here the first quartiles of the matches are {fmt_cell(min(q1.values()), '.0f')}.."
-            f"{fmt_cell(max(q1.values()), '.0f')} and the medians {fmt_cell(min(med.values()), '.0f')}.."
-            f"{fmt_cell(max(med.values()), '.0f')}: tau = {tau} is ")
+            f"M_fixed at 1920x1200). Here the first quartiles of the matches are {format_number(min(q1.values()), '.0f')}.."
+            f"{format_number(max(q1.values()), '.0f')} and the medians {format_number(min(med.values()), '.0f')}.."
+            f"{format_number(max(med.values()), '.0f')}: tau = {tau} is ")
     if not above_q1:
         return text + "under every first quartile, as in the paper."
     return text + (f"above the first quartile of {len(above_q1)} of {len(q1)} methods"

@@ -8,10 +8,11 @@ import time
 from dataclasses import asdict
 from pathlib import Path
 
+from emulator.cells import format_number
 from emulator.io.files import REPORT_FILE, RESULTS_FILE, prepare_output, read_results, write_results, write_text
 from emulator.report.html import run_folder_pages, write_report
 from validation.ae_study.config import CONFIGS, PAPER, VO_CONFIGURATION_NOTE, StudyConfig, StudyError, config_from_dict
-from validation.ae_study.findings import evaluate_findings, findings_paragraph, findings_with_evidence, fmt_cell
+from validation.ae_study.findings import evaluate_findings, findings_paragraph, findings_with_evidence
 from validation.ae_study.report import plot_summary, report_markdown
 from validation.ae_study.summary import summarise
 
@@ -193,8 +194,8 @@ def finish_replicated_study(out, studies: list[dict], command: str | None = None
              "| --- | --- | ---: | --- | ---: | ---: | --- |"]
     for f in findings:
         ci = f.get("ci95") or [None, None]
-        lines.append(f"| {f['id']} | {f['verdict']} | {fmt_cell(f['effect'])} | {fmt_cell(ci[0])}..{fmt_cell(ci[1])} | "
-                     f"{fmt_cell(f['p_adjusted'], '.2g')} | {f.get('n_walks') if f.get('n_walks') is not None else '-'} | "
+        lines.append(f"| {f['id']} | {f['verdict']} | {format_number(f['effect'])} | {format_number(ci[0])}..{format_number(ci[1])} | "
+                     f"{format_number(f['p_adjusted'], '.2g')} | {f.get('n_walks') if f.get('n_walks') is not None else '-'} | "
                      f"{f.get('effect_definition') or f.get('verdict_reason')} |")
     from validation.ae_study.report import method_intervals, method_intervals_markdown
     from validation.verdicts.findings import FAMILY

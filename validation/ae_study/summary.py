@@ -7,6 +7,7 @@ from collections import Counter
 
 import numpy as np
 
+from emulator.cells import median_finite
 from validation.ae_study.config import METHODS, StudyConfig
 
 __all__ = ["segment_success", "summarise"]
@@ -50,11 +51,6 @@ def _minimal_median(rpe: dict | None, key: str) -> tuple[float | None, float | N
     return best if best is not None else (None, None)
 
 
-def _median(values) -> float | None:
-    vals = [float(v) for v in values if v is not None and math.isfinite(float(v))]
-    return float(np.median(vals)) if vals else None
-
-
 def _mean(values) -> float | None:
     vals = [float(v) for v in values if v is not None and math.isfinite(float(v))]
     return float(np.mean(vals)) if vals else None
@@ -70,8 +66,8 @@ def _vo_entry(v: dict) -> dict:
         "n_frames": v["n_frames"],
         "n_failed_frames": len(v["failures"]),
         "failure_reasons": dict(Counter(fl["reason"] for fl in v["failures"])),
-        "median_stereo_points": _median(v["frames"]["n_stereo_points"]),
-        "median_inliers": _median(v["frames"]["n_inliers"][1:]),
+        "median_stereo_points": median_finite(v["frames"]["n_stereo_points"]),
+        "median_inliers": median_finite(v["frames"]["n_inliers"][1:]),
         "rpe_trans_pct": trans,
         "rpe_trans_delta_m": trans_delta,
         "rpe_rot_deg_per_m": rot,
@@ -160,7 +156,7 @@ def summarise(config: StudyConfig, features: dict, vo: dict[str, dict], runs: di
             "quartiles_matches": f.get("quartiles_matches"),
             "min_matches": min((e["min_matches"] for e in entries if e["min_matches"] is not None), default=None),
             "max_matches": max((e["max_matches"] for e in entries if e["max_matches"] is not None), default=None),
-            "median_keypoints": _median(e["median_keypoints"] for e in entries),
+            "median_keypoints": median_finite(e["median_keypoints"] for e in entries),
             "sequence_success_rate": seq_rate,
             "segment_success": seg,
             "vo_failed_frames": sum(x["n_failed_frames"] for x in vos),

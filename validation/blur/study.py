@@ -10,6 +10,7 @@ import numpy as np
 from validation.blur import measure
 from validation.blur.config import BlurConfig, default_real_imu
 from validation.common import Progress, make_camera, provenance
+from emulator.cells import median_finite
 
 __all__ = ["run_study", "summarise"]
 
@@ -20,22 +21,17 @@ ANGULAR_RATE_RATIO_RANGE = (0.85, 1.15)
 HALVING_GOAL = 0.5
 
 
-def _median(rows, key):
-    vals = [r[key] for r in rows if r.get(key) is not None]
-    return float(np.median(vals)) if vals else None
-
-
 def summarise(rows_ref, cost, rates, rows_sharp, cost_median=None) -> dict:
     """The headline figures of results.json from the per-instant rows."""
     ratio = rates.get("ratio")
     return {
-        "reference_error_percent": _median(rows_ref, "error_percent"),
-        "reference_noise_percent": _median(rows_ref, "expected_noise_percent"),
-        "reference_error_over_noise": _median(rows_ref, "error_over_noise"),
-        "reference_no_blur_error_percent": _median(rows_ref, "no_blur_error_percent"),
+        "reference_error_percent": median_finite([r.get("error_percent") for r in rows_ref]),
+        "reference_noise_percent": median_finite([r.get("expected_noise_percent") for r in rows_ref]),
+        "reference_error_over_noise": median_finite([r.get("error_over_noise") for r in rows_ref]),
+        "reference_no_blur_error_percent": median_finite([r.get("no_blur_error_percent") for r in rows_ref]),
         "reference_error_over_noise_by_interpolation": {
-            name: _median([x for row in rows_ref for x in row.get("by_interpolation", [])
-                           if x["interpolation"] == name], "error_over_noise")
+            name: median_finite(x.get("error_over_noise") for row in rows_ref for x in row.get("by_interpolation", [])
+                                if x["interpolation"] == name)
             for name in dict.fromkeys(x["interpolation"] for row in rows_ref for x in row.get("by_interpolation", []))},
         "render_cost_ratio": cost["render_cost_ratio"],
         "render_cost_ratio_median_rate": None if cost_median is None else cost_median["render_cost_ratio"],
@@ -44,8 +40,8 @@ def summarise(rows_ref, cost, rates, rows_sharp, cost_median=None) -> dict:
         "angular_rate_within_goal": (None if ratio is None else
                                      all(ANGULAR_RATE_RATIO_RANGE[0] <= v <= ANGULAR_RATE_RATIO_RANGE[1]
                                          for v in ratio.values())),
-        "sharpness_error_plain_percent": _median(rows_sharp, "plain_error_percent"),
-        "sharpness_error_consistent_percent": _median(rows_sharp, "consistent_error_percent"),
+        "sharpness_error_plain_percent": median_finite([r.get("plain_error_percent") for r in rows_sharp]),
+        "sharpness_error_consistent_percent": median_finite([r.get("consistent_error_percent") for r in rows_sharp]),
         **_halving(rows_sharp),
     }
 

@@ -9,13 +9,9 @@ import numpy as np
 from emulator.io.files import save_figure
 from emulator.report.figures import subplots
 from validation.common import PAPER_MAX_RMSE_PERCENT, PAPER_MEDIAN_RMSE_PERCENT
+from emulator.cells import format_number
 
 __all__ = ["emulation_verdict"]
-
-
-# ------------------------------------------------------------------------------------------ report
-def _fmt(v, digits: int = 3) -> str:
-    return "n/a" if v is None else f"{v:.{digits}f}"
 
 
 # ------------------------------------------------------------------------------------------ emulation
@@ -29,7 +25,7 @@ def emulation_verdict(r: dict, which: str) -> str:
     if ours is None:
         return "cannot be judged: no valid pixel"
     why = (f"static synthetic scenes and the exact camera response leave quantisation and noise only "
-           f"(noiseless max {_fmt(r['noiseless_max_rmse_percent'])} %)")
+           f"(noiseless max {format_number(r['noiseless_max_rmse_percent'], '.3f')} %)")
     if ours <= paper:
         return f"at or below the paper's ({ours / paper:.2g}x), as expected: {why}"
     return (f"above the paper's ({ours / paper:.2g}x), not expected: {why}; the per-scene and hard-case tables "
@@ -169,14 +165,14 @@ def _emulation_md(r: dict, figures: list[str]) -> str:
     main = r["main_camera"]
     L = ["# Emulation accuracy on synthetic ground truth (paper section V-B, Fig. 3)", ""]
     L += ["| figure | this study (% of the DN range) | paper (%) | verdict |", "| --- | --- | --- | --- |",
-          f"| median RMSE, {r['selector']}, noise subtracted, valid pixels | {_fmt(r['median_rmse_percent'])} | "
+          f"| median RMSE, {r['selector']}, noise subtracted, valid pixels | {format_number(r['median_rmse_percent'], '.3f')} | "
           f"{PAPER_MEDIAN_RMSE_PERCENT} | {emulation_verdict(r, 'median')} |",
-          f"| max RMSE, same | {_fmt(r['max_rmse_percent'])} | {PAPER_MAX_RMSE_PERCENT} | "
+          f"| max RMSE, same | {format_number(r['max_rmse_percent'], '.3f')} | {PAPER_MAX_RMSE_PERCENT} | "
           f"{emulation_verdict(r, 'max')} |",
-          f"| median / max, all pixels | {_fmt(r['median_rmse_percent_all_pixels'])} / "
-          f"{_fmt(r['max_rmse_percent_all_pixels'])} | - | includes the invalid (clipped) pixels the paper leaves out |",
-          f"| noiseless mode: median / max (valid pixels) | {_fmt(r['noiseless_median_rmse_percent'])} / "
-          f"{_fmt(r['noiseless_max_rmse_percent'])} | - | quantisation and clipping alone |",
+          f"| median / max, all pixels | {format_number(r['median_rmse_percent_all_pixels'], '.3f')} / "
+          f"{format_number(r['max_rmse_percent_all_pixels'], '.3f')} | - | includes the invalid (clipped) pixels the paper leaves out |",
+          f"| noiseless mode: median / max (valid pixels) | {format_number(r['noiseless_median_rmse_percent'], '.3f')} / "
+          f"{format_number(r['noiseless_max_rmse_percent'], '.3f')} | - | quantisation and clipping alone |",
           f"| noiseless per-pixel error within the analytic bound | {r['noiseless_within_analytic_bound']} | - | "
           f"{'as expected: the emulator adds no error beyond quantisation' if r['noiseless_within_analytic_bound'] else 'NOT expected: an emulation error beyond quantisation (see bound ok per scene)'} |",
           "", "\"-\": the paper gives no such figure; \"n/a\" in the tables below: no valid pixel in that region.", ""]
@@ -187,34 +183,34 @@ def _emulation_md(r: dict, figures: list[str]) -> str:
           "two captures (pair = sqrt(2) sigma), clamps to zero wherever emulating down from a longer bracket "
           "gives an image less noisy than a real capture:", "",
           "| reading | median | max |", "| --- | --- | --- |",
-          f"| raw: emulated vs one noisy capture | {_fmt(p['raw_valid']['median'])} | {_fmt(p['raw_valid']['max'])} |",
-          f"| camera noise: RMSE between two captures (pair) | {_fmt(p['pair_valid']['median'])} | "
-          f"{_fmt(p['pair_valid']['max'])} |",
-          f"| sub (headline): sqrt(raw^2 - sigma^2) | {_fmt(p['sub_valid']['median'])} | {_fmt(p['sub_valid']['max'])} |",
-          f"| sub_pair: sqrt(raw^2 - pair^2) | {_fmt(p['sub_pair_valid']['median'])} | "
-          f"{_fmt(p['sub_pair_valid']['max'])} |",
-          f"| sub_linear: raw - pair (the paper's words, literally) | {_fmt(p['sub_linear_valid']['median'])} | "
-          f"{_fmt(p['sub_linear_valid']['max'])} |",
-          f"| exact: vs the noiseless ground truth (what sub estimates) | {_fmt(p['exact_valid']['median'])} | "
-          f"{_fmt(p['exact_valid']['max'])} |",
-          f"| clean: noiseless mode | {_fmt(p['clean_valid']['median'])} | {_fmt(p['clean_valid']['max'])} |", "",
-          f"Valid-pixel fraction of the selector's emulations: median {_fmt(p['valid_fraction']['median'])}, mean "
-          f"{_fmt(p['valid_fraction']['mean'])}.", ""]
+          f"| raw: emulated vs one noisy capture | {format_number(p['raw_valid']['median'], '.3f')} | {format_number(p['raw_valid']['max'], '.3f')} |",
+          f"| camera noise: RMSE between two captures (pair) | {format_number(p['pair_valid']['median'], '.3f')} | "
+          f"{format_number(p['pair_valid']['max'], '.3f')} |",
+          f"| sub (headline): sqrt(raw^2 - sigma^2) | {format_number(p['sub_valid']['median'], '.3f')} | {format_number(p['sub_valid']['max'], '.3f')} |",
+          f"| sub_pair: sqrt(raw^2 - pair^2) | {format_number(p['sub_pair_valid']['median'], '.3f')} | "
+          f"{format_number(p['sub_pair_valid']['max'], '.3f')} |",
+          f"| sub_linear: raw - pair (the paper's words, literally) | {format_number(p['sub_linear_valid']['median'], '.3f')} | "
+          f"{format_number(p['sub_linear_valid']['max'], '.3f')} |",
+          f"| exact: vs the noiseless ground truth (what sub estimates) | {format_number(p['exact_valid']['median'], '.3f')} | "
+          f"{format_number(p['exact_valid']['max'], '.3f')} |",
+          f"| clean: noiseless mode | {format_number(p['clean_valid']['median'], '.3f')} | {format_number(p['clean_valid']['max'], '.3f')} |", "",
+          f"Valid-pixel fraction of the selector's emulations: median {format_number(p['valid_fraction']['median'], '.3f')}, mean "
+          f"{format_number(p['valid_fraction']['mean'], '.3f')}.", ""]
     L += ["## Per scene (noise subtracted; valid pixels | all pixels)", "",
           "| scene | lighting | DR (dB) | median | max | median all | max all | noiseless max | bound ok |",
           "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     for s, d in r["per_scene"].items():
         st, info = d[main], d["info"]
-        L.append(f"| {s} | {info['lighting']} | {info['dynamic_range_db']:.1f} | {_fmt(st['sub_valid']['median'])} | "
-                 f"{_fmt(st['sub_valid']['max'])} | {_fmt(st['sub_all']['median'])} | {_fmt(st['sub_all']['max'])} | "
-                 f"{_fmt(st['clean_valid']['max'])} | {st['bound_ok']} |")
+        L.append(f"| {s} | {info['lighting']} | {info['dynamic_range_db']:.1f} | {format_number(st['sub_valid']['median'], '.3f')} | "
+                 f"{format_number(st['sub_valid']['max'], '.3f')} | {format_number(st['sub_all']['median'], '.3f')} | {format_number(st['sub_all']['max'], '.3f')} | "
+                 f"{format_number(st['clean_valid']['max'], '.3f')} | {st['bound_ok']} |")
     L += ["", "## Per camera response and vignetting (all scenes pooled)", "",
           "| camera | vignetting | median | max | median all | max all | noiseless max | choice = main's |",
           "| --- | --- | --- | --- | --- | --- | --- | --- |"]
     agree = r["camera_spread"]["selector_choice_agreement_with_main"]
     for lbl, d in r["by_camera"].items():
-        L.append(f"| {lbl} | {d['vignetting']:g} | {_fmt(d['sub_valid']['median'])} | {_fmt(d['sub_valid']['max'])} | "
-                 f"{_fmt(d['sub_all']['median'])} | {_fmt(d['sub_all']['max'])} | {_fmt(d['clean_valid']['max'])} | "
+        L.append(f"| {lbl} | {d['vignetting']:g} | {format_number(d['sub_valid']['median'], '.3f')} | {format_number(d['sub_valid']['max'], '.3f')} | "
+                 f"{format_number(d['sub_all']['median'], '.3f')} | {format_number(d['sub_all']['max'], '.3f')} | {format_number(d['clean_valid']['max'], '.3f')} | "
                  f"{100 * agree[lbl]:.1f} % |")
     if r.get("hard_cases"):
         L += ["", "## Hard cases", "",
@@ -226,8 +222,8 @@ def _emulation_md(r: dict, figures: list[str]) -> str:
         for case, d in r["hard_cases"].items():
             for row in d["rows"]:
                 L.append(f"| {case} | {row['target_ms']:g} | {row['bracket_ms']:g} | {row['valid_fraction']:.3f} | "
-                         f"{_fmt(row['exact_valid_percent'])} | {_fmt(row['exact_invalid_percent'])} | "
-                         f"{_fmt(row['exact_all_percent'])} | {_fmt(row['clean_valid_percent'])} | {row['bound_ok']} |")
+                         f"{format_number(row['exact_valid_percent'], '.3f')} | {format_number(row['exact_invalid_percent'], '.3f')} | "
+                         f"{format_number(row['exact_all_percent'], '.3f')} | {format_number(row['clean_valid_percent'], '.3f')} | {row['bound_ok']} |")
         L += ["", "(errors against the exact noiseless ground truth, % of the DN range; n/a: empty region)"]
     L += ["", "## Definitions", ""] + [f"- **{k}**: {v}" for k, v in r["definitions"].items()]
     L += ["", "## Figures", ""] + [f"![{f}]({f})" for f in figures]

@@ -85,6 +85,10 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
                    help="a render preset (study-oidn8: the default settings; study-sun64; study-hq) or a setting "
                         "DENOISER@SPP[+LIGHT=WEIGHT,...]: sets --spp, --denoise and the renders' choice of lights "
                         "together (docs/results/render.md measures them); not with --spp or --denoise")
+    p.add_argument("--stochastic-seeds", type=int, metavar="K",
+                   help="seeds per walk and condition of each AE method that draws random numbers (kim): the same K "
+                        "seeds in every condition, the verdicts on their mean per walk, the per-seed rows in "
+                        "walks_seeds.csv (default 1: its default seed alone)")
     p.add_argument("--keep-radiance", action="store_true", help="keep the datasets' radiance EXRs (large)")
     p.add_argument("--no-run-images", action="store_true",
                    help="delete each walk's run images (runs/<scene>/<run>/<method>/images/left and right) once its "
@@ -142,6 +146,9 @@ def _render_changes(args) -> dict:
     if preset.denoise.enabled and preset.denoise != resolve_denoise(preset.denoise.name):
         raise LiveError(f"--render {args.render}: a study's denoiser is a named one ({preset.denoise.name} with its own "
                         f"albedo/normal spp); use a preset or DENOISER@SPP without /AUX_SPP")
+    if preset.adaptive is not None:
+        raise LiveError(f"--render {args.render}: the live study does not carry adaptive sampling (~{preset.adaptive.text}); "
+                        f"it is measured with scripts/render_noise_balance.py")
     return {"spp": preset.spp, "denoise": preset.denoise.name, "emitter_weights": preset.emitter_weights}
 
 
@@ -153,7 +160,7 @@ def config_from_args(args) -> LiveConfig:
     if args.size is not None:
         changes["width"], changes["height"] = args.size
     for key in ("spp", "seed", "scenes", "methods", "noise_repeats", "latency_frames", "frame_rate_hz",
-                "render_per", "denoise"):
+                "render_per", "denoise", "stochastic_seeds"):
         if getattr(args, key, None) is not None:
             changes[key] = getattr(args, key)
     if getattr(args, "render", None) is not None:
@@ -173,7 +180,7 @@ def command_line(args, prog: str) -> str:
     if args.quick:
         words.append("--quick")
     for key in ("scenes", "cycles", "size", "spp", "seed", "methods", "noise_repeats", "latency_frames",
-                "frame_rate_hz", "render_per", "denoise", "render"):
+                "frame_rate_hz", "render_per", "denoise", "render", "stochastic_seeds"):
         value = getattr(args, key, None)
         if value is None:
             continue

@@ -36,6 +36,7 @@ __all__ = [
     "STUDY_SPP",
     "STUDY_DENOISE",
     "STUDY_RENDER_PER",
+    "MAX_STOCHASTIC_SEEDS",
     "LiveError",
     "LiveConfig",
     "CONFIG_CHANGES",
@@ -151,6 +152,9 @@ STUDY_DENOISE = "oidn"
 STUDY_RENDER_PER = "cycle"
 
 
+#: Most seeds per walk and condition of a method that draws random numbers (``LiveConfig.stochastic_seeds``).
+MAX_STOCHASTIC_SEEDS = 64
+
 #: A pre-registered study's plan, written into its folder before the first walk (validation.live.preregistration).
 PREREG_FILE = "preregistration.json"
 
@@ -211,6 +215,9 @@ class LiveConfig:
         How the renders' next-event estimation picks a light (:meth:`scenes.Scene.with_emitter_weights`);
         empty: uniform (recorded in ``results.json`` only when set).  ``--render PRESET`` sets it with
         ``spp`` and ``denoise`` (:mod:`scenes.presets`).
+    stochastic_seeds : int
+        Seeds k per walk and condition of each method that draws random numbers (:mod:`validation.live.seeds`;
+        the verdicts use its mean over them); 1 (the default, recorded only when other): its default seed alone.
     """
 
     scenes: tuple[str, ...] = SCENES
@@ -236,6 +243,7 @@ class LiveConfig:
     render_per: str = STUDY_RENDER_PER
     denoise: str | None = None
     emitter_weights: tuple = ()
+    stochastic_seeds: int = 1
 
     def __post_init__(self) -> None:
         import os
@@ -284,6 +292,9 @@ class LiveConfig:
                 raise LiveError(f"${ENV_DENOISE}={env!r} is not a denoiser; valid: {', '.join(DENOISERS)}")
         elif self.denoise not in DENOISERS:
             raise LiveError(f"denoise must be one of {', '.join(DENOISERS)}, got {self.denoise!r}")
+        k = self.stochastic_seeds
+        if isinstance(k, bool) or not isinstance(k, int) or not 1 <= k <= MAX_STOCHASTIC_SEEDS:
+            raise LiveError(f"stochastic_seeds must be an integer in 1..{MAX_STOCHASTIC_SEEDS}, got {k!r}")
         try:
             weights = check_emitter_weights(dict(self.emitter_weights), "emitter_weights")
         except (TypeError, ValueError, ExposimError) as exc:
@@ -308,6 +319,8 @@ class LiveConfig:
         weights = d.pop("emitter_weights")  # recorded only when set: the records of earlier studies stay as they were
         if weights:
             d["emitter_weights"] = {k: float(v) for k, v in weights}
+        if d["stochastic_seeds"] == 1:  # recorded only when set: the records of earlier studies stay as they were
+            del d["stochastic_seeds"]
         d["scene_parameters"] = {s: self.scene_parameters(s) for s in self.scenes}
         d["renders"] = self.n_cycles * (12 if self.render_per == "shot" else 2) * len(self.scenes)
         d["fixed_instant"] = "timestamp of the cycle's first shot (bracket index 0, the 1 ms bracket)"

@@ -161,8 +161,8 @@ def parse_walks_table(text: str, name: str = WALKS_TABLE) -> tuple[list[str], li
     return walks, methods, tables
 
 
-def store_walks_table(out, walks, tables: dict, methods) -> str:
-    """Write the per-walk table into the study folder ``out`` (:data:`WALKS_TABLE`); returns its name.
+def store_walks_table(out, walks, tables: dict, methods, name: str = WALKS_TABLE) -> str:
+    """Write the per-walk table into the study folder ``out`` (``name``: :data:`WALKS_TABLE`); returns its name.
 
     An existing table with the same content is left alone, one whose every row the new table
     keeps is completed (a resumed study adds walks); one whose rows differ is never
@@ -173,17 +173,17 @@ def store_walks_table(out, walks, tables: dict, methods) -> str:
     from emulator.io.files import read_text, write_text
     from validation.live.config import LiveError
 
-    path = Path(out) / WALKS_TABLE
+    path = Path(out) / name
     text = walks_table_csv(walks, tables, methods)
     if path.is_file():
         old = read_text(path)
         if old == text:
-            return WALKS_TABLE
+            return name
         if not set(old.splitlines()) <= set(text.splitlines()):
             raise LiveError(f"{path}: differs from the walks recomputed from this folder's raw records; move it "
                             "away to write it again")
     write_text(path, text, overwrite=True)
-    return WALKS_TABLE
+    return name
 
 
 def condition_table(table: np.ndarray, methods, *, n_resamples: int = 1000, seed=0, clusters=None) -> dict:

@@ -111,7 +111,8 @@ def assemble_raw(experiment, cfg: LiveConfig, failed: dict[str, str], command: s
            "summaries": {}, "findings": {},
            "noise_variance_ratio": walks[0]["noise_variance_ratio"] if walks else None,
            "noise_variance_ratio_brightening": walks[0]["noise_variance_ratio_brightening"] if walks else None,
-           "failed_walks": [{"walk": f"{s}/seed{cfg.seed}", "error": e} for s, e in failed.items()]}
+           "failed_walks": [{"walk": f"{s}/seed{cfg.seed}", "error": e} for s, e in failed.items()],
+           **({"method_processes": walks[0]["method_processes"]} if walks and "method_processes" in walks[0] else {})}
     if cfg.metrics and walks:
         study_cfg = ae_study.StudyConfig(scenes=tuple(present), n_cycles=cfg.n_cycles, width=cfg.width,
                                          height=cfg.height, spp=cfg.spp, vo_ratio=cfg.vo_ratio,
@@ -260,7 +261,7 @@ def finish(out, raw: dict) -> dict:
         "config": cfg.to_dict(),
         "render_variant": raw.get("render_variant"),
         "timings": raw.get("timings", {}),
-        "failed_walks": raw.get("failed_walks", []),
+        "failed_walks": raw.get("failed_walks", []), **{k: raw[k] for k in ("method_processes",) if k in raw},
         "files": {"report": "report.md", "metrics_figure": "metrics.png" if cfg.metrics else None,
                   "exposure_figures": {s: f"exposure_{s}.png" for s in scenes}, "raw": RAW_FILE,
                   "walks": "walks/<scene>.json", "runs": "runs/<scene>/<run>",
@@ -285,11 +286,16 @@ def evidence(cfg: LiveConfig, records: list[dict], power_seeds: int = 100, folde
     :func:`validation.live.table_check.canonical_order`, whatever the records' order), and the calibration
     (``calibration_studies`` plasmode studies; :func:`validation.live.evidence.store_calibration`)."""
     from validation.live.evidence import store_walks_table, walk_values
+    from validation.live.seeds import loop_names, split_seeds, store_seeds_table
     from validation.live.table_check import canonical_order
 
-    walks, tables = walk_values(records, cfg.methods)
-    walks, _, tables = canonical_order(walks, cfg.methods, tables, scenes=cfg.scenes, method_order=cfg.methods)
+    names = loop_names(cfg.methods, cfg.stochastic_seeds)  # k > 1: each seed of a stochastic method, then the mean
+    walks, tables = walk_values(records, names)
+    walks, _, tables = canonical_order(walks, names, tables, scenes=cfg.scenes, method_order=names)
     out = {"walks": walks, "n_walks": len(walks)}
+    if tables and cfg.stochastic_seeds > 1:
+        tables, seed_names, seed_tables = split_seeds(tables, names, cfg.methods, cfg.stochastic_seeds)
+        out["seeds_table"] = None if folder is None else store_seeds_table(folder, walks, seed_names, seed_tables)
     if tables and folder is not None:
         out["walks_table"] = store_walks_table(folder, walks, tables, cfg.methods)
     if tables:
@@ -319,6 +325,10 @@ def _judged(cfg: LiveConfig, tables: dict, methods, walks, folder, power_seeds: 
     if folder is not None:
         out["calibration_file"] = store_calibration(folder, out["calibration"])
         out["power_file"] = store_power(folder, out)
+        if prereg is not None or cfg.stochastic_seeds > 1:  # new folders: the methods' shares of the residual
+            from validation.live.seeds import store_shares
+
+            out["residual_shares_file"] = store_shares(folder, cfg, tables, methods)
     return out
 
 
@@ -389,7 +399,7 @@ def finish_replicated(out, records: list[dict], command: str | None = None, powe
                "config": cfg.to_dict(), "replicates": [f"{REPLICATES_DIR}/seed{r['config']['seed']}" for r in records],
                "timings": {"total_s": float(sum((r.get("timings") or {}).get("total_s", 0.0) for r in records)),
                            **({} if wall_s is None else {"wall_s": float(wall_s)})},
-               "failed_walks": failed}
+               "failed_walks": failed, **{k: records[0][k] for k in ("method_processes",) if k in records[0]}}
     results.update(evidence(cfg, records, power_seeds=power_seeds, folder=out, calibration_studies=calibration_studies))
     from validation.live.native import native_markdown
 
@@ -444,7 +454,7 @@ def verdicts_from_table(out, power_seeds: int = 100, calibration_studies: int | 
     walks, methods, tables = canonical_order(*parse_walks_table(text, name), scenes=cfg.scenes,
                                              method_order=cfg.methods)
     results = {k: prev[k] for k in ("experiment", "command", "config", "replicates", "timings", "failed_walks",
-                                    "native_emulation") if k in prev}  # native emulation's figures: not in the table
+                                    "native_emulation", "method_processes") if k in prev}  # not in the table
     results.update({"walks": walks, "n_walks": len(walks), "walks_table": WALKS_TABLE})
     results["command"] = relative_command(results.get("command"), out)
     results.update(_judged(cfg, tables, methods, walks, out, power_seeds, calibration_studies))

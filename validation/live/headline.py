@@ -28,6 +28,7 @@ from validation.live.config import (
     LIVE_LIVE,
     RPE_RANK,
 )
+from emulator.cells import format_number
 
 __all__ = ["rpe_rank_table", "with_derived", "HEADLINE_FAMILY", "OWN_FAMILY", "apply_family", "walks_to_decide",
            "headlines", "headlines_markdown", "headline_lines"]
@@ -195,18 +196,14 @@ def headlines(comparisons: dict, family: dict) -> dict:
     return out
 
 
-def _fmt(v, spec=".3g") -> str:
-    return "n/a" if v is None else format(float(v), spec)
-
-
 def _ci(iv) -> str:
     if not iv or iv[0] is None and iv[1] is None:
         return "n/a"
-    return f"[{_fmt(iv[0])}, {'inf' if iv[1] is None else _fmt(iv[1])}]"
+    return f"[{format_number(iv[0])}, {'inf' if iv[1] is None else format_number(iv[1])}]"
 
 
 def _cell(r: dict) -> str:
-    txt = f"**{r['verdict']}** {_fmt(r['omega2'])} {_ci(r['omega2_ci90'])}"
+    txt = f"**{r['verdict']}** {format_number(r['omega2'])} {_ci(r['omega2_ci90'])}"
     if r.get("verdict_alone") and r["verdict_alone"] != r["verdict"]:
         txt += f" ({r['verdict_alone']} alone)"
     wd = r.get("walks_to_decide")
@@ -215,7 +212,7 @@ def _cell(r: dict) -> str:
                 else f"; walks to decide: {wd.get('reason', 'n/a')}")
     ll = r.get("live_live")
     if ll:
-        txt += f"; live vs live: {ll['verdict']} {_fmt(ll['omega2'])} {_ci(ll['omega2_ci90'])}"
+        txt += f"; live vs live: {ll['verdict']} {format_number(ll['omega2'])} {_ci(ll['omega2_ci90'])}"
     return txt
 
 
@@ -271,7 +268,7 @@ def headline_lines(results: dict) -> list[str]:
         if c["status"] != "run":
             lines.append(f"  {label}: not run")
             continue
-        cells = [f"{m} {c['metrics'][m]['verdict']} {_fmt(c['metrics'][m]['omega2'])} "
+        cells = [f"{m} {c['metrics'][m]['verdict']} {format_number(c['metrics'][m]['omega2'])} "
                  f"{_ci(c['metrics'][m]['omega2_ci90'])}" for m in h.get("distinct_metrics", HEADLINE_METRICS)
                  if m in c["metrics"]]
         lines.append(f"  {label}: " + "; ".join(cells))

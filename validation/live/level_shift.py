@@ -25,6 +25,7 @@ from emulator.stats import percentile_interval, variance_components
 from validation.live.config import COMPARISONS, HEADLINE_COMPARISONS
 from validation.verdicts.agreement import omega2_untruncated
 from validation.verdicts.ranking import cluster_plan, over_plan
+from emulator.cells import format_number
 
 __all__ = ["LEVEL_MARGIN", "SHIFT_METRICS", "level_shift", "per_scene", "leave_one_scene_out"]
 
@@ -111,10 +112,6 @@ def leave_one_scene_out(tables: dict, walks, methods, *, seed: int = 0, n_resamp
     return out
 
 
-def _fmt(v, spec="+.1%") -> str:
-    return "n/a" if v is None else format(v, spec)
-
-
 def main(argv=None) -> int:
     """``python -m validation.live.level_shift OUT``: level shifts, per-scene omega2 and the leave-one-scene-out
     check of a study folder's headline, printed as Markdown."""
@@ -152,10 +149,10 @@ def main(argv=None) -> int:
             sh = level_shift(L, E, seeds, seed=[seed, 44_004, c, i]) if m in SHIFT_METRICS else None
             ps = per_scene(L, E, scenes)
             shift = "n/a (fixed mean)" if sh is None else (
-                f"{_fmt(sh['relative'])} [{_fmt(sh['relative_ci95'][0])}, {_fmt(sh['relative_ci95'][1])}]")
+                f"{format_number(sh['relative'], '+.1%')} [{format_number(sh['relative_ci95'][0], '+.1%')}, {format_number(sh['relative_ci95'][1], '+.1%')}]")
             lines.append(f"| {m} | {float(omega2_untruncated(L[ok], E[ok])):.3g} | {shift} | "
                          f"{'' if sh is None else sh['verdict']} | "
-                         + "; ".join(f"{s} {v['omega2_untruncated']:.2g} / {_fmt(v['relative_shift'], '+.0%')}"
+                         + "; ".join(f"{s} {v['omega2_untruncated']:.2g} / {format_number(v['relative_shift'], '+.0%')}"
                                      for s, v in ps.items() if v["omega2_untruncated"] is not None) + " |")
         lines.append("")
     loso = leave_one_scene_out(tables, walks, methods, seed=seed)

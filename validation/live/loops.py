@@ -197,7 +197,9 @@ def iter_live(
     camera : synth.Camera
         The recording's camera (``synth.sequence.load_camera``).
     methods : names or AE method instances
-        As :func:`emulator.playback.iter_run` takes them (names are built fresh).
+        As :func:`emulator.playback.iter_run` takes them and runs them: each in its own worker process (forked
+        from the one fork server, NumPy's kernels of :mod:`emulator.numpy_dispatch`) unless ``config.workers``
+        is ``"inline"``; names are built fresh.
     timing : {"same-instant", "fixed-instant"}
         Capture at the timestamp of the bracket the emulator would select for the live
         target, or at the cycle's first shot.
@@ -219,15 +221,15 @@ def iter_live(
         (``left``/``right``); ``bracket_ms`` is the bracket whose instant was used,
         ``ratio`` 1, ``valid_fraction`` 1.
     """
-    from emulator.autoexposure.methodset import build_methods
     from emulator.dataset import CAMERAS
     from emulator.playback import LiveCycleProvider, closed_loop
+    from emulator.playback.workers import start_methods
 
     if timing not in VARIANTS:
         raise LiveError(f"timing must be one of {', '.join(VARIANTS)}, got {timing!r}")
     seq, cfg, response = live_setup(sequence, camera, config, response, initial_ms=initial_ms, range_ms=range_ms,
                                     selector=selector, mode=mode)
-    built = build_methods(methods, mode=cfg.mode, response=response, options=cfg.options)
+    built = start_methods(methods, cfg, response)  # as the emulated loop runs them (cfg.workers: worker processes)
     cams = tuple(c for c in CAMERAS if c in seq.cameras)
     shoot = make_shoot(radiance, camera, cams, seed=seed, noise=noise)
     provider = LiveCycleProvider(seq, shoot, cfg, instant="selected" if timing == "same-instant" else "fixed",

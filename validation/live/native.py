@@ -42,6 +42,7 @@ from dataclasses import replace
 import numpy as np
 
 from validation.live.config import FIXED_INSTANT_BRACKET_INDEX, LiveError
+from emulator.cells import median_finite
 
 __all__ = ["NATIVE_FRAME_RATE_HZ", "NATIVE_LATENCY_FRAMES", "GRID_TOLERANCE_NS", "EMULATED_NATIVE_RUN", "shot_timestamps",
            "window_start_shoot", "native_rate_loop", "per_cycle", "cycle_picks", "native_provider", "emulated_native_loop",
@@ -121,10 +122,12 @@ def native_rate_loop(sequence, radiance: Callable, camera, methods, *, seed: int
         Images kept (left and right where the recording is stereo). Methods that failed at a
         frame not yielded are named in the next yielded step's ``failed``.
     """
-    from emulator.autoexposure.methodset import build_methods, latency_options
     from emulator.dataset import CAMERAS
     from emulator.errors import PlaybackError
+    from dataclasses import replace
+
     from emulator.playback import LiveRateProvider, closed_loop
+    from emulator.playback.workers import start_methods
     from validation.live.loops import live_setup, make_shoot
 
     if isinstance(latency_frames, bool) or not isinstance(latency_frames, (int, np.integer)) or latency_frames < 0:
@@ -143,8 +146,8 @@ def native_rate_loop(sequence, radiance: Callable, camera, methods, *, seed: int
         raise LiveError(f"{seq.path if hasattr(seq, 'path') else 'recording'}: no shots")
     start_ns, last_ns = shots_ns[0], shots_ns[-1]
     n_frames = int(np.floor((last_ns - start_ns) * rate / 1e9 + 1e-6)) + 1
-    built = build_methods(methods, mode=cfg.mode, response=response,
-                          options=latency_options(cfg.options, int(latency_frames)))
+    # in worker processes, as every loop of the study runs its methods (fixed freezes one exposure in flight)
+    built = start_methods(methods, replace(cfg, rate="native", latency_frames=int(latency_frames)), response)
     shoot = window_start_shoot(make_shoot(radiance, camera, cams, seed=seed, noise=noise), shots_ns)
     try:
         provider = LiveRateProvider(shoot, n_frames=n_frames, white_level=int(seq.white_level),
@@ -213,12 +216,14 @@ def native_provider(seq, response, config, *, warp: bool = True, **kw):
 def emulated_native_loop(seq, methods, response, config) -> tuple[object, list]:
     """The emulated native-rate closed loop of ``methods`` on a walk's recording: ``(provider, every frame's
     CycleStep with images)``."""
-    from emulator.autoexposure.methodset import build_methods, latency_options
+    from dataclasses import replace
+
     from emulator.playback import closed_loop
+    from emulator.playback.workers import start_methods
 
     provider = native_provider(seq, response, config)
-    built = build_methods(methods, mode=config.mode, response=response,
-                          options=latency_options(config.options, provider.latency_ticks))
+    # in worker processes, as every loop of the study runs its methods (fixed freezes one exposure in flight)
+    built = start_methods(methods, replace(config, latency_frames=provider.latency_ticks), response)
     return provider, list(closed_loop(provider, built, config, want_right=True, keep_images=True))
 
 
@@ -286,12 +291,6 @@ GOAL_NATIVE_RMSE_PERCENT = 3.0
 GOAL_WARP_CUT = 0.5
 
 
-def _median(values) -> float | None:
-    a = np.asarray([v for v in values if v is not None], dtype=np.float64)
-    a = a[np.isfinite(a)]
-    return float(np.median(a)) if a.size else None
-
-
 def _over_walks(values: list, seed) -> dict:
     """Mean over walks of one figure, with a bootstrap 95 % interval over walks (None with fewer than 2)."""
     a = np.asarray([v for v in values if v is not None and np.isfinite(v)], dtype=np.float64)
@@ -322,10 +321,10 @@ def native_emulation_summary(per_walk: dict, names, *, seed: int = 0) -> dict | 
         allw, allu, alla, nbw, nbu, nbo, perfect = [], [], [], [], [], [], []
         for m in names:
             d = per.get(m) or {}
-            rw, ru = _median(d.get("rmse_percent", [])), _median(d.get("rmse_percent_unwarped", []))
+            rw, ru = median_finite(d.get("rmse_percent", [])), median_finite(d.get("rmse_percent_unwarped", []))
             off = np.asarray(d.get("source_offset", []))
             table[w][m] = {"image_rmse_percent_median": rw, "image_rmse_percent_median_unwarped": ru,
-                           "exposure_log2_error_median": _median(d.get("exposure_log2_error", [])),
+                           "exposure_log2_error_median": median_finite(d.get("exposure_log2_error", [])),
                            "neighbour_fraction": float(np.mean(off != 0)) if off.size else None,
                            "warp_share_of_error": (1.0 - rw / ru) if rw is not None and ru else None,
                            "frames": int(off.size)}
@@ -338,9 +337,9 @@ def native_emulation_summary(per_walk: dict, names, *, seed: int = 0) -> dict | 
             nbw += list(np.asarray(d.get("rmse_percent", []), dtype=float)[nb]) if off.size else []
             nbu += list(np.asarray(d.get("rmse_percent_unwarped", []), dtype=float)[nb]) if off.size else []
             nbo += list(np.asarray(d.get("rmse_percent_own_bracket", []), dtype=float)[nb]) if off.size else []
-        mw, mu = _median(allw), _median(allu)
-        pooled["all"].append(_median(alla))
-        w_nb, u_nb, o_nb = _median(nbw), _median(nbu), _median(nbo)
+        mw, mu = median_finite(allw), median_finite(allu)
+        pooled["all"].append(median_finite(alla))
+        w_nb, u_nb, o_nb = median_finite(nbw), median_finite(nbu), median_finite(nbo)
         pooled["cut_nb"].append((1.0 - w_nb / u_nb) if w_nb is not None and u_nb else None)
         pooled["cut_nb_excess"].append((u_nb - w_nb) / (u_nb - o_nb) if None not in (w_nb, u_nb, o_nb) and u_nb > o_nb
                                        else None)
@@ -349,7 +348,7 @@ def native_emulation_summary(per_walk: dict, names, *, seed: int = 0) -> dict | 
         pooled["rmse"].append(mw)
         pooled["unwarped"].append(mu)
         pooled["cut"].append((1.0 - mw / mu) if mw is not None and mu else None)
-        mp = _median(perfect)
+        mp = median_finite(perfect)
         pooled["cut_perfect"].append((1.0 - mp / mu) if mp is not None and mu else None)
     rmse = _over_walks(pooled["rmse"], [seed, 32, 1])
     cut = _over_walks(pooled["cut"], [seed, 32, 2])

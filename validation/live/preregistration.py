@@ -32,6 +32,8 @@ __all__ = ["PREREG_FILE", "FORMAT", "MIN_SEGMENTS", "PLANNED_RESAMPLES", "segmen
            "interim_reason"]
 
 #: The pre-registration's file in the study folder.
+#: The plan's draws per stochastic method (k), present only when k is not 1.
+DRAWS_KEY = "draws_per_stochastic_method"
 #: The study format a pre-registered folder is judged by.
 FORMAT = 3
 #: Fewest segments per walk for the segment success rate to stay in the headline.
@@ -58,13 +60,14 @@ def headline_exclusions(cfg: LiveConfig) -> dict[str, str]:
         "the family")}
 
 
-def preregistration(cfg: LiveConfig, replicates: int, *, draws: int = 1,
+def preregistration(cfg: LiveConfig, replicates: int, *, draws: int | None = None,
                     n_resamples: int = PLANNED_RESAMPLES) -> dict:
     """The study's plan (see the module); ``draws``: seeds per walk and condition of a method that draws random
-    numbers (``k``)."""
+    numbers (``k``; None: the configuration's ``stochastic_seeds``), recorded only when it is not 1."""
     from validation.live.level_shift import LEVEL_MARGIN
     from validation.verdicts.agreement import ALPHA, OMEGA2_MAX
 
+    draws = int(cfg.stochastic_seeds if draws is None else draws)
     if replicates < 1 or draws < 1:
         raise LiveError(f"replicates and draws must be >= 1, got {replicates} and {draws}")
     excluded = headline_exclusions(cfg)
@@ -81,7 +84,7 @@ def preregistration(cfg: LiveConfig, replicates: int, *, draws: int = 1,
                                                        "frame_rate_hz", "latency_frames")},
                        **({"emitter_weights": {k: float(v) for k, v in cfg.emitter_weights}}
                           if cfg.emitter_weights else {})},
-            "draws_per_stochastic_method": int(draws), "bootstrap_resamples": int(n_resamples),
+            **({DRAWS_KEY: draws} if draws != 1 else {}), "bootstrap_resamples": int(n_resamples),
             "monte_carlo": "each p's 99 % Monte Carlo interval (Wilson); a verdict whose Holm-adjusted p's interval "
                            "holds the level is undetermined",
             "looks": f"verdicts at {len(cfg.scenes) * int(replicates)} walks only; an earlier look is futility-only "
@@ -115,7 +118,10 @@ def check_preregistration(out, prereg: dict) -> None:
     before = read_preregistration(out)
     if before is None:
         return
-    diff = sorted(k for k in set(before) | set(prereg) if before.get(k) != prereg.get(k))
+    def get(plan, k):  # a plan without the draws per stochastic method has one
+        return plan.get(k, 1 if k == DRAWS_KEY else None)
+
+    diff = sorted(k for k in set(before) | set(prereg) if get(before, k) != get(prereg, k))
     if diff:
         raise LiveError(f"{Path(out) / PREREG_FILE}: the study was pre-registered with other "
                         f"{', '.join(diff)}; a pre-registered plan is not changed (start a new study folder)")

@@ -89,6 +89,29 @@ def control_seed(seed: int, scene: str, stream: int = CONTROL_STREAM) -> int:
     return int(np.random.SeedSequence(stream_key(seed, stream, scene)).generate_state(1)[0])
 
 
+def _loop_items(cfg: LiveConfig, mode: str) -> Callable[[], list]:
+    """What each loop of the walk is given to run, fresh per call: the methods, and each stochastic method's
+    seeds 1 .. k - 1 as instances of their own (:func:`validation.live.seeds.loop_items`)."""
+    from validation.live.seeds import loop_items
+
+    return lambda: loop_items(cfg.methods, cfg.stochastic_seeds, mode)
+
+
+def _n_loop_methods(cfg: LiveConfig) -> int:
+    from validation.live.seeds import loop_names
+
+    return len(loop_names(cfg.methods, cfg.stochastic_seeds))
+
+
+def method_processes() -> dict:
+    """How the walk's loops ran the methods, for its record: every method in every condition (live and emulated)
+    in its own worker process forked from one fork server, with NumPy's kernels there
+    (:mod:`emulator.numpy_dispatch`)."""
+    from emulator import numpy_dispatch
+
+    return {"workers": "process", "numpy": numpy_dispatch.describe()}
+
+
 def _collect(iterator, n: int, desc: str, progress: bool) -> list:
     got = []
     with _bar(n, desc, progress) as bar:
@@ -110,13 +133,13 @@ def _loops(cfg: LiveConfig, seq, radiance, camera, model, response, native_loop,
     from emulator.playback import RunConfig
     from validation.live.loops import iter_emulated, iter_live, lockstep
 
-    names = list(cfg.methods)
     common = dict(config=RunConfig(initial_ms=cfg.initial_ms, selector=cfg.selector), response=response)
+    names = _loop_items(cfg, common["config"].mode)
     cycles: dict = {}
     t0 = time.perf_counter()
     for opt, mode in NOISE_OPTIONS.items():
         cycles[f"emulated-{opt}"] = _collect(
-            iter_emulated(seq, names, noise=mode, noise_model=model, seed=cfg.seed, **common), len(seq.cycles),
+            iter_emulated(seq, names(), noise=mode, noise_model=model, seed=cfg.seed, **common), len(seq.cycles),
             f"{tag}: emulated loop ({opt})", progress)
     timings[f"emulated_{scene}_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
@@ -124,9 +147,9 @@ def _loops(cfg: LiveConfig, seq, radiance, camera, model, response, native_loop,
     if cfg.control:  # each cycle-rate live run again, with capture-noise streams of its own
         live_runs += [(RESEEDED[f"live-{v}"].removeprefix("live-"), v,
                        control_seed(cfg.seed, scene, RESEEDED_STREAMS[RESEEDED[f"live-{v}"]])) for v in VARIANTS]
-    shared = _shared_radiance(radiance, cfg, len(names), len(live_runs))
+    shared = _shared_radiance(radiance, cfg, _n_loop_methods(cfg), len(live_runs))
     with _bar(len(seq.cycles) * len(live_runs), f"{tag}: live loops ({len(live_runs)} runs)", progress) as bar:
-        got = lockstep([iter_live(seq, shared, camera, names, timing=timing, noise=cfg.capture_noise, seed=seed,
+        got = lockstep([iter_live(seq, shared, camera, names(), timing=timing, noise=cfg.capture_noise, seed=seed,
                                   **common) for _, timing, seed in live_runs], on_step=lambda: bar.update(1))
     for (label, _, _), steps in zip(live_runs, got):
         cycles[f"live-{label}"] = steps
@@ -138,7 +161,7 @@ def _loops(cfg: LiveConfig, seq, radiance, camera, model, response, native_loop,
     return cycles
 
 
-def _native_loops(cfg: LiveConfig, seq, radiance, camera, names, native_loop, response, cycles: dict,
+def _native_loops(cfg: LiveConfig, seq, radiance, camera, names: Callable, native_loop, response, cycles: dict,
                   native_out: dict, timings: dict, scene: str, tag: str, progress: bool, t0: float) -> None:
     """The native-rate live run (every frame) and, with the control, its re-seeded twin advanced with it (only
     the frames the benchmarks use kept); then the emulated native-rate condition (:func:`_emulated_native`)."""
@@ -150,8 +173,8 @@ def _native_loops(cfg: LiveConfig, seq, radiance, camera, names, native_loop, re
               every_frame=True)
     seeds = [cfg.seed] + ([control_seed(cfg.seed, scene, RESEEDED_STREAMS[RESEEDED[NATIVE_RUN]])]
                           if cfg.control else [])
-    shared = _shared_radiance(radiance, cfg, len(names), len(seeds))
-    loops = [native_loop(seq, shared, camera, names, seed=s, **kw) for s in seeds]
+    shared = _shared_radiance(radiance, cfg, _n_loop_methods(cfg), len(seeds))
+    loops = [native_loop(seq, shared, camera, names(), seed=s, **kw) for s in seeds]
     if cfg.control:  # the re-seeded frames are streamed: only the benchmarked ones are kept
         config = RunConfig(initial_ms=cfg.initial_ms, selector=cfg.selector, rate="native",
                            latency_frames=cfg.latency_frames, native_warp="rotation")
@@ -161,7 +184,7 @@ def _native_loops(cfg: LiveConfig, seq, radiance, camera, names, native_loop, re
         got = lockstep(loops, on_step=lambda: bar.update(1))
     timings[f"live_{scene}_s"] = time.perf_counter() - t0
     _emulated_native(cfg, seq, response, got[0], cycles, native_out, timings, scene,
-                     (lambda: got[1]) if cfg.control else None)
+                     (lambda: got[1]) if cfg.control else None, names)
 
 
 def _thinned(frames, keep: set):
@@ -174,7 +197,7 @@ def _thinned(frames, keep: set):
 
 
 def _emulated_native(cfg: LiveConfig, seq, response, every: list, cycles: dict, native_out: dict, timings: dict,
-                     scene: str, reseeded: Callable | None = None) -> None:
+                     scene: str, reseeded: Callable | None = None, items: Callable | None = None) -> None:
     """The emulated native-rate condition beside the native live one: both runs benchmarked on
     the frame at each cycle's first shot; and the open-loop image error of native emulation (with and
     without the warp) at the exposures the native live camera applied.  ``reseeded``: the re-seeded
@@ -187,7 +210,7 @@ def _emulated_native(cfg: LiveConfig, seq, response, every: list, cycles: dict, 
     t0 = time.perf_counter()
     config = RunConfig(initial_ms=cfg.initial_ms, selector=cfg.selector, rate="native",
                        latency_frames=cfg.latency_frames, native_warp="rotation")
-    provider, emulated = emulated_native_loop(seq, names, response, config)
+    provider, emulated = emulated_native_loop(seq, names if items is None else items(), response, config)
     picks = cycle_picks(provider)
     cycles[NATIVE_RUN] = per_cycle(every, picks)
     cycles[EMULATED_NATIVE_RUN] = per_cycle(emulated, picks)
@@ -351,7 +374,9 @@ def run_walk(config: dict, scene_name: str, experiment: str, cache_dir=None, nat
                     native_errors)
     runs = list(cycles)
     comp = _comparisons(cfg, cycles, seq, response)
-    names = list(cfg.methods)
+    from validation.live.seeds import loop_names
+
+    names = loop_names(cfg.methods, cfg.stochastic_seeds)  # every seed of a stochastic method is benchmarked
     summaries = {}
     try:  # the run images go with --no-run-images whether the walk ends here or fails on its way
         for r in runs:
@@ -362,7 +387,7 @@ def run_walk(config: dict, scene_name: str, experiment: str, cache_dir=None, nat
         trajectories = {r: {m: {"timestamp_ns": [cs.steps[m].timestamp_ns for cs in cycles[r] if m in cs.steps],
                                 "target_ms": [cs.steps[m].target_ms for cs in cycles[r] if m in cs.steps],
                                 "bracket_ms": [cs.steps[m].bracket_ms for cs in cycles[r] if m in cs.steps]}
-                            for m in names} for r in runs}
+                            for m in cfg.methods} for r in runs}
         del cycles
         t0 = time.perf_counter()
         nvr = measure_noise_variance_ratio(*ratio_input, repeats=cfg.noise_repeats, seed=cfg.seed)
@@ -381,7 +406,7 @@ def run_walk(config: dict, scene_name: str, experiment: str, cache_dir=None, nat
     record = {"walk": tag, "scene": scene_name, "config": cfg.to_dict(), "runs": runs,
               "render_variant": scenes.choose_variant(), "comparison": comp, "trajectories": trajectories,
               "run_summaries": summaries, "benchmarks": bench, "noise_variance_ratio": nvr,
-              "noise_variance_ratio_brightening": nvr_up, "timings": timings,
+              "noise_variance_ratio_brightening": nvr_up, "timings": timings, "method_processes": method_processes(),
               **({"native_emulation": native_errors} if native_errors else {})}
     write_results(walk_record_path(exp, scene_name), to_jsonable(record))
     say(f"{tag}: done in {timings[f'walk_{scene_name}_s'] / 60:.1f} min")

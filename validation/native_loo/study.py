@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 import platform
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -10,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from validation.native_loo.measure import GOOD_MATCH_PX, MOTION_CLASSES, crop_sequence, leave_one_out
+from emulator.cells import format_number, median_finite
 
 __all__ = ["NativeLooConfig", "run_study", "summarise", "report_markdown"]
 
@@ -39,11 +39,6 @@ class NativeLooConfig:
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()}
 
 
-def _median(rows, key):
-    vals = np.asarray([r[key] for r in rows if r[key] is not None and math.isfinite(r[key])], dtype=np.float64)
-    return float(np.median(vals)) if vals.size else None
-
-
 def summarise(rows: list[dict], warps) -> dict:
     """Medians by motion class (and over every frame) and warp mode; CPU per frame of each mode."""
     classes = [name for name, _ in MOTION_CLASSES] + ["unknown", "all"]
@@ -54,21 +49,17 @@ def summarise(rows: list[dict], warps) -> dict:
             if not sel:
                 continue
             table.append({"motion_class": cls, "warp": mode, "n_frames": len(sel),
-                          "rate_deg_s": _median(sel, "rate_deg_s"),
-                          "rmse_percent": _median(sel, "rmse_percent"),
-                          "motion_left_px": _median(sel, "motion_left_px"),
-                          "sift_good_matches": _median(sel, "sift_good_matches"),
-                          "neighbour_offset_abs": _median([{"x": abs(r["source_offset"])} for r in sel], "x")})
+                          "rate_deg_s": median_finite([r.get("rate_deg_s") for r in sel]),
+                          "rmse_percent": median_finite([r.get("rmse_percent") for r in sel]),
+                          "motion_left_px": median_finite([r.get("motion_left_px") for r in sel]),
+                          "sift_good_matches": median_finite([r.get("sift_good_matches") for r in sel]),
+                          "neighbour_offset_abs": median_finite(abs(r["source_offset"]) for r in sel)})
     cpu = {m: sum(r["cpu_s"] for r in rows if r["warp"] == m) for m in warps}
     n = {m: sum(1 for r in rows if r["warp"] == m) for m in warps}
     rot = cpu.get("rotation")
     speed = {m: {"cpu_s": cpu[m], "frames": n[m], "frames_per_cpu_s": (n[m] / cpu[m]) if cpu[m] > 0 else None,
                  "cpu_over_rotation": (cpu[m] / rot) if rot else None} for m in warps}
     return {"table": table, "speed": speed}
-
-
-def _fmt(v, spec=".2f"):
-    return "" if v is None else format(v, spec)
 
 
 def report_markdown(results: dict) -> str:
@@ -86,15 +77,15 @@ def report_markdown(results: dict) -> str:
              "| motion | warp | frames | rate deg/s | error % | motion left px | SIFT good matches | |offset| |",
              "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
     for r in results["summary"]["table"]:
-        lines.append(f"| {r['motion_class']} | {r['warp']} | {r['n_frames']} | {_fmt(r['rate_deg_s'], '.1f')} | "
-                     f"{_fmt(r['rmse_percent'])} | {_fmt(r['motion_left_px'])} | "
-                     f"{_fmt(r['sift_good_matches'], '.0f')} | "
-                     f"{_fmt(r['neighbour_offset_abs'], '.0f')} |")
+        lines.append(f"| {r['motion_class']} | {r['warp']} | {r['n_frames']} | {format_number(r['rate_deg_s'], '.1f')} | "
+                     f"{format_number(r['rmse_percent'], '.2f')} | {format_number(r['motion_left_px'], '.2f')} | "
+                     f"{format_number(r['sift_good_matches'], '.0f')} | "
+                     f"{format_number(r['neighbour_offset_abs'], '.0f')} |")
     lines += ["", "| warp | frames | CPU s (selection, emulation, warp) | frames per CPU s | CPU / rotation's |",
               "| --- | ---: | ---: | ---: | ---: |"]
     for m, s in results["summary"]["speed"].items():
-        lines.append(f"| {m} | {s['frames']} | {_fmt(s['cpu_s'], '.3f')} | {_fmt(s['frames_per_cpu_s'], '.1f')} | "
-                     f"{_fmt(s['cpu_over_rotation'])} |")
+        lines.append(f"| {m} | {s['frames']} | {format_number(s['cpu_s'], '.3f')} | {format_number(s['frames_per_cpu_s'], '.1f')} | "
+                     f"{format_number(s['cpu_over_rotation'], '.2f')} |")
     lines += ["", f"Command: `{results['provenance']['experiment']}`", ""]
     return "\n".join(lines)
 

@@ -19,7 +19,8 @@ noise no worse for features than sensor noise, within 3 points). Intervals are S
 intervals over the poses.
 
 A setting is ``DENOISER@SPP``, e.g. ``oidn-fast@2`` or ``oidn@8``; ``DENOISER@SPP/AUX`` also
-sets the spp of the albedo/normal pass (:class:`scenes.denoise.DenoiseSettings`).
+sets the spp of the albedo/normal pass (:class:`scenes.denoise.DenoiseSettings`); the whole form,
+with light weights and adaptive sampling, is :mod:`scenes.presets`'.
 """
 
 from __future__ import annotations
@@ -97,7 +98,7 @@ _FPS = 22.0
 
 
 def _shot_source(scene, traj, *, width: int, height: int, spp: int, settings, fov_deg: float, render_seed: int,
-                 render_per: str, cache_dir):
+                 render_per: str, cache_dir, adaptive=None):
     """``(index, exposure_ms) -> radiance`` of the left camera: the study's shots, or still renders."""
     import scenes
     from scenes.walkshots import WalkShots, shot_time_s
@@ -106,11 +107,12 @@ def _shot_source(scene, traj, *, width: int, height: int, spp: int, settings, fo
         def still(index, exposure_ms):
             return scenes.render_with_info(scene, traj.pose(shot_time_s(index, _FPS)), width=width, height=height,
                                            spp=spp, seed=render_seed * 1_000_003 + 2 * index, fov_deg=fov_deg,
-                                           denoise=settings, cache_dir=cache_dir)[0]
+                                           denoise=settings, cache_dir=cache_dir, adaptive=adaptive)[0]
         return still
     shots = WalkShots(scene, traj, render=dict(width=width, height=height, spp=spp, fov_deg=fov_deg,
                                                cache_dir=cache_dir, variant=None, denoise=settings,
-                                               render_seed=render_seed),
+                                               render_seed=render_seed,
+                                               **({} if adaptive is None else {"adaptive": adaptive})),
                       fps=_FPS, n_brackets=len(_BRACKETS_MS), max_window_ms=max(_BRACKETS_MS), baseline_m=0.0,
                       render_per=render_per)
     return lambda index, exposure_ms: shots.radiance(index, "left", exposure_ms)
@@ -158,7 +160,8 @@ def noise_balance(setting: str, *, scene_key: str = "forest_winter", width: int 
     traj = scene.trajectory((max(sweeps) + 1) * len(_BRACKETS_MS) / _FPS + 1.0)
     camera = synthetic_camera(scene, width, height)
     sources = [_shot_source(scene, traj, width=width, height=height, spp=spp, settings=settings,
-                            fov_deg=camera.fov_x_deg, render_seed=int(r), render_per=render_per, cache_dir=cache_dir)
+                            fov_deg=camera.fov_x_deg, render_seed=int(r), render_per=render_per, cache_dir=cache_dir,
+                            adaptive=preset.adaptive)
                for r in render_seeds]
     rows, seconds = [], []
     for sweep in sweeps:
@@ -172,6 +175,7 @@ def noise_balance(setting: str, *, scene_key: str = "forest_winter", width: int 
     out = {"setting": label, "scene": scene_key, "size": [int(width), int(height)], "spp": spp,
            "denoise": settings.key_material() if settings.enabled else {"name": "off"}, "render_per": render_per,
            **({"emitter_weights": dict(preset.emitter_weights)} if preset.emitter_weights else {}),
+           **({"adaptive": preset.adaptive.key_material()} if preset.adaptive is not None else {}),
            "seconds_per_sweep": float(np.median(seconds)), "tolerance_points": tolerance,
            "per_pose": rows, "exposures": {}}
     for e in exposures_ms:
@@ -269,7 +273,7 @@ def radiance_bias(setting: str, *, scene_key: str = "forest_winter", reference: 
                                      (ref, 2, cache_dir if reference_cache_dir is None else reference_cache_dir)):
             t0 = time.perf_counter()
             img = scenes.render(preset.scene(base), pose, width=width, height=height, spp=preset.spp, seed=seed,
-                                fov_deg=fov, denoise=preset.denoise, cache_dir=folder)
+                                fov_deg=fov, denoise=preset.denoise, cache_dir=folder, adaptive=preset.adaptive)
             if preset is test:
                 seconds.append(time.perf_counter() - t0)
             lums.append(img.astype(np.float64) @ lum)

@@ -31,7 +31,7 @@ def check_options(studies: int, json_path) -> None:
 
 
 def main(argv=None) -> int:
-    """``python -m validation.verdicts.plasmode FOLDER``: the calibration of a live study folder's ``walks.csv``,
+    """``python -m validation.verdicts.study_calibration FOLDER``: the calibration of a live study folder's ``walks.csv``,
     printed (and written to ``--json``), without touching the folder."""
     import argparse
     import sys

@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from emulator.stats import variance_components
+from emulator.cells import format_number
 
 __all__ = ["PAPER_EFFECTS", "TRANSFER", "paper_effects", "study_units", "finding_scales", "paper_sized_power",
            "agreement_power", "main"]
@@ -174,10 +175,6 @@ def agreement_power(folder, *, n_walks: int | None = None, n_seeds: int = 100, s
     return out
 
 
-def _fmt(v, spec=".3g") -> str:
-    return "n/a" if v is None else format(v, spec)
-
-
 def markdown(result: dict) -> str:
     lines = [f"# What {result['folder']} can decide ({result['kind']}, {result['n_units']} walks)", ""]
     if result.get("agreement"):
@@ -190,9 +187,9 @@ def markdown(result: dict) -> str:
                 lines.append(f"| {m} | {p['reason']} | | | | | | | | |")
                 continue
             s = p["scales"]
-            lines.append(f"| {m} | {_fmt(s['sd_method'])} | {_fmt(s['sd_walk_method'])} | {_fmt(s['sd_noise'])} | "
-                         f"{_fmt(p['noise_to_method_sd'], '.2f')} | {p['n_walks']} | "
-                         f"{_fmt(p['smallest_detectable_omega2'])} | {p['walks_needed_for_agrees'] or '> 240'} | "
+            lines.append(f"| {m} | {format_number(s['sd_method'])} | {format_number(s['sd_walk_method'])} | {format_number(s['sd_noise'])} | "
+                         f"{format_number(p['noise_to_method_sd'], '.2f')} | {p['n_walks']} | "
+                         f"{format_number(p['smallest_detectable_omega2'])} | {p['walks_needed_for_agrees'] or '> 240'} | "
                          f"{100 * p['perfect_emulator_rates']['agrees']:.0f} % | "
                          f"{100 * p['random_emulator_rates']['disagrees']:.0f} % |")
         lines.append("")
@@ -202,11 +199,11 @@ def markdown(result: dict) -> str:
               "| --- | ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
     for fid, r in result["findings"].items():
         if r["effect_noise_sd"] is None:
-            lines.append(f"| {fid} | {_fmt(r['paper_effect'])} | {r['transfer']} | | | | | | | {r.get('reason', '')} |")
+            lines.append(f"| {fid} | {format_number(r['paper_effect'])} | {r['transfer']} | | | | | | | {r.get('reason', '')} |")
             continue
-        lines.append(f"| {fid} | {_fmt(r['paper_effect'])} | {r['transfer']} | {_fmt(r['level'])} | "
-                     f"{_fmt(r['effect_study_units'])} | {_fmt(r['sd_residual'])} | {_fmt(r['effect_noise_sd'], '.2f')}"
-                     f" | {_fmt(r['effect_noise_sd_by_method_sd'], '.2f')} | {100 * r['power_at_size']:.0f} % "
+        lines.append(f"| {fid} | {format_number(r['paper_effect'])} | {r['transfer']} | {format_number(r['level'])} | "
+                     f"{format_number(r['effect_study_units'])} | {format_number(r['sd_residual'])} | {format_number(r['effect_noise_sd'], '.2f')}"
+                     f" | {format_number(r['effect_noise_sd_by_method_sd'], '.2f')} | {100 * r['power_at_size']:.0f} % "
                      f"({r['n_walks_power']} walks) | "
                      f"{r['walks_for_80_percent'] or '> 240'} |")
     return "\n".join(lines) + "\n"
