@@ -336,7 +336,6 @@ def _is_identity(H: np.ndarray, size) -> bool:
 _RESAMPLE = {"linear": "INTER_LINEAR", "cubic": "INTER_CUBIC"}
 
 #: The DN lookup after a warp, under the name emulator.native imported before it moved to emulator.lut.
-_forward_dn = forward_dn
 
 
 def emulate_blur_consistent(raw: np.ndarray, source_ms: float, target_ms: float, response,

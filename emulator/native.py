@@ -47,7 +47,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from emulator.blur import _forward_dn
+from emulator.lut import forward_dn
 from emulator.errors import EmulationError
 
 __all__ = [
@@ -239,7 +239,7 @@ def _inside_fraction(H: np.ndarray, width: int, height: int) -> float:
     return float(min(1.0, max(0.0, area / (width * height))))
 
 
-#: Grid of the DN lookup after a warp (:func:`emulator.blur._forward_dn`): 2**20 cells leave few pixels to
+#: Grid of the DN lookup after a warp (:func:`emulator.lut.forward_dn`): 2**20 cells leave few pixels to
 #: search on a real response (7x faster than 2**16 on the sample; the same bytes).
 _DN_GRID = 1 << 20
 
@@ -269,7 +269,7 @@ def warp_to_instant(image: np.ndarray, H: np.ndarray, response, *, bayer: bool =
         Hp = H if px is None else _plane_homography(H, px, py)
         out[sl] = cv2.warpPerspective(plane, Hp, (plane.shape[1], plane.shape[0]), flags=RESAMPLERS[resample],
                                       borderMode=cv2.BORDER_REPLICATE)
-    return _forward_dn(response, out, _DN_GRID), _inside_fraction(H, width, height)
+    return forward_dn(response, out, _DN_GRID), _inside_fraction(H, width, height)
 
 
 # ============================================================================ the flow warp
@@ -355,7 +355,7 @@ def warp_with_flow(image: np.ndarray, H: np.ndarray, displacement: np.ndarray | 
     for sl, mx, my, inside in instant_maps(H, displacement, image.shape):
         out[sl] = cv2.remap(np.ascontiguousarray(h[sl]), mx, my, RESAMPLERS[resample], borderMode=cv2.BORDER_REPLICATE)
         n_in += int(inside.sum())
-    return _forward_dn(response, out, _DN_GRID), n_in / float(image.size)
+    return forward_dn(response, out, _DN_GRID), n_in / float(image.size)
 
 
 def median_motion_px(H: np.ndarray, displacement: np.ndarray | None, shape: tuple[int, int]) -> float:

@@ -179,12 +179,12 @@ def test_bayer_sites_are_warped_on_their_own_grid():
 def _noise_dn(resp, full_well_e):
     """Per source DN: sigma_h (linear units) of one capture, and 1 / g'(DN) (DN per unit h)."""
     from emulator.noise import NoiseModel
-    from emulator.noise.tables import _slope
+    from emulator.noise.tables import response_slope
 
     nm = NoiseModel.from_full_well(resp, full_well_e)
     dn = np.arange(resp.white_level + 1)
     sigma_h = np.sqrt(nm.variance_e(dn)) / float(np.ravel(nm.gain_e_per_h)[0])
-    return sigma_h, 1.0 / np.maximum(_slope(resp)[: resp.white_level + 1], 1e-12)
+    return sigma_h, 1.0 / np.maximum(response_slope(resp)[: resp.white_level + 1], 1e-12)
 
 
 @pytest.mark.slow

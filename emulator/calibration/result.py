@@ -143,6 +143,3 @@ class CalibrationResult:
             "knots_g": self.knots_g.tolist(),
             **self.info,
         }
-
-
-_report = report_progress  # old name, for emulator.calibration.stack_engel2016 (remove once it imports report_progress)

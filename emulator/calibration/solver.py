@@ -327,8 +327,3 @@ def comparametric_irls(a_mat, b_mat, d_lo, ratio, knots, presence, smoothness, h
         sigma = robust_scale(rel)
         w_rob = _huber(rel, huber_k * max(sigma, 1e-6))
     return c
-
-
-# old names, for emulator.calibration.stack_engel2016 (remove once it imports the public names)
-_blas_single_thread, _finish, _Knots = blas_single_thread, finish_response, Knots
-_robust_scale, _solve_als, _solve_varpro = robust_scale, solve_als, solve_varpro

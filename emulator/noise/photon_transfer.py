@@ -275,7 +275,3 @@ def per_group_fits(groups, cols: dict, shifts, motion_term: bool) -> list[dict]:
             entry.update(gain_e_per_h=gi, read_noise_e=ri, gain_std=sgi, read_noise_std=sri)
         per_group.append(entry)
     return per_group
-
-
-# old names, for emulator.noise.insitu (remove once it imports the public names)
-_group_points, _gain_read, _percentiles, _fit_bins = group_points, gain_read, finite_percentiles, fit_bins

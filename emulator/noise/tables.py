@@ -257,7 +257,6 @@ def response_slope(response: CameraResponse) -> np.ndarray:
 
 
 _SLOPES: dict = {}
-_slope = response_slope  # old name, for emulator.noise.insitu (remove once it imports response_slope)
 
 
 def build_tables(model: NoiseModel, k: float) -> NoiseTables:
