@@ -178,6 +178,10 @@ def connect(address: str | None = None, *, scheduler_file: str | None = None, ti
     from dask.distributed import Client
 
     where = address if scheduler_file is None else f"scheduler file {scheduler_file}"
+    # A Client whose start failed (e.g. a tls:// address without certificates) keeps its loop runner registered
+    # until it is collected; a new Client would share that stopped loop and fail an assertion in distributed
+    # (seen once under load, in test_a_tls_address_is_tried_and_named_when_unreachable). Collected here first.
+    gc.collect()
     try:
         if scheduler_file is not None:
             client = Client(scheduler_file=str(scheduler_file), timeout=f"{timeout_s}s")
@@ -188,6 +192,7 @@ def connect(address: str | None = None, *, scheduler_file: str | None = None, ti
     except TypeError as exc:  # tls:// without certificates: distributed asks for an ssl_context
         if "ssl_context" not in str(exc):
             raise
+        gc.collect()  # the half-started Client, before anyone starts another
         raise SchedulerError(f"{where}: a tls:// scheduler needs TLS certificates in Dask's configuration "
                              "(distributed.comm.tls.ca-file and distributed.comm.tls.client.cert/key, e.g. in "
                              "~/.config/dask/distributed.yaml or DASK_DISTRIBUTED__COMM__TLS__CA_FILE)") from None
