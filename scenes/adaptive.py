@@ -31,6 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from scenes.dynamic_range import luminance
 from scenes.errors import RenderError
 
 __all__ = ["AdaptiveSampling", "parse_adaptive", "pass_seed", "tile_scores", "select_tiles", "tile_crops",
@@ -43,7 +44,6 @@ FLOOR_FRACTION = 0.05
 #: Extra samples (pixels times spp) worth one more crop: two crops are merged into their bounding
 #: box when it adds fewer (a crop's fixed cost, about 1.2 s on two cores, is about 1.5 M samples).
 MERGE_SAMPLES = 1_500_000
-_LUM = np.array([0.2126, 0.7152, 0.0722])
 
 
 @dataclass(frozen=True)
@@ -96,7 +96,7 @@ def pass_seed(seed: int, index: int) -> int:
 
 def tile_scores(a: np.ndarray, b: np.ndarray, tile: int) -> np.ndarray:
     """(rows, cols) score of each tile: summed variance of the mean of ``a`` and ``b`` over summed floored luminance."""
-    la, lb = np.asarray(a, np.float64) @ _LUM, np.asarray(b, np.float64) @ _LUM
+    la, lb = luminance(a), luminance(b)
     var = 0.25 * (la - lb) ** 2
     mean = 0.5 * (la + lb)
     floor = FLOOR_FRACTION * max(float(mean.mean()), 1e-12)

@@ -21,13 +21,12 @@ sunlit surfaces; the expected radiance is unchanged (docs/results/render.md meas
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, replace
 
 from scenes.adaptive import AdaptiveSampling, parse_adaptive
-from scenes.base import EMITTER_KINDS, Scene
+from scenes.base import EMITTER_KINDS, Scene, check_emitter_weights
 from scenes.denoise import DenoiseSettings, resolve_denoise
-from scenes.errors import RenderError
+from scenes.errors import RenderError, SceneError
 
 __all__ = ["RenderPreset", "RENDER_PRESETS", "LEGACY_STUDY_PRESET", "parse_setting"]
 
@@ -92,14 +91,16 @@ def _weights(text: str, setting: str) -> tuple:
         k, eq, v = part.partition("=")
         k = k.strip()
         try:
-            value = float(v)
-        except ValueError:
-            value = float("nan")
-        if not eq or k not in EMITTER_KINDS or not (math.isfinite(value) and value > 0) or k in out:
+            check_emitter_weights({k: float(v)})  # the lights and the rule on a weight a Scene applies
+        except (ValueError, SceneError):
+            valid = False
+        else:
+            valid = True
+        if not eq or not valid or k in out:
             raise RenderError(f"render setting {setting!r}: expected LIGHT=WEIGHT pairs after '+' with LIGHT one of "
                               f"{', '.join(EMITTER_KINDS)} (each once) and WEIGHT > 0, got {part!r}")
-        out[k] = value
-    return tuple((k, v) for k, v in sorted(out.items()) if v != 1.0)
+        out[k] = float(v)
+    return check_emitter_weights(out)
 
 
 def parse_setting(text: str) -> RenderPreset:

@@ -252,6 +252,7 @@ def radiance_bias(setting: str, *, scene_key: str = "forest_winter", reference: 
         95 % over the poses), ``seconds`` (the setting's render, median over the poses).
     """
     import scenes
+    from scenes.dynamic_range import luminance
     from scenes.image_stats import synthetic_camera
     from scenes.walkshots import shot_time_s
     from validation.common import study_scene
@@ -261,7 +262,6 @@ def radiance_bias(setting: str, *, scene_key: str = "forest_winter", reference: 
     base = scenes.get_scene(spec.scene, seed=walk_seed, **dict(spec.params))
     traj = base.trajectory((max(sweeps) + 1) * len(_BRACKETS_MS) / _FPS + 1.0)
     fov = synthetic_camera(base, width, height).fov_x_deg
-    lum = np.array([0.2126, 0.7152, 0.0722])
     from scenes.denoise import PASSTHROUGH_RADIANCE
 
     bright = PASSTHROUGH_RADIANCE * float(base.reference_radiance)
@@ -276,7 +276,7 @@ def radiance_bias(setting: str, *, scene_key: str = "forest_winter", reference: 
                                 fov_deg=fov, denoise=preset.denoise, cache_dir=folder, adaptive=preset.adaptive)
             if preset is test:
                 seconds.append(time.perf_counter() - t0)
-            lums.append(img.astype(np.float64) @ lum)
+            lums.append(luminance(img))
             means.append(float(np.mean(lums[-1])))
         keep = np.maximum(*lums) < bright  # the sun disk and its glints: the denoiser passes them through raw
         dim = [float(np.mean(x[keep])) for x in lums]
