@@ -56,7 +56,7 @@ def _worker(args) -> None:
     from emulator.playback import RunStats, iter_run
 
     try:
-        from emulator.tools.framecache import build_frame_cache
+        from emulator.orchestration.framecache import build_frame_cache
     except ImportError:  # checkouts before the tools layer
         from emulator.io.framecache import build_frame_cache
 

@@ -1,6 +1,6 @@
 """Wall time of ``exposim demo``: cold (an empty render cache) and warm (the cache it filled).
 
-Each run is a child process (``python -m emulator.cli demo``), as a user starts it, with
+Each run is a child process (``python -m emulator.commands.cli demo``), as a user starts it, with
 ``EXPOSIM_CACHE`` set to a new temporary folder; the load average is printed before and after
 every run, because on a shared machine it moves the figure more than anything else.  The
 Dr.Jit kernel cache (``~/.drjit``) is the user's unless ``--fresh-home`` gives the runs an empty
@@ -32,7 +32,7 @@ def _load() -> str:
 
 def run_once(folder: Path, env: dict, quick: bool, label: str) -> float:
     """Run the demo into ``folder/label``; print and return its wall time in seconds."""
-    cmd = [sys.executable, "-m", "emulator.cli", "demo", "-q", "-o", str(folder / label)] + (["--quick"] if quick else [])
+    cmd = [sys.executable, "-m", "emulator.commands.cli", "demo", "-q", "-o", str(folder / label)] + (["--quick"] if quick else [])
     before = _load()
     t0 = time.perf_counter()
     subprocess.run(cmd, cwd=folder, env=env, check=True, stdout=subprocess.DEVNULL)

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from emulator.emulate import emulate
+from emulator.core.emulate import emulate
 from emulator.io.borealhdr import load_sequence, sequence_response
 from emulator.io.png import read_png16
 from _timing import SAMPLE_SEQ, median_ms

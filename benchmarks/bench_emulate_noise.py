@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from emulator.emulate import emulate
+from emulator.core.emulate import emulate
 from emulator.io.borealhdr import load_sequence, sequence_response
 from emulator.noise import NoiseModel
 from _timing import median_ms

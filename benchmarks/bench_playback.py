@@ -34,9 +34,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from emulator.autoexposure import METHOD_NAMES, METHODS  # noqa: E402
 from emulator.io.borealhdr import load_sequence, sequence_response
 from emulator.io.png import read_png16  # noqa: E402
-from emulator.emulate import apply_lut  # noqa: E402
+from emulator.core.emulate import apply_lut  # noqa: E402
 from emulator.playback import RunStats, iter_run  # noqa: E402
-from emulator.select import higher_no_sat, saturated_fraction  # noqa: E402
+from emulator.core.select import higher_no_sat, saturated_fraction  # noqa: E402
 from _timing import SAMPLE_SEQ, median_ms  # noqa: E402
 
 DEFAULT_SEQ = SAMPLE_SEQ

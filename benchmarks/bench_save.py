@@ -6,7 +6,7 @@ Usage: python benchmarks/bench_save.py [SEQUENCE] [--cycles 90] [--mode paper|bo
 The shared sample has two complete stereo cycles; a recording of ``--cycles`` cycles is made
 from them in a temporary BorealHDR folder (the two cycles alternately, every PNG hard-linked
 under a timestamp shifted by whole replay periods, so names and times stay increasing).
-Each save mode runs :func:`emulator.runner.run_to_folder` on it (all seven methods, stereo);
+Each save mode runs :func:`emulator.orchestration.runner.run_to_folder` on it (all seven methods, stereo);
 reported: wall seconds of the whole call, the loop's cycles/s, and the steady-state cycles/s
 after the first cycle (``timing.steady_cycles_per_s``), and the ratio png8 / none.
 """
@@ -28,7 +28,7 @@ sys.path.insert(0, str(ROOT))
 from emulator.io.borealhdr import CAMERA_FOLDERS, exposure_folder_name, find_response, load_sequence  # noqa: E402
 from emulator.io.files import strict_json  # noqa: E402
 from emulator.playback import RunConfig  # noqa: E402
-from emulator.runner import run_to_folder  # noqa: E402
+from emulator.orchestration.runner import run_to_folder  # noqa: E402
 
 
 def default_sequence() -> Path:

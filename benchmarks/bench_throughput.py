@@ -39,7 +39,7 @@ sys.path.insert(0, str(HERE.parent / "tests"))
 
 from emulator.autoexposure import METHOD_NAMES  # noqa: E402
 from emulator.io.borealhdr import load_sequence, sequence_response  # noqa: E402
-from emulator.tools.framecache import build_frame_cache  # noqa: E402
+from emulator.orchestration.framecache import build_frame_cache  # noqa: E402
 from emulator.playback import RunStats, iter_run  # noqa: E402
 from _timing import SAMPLE_SEQ  # noqa: E402
 

@@ -33,7 +33,7 @@ from bench_save import default_sequence, replay_recording  # noqa: E402
 from emulator.io.borealhdr import load_sequence, sequence_response  # noqa: E402
 from emulator.playback import RunConfig, RunStats, closed_loop, prepare_run  # noqa: E402
 from emulator.playback.workers import MethodWorker  # noqa: E402
-from emulator.tools.framecache import build_frame_cache  # noqa: E402
+from emulator.orchestration.framecache import build_frame_cache  # noqa: E402
 
 INITIAL_MS, RANGE_MS = 4.0, (0.02, 50.0)
 

@@ -14,24 +14,26 @@ The user verbs::
     ex.run_to_folder(seq, "all", "out/run", ex.RunConfig(save="png8"))    # ... written to a run folder
     m = ex.make_method("zhang", mode="paper")
 
-Submodules keep their names: ``import emulator.select as s`` and ``import emulator.emulate as e``
-give the modules.  Their functions are exported here under names that say what they act on:
-:func:`select_bracket` (``emulator.select.select``) and :func:`emulate_image`
-(``emulator.emulate.emulate``).  ``from emulator import emulate`` therefore gives the module
-(as ``from emulator import select`` does); the function is ``from emulator.emulate import
+The numeric modules live on the core floor (:mod:`emulator.core`): ``import emulator.core.select as s``
+and ``import emulator.core.emulate as e`` give the modules, and so do ``emulator.select`` and
+``emulator.emulate``, bound here.  Their functions are exported here under names that say what they act on:
+:func:`select_bracket` (``emulator.core.select.select``) and :func:`emulate_image`
+(``emulator.core.emulate.emulate``).  ``from emulator import emulate`` therefore gives the module
+(as ``from emulator import select`` does); the function is ``from emulator.core.emulate import
 emulate`` or ``emulator.emulate_image``.
 """
 
 from emulator.autoexposure import make_method
-from emulator.emulate import emulate as emulate_image
-from emulator.emulate import emulation_lut
+from emulator.core import emulate, select  # the modules, as before the floors (see above)
+from emulator.core.emulate import emulate as emulate_image
+from emulator.core.emulate import emulation_lut
 from emulator.errors import DatasetError, EmulationError, ExposimError, OutputExistsError, PlaybackError, ResponseError
 from emulator.io.borealhdr import load_sequence, sequence_response
 from emulator.playback import RunConfig, iter_run, run
-from emulator.response import CameraResponse
-from emulator.runner import run_to_folder
-from emulator.select import SELECTORS, closest, higher_no_sat, saturated_fraction
-from emulator.select import select as select_bracket
+from emulator.core.response import CameraResponse
+from emulator.orchestration.runner import run_to_folder
+from emulator.core.select import SELECTORS, closest, higher_no_sat, saturated_fraction
+from emulator.core.select import select as select_bracket
 from emulator.version import __version__
 
 __all__ = [

@@ -24,6 +24,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import os
+from pathlib import Path
 
 __all__ = ["worker_numpy_env", "forkserver_env", "describe", "avx512_sort_is_slow", "avx512_sort_slow_in_this_process"]
 
@@ -35,11 +36,9 @@ _USER_KEYS = ("NPY_DISABLE_CPU_FEATURES", "NPY_ENABLE_CPU_FEATURES")
 def _cpu(cpuinfo: str | None) -> tuple[str, int | None, set[str]]:
     """(vendor, family, flags) of the first processor in /proc/cpuinfo's text ('' when unknown)."""
     if cpuinfo is None:
-        from emulator.io.files import read_text
-
-        try:
-            cpuinfo = read_text("/proc/cpuinfo")
-        except (OSError, ValueError):  # not Linux, or not text
+        try:  # the machine's description, not data: the one file this base module reads
+            cpuinfo = Path("/proc/cpuinfo").read_text(encoding="ascii", errors="replace")
+        except OSError:  # not Linux
             return "", None, set()
     vendor, family, flags = "", None, set()
     for line in cpuinfo.splitlines():

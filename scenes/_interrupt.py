@@ -4,7 +4,7 @@ Mitsuba's ``render`` puts its own C-level SIGINT handler in place (``integrator_
 "Received interrupt signal, winding down..").  With a JIT variant it is still in place after
 ``render`` has returned, while the kernel runs.  A Ctrl-C that reaches it then only sets the
 integrator's stop flag; Python's handler, the command's own handler and the watchdog of
-:mod:`emulator.interrupts` never see it.  The command then went on rendering image after
+:mod:`emulator.orchestration.interrupts` never see it.  The command then went on rendering image after
 image, and a test that sent one SIGINT waited in vain (seen under load: the signal had landed
 while Mitsuba's handler was in place).
 

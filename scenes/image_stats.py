@@ -223,7 +223,7 @@ def synthetic_gray8(radiance, scene, *, exposure_ms: float = 8.0, seed: int = 0,
         Default :func:`synthetic_camera` at the render's size.
     """
     import synth
-    from emulator.gray import bayer_to_gray8
+    from emulator.core.gray import bayer_to_gray8
 
     rad = np.asarray(radiance)
     if rad.ndim != 3 or rad.shape[2] != 3:
@@ -243,7 +243,7 @@ def real_frames_gray8(sequence_path, *, exposure_ms: float = 8.0, size: tuple[in
         In timestamp order, left before right.
     """
     from emulator.io.borealhdr import load_sequence
-    from emulator.gray import bayer_to_gray8
+    from emulator.core.gray import bayer_to_gray8
 
     seq = load_sequence(sequence_path)
     out = []

@@ -49,7 +49,7 @@ def check_scheduler(spec: str | None) -> str | None:
 def dask_client(spec: str, *, n_workers: int | None = None):
     """A connected :class:`dask.distributed.Client` for ``spec`` (closed, with its local cluster, on exit).
 
-    The client is :func:`emulator.distributed.open_client`'s, the one way exposim opens a Dask
+    The client is :func:`emulator.orchestration.distributed.open_client`'s, the one way exposim opens a Dask
     client (the same local cluster settings and address handling as dataset runs).
 
     Raises
@@ -60,7 +60,7 @@ def dask_client(spec: str, *, n_workers: int | None = None):
     spec = check_scheduler(spec)
     if spec is None:
         raise RenderError("dask_client needs a scheduler ('local' or tcp://HOST:PORT)")
-    from emulator.distributed import SchedulerError, open_client
+    from emulator.orchestration.distributed import SchedulerError, open_client
 
     with contextlib.ExitStack() as stack:
         try:

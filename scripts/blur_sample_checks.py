@@ -26,10 +26,10 @@ import sys
 import cv2
 import numpy as np
 
-from emulator.blur import integrate_rotation, rotation_homography
-from emulator.emulate import emulate
+from emulator.core.blur import integrate_rotation, rotation_homography
+from emulator.core.emulate import emulate
 from emulator.io.borealhdr import load_sequence, sequence_response
-from emulator.motion import blur_hook, recording_motion
+from emulator.playback.motion import blur_hook, recording_motion
 from validation.blur.measure import sharpness as sharpness_of
 
 SAMPLE = "/work/shared/data/borealhdr_sample/backpack_2023-09-25-15-05-03"
@@ -73,7 +73,7 @@ def stamp(seq, resp):
 def _axis_fit(seq, pairs):
     """Least squares image shift (x, y) = A theta_imu over the pairs (gyro in IMU axes, offset removed,
     stamp at the end), against the assumed A = [[0, -f, 0], [f, 0, 0]] @ R_CAM_IMU_FLU."""
-    from emulator.blur import R_CAM_IMU_FLU, exposure_window_s
+    from emulator.core.blur import R_CAM_IMU_FLU, exposure_window_s
 
     motion = recording_motion(seq, R_cam_imu=np.eye(3))
     X, Y = [], []
@@ -97,7 +97,7 @@ def _axis_fit(seq, pairs):
 def imu_rotation(seq, resp, draws: int = 2000, seed: int = 0):
     """Camera x and y axes in IMU coordinates from the image shifts (roll about the optical axis moves
     the centre by nothing, so it is not seen: the third axis follows from the two by orthogonality)."""
-    from emulator.blur import R_CAM_IMU_FLU
+    from emulator.core.blur import R_CAM_IMU_FLU
 
     fit = stamp(seq, resp)["axis_fit"]
     A, se = np.array(fit["fitted_px_per_rad"]), np.array(fit["fitted_se_px_per_rad"])

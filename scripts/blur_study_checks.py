@@ -154,7 +154,7 @@ def consistent(out_path: str, sizes) -> dict:
     """
     from dataclasses import replace
 
-    from emulator.emulate import emulate
+    from emulator.core.emulate import emulate
     from validation.blur import measure
     from validation.common import make_camera
 

@@ -5,7 +5,7 @@
 On a recording with a gyro (and a camera calibration it can find), the native selector as runs use it
 and the blur-aware one (``exposim run --rate native --native-blur-aware``) are asked for every frame
 and target.  Among the (frame, target) pairs where some candidate's predicted blur is within
-:data:`emulator.native.BLUR_LIMIT_PX` of the target's, it prints how often each selector took a source
+:data:`emulator.core.native.BLUR_LIMIT_PX` of the target's, it prints how often each selector took a source
 more than that beyond, by motion class (validation.native_loo's), and how often the blur-aware one did
 so from a longer window (emulating down).  Full resolution, as runs.
 """
@@ -18,10 +18,10 @@ import numpy as np
 
 
 def main(argv=None) -> int:
-    from emulator.blur import exposure_window_s
+    from emulator.core.blur import exposure_window_s
     from emulator.io.borealhdr import load_sequence
-    from emulator.motion import recording_motion
-    from emulator.native import BLUR_LIMIT_PX, BLUR_STOPS_PER_PX
+    from emulator.playback.motion import recording_motion
+    from emulator.core.native import BLUR_LIMIT_PX, BLUR_STOPS_PER_PX
     from emulator.playback import NativeProvider, RunConfig
     from emulator.playback.native import recording_stamp
     from validation.native_loo.measure import frame_rate_deg_s, motion_class

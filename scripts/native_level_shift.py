@@ -10,7 +10,7 @@ first shot of each recorder cycle (the frames ``bench features`` reads at native
 ``source_offset`` not 0), the difference in median matches and in mean SIFT keypoints per image between
 the emulated-native and the live-native runs (``benchmarks.features``).  Printed: the mean differences
 over all pairs, by neighbour share (none, some, most) and by scene, with a bootstrap 95 % interval over
-pairs (``emulator.stats.statistic_interval``, 2000 resamples, seed 0), and the correlation of the
+pairs (``emulator.core.stats.statistic_interval``, 2000 resamples, seed 0), and the correlation of the
 matches difference with the share.
 """
 
@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from emulator.stats import statistic_interval
+from emulator.core.stats import statistic_interval
 
 SHOTS_PER_CYCLE = 6
 
@@ -58,7 +58,7 @@ def pairs(files) -> list[dict]:
 
 
 def mean_ci(values) -> str:
-    """The mean with its bootstrap 95 % interval over the pairs (:func:`emulator.stats.statistic_interval`)."""
+    """The mean with its bootstrap 95 % interval over the pairs (:func:`emulator.core.stats.statistic_interval`)."""
     r = statistic_interval(values, "mean", n_resamples=2000, seed=0)
     if r["estimate"] is None:
         return "-"

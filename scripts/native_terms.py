@@ -139,8 +139,8 @@ def _flow_warp(src_dn, ref_dn, H, response):
     """``src_dn`` moved by ``H`` and then onto ``ref_dn`` by a dense flow (DIS on the RGGB quads' log gray)."""
     import cv2
 
-    from emulator.lut import forward_dn
-    from emulator.native import _plane_homography
+    from emulator.core.lut import forward_dn
+    from emulator.core.native import _plane_homography
 
     ls, lr = (response.inverse(x).astype(np.float32) for x in (src_dn, ref_dn))
     quad = lambda a: 0.25 * (a[0::2, 0::2] + a[1::2, 0::2] + a[0::2, 1::2] + a[1::2, 1::2])  # noqa: E731
@@ -167,9 +167,9 @@ def attribution(seq, live_frames, response, config, names, traj, into) -> None:
     """Per neighbour frame and method, the errors ``--attribution`` prints (see the module notes), into ``into``."""
     import cv2
 
-    from emulator.blur import rotation_homography
-    from emulator.emulate import validity_mask
-    from emulator.native import warp_to_instant
+    from emulator.core.blur import rotation_homography
+    from emulator.core.emulate import validity_mask
+    from emulator.core.native import warp_to_instant
     from validation.live.native import native_provider
 
     pw, pp = native_provider(seq, response, config), native_provider(seq, response, config, warp=False)

@@ -47,7 +47,7 @@ def main(argv=None) -> int:
     p.add_argument("--tag", default="", help="name suffix of the synthesised dataset")
     a = p.parse_args(argv)
     from emulator.io.borealhdr import load_sequence, sequence_response
-    from emulator.motion import recording_motion
+    from emulator.playback.motion import recording_motion
     from emulator.noise import bracket_groups, estimate_noise_model
     from emulator.noise.insitu import noise_strata
     from scenes.synthesize import synthesize

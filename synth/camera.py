@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from emulator.response import BOREALHDR_WHITE_LEVEL, CameraResponse
+from emulator.core.response import BOREALHDR_WHITE_LEVEL, CameraResponse
 from synth.errors import CameraError, SynthError
 from synth.presets import BOREALHDR_FOV_X_DEG, REFERENCE_RADIANCE, preset_fields
 from synth.sensor import SKEWNESS_LIMIT, Quantiser, skewed_range
@@ -81,7 +81,7 @@ class Camera:
     response : CameraResponse or None
         Inverse response g over DN 0..table top; None gives a linear one.  The camera
         keeps ``response.with_levels(white_level, black_level)``, so ``camera.response``
-        is ready for :func:`emulator.emulate` (its table then ends at ``white_level``).
+        is ready for :func:`emulator.core.emulate` (its table then ends at ``white_level``).
     white_level, black_level : int
         Output clip levels, DN.  Pixels at or below black, or at white, are clipped.
     full_well_e : float

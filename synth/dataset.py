@@ -28,7 +28,7 @@ from emulator.io.borealhdr import METADATA_FILE, read_recording_metadata
 from emulator.io.camera_info import CameraInfo
 from emulator.io.files import make_staging_dir, read_metadata, write_metadata
 from emulator.io.pcalib import PCALIB_TABLE_TOP, read_response
-from emulator.response import CameraResponse
+from emulator.core.response import CameraResponse
 from synth.camera import Camera
 from synth.errors import SynthError
 
@@ -221,7 +221,7 @@ def check_target(out_dir: Path, overwrite: bool) -> None:
 
 def new_staging(out_dir: Path) -> Path:
     """The hidden staging folder ``.NAME.partial-XXXXXXXX`` beside ``out_dir`` (umask honoured)."""
-    from emulator.interrupts import remove_at_forced_exit
+    from emulator.orchestration.interrupts import remove_at_forced_exit
 
     staging = make_staging_dir(out_dir.parent, f".{out_dir.name}.partial-")
     remove_at_forced_exit(staging)  # a process ended seconds after Ctrl-C leaves no partial dataset

@@ -36,7 +36,7 @@ Model (DESIGN.md, "Synthetic camera"), per Bayer site ``(y, x)`` of colour ``c(y
        DN = clip(floor(f(h) + 1/2), black_level, white_level)
 
    with ``f`` the piecewise-linear inverse of the response table g (what
-   :meth:`emulator.response.CameraResponse.forward` evaluates).  ``floor(f(h) + 1/2)``
+   :meth:`emulator.core.response.CameraResponse.forward` evaluates).  ``floor(f(h) + 1/2)``
    is the number of decision levels ``g(d + 1/2) = (g[d] + g[d+1]) / 2`` at or below h
    (round half up; ties have probability zero).  The noiseless path evaluates this
    exactly (a lookup table with an exact fix-up near decision levels).  The noisy path

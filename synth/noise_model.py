@@ -2,7 +2,7 @@
 
 :func:`noise_model_of` turns a :class:`synth.Camera` into the
 :class:`emulator.noise.NoiseModel` that noise-consistent emulation
-(``emulator.emulate(..., noise="consistent")``) and the in-situ estimator speak: the
+(``emulator.core.emulate(..., noise="consistent")``) and the in-situ estimator speak: the
 camera's electrons are ``h / h_per_electron`` with ``h = g(DN)``, so the conversion gain is
 ``1 / h_per_electron = full_well_e / g(white_level)`` electrons per unit of h, exactly; the
 read noise is the camera's.  Shot noise, read noise, quantisation and clipping are then the

@@ -13,7 +13,7 @@ import math
 import numpy as np
 
 from emulator.io.pcalib import PCALIB_TABLE_TOP
-from emulator.response import BOREALHDR_WHITE_LEVEL, CameraResponse
+from emulator.core.response import BOREALHDR_WHITE_LEVEL, CameraResponse
 from synth.errors import CameraError
 from synth.response_fit import inverse_response_curve
 

@@ -19,7 +19,7 @@ Nine numbers, :data:`BOREALHDR_FIT`.  They minimise (Nelder-Mead on a p=60 norm,
 near-minimax) the *mixed* error ``(g_fit - g_table) / (g_table + 1)``: relative where the
 table is well above one unit, absolute in the toe where it is not, so that neither end
 dominates.  Every term is increasing for x > 0 with the bounds used, so the curve is
-strictly increasing (checked at every integer DN by :class:`~emulator.response.CameraResponse`).
+strictly increasing (checked at every integer DN by :class:`~emulator.core.response.CameraResponse`).
 
 Measured against the table (the test ``tests/test_synth_camera.py`` recomputes them):
 maximum absolute error 2.35 table units (0.92 % of g(4095) = 255), at sample 215

@@ -246,7 +246,7 @@ def test_tiny_study_report_gives_a_verdict_per_result(tiny_study):
 @pytest.mark.render
 @pytest.mark.slow
 def test_exposim_validate_ae_study_refuses_an_existing_study(tiny_study, capsys):
-    from emulator.cli import main as exposim
+    from emulator.commands.cli import main as exposim
 
     out, _, _ = tiny_study
     before = (out / "results.json").read_bytes()
@@ -258,7 +258,7 @@ def test_exposim_validate_ae_study_refuses_an_existing_study(tiny_study, capsys)
 
 
 def _help(capsys, monkeypatch, *argv) -> str:
-    from emulator.cli import main as exposim
+    from emulator.commands.cli import main as exposim
 
     monkeypatch.setenv("COLUMNS", "250")  # one line per option
     with pytest.raises(SystemExit) as exc:

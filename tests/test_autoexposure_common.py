@@ -23,7 +23,7 @@ from emulator.autoexposure import (
 )
 from emulator.autoexposure._base import REF_BAYER_CODE, RGGB_BAYER_CODE
 from emulator.errors import ExposimError
-from emulator.response import CameraResponse
+from emulator.core.response import CameraResponse
 
 RANGE = (0.02, 50.0)
 

@@ -32,7 +32,7 @@ def sample(sample_seq):
 @pytest.fixture(scope="module")
 def frames(sample):
     """(name, exposure_ms, raw) of real frames: brackets and emulations at off-bracket targets."""
-    from emulator.emulate import apply_lut
+    from emulator.core.emulate import apply_lut
 
     seq, response = sample
     cycle = seq[1]

@@ -298,7 +298,7 @@ def test_borealhdr_equals_published_loop_on_a_replay_and_per_fit_seeding_does_no
     Cycle 10 is a knife edge: a 1e-16 relative change of one metric flips it (:data:`REF_EXACT`)."""
     import dataclasses
 
-    from emulator.dataset import Cycle
+    from emulator.core.dataset import Cycle
     from emulator.io.borealhdr import load_sequence
 
     seq = load_sequence(sample_seq)
@@ -341,7 +341,7 @@ def test_trajectory_does_not_depend_on_the_blas_thread_count(sample_seq, tmp_pat
     for n in (1, 2):
         env = dict(os.environ, OPENBLAS_NUM_THREADS=str(n), OMP_NUM_THREADS=str(n))
         out = tmp_path / f"t{n}"
-        subprocess.run([sys.executable, "-m", "emulator.cli", "run", str(sample_seq), "--methods", "kim",
+        subprocess.run([sys.executable, "-m", "emulator.commands.cli", "run", str(sample_seq), "--methods", "kim",
                         "-o", str(out), "--no-progress"], env=env, check=True, capture_output=True)
         csv[n] = (out / "kim" / "exposures.csv").read_bytes()
     assert csv[1] == csv[2]

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from emulator.cli import main
-from emulator.gray import bayer_to_gray8
+from emulator.commands.cli import main
+from emulator.core.gray import bayer_to_gray8
 from emulator.io.runfolder import read_run_folder
 from emulator.io.tum import read_tum, write_tum
 

@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from emulator.cli import main
-from emulator.runner import run_to_folder
+from emulator.commands.cli import main
+from emulator.orchestration.runner import run_to_folder
 from conftest import static_chart_recording  # noqa: E402
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from emulator.cli import main
+from emulator.commands.cli import main
 from emulator.metrics.bench import no_reference_note, REFINE_THRESHOLD_FRACTION, bench_vo, evo_result_path
 from emulator.metrics.vo import VOParameters
 

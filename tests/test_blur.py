@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 import pytest
 
-from emulator.blur import (
+from emulator.core.blur import (
     AngularVelocity,
     as_angular_velocity,
     blur_homographies,
@@ -19,9 +19,9 @@ from emulator.blur import (
     predict_blur,
     structure_of,
 )
-from emulator.emulate import emulate
+from emulator.core.emulate import emulate
 from emulator.errors import EmulationError
-from emulator.response import CameraResponse
+from emulator.core.response import CameraResponse
 
 F_PX = 500.0
 SIZE = (201, 101)
@@ -193,7 +193,7 @@ def test_sample_at_rest_changes_less_than_noise(sample_seq):
     the noise that image carries (source noise x ratio, full well 10 500 e-: the smaller noise of
     the two candidates, so the stricter bound); measured maximum 0.47 (docs/blur.md)."""
     from emulator.io.borealhdr import load_sequence, sequence_response
-    from emulator.motion import blur_hook
+    from emulator.playback.motion import blur_hook
 
     seq = load_sequence(sample_seq)
     resp = sequence_response(seq)
@@ -215,7 +215,7 @@ def test_sample_at_rest_changes_less_than_noise(sample_seq):
 
 def test_recording_motion_takes_a_synthetic_angular_velocity(tmp_path):
     """The synthetic side's plug: an angular velocity and intrinsics, no IMU, no calibration files."""
-    from emulator.motion import recording_motion
+    from emulator.playback.motion import recording_motion
 
     class Seq:
         imu = None
@@ -236,7 +236,7 @@ def test_hook_outside_the_gyro_span_emulates_plainly():
     """A frame the gyro does not cover gets the plain emulation and a NaN excess, not an error."""
     from types import SimpleNamespace
 
-    from emulator.motion import BlurHook, RecordingMotion
+    from emulator.playback.motion import BlurHook, RecordingMotion
 
     t = np.linspace(0.0, 1.0, 101)
     motion = RecordingMotion(as_angular_velocity((t, np.tile([0.0, 0.5, 0.0], (101, 1)))), 0, {"left": (K, SIZE)},
@@ -257,7 +257,7 @@ def test_hook_outside_the_gyro_span_emulates_plainly():
 
 @pytest.mark.parametrize("resp", [CameraResponse.linear(4095), CameraResponse.gamma(2.2, 4094)])
 def test_forward_dn_is_rint_of_f(resp):
-    from emulator.lut import forward_dn
+    from emulator.core.lut import forward_dn
 
     h = np.random.default_rng(5).uniform(-1.0, 1.2 * resp.g[resp.white_level], size=200_000).astype(np.float32)
     h[:5] = [resp.g[0], resp.g[resp.white_level], 0.0, resp.g[100], resp.g[3000]]  # knots and ends
@@ -268,7 +268,7 @@ def test_forward_dn_is_rint_of_f(resp):
 
 
 def test_still_gyro_bias_and_smoothing():
-    from emulator.blur import smooth_angular_velocity, still_gyro_bias
+    from emulator.core.blur import smooth_angular_velocity, still_gyro_bias
 
     rng = np.random.default_rng(7)
     t_ns = np.arange(0, 4_000_000_000, 10_000_000, dtype=np.int64)  # 4 s at 100 Hz
@@ -337,7 +337,7 @@ def test_clipped_blocks_do_not_lower_the_measured_noise():
     """A noisy ramp (variance = level) 38 % clipped at 2500: without the clipped mask the bin next
     to the clipped part mixes in blocks of zero detail and the noise just below the clip level is
     measured about 20 % low; with it, within 5 %."""
-    from emulator.structure import _plane_noise_var
+    from emulator.core.structure import _plane_noise_var
 
     rng = np.random.default_rng(5)
     ramp = np.tile(np.linspace(100.0, 4000.0, 400), (200, 1))
@@ -358,7 +358,7 @@ def test_wiener_structure_flattens_noise_and_keeps_an_edge():
     the structure is flat to 0.35 sigma.  A step of 100 sigma beside it stays a step: the pixels
     next to it are within 3 sigma of the true levels, where a Gaussian of the same window is
     more than 10 sigma off."""
-    from emulator.structure import _plane_noise_var
+    from emulator.core.structure import _plane_noise_var
 
     rng = np.random.default_rng(7)
     sigma = 5.0

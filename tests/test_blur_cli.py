@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pytest
 
-from emulator.cli import main
+from emulator.commands.cli import main
 from emulator.io.blurtable import read_blur_table
 
 SAMPLE_CYCLES = 4

@@ -21,12 +21,12 @@ from emulator.calibration import (
     fit_inverse_response,
     response_error,
 )
-from emulator.cli import main
+from emulator.commands.cli import main
 from emulator.errors import CalibrationError
 from emulator.io.borealhdr import load_sequence, write_frame
 from emulator.io.pcalib import read_response, write_response
 from emulator.io.stack import read_stack, write_stack
-from emulator.response import CameraResponse
+from emulator.core.response import CameraResponse
 
 
 # ---------------------------------------------------------------------------- helpers

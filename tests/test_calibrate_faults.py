@@ -17,13 +17,13 @@ import numpy as np
 import pytest
 
 from emulator.calibration import calibrate_stack, fit_inverse_response
-from emulator.cli import main
-from emulator.emulate import emulate
+from emulator.commands.cli import main
+from emulator.core.emulate import emulate
 from emulator.errors import ResponseError
 from emulator.io.borealhdr import load_sequence, sequence_response
 from emulator.io.pcalib import PCALIB_ORIGIN_TOLERANCE, read_response, write_pcalib
 from emulator.io.stack import write_stack
-from emulator.response import CameraResponse
+from emulator.core.response import CameraResponse
 
 from test_calibrate import stack_arrays
 

@@ -12,7 +12,7 @@ import json
 
 import pytest
 
-from emulator.cli import main
+from emulator.commands.cli import main
 from emulator.io.borealhdr import sequence_response
 from emulator.io.noisemodel import read_noise_model
 from emulator.noise import bracket_groups, estimate_noise_model
@@ -69,7 +69,7 @@ def test_cli_calibrate_noise_errors(tmp_path, capsys):
 def test_readme_row_names_the_noise_option():
     from pathlib import Path
 
-    from emulator.cli import build_parser
+    from emulator.commands.cli import build_parser
 
     readme = (Path(__file__).resolve().parents[1] / "docs" / "commands.md").read_text(encoding="utf-8")
     row = next(line for line in readme.splitlines() if line.startswith("| `exposim calibrate "))

@@ -5,7 +5,7 @@ import sys
 import numpy as np
 import pytest
 
-from emulator.cli import main
+from emulator.commands.cli import main
 from emulator.io.png import read_png16
 
 
@@ -19,7 +19,7 @@ def test_help_lists_commands(capsys):
 
 
 def test_console_script_runs():
-    r = subprocess.run([sys.executable, "-m", "emulator.cli", "info", "--help"], capture_output=True, text=True)
+    r = subprocess.run([sys.executable, "-m", "emulator.commands.cli", "info", "--help"], capture_output=True, text=True)
     assert r.returncode == 0 and "--json" in r.stdout
 
 

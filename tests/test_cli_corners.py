@@ -9,7 +9,7 @@ import warnings
 
 import pytest
 
-from emulator.cli import main
+from emulator.commands.cli import main
 from emulator.io.imu import ImuMissingWarning
 from test_playback import write_static_sequence
 

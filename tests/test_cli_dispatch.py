@@ -8,7 +8,7 @@ from importlib.metadata import EntryPoint
 
 import pytest
 
-from emulator import cli
+from emulator.commands import cli
 
 GROUP = cli.ENTRY_POINT_GROUP
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from emulator.cli import build_parser, main
+from emulator.commands.cli import build_parser, main
 from emulator.commands.progress import bars_enabled, progress_bar
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -119,7 +119,7 @@ def test_a_run_with_stderr_in_a_file_draws_no_bar(tmp_path):
     seq = write_static_sequence(tmp_path / "seq", n_cycles=6, shape=(32, 48))[0]
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
     with open(tmp_path / "stderr.txt", "w") as err:
-        got = subprocess.run([sys.executable, "-c", "import sys; from emulator.cli import main; sys.exit(main())",
+        got = subprocess.run([sys.executable, "-c", "import sys; from emulator.commands.cli import main; sys.exit(main())",
                               "run", str(seq), "--methods", "classical-50", "--save", "none", "-o", str(tmp_path / "r")],
                              stdout=subprocess.PIPE, stderr=err, text=True, env=env, timeout=300)
     assert got.returncode == 0
@@ -194,7 +194,7 @@ def test_one_ratio_threshold_for_features_and_vo():
 
 
 def test_a_plugin_shows_as_plugin_not_none_in_the_run_report(tmp_path, monkeypatch):
-    from emulator.runner import run_to_folder
+    from emulator.orchestration.runner import run_to_folder
 
     (tmp_path / "plain_ae.py").write_text((ROOT / "examples" / "my_ae.py").read_text())
     monkeypatch.syspath_prepend(str(tmp_path))

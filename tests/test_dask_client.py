@@ -11,7 +11,7 @@ import warnings
 
 import pytest
 
-from emulator.distributed import (SchedulerError, check_scheduler, connect, is_address, local_client, open_client,
+from emulator.orchestration.distributed import (SchedulerError, check_scheduler, connect, is_address, local_client, open_client,
                                   resolve_scheduler)
 
 try:
@@ -77,8 +77,8 @@ def test_local_cluster_starts_no_dashboard_warns_nothing_and_leaves_no_files(tmp
 
 def test_run_dataset_by_scheduler_file_by_client_and_by_environment(tmp_path, monkeypatch):
     distributed = pytest.importorskip("dask.distributed")
-    from emulator.cli import main
-    from emulator.datasetrun import run_dataset
+    from emulator.commands.cli import main
+    from emulator.orchestration.datasetrun import run_dataset
 
     root = make_dataset(tmp_path / "root")
     run_dataset(root, tmp_path / "serial", methods=METHODS, scheduler="serial")

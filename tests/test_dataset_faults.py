@@ -9,7 +9,7 @@ import shutil
 import numpy as np
 import pytest
 
-from emulator.cli import main
+from emulator.commands.cli import main
 from emulator.errors import DatasetError
 from emulator.io.borealhdr import load_sequence, png_size
 from emulator.io.png import encode_png, write_png16

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from emulator.cli import main
-from emulator.datasetrun import (BOREALHDR_FULL, DatasetRunError, discover_sequences, plan_groups, plan_units,
+from emulator.commands.cli import main
+from emulator.orchestration.datasetrun import (BOREALHDR_FULL, DatasetRunError, discover_sequences, plan_groups, plan_units,
                                  project_throughput, throughput)
 
 try:

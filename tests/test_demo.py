@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from emulator.cli import main
+from emulator.commands.cli import main
 from emulator.errors import OutputExistsError
 from validation.demo import demo_config, demo_dataset, demo_dataset_key, new_output_dir, run_demo
 
@@ -25,7 +25,7 @@ def _demo_in_a_log(tmp_path, *args) -> subprocess.CompletedProcess:
     """``exposim demo --quick`` as in a batch log: stdout and stderr are pipes, not a terminal."""
     env = {**os.environ, "EXPOSIM_DENOISE": "off", "EXPOSIM_CACHE": str(tmp_path / "cache"),
            "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
-    got = subprocess.run([sys.executable, "-m", "emulator.cli", "demo", "--quick", *args], cwd=tmp_path, env=env,
+    got = subprocess.run([sys.executable, "-m", "emulator.commands.cli", "demo", "--quick", *args], cwd=tmp_path, env=env,
                          capture_output=True, text=True, timeout=600)
     assert got.returncode == 0, got.stderr
     return got

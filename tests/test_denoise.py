@@ -122,7 +122,7 @@ def test_unsupported_cpu_and_broken_library_fall_back(monkeypatch, fresh_oidn):
 
 
 def test_cli_render_denoise_option_and_fallback(tmp_path, monkeypatch, fresh_oidn, capsys):
-    from emulator.cli import main
+    from emulator.commands.cli import main
 
     base = ["render", "static_lab", "--size", "24x16", "--spp", "2", "--duration", "0", "--quiet"]
     assert main(base + ["--denoise", "off", "-o", str(tmp_path / "off")]) == 0
@@ -144,7 +144,7 @@ def test_cli_render_denoise_option_and_fallback(tmp_path, monkeypatch, fresh_oid
 
 
 def test_cli_render_default_is_denoised(tmp_path, fresh_oidn):
-    from emulator.cli import main
+    from emulator.commands.cli import main
 
     _need_oidn()
     assert main(["render", "static_lab", "--size", "24x16", "--spp", "2", "--duration", "0", "--quiet",

@@ -8,8 +8,8 @@ import sys
 
 import pytest
 
-from emulator.datasetrun import run_dataset
-from emulator.distributed import run_tasks
+from emulator.orchestration.datasetrun import run_dataset
+from emulator.orchestration.distributed import run_tasks
 
 try:
     from test_datasetrun import csv_bytes, make_dataset

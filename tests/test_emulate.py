@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from emulator import CameraResponse, EmulationError
-from emulator.emulate import emulate
+from emulator.core.emulate import emulate
 from emulator.io.pcalib import read_response
 
 #: These tests use synthetic responses over the full 12-bit range (the BorealHDR default is 4094).
@@ -174,7 +174,7 @@ def test_extreme_ratios_stay_finite_and_clipped(pcalib_path):
 
 @pytest.mark.parametrize("ratio", [0.25, 0.999, 1.0, 1.5, 40.0])
 def test_mask_by_comparison_equals_mask_table(ratio):
-    from emulator.emulate import validity_mask
+    from emulator.core.emulate import validity_mask
 
     r = CameraResponse.gamma(2.2, FULL_12BIT, black_level=10).with_levels(white_level=4094)
     raw = np.arange(4095, dtype=np.uint16).reshape(63, 65)
@@ -184,7 +184,7 @@ def test_mask_by_comparison_equals_mask_table(ratio):
 def test_lut_cache_is_thread_safe_under_eviction(monkeypatch):
     from concurrent.futures import ThreadPoolExecutor
 
-    import emulator.response as resp
+    import emulator.core.response as resp
 
     monkeypatch.setattr(resp, "LUT_CACHE_SIZE", 4)
     r = CameraResponse.gamma(2.2, FULL_12BIT)
@@ -199,7 +199,7 @@ def test_lut_cache_is_thread_safe_under_eviction(monkeypatch):
 def test_both_gather_paths_agree(monkeypatch):
     import importlib
 
-    em = importlib.import_module("emulator.lut")  # the module that holds the gather
+    em = importlib.import_module("emulator.core.lut")  # the module that holds the gather
 
     rng = np.random.default_rng(9)
     raw = rng.integers(0, 4096, (1200, 1920), dtype=np.uint16)

@@ -19,7 +19,7 @@ import pytest
 from scipy.special import ndtr
 
 from emulator import CameraResponse, EmulationError, ExposimError
-from emulator.emulate import emulate
+from emulator.core.emulate import emulate
 from emulator.io.borealhdr import load_sequence, sequence_response
 from emulator.noise import NoiseModel, NoiseModelError
 from synth import Camera, capture

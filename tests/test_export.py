@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 import yaml
 
-from emulator.cli import main
-from emulator.gray import bayer_to_gray8
+from emulator.commands.cli import main
+from emulator.core.gray import bayer_to_gray8
 from emulator.io.camera_info import read_camera_info
 
 try:

@@ -34,7 +34,7 @@ def exposim_without(tmp_path: Path, hidden: str, *args: str) -> subprocess.Compl
     (shim / "sitecustomize.py").write_text(SHIM)
     env = dict(os.environ, EXPOSIM_TEST_HIDE=hidden,
                PYTHONPATH=os.pathsep.join([str(shim), str(ROOT), os.environ.get("PYTHONPATH", "")]))
-    return subprocess.run([sys.executable, "-c", "import sys; from emulator.cli import main; sys.exit(main())", *args],
+    return subprocess.run([sys.executable, "-c", "import sys; from emulator.commands.cli import main; sys.exit(main())", *args],
                           cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
 
 
@@ -79,7 +79,7 @@ REAL_DATA_CHECKS = {"validate native"}
 def test_every_command_of_the_synthetic_layer_declares_the_synth_extra():
     """A command whose code lives in synth, scenes or validation renders or reads renders: the
     dispatcher must check the 'synth' extra before it runs (one line, no output), not the walk."""
-    from emulator.cli import build_parser
+    from emulator.commands.cli import build_parser
 
     checked = []
     for words, parser in _leaf_commands(build_parser()):

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from emulator.calibration.stack_engel2016 import fit_inverse_response
-from emulator.emulate import emulate
+from emulator.core.emulate import emulate
 from emulator.errors import CalibrationError, EmulationError, ExposimError, ResponseError
-from emulator.response import CameraResponse
-from emulator.select import saturated_fraction, select
+from emulator.core.response import CameraResponse
+from emulator.core.select import saturated_fraction, select
 
 
 @pytest.fixture(scope="module")
@@ -41,7 +41,7 @@ def test_saturated_fraction_refuses_white_at_or_below_black():
 
 
 def test_duplicate_bracket_keys_are_refused():
-    from emulator.select import _sorted_brackets
+    from emulator.core.select import _sorted_brackets
 
     with pytest.raises(ExposimError, match=r"brackets given twice: 4 ms \(keys '4', 4.0\)"):
         select("higher-no-sat", 6.0, {"4": 0.0, 4.0: 0.0, 8.0: 0.0}, white_level=4095, black_level=0)

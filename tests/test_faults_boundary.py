@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from emulator.cli import main
+from emulator.commands.cli import main
 from test_faults_workers import BUILTINS, alone  # noqa: F401 - the built-ins' bytes without a plugin, on this seq
 from test_playback import write_static_sequence
 
@@ -265,7 +265,7 @@ def test_eight_methods_run_on_dockers_64_mib_dev_shm(sample_seq, tmp_path):
     if why:
         pytest.skip(why)
     out = tmp_path / "run"
-    script = (f"mount -t tmpfs -o size=64m tmpfs /dev/shm && exec {sys.executable} -m emulator.cli run {sample_seq} "
+    script = (f"mount -t tmpfs -o size=64m tmpfs /dev/shm && exec {sys.executable} -m emulator.commands.cli run {sample_seq} "
               f"--methods all,my_ae:MyAE -o {out} --no-progress")
     proc = subprocess.run(["unshare", "-m", "sh", "-c", script], env=_env(REPO / "examples"), capture_output=True,
                           text=True, timeout=300)
@@ -277,7 +277,7 @@ def test_eight_methods_run_on_dockers_64_mib_dev_shm(sample_seq, tmp_path):
 
 def test_a_run_killed_by_a_signal_leaves_run_json_failed_no_lock_and_no_shared_memory(seq, plugin_dir, tmp_path):
     out = tmp_path / "run"
-    proc = subprocess.run([sys.executable, "-m", "emulator.cli", "run", str(seq), "--methods",
+    proc = subprocess.run([sys.executable, "-m", "emulator.commands.cli", "run", str(seq), "--methods",
                            "classical-50,boundary_plugins:KillRun,shim", "-o", str(out), "--no-progress"],
                           env=_env(plugin_dir), capture_output=True, text=True, timeout=120)
     assert proc.returncode == -7 or proc.returncode == 135  # SIGBUS

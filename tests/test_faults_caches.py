@@ -7,11 +7,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from emulator.cli import main
+from emulator.commands.cli import main
 from emulator.io.borealhdr import load_sequence
 from emulator.io.png import read_png16
 from emulator.io.framecache import CACHE_DIRNAME, FrameCacheEntryError, cached_frame_path, read_cached_frame
-from emulator.tools.framecache import build_frame_cache
+from emulator.orchestration.framecache import build_frame_cache
 from test_playback import write_static_sequence
 
 

@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-from emulator.cli import main
+from emulator.commands.cli import main
 from test_playback import write_static_sequence
 
 PLUG = '''
@@ -113,7 +113,7 @@ def test_a_concurrent_resume_is_refused_and_leaves_the_live_run_whole(tmp_path, 
         write_static_sequence(root / name, n_cycles=4, shape=(32, 48))
     out = tmp_path / "out"
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), os.environ.get("PYTHONPATH", "")])}
-    live = subprocess.Popen([sys.executable, "-m", "emulator.cli", "run", str(root), "--sequences", "all",
+    live = subprocess.Popen([sys.executable, "-m", "emulator.commands.cli", "run", str(root), "--sequences", "all",
                              "--scheduler", "serial", "--methods", "slow_plug:Slow", "-o", str(out), "--no-progress"],
                             env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     try:

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from emulator.autoexposure import AutoExposureError, Kim2018, make_method
-from emulator.cli import main
+from emulator.commands.cli import main
 from test_playback import write_static_sequence
 
 
@@ -201,7 +201,7 @@ def test_new_method_output_compiles(tmp_path):
 
 
 def test_long_method_groups_get_folder_names_the_filesystem_takes(tmp_path, monkeypatch):
-    from emulator.datasetrun import MAX_GROUP_NAME_BYTES, plan_units
+    from emulator.orchestration.datasetrun import MAX_GROUP_NAME_BYTES, plan_units
 
     long_a, long_b = "a" * 150, "b" * 150
     plug = tmp_path / "long_plug.py"

@@ -17,7 +17,7 @@ import pytest
 
 from emulator.autoexposure import AutoExposureError, MethodFailed
 from emulator.autoexposure.isolation import call_method, captured_output, frozen, is_frozen
-from emulator.cli import main
+from emulator.commands.cli import main
 from emulator.playback import run
 from test_playback import write_static_sequence
 

@@ -12,7 +12,7 @@ import warnings
 
 import pytest
 
-from emulator.cli import main
+from emulator.commands.cli import main
 from test_playback import write_static_sequence
 
 

@@ -14,7 +14,7 @@ import time
 
 import pytest
 
-from emulator.cli import main
+from emulator.commands.cli import main
 from test_playback import write_static_sequence
 
 SLOW = '''
@@ -38,7 +38,7 @@ def test_sigterm_is_handled_like_ctrl_c_and_the_run_resumes(tmp_path, monkeypatc
     seq, _ = write_static_sequence(tmp_path / "seq", n_cycles=12, shape=(32, 48))
     out = tmp_path / "run"
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), os.environ.get("PYTHONPATH", "")])}
-    cmd = [sys.executable, "-m", "emulator.cli", "run", str(seq), "--methods", "classical-50,slow_term:Slow",
+    cmd = [sys.executable, "-m", "emulator.commands.cli", "run", str(seq), "--methods", "classical-50,slow_term:Slow",
            "-o", str(out), "--no-progress"]
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     csv = out / "slow" / "exposures.csv"
@@ -85,7 +85,7 @@ def test_no_space_left_names_the_file(tmp_path, monkeypatch, capsys):
         files.atomic_write_bytes(target, b"data")
     assert exc.value.errno == errno.ENOSPC and exc.value.filename == str(target)
     assert list((tmp_path / "out").iterdir()) == []  # no partial file left
-    from emulator.cli import _os_error
+    from emulator.commands.cli import _os_error
 
     assert _os_error(exc.value) == f"{target}: No space left on device"
 
@@ -116,7 +116,7 @@ def test_a_damaged_png_is_one_line_without_libpng_noise(tmp_path, damage):
         data = png.read_bytes()
         png.write_bytes(data[: len(data) - 20] if damage == "truncate" else data[:60] + bytes([data[60] ^ 0xFF]) +
                         data[61:])
-    proc = subprocess.run([sys.executable, "-m", "emulator.cli", "run", str(seq), "--methods", "classical-50",
+    proc = subprocess.run([sys.executable, "-m", "emulator.commands.cli", "run", str(seq), "--methods", "classical-50",
                            "-o", str(tmp_path / "run"), "--no-progress"], capture_output=True, text=True)
     # (the one warning line for a recording without imu/imu.csv is not ours to judge here)
     lines = [ln for ln in proc.stderr.strip().splitlines() if "no imu/imu.csv" not in ln]

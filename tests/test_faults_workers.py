@@ -18,7 +18,7 @@ import time
 
 import pytest
 
-from emulator.cli import main
+from emulator.commands.cli import main
 from emulator.playback import run
 from test_playback import write_static_sequence
 
@@ -160,7 +160,7 @@ def _cli(seq, plugin_dir, out, plugin, *extra, timeout=120):
     """The run in a subprocess (PYTHONPATH: the plugin's folder); returns (rc, wall s, stderr)."""
     a, b, c = BUILTINS.split(",")
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(plugin_dir), os.environ.get("PYTHONPATH", "")])}
-    cmd = [sys.executable, "-m", "emulator.cli", "run", str(seq), "--methods", f"{a},{b},hostile_workers:{plugin},{c}",
+    cmd = [sys.executable, "-m", "emulator.commands.cli", "run", str(seq), "--methods", f"{a},{b},hostile_workers:{plugin},{c}",
            "-o", str(out), "--no-progress", *extra]
     t0 = time.monotonic()
     proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=timeout)
@@ -274,7 +274,7 @@ def test_a_signal_while_a_method_hangs_ends_the_run_at_once(seq, plugin_dir, tmp
     """The method never returns and no limit is near: the signal alone ends the run, in seconds."""
     out = tmp_path / "run"
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(plugin_dir), os.environ.get("PYTHONPATH", "")])}
-    cmd = [sys.executable, "-m", "emulator.cli", "run", str(seq), "--methods", "classical-50,hostile_workers:Sleeper",
+    cmd = [sys.executable, "-m", "emulator.commands.cli", "run", str(seq), "--methods", "classical-50,hostile_workers:Sleeper",
            "-o", str(out), "--no-progress", "--jobs", "2"]
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     csv = out / "classical-50" / "exposures.csv"  # its header: the loop has started
@@ -293,7 +293,7 @@ def test_a_signal_while_a_method_hangs_ends_the_run_at_once(seq, plugin_dir, tmp
 STUCK = '''
 import signal, sys, time
 from pathlib import Path
-from emulator.interrupts import remove_at_forced_exit, watchdog
+from emulator.orchestration.interrupts import remove_at_forced_exit, watchdog
 
 staging = Path(sys.argv[1])
 staging.mkdir()
@@ -338,7 +338,7 @@ def test_a_worker_hanging_in_a_call_ends_when_the_run_is_killed(seq, plugin_dir,
     pid_file = tmp_path / "pid"
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(plugin_dir), os.environ.get("PYTHONPATH", "")]),
            "HOSTILE_PID_FILE": str(pid_file)}
-    cmd = [sys.executable, "-m", "emulator.cli", "run", str(seq), "--methods", "hostile_workers:PidSleeper",
+    cmd = [sys.executable, "-m", "emulator.commands.cli", "run", str(seq), "--methods", "hostile_workers:PidSleeper",
            "-o", str(tmp_path / "run"), "--no-progress"]
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     deadline = time.monotonic() + 90

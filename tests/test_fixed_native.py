@@ -15,7 +15,7 @@ import pytest
 from emulator.autoexposure import make_method
 from emulator.autoexposure.classical import Fixed
 from emulator.autoexposure.methodset import latency_options
-from emulator.runner import run_to_folder
+from emulator.orchestration.runner import run_to_folder
 from conftest import static_chart_recording  # noqa: E402
 
 LATENCIES = (0, 1, 3)
@@ -95,7 +95,7 @@ def test_the_native_report_counts_frames_and_says_where_fixed_differs(recording,
 
 def test_a_native_run_in_a_log_prints_its_frames(recording, tmp_path, capsys):
     """Issue 46: off a terminal ``run --rate native`` prints stage lines (here stderr is captured, not a tty)."""
-    from emulator.cli import main
+    from emulator.commands.cli import main
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

@@ -10,7 +10,7 @@ import pytest
 from emulator.io.borealhdr import load_sequence, write_frame
 from emulator.errors import DatasetError
 from emulator.io.framecache import CACHE_DIRNAME, cached_frame_path, read_cached_frame
-from emulator.tools.framecache import build_frame_cache
+from emulator.orchestration.framecache import build_frame_cache
 
 
 def _frames(seq):
@@ -80,7 +80,7 @@ def test_default_folder_stale_entries_and_errors(tmp_path):
 
 def test_cache_command_builds_then_keeps(tmp_path, capsys):
     """`exposim cache SEQ` writes one entry per PNG, and a second run keeps them all."""
-    from emulator.cli import main
+    from emulator.commands.cli import main
 
     seq = _tiny(tmp_path)
     n_png = len(list(seq.rglob("*.png")))
@@ -95,7 +95,7 @@ def test_cache_command_builds_then_keeps(tmp_path, capsys):
 def test_a_fast_level_reads_the_same_frames_from_larger_entries(tmp_path, capsys):
     """`exposim cache --level -1` (zstd's fast level): the same arrays, entries at least as large
     as level 3's; levels outside 1..22 and -1..-100 are refused in one line."""
-    from emulator.cli import main
+    from emulator.commands.cli import main
 
     seq = _tiny(tmp_path)
     fast, packed = tmp_path / "fast", tmp_path / "packed"

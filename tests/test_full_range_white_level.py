@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from emulator.cli import main
+from emulator.commands.cli import main
 from emulator.io.stack import write_stack
-from emulator.response import CameraResponse
+from emulator.core.response import CameraResponse
 
 try:
     from test_calibrate import stack_arrays

@@ -9,10 +9,10 @@ import math
 import numpy as np
 import pytest
 
-from emulator.emulate import emulate
+from emulator.core.emulate import emulate
 from emulator.errors import CalibrationError, EmulationError, ExposimError, ResponseError
-from emulator.response import CameraResponse
-from emulator.select import saturated_fraction, select
+from emulator.core.response import CameraResponse
+from emulator.core.select import saturated_fraction, select
 
 
 @pytest.fixture(scope="module")

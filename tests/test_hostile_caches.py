@@ -13,7 +13,7 @@ import re
 import numpy as np
 import pytest
 
-from emulator.cli import main
+from emulator.commands.cli import main
 from test_playback import write_static_sequence
 
 METHODS = "classical-50,shim"

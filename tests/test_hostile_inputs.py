@@ -14,7 +14,7 @@ import sys
 
 import pytest
 
-from emulator.cli import main
+from emulator.commands.cli import main
 from test_playback import write_static_sequence
 
 
@@ -117,7 +117,7 @@ def _child(args, timeout=60):
     def limit():
         resource.setrlimit(resource.RLIMIT_AS, (3 << 30, 3 << 30))
 
-    return subprocess.run([sys.executable, "-m", "emulator.cli", *args], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "emulator.commands.cli", *args], capture_output=True, text=True,
                           timeout=timeout, preexec_fn=limit, env={**os.environ, "MPLBACKEND": "Agg"})
 
 

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from emulator.cli import main
+from emulator.commands.cli import main
 from test_playback import write_static_sequence
 
 HERE = Path(__file__).resolve().parent
@@ -285,7 +285,7 @@ def test_prints_never_reach_json_output(seq, tmp_path):
     """A real process: --json stdout is one JSON document whatever the method prints."""
     out = tmp_path / "run"
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(HERE), os.environ.get("PYTHONPATH", "")])}
-    proc = subprocess.run([sys.executable, "-m", "emulator.cli", "run", str(seq), "--methods",
+    proc = subprocess.run([sys.executable, "-m", "emulator.commands.cli", "run", str(seq), "--methods",
                            f"{MOD}:Printer,classical-50", "-o", str(out), "-q", "--json"],
                           capture_output=True, text=True, env=env, timeout=120)
     assert proc.returncode == 0, proc.stderr
@@ -299,7 +299,7 @@ def test_prints_never_reach_json_output(seq, tmp_path):
 def test_a_background_thread_printing_does_not_corrupt_json(seq, tmp_path):
     out = tmp_path / "run"
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(HERE), os.environ.get("PYTHONPATH", "")])}
-    proc = subprocess.run([sys.executable, "-m", "emulator.cli", "run", str(seq), "--methods",
+    proc = subprocess.run([sys.executable, "-m", "emulator.commands.cli", "run", str(seq), "--methods",
                            f"{MOD}:ThreadPrinter,classical-50", "-o", str(out), "-q", "--json"],
                           capture_output=True, text=True, env=env, timeout=120)
     assert proc.returncode == 0, proc.stderr

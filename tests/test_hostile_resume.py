@@ -11,8 +11,8 @@ import json
 
 import pytest
 
-from emulator.cli import main
-from emulator.runner import run_to_folder
+from emulator.commands.cli import main
+from emulator.orchestration.runner import run_to_folder
 from test_playback import write_static_sequence
 
 METHODS = ["classical-50", "shim"]

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from emulator.cli import main
+from emulator.commands.cli import main
 from test_playback import write_static_sequence
 
 HERE = Path(__file__).resolve().parent
@@ -77,7 +77,7 @@ def test_sigterm_marks_the_run_interrupted_and_resume_gives_the_clean_bytes(data
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(HERE), os.environ.get("PYTHONPATH", "")])}
     clean = tmp_path / "clean"
     out = tmp_path / "run"
-    proc = subprocess.Popen([sys.executable, "-m", "emulator.cli", "run", str(seq), "--methods", methods,
+    proc = subprocess.Popen([sys.executable, "-m", "emulator.commands.cli", "run", str(seq), "--methods", methods,
                              "-o", str(out), "-q"], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.time() + 60
     while time.time() < deadline:  # wait until the first row is written
@@ -92,7 +92,7 @@ def test_sigterm_marks_the_run_interrupted_and_resume_gives_the_clean_bytes(data
     assert info["status"] == "interrupted", (info["status"], err)
     assert "Traceback" not in err, err
     assert not (out / "run.lock").exists()
-    rc = subprocess.run([sys.executable, "-m", "emulator.cli", "run", str(seq), "-o", str(out), "--resume", "-q"],
+    rc = subprocess.run([sys.executable, "-m", "emulator.commands.cli", "run", str(seq), "-o", str(out), "--resume", "-q"],
                         env=env, capture_output=True, text=True, timeout=120)
     assert rc.returncode == 0, rc.stderr
     assert main(["run", str(seq), "--methods", methods, "-o", str(clean), "-q"]) == 0

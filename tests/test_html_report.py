@@ -13,7 +13,7 @@ import pytest
 
 from emulator.report.html import (HTML_REPORT_FILE, Thumb, _sample, contact_sheet, markdown_to_html, png_data_uri,
                                   thumbnail, write_report)
-from emulator.runner import run_to_folder
+from emulator.orchestration.runner import run_to_folder
 
 try:
     from test_playback import write_static_sequence
@@ -137,7 +137,7 @@ def test_dataset_report_links_every_unit_page_and_shows_the_first_sheet(tmp_path
         from test_datasetrun import make_dataset
     except ImportError:  # tests collected as a package
         from tests.test_datasetrun import make_dataset
-    from emulator.datasetrun import run_dataset
+    from emulator.orchestration.datasetrun import run_dataset
 
     root = make_dataset(tmp_path / "root")
     run_dataset(root, tmp_path / "out", methods="classical-50,zhang", group_size=1, scheduler="serial",

@@ -1,4 +1,4 @@
-"""The import contract of DESIGN.md: ``validation -> scenes -> synth -> emulator``.
+"""The import contract of DESIGN.md: ``validation -> scenes -> synth -> emulator``, and the floors inside.
 
 Every module of the four packages is parsed (not imported) and every import is read,
 including imports inside functions, relative imports and ``importlib.import_module("...")``
@@ -6,6 +6,11 @@ including imports inside functions, relative imports and ``importlib.import_modu
 packages below it, so ``emulator`` (what real-data users install and run) never reaches
 ``synth``, ``scenes`` or ``validation``, not even lazily; and Mitsuba / Dr.Jit are
 imported only inside ``scenes/``.
+
+Inside a package the same rule holds between its floors (:data:`FLOORS`): each top-level
+module or sub-package of the package sits on one floor and imports only its own floor and those
+below.  The package's ``__init__`` (its public facade) is the top floor: it may import any floor
+and nothing inside the package imports it.
 
 The checker is tested on small synthetic trees too, so that this test can fail.
 """
@@ -22,6 +27,18 @@ ROOT = Path(__file__).resolve().parents[1]
 LAYERS = ("emulator", "synth", "scenes", "validation")
 #: Third-party top-level modules allowed only inside one package.
 CONFINED = {"mitsuba": "scenes", "drjit": "scenes"}
+#: Inside a package, lowest first: the top-level modules and sub-packages on each floor.
+FLOORS = {
+    "emulator": (
+        ("errors", "version", "extras", "cells", "pools", "numpy_dispatch"),  # base: no numbers, no files
+        ("core", "noise", "autoexposure"),  # numeric core: arrays in, arrays out
+        ("io",),  # files: recordings, run folders, caches
+        ("report", "metrics", "calibration"),  # what a run or a recording measures and says
+        ("playback",),  # the closed loop and its image providers
+        ("orchestration",),  # orchestration: run folders, dataset runs, Dask, interrupts
+        ("commands",),  # the command line
+    ),
+}
 
 
 def module_name(path: Path, root: Path) -> tuple[str, bool]:
@@ -81,6 +98,73 @@ def test_the_packages_keep_the_dependency_direction():
     assert violations(ROOT) == []
 
 
+def floor_violations(root: Path, floors=FLOORS) -> list[str]:
+    """Every import inside a package that climbs a floor (or reaches the package's facade)."""
+    bad = []
+    for pkg, levels in floors.items():
+        rank = {unit: i for i, units in enumerate(levels) for unit in units}
+        top = len(levels)
+
+        def floor_of(name: str) -> int | None:
+            parts = name.split(".")
+            if parts[0] != pkg:
+                return None
+            if len(parts) == 1:
+                return top  # the facade
+            if parts[1] in rank:
+                return rank[parts[1]]
+            exists = (root / pkg / parts[1]).is_dir() or (root / pkg / f"{parts[1]}.py").is_file()
+            return -1 if exists else None  # -1: a unit on no floor; None: a name, not a module
+
+        for path in sorted((root / pkg).rglob("*.py")):
+            name, is_package = module_name(path, root)
+            here = floor_of(name)
+            where = path.relative_to(root)
+            if here == -1:
+                bad.append(f"{where}: {name} is on no floor of {pkg} (add it to FLOORS)")
+                continue
+            seen = set()
+            for line, target in imports_of(path.read_text(encoding="utf-8"), name, is_package):
+                there = floor_of(target)
+                if there is None or here == top or there == -1 or line in seen:
+                    continue
+                if there > here:
+                    level = "the facade" if there == top else f"floor {there} ({', '.join(levels[there])})"
+                    bad.append(f"{where}:{line}: {name} (floor {here}) imports {target}, on {level}")
+                    seen.add(line)
+    return bad
+
+
+def test_no_import_climbs_a_floor_inside_a_package():
+    assert floor_violations(ROOT) == []
+
+
+def test_every_folder_and_module_of_a_floored_package_is_on_a_floor():
+    for pkg, levels in FLOORS.items():
+        placed = {unit for units in levels for unit in units}
+        here = {p.stem for p in (ROOT / pkg).glob("*.py") if p.stem != "__init__"}
+        here |= {p.name for p in (ROOT / pkg).iterdir() if (p / "__init__.py").is_file()}
+        assert here == placed, (sorted(here - placed), sorted(placed - here))
+
+
+def test_the_floor_checker_finds_a_climb_and_the_facade(tmp_path):
+    floors = {"emulator": (("errors",), ("core",), ("io",))}
+    root = _tree(tmp_path, {
+        "emulator/errors.py": "",
+        "emulator/core/__init__.py": "",
+        "emulator/core/a.py": "from emulator.errors import E\ndef f():\n    from emulator.io.png import read\n",
+        "emulator/io/__init__.py": "",
+        "emulator/io/png.py": "from emulator.core import a\nfrom emulator import __version__\n",
+        "emulator/loose.py": "",
+    })
+    found = floor_violations(root, floors)
+    assert found == [
+        "emulator/core/a.py:3: emulator.core.a (floor 1) imports emulator.io.png, on floor 2 (io)",
+        "emulator/io/png.py:2: emulator.io.png (floor 2) imports emulator, on the facade",
+        "emulator/loose.py: emulator.loose is on no floor of emulator (add it to FLOORS)",
+    ]
+
+
 def test_every_package_is_checked():
     for pkg in LAYERS:
         assert (ROOT / pkg / "__init__.py").is_file()
@@ -102,15 +186,15 @@ def test_checker_accepts_downward_and_internal_imports(tmp_path):
     root = _tree(tmp_path, {
         "validation/a.py": "import scenes\nfrom synth import camera\nfrom emulator.io import png\n",
         "scenes/r.py": "def f():\n    import mitsuba as mi\n    from . import base\n    from .base import x\n",
-        "synth/s.py": "from emulator.response import CameraResponse\nimport numpy\n",
+        "synth/s.py": "from emulator.core.response import CameraResponse\nimport numpy\n",
         "emulator/io/p.py": "from ..errors import DatasetError\nfrom . import files\n",
     })
     assert violations(root) == []
 
 
 @pytest.mark.parametrize("rel, text, expected", [
-    ("emulator/cli.py", "def main():\n    from validation.commands import validate\n",
-     "emulator/cli.py:2: emulator imports validation.commands"),
+    ("emulator/commands/cli.py", "def main():\n    from validation.commands import validate\n",
+     "emulator/commands/cli.py:2: emulator imports validation.commands"),
     ("emulator/x.py", "import scenes.render as r\n", "emulator/x.py:1: emulator imports scenes.render"),
     ("emulator/x.py", "import importlib\nm = importlib.import_module('synth.camera')\n",
      "emulator/x.py:2: emulator imports synth.camera"),

@@ -7,12 +7,12 @@ import dataclasses
 import pytest
 
 from emulator.errors import CalibrationError, ExposimError, ResponseError
-from emulator.levels import BOREALHDR_LEVELS, Levels
+from emulator.core.levels import BOREALHDR_LEVELS, Levels
 
 
 def test_borealhdr_levels_are_the_one_default_and_the_old_names_alias_them():
     import emulator.io.borealhdr as bh
-    import emulator.response as r
+    import emulator.core.response as r
 
     assert (BOREALHDR_LEVELS.black, BOREALHDR_LEVELS.white, BOREALHDR_LEVELS.bit_depth) == (0, 4094, 12)
     assert bh.BOREALHDR_LEVELS is BOREALHDR_LEVELS
@@ -41,7 +41,7 @@ def test_levels_is_frozen_and_validated():
 
 
 def test_readers_use_levels(tmp_path):
-    from emulator.response import CameraResponse
+    from emulator.core.response import CameraResponse
 
     import numpy as np
 
@@ -57,7 +57,7 @@ def test_calibration_percent_names_keep_their_old_aliases():
 
     from emulator.calibration.result import CalibrationResult
     from emulator.calibration.stack_engel2016 import calibrate_stack
-    from emulator.response import CameraResponse
+    from emulator.core.response import CameraResponse
 
     r = CalibrationResult(CameraResponse.linear(), np.zeros(2), np.zeros(2), "m", (0, 1), 1.0, 1.0, 2.5, np.nan,
                           np.zeros(0), np.zeros(0), 4094, 0)

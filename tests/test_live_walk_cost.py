@@ -250,7 +250,7 @@ def test_a_native_run_folder_has_its_native_columns_in_the_header_as_in_every_ro
 
 
 def test_no_run_images_reaches_every_walk_and_stays_out_of_the_command(tmp_path, monkeypatch):
-    import emulator.distributed
+    import emulator.orchestration.distributed
     from conftest import SynthesizeCalled
 
     from validation.live.cli import build_parser, command_line, main
@@ -261,7 +261,7 @@ def test_no_run_images_reaches_every_walk_and_stays_out_of_the_command(tmp_path,
         seen.append([a[-1] for a in args])  # run_walk's keep_run_images
         raise SynthesizeCalled
 
-    monkeypatch.setattr(emulator.distributed, "run_tasks", no_walks)
+    monkeypatch.setattr(emulator.orchestration.distributed, "run_tasks", no_walks)
     for flag, keep in ((["--no-run-images"], False), ([], True)):
         with pytest.raises(SynthesizeCalled):
             main(["-o", str(tmp_path / f"out{keep}"), "--quick", "--no-progress", "--scenes", "forest_edge,sun_glare"]

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from emulator.errors import MetricsError, RunFolderError
-from emulator.gray import bayer_to_gray8
+from emulator.core.gray import bayer_to_gray8
 from emulator.metrics.features import (
     analyse_sequence,
     detect_sift,
@@ -22,7 +22,7 @@ from emulator.metrics.features import (
     to_gray8,
 )
 from emulator.io.runfolder import read_run_folder
-from emulator.response import BOREALHDR_WHITE_LEVEL
+from emulator.core.response import BOREALHDR_WHITE_LEVEL
 
 
 def blob_image(cells, grid=20, cell_px=20, sigma_px=3.0) -> np.ndarray:

@@ -10,13 +10,13 @@ import pytest
 
 
 import synth
-from emulator.blur import rotation_homography
+from emulator.core.blur import rotation_homography
 from emulator.errors import EmulationError, PlaybackError
 from emulator.io.borealhdr import load_sequence, sequence_response
-from emulator.native import NativeCandidate, invalid_fraction, native_cost, native_select, warp_to_instant
+from emulator.core.native import NativeCandidate, invalid_fraction, native_cost, native_select, warp_to_instant
 from emulator.playback import NativeProvider, RunConfig, closed_loop
 from emulator.playback.native import NativeWarpWarning
-from emulator.response import CameraResponse
+from emulator.core.response import CameraResponse
 from synth.sequence import load_camera
 from validation.common import quantisation_bound
 from validation.live import DatasetRadiance
@@ -293,7 +293,7 @@ def test_selection_on_a_hand_built_sequence(ramp):
 
 def test_a_rotation_from_the_gyro_between_frames(static):
     seq, cam, resp, _ = static
-    from emulator.motion import recording_motion
+    from emulator.playback.motion import recording_motion
 
     rate = np.array([0.0, 0.2, 0.0])  # rad/s about the camera's y axis
     K = np.array([[40.0, 0, 19.5], [0, 40.0, 11.5], [0, 0, 1]])
@@ -392,7 +392,7 @@ def test_frames_the_gyro_does_not_cover_get_no_warp_and_the_run_counts_them(stat
     nanoseconds: a neighbour frame whose rotation it does not cover is used unwarped (warp NaN),
     never warped by a guess, and :meth:`NativeProvider.gyro_coverage` counts the frames in one line."""
     seq, cam, resp, _ = static
-    from emulator.motion import recording_motion
+    from emulator.playback.motion import recording_motion
 
     t = np.arange(-0.5, 1.5, 0.005)
     t = {"whole": t, "ends-early": t[t < 0.3], "hole": t[(t < 0.25) | (t > 0.45)], "microseconds": t / 1000}[record]
@@ -414,7 +414,7 @@ def test_frames_the_gyro_does_not_cover_get_no_warp_and_the_run_counts_them(stat
 
 
 def test_a_hole_in_the_gyro_record_is_not_covered():
-    from emulator.gyro import AngularVelocity
+    from emulator.core.gyro import AngularVelocity
 
     t = np.r_[np.arange(0.0, 1.0, 0.01), np.arange(1.6, 3.0, 0.01)]  # a 0.6 s hole
     omega = AngularVelocity(t, np.zeros((t.size, 3)))
@@ -453,7 +453,7 @@ def test_a_run_says_in_one_line_and_in_run_json_how_many_frames_got_no_warp(stat
     import json
     import shutil
 
-    from emulator.cli import main
+    from emulator.commands.cli import main
 
     seq, _, _, _ = static
     root = tmp_path / "rec"

@@ -9,8 +9,8 @@ import json
 import pytest
 
 from emulator.io.borealhdr import load_sequence
-from emulator.motion import recording_motion
-from emulator.native import BLUR_LIMIT_PX, NativeCandidate, native_select
+from emulator.playback.motion import recording_motion
+from emulator.core.native import BLUR_LIMIT_PX, NativeCandidate, native_select
 from emulator.playback import NativeProvider, RunConfig
 from emulator.playback.native import recording_stamp
 
@@ -89,7 +89,7 @@ def test_on_a_recorded_turn_no_source_blurs_over_a_pixel_more_than_it_must(turn)
 
 
 def test_the_run_flags_are_recorded_only_when_set(sample_seq, tmp_path):
-    from emulator.runner import run_to_folder
+    from emulator.orchestration.runner import run_to_folder
 
     run_to_folder(sample_seq, "fixed", tmp_path / "a", rate="native", native_blur_aware=True, native_warp="flow")
     native = json.loads((tmp_path / "a" / "run.json").read_text())

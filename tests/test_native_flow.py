@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from emulator.native import flow_velocity, move_mask, radiance_gray, warp_to_instant, warp_with_flow
-from emulator.response import CameraResponse
+from emulator.core.native import flow_velocity, move_mask, radiance_gray, warp_to_instant, warp_with_flow
+from emulator.core.response import CameraResponse
 
 W, H = 320, 240
 

@@ -8,9 +8,9 @@ import json
 import numpy as np
 import pytest
 
-from emulator.cli import main
+from emulator.commands.cli import main
 from emulator.io.borealhdr import load_sequence
-from emulator.motion import recording_motion
+from emulator.playback.motion import recording_motion
 from emulator.playback import NativeProvider, RunConfig
 from emulator.playback.native import recording_stamp
 from validation.native_loo.measure import crop_sequence, motion_class

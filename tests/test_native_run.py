@@ -8,9 +8,9 @@ import warnings
 import pytest
 
 
-from emulator.cli import main
+from emulator.commands.cli import main
 from emulator.io.runcsv import CSV_COLUMNS, EXTRA_COLUMNS, NATIVE_COLUMNS
-from emulator.runner import run_to_folder
+from emulator.orchestration.runner import run_to_folder
 from conftest import static_chart_recording  # noqa: E402
 
 W, H = 40, 24

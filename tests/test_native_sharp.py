@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from emulator.io.borealhdr import load_sequence
-from emulator.motion import recording_motion
-from emulator.native import DEFAULT_NATIVE_WARP, SHARP_MOTION_PX, median_motion_px
+from emulator.playback.motion import recording_motion
+from emulator.core.native import DEFAULT_NATIVE_WARP, SHARP_MOTION_PX, median_motion_px
 from emulator.playback import NativeProvider, RunConfig
 from emulator.playback.native import recording_stamp
 from validation.native_loo.measure import crop_sequence

@@ -181,7 +181,7 @@ def test_strata_and_bootstrap_on_a_static_synth_recording(tmp_path):
 
 
 def test_bracket_groups_keep_still_groups_by_the_gyro(tmp_path):
-    from emulator.motion import RecordingMotion
+    from emulator.playback.motion import RecordingMotion
 
     _, seq = _recording(tmp_path, 0.0)
     t0 = seq[0].timestamp_ns
@@ -194,7 +194,7 @@ def test_bracket_groups_keep_still_groups_by_the_gyro(tmp_path):
 
 
 def AngularVelocityShim(f):
-    from emulator.blur import as_angular_velocity
+    from emulator.core.blur import as_angular_velocity
 
     return as_angular_velocity(f)
 

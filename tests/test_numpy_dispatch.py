@@ -104,7 +104,7 @@ def test_every_methods_table_is_the_same_bytes_with_and_without_numpys_avx512_ke
         env = {k: v for k, v in os.environ.items() if k not in ("NPY_DISABLE_CPU_FEATURES", "NPY_ENABLE_CPU_FEATURES")}
         env.update(extra)
         out = tmp_path / name
-        subprocess.run([sys.executable, "-m", "emulator.cli", "run", str(sample_seq), "--methods", "all", "--mode", mode,
+        subprocess.run([sys.executable, "-m", "emulator.commands.cli", "run", str(sample_seq), "--methods", "all", "--mode", mode,
                         "--workers", "inline", "-o", str(out), "--no-progress", "-q"], env=env, check=True,
                        capture_output=True)
         tables[name] = {p.parent.name: p.read_bytes() for p in sorted(out.glob("*/exposures.csv"))}

@@ -18,13 +18,13 @@ import pytest
 
 from emulator import playback
 from emulator.autoexposure import METHOD_NAMES, MODES
-from emulator.dataset import Frame
+from emulator.core.dataset import Frame
 from emulator.io.borealhdr import load_sequence, write_frame
 from emulator.io.runfolder import CSV_COLUMNS, format_row
 from emulator.playback import iter_run, run
-from emulator.runner import run_to_folder
+from emulator.orchestration.runner import run_to_folder
 from emulator.io.pcalib import write_response
-from emulator.response import CameraResponse
+from emulator.core.response import CameraResponse
 
 BRACKETS = (1.0, 2.0, 4.0, 8.0, 16.0, 32.0)
 T0_NS = 1_700_000_000_000_000_000

@@ -242,7 +242,7 @@ def test_run_folder_images_encoded_once_per_target_and_summary_from_memory(tmp_p
 
     from emulator.io.runfolder import RunWriter, read_tables
     from emulator.report.run import summarise_run
-    from emulator.runner import run_to_folder
+    from emulator.orchestration.runner import run_to_folder
 
     root, _ = write_static_sequence(tmp_path / "seq", n_cycles=4, shape=(16, 24))
     out = tmp_path / "run"

@@ -17,11 +17,11 @@ import numpy as np
 import pytest
 
 from emulator.autoexposure import AutoExposureError, MethodFailed, PluginMethod, installed_methods, method_names, registry
-from emulator.cli import main
+from emulator.commands.cli import main
 from emulator.autoexposure.methodset import build_methods, parse_methods
 from emulator.errors import PlaybackError
 from emulator.playback import run
-from emulator.runner import run_to_folder
+from emulator.orchestration.runner import run_to_folder
 from test_playback import K_DN_PER_MS, write_static_sequence
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -13,9 +13,9 @@ def test_user_verbs_are_exported_and_are_the_library_functions():
     from emulator.autoexposure import make_method
     from emulator.io.borealhdr import load_sequence
     from emulator.playback import RunConfig, run
-    from emulator.runner import run_to_folder
-    from emulator.emulate import emulate
-    from emulator.select import select
+    from emulator.orchestration.runner import run_to_folder
+    from emulator.core.emulate import emulate
+    from emulator.core.select import select
 
     assert emulator.load_sequence is load_sequence
     assert emulator.run is run and emulator.run_to_folder is run_to_folder
@@ -26,18 +26,18 @@ def test_user_verbs_are_exported_and_are_the_library_functions():
 
 
 def test_no_export_shadows_a_submodule():
-    import emulator.select as s
+    import emulator.core.select as s
 
-    assert isinstance(s, types.ModuleType) and s.__name__ == "emulator.select"
+    assert isinstance(s, types.ModuleType) and s.__name__ == "emulator.core.select"
     import emulator.playback as p
 
     assert isinstance(p, types.ModuleType)
-    import emulator.emulate as e
+    import emulator.core.emulate as e
 
-    assert isinstance(e, types.ModuleType) and e.__name__ == "emulator.emulate"
+    assert isinstance(e, types.ModuleType) and e.__name__ == "emulator.core.emulate"
     from emulator import emulate  # the module too, as ``from emulator import select``
 
-    assert emulate is e and emulator.emulate is e and callable(e.emulate)
+    assert emulate is e and emulator.core.emulate is e and callable(e.emulate)
     from emulator import select
 
     assert isinstance(select, types.ModuleType)

@@ -7,7 +7,7 @@ import re
 import subprocess
 from pathlib import Path
 
-from emulator.cli import build_parser, load_commands
+from emulator.commands.cli import build_parser, load_commands
 
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text(encoding="utf-8")

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from emulator.cli import main
+from emulator.commands.cli import main
 from emulator.io.borealhdr import find_response, load_sequence, sequence_response
 from emulator.io.layout import choose_stereo_calibration, recording_date, search_roots
 from emulator.metrics.stereo import choose_calibration

@@ -13,7 +13,7 @@ import logging
 
 import pytest
 
-from emulator.cli import main
+from emulator.commands.cli import main
 from scenes.errors import RenderError
 from scenes.parallel import check_scheduler
 

@@ -154,7 +154,7 @@ def test_cli_turns_bad_input_into_one_line(tmp_path, capsys):
 
 
 def test_exposim_validate_render_help_shows_the_defaults(capsys):
-    from emulator.cli import main
+    from emulator.commands.cli import main
 
     with pytest.raises(SystemExit) as exc:
         main(["validate", "render", "--help"])
@@ -168,7 +168,7 @@ def test_exposim_validate_render_help_shows_the_defaults(capsys):
 
 
 def test_exposim_validate_render_bad_scene_is_one_line(tmp_path, capsys):
-    from emulator.cli import main
+    from emulator.commands.cli import main
 
     assert main(["validate", "render", "-o", str(tmp_path / "x"), "--scenes", "nowhere", "--no-progress"]) == 1
     err = capsys.readouterr().err
@@ -178,7 +178,7 @@ def test_exposim_validate_render_bad_scene_is_one_line(tmp_path, capsys):
 
 @pytest.mark.render
 def test_exposim_validate_render_runs_the_study(tmp_path, capsys):
-    from emulator.cli import main
+    from emulator.commands.cli import main
 
     args = ["validate", "render", "-o", str(tmp_path / "out"), "--scenes", "static_lab", "--size", "24x16",
             "--spp", "1,2", "--reference-spp", "8", "--texture-scenes", "", "--real", str(tmp_path / "none"),

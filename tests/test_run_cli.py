@@ -8,10 +8,10 @@ import cv2
 import numpy as np
 import pytest
 
-from emulator.cli import main
+from emulator.commands.cli import main
 from emulator.errors import PlaybackError
 from emulator.io.runfolder import CSV_COLUMNS
-from emulator.runner import run_to_folder
+from emulator.orchestration.runner import run_to_folder
 from test_playback import write_static_sequence
 
 METHODS = "classical-50,kim,zhang,fixed"
@@ -184,7 +184,7 @@ def test_emulate_png8_equals_run_png8(tmp_path, capsys):
 
 
 def test_every_emulate_argument_is_documented():
-    from emulator.cli import build_parser
+    from emulator.commands.cli import build_parser
 
     sub = build_parser()._subparsers._group_actions[0].choices  # noqa: SLF001
     for cmd in ("emulate", "run", "info"):
@@ -197,7 +197,7 @@ def test_every_emulate_argument_is_documented():
 
 # ---------------------------------------------------------------------------- --help consistency
 def _all_parsers():
-    from emulator.cli import build_parser
+    from emulator.commands.cli import build_parser
 
     stack = [("exposim", build_parser())]
     while stack:
@@ -226,7 +226,7 @@ def test_cache_folder_options_render_cache_dir_and_frame_cache(capsys):
                         seen.append(name)
     assert {"exposim render", "exposim synth"} <= set(seen)
     assert set(frames) == {"exposim cache", "exposim run", "exposim info", "exposim emulate"}
-    from emulator.cli import build_parser
+    from emulator.commands.cli import build_parser
 
     sub = build_parser()._subparsers._group_actions[0].choices  # noqa: SLF001
     for cmd in ("render", "synth"):
@@ -240,7 +240,7 @@ def test_fixed_is_explained_in_help_readme_and_report(clean_run):
 
     from emulator.autoexposure import make_method
     from emulator.autoexposure.classical import N_AUTO_FRAMES
-    from emulator.cli import build_parser
+    from emulator.commands.cli import build_parser
 
     n = N_AUTO_FRAMES
     # the documented numbers are the method's: it adjusts on n frames (n + 1 in borealhdr mode)

@@ -13,12 +13,12 @@ import json
 
 import pytest
 
-from emulator.cli import main
-from emulator.datasetrun import DATASET_FILE, run_dataset
-from emulator.emulate import UPWARD_RATIO_FLAG
+from emulator.commands.cli import main
+from emulator.orchestration.datasetrun import DATASET_FILE, run_dataset
+from emulator.core.emulate import UPWARD_RATIO_FLAG
 from emulator.io.runfolder import read_csv_rows
 from emulator.playback import RunConfig
-from emulator.runner import run_to_folder
+from emulator.orchestration.runner import run_to_folder
 from test_playback import write_static_sequence
 
 PARTIAL = [{"cycle": 0, "missing": {"right": [1.0]}},

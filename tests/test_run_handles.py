@@ -12,7 +12,7 @@ import pytest
 
 from emulator.autoexposure.registry import MethodFailed
 from emulator.io.runcsv import NATIVE_COLUMNS
-from emulator.native import NATIVE_RATE, is_native_run, native_record, run_rate, tick_unit
+from emulator.core.native import NATIVE_RATE, is_native_run, native_record, run_rate, tick_unit
 from emulator.playback import EmulatedProvider, NativeProvider, RunConfig, closed_loop, prepare_run, resolve_sequence
 from emulator.playback.seam import InlineMethod, MethodHandle, as_handle, call_method
 from emulator.playback.workers import start_methods

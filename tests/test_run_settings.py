@@ -10,7 +10,7 @@ import dataclasses
 
 import pytest
 
-from emulator.cli import main
+from emulator.commands.cli import main
 from emulator.errors import PlaybackError
 from emulator.playback import RunConfig, settings
 from emulator.playback.config import CONFIG_KEYS, DEFAULT_METHOD_TIMEOUT_S

@@ -16,7 +16,7 @@ import sys
 import numpy as np
 import pytest
 
-from emulator.cli import main
+from emulator.commands.cli import main
 from emulator.errors import RunLockedError
 from emulator.io.runfolder import LOCK_FILE, RunLock
 from test_playback import write_static_sequence

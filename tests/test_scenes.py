@@ -628,7 +628,7 @@ def test_select_spp_reports_the_noise_curve(built):
 
 @pytest.mark.render
 def test_cli_render_writes_frames_poses_and_json(tmp_path, capsys):
-    from emulator.cli import main
+    from emulator.commands.cli import main
 
     out = tmp_path / "run"
     argv = ["render", "static_lab", "--size", "32x20", "--spp", "2", "--duration", "0.5", "--rate", "2",

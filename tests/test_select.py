@@ -2,8 +2,8 @@ import numpy as np
 import pytest
 
 from emulator import ExposimError, closest, higher_no_sat, saturated_fraction
-from emulator.select import select
-from emulator.select import reference_rule
+from emulator.core.select import select
+from emulator.core.select import reference_rule
 
 BR = [1.0, 2.0, 4.0, 8.0, 16.0, 32.0]
 LV = dict(white_level=4095, black_level=0)
@@ -79,7 +79,7 @@ def test_front_function_and_errors():
 
 def test_predicted_error_selector():
     from emulator import CameraResponse
-    from emulator.select import NoiseModel, predicted_error, predicted_mse_table
+    from emulator.core.select import NoiseModel, predicted_error, predicted_mse_table
 
     r = CameraResponse.linear(4095)  # full 12-bit range, as the images below
     quiet = NoiseModel(shot=0.0, floor=0.0)
@@ -103,7 +103,7 @@ def test_predicted_error_selector():
 
 
 def test_blur_aware_weighs_excess_blur_against_noise():
-    from emulator.select import blur_aware, higher_no_sat
+    from emulator.core.select import blur_aware, higher_no_sat
 
     br = {4.0: 0.0, 8.0: 0.0, 16.0: 0.0}
     lv = dict(white_level=4095, black_level=0)

@@ -1,4 +1,4 @@
-"""A clip too short for the methods to settle: :mod:`emulator.settling` and the run report's words."""
+"""A clip too short for the methods to settle: :mod:`emulator.core.settling` and the run report's words."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from emulator.report.run import _trending_note, per_recorder_cycle
-from emulator.settling import still_trending, trending_methods
+from emulator.core.settling import still_trending, trending_methods
 
 
 def test_a_method_still_climbing_at_the_end_is_trending():

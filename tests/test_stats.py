@@ -1,10 +1,10 @@
-"""emulator.stats: resampling plans, intervals, Holm, TOST, variance components, tau-b."""
+"""emulator.core.stats: resampling plans, intervals, Holm, TOST, variance components, tau-b."""
 
 import numpy as np
 import pytest
 from scipy.stats import kendalltau
 
-from emulator import stats
+from emulator.core import stats
 
 
 def test_bootstrap_indices_shape_range_and_seed():
@@ -146,7 +146,7 @@ def test_compare_methods_best_difference_and_unaligned():
 
 
 def test_compare_methods_by_segment_is_a_cluster_bootstrap_and_pairs_methods():
-    from emulator.stats import compare_methods_by_segment, statistic_interval
+    from emulator.core.stats import compare_methods_by_segment, statistic_interval
 
     rng = np.random.default_rng(5)
     units = rng.normal(size=20)

@@ -15,7 +15,7 @@ import pytest
 import synth
 from emulator.errors import ExposimError
 from emulator.io.pcalib import read_pcalib
-from emulator.response import CameraResponse
+from emulator.core.response import CameraResponse
 from synth import Camera, capture
 from synth.imaging import check_radiance, mean_electrons
 from synth.errors import CameraError, RadianceError, SynthError

@@ -5,10 +5,10 @@ import json
 import numpy as np
 import pytest
 
-from emulator.cli import main
+from emulator.commands.cli import main
 from emulator.io.borealhdr import load_sequence, sequence_response
 from emulator.io.png import read_png16
-from emulator.emulate import emulate
+from emulator.core.emulate import emulate
 
 pytestmark = pytest.mark.render
 
@@ -74,7 +74,7 @@ def test_ctrl_c_during_rendering_stops_cleanly_with_130(tmp_path):
     out = tmp_path / "walk"
     env = dict(os.environ, EXPOSIM_CACHE=str(tmp_path / "cache"))
     proc = subprocess.Popen(
-        [sys.executable, "-m", "emulator.cli", "synth", "forest_winter", "-o", str(out), "--size", "64x40",
+        [sys.executable, "-m", "emulator.commands.cli", "synth", "forest_winter", "-o", str(out), "--size", "64x40",
          "--spp", "256", "--cycles", "200", "--quiet"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env,
     )

@@ -17,7 +17,7 @@ from scipy.spatial.transform import Rotation
 import synth
 from synth.errors import SynthError
 import synth.sequence
-from emulator.emulate import emulate
+from emulator.core.emulate import emulate
 from emulator.io.borealhdr import exposure_folder_name, load_sequence, sequence_response
 from emulator.io.png import read_png16
 from emulator.errors import OutputExistsError

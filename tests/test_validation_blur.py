@@ -35,14 +35,14 @@ def test_sharpness_of_a_ramp_is_exact():
 @pytest.mark.render
 @pytest.mark.slow
 def test_validate_blur_quick(tmp_path):
-    from emulator.cli import main
+    from emulator.commands.cli import main
 
     out = tmp_path / "blur"
     assert main(["validate", "blur", "--quick", "-o", str(out)]) == 0
     r = json.loads((out / "results.json").read_text())
     for key in ("reference_error_percent", "render_cost_ratio", "sharpness_error_plain_percent"):
         assert r[key] is not None and r[key] == r[key]
-    assert r["sharpness_error_consistent_percent"] is not None  # emulator.blur fed with the walk's gyro
+    assert r["sharpness_error_consistent_percent"] is not None  # emulator.core.blur fed with the walk's gyro
     row = r["sharpness"][0]
     assert row["size"] == [64, 40] and row["rms_plain_dn"] > 0 and row["rms_consistent_dn"] > 0
     assert r["image_rms_error_ratio"] == pytest.approx(row["rms_consistent_dn"] / row["rms_plain_dn"])

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from emulator import CameraResponse
-from emulator.emulate import emulate
+from emulator.core.emulate import emulate
 from emulator.errors import ExposimError, OutputExistsError
 from emulator.io.files import prepare_output, write_results
 from emulator.io.pcalib import read_response
@@ -184,7 +184,7 @@ def test_oracle_and_excess():
 
 
 def test_cli_refuses_unknown_scene_and_response(tmp_path, capsys):
-    from emulator.cli import main
+    from emulator.commands.cli import main
 
     assert main(["validate", "emulation", "--quick", "-o", str(tmp_path / "a"), "--scenes", "nope"]) == 1
     assert "unknown study scene 'nope'" in capsys.readouterr().err

@@ -13,7 +13,7 @@ import synth
 from emulator.autoexposure import make_method
 from emulator.io.borealhdr import load_sequence, sequence_response
 from emulator.errors import EmulationError
-from emulator.response import CameraResponse
+from emulator.core.response import CameraResponse
 from emulator.noise import NoiseModel
 from emulator.playback import iter_run
 from synth.noise_model import noise_model_of
@@ -266,7 +266,7 @@ def test_tiny_experiment_end_to_end(tmp_path, render_cache, monkeypatch):
 @pytest.mark.slow
 def test_exposim_validate_live_cli(tmp_path, render_cache, capsys, monkeypatch):
     monkeypatch.setenv("EXPOSIM_DENOISE", "off")  # the same raw renders as the end-to-end test
-    from emulator.cli import main as exposim
+    from emulator.commands.cli import main as exposim
 
     with pytest.raises(SystemExit) as exc:
         exposim(["validate", "live", "--help"])
@@ -332,7 +332,7 @@ def test_exposim_validate_live_cli(tmp_path, render_cache, capsys, monkeypatch):
 
 
 def test_scheduler_runs_the_walks_and_a_bad_one_creates_nothing(tmp_path, monkeypatch, capsys):
-    import emulator.distributed
+    import emulator.orchestration.distributed
 
     seen = {}
 
@@ -340,7 +340,7 @@ def test_scheduler_runs_the_walks_and_a_bad_one_creates_nothing(tmp_path, monkey
         seen.update(kwargs, scheduler=scheduler)
         raise SynthesizeCalled
 
-    monkeypatch.setattr(emulator.distributed, "open_client", no_cluster)
+    monkeypatch.setattr(emulator.orchestration.distributed, "open_client", no_cluster)
     with pytest.raises(SynthesizeCalled):
         main(["-o", str(tmp_path / "run"), "--quick", "--no-progress", "--scheduler", "tcp://10.0.0.1:8786"])
     assert seen == {"scheduler": "tcp://10.0.0.1:8786", "n_workers": None, "retries": 1}

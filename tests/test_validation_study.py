@@ -67,7 +67,7 @@ def test_noiseless_max_error_is_within_the_quantisation_bound_of_the_chosen_brac
     """The headline noiseless maximum is the largest RMSE of the selector's noiseless choices, and each
     of those RMSEs is at most the largest per-pixel analytic bound (validation.common.quantisation_bound)
     over that emulation's valid pixels: quantisation alone, about 1.5 DN when the ratio is near 1."""
-    from emulator.emulate import emulate
+    from emulator.core.emulate import emulate
     from validation.common import make_camera, quantisation_bound, to_percent
     from validation.emulation import choose_brackets
 
@@ -196,7 +196,7 @@ def test_speed_study_small():
 
 
 def test_cli_writes_folder_and_refuses_overwrite(tmp_path, capsys):
-    from emulator.cli import main
+    from emulator.commands.cli import main
 
     out = tmp_path / "emul"
     argv = ["validate", "emulation", "--quick", "-o", str(out), "--exposures", "6", "--responses", "borealhdr",

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from emulator.cli import main
+from emulator.commands.cli import main
 from emulator.errors import DatasetError
 from emulator.io.borealhdr import ZipSource, load_sequence, read_frame
 

@@ -161,8 +161,8 @@ def emulation_check(dataset: Path, selector: str = "higher-no-sat") -> dict:
     """
     from emulator.io.borealhdr import exposure_folder_name, load_sequence, sequence_response
     from emulator.io.png import read_png16
-    from emulator.emulate import emulate
-    from emulator.select import saturated_fraction, select
+    from emulator.core.emulate import emulate
+    from emulator.core.select import saturated_fraction, select
 
     seq = load_sequence(dataset)
     response = sequence_response(seq)
@@ -236,7 +236,7 @@ def run_demo(output=None, *, quick: bool = False, progress=None, cache_dir=None)
     from emulator.io.borealhdr import load_sequence
     from emulator.metrics.bench import bench_features, bench_vo
     from emulator.metrics.vo import VOParameters
-    from emulator.runner import run_to_folder
+    from emulator.orchestration.runner import run_to_folder
 
     def say(stage: str, done: int, total: int) -> None:
         if progress is not None:

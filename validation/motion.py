@@ -33,8 +33,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from emulator.emulate import emulate
-from emulator.select import higher_no_sat, saturated_fraction
+from emulator.core.emulate import emulate
+from emulator.core.select import higher_no_sat, saturated_fraction
 from validation.common import (
     BRACKETS_MS,
     RESPONSES,

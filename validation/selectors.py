@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from emulator.select import NoiseModel, predicted_error, predicted_mse_table
+from emulator.core.select import NoiseModel, predicted_error, predicted_mse_table
 from validation.common import (
     BRACKETS_MS,
     RESPONSES,
@@ -280,7 +280,7 @@ def _selector_choices_predicted_only(sweep, response, noise, clip_weight) -> np.
 
 
 def selector_fn(response, noise: NoiseModel, clip_weight: float) -> Callable:
-    """:func:`predicted_error` bound to a camera, with the signature of ``emulator.select`` selectors."""
+    """:func:`predicted_error` bound to a camera, with the signature of ``emulator.core.select`` selectors."""
 
     def fn(target_ms, brackets, *, white_level, black_level, **_):
         return predicted_error(target_ms, brackets, response=response, noise=noise, white_level=white_level,

@@ -4,7 +4,7 @@ Emulation paths, all from the same noiseless brackets against the same noiseless
 truth (HigherNoSat's bracket at each exposure):
 
 ``lut``
-    :func:`emulator.emulate`: one gather through the cached per-ratio table (rounded DN);
+    :func:`emulator.core.emulate`: one gather through the cached per-ratio table (rounded DN);
 ``lut+build``
     the same with the table built for the ratio first (first use of a ratio);
 ``float``
@@ -29,10 +29,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from emulator.emulate import emulate, validity_mask
+from emulator.core.emulate import emulate, validity_mask
 from emulator.io.pcalib import PCALIB_TABLE_TOP
-from emulator.response import CameraResponse
-from emulator.select import higher_no_sat, saturated_fraction
+from emulator.core.response import CameraResponse
+from emulator.core.select import higher_no_sat, saturated_fraction
 from validation.common import (
     BRACKETS_MS,
     RESPONSES,

@@ -17,7 +17,7 @@ The protocol (``specs/ae_methods.md`` section 0) is that of the built-ins:
 uint16 12-bit Bayer mosaic (read-only) captured at ``exposure_ms``, the result the next
 exposure in ms.  A factory gets, among its keyword parameters (or ``**kwargs``), ``mode``
 (``"paper"`` or ``"borealhdr"``), ``range_ms`` (``None``: the closed loop clamps) and
-``response`` (the recording's :class:`~emulator.response.CameraResponse`) when it takes them,
+``response`` (the recording's :class:`~emulator.core.response.CameraResponse`) when it takes them,
 plus the user's options (``exposim run --option NAME.KEY=VALUE``).  Subclassing
 :class:`~emulator.autoexposure.AutoExposureMethod` gives input checks, the gray conversion
 and ``config()`` for free, but is not required.

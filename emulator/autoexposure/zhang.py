@@ -278,7 +278,7 @@ class Zhang2017(AutoExposureMethod):
             self._h = ref_icrf_derivative(_ref_knots(response))
         else:
             if response is None:
-                from emulator.response import CameraResponse
+                from emulator.core.response import CameraResponse
 
                 response = CameraResponse.linear()
             self._dlogt = paper_dlogt_table(response)

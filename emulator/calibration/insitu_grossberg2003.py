@@ -31,7 +31,7 @@ from emulator.calibration.result import (
 )
 from emulator.calibration.solver import Knots, blas_single_thread, comparametric_irls, finish_response, robust_scale
 from emulator.errors import CalibrationError
-from emulator.levels import BOREALHDR_LEVELS
+from emulator.core.levels import BOREALHDR_LEVELS
 
 __all__ = ["comparagram_pairs", "fit_comparametric", "calibrate_from_recording"]
 
@@ -206,11 +206,11 @@ def calibrate_from_recording(
 ) -> CalibrationResult:
     """Recover g from a bracketed recording's own sweeps (comparametric, no static scene).
 
-    ``sequence`` is a path or an :class:`emulator.dataset.Sequence`.  Images are read
+    ``sequence`` is a path or an :class:`emulator.core.dataset.Sequence`.  Images are read
     every ``stride``-th pixel of each Bayer plane.  See :func:`comparagram_pairs` and
     :func:`fit_comparametric`.
     """
-    from emulator.dataset import Sequence
+    from emulator.core.dataset import Sequence
     from emulator.io.borealhdr import load_sequence
 
     seq = sequence if isinstance(sequence, Sequence) else load_sequence(sequence)

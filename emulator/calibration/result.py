@@ -14,7 +14,7 @@ import numpy as np
 
 from emulator.errors import ResponseError
 from emulator.io.pcalib import check_origin
-from emulator.response import CameraResponse
+from emulator.core.response import CameraResponse
 
 __all__ = ["CalibrationResult", "Progress", "bayer_subsample", "table_top_for", "origin_warnings", "planes_of",
            "sweep_neighbours", "report_progress"]

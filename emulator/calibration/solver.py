@@ -21,7 +21,7 @@ from emulator.calibration.result import report_progress
 from emulator.errors import CalibrationError
 from emulator.io.pcalib import PCALIB_TOP_VALUE
 from emulator.pools import single_thread_pools
-from emulator.response import CameraResponse
+from emulator.core.response import CameraResponse
 
 __all__ = ["Knots", "blas_single_thread", "robust_scale", "finish_response", "solve_varpro", "solve_als",
            "comparametric_irls"]

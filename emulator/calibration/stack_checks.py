@@ -12,7 +12,7 @@ import numpy as np
 
 from emulator.calibration.result import bayer_subsample, table_top_for
 from emulator.errors import CalibrationError
-from emulator.levels import BOREALHDR_LEVELS
+from emulator.core.levels import BOREALHDR_LEVELS
 
 __all__ = ["estimate_noise_dn", "stack_warnings", "check_stack"]
 

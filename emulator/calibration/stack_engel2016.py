@@ -69,7 +69,7 @@ from emulator.calibration.stack_checks import check_stack, estimate_noise_dn, st
 from emulator.errors import CalibrationError
 from emulator.io.pcalib import PCALIB_SAMPLES
 from emulator.io.stack import Stack, read_stack
-from emulator.levels import BOREALHDR_LEVELS
+from emulator.core.levels import BOREALHDR_LEVELS
 
 __all__ = ["estimate_noise_dn", "fit_inverse_response", "calibrate_stack"]
 

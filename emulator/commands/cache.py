@@ -44,7 +44,7 @@ def _cache(args) -> int:
     from tqdm import tqdm
 
     from emulator.io.framecache import MIN_FAST_LEVEL
-    from emulator.tools.framecache import build_frame_cache
+    from emulator.orchestration.framecache import build_frame_cache
 
     if not (1 <= args.level <= 22 or MIN_FAST_LEVEL <= args.level <= -1):
         raise SystemExit(f"exposim cache: error: --level must be 1..22, or -1..{MIN_FAST_LEVEL} for zstd's fast "

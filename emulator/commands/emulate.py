@@ -78,17 +78,17 @@ def emulate_cycle(
     The selector sees the brackets present for every requested camera and decides on the
     first camera's saturation (the left one for a stereo pair), once for all cameras.
     ``from_ms`` forces the source bracket instead (it must be present for every camera).
-    ``selector="blur-aware"``: :func:`emulator.select.blur_aware` with the recording's gyro.
+    ``selector="blur-aware"``: :func:`emulator.core.select.blur_aware` with the recording's gyro.
     ``blur="consistent"`` adds the blur of the extra exposure time from the recording's
-    gyro (:mod:`emulator.motion`); with an IMU, each camera's entry records the predicted
+    gyro (:mod:`emulator.playback.motion`); with an IMU, each camera's entry records the predicted
     blur of the source and of a capture at the target (px, largest over the image) and
     ``blur_mismatch_px`` (source minus target: > 0 is blur the emulated image keeps; with
     ``consistent`` the added blur makes it 0 where the target is longer).
     """
-    from emulator.emulate import check_exposure
+    from emulator.core.emulate import check_exposure
     from emulator.errors import DatasetError
     from emulator.io.borealhdr import sequence_response
-    from emulator.select import saturated_fraction
+    from emulator.core.select import saturated_fraction
 
     exposure_ms = check_exposure(exposure_ms, "--exposure-ms")
     cycle, available = _cycle_brackets(sequence, cycle_index, cameras)
@@ -112,7 +112,7 @@ def emulate_cycle(
             raise ExposimError(f"--from-ms {from_ms:g}: cycle {cycle_index} of {sequence.path} has no {from_ms:g} ms "
                                f"bracket for {' and '.join(cameras)} (present: {', '.join(f'{b:g}' for b in available)})")
         chosen = from_ms
-    from emulator.motion import blur_hook, recording_motion
+    from emulator.playback.motion import blur_hook, recording_motion
 
     hook = blur_hook(blur, sequence, response, calibration=calibration, stamp=stamp)
     motion = hook.motion if hook is not None else (
@@ -165,7 +165,7 @@ def _select_bracket(selector: str, exposure_ms: float, fractions: dict, levels: 
                     lead: str) -> float:
     """The bracket ``selector`` picks from the lead camera's saturated ``fractions`` (bracket -> callable);
     ``blur-aware`` weighs each bracket's excess blur from the recording's gyro (``motion``)."""
-    from emulator.select import blur_aware, select
+    from emulator.core.select import blur_aware, select
 
     if selector == "blur-aware":
         if motion is None:
@@ -177,9 +177,9 @@ def _select_bracket(selector: str, exposure_ms: float, fractions: dict, levels: 
 
 def _emulate_camera(cam: str, frame, raw, chosen: float, exposure_ms: float, response, levels: dict, hook, motion):
     """One camera's emulated image (blur-consistent with a blur ``hook``) and its entry of ``info["cameras"]``."""
-    from emulator.blur import emulate_blur_consistent
-    from emulator.emulate import emulate
-    from emulator.select import saturated_fraction
+    from emulator.core.blur import emulate_blur_consistent
+    from emulator.core.emulate import emulate
+    from emulator.core.select import saturated_fraction
 
     if hook is not None:
         Hs, ws = motion.homographies(cam, frame.timestamp_ns, chosen, exposure_ms, (raw.shape[1], raw.shape[0]))
@@ -219,7 +219,7 @@ def _blur_info(motion, cam: str, timestamp_ns: int, source_ms: float, target_ms:
 
 
 def _has_calibration(sequence, calibration) -> bool:
-    from emulator.motion import find_camera_calibration
+    from emulator.playback.motion import find_camera_calibration
 
     return find_camera_calibration(sequence, calibration) is not None
 
@@ -227,7 +227,7 @@ def _has_calibration(sequence, calibration) -> bool:
 def _emulate(args) -> int:
     from emulator.io.borealhdr import load_sequence, sequence_response
     from emulator.io.png import write_png8, write_png16
-    from emulator.runner import saved_image
+    from emulator.orchestration.runner import saved_image
 
     seq = load_sequence(args.sequence, frame_cache=args.frame_cache)
     cams = ("left", "right") if args.camera == "both" else (args.camera,)

@@ -87,7 +87,7 @@ def _found_files(seq, calibration) -> tuple[str | None, dict]:
 def _motion(seq, args) -> tuple[dict | None, dict | None]:
     """(IMU summary, predicted blur per left frame) for ``info``; (None, None) without an IMU."""
     from emulator.errors import CalibrationError
-    from emulator.motion import blur_table, recording_motion
+    from emulator.playback.motion import blur_table, recording_motion
 
     if seq.imu is None:
         return None, None

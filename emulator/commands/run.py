@@ -1,4 +1,4 @@
-"""``exposim run``: AE methods in closed loop on a recording (calls :func:`emulator.runner.run_to_folder`)."""
+"""``exposim run``: AE methods in closed loop on a recording (calls :func:`emulator.orchestration.runner.run_to_folder`)."""
 
 from __future__ import annotations
 
@@ -10,9 +10,9 @@ from pathlib import Path
 
 from emulator.commands.progress import add_quiet, bars_enabled, log_lines
 from emulator.commands.run_summary import print_run_summary
-from emulator.distributed import SCHEDULER_HELP, resolve_scheduler
+from emulator.orchestration.distributed import SCHEDULER_HELP, resolve_scheduler
 from emulator.errors import ExposimError, PlaybackError
-from emulator.native import NATIVE_RATE
+from emulator.core.native import NATIVE_RATE
 from emulator.playback.config import WORKER_MODES, RunConfig, parse_options
 from emulator.playback.settings import add_arguments, command_words, flag_of, given, settings_of, values_from_json
 
@@ -230,7 +230,7 @@ def _run(args) -> int:
                            "pass --sequences all for a dataset run")
     _refuse_dataset_root(args.sequence)
     from emulator.io.runfolder import RUN_FILE, read_run_json
-    from emulator.runner import run_to_folder
+    from emulator.orchestration.runner import run_to_folder
 
     methods = args.methods
     recorded = None
@@ -283,7 +283,7 @@ def _run(args) -> int:
 
 def _refuse_dataset_root(path: Path) -> None:
     """A folder of recordings given as one recording: say which recordings and how to run them."""
-    from emulator.datasetrun import discover_sequences
+    from emulator.orchestration.datasetrun import discover_sequences
     from emulator.io.borealhdr import is_recording
 
     if not path.is_dir() or is_recording(path):
@@ -318,7 +318,7 @@ def _check_methods_once(methods: str, config: RunConfig) -> None:
 
 def _run_dataset(args) -> int:
     """``exposim run ROOT --sequences ...``: every (sequence, method group) unit, then the dataset summary."""
-    from emulator.datasetrun import DATASET_FILE, run_dataset
+    from emulator.orchestration.datasetrun import DATASET_FILE, run_dataset
     from emulator.io.files import read_metadata
 
     recorded = read_metadata(args.output / DATASET_FILE) if args.resume else {}

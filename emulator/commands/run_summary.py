@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 
-from emulator.native import is_native_run
+from emulator.core.native import is_native_run
 
 __all__ = ["print_run_summary"]
 

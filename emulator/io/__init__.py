@@ -10,7 +10,7 @@ module                     format
                            ``scene.json``); ``results.json``; markdown; figures; ``.npz``
 :mod:`.png`                16-bit Bayer PNG frames (12-bit DN), 8-bit viewable PNGs
 :mod:`.borealhdr`          the BorealHDR recording layout (scan into
-                           :mod:`emulator.dataset`, frame writer, levels, response lookup)
+                           :mod:`emulator.core.dataset`, frame writer, levels, response lookup)
 :mod:`.layout`             where calibration files live: the BorealHDR sample, a clone
                            of the BorealHDR repository, symlinked zips; dated choice
 :mod:`.pcalib`             the pcalib inverse-response text format

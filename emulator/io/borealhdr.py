@@ -10,7 +10,7 @@ Layout (BorealHDR, also written by ``synth``)::
     or <clone>/calibration_files/pcalib_inside1.txt   the inverse response (pcalib format);
                                    see emulator.io.layout for the search
 
-:func:`load_sequence` scans the layout into the in-memory model of :mod:`emulator.dataset`
+:func:`load_sequence` scans the layout into the in-memory model of :mod:`emulator.core.dataset`
 (cycles grouped by timestamp); images decode lazily through :func:`read_frame`.  The scan
 reads through a :class:`FileSource`, so another container than a folder can be plugged in
 without touching the scan; :class:`FolderSource` is the file system, :class:`ZipSource` a
@@ -18,8 +18,8 @@ BorealHDR trajectory zip read in place (members are read into memory, nothing is
 the three live in :mod:`emulator.io.sources`.
 
 The camera's levels are properties of the recording: the BorealHDR sample saturates at
-:data:`BOREALHDR_LEVELS` (black 0, white 4094 DN; one :class:`~emulator.levels.Levels`
-value, defined in the leaf module :mod:`emulator.levels` so that :mod:`emulator.response`
+:data:`BOREALHDR_LEVELS` (black 0, white 4094 DN; one :class:`~emulator.core.levels.Levels`
+value, defined in the leaf module :mod:`emulator.core.levels` so that :mod:`emulator.core.response`
 can default to it without an import circle).  A recording's own ``exposim.json`` (written
 by ``synth``) overrides them; these levels are the only fallback anywhere in exposim.
 """
@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from emulator.dataset import CAMERAS, Frame, Sequence, build_sequence
+from emulator.core.dataset import CAMERAS, Frame, Sequence, build_sequence
 from emulator.errors import DatasetError
 from emulator.io.files import parse_json_object, write_metadata
 from emulator.io.framecache import FrameCacheEntryError, cached_frame_path, read_cached_frame, resolve_frame_cache, \
@@ -45,7 +45,7 @@ from emulator.io.layout import find_response_file
 from emulator.io.pcalib import PCALIB_TABLE_TOP, read_response
 from emulator.io.png import decode_png16, write_png16
 from emulator.io.sources import CAMERA_FOLDERS, FileSource, FolderSource, ZipSource  # re-exported
-from emulator.levels import BOREALHDR_LEVELS
+from emulator.core.levels import BOREALHDR_LEVELS
 
 __all__ = [
     "BOREALHDR_LEVELS",

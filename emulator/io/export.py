@@ -20,7 +20,7 @@ Three layouts, each of the left (``cam0``) and right (``cam1``) images of one AE
 Pixels: a ``--save png8`` run is exported as saved (8-bit grey, ROS ``mono8``); a
 ``--save png16`` run holds 12-bit RGGB mosaics, exported as grey in DN (``cv2.cvtColor``
 ``COLOR_BayerRG2GRAY``, ``uint16``, values 0..white level, ROS ``mono16``), or with
-``mono8=True`` as 8-bit grey by the fixed scale of :func:`emulator.gray.bayer_to_gray8`
+``mono8=True`` as 8-bit grey by the fixed scale of :func:`emulator.core.gray.bayer_to_gray8`
 (what the feature and VO benchmarks see; most SLAM front ends expect 8 bits).
 
 The calibration files (``left.yaml``, ``right.yaml``) are written to ``calibration/`` in
@@ -42,7 +42,7 @@ import cv2
 import numpy as np
 
 from emulator.errors import OutputExistsError, RunFolderError
-from emulator.gray import bayer_to_gray8
+from emulator.core.gray import bayer_to_gray8
 from emulator.io.camera_info import CameraInfo, format_camera_info
 from emulator.io.files import atomic_write_bytes
 from emulator.io.png import encode_png, read_image

@@ -1,7 +1,7 @@
 """Decoded-frame cache: each 16-bit PNG of a recording stored once as a zstd-compressed ``.npy``.
 
 Decoding a 1920 x 1200 16-bit PNG costs ~30-40 ms on the project machine, and the closed
-loop decodes the same brackets on every run over a sequence.  :func:`emulator.tools.framecache.build_frame_cache`
+loop decodes the same brackets on every run over a sequence.  :func:`emulator.orchestration.framecache.build_frame_cache`
 decodes every frame once and writes ``<cache>/camera_<side>/<exposure>/<timestamp>.<size>-<mtime_ns>.npy.zst``
 (the PNG's byte size and modification time in the name: a PNG replaced after the cache was
 built no longer matches its entry, and is decoded from the PNG again).  When
@@ -17,7 +17,7 @@ key is the entry's place in the cache (``camera_<side>/<exposure>/<timestamp>.<s
 and ``crc32`` that of the pixel bytes: both are checked on every read, so an entry moved or
 swapped to another frame's name, altered, truncated, or of an older format is a bad entry
 (:class:`FrameCacheEntryError`).  :func:`emulator.io.borealhdr.read_frame` then decodes the
-PNG and writes the entry again, and :func:`emulator.tools.framecache.build_frame_cache` (``exposim cache``) rebuilds
+PNG and writes the entry again, and :func:`emulator.orchestration.framecache.build_frame_cache` (``exposim cache``) rebuilds
 every bad entry it finds.
 """
 
@@ -56,7 +56,7 @@ class FrameCacheEntryError(DatasetError):
 CACHE_DIRNAME = ".exposim-frames"
 #: Suffix of a cache entry.
 CACHE_SUFFIX = ".npy.zst"
-#: zstandard level of :func:`emulator.tools.framecache.build_frame_cache`.  A read of a 1920x1200
+#: zstandard level of :func:`emulator.orchestration.framecache.build_frame_cache`.  A read of a 1920x1200
 #: frame takes 6.7-7.8 ms at this level, 5.4-6.1 ms at 1, and 2.5-3.7 ms at zstd's fast level -1,
 #: whose entries are 1.2-1.8x larger (0.90-1.0 of the pixel bytes against 0.55-0.78).
 DEFAULT_LEVEL = 3

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from emulator.io.files import atomic_write_bytes
 from emulator.noise import NoiseEstimate, NoiseModel, NoiseModelError, json_safe
-from emulator.response import CameraResponse
+from emulator.core.response import CameraResponse
 
 __all__ = ["write_noise_model", "read_noise_model", "noise_model_from_metadata"]
 

@@ -29,7 +29,7 @@ import numpy as np
 
 from emulator.errors import ResponseError
 from emulator.io.files import atomic_write_bytes
-from emulator.response import CameraResponse
+from emulator.core.response import CameraResponse
 
 __all__ = [
     "PCALIB_TABLE_TOP",

@@ -4,7 +4,7 @@
   PNGs holding raw DN (BorealHDR frames, calibration stacks, ``--save png16`` run images,
   emulated images).  Reading checks dtype, channels and, when given, the white level.
 * :func:`write_png8`: an 8-bit image for viewers (``--save png8``): grey (H, W) or BGR
-  (H, W, 3) ``uint8``; the conversion from DN is :func:`emulator.gray.bayer_to_gray8`.
+  (H, W, 3) ``uint8``; the conversion from DN is :func:`emulator.core.gray.bayer_to_gray8`.
 * :func:`read_image`: a run image as saved, ``uint16`` mosaic or ``uint8`` grey.
 
 Encoding uses OpenCV with compression level 1 (fast; the same array gives the same bytes),

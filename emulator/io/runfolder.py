@@ -12,7 +12,7 @@ Layout (a contract with the feature / VO benchmark and the report)::
     RUN_DIR/exposure.png, RUN_DIR/results.json, RUN_DIR/report.md   (emulator.report.run)
 
 ``png16`` images are 12-bit DN in ``uint16`` RGGB Bayer mosaics; ``png8`` images are 8-bit
-grey (:func:`emulator.gray.bayer_to_gray8`).  ``times.txt`` is the TUM monoVO format
+grey (:func:`emulator.core.gray.bayer_to_gray8`).  ``times.txt`` is the TUM monoVO format
 (:mod:`emulator.io.stack`), the image name being its timestamp in ns.
 
 **Writer** (:class:`RunWriter`): creates a new folder (refusing a non-empty one) or

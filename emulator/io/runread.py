@@ -14,7 +14,7 @@ from pathlib import Path
 from emulator.errors import RunFolderError
 from emulator.io.files import read_metadata
 from emulator.io.stack import TIMES_FILE, read_times
-from emulator.levels import BOREALHDR_LEVELS, Levels
+from emulator.core.levels import BOREALHDR_LEVELS, Levels
 
 __all__ = [
     "RUN_FILE",
@@ -101,7 +101,7 @@ class RunFolder:
 
     @property
     def levels(self) -> Levels:
-        """The clip levels as one :class:`~emulator.levels.Levels` value."""
+        """The clip levels as one :class:`~emulator.core.levels.Levels` value."""
         return Levels(self.black_level, self.white_level)
 
 

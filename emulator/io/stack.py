@@ -33,7 +33,7 @@ import numpy as np
 from emulator.errors import CalibrationError
 from emulator.io.files import atomic_write_bytes, read_metadata, write_metadata
 from emulator.io.png import read_png16, write_png16
-from emulator.levels import BOREALHDR_LEVELS, Levels
+from emulator.core.levels import BOREALHDR_LEVELS, Levels
 
 __all__ = [
     "TIMES_FILE",

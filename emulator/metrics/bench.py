@@ -74,10 +74,10 @@ def tau_grid(max_min_matches: int, *, n: int = 100) -> list[int]:
 
 def _still_trending(run_dir, names: list[str]) -> dict:
     """``{"still_trending": ...}`` of the run's methods whose exposure was still moving one way at its end
-    (:mod:`emulator.settling`, per recorder cycle); empty where all settled or the tables cannot tell."""
+    (:mod:`emulator.core.settling`, per recorder cycle); empty where all settled or the tables cannot tell."""
     from emulator.io.runcsv import read_tables
     from emulator.report.run import per_recorder_cycle
-    from emulator.settling import trending_methods
+    from emulator.core.settling import trending_methods
 
     try:
         tables = read_tables(run_dir, names)

@@ -10,7 +10,7 @@ from __future__ import annotations
 from emulator.errors import MetricsError
 from emulator.io.runfolder import MethodRun
 from emulator.metrics.features import load_gray8
-from emulator.native import is_native_run
+from emulator.core.native import is_native_run
 
 __all__ = ["CONVERSION", "benchmark_frames"]
 
@@ -23,7 +23,7 @@ CONVERSION = (
 
 
 def _version() -> str:
-    from emulator import __version__
+    from emulator.version import __version__
 
     return __version__
 

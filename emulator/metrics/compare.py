@@ -12,7 +12,7 @@ benchmarks use (one per recorder cycle, column ``benchmarked``), so that both ra
 the same instants; rows are paired on the recorder cycles they all have.  Run folders are compared on
 the mean saturated fraction (lower is better) with the mean exposure beside it; feature folders on
 the median matches between consecutive images (higher is better) and the median uniformity.
-Intervals: circular block bootstrap over the units (:func:`emulator.stats.compare_methods`).
+Intervals: circular block bootstrap over the units (:func:`emulator.core.stats.compare_methods`).
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from emulator.errors import MetricsError
 from emulator.io.files import RESULTS_FILE, prepare_output, read_metadata, write_results
 from emulator.io.runcsv import read_tables
 from emulator.io.runfolder import RUN_FILE, read_run_json
-from emulator.native import is_native_run, run_rate
+from emulator.core.native import is_native_run, run_rate
 
 __all__ = ["bench_compare", "load_inputs", "row_labels"]
 
@@ -134,8 +134,8 @@ def _paired(rows: dict, key: str) -> tuple[dict, int]:
 
 
 def _comparisons(kind: str, rows: dict) -> dict:
-    from emulator.settling import trending_methods
-    from emulator.stats import compare_methods, statistic_interval
+    from emulator.core.settling import trending_methods
+    from emulator.core.stats import compare_methods, statistic_interval
 
     if kind == "run":
         sat, n_common = _paired(rows, "saturated_fraction")

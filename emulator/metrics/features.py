@@ -11,7 +11,7 @@ Three measurements on the emulated left images of a run:
   (:func:`success_curve`).
 
 Images reach SIFT as 8-bit grey.  A 12-bit RGGB Bayer mosaic is converted by
-:func:`emulator.gray.bayer_to_gray8` (the conversion ``--save png8`` uses too): OpenCV's
+:func:`emulator.core.gray.bayer_to_gray8` (the conversion ``--save png8`` uses too): OpenCV's
 ``COLOR_BayerRG2GRAY`` demosaicing to grey, then a *fixed linear* scale of the camera's DN
 range to 0..255.  The scale is the same for every image; a per-image normalisation would
 hide exactly the exposure effects the benchmark measures.
@@ -30,7 +30,7 @@ import cv2
 import numpy as np
 
 from emulator.errors import DatasetError, MetricsError, RunFolderError
-from emulator.gray import bayer_to_gray8
+from emulator.core.gray import bayer_to_gray8
 from emulator.io.png import read_image
 from emulator.metrics.sift import (  # re-exported: SIFT lives in emulator.metrics.sift
     MATCHERS,
@@ -74,7 +74,7 @@ def to_gray8(image: np.ndarray, *, white_level: int, black_level: int) -> np.nda
         (H, W) ``uint16`` RGGB mosaic in DN, (H, W) ``uint8`` grey, or (H, W, 3) ``uint8`` BGR.
     white_level, black_level : int
         The camera's clip levels in DN, used for ``uint16`` input only
-        (:func:`emulator.gray.bayer_to_gray8`).
+        (:func:`emulator.core.gray.bayer_to_gray8`).
 
     Returns
     -------

@@ -148,7 +148,7 @@ def pair_segments(first_index, second_index) -> np.ndarray:
 
     Segments are consecutive runs of start poses as long as the median pair (in poses), so
     a pair overlaps at most its own and the next segment; the segments are the units of
-    the RPE's block bootstrap (:func:`emulator.stats.compare_methods_by_segment`).
+    the RPE's block bootstrap (:func:`emulator.core.stats.compare_methods_by_segment`).
 
     >>> pair_segments([0, 1, 2, 3, 4, 5], [3, 4, 5, 6, 7, 8]).tolist()
     [0, 0, 0, 1, 1, 1]

@@ -32,7 +32,7 @@ from emulator.metrics.vo_extrinsics import (  # re-exported: the extrinsics chec
 )
 from emulator.metrics.vo_table import vo_ranking, vo_summary
 from emulator.report.bench import write_vo_report
-from emulator.stats import compare_methods_by_segment
+from emulator.core.stats import compare_methods_by_segment
 
 __all__ = [
     "bench_vo",
@@ -227,7 +227,7 @@ def rpe_intervals(method_results: dict, *, seed: int = 0) -> list[dict]:
     """Per RPE pair length: each method's median translation RPE (% of the length) with a 95 % interval
     and its difference from the best (lowest) with an interval, by a circular block bootstrap over
     segments of the run (:func:`emulator.metrics.rpe.pair_segments`,
-    :func:`emulator.stats.compare_methods_by_segment`; methods on the same reference pairs paired).
+    :func:`emulator.core.stats.compare_methods_by_segment`; methods on the same reference pairs paired).
     Methods without an RPE at that length are left out; a length no method has is left out."""
     by_delta: dict[float, dict] = {}
     for name, entry in method_results.items():

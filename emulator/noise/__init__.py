@@ -2,7 +2,7 @@
 
 An emulated image carries its source bracket's noise scaled by the exposure ratio, not the
 noise a capture at the target exposure would have (issue 14).  This package holds what the
-emulator needs to correct that (:func:`emulator.emulate` with ``noise="consistent"``):
+emulator needs to correct that (:func:`emulator.core.emulate` with ``noise="consistent"``):
 
 * :mod:`~emulator.noise.model`: :class:`NoiseModel` (conversion gain, read noise, full
   well; the sensor model in its docstring) and its JSON text;

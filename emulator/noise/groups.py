@@ -8,10 +8,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from emulator.blur import exposure_window_s, predict_blur
-from emulator.dataset import Sequence
+from emulator.core.blur import exposure_window_s, predict_blur
+from emulator.core.dataset import Sequence
 from emulator.noise.model import NoiseModelError
-from emulator.response import CameraResponse
+from emulator.core.response import CameraResponse
 
 __all__ = ["BracketGroup", "checked_groups", "bracket_groups"]
 
@@ -99,7 +99,7 @@ def bracket_groups(sequence, *, size: int = 3, cameras=None, cycles=None, max_gr
 
     Parameters
     ----------
-    sequence : emulator.dataset.Sequence
+    sequence : emulator.core.dataset.Sequence
         The recording (:func:`emulator.io.borealhdr.load_sequence`).
     size : int
         3 (default): triples, whose time-interpolated difference cancels motion linear in
@@ -115,7 +115,7 @@ def bracket_groups(sequence, *, size: int = 3, cameras=None, cycles=None, max_gr
         interval between shots): a missing bracket breaks a group.
     progress : callable(done, total, label), optional
         Called after each group's images are loaded.
-    motion, max_motion_px : emulator.motion.RecordingMotion, float, optional
+    motion, max_motion_px : emulator.playback.motion.RecordingMotion, float, optional
         Keep only groups over whose whole span (first shot's start to last shot's end) the
         gyro turns the image by at most ``max_motion_px`` pixels (largest over the image):
         the still frames, for a fit robust to motion.  A group the gyro does not cover is kept.
@@ -126,7 +126,7 @@ def bracket_groups(sequence, *, size: int = 3, cameras=None, cycles=None, max_gr
         Capture order within a group; ``times_s`` from the file timestamps.
     """
     if not isinstance(sequence, Sequence):
-        raise NoiseModelError(f"sequence must be an emulator.dataset.Sequence, got {type(sequence).__name__}")
+        raise NoiseModelError(f"sequence must be an emulator.core.dataset.Sequence, got {type(sequence).__name__}")
     if size not in (2, 3):
         raise NoiseModelError(f"size must be 2 (pairs) or 3 (triples), got {size!r}")
     cams = tuple(sequence.cameras if cameras is None else cameras)

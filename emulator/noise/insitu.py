@@ -27,7 +27,7 @@ from emulator.noise.model import PHASES, NoiseModel, NoiseModelError
 from emulator.noise.photon_transfer import (finite_percentiles, fit_bins, gain_read, group_points, per_group_fits,
                                              per_phase_fits)
 from emulator.noise.tables import response_slope
-from emulator.response import CameraResponse
+from emulator.core.response import CameraResponse
 
 __all__ = ["BracketGroup", "bracket_groups", "NoiseEstimate", "estimate_noise_model", "bootstrap_gain", "noise_strata"]
 

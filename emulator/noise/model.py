@@ -42,7 +42,7 @@ import numpy as np
 
 from emulator.errors import EmulationError, ExposimError
 from emulator.noise.tables import NoiseTables, build_tables, response_slope
-from emulator.response import CameraResponse
+from emulator.core.response import CameraResponse
 
 __all__ = ["NoiseModel", "NoiseModelError", "response_fingerprint", "json_safe", "PHASES",
            "NOISE_MODEL_FORMAT", "NOISE_MODEL_VERSION"]

@@ -15,7 +15,7 @@ import numpy as np
 
 from emulator.noise.groups import BracketGroup
 from emulator.noise.model import PHASES
-from emulator.response import CameraResponse
+from emulator.core.response import CameraResponse
 
 __all__ = ["robust_variance", "per_phase_fits", "per_group_fits", "group_points", "gain_read", "finite_percentiles",
            "fit_bins"]

@@ -22,7 +22,7 @@ import cv2
 import numpy as np
 
 from emulator.errors import EmulationError
-from emulator.response import CameraResponse
+from emulator.core.response import CameraResponse
 
 if TYPE_CHECKING:
     from emulator.noise.model import NoiseModel
@@ -42,7 +42,7 @@ _QUANTISER_MARGIN_BINS = 0.25
 _MULTI = np.uint16(0x8000)
 #: Pixels per block of the noise kernel (its float32 temporaries then stay in the CPU cache).
 _BLOCK_PIXELS = 1 << 16
-#: Images with at least this many pixels are split across two threads (as emulator.emulate does).
+#: Images with at least this many pixels are split across two threads (as emulator.core.emulate does).
 _THREAD_MIN_PIXELS = 1 << 20
 
 
@@ -204,7 +204,7 @@ class NoiseTables:
         Source signal estimate ``e_s = G * max(g(d), 0)``, electrons.
     var_live, var_emulated : ndarray
         Noise variance, electrons^2, of a live capture at the target and of the plain
-        emulation (see :func:`emulator.emulate`, Notes), both including the target's
+        emulation (see :func:`emulator.core.emulate`, Notes), both including the target's
         quantisation.
     var_added : ndarray
         ``max(var_live - var_emulated, 0)``: what consistent emulation adds.
@@ -260,7 +260,7 @@ _SLOPES: dict = {}
 
 
 def build_tables(model: NoiseModel, k: float) -> NoiseTables:
-    """Per-DN noise tables for ratio k (derivation: :func:`emulator.emulate`, Notes)."""
+    """Per-DN noise tables for ratio k (derivation: :func:`emulator.core.emulate`, Notes)."""
     response = model.response
     g = response.g
     slope = response_slope(response)
@@ -302,7 +302,7 @@ def build_tables(model: NoiseModel, k: float) -> NoiseTables:
 # ---------------------------------------------------------------------------- emulation kernel
 def consistent_noise(raw: np.ndarray, plain: np.ndarray, ratio: float, model: NoiseModel,
                      rng: np.random.Generator, *, tables: NoiseTables | None = None) -> np.ndarray:
-    """Add the missing noise to a plain emulation (used by :func:`emulator.emulate`).
+    """Add the missing noise to a plain emulation (used by :func:`emulator.core.emulate`).
 
     Where the tables add variance, the output is ``quantise(k g(d) + sigma_h(d) z)`` with
     z standard normal (:func:`standard_normal`, one draw per pixel of ``raw``, in raster

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from emulator.noise.model import NoiseModelError
-from emulator.response import CameraResponse
+from emulator.core.response import CameraResponse
 
 __all__ = ["VarianceRatio", "noise_variance_ratio"]
 

@@ -23,13 +23,13 @@ exposure.  The timestamp of an emulated image is the timestamp of the bracket it
 so a stereo pair always comes from one capture instant.  Results do not depend on
 ``jobs`` nor on the machine's cores (each cycle's methods run under one BLAS thread,
 :mod:`emulator.pools`).  A run written to a run folder (with ``resume``) is
-:mod:`emulator.runner`; the folder's layout, writer and reader are
+:mod:`emulator.orchestration.runner`; the folder's layout, writer and reader are
 :mod:`emulator.io.runfolder`.  The clamp default is
 :data:`emulator.autoexposure.DEFAULT_RANGE_MS`, shared with the paper-mode methods.
 
 ``saturated_fraction`` and ``valid_fraction`` describe the emulated left image the method
 saw: pixels at or below black or at or above white, and pixels whose source carried the
-information the target needs (see :func:`emulator.emulate.emulate`).  Nothing here prints.
+information the target needs (see :func:`emulator.core.emulate.emulate`).  Nothing here prints.
 """
 
 from emulator.autoexposure import DEFAULT_RANGE_MS

@@ -209,7 +209,7 @@ class _Child:
         self.conn.send_bytes(data)
 
     def _left_threads(self) -> list[str]:
-        from emulator import pools
+        import emulator.pools as pools
 
         pool = getattr(pools, "_LUT_POOL", None)
         ours = set(getattr(pool, "_threads", ()) or ())

@@ -1,8 +1,8 @@
 """One run configuration: :class:`RunConfig`, validated once, written to and read from ``run.json``.
 
 Every closed-loop run takes a :class:`RunConfig`: ``exposim run`` (single sequence and
-dataset), :func:`emulator.runner.run_to_folder`, :func:`emulator.playback.iter_run`, the
-dataset units (:mod:`emulator.datasetrun`) and the studies.  The constructor checks every
+dataset), :func:`emulator.orchestration.runner.run_to_folder`, :func:`emulator.playback.iter_run`, the
+dataset units (:mod:`emulator.orchestration.datasetrun`) and the studies.  The constructor checks every
 field and refuses a bad one with a :class:`~emulator.errors.PlaybackError` naming it; no
 other place repeats these checks.  What the configuration cannot know alone (the
 recording's levels, its response and noise model) is resolved by :meth:`RunConfig.response_for`
@@ -29,7 +29,7 @@ import numpy as np
 from emulator.autoexposure import DEFAULT_RANGE_MS
 from emulator.errors import PlaybackError
 from emulator.io.runfolder import SAVE_MODES
-from emulator.native import DEFAULT_NATIVE_WARP, NATIVE_RATE, RATES, WARP_MODES, is_native_run
+from emulator.core.native import DEFAULT_NATIVE_WARP, NATIVE_RATE, RATES, WARP_MODES, is_native_run
 from emulator.playback import settings
 from emulator.playback.runjson import (blur_json, common_figures, noise_json, recorded_blur, recorded_noise_model,
                                        recorded_response, same_file)
@@ -113,7 +113,7 @@ class RunConfig:
     * ``run.json`` records ``skip_partial``, ``native_blur_aware`` only where set, ``rate`` and
       ``latency_frames`` for a native run only, ``native_warp`` where it is not ``rotation`` (a
       folder without it: rotation, as before the setting); ``png_level`` absent reads as 1.
-    * ``native_warp`` None: :data:`emulator.native.DEFAULT_NATIVE_WARP` at native rate (set so on
+    * ``native_warp`` None: :data:`emulator.core.native.DEFAULT_NATIVE_WARP` at native rate (set so on
       construction), None at cycle rate (nothing is warped: :attr:`warp_mode` says ``rotation``).
     """
 
@@ -221,7 +221,7 @@ class RunConfig:
              "the gyro (docs/native.md)")
 
     def __post_init__(self) -> None:
-        from emulator.select import SELECTORS
+        from emulator.core.select import SELECTORS
 
         put = object.__setattr__
         initial = _number(self.initial_ms, "initial_ms")
@@ -249,7 +249,7 @@ class RunConfig:
             raise PlaybackError(f"workers must be process or inline, got {self.workers!r}")
         if self.save not in SAVE_MODES:
             raise PlaybackError(f"save must be one of {', '.join(SAVE_MODES)}, got {self.save!r}")
-        from emulator.emulate import NOISE_MODES
+        from emulator.core.emulate import NOISE_MODES
 
         if self.noise not in NOISE_MODES:
             raise PlaybackError(f"noise must be one of {', '.join(NOISE_MODES)}, got {self.noise!r}")
@@ -272,7 +272,7 @@ class RunConfig:
                 or not 0 <= self.png_level <= 9:
             raise PlaybackError(f"png_level must be an integer 0..9, got {self.png_level!r}")
         put(self, "png_level", int(self.png_level))
-        from emulator.blur import BLUR_MODES
+        from emulator.core.blur import BLUR_MODES
 
         if self.blur not in BLUR_MODES:
             raise PlaybackError(f"blur must be one of {', '.join(BLUR_MODES)}, got {self.blur!r}")
@@ -325,7 +325,7 @@ class RunConfig:
     @property
     def warp_mode(self) -> str:
         """The native warp this configuration runs: ``native_warp``, or where None the native default
-        (:data:`emulator.native.DEFAULT_NATIVE_WARP`; ``rotation`` at cycle rate, where nothing is warped)."""
+        (:data:`emulator.core.native.DEFAULT_NATIVE_WARP`; ``rotation`` at cycle rate, where nothing is warped)."""
         if self.native_warp is not None:
             return self.native_warp
         return DEFAULT_NATIVE_WARP if _is_native(self) else "rotation"
@@ -400,7 +400,7 @@ class RunConfig:
         The model is :attr:`noise_model` (a NoiseModel or a noise-model JSON), or the one
         the recording's ``exposim.json`` carries; it must refer to ``response``.
         """
-        from emulator.emulate import _check_noise_model
+        from emulator.core.emulate import _check_noise_model
         from emulator.io.noisemodel import noise_model_from_metadata, read_noise_model
         from emulator.noise import NoiseModel
 
@@ -422,10 +422,10 @@ class RunConfig:
         return _check_noise_model(model, response, self.noise, False), source
 
     def blur_for(self, sequence, response):
-        """The run's blur hook (:class:`emulator.motion.BlurHook`), or None for ``blur="none"``."""
+        """The run's blur hook (:class:`emulator.playback.motion.BlurHook`), or None for ``blur="none"``."""
         if self.blur == "none":
             return None
-        from emulator.motion import blur_hook
+        from emulator.playback.motion import blur_hook
 
         return blur_hook(self.blur, sequence, response, blur_aware=self.blur_aware)
 

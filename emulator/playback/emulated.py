@@ -22,13 +22,13 @@ import cv2
 import numpy as np
 
 from emulator.autoexposure.isolation import readonly_view
-from emulator.dataset import CAMERAS, missing_text
-from emulator.emulate import apply_lut
+from emulator.core.dataset import CAMERAS, missing_text
+from emulator.core.emulate import apply_lut
 from emulator.errors import DatasetError
 from emulator.playback.config import RATES, RunConfig, provides_rate
 from emulator.playback.loop import Shot
 from emulator.playback.records import RunStats
-from emulator.select import select
+from emulator.core.select import select
 
 __all__ = ["EmulatedProvider", "EmulatedTick", "METHOD_CAMERA"]
 
@@ -110,7 +110,7 @@ class _CycleImages(_Memo):
         return readonly_view(out)
 
     def _add_noise(self, camera: str, exposure_ms: float, ratio: float, raw: np.ndarray, plain: np.ndarray):
-        """Noise-consistent emulation (``emulator.emulate``, ``noise="consistent"``), seeded by
+        """Noise-consistent emulation (``emulator.core.emulate``, ``noise="consistent"``), seeded by
         (seed, cycle, camera, bracket, ratio): independent of threads and of which method asks."""
         from emulator.noise import consistent_noise
 
@@ -216,7 +216,7 @@ class EmulatedProvider:
 
     Parameters
     ----------
-    sequence : emulator.dataset.Sequence
+    sequence : emulator.core.dataset.Sequence
     config : RunConfig
         Its selector is used; its noise settings are resolved by the caller into ``noise``.
     response : CameraResponse

@@ -41,11 +41,11 @@ from collections.abc import Callable
 
 import numpy as np
 
-from emulator.dataset import CAMERAS
+from emulator.core.dataset import CAMERAS
 from emulator.errors import PlaybackError
 from emulator.playback.config import RunConfig
 from emulator.playback.loop import Shot
-from emulator.select import saturated_fraction, select
+from emulator.core.select import saturated_fraction, select
 
 __all__ = ["LiveCycleProvider", "LiveRateProvider", "INSTANTS", "BOREALHDR_FRAME_RATE_HZ"]
 

@@ -7,25 +7,25 @@ proposal made after reading frame k is first used at frame ``k + 1 + latency``. 
 same closed loop (:func:`~emulator.playback.loop.closed_loop`); only the images differ:
 
 * frame k's image at the applied exposure ``t`` comes from frame k's own bracket or from a
-  frame within one recorder cycle each side (:data:`emulator.native.WINDOW_CYCLES`; the
-  frames present for every camera), chosen by :func:`emulator.native.native_select` (time
+  frame within one recorder cycle each side (:data:`emulator.core.native.WINDOW_CYCLES`; the
+  frames present for every camera), chosen by :func:`emulator.core.native.native_select` (time
   offset against upward ratio and clipping);
 * the source is emulated at ``t`` as at cycle rate (lookup table, then ``--blur consistent``'s
   hook, then ``--noise consistent``'s noise, each seeded by the source frame) and, when it is
   another frame, moved to frame k's instant by the rotation the gyro measured between the
-  two (:func:`emulator.native.warp_to_instant`): from the middle of the window the emulated
+  two (:func:`emulator.core.native.warp_to_instant`): from the middle of the window the emulated
   image stands for to the middle of frame k's window at ``t`` (frame k's window starts where
   its recorded shot started; the timestamp convention is the blur model's,
-  :data:`emulator.blur.DEFAULT_STAMP`, or the trigger for a synthetic recording);
+  :data:`emulator.core.blur.DEFAULT_STAMP`, or the trigger for a synthetic recording);
 * without an IMU (or a camera calibration) the neighbour is used as it is, and one warning
   says so;
 * opt-in (the defaults keep the runs as they were): ``warp="flow"`` moves a neighbour by the
   rotation and then by the optical flow between the frames on either side of frame k
-  (:func:`emulator.native.flow_velocity`; frame k's own image never informs its flow),
+  (:func:`emulator.core.native.flow_velocity`; frame k's own image never informs its flow),
   ``warp="flow-sharp"`` (``exposim run``'s default) does so only where the median move is at least
-  :data:`emulator.native.SHARP_MOTION_PX`, and
+  :data:`emulator.core.native.SHARP_MOTION_PX`, and
   ``blur_stops_per_px`` makes the selector weigh the motion blur a candidate's window carries
-  beyond the target's (:func:`emulator.native.native_select`);
+  beyond the target's (:func:`emulator.core.native.native_select`);
 * a tick made with ``hidden=True`` (:meth:`NativeProvider.tick`) leaves frame k's own shots out of
   its candidates: the leave-one-out check, ``exposim validate native``.
 
@@ -46,11 +46,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from emulator.autoexposure.isolation import readonly_view
-from emulator.dataset import CAMERAS
+from emulator.core.dataset import CAMERAS
 from emulator.errors import CalibrationError, PlaybackError
-from emulator.gyro import GYRO_HOLE_S
+from emulator.core.gyro import GYRO_HOLE_S
 from emulator.io.runcsv import NATIVE_COLUMNS
-from emulator.native import (BLUR_STOPS_PER_PX, MOTION_STOPS_PER_FRAME, NATIVE_RATE, SATURATION_LIMIT, SHARP_MOTION_PX, WARP_MODES, WARP_RESAMPLE,
+from emulator.core.native import (BLUR_STOPS_PER_PX, MOTION_STOPS_PER_FRAME, NATIVE_RATE, SATURATION_LIMIT, SHARP_MOTION_PX, WARP_MODES, WARP_RESAMPLE,
                              WINDOW_CYCLES, NativeCandidate, flow_velocity, invalid_fraction, median_motion_px,
                              native_select, radiance_gray, rotation_between, warp_to_instant, warp_with_flow)
 from emulator.playback.config import RunConfig, provides_rate
@@ -79,7 +79,7 @@ class NativeInfo:
 def recording_stamp(sequence) -> str:
     """Where a frame's timestamp lies in its window: the trigger (``start``) for a synthetic recording
     (its ``exposim.json`` says so), else the blur model's default (docs/blur.md)."""
-    from emulator.blur import DEFAULT_STAMP
+    from emulator.core.blur import DEFAULT_STAMP
 
     note = str((getattr(sequence, "metadata", None) or {}).get("timestamps", ""))
     return "start" if note.startswith("trigger instant") else DEFAULT_STAMP
@@ -183,20 +183,20 @@ class NativeProvider:
         is the latency; its selector plays no part).
     motion : "auto", RecordingMotion or None
         The gyro and intrinsics of the warp: "auto" (default) the blur hook's, else the
-        recording's own (:func:`emulator.motion.recording_motion`, timestamps by
+        recording's own (:func:`emulator.playback.motion.recording_motion`, timestamps by
         :func:`recording_stamp`); None: no warp.
     warp : bool or {"none", "rotation", "flow"}
         False or "none": neighbour frames are used unwarped even where the gyro is known (the
         warp's share of the error is measured so); True or "rotation" (default): the gyro's
         rotation; "flow": the rotation, then the optical flow between the frames on either side of
         frame k; "flow-sharp": as "flow" where the median move is at least
-        :data:`emulator.native.SHARP_MOTION_PX`, else none (:data:`emulator.native.WARP_MODES`).
+        :data:`emulator.core.native.SHARP_MOTION_PX`, else none (:data:`emulator.core.native.WARP_MODES`).
     motion_stops_per_frame, saturation_limit : float
         The native selector's weight of one frame of offset and its clipping margin
-        (:data:`emulator.native.MOTION_STOPS_PER_FRAME`, :data:`emulator.native.SATURATION_LIMIT`).
+        (:data:`emulator.core.native.MOTION_STOPS_PER_FRAME`, :data:`emulator.core.native.SATURATION_LIMIT`).
     blur_stops_per_px : float or None
         None (default): the selector leaves blur out; a number: it is blur-aware, with this weight
-        per pixel of predicted excess blur (:data:`emulator.native.BLUR_STOPS_PER_PX`).
+        per pixel of predicted excess blur (:data:`emulator.core.native.BLUR_STOPS_PER_PX`).
     """
 
     #: Frames are decoded on demand and memoised per frame, so ticks are independent (see EmulatedProvider).
@@ -255,7 +255,7 @@ class NativeProvider:
             return motion
         if self.blur is not None:
             return self.blur.motion
-        from emulator.motion import recording_motion
+        from emulator.playback.motion import recording_motion
 
         why = None
         if getattr(self.sequence, "imu", None) is None:
@@ -264,7 +264,7 @@ class NativeProvider:
             try:
                 return recording_motion(self.sequence, stamp=recording_stamp(self.sequence))
             except CalibrationError as exc:  # none found, or one that cannot be read: say which
-                from emulator.motion import find_camera_calibration
+                from emulator.playback.motion import find_camera_calibration
 
                 why = "no camera calibration (left.yaml)" if find_camera_calibration(self.sequence) is None \
                     else f"invalid camera calibration ({exc})"
@@ -318,7 +318,7 @@ class NativeProvider:
 
     def _window_s(self, j: int, exposure_ms: float) -> tuple[float, float]:
         """The window (s, the gyro's clock) of an image of ``exposure_ms`` stamped at frame ``j``'s timestamp."""
-        from emulator.blur import exposure_window_s
+        from emulator.core.blur import exposure_window_s
 
         return exposure_window_s(self.motion.t_s(self.frames.timestamps[j]), exposure_ms, self.motion.stamp)
 
@@ -358,12 +358,12 @@ class NativeProvider:
 
     def geometry(self, camera: str, j: int, k: int, source_ms: float, target_ms: float, shape):
         """How :meth:`emulate` moves frame ``j``'s image (of ``shape``, standing for ``source_ms``) to frame ``k``:
-        ``(H, displacement)`` (:func:`emulator.native.instant_maps`), ``(None, None)`` where it is not moved."""
+        ``(H, displacement)`` (:func:`emulator.core.native.instant_maps`), ``(None, None)`` where it is not moved."""
         return self._geometry(camera, j, k, source_ms, target_ms, shape)[1:]
 
     def _geometry(self, camera: str, j: int, k: int, source_ms: float, target_ms: float, shape):
         """``(R, H, displacement)`` of :meth:`geometry`; ``(None, None, None)`` where the image is not moved."""
-        from emulator.blur import rotation_homography
+        from emulator.core.blur import rotation_homography
 
         if j == k or self.motion is None or self.warp_mode == "none":
             return None, None, None
@@ -402,7 +402,7 @@ class NativeProvider:
         """Image velocity at frame ``k`` (full-resolution px/s on the binned grid) from the nearest frames before and
         after it present on every camera, each turned to frame k's instant (never frame k's own image); None
         where one side has none or the gyro does not cover them.  Memoised per camera and frame."""
-        from emulator.blur import rotation_homography
+        from emulator.core.blur import rotation_homography
 
         key = (camera, k)
         with self._lock:
@@ -433,7 +433,7 @@ class NativeProvider:
     def excess_blur_px(self, j: int, k: int, target_ms: float) -> float:
         """Predicted blur of frame ``j``'s window beyond a capture of ``target_ms`` at frame ``k`` (px, largest over
         the image's 3x3 grid, the first camera; 0 without a gyro, or where it does not cover the windows)."""
-        from emulator.blur import _window_blur, as_angular_velocity
+        from emulator.core.blur import _window_blur, as_angular_velocity
 
         if self.motion is None:
             return 0.0

@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterator
 from typing import NamedTuple
 
-from emulator.dataset import Sequence
+from emulator.core.dataset import Sequence
 from emulator.playback.config import RunConfig
 from emulator.playback.loop import closed_loop
 from emulator.playback.records import CycleStep, MethodStep, RunResult, RunStats
@@ -19,7 +19,7 @@ __all__ = ["iter_run", "run", "prepare_run", "at_rate", "Prepared", "resolve_seq
 
 
 def resolve_sequence(sequence, *, imu_warning: bool = True) -> Sequence:
-    """A loaded :class:`~emulator.dataset.Sequence`, or the recording at this path (``imu_warning``:
+    """A loaded :class:`~emulator.core.dataset.Sequence`, or the recording at this path (``imu_warning``:
     :func:`~emulator.io.borealhdr.load_sequence`'s)."""
     from emulator.io.borealhdr import load_sequence
 

@@ -23,7 +23,7 @@ def noise_json(config, ctx) -> dict:
 
 
 def blur_json(config, ctx) -> dict:
-    from emulator.blur import DEFAULT_PLACEMENT
+    from emulator.core.blur import DEFAULT_PLACEMENT
 
     hook = ctx.get("blur_hook")
     if hook is not None:

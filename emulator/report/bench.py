@@ -28,7 +28,7 @@ from emulator.report.vo import (  # re-exported: the VO report lives in emulator
     vo_verdicts,
     write_vo_report,
 )
-from emulator.stats import compare_methods
+from emulator.core.stats import compare_methods
 
 __all__ = [
     "plot_features",
@@ -91,7 +91,7 @@ def features_verdicts(results: dict) -> list[str]:
 def features_intervals(results: dict) -> dict:
     """Median matches (over consecutive pairs) and median uniformity (over images) per method with 95 %
     circular-block-bootstrap intervals, and each method's difference from the best
-    (:func:`emulator.stats.compare_methods`; pairs and images are time series)."""
+    (:func:`emulator.core.stats.compare_methods`; pairs and images are time series)."""
     methods = list(results["methods"])
     matches = {m: [c for run in results["runs"] for c in run["methods"].get(m, {}).get("matches", [])]
                for m in methods}

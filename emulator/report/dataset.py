@@ -2,7 +2,7 @@
 
 Per-sequence tables (each method's figures on each sequence, from the units' own
 ``results.json``), per-method tables over the sequences, and the throughput with its
-projection to the full BorealHDR dataset (:func:`emulator.datasetrun.throughput`).
+projection to the full BorealHDR dataset (:func:`emulator.orchestration.datasetrun.throughput`).
 """
 
 from __future__ import annotations
@@ -49,8 +49,8 @@ def per_method_table(per_sequence: dict, methods: list[str]) -> dict:
 def method_intervals(per_sequence: dict, methods: list[str]) -> dict:
     """Per method over the sequences (the independent units): mean exposure and mean saturated fraction with
     95 % bootstrap intervals, and each method's difference from the best (least saturated), paired by sequence
-    (:func:`emulator.stats.compare_methods`).  A sequence missing a method leaves the pairs unaligned."""
-    from emulator.stats import compare_methods
+    (:func:`emulator.core.stats.compare_methods`).  A sequence missing a method leaves the pairs unaligned."""
+    from emulator.core.stats import compare_methods
 
     seqs = list(per_sequence)
 

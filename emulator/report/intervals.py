@@ -1,4 +1,4 @@
-"""Markdown tables of method comparisons with intervals (:func:`emulator.stats.compare_methods`)."""
+"""Markdown tables of method comparisons with intervals (:func:`emulator.core.stats.compare_methods`)."""
 
 from __future__ import annotations
 
@@ -36,7 +36,7 @@ def comparison_table(comparison: dict, label: str, *, spec: str = ".3g", scale: 
 
 def mark_trending(comparison: dict, trending: dict) -> dict:
     """``comparison`` with the methods still trending at the end of the run (``{name: {"direction": ...}}``,
-    :func:`emulator.settling.trending_methods`) renamed ``name (still rising)``, so that a "best" or
+    :func:`emulator.core.settling.trending_methods`) renamed ``name (still rising)``, so that a "best" or
     "differs" beside them reads as the transient it is."""
     if not trending:
         return comparison

@@ -14,7 +14,7 @@ import numpy as np
 from emulator.io.files import REPORT_FILE, RESULTS_FILE, write_results, write_text
 from emulator.report.html import run_contact_sheet, write_report
 from emulator.io.runfolder import read_run_json, read_tables
-from emulator.native import is_native_run, native_record, run_rate, tick_unit
+from emulator.core.native import is_native_run, native_record, run_rate, tick_unit
 from emulator.report.figures import legend_outside, log_ticks_at, new_figure, plural, same_as, save
 from emulator.report.words import mode_words, selector_words
 
@@ -71,7 +71,7 @@ def summarise_run(run_dir: str | os.PathLike, info: dict | None = None, tables: 
             "fallback_cycles": [int(c) for c in t["cycle"][t["guarded"].astype(bool)]] if n else [],
             **_source_offsets(t),
         }
-    from emulator.stats import compare_methods, statistic_interval
+    from emulator.core.stats import compare_methods, statistic_interval
 
     unit = tick_unit(info)
     intervals = {
@@ -105,7 +105,7 @@ def summarise_run(run_dir: str | os.PathLike, info: dict | None = None, tables: 
     flags = run_flags(info, tables)
     if flags is not None:  # only where something is flagged: other runs' results stay as they were
         summary["flags"] = flags
-    from emulator.settling import trending_methods
+    from emulator.core.settling import trending_methods
 
     trending = trending_methods({n: per_recorder_cycle(tables[n])["target_ms"] for n in names})
     if trending:  # only where a method had not settled: other runs' results stay as they were
@@ -138,10 +138,10 @@ def run_flags(info: dict, tables: dict) -> dict | None:
 
     ``partial_cycles``: the recording's cycles missing a bracket on either camera, with what
     was missing (``run.json``); per method, how many of its cycles were partial, how many
-    were emulated upwards by more than :data:`~emulator.emulate.UPWARD_RATIO_FLAG`, and its
+    were emulated upwards by more than :data:`~emulator.core.emulate.UPWARD_RATIO_FLAG`, and its
     largest upward ratio (None when it never emulated upwards).
     """
-    from emulator.emulate import UPWARD_RATIO_FLAG
+    from emulator.core.emulate import UPWARD_RATIO_FLAG
 
     partial = list(info.get("partial_cycles") or [])
     partial_set = {int(p["cycle"]) for p in partial}
@@ -168,7 +168,7 @@ def run_flags(info: dict, tables: dict) -> dict | None:
 def _flags_markdown(flags: dict, unit: str = "cycles") -> list[str]:
     """The report's section on partial cycles and large upward ratios (``unit``: what a row of the run is,
     ``cycles`` or, at native rate, ``frames``)."""
-    from emulator.dataset import missing_text
+    from emulator.core.dataset import missing_text
 
     bound = flags["upward_ratio_bound"]
     partial = flags["partial_cycles"]
@@ -296,7 +296,7 @@ def _trending_note(summary: dict, unit: str) -> list[str]:
     trending = summary.get("still_trending")
     if not trending:
         return []
-    from emulator.settling import TREND_MIN_CHANGE_FRACTION
+    from emulator.core.settling import TREND_MIN_CHANGE_FRACTION
 
     k = next(iter(trending.values()))["steps"]
     return ["", f"**Too short to settle:** {len(trending)} of {len(summary['methods'])} method(s) were still "

@@ -23,7 +23,7 @@ For each scene (default ``forest_winter``, ``forest_edge``, ``sun_glare``):
    walk (at ``edge_exit_fraction`` of the path), so the sequence contains the passage from
    shade to sunlit snow whatever its length.
 2. **Closed loop**: the seven AE methods on the recording
-   (:func:`emulator.runner.run_to_folder`, ``save="png16"``).
+   (:func:`emulator.orchestration.runner.run_to_folder`, ``save="png16"``).
 3. **Features** (paper Fig. 4) over all scenes' runs together
    (:func:`emulator.metrics.bench.bench_features`): SIFT grid uniformity, consecutive
    matches, success rate over sequences at ``tau`` = 5 and 100.  Because a handful of

@@ -41,8 +41,8 @@ def _paper_cell(key: str, method: str, spec: str = "") -> str:
 def method_intervals(per_scene: dict, seed: int = 0) -> dict:
     """Per figure of :data:`WALK_COMPARISONS`: each method's mean over the walks (``per_scene``: walk -> method
     -> entry of :func:`~validation.ae_study.summary.summarise`) with a 95 % bootstrap interval over walks,
-    and its difference from the best with a paired bootstrap over walks (:func:`emulator.stats.compare_methods`)."""
-    from emulator.stats import compare_methods
+    and its difference from the best with a paired bootstrap over walks (:func:`emulator.core.stats.compare_methods`)."""
+    from emulator.core.stats import compare_methods
 
     methods = [m for rows in per_scene.values() for m in rows]
     methods = list(dict.fromkeys(methods))

@@ -72,7 +72,7 @@ def run_study(out, config: StudyConfig = CONFIGS["full"], *, force: bool = False
     from emulator.metrics.features import DEFAULT_TAUS
     from emulator.metrics.vo import VOParameters
     from emulator.playback import RunConfig
-    from emulator.runner import run_to_folder
+    from emulator.orchestration.runner import run_to_folder
     from scenes.synthesize import synthesize
 
     out = prepare_output(out, force=force)

@@ -236,7 +236,7 @@ def sharpness_comparison(scene, traj, t0_s: float, cfg, camera, consistent=None)
     ``consistent``: optional ``f(raw, source_ms, target_ms, response, extra_radiance_fn) -> raw``
     hook for blur-consistent emulation (:func:`consistent_from_walk`); None leaves that figure out.
     """
-    from emulator.emulate import emulate
+    from emulator.core.emulate import emulate
 
     shot, src, live, info = source_and_live(scene, traj, t0_s, cfg, camera)
     plain, valid = emulate(src, cfg.source_ms, cfg.exposure_ms, camera.response, return_mask=True)
@@ -252,7 +252,7 @@ def sharpness_comparison(scene, traj, t0_s: float, cfg, camera, consistent=None)
 
 
 def walk_omega(traj):
-    """The walk's angular velocity as :mod:`emulator.blur` takes it: ``omega(t_s) -> (N, 3)`` rad/s in
+    """The walk's angular velocity as :mod:`emulator.core.blur` takes it: ``omega(t_s) -> (N, 3)`` rad/s in
     camera axes (:func:`scenes.walks.angular_velocity`), times clamped to the walk."""
     from scenes.walks import angular_velocity
 
@@ -263,17 +263,17 @@ def walk_omega(traj):
 
 
 def consistent_from_walk(traj, camera, *, placement: str | None = None, **emulate_kw):
-    """The blur-consistent emulation of :mod:`emulator.blur` fed with the walk's own angular velocity.
+    """The blur-consistent emulation of :mod:`emulator.core.blur` fed with the walk's own angular velocity.
 
     Returns ``f(raw, source_ms, target_ms, response, shot) -> raw`` for
     :func:`sharpness_comparison`: the gyro is :func:`walk_omega` of the walk, windows start at
     the trigger (``stamp="start"``, the synthetic convention), K is the synthetic camera's.
-    ``placement`` (:func:`emulator.blur.blur_homographies`) and ``emulate_kw``
-    (:func:`emulator.blur.emulate_blur_consistent`'s keywords) default to the emulator's defaults:
+    ``placement`` (:func:`emulator.core.blur.blur_homographies`) and ``emulate_kw``
+    (:func:`emulator.core.blur.emulate_blur_consistent`'s keywords) default to the emulator's defaults:
     tiled copies and the noise measured on the image, which on these noiseless captures finds
     little, so nearly all of the source is moved.
     """
-    from emulator.blur import DEFAULT_PLACEMENT, blur_homographies, emulate_blur_consistent
+    from emulator.core.blur import DEFAULT_PLACEMENT, blur_homographies, emulate_blur_consistent
     from scenes.camera import intrinsics_matrix
 
     k = intrinsics_matrix(camera.width, camera.height, camera.fov_x_deg)

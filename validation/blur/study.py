@@ -68,7 +68,7 @@ def run_study(config: BlurConfig, out_dir, *, command: str = "", force: bool = F
     """Measure, write ``results.json`` and ``report.md`` into ``out_dir``; return the results.
 
     ``consistent``: the blur-consistent emulation hook of :func:`measure.sharpness_comparison`
-    (default: :func:`measure.consistent_from_walk`, :mod:`emulator.blur` fed the walk's gyro).
+    (default: :func:`measure.consistent_from_walk`, :mod:`emulator.core.blur` fed the walk's gyro).
     """
     import scenes
     from emulator.io.files import prepare_output, write_results, write_text
@@ -86,7 +86,7 @@ def run_study(config: BlurConfig, out_dir, *, command: str = "", force: bool = F
     if consistent is None:
         try:
             consistent = measure.consistent_from_walk(traj, camera_sharp)
-        except ImportError:  # an exposim without emulator.blur: the figure stays null
+        except ImportError:  # an exposim without emulator.core.blur: the figure stays null
             consistent = None
     rates = measure.angular_rate_ratio(traj, config.walk_s, real_imu)
     tick(1)

@@ -15,7 +15,7 @@ Per walk (a scene with the realistic ``borealhdr`` walk and its own seed; walks 
 2. on each: the live loop (the method's own exposure captured at the instant of the bracket
    the emulator would use, ``same-instant`` timing, integrated over its own window on the
    blurred recording), the emulated loop with plain emulation and with ``--blur consistent``
-   (:class:`emulator.motion.BlurHook` fed the recording's own ``imu/imu.csv``, windows
+   (:class:`emulator.playback.motion.BlurHook` fed the recording's own ``imu/imu.csv``, windows
    starting at the trigger: the synthetic convention);
 3. the features (median matches, median uniformity) and the VO (failed frames, translation
    RPE through evo) of every run.
@@ -64,7 +64,7 @@ def record_walk(scene, folder: Path, cfg, seed: int, integrate: bool) -> Path:
 
 def _consistent_hook(seq, response):
     """``--blur consistent`` on a synthetic recording: its own gyro, trigger-start windows, no bias removal."""
-    from emulator.motion import BlurHook, recording_motion
+    from emulator.playback.motion import BlurHook, recording_motion
 
     return BlurHook(recording_motion(seq, stamp="start", remove_bias=False), response, False)
 
@@ -156,7 +156,7 @@ def compare(walks: list[dict], methods, *, seed: int = 0) -> dict:
 
     ``walks``: one record per walk, ``{"walk": name, "by_blur": {blur: bench_walk(...)}}``.
     """
-    from emulator.stats import difference_interval
+    from emulator.core.stats import difference_interval
     from validation.live.config import EQUIVALENCE_MARGINS
 
     table: dict = {}
@@ -223,4 +223,4 @@ def run_versus(out: Path, cfg, *, tick=None) -> dict:
     return {"walks": walks, "table": compare(walks, cfg.versus_methods, seed=cfg.seed),
             "settings": {"runs": list(RUNS), "scene_blur": list(SCENE_BLUR), "live_timing": "same-instant",
                          "recording": "render_per=cycle, one render per sweep and camera shared by both recordings",
-                         "consistent": "emulator.motion.BlurHook, the recording's imu.csv, stamp=start"}}
+                         "consistent": "emulator.playback.motion.BlurHook, the recording's imu.csv, stamp=start"}}

@@ -9,7 +9,7 @@ import numpy as np
 
 from emulator.calibration import response_error
 from emulator.io.pcalib import PCALIB_TABLE_TOP
-from emulator.response import CameraResponse
+from emulator.core.response import CameraResponse
 from validation.calibration_study.config import BRACKETS_MS, DN_RANGE
 
 __all__ = ["study_radiance", "electrons_per_ms", "stack_exposures", "capture_stack", "opencv_curves", "codes_to_dn_curve", "curve_error", "code_curve_error", "emulation_check"]
@@ -115,7 +115,7 @@ def emulation_check(radiance, camera, e1, recovered: CameraResponse, *, seed: in
     targets sit halfway (x sqrt 2) between brackets; ground truth is the noiseless capture.
     RMSE (DN) over the validity mask; ``ratio`` is RMSE(recovered) / RMSE(true).
     """
-    from emulator.emulate import emulate
+    from emulator.core.emulate import emulate
 
     true = camera.response
     rec = recovered.with_levels(white_level=camera.white_level, black_level=camera.black_level)

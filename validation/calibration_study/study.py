@@ -18,7 +18,7 @@ from emulator.calibration import (
 )
 from emulator.io.pcalib import read_response
 from emulator.io.stack import write_stack
-from emulator.response import CameraResponse
+from emulator.core.response import CameraResponse
 from emulator.report.html import write_report
 from validation.calibration_study.config import BRACKETS_MS, CONFIGS, DN_RANGE, PRESETS, SHOT_INTERVAL_S
 from validation.calibration_study.measure import (

@@ -13,7 +13,7 @@ __all__ = ["main"]
 
 def main(argv=None) -> int:
     """``python -m validation.emulation OUT [options]``: ``exposim validate emulation -o OUT [options]``."""
-    from emulator.cli import main as exposim
+    from emulator.commands.cli import main as exposim
 
     args = sys.argv[1:] if argv is None else list(argv)
     if args and not args[0].startswith("-"):

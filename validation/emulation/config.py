@@ -5,7 +5,7 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
-from emulator.select import SELECTORS
+from emulator.core.select import SELECTORS
 from validation.common import BRACKETS_MS, RESPONSES, STUDY_SCENES, ValidationError, study_scene
 
 

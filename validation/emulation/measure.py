@@ -7,8 +7,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from emulator.emulate import emulate
-from emulator.select import SELECTORS, saturated_fraction
+from emulator.core.emulate import emulate
+from emulator.core.select import SELECTORS, saturated_fraction
 from validation.common import (
     BRACKETS_MS,
     Progress,

@@ -127,7 +127,7 @@ def _pool(per: dict, keys, field_: str) -> list:
 #: What the figures of the study's results mean (``results["definitions"]``).
 _DEFINITIONS = {
     "rmse_percent": "100 * RMSE(DN) / (white_level - black_level)",
-    "valid": "over the validity mask of the emulated image (emulator.emulate return_mask)",
+    "valid": "over the validity mask of the emulated image (emulator.core.emulate return_mask)",
     "all": "over all pixels",
     "invalid": "over the pixels outside the validity mask",
     "ground_truth": "one noisy capture (repeat 0 of the repeats) at the target exposure",

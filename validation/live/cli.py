@@ -16,7 +16,7 @@ from pathlib import Path
 
 from emulator.commands.progress import add_json, add_quiet, bars_enabled, print_json
 from emulator.commands import argtypes
-from emulator.distributed import check_scheduler
+from emulator.orchestration.distributed import check_scheduler
 from emulator.errors import ExposimError
 from validation.live.config import CONFIG_CHANGES, CONFIGS, DEFAULTS, STUDY_DENOISE, LiveConfig, LiveError
 
@@ -122,7 +122,7 @@ def register(vsub) -> argparse.ArgumentParser:
     q = vsub.add_parser("live", help=HELP, description=DESCRIPTION)
     add_arguments(q)
     q.set_defaults(func=lambda args: run(args, "exposim validate live"), experiment="live",
-                   extras=("synth",))  # renders walks: checked before any output (emulator.cli)
+                   extras=("synth",))  # renders walks: checked before any output (emulator.commands.cli)
     return q
 
 

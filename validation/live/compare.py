@@ -37,7 +37,7 @@ def exposure_log2_errors(emulated, live, names) -> dict[str, np.ndarray]:
 def image_errors(emulated, live, names, sequence, response) -> dict[str, dict]:
     """Per method: RMSE (% of the DN range) of the emulated vs the live left image of each
     cycle, over the emulation's valid pixels, and the valid fraction."""
-    from emulator.emulate import validity_mask
+    from emulator.core.emulate import validity_mask
 
     white, black = int(sequence.white_level), int(sequence.black_level)
     cycles = {c.index: c for c in sequence.cycles}
@@ -107,7 +107,7 @@ def measure_noise_variance_ratio(radiance: np.ndarray, camera, response, noise_m
     noise library's predicted ratio (:func:`emulator.noise.excess_map`) averaged per bin.
     """
     import synth
-    from emulator.emulate import emulate
+    from emulator.core.emulate import emulate
     from emulator.noise import NoiseModelError, noise_variance_ratio
 
     white, black = camera.white_level, camera.black_level

@@ -253,7 +253,7 @@ class LiveConfig:
         from scenes.denoise import DENOISERS, ENV_DENOISE
 
         from emulator.autoexposure.methodset import parse_methods
-        from emulator.select import SELECTORS
+        from emulator.core.select import SELECTORS
 
         if not self.scenes:
             raise LiveError("scenes: at least one scene is needed")

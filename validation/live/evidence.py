@@ -22,7 +22,7 @@ import math
 
 import numpy as np
 
-from emulator.stats import percentile_interval, rng_of
+from emulator.core.stats import percentile_interval, rng_of
 from validation.live.config import (
     COMPARISONS,
     CONDITIONS,

@@ -20,7 +20,7 @@ import math
 
 import numpy as np
 
-from emulator.stats import holm
+from emulator.core.stats import holm
 from validation.live.config import (
     HEADLINE_COMPARISONS,
     HEADLINE_METRICS,
@@ -122,7 +122,7 @@ def apply_family(comparisons: dict, alpha: float = 0.05, min_walks: int = 10, ex
 
 def _decided_rate(scales, n_walks: int, omega2: float, target: str, alpha: float, n_seeds: int,
                   n_resamples: int, seed) -> float:
-    from emulator.stats import rng_of
+    from emulator.core.stats import rng_of
     from validation.verdicts.agreement import VERDICTS, judge_batch
     from validation.verdicts.simulate import simulate_tables
 

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from emulator.stats import percentile_interval, variance_components
+from emulator.core.stats import percentile_interval, variance_components
 from validation.live.config import COMPARISONS, HEADLINE_COMPARISONS
 from validation.verdicts.agreement import omega2_untruncated
 from validation.verdicts.ranking import cluster_plan, over_plan

@@ -187,7 +187,7 @@ def iter_live(
 
     Parameters
     ----------
-    sequence : emulator.dataset.Sequence or path
+    sequence : emulator.core.dataset.Sequence or path
         The bracketed recording of the walk: it gives the cycles, their shot timestamps,
         and (same-instant timing) the brackets the selector looks at.
     radiance : callable(timestamp_ns, camera) -> ndarray
@@ -221,7 +221,7 @@ def iter_live(
         (``left``/``right``); ``bracket_ms`` is the bracket whose instant was used,
         ``ratio`` 1, ``valid_fraction`` 1.
     """
-    from emulator.dataset import CAMERAS
+    from emulator.core.dataset import CAMERAS
     from emulator.playback import LiveCycleProvider, closed_loop
     from emulator.playback.workers import start_methods
 
@@ -262,7 +262,7 @@ def write_run_folder(folder, sequence_path, cycles, names, *, white_level: int, 
                      description: dict | None = None, png_level: int = 1) -> Path:
     """Write cycles (with images) as a run folder that ``exposim bench features|vo`` read.
 
-    The layout of :func:`emulator.runner.run_to_folder` with ``save="png16"``, written by
+    The layout of :func:`emulator.orchestration.runner.run_to_folder` with ``save="png16"``, written by
     the same :class:`emulator.io.runfolder.RunWriter`: ``run.json``,
     ``<method>/exposures.csv``, ``<method>/images/{left,right}/<ts>.png``,
     ``<method>/images/times.txt``; the recording is named relative to ``folder``.  Refuses an existing non-empty folder

@@ -23,7 +23,7 @@ import math
 
 import numpy as np
 
-from emulator.stats import holm, rng_of
+from emulator.core.stats import holm, rng_of
 from validation.live.config import COMPARISONS, HEADLINE_COMPARISONS, HEADLINE_METRICS, JUDGED_METRICS
 from validation.live.headline import apply_family, with_derived
 from validation.verdicts.agreement import ALPHA, MIN_WALKS, OMEGA2_MAX, complete_walks, judge_batch, \

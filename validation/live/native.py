@@ -94,7 +94,7 @@ def native_rate_loop(sequence, radiance: Callable, camera, methods, *, seed: int
 
     Parameters
     ----------
-    sequence : emulator.dataset.Sequence or path
+    sequence : emulator.core.dataset.Sequence or path
         The bracketed recording of the walk: its shot instants are the frame grid, its cycles
         the instants whose frames are yielded.
     radiance : callable
@@ -122,7 +122,7 @@ def native_rate_loop(sequence, radiance: Callable, camera, methods, *, seed: int
         Images kept (left and right where the recording is stereo). Methods that failed at a
         frame not yielded are named in the next yielded step's ``failed``.
     """
-    from emulator.dataset import CAMERAS
+    from emulator.core.dataset import CAMERAS
     from emulator.errors import PlaybackError
     from dataclasses import replace
 
@@ -206,7 +206,7 @@ def native_provider(seq, response, config, *, warp: bool = True, **kw):
     """The native-rate image provider of a synthetic walk: the walk's gyro (no offset to remove),
     timestamps at the trigger, the synthetic camera's intrinsics (its calibration files); ``kw``:
     :class:`~emulator.playback.NativeProvider`'s (the selector's weight)."""
-    from emulator.motion import recording_motion
+    from emulator.playback.motion import recording_motion
     from emulator.playback import NativeProvider
 
     motion = recording_motion(seq, stamp="start", remove_bias=False) if warp and seq.imu is not None else None
@@ -241,8 +241,8 @@ def native_image_errors(seq, live_frames, response, config, names, **kw) -> dict
     "source_offset", "warp_deg"}}`` (lists, one entry per frame)."""
     import cv2
 
-    from emulator.blur import rotation_homography
-    from emulator.emulate import validity_mask
+    from emulator.core.blur import rotation_homography
+    from emulator.core.emulate import validity_mask
 
     warped, plain = native_provider(seq, response, config, **kw), native_provider(seq, response, config, warp=False, **kw)
     white, black = int(seq.white_level), int(seq.black_level)

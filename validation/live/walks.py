@@ -8,7 +8,7 @@ of the experiment (``datasets/<scene>``, ``runs/<scene>/<run>``, ``features/<sce
 summaries, the feature benchmark's per-run entries, the VO benchmarks and the noise
 variance ratios.  It is a pure function of its arguments (every draw seeded from the
 configuration), so :func:`run_walks` can run the walks serially, on a local Dask cluster
-or on a scheduler's workers (:func:`emulator.distributed.run_tasks`, one error policy: a
+or on a scheduler's workers (:func:`emulator.orchestration.distributed.run_tasks`, one error policy: a
 walk that raises becomes an error row, the others go on) and the records are the same
 bytes on every path.  A walk whose record exists is not run again (resume).
 """
@@ -420,12 +420,12 @@ def run_walks(experiments: list[tuple[Path, LiveConfig]], *, scheduler=None, n_w
 
     ``scheduler``: None or ``"serial"`` (this process, one walk after the other), ``"local"``
     (a local Dask cluster, ``n_workers`` processes), a ``tcp://``/``tls://`` address or a
-    :class:`distributed.Client` (:func:`emulator.distributed.open_client`); on Dask the
+    :class:`distributed.Client` (:func:`emulator.orchestration.distributed.open_client`); on Dask the
     workers must see ``experiments`` and ``cache_dir`` under the same paths.  ``keep_run_images``: as
     :func:`run_walk`.  Returns
     ``{(experiment, scene): error text}`` of the walks that failed (empty when all ran).
     """
-    from emulator.distributed import open_client, run_tasks
+    from emulator.orchestration.distributed import open_client, run_tasks
 
     todo = [(exp, cfg, s) for exp, cfg in experiments for s in cfg.scenes
             if not walk_record_path(exp, s).is_file()]

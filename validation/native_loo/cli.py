@@ -17,7 +17,7 @@ HELP = ("native emulation on a real recording, leaving each frame out: every rec
 
 
 def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
-    from emulator.native import BLUR_STOPS_PER_PX, WARP_MODES
+    from emulator.core.native import BLUR_STOPS_PER_PX, WARP_MODES
 
     p.add_argument("sequence", metavar="SEQ", help="a recording (BorealHDR layout, folder or zip)")
     p.add_argument("-o", "--output", type=Path, required=True, help="output folder (results.json, report.md)")
@@ -41,7 +41,7 @@ def register(vsub) -> None:
 
 
 def _config(args):
-    from emulator.native import BLUR_STOPS_PER_PX
+    from emulator.core.native import BLUR_STOPS_PER_PX
     from validation.native_loo.study import NativeLooConfig
 
     return NativeLooConfig(size=args.size, max_frames=args.frames, warps=tuple(args.warps),

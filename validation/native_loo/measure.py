@@ -14,7 +14,7 @@ method that asked for it, and compared with the real frame k:
   image whose keypoints lie within :data:`GOOD_MATCH_PX` of each other (the two should coincide);
 
 by the camera's motion class at frame k (:func:`motion_class`: mean gyro rate over a frame interval
-each side) and warp mode (:data:`emulator.native.WARP_MODES`).
+each side) and warp mode (:data:`emulator.core.native.WARP_MODES`).
 """
 
 from __future__ import annotations
@@ -89,7 +89,7 @@ def compare(emulated: np.ndarray, real: np.ndarray, mask: np.ndarray, *, white: 
             real_features=None) -> dict:
     """Image error (% of range, over ``mask``), motion left (px) and SIFT good matches of ``emulated`` against
     ``real`` (both DN Bayer images of one exposure).  ``real_features``: the real frame's SIFT, if known."""
-    from emulator.gray import bayer_to_gray8
+    from emulator.core.gray import bayer_to_gray8
     from emulator.metrics.features import detect_sift, match_descriptors
 
     d = emulated.astype(np.float64)[mask] - real.astype(np.float64)[mask]
@@ -116,11 +116,11 @@ def leave_one_out(providers: dict, frames, response, *, progress=None) -> list[d
     """One row per (hidden frame, warp mode): ``providers`` maps a warp mode to a
     :class:`~emulator.playback.native.NativeProvider` of the recording (the same selection in each);
     ``frames``: the frame indices to hide.  ``progress(line)`` hears one line per frame."""
-    from emulator.blur import exposure_window_s
-    from emulator.emulate import validity_mask
-    from emulator.gray import bayer_to_gray8
+    from emulator.core.blur import exposure_window_s
+    from emulator.core.emulate import validity_mask
+    from emulator.core.gray import bayer_to_gray8
     from emulator.metrics.features import detect_sift
-    from emulator.native import move_mask
+    from emulator.core.native import move_mask
 
     first = next(iter(providers.values()))
     fr, white, black = first.frames, first.white, first.black

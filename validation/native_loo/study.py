@@ -25,7 +25,7 @@ class NativeLooConfig:
     max_frames : int or None
         Hide at most this many frames, spread evenly over the recording; None: every frame.
     warps : tuple of str
-        Warp modes compared (:data:`emulator.native.WARP_MODES`).
+        Warp modes compared (:data:`emulator.core.native.WARP_MODES`).
     blur_stops_per_px : float or None
         None: the native selector as runs use it; a number: the blur-aware selector with this weight.
     """
@@ -98,13 +98,13 @@ def _frames_to_hide(n: int, max_frames: int | None) -> list[int]:
 
 def run_study(sequence, out_dir, config: NativeLooConfig = NativeLooConfig(), *, command: str = "",
               force: bool = False, progress=None) -> dict:
-    """Hide each frame of ``sequence`` (a path or :class:`~emulator.dataset.Sequence`) in turn, measure, write
+    """Hide each frame of ``sequence`` (a path or :class:`~emulator.core.dataset.Sequence`) in turn, measure, write
     ``results.json`` and ``report.md`` into ``out_dir`` (refused where a results.json is, unless ``force``).
     ``progress(line)`` hears a line per frame."""
     from emulator.errors import CalibrationError
     from emulator.io.files import prepare_output, write_results, write_text
-    from emulator.motion import recording_motion
-    from emulator.native import WARP_MODES
+    from emulator.playback.motion import recording_motion
+    from emulator.core.native import WARP_MODES
     from emulator.playback import RunConfig
     from emulator.playback.native import NativeProvider, recording_stamp
     from emulator.playback.offline import resolve_sequence

@@ -7,7 +7,7 @@ Modules: :mod:`~validation.verdicts.agreement` (omega2, the verdict per metric),
 :mod:`~validation.verdicts.simulate` (synthetic metric tables with known truth),
 :mod:`~validation.verdicts.power` (verdict rates, smallest detectable interaction, walks needed).
 The numeric primitives (bootstrap plans, intervals, Holm, TOST, variance components) are
-:mod:`emulator.stats`.
+:mod:`emulator.core.stats`.
 """
 
 #: Realistic scales of the calibration (metric units, method SD 1): the noise of one run

@@ -7,7 +7,7 @@ numbers).  For one metric this gives three walks x methods tables ``live``, ``em
 and ``control``.
 
 Estimand (per metric): the method x condition interaction, the method contrasts
-emulated minus the same contrasts live.  With :func:`emulator.stats.variance_components`
+emulated minus the same contrasts live.  With :func:`emulator.core.stats.variance_components`
 (two-way, walks x methods, unbiased for the variance of the method effects over the
 methods)::
 
@@ -53,7 +53,7 @@ import math
 
 import numpy as np
 
-from emulator.stats import (
+from emulator.core.stats import (
     covariance_components,
     holm,
     kendall_tau_b,
@@ -115,7 +115,7 @@ def _plan_counts(plan, n_walks: int) -> np.ndarray:
 
 
 def _components_over_counts(counts, *tables) -> list[tuple[np.ndarray, np.ndarray]]:
-    """:func:`emulator.stats.variance_components` of every resample (``counts`` per walk) of each walks x
+    """:func:`emulator.core.stats.variance_components` of every resample (``counts`` per walk) of each walks x
     methods table, from per-walk sums (no resampled table is built, one matrix product): the same numbers up
     to rounding."""
     u = counts.sum(axis=1)

@@ -33,7 +33,7 @@ def interval_table(n_studies: int, n_resamples: int = 400) -> None:
     bias-corrected percentiles of the untruncated statistic, on studies whose true omega2 is exact."""
     import numpy as np
 
-    from emulator.stats import percentile_interval, rng_of
+    from emulator.core.stats import percentile_interval, rng_of
     from validation.verdicts.agreement import omega2_untruncated
     from validation.verdicts.simulate import simulate_tables
 

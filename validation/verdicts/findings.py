@@ -35,7 +35,7 @@ import math
 
 import numpy as np
 
-from emulator.stats import percentile_interval, rng_of
+from emulator.core.stats import percentile_interval, rng_of
 from validation.verdicts.agreement import ALPHA, MIN_WALKS
 from validation.verdicts.claims import Claim, claim_pvalues, holm_rows
 

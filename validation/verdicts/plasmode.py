@@ -38,7 +38,7 @@ import math
 
 import numpy as np
 
-from emulator.stats import rng_of, variance_components
+from emulator.core.stats import rng_of, variance_components
 from validation.verdicts.agreement import MIN_WALKS, VERDICTS, judge
 
 __all__ = ["STUDIES", "INJECTED_OMEGA2", "NOISY_FACTOR", "TARGET", "RESEEDED_SUFFIX", "WALK_CANDIDATES",

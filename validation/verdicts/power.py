@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from emulator.stats import rng_of, variance_components
+from emulator.core.stats import rng_of, variance_components
 from validation.verdicts.agreement import ALPHA, OMEGA2_MAX, VERDICTS, judge_batch
 from validation.verdicts.simulate import Scales, simulate_tables
 
@@ -30,7 +30,7 @@ def verdict_rates(kind: str, n_walks: int, scales: Scales, *, n_seeds: int = 200
 def scales_from_tables(live, emulated=None, control=None) -> Scales:
     """Variance components of one metric from a pilot's walks x methods tables.
 
-    ``sd_method`` and the residual of the live table (:func:`emulator.stats.variance_components`);
+    ``sd_method`` and the residual of the live table (:func:`emulator.core.stats.variance_components`);
     the run noise from live - control on the same walks (their residual is twice the run
     noise variance: the walk x method part cancels); the walk x method part is the live
     residual less the noise (0 when the noise explains it all); ``sd_walk`` from the

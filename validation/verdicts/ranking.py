@@ -22,7 +22,7 @@ import math
 
 import numpy as np
 
-from emulator.stats import kendall_tau_b, percentile_interval, rng_of
+from emulator.core.stats import kendall_tau_b, percentile_interval, rng_of
 from validation.verdicts.claims import holm_rows, one_sided_p
 
 __all__ = ["cluster_plan", "over_plan", "margin_in_ranking_terms", "emulation_bias", "pairs_check"]

@@ -34,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from emulator.stats import rng_of
+from emulator.core.stats import rng_of
 
 __all__ = ["Scales", "KINDS", "method_effects", "simulate_tables"]
 

@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from emulator.stats import variance_components
+from emulator.core.stats import variance_components
 from emulator.cells import format_number
 
 __all__ = ["PAPER_EFFECTS", "TRANSFER", "paper_effects", "study_units", "finding_scales", "paper_sized_power",

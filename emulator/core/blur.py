@@ -41,9 +41,9 @@ import cv2
 import numpy as np
 
 from emulator.errors import EmulationError
-from emulator.lut import apply_lut, check_exposure, forward_dn
-from emulator.structure import STRUCTURE_FILTERS, STRUCTURE_SIGMA_PX, structure_of
-from emulator.gyro import (  # re-exported: the IMU side lives in emulator.gyro
+from emulator.core.lut import apply_lut, check_exposure, forward_dn
+from emulator.core.structure import STRUCTURE_FILTERS, STRUCTURE_SIGMA_PX, structure_of
+from emulator.core.gyro import (  # re-exported: the IMU side lives in emulator.core.gyro
     GYRO_SMOOTH_S,
     R_CAM_IMU_FLU,
     AngularVelocity,
@@ -335,7 +335,7 @@ def _is_identity(H: np.ndarray, size) -> bool:
 #: Resamplers of :func:`emulate_blur_consistent`'s warps: name -> OpenCV flag.
 _RESAMPLE = {"linear": "INTER_LINEAR", "cubic": "INTER_CUBIC"}
 
-#: The DN lookup after a warp, under the name emulator.native imported before it moved to emulator.lut.
+#: The DN lookup after a warp, under the name emulator.core.native imported before it moved to emulator.core.lut.
 
 
 def emulate_blur_consistent(raw: np.ndarray, source_ms: float, target_ms: float, response,
@@ -377,7 +377,7 @@ def emulate_blur_consistent(raw: np.ndarray, source_ms: float, target_ms: float,
     (image, valid) : (numpy.ndarray, numpy.ndarray)
         ``uint16`` DN and the validity mask: the plain emulation's, less pixels that a
         clipped source pixel blurs into.  Without homographies, or when they are all the
-        identity, exactly :func:`emulator.emulate.emulate`'s output.
+        identity, exactly :func:`emulator.core.emulate.emulate`'s output.
     """
     source_ms = check_exposure(source_ms, "source_ms")
     target_ms = check_exposure(target_ms, "target_ms")

@@ -1,7 +1,7 @@
 """The gyro as angular velocity in camera axes: samples or a function, its offset, its smoothing.
 
-Split out of :mod:`emulator.blur` (which re-exports every name here): the IMU side of the
-blur prediction.  Numeric core, no file I/O; see :mod:`emulator.blur` for the conventions.
+Split out of :mod:`emulator.core.blur` (which re-exports every name here): the IMU side of the
+blur prediction.  Numeric core, no file I/O; see :mod:`emulator.core.blur` for the conventions.
 """
 
 from __future__ import annotations

@@ -27,9 +27,9 @@ import numpy as np
 
 from emulator.autoexposure.methodset import parse_methods
 from emulator.errors import PlaybackError
-from emulator.gray import bayer_to_gray8
+from emulator.core.gray import bayer_to_gray8
 from emulator.io.runfolder import CSV_COLUMNS, CSV_FILE, RUN_FILE, RunWriter, format_row, tables_from_rows
-from emulator import numpy_dispatch
+import emulator.numpy_dispatch as numpy_dispatch
 from emulator.playback import METHOD_CAMERA, MethodStep, RunConfig, RunStats, closed_loop, prepare_run, \
     resolve_sequence
 from emulator.io.runwatch import watch_run
@@ -44,7 +44,7 @@ RUN_JSON_EVERY = 10
 
 def saved_image(image: np.ndarray, save: str, *, white_level: int, black_level: int) -> np.ndarray:
     """What ``--save`` writes of an emulated Bayer image: itself (png16), or 8-bit grey with the
-    black level subtracted (png8, :func:`emulator.gray.bayer_to_gray8`). Shared by ``run`` and ``emulate``."""
+    black level subtracted (png8, :func:`emulator.core.gray.bayer_to_gray8`). Shared by ``run`` and ``emulate``."""
     if save == "png16":
         return image
     if save == "png8":

@@ -17,7 +17,7 @@
 :func:`resolve_scheduler` picks one for the command line: ``--scheduler-file``, else
 ``--scheduler``, else ``$DASK_SCHEDULER_ADDRESS``, else the caller's default.
 
-Every task (e.g. a dataset unit, :func:`emulator.datasetrun.run_unit`) is submitted with
+Every task (e.g. a dataset unit, :func:`emulator.orchestration.datasetrun.run_unit`) is submitted with
 ``retries`` (a task that raises is run again) and ``pure=False``; a worker that dies
 mid-task makes the scheduler run the task again on another worker (up to its
 ``distributed.scheduler.allowed-failures``, which :func:`local_client` sets to ``retries``).

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from emulator.emulate import check_exposure
+from emulator.core.emulate import check_exposure
 from emulator.errors import ExposimError
 
 __all__ = [
@@ -309,7 +309,7 @@ def blur_aware(
     ----------
     excess_blur_px : callable(bracket_ms) -> float, optional
         Blur of the bracket beyond a capture at the target, px (e.g.
-        :meth:`emulator.motion.RecordingMotion.mismatch_px`); NaN counts as 0.
+        :meth:`emulator.playback.motion.RecordingMotion.mismatch_px`); NaN counts as 0.
     px_per_noise : float
         Pixels of excess blur that cost as much as a doubled relative noise (> 0).
 

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from emulator.errors import DatasetError
-from emulator.levels import Levels
+from emulator.core.levels import Levels
 
 __all__ = ["CAMERAS", "Frame", "Cycle", "Sequence", "build_sequence", "group_cycles", "missing_text"]
 
@@ -132,7 +132,7 @@ class Sequence:
 
     @property
     def levels(self) -> Levels:
-        """The clip levels as one :class:`~emulator.levels.Levels` value."""
+        """The clip levels as one :class:`~emulator.core.levels.Levels` value."""
         return Levels(self.black_level, self.white_level)
 
     def __len__(self) -> int:

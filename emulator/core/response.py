@@ -25,12 +25,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from emulator.errors import ResponseError
-from emulator.levels import BOREALHDR_LEVELS, Levels
+from emulator.core.levels import BOREALHDR_LEVELS, Levels
 
 __all__ = ["CameraResponse", "BOREALHDR_WHITE_LEVEL", "BOREALHDR_BLACK_LEVEL"]
 
 #: The one default white level, DN (alias of ``BOREALHDR_LEVELS.white``, defined in
-#: :mod:`emulator.levels`): the BorealHDR sample saturates at 4094, one below the 12-bit
+#: :mod:`emulator.core.levels`): the BorealHDR sample saturates at 4094, one below the 12-bit
 #: maximum 4095 (DESIGN.md).  Everything that needs a white level and is not given one falls
 #: back to this: the response constructors here, the readers of recordings, stacks and run
 #: folders (:mod:`emulator.io`), calibration and the synthetic camera.  A camera's own level
@@ -182,7 +182,7 @@ class CameraResponse:
 
     @property
     def levels(self) -> Levels:
-        """The clip levels as one :class:`~emulator.levels.Levels` value."""
+        """The clip levels as one :class:`~emulator.core.levels.Levels` value."""
         return Levels(self.black_level, self.white_level)
 
     # ------------------------------------------------------------------ evaluation
@@ -203,7 +203,7 @@ class CameraResponse:
 
     # ------------------------------------------------------------------ emulation tables
     def lut(self, ratio: float) -> tuple[np.ndarray, np.ndarray]:
-        """(uint16 table L_k, bool validity table) for ratio k, cached (see emulator.emulate).
+        """(uint16 table L_k, bool validity table) for ratio k, cached (see emulator.core.emulate).
 
         Raises :class:`ResponseError` for a ratio that is not a finite positive number.
         """

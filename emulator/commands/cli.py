@@ -171,7 +171,7 @@ def main(argv: list[str] | None = None) -> int:
     previous = None
     if threading.current_thread() is threading.main_thread():
         previous = signal.signal(signal.SIGTERM, _on_sigterm)
-    from emulator.interrupts import watchdog
+    from emulator.orchestration.interrupts import watchdog
 
     shown = warnings.showwarning
     warnings.showwarning = _one_line_warning

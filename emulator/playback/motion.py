@@ -1,8 +1,8 @@
 """Motion of a recording: its gyro and stereo intrinsics joined to predict each frame's blur.
 
-:func:`recording_motion` builds a :class:`RecordingMotion` from a :class:`~emulator.dataset.Sequence`
+:func:`recording_motion` builds a :class:`RecordingMotion` from a :class:`~emulator.core.dataset.Sequence`
 with an IMU (``Sequence.imu``) and the ROS ``camera_info`` files of its cameras
-(:func:`find_camera_calibration`); the numbers come from :mod:`emulator.blur`.  Used by
+(:func:`find_camera_calibration`); the numbers come from :mod:`emulator.core.blur`.  Used by
 ``exposim info`` (blur per cycle and bracket), ``exposim emulate --blur consistent`` and
 ``exposim run --blur consistent`` (:func:`blur_hook`).  Conventions and assumptions:
 ``docs/blur.md``.
@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from emulator.blur import (
+from emulator.core.blur import (
     BLUR_MODES,
     DEFAULT_PLACEMENT,
     DEFAULT_STAMP,
@@ -89,7 +89,7 @@ class RecordingMotion:
     intrinsics : dict of str to (numpy.ndarray, (int, int))
         Per camera: K (3x3) and the (width, height) it is calibrated for.
     stamp : str
-        Timestamp convention (:data:`emulator.blur.STAMP_CONVENTIONS`).
+        Timestamp convention (:data:`emulator.core.blur.STAMP_CONVENTIONS`).
     """
 
     omega: AngularVelocity
@@ -131,9 +131,9 @@ def recording_motion(sequence, calibration=None, *, stamp: str = DEFAULT_STAMP, 
     ``calibration``: a folder with ``left.yaml`` (and ``right.yaml``), or None to find one
     (:func:`find_camera_calibration`); :class:`CalibrationError` when none is found.
     ``omega``: angular velocity in camera axes (anything
-    :func:`emulator.blur.as_angular_velocity` takes, times in s since ``origin_ns``),
+    :func:`emulator.core.blur.as_angular_velocity` takes, times in s since ``origin_ns``),
     used instead of the IMU (synthetic walks).  ``remove_bias``: subtract the gyro offset
-    measured where the IMU is still (:func:`emulator.blur.still_gyro_bias`; on the
+    measured where the IMU is still (:func:`emulator.core.blur.still_gyro_bias`; on the
     BorealHDR sample 0.4-0.8 deg/s, as much as the sample's cycles turn).  ``intrinsics``:
     camera -> (K (3x3), (width, height)) instead of calibration files (synthetic cameras).
     """
@@ -191,7 +191,7 @@ class BlurHook:
 
     motion: RecordingMotion
     response: object
-    #: Select brackets with :func:`emulator.select.blur_aware` instead of HigherNoSat.
+    #: Select brackets with :func:`emulator.core.select.blur_aware` instead of HigherNoSat.
     blur_aware: bool = False
     _rows: dict = field(default_factory=dict, repr=False)
     _lock: object = field(default_factory=threading.Lock, repr=False)
@@ -206,9 +206,9 @@ class BlurHook:
                 "focal_px": {cam: float(K[0, 0]) for cam, (K, _) in m.intrinsics.items()}}
 
     def select(self, selector: str, cycle, camera: str, target_ms: float, brackets, select_kw: dict):
-        """The loop's bracket choice: ``selector``, or :func:`emulator.select.blur_aware` when
+        """The loop's bracket choice: ``selector``, or :func:`emulator.core.select.blur_aware` when
         :attr:`blur_aware` (``selector`` must then be ``higher-no-sat``)."""
-        from emulator.select import blur_aware, select
+        from emulator.core.select import blur_aware, select
 
         if not self.blur_aware:
             return select(selector, target_ms, brackets, **select_kw)

@@ -3,7 +3,7 @@
 ``I_target = f( (t_target / t_source) * f^-1(I_source) )``.  The source is an integer DN,
 so for one ratio k the whole mapping is a table over all DN values,
 ``L_k[d] = clip(round(f(k * g(d))), black, white)``, built once per ratio (cached on the
-:class:`~emulator.response.CameraResponse`) and applied with one gather.
+:class:`~emulator.core.response.CameraResponse`) and applied with one gather.
 
 Quantisation sets the accuracy floor: one source DN spans one bin of linear exposure and
 the ratio stretches it, so emulating a longer exposure from a shorter one carries an error
@@ -25,8 +25,8 @@ from __future__ import annotations
 import numpy as np
 
 from emulator.errors import EmulationError
-from emulator.lut import apply_lut, check_exposure, check_raw  # re-exported: the DN lookups live in emulator.lut
-from emulator.response import CameraResponse
+from emulator.core.lut import apply_lut, check_exposure, check_raw  # re-exported: the DN lookups live in emulator.core.lut
+from emulator.core.response import CameraResponse
 
 __all__ = [
     "emulate",

@@ -1,8 +1,8 @@
 """DN lookups (numeric core, no file I/O): a per-DN table applied to a raw image, and DN looked up from linear exposure.
 
 :func:`apply_lut` gathers ``table[raw]`` in one native call (the per-ratio tables of
-:mod:`emulator.emulate`); :func:`forward_dn` is the way back from linear exposure,
-``clip(rint(f(h)), black, white)``, used after a warp (:mod:`emulator.blur`, native-rate
+:mod:`emulator.core.emulate`); :func:`forward_dn` is the way back from linear exposure,
+``clip(rint(f(h)), black, white)``, used after a warp (:mod:`emulator.core.blur`, native-rate
 frames).  :func:`check_exposure` and :func:`check_raw` check the inputs both sides share.
 """
 

@@ -22,7 +22,7 @@ Each unit runs :func:`run_unit`: it writes its run folder under a staging name
 is killed mid-way (a worker that dies) leaves no partial folder under the final name, and a
 retry starts from scratch; a unit whose folder already exists is not recomputed (resume,
 or a duplicate attempt).  :func:`run_dataset` plans the units, runs them serially or on
-Dask (:mod:`emulator.distributed`) and writes the summary.  Nothing here prints.
+Dask (:mod:`emulator.orchestration.distributed`) and writes the summary.  Nothing here prints.
 """
 
 from __future__ import annotations
@@ -205,7 +205,7 @@ def run_unit(unit: Unit, out_dir: str | os.PathLike, config) -> dict:
     """
     from emulator.io.borealhdr import load_sequence
     from emulator.report.run import write_run_report
-    from emulator.runner import write_run
+    from emulator.orchestration.runner import write_run
 
     out_dir = Path(out_dir)
     final = out_dir / unit.sequence / unit.group
@@ -361,23 +361,23 @@ def run_dataset(
     ``n_workers`` processes, default sized to the machine), ``tcp://HOST:PORT`` or
     ``tls://HOST:PORT`` (an existing Dask cluster that sees the same paths), or an open
     :class:`distributed.Client` (used, not closed); ``scheduler_file`` instead names a
-    Dask scheduler file (see :mod:`emulator.distributed`).  Refuses an existing ``out_dir``
+    Dask scheduler file (see :mod:`emulator.orchestration.distributed`).  Refuses an existing ``out_dir``
     that holds a dataset run unless ``resume`` (then the configuration must be the same;
     complete units are kept, others computed).  Every path runs the units through
-    :func:`emulator.distributed.run_tasks`: a unit that raises any exception becomes an
+    :func:`emulator.orchestration.distributed.run_tasks`: a unit that raises any exception becomes an
     error row (Dask retries it ``retries`` times first), the others are kept, and the
     bytes written are the same on every path.
     ``progress(done, total)`` after each unit.
     """
     from emulator.autoexposure.methodset import parse_methods
-    from emulator.distributed import open_client, run_tasks
+    from emulator.orchestration.distributed import open_client, run_tasks
     from emulator.io.files import read_metadata, write_metadata
     from emulator.playback import RunConfig
     from emulator.report.dataset import write_dataset_report
 
     out = Path(os.path.abspath(out_dir))  # absolute: a plugin's os.chdir cannot move the output
     cfg = RunConfig.from_kwargs(config, **settings)
-    from emulator.distributed import check_scheduler, is_client
+    from emulator.orchestration.distributed import check_scheduler, is_client
 
     if scheduler_file is not None and scheduler in ("serial", None):
         scheduler = "file"

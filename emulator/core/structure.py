@@ -1,6 +1,6 @@
 """What blur-consistent emulation moves: the structure of a plane, told from its noise.
 
-:func:`structure_of` is the ``s`` of :func:`emulator.blur.emulate_blur_consistent`
+:func:`structure_of` is the ``s`` of :func:`emulator.core.blur.emulate_blur_consistent`
 (``h_T = (T/S) h_S + sum_j (w_j/S) (warp_j(s) - s)``): the scene's structure moves with the
 camera, the source's noise stays where it is, as a live capture's noise is never smeared.
 Measurements behind the choices: docs/blur.md, section "Blur-consistent emulation".

@@ -21,7 +21,7 @@ the two numeric parts of that:
   while it costs less than the nearest kept neighbour.
 * **the warp** (:func:`warp_to_instant`): a source frame taken at another instant is moved
   to frame k's instant by the infinite homography of the camera's rotation between the two
-  (``H = K R^T K^-1``, :func:`emulator.blur.rotation_homography`), each RGGB site on its own
+  (``H = K R^T K^-1``, :func:`emulator.core.blur.rotation_homography`), each RGGB site on its own
   grid, in linear exposure, resampled by :data:`WARP_RESAMPLE` (Lanczos: a bilinear warp at a
   fractional offset averages neighbouring sites and removes the fine detail SIFT detects).
   Pixels that come from outside the source image are reported through the inside fraction.
@@ -47,7 +47,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from emulator.lut import forward_dn
+from emulator.core.lut import forward_dn
 from emulator.errors import EmulationError
 
 __all__ = [
@@ -157,7 +157,7 @@ def invalid_fraction(hist: np.ndarray, ratio: float, *, white_level: int, black_
     """Share of a source's pixels (its DN histogram) whose emulation at ``ratio`` carries no radiance.
 
     Emulating upwards (``ratio > 1``) a black pixel is lost (a white one stays white);
-    downwards a white pixel is lost (:func:`emulator.emulate.validity_mask`).
+    downwards a white pixel is lost (:func:`emulator.core.emulate.validity_mask`).
     """
     n = float(hist.sum())
     if ratio == 1.0 or n == 0:
@@ -215,7 +215,7 @@ def native_select(target_ms: float, candidates: Iterable[NativeCandidate], *,
 # ============================================================================ the warp
 def rotation_between(omega, t_from_s: float, t_to_s: float) -> np.ndarray | None:
     """The camera's rotation from ``t_from_s`` to ``t_to_s`` (3x3), or None where the gyro does not cover it."""
-    from emulator.blur import as_angular_velocity, integrate_rotation
+    from emulator.core.blur import as_angular_velocity, integrate_rotation
 
     omega = as_angular_velocity(omega)
     if not omega.covers(t_from_s, t_to_s):
@@ -239,7 +239,7 @@ def _inside_fraction(H: np.ndarray, width: int, height: int) -> float:
     return float(min(1.0, max(0.0, area / (width * height))))
 
 
-#: Grid of the DN lookup after a warp (:func:`emulator.lut.forward_dn`): 2**20 cells leave few pixels to
+#: Grid of the DN lookup after a warp (:func:`emulator.core.lut.forward_dn`): 2**20 cells leave few pixels to
 #: search on a real response (7x faster than 2**16 on the sample; the same bytes).
 _DN_GRID = 1 << 20
 
