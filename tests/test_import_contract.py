@@ -38,6 +38,15 @@ FLOORS = {
         ("orchestration",),  # orchestration: run folders, dataset runs, Dask, interrupts
         ("commands",),  # the command line
     ),
+    "validation": (
+        ("common", "published", "protocol", "demo"),  # base: shared helpers, published data, the study protocol
+        ("verdicts",),  # statistics of the verdicts: tables in, verdicts out
+        ("emulation", "selectors", "motion", "speed", "calibration_study", "render_study", "native_loo",
+         "ae_study"),  # studies on their own
+        ("report", "live"),  # studies built on others: the four experiments' runner, live (reads the AE study's)
+        ("blur", "verdict_studies"),  # studies built on live: blur's live-against-emulated, checks of its folders
+        ("commands",),  # the command line: the registry of studies
+    ),
 }
 
 

@@ -1,10 +1,10 @@
-"""validation.verdicts.own_residuals: the verdict rule calibrated on the emulator's own residuals."""
+"""validation.verdict_studies.own_residuals: the verdict rule calibrated on the emulator's own residuals."""
 
 import math
 
 import numpy as np
 
-from validation.verdicts.own_residuals import metric_own_calibration, own_residuals, scenario_rates
+from validation.verdict_studies.own_residuals import metric_own_calibration, own_residuals, scenario_rates
 
 SCENES = ("a", "b", "c", "d")
 

@@ -164,7 +164,10 @@ def test_the_study_folder_keeps_its_calibration_and_redraw_recomputes_it(tmp_pat
 
 def test_command_line_reads_the_folder_and_never_overwrites(tmp_path, capsys):
     from validation.live.experiment import finish_replicated
-    from validation.verdicts.study_calibration import main
+    from emulator.commands.cli import main as exposim
+
+    def main(argv):
+        return exposim(["validate", "study-calibration", *argv])
 
     assert main([str(tmp_path / "nowhere")]) == 1
     assert "walks.csv" in capsys.readouterr().err  # one line naming the file

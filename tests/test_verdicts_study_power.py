@@ -1,11 +1,12 @@
-"""validation.verdicts.study_power: what a finished study can decide, from its own walks."""
+"""validation.verdict_studies.study_power (exposim validate study-power): what a finished study can decide, from its own walks."""
 
 import json
 
 import numpy as np
 import pytest
 
-from validation.verdicts.study_power import PAPER_EFFECTS, main, paper_sized_power, study_units
+from emulator.commands.cli import main as exposim
+from validation.verdict_studies.study_power import PAPER_EFFECTS, paper_sized_power, study_units
 
 METHODS = ("fixed", "classical-30", "classical-50", "classical-70", "shim", "zhang", "kim")
 
@@ -50,4 +51,4 @@ def test_paper_sized_effect_in_the_studys_residual_sds(tmp_path):
         (tmp_path / "replicates" / f"seed{seed}" / "raw.json").write_text(json.dumps(rec))
     kind, got = study_units(tmp_path)
     assert kind == "live" and len(got) == 12 and got[7]["kim"]["vo"]["rpe_trans_pct"] == rpe[7, 6]
-    assert main([str(tmp_path / "nowhere")]) == 1
+    assert exposim(["validate", "study-power", str(tmp_path / "nowhere")]) == 1

@@ -8,18 +8,19 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-from emulator.commands.progress import add_quiet, bars_enabled
+from emulator.commands.progress import add_json, add_quiet, bars_enabled, print_json
 from emulator.commands import argtypes
 from emulator.errors import ExposimError
 from scenes.commands.render import add_scheduler_option
 from scenes.parallel import check_scheduler
 from validation.ae_study.config import CONFIGS
 from validation.ae_study.study import redraw, run_replicated_study, run_study
+from validation.protocol import DefaultsFormatter, Study
 
 #: The one-paragraph description of ``python -m validation.ae_study --help``.
 DESCRIPTION = "Synthetic AE study: the paper's section V-D benchmarks on synthetic stereo walks."
 
-__all__ = ["add_arguments", "run_from_args", "main"]
+__all__ = ["STUDY", "add_arguments", "run_from_args", "summary_lines", "main"]
 
 
 
@@ -108,3 +109,35 @@ def main(argv=None) -> int:
         return 1
     print("\n".join(summary_lines(args, results)))
     return 0
+
+
+def _validate_arguments(p: argparse.ArgumentParser) -> None:
+    """The options of ``exposim validate ae-study``: the study's, with ``-o/--output`` and ``--json``."""
+    add_arguments(p, output_option=True)
+    add_json(p)
+
+
+def run_validate(args: argparse.Namespace) -> int:
+    """``exposim validate ae-study``: run (or redraw) the study, print its summary (or ``--json``)."""
+    words = ["exposim", "validate", "ae-study", "-o", str(args.output)]
+    words += [w for flag, on in (("--quick", args.quick), ("--redraw", args.redraw)) if on for w in [flag]]
+    for flag, value in (("--cycles", args.cycles), ("--spp", args.spp)):
+        if value is not None:
+            words += [flag, str(value)]
+    if args.size is not None:
+        words += ["--size", f"{args.size[0]}x{args.size[1]}"]
+    if args.scenes:
+        words += ["--scenes", ",".join(args.scenes)]
+    results = run_from_args(args, shlex.join(words))
+    if args.json:
+        print_json(results)
+        return 0
+    print("\n".join(summary_lines(args, results)))
+    return 0
+
+
+_HELP = ("the paper's section V-D benchmarks (features, stereo VO, RPE) for the seven AE methods on synthetic "
+         "stereo walks, with a verdict on each of the paper's findings")
+
+#: ``exposim validate ae-study``.
+STUDY = Study("ae-study", _HELP, _validate_arguments, run_validate, formatter_class=DefaultsFormatter)

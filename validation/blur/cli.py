@@ -9,9 +9,13 @@ from dataclasses import replace
 from pathlib import Path
 
 from emulator.commands import argtypes
+from emulator.errors import ExposimError
 from validation.blur.config import BlurConfig
+from validation.blur.report import headline
+from validation.blur.study import run_study
+from validation.protocol import Study
 
-__all__ = ["HELP", "add_arguments", "register", "run_from_args", "main"]
+__all__ = ["HELP", "STUDY", "add_arguments", "config_from_args", "run_from_args", "main"]
 
 HELP = ("exposure-time blur: warped sub-instants against a brute-force reference, render cost, the walk's "
         "angular rate against the real gyro, emulated against live sharpness")
@@ -43,13 +47,8 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     return p
 
 
-def register(vsub) -> None:
-    q = vsub.add_parser("blur", help=HELP, description=HELP)
-    add_arguments(q)
-    q.set_defaults(func=run_from_args, experiment="blur", extras=("synth",))  # renders walks: checked up front
-
-
 def config_from_args(args) -> BlurConfig:
+    """The configuration the parsed options ask for."""
     cfg = BlurConfig.quick() if args.quick else BlurConfig()
     changes = {k: v for k, v in (("scene", args.scene), ("walk", args.walk), ("spp", args.spp),
                                  ("n_instants", args.instants), ("real_imu", args.real_imu),
@@ -63,9 +62,7 @@ def config_from_args(args) -> BlurConfig:
 
 
 def run_from_args(args) -> int:
-    from validation.blur.report import headline
-    from validation.blur.study import run_study
-
+    """Run the study from parsed :func:`add_arguments` options; print its headline."""
     words = ["exposim", "validate", "blur", "-o", str(args.output)] + (["--quick"] if args.quick else [])
     for flag, v in (("--scene", args.scene), ("--walk", args.walk), ("--spp", args.spp),
                     ("--instants", args.instants), ("--versus-walks", args.versus_walks),
@@ -89,9 +86,11 @@ def main(argv=None) -> int:
     try:
         return run_from_args(args)
     except Exception as exc:  # noqa: BLE001 - one clear line, as the exposim CLI does
-        from emulator.errors import ExposimError
-
         if isinstance(exc, (ExposimError, FileNotFoundError)):
             print(f"error: {exc}", file=sys.stderr)
             return 1
         raise
+
+
+#: ``exposim validate blur``: renders walks, so the synth extra is checked up front.
+STUDY = Study("blur", HELP, add_arguments, run_from_args)

@@ -97,7 +97,7 @@ def bench_walk(out: Path, scene_name: str, ds: Path, runs: dict, cfg, seed: int)
     from emulator.io.borealhdr import load_sequence
     from emulator.metrics.bench import bench_features, bench_vo
     from emulator.metrics.vo import VOParameters
-    from validation import ae_study
+    import validation.ae_study as ae_study
 
     seq = load_sequence(ds)
     names = list(cfg.versus_methods)

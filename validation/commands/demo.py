@@ -3,9 +3,16 @@
 from __future__ import annotations
 
 import argparse
+import sys
+import time
 from pathlib import Path
 
+from tqdm import tqdm
+
 from emulator.commands.progress import add_json, add_quiet, bars_enabled, print_json
+from emulator.io.files import read_results
+from scenes.commands.synth import stop_between_images
+from validation.demo import run_demo
 
 __all__ = ["register"]
 
@@ -33,14 +40,6 @@ register.order = 90  # place in `exposim --help`
 
 
 def _demo(args) -> int:
-    import sys
-    import time
-
-    from tqdm import tqdm
-
-    from scenes.commands.synth import stop_between_images
-    from validation.demo import run_demo
-
     bars: dict[str, tqdm] = {}
     on_terminal = bars_enabled(args.quiet)
     t0 = time.perf_counter()
@@ -64,8 +63,6 @@ def _demo(args) -> int:
     finally:
         for bar in bars.values():
             bar.close()
-    from emulator.io.files import read_results
-
     results = read_results(result["output"])
     if args.json:
         print_json(results)

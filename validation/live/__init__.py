@@ -72,6 +72,7 @@ _HOMES = {
     **dict.fromkeys(("finish", "numbered_output", "redraw", "run_live_experiment"), "validation.live.experiment"),
     **dict.fromkeys(("DatasetRadiance", "iter_emulated", "iter_live", "write_run_folder"), "validation.live.loops"),
     "native_rate_loop": "validation.live.native",
+    "main": "validation.live.cli",  # python -m validation.live
     **dict.fromkeys(("run_walk", "run_walks"), "validation.live.walks"),
 }
 
@@ -102,13 +103,6 @@ __all__ = [
     "run_walks",
     "main",
 ]
-
-
-def main(argv=None) -> int:
-    """``python -m validation.live`` (:func:`validation.live.cli.main`)."""
-    from validation.live.cli import main as _main
-
-    return _main(argv)
 
 
 def __getattr__(name: str):

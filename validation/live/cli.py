@@ -18,10 +18,16 @@ from emulator.commands.progress import add_json, add_quiet, bars_enabled, print_
 from emulator.commands import argtypes
 from emulator.orchestration.distributed import check_scheduler
 from emulator.errors import ExposimError
+from scenes.denoise import DENOISERS, resolve_denoise
+from scenes.errors import RenderError
+from scenes.presets import parse_setting
 from validation.live.config import CONFIG_CHANGES, CONFIGS, DEFAULTS, STUDY_DENOISE, LiveConfig, LiveError
+from validation.live.experiment import numbered_output, redraw, run_live_experiment, run_replicated
+from validation.live.report import headline
+from validation.protocol import Study
 
-__all__ = ["HELP", "DESCRIPTION", "add_arguments", "register", "build_parser", "config_from_args", "command_line",
-           "run", "main"]
+__all__ = ["HELP", "DESCRIPTION", "STUDY", "add_arguments", "build_parser", "config_from_args", "command_line",
+           "run", "run_validate", "main"]
 
 HELP = "live versus emulated closed loop: does the emulated benchmark rank the AE methods as a live camera would?"
 DESCRIPTION = (
@@ -74,8 +80,6 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument("--render-per", choices=("shot", "cycle"),
                    help="one render per shot and camera, or one per bracket sweep and camera warped with depth "
                         f"to every shot (a sixth of the renders) (default {full.render_per})")
-    from scenes.denoise import DENOISERS  # the names renders take (no renderer imported)
-
     p.add_argument("--denoise", choices=DENOISERS,
                    help="denoiser of the renders (default $EXPOSIM_DENOISE when set, else "
                         f"{STUDY_DENOISE}); 'oidn-hq' with --spp 256: render noise no worse than the sensor's "
@@ -117,32 +121,18 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     return p
 
 
-def register(vsub) -> argparse.ArgumentParser:
-    """Add ``live`` to the sub-parsers of ``exposim validate``."""
-    q = vsub.add_parser("live", help=HELP, description=DESCRIPTION)
-    add_arguments(q)
-    q.set_defaults(func=lambda args: run(args, "exposim validate live"), experiment="live",
-                   extras=("synth",))  # renders walks: checked before any output (emulator.commands.cli)
-    return q
-
-
 def build_parser(prog: str = "python -m validation.live") -> argparse.ArgumentParser:
     return add_arguments(argparse.ArgumentParser(prog=prog, description=DESCRIPTION))
 
 
 def _render_changes(args) -> dict:
     """``--render PRESET`` as the configuration's spp, denoiser and emitter weights."""
-    from scenes.errors import RenderError
-    from scenes.presets import parse_setting
-
     if args.spp is not None or args.denoise is not None:
         raise LiveError("--render sets spp and the denoiser: give --render, or --spp and --denoise, not both")
     try:
         preset = parse_setting(args.render)
     except RenderError as exc:
         raise LiveError(f"--render: {exc}") from None
-    from scenes.denoise import resolve_denoise
-
     if preset.denoise.enabled and preset.denoise != resolve_denoise(preset.denoise.name):
         raise LiveError(f"--render {args.render}: a study's denoiser is a named one ({preset.denoise.name} with its own "
                         f"albedo/normal spp); use a preset or DENOISER@SPP without /AUX_SPP")
@@ -204,9 +194,6 @@ def run(args, prog: str = "exposim validate live") -> int:
     Raises :class:`~emulator.errors.ExposimError` for bad options or input (the caller
     prints it as one line).
     """
-    from validation.live.experiment import numbered_output, redraw, run_live_experiment, run_replicated
-    from validation.live.report import headline
-
     def log(msg: str) -> None:
         print(msg, file=sys.stderr)
 
@@ -258,3 +245,12 @@ def main(argv=None) -> int:
     except (ExposimError, OSError) as exc:  # bad input, or a path that cannot be read or written: one line
         print(f"live: {exc}", file=sys.stderr)
         return 1
+
+
+def run_validate(args) -> int:
+    """``exposim validate live``: :func:`run` under that name."""
+    return run(args, "exposim validate live")
+
+
+#: ``exposim validate live``: renders walks, so the synth extra is checked before any output.
+STUDY = Study("live", HELP, add_arguments, run_validate, description=DESCRIPTION)

@@ -96,7 +96,7 @@ def assemble_raw(experiment, cfg: LiveConfig, failed: dict[str, str], command: s
     """``raw.json`` of one experiment (one seed) from its walk records; ``failed``: scene -> error of the walks
     without one.  The walks' figures are pooled as one experiment over its scenes always was."""
     from emulator import __version__
-    from validation import ae_study
+    import validation.ae_study as ae_study
     from validation.live.walks import read_walk
 
     walks = [read_walk(experiment, s) for s in cfg.scenes if s not in failed]

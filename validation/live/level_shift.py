@@ -13,8 +13,8 @@ omega2 compares the methods' effects: an emulator that moves every method by the
   Holm included) recomputed with each scene's walks left out; a verdict that changes when one
   scene goes is carried by that scene (``carried_by``).
 
-``python -m validation.live.level_shift OUT`` prints them for a study folder's ``walks.csv``
-without writing into the folder.
+``exposim validate level-shift OUT`` prints them for a study folder's ``walks.csv``
+without writing into the folder (:mod:`validation.verdict_studies.live_checks`).
 """
 
 from __future__ import annotations
@@ -22,10 +22,8 @@ from __future__ import annotations
 import numpy as np
 
 from emulator.core.stats import percentile_interval, variance_components
-from validation.live.config import COMPARISONS, HEADLINE_COMPARISONS
 from validation.verdicts.agreement import omega2_untruncated
 from validation.verdicts.ranking import cluster_plan, over_plan
-from emulator.cells import format_number
 
 __all__ = ["LEVEL_MARGIN", "SHIFT_METRICS", "level_shift", "per_scene", "leave_one_scene_out"]
 
@@ -110,59 +108,3 @@ def leave_one_scene_out(tables: dict, walks, methods, *, seed: int = 0, n_resamp
             if r["verdict"] != out[k]["verdict"]:
                 out[k]["carried_by"].append(s)
     return out
-
-
-def main(argv=None) -> int:
-    """``python -m validation.live.level_shift OUT``: level shifts, per-scene omega2 and the leave-one-scene-out
-    check of a study folder's headline, printed as Markdown."""
-    import argparse
-    import sys
-    from pathlib import Path
-
-    from emulator.io.files import read_results
-    from validation.live.config import HEADLINE_METRICS, LiveError
-    from validation.live.headline import with_derived
-    from validation.live.table_check import read_folder_table
-
-    p = argparse.ArgumentParser(prog="python -m validation.live.level_shift", description=__doc__.split("\n")[0])
-    p.add_argument("folder", type=Path, help="a live study folder with walks.csv and results.json")
-    args = p.parse_args(argv)
-    try:
-        walks, methods, tables = read_folder_table(args.folder)
-        seed = int(read_results(args.folder / "results.json")["config"]["seed"])
-    except (LiveError, OSError, KeyError) as exc:
-        print(f"level_shift: {exc}", file=sys.stderr)
-        return 1
-    tables = with_derived(tables)
-    seeds = [int(str(w).rpartition("/seed")[2]) for w in walks]
-    scenes = [str(w).rpartition("/seed")[0] for w in walks]
-    lines = []
-    for c, label in enumerate(HEADLINE_COMPARISONS):
-        ref, other = COMPARISONS[label]
-        if ref not in tables or other not in tables:
-            continue
-        lines += [f"### {label}", "", f"| metric | omega2 | level shift [95 %] | vs +-{LEVEL_MARGIN:.0%} | per scene: "
-                  "omega2 / shift |", "| --- | --- | --- | --- | --- |"]
-        for i, m in enumerate(HEADLINE_METRICS + ("rpe_trans_pct",)):
-            L, E = tables[ref][m], tables[other][m]
-            ok = np.all(np.isfinite(L) & np.isfinite(E), axis=1)
-            sh = level_shift(L, E, seeds, seed=[seed, 44_004, c, i]) if m in SHIFT_METRICS else None
-            ps = per_scene(L, E, scenes)
-            shift = "n/a (fixed mean)" if sh is None else (
-                f"{format_number(sh['relative'], '+.1%')} [{format_number(sh['relative_ci95'][0], '+.1%')}, {format_number(sh['relative_ci95'][1], '+.1%')}]")
-            lines.append(f"| {m} | {float(omega2_untruncated(L[ok], E[ok])):.3g} | {shift} | "
-                         f"{'' if sh is None else sh['verdict']} | "
-                         + "; ".join(f"{s} {v['omega2_untruncated']:.2g} / {format_number(v['relative_shift'], '+.0%')}"
-                                     for s, v in ps.items() if v["omega2_untruncated"] is not None) + " |")
-        lines.append("")
-    loso = leave_one_scene_out(tables, walks, methods, seed=seed)
-    lines += ["### Leave one scene out (headline family, Holm)", "", "| verdict | on all walks | carried by |",
-              "| --- | --- | --- |"]
-    lines += [f"| {k} | {r['verdict']} | " + (", ".join(f"{s} ({r['without'][s]} without it)" for s in r["carried_by"])
-                                              or "no single scene") + " |" for k, r in loso.items()]
-    print("\n".join(lines))
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

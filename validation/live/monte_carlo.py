@@ -13,8 +13,8 @@ verdict can depend on which replicates were drawn.  Two measurements:
 * :func:`verdict_stability`: the family over many bootstrap seeds (the study's seed replaced), and
   how many of its verdicts change.
 
-``python -m validation.live.monte_carlo OUT [--seeds 20] [--resamples 1000,4000]`` prints both for a
-study folder's ``walks.csv`` without writing into the folder.
+``exposim validate monte-carlo OUT [--seeds 20] [--resamples 1000,4000]`` prints both for a
+study folder's ``walks.csv`` without writing into the folder (:mod:`validation.verdict_studies.live_checks`).
 """
 
 from __future__ import annotations
@@ -138,41 +138,3 @@ def verdict_stability(tables: dict, walks, methods, *, seeds, n_resamples: int =
     return {"n_seeds": len(seeds), "n_resamples": int(n_resamples), "counts": counts,
             "changed": sorted(k for k, v in counts.items() if len(v) > 1),
             "mc_undetermined_on_some_seed": sorted(k for k, v in mc.items() if v)}
-
-
-def main(argv=None) -> int:
-    """``python -m validation.live.monte_carlo OUT``: the headline's Monte Carlo error of a study folder."""
-    import argparse
-    import json
-    import sys
-
-    from emulator.io.files import read_results
-    from validation.live.config import LiveError
-    from validation.live.table_check import read_folder_table
-
-    p = argparse.ArgumentParser(prog="python -m validation.live.monte_carlo", description=__doc__.split("\n")[0])
-    p.add_argument("folder", help="a live study folder with walks.csv and results.json")
-    p.add_argument("--seeds", type=int, default=20, help="bootstrap seeds (default 20: 0..19)")
-    p.add_argument("--resamples", default="1000", help="bootstrap resamples, comma-separated (default 1000)")
-    args = p.parse_args(argv)
-    try:
-        from pathlib import Path
-
-        folder = Path(args.folder)
-        walks, methods, tables = read_folder_table(folder)
-        seed = int(read_results(folder / "results.json")["config"]["seed"])
-        own = headline_family(tables, walks, methods, seed=seed)
-        print(json.dumps({k: {"verdict": r["verdict"], "verdict_mc": r["verdict_mc"], "adjusted_mc": r["adjusted_mc"]}
-                          for k, r in own.items()}, indent=1))
-        for b in (int(x) for x in args.resamples.split(",")):
-            st = verdict_stability(tables, walks, methods, seeds=range(args.seeds), n_resamples=b)
-            print(json.dumps({"n_resamples": b, "changed": {k: st["counts"][k] for k in st["changed"]},
-                              "mc_undetermined_on_some_seed": st["mc_undetermined_on_some_seed"]}, indent=1))
-    except (LiveError, OSError, ValueError, KeyError) as exc:
-        print(f"monte_carlo: {exc}", file=sys.stderr)
-        return 1
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -8,8 +8,11 @@ import sys
 from pathlib import Path
 
 from emulator.commands import argtypes
+from emulator.core.native import BLUR_STOPS_PER_PX, WARP_MODES
+from validation.native_loo.study import NativeLooConfig, run_study
+from validation.protocol import Study
 
-__all__ = ["HELP", "add_arguments", "register", "run_from_args"]
+__all__ = ["HELP", "STUDY", "add_arguments", "run_from_args"]
 
 HELP = ("native emulation on a real recording, leaving each frame out: every recorded frame is emulated from the "
         "frames around it and compared with itself (image error, motion left after the warp, SIFT good matches) "
@@ -17,8 +20,7 @@ HELP = ("native emulation on a real recording, leaving each frame out: every rec
 
 
 def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
-    from emulator.core.native import BLUR_STOPS_PER_PX, WARP_MODES
-
+    """The study's options on ``p``."""
     p.add_argument("sequence", metavar="SEQ", help="a recording (BorealHDR layout, folder or zip)")
     p.add_argument("-o", "--output", type=Path, required=True, help="output folder (results.json, report.md)")
     p.add_argument("--force", action="store_true", help="overwrite an existing results.json")
@@ -34,23 +36,13 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     return p
 
 
-def register(vsub) -> None:
-    q = vsub.add_parser("native", help=HELP, description=HELP)
-    add_arguments(q)
-    q.set_defaults(func=run_from_args, experiment="native", extras=())  # real data: no synthetic extra
-
-
 def _config(args):
-    from emulator.core.native import BLUR_STOPS_PER_PX
-    from validation.native_loo.study import NativeLooConfig
-
     return NativeLooConfig(size=args.size, max_frames=args.frames, warps=tuple(args.warps),
                            blur_stops_per_px=BLUR_STOPS_PER_PX if args.blur_aware else None)
 
 
 def run_from_args(args) -> int:
-    from validation.native_loo.study import run_study
-
+    """Run the study from parsed :func:`add_arguments` options; print the table's ``all`` rows."""
     words = ["exposim", "validate", "native", str(args.sequence), "-o", str(args.output)]
     if args.size is not None:
         words += ["--size", f"{args.size[0]}x{args.size[1]}"]
@@ -67,3 +59,7 @@ def run_from_args(args) -> int:
     print(f"wrote {args.output / 'results.json'} and {args.output / 'report.md'}")
     return 0
 
+
+
+#: ``exposim validate native``: real data only, no synthetic extra.
+STUDY = Study("native", HELP, add_arguments, run_from_args, extras=())

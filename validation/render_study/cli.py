@@ -8,15 +8,16 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-from emulator.commands.progress import add_quiet, bars_enabled
+from emulator.commands.progress import add_json, add_quiet, bars_enabled, print_json
 from emulator.commands import argtypes
 from emulator.errors import ExposimError
 from validation.common import ValidationError
 from validation.render_study.config import CONFIGS, DEFAULT_REAL_SEQUENCE, RenderStudyConfig
 from validation.render_study.study import run_render_study, total_steps
 from validation.render_study.report import render_study_table
+from validation.protocol import Study
 
-__all__ = ["add_arguments", "config_from_args", "run_from_args", "print_summary", "main"]
+__all__ = ["STUDY", "add_arguments", "config_from_args", "run_from_args", "print_summary", "run_validate", "main"]
 
 
 # ------------------------------------------------------------------------------------------ command line
@@ -130,3 +131,37 @@ def main(argv=None) -> int:
         return 1
     print_summary(results, args.output)
     return 0
+
+
+def _validate_arguments(p: argparse.ArgumentParser) -> None:
+    """The options of ``exposim validate render``: the study's, with ``-o/--output`` and ``--json``."""
+    add_arguments(p, output_option=True)
+    add_json(p)
+
+
+def run_validate(args: argparse.Namespace) -> int:
+    """``exposim validate render``: run the study, print its table (or ``--json``)."""
+    words = ["exposim", "validate", "render", "-o", str(args.output)]
+    for flag in ("quick", "force"):
+        if getattr(args, flag):
+            words.append("--" + flag)
+    for key in ("scenes", "size", "spp", "reference_spp", "texture_scenes", "texture_sizes", "texture_spp",
+                "texture_poses", "real"):
+        value = getattr(args, key)
+        if value is not None:
+            if isinstance(value, tuple):
+                value = "x".join(map(str, value)) if key == "size" else ",".join(map(str, value))
+            words += ["--" + key.replace("_", "-"), str(value)]
+    results = run_from_args(args, shlex.join(words))
+    if args.json:
+        print_json(results)
+        return 0
+    print_summary(results, args.output)
+    return 0
+
+
+_HELP = ("render study: time and error of raw vs OIDN-denoised renders per spp against a high-spp "
+         "reference, keypoint repeatability, static-camera flicker, texture statistics vs real frames")
+
+#: ``exposim validate render``.
+STUDY = Study("render", _HELP, _validate_arguments, run_validate)

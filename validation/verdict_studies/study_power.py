@@ -1,4 +1,4 @@
-"""What a finished study can decide, from its own walks: ``python -m validation.verdicts.study_power OUT``.
+"""What a finished study can decide, from its own walks: ``exposim validate study-power OUT``.
 
 Reads the walks of a live study (``exposim validate live``, one experiment or
 ``--replicates``) or an AE study (``exposim validate ae-study``) and reports, from the
@@ -31,11 +31,19 @@ from pathlib import Path
 
 import numpy as np
 
-from emulator.core.stats import variance_components
 from emulator.cells import format_number
+from emulator.core.stats import variance_components
+from emulator.errors import ExposimError
+from emulator.io.files import read_results, to_jsonable, write_results
+from validation.ae_study.config import PAPER
+from validation.live.config import METRICS, LiveError, config_from_dict
+from validation.live.evidence import metric_scales, walk_values
+from validation.protocol import Study
+from validation.verdicts.findings import CLAIMED, FINDINGS, finding_power, unit_tables
+from validation.verdicts.power import power_summary
 
 __all__ = ["PAPER_EFFECTS", "TRANSFER", "paper_effects", "study_units", "finding_scales", "paper_sized_power",
-           "agreement_power", "main"]
+           "agreement_power", "markdown", "STUDY", "add_arguments", "run"]
 
 #: Findings' metrics -> (the paper's numbers in validation.ae_study.config.PAPER, how the effect moves to the
 #: study's units: "relative" to the level, or "absolute"; scale of the paper's figure to the study's unit).
@@ -50,9 +58,6 @@ def paper_effects() -> dict[str, dict]:
     """Per tested finding whose effect the paper's numbers give: the effect on the paper's reported methods
     (the finding's own statistic, :data:`validation.verdicts.findings.FINDINGS`), their mean (the level),
     and how it moves to the study's units."""
-    from validation.ae_study.config import PAPER
-    from validation.verdicts.findings import CLAIMED, FINDINGS
-
     out = {}
     for fid, (metric, f, definition) in FINDINGS.items():
         if metric not in TRANSFER:
@@ -75,8 +80,6 @@ PAPER_EFFECTS = paper_effects()
 
 
 def _records(folder: Path, name: str) -> list[dict]:
-    from emulator.io.files import read_results
-
     one = folder / name
     if one.is_file():
         return [read_results(one)]
@@ -88,8 +91,6 @@ def _records(folder: Path, name: str) -> list[dict]:
 def study_units(folder, run: str = "emulated-plain") -> tuple[str, list[dict]]:
     """(kind, per-walk summaries ``{method: per-scene entry}``) of a study folder: a live study's run ``run``
     (raw.json of the experiment or of each replicate) or an AE study's walks (results.json ``summary``)."""
-    from validation.live.config import LiveError
-
     folder = Path(folder)
     raws = _records(folder, "raw.json")
     if raws:
@@ -124,8 +125,6 @@ def paper_sized_power(units: list[dict], *, n_walks: int | None = None, n_seeds:
     """Per finding of :data:`PAPER_EFFECTS`: the paper's effect in the study's units and in its per-walk
     residual SDs, the power of a true effect of that size at ``n_walks`` (default: the study's complete
     walks) and the fewest ``candidates`` walks with power >= 0.8 (None: not within them)."""
-    from validation.verdicts.findings import finding_power, unit_tables
-
     tables = unit_tables(units)
     out = {}
     for k, (fid, pe) in enumerate(PAPER_EFFECTS.items()):
@@ -158,10 +157,6 @@ def paper_sized_power(units: list[dict], *, n_walks: int | None = None, n_seeds:
 def agreement_power(folder, *, n_walks: int | None = None, n_seeds: int = 100, seed: int = 0) -> dict:
     """Per metric of a live study: :func:`validation.verdicts.power.power_summary` at ``n_walks`` (default the
     study's) from the scales measured on its walks (:func:`validation.live.evidence.metric_scales`)."""
-    from validation.live.config import METRICS, config_from_dict
-    from validation.live.evidence import metric_scales, walk_values
-    from validation.verdicts.power import power_summary
-
     raws = _records(Path(folder), "raw.json")
     cfg = config_from_dict(raws[0]["config"])
     _, tables = walk_values(raws, cfg.methods)
@@ -176,6 +171,7 @@ def agreement_power(folder, *, n_walks: int | None = None, n_seeds: int = 100, s
 
 
 def markdown(result: dict) -> str:
+    """The result of :func:`run` as the Markdown it prints."""
     lines = [f"# What {result['folder']} can decide ({result['kind']}, {result['n_units']} walks)", ""]
     if result.get("agreement"):
         lines += ["## Live vs emulated, per metric (scales measured on the study's walks)", "",
@@ -209,8 +205,8 @@ def markdown(result: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m validation.verdicts.study_power", description=__doc__.split("\n\n")[0])
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The options of ``exposim validate study-power``."""
     p.add_argument("folder", type=Path, help="a finished live study or AE study folder")
     p.add_argument("--run", default="emulated-plain",
                    help="live study: the run whose walks the findings' noise is measured on (default emulated-plain, "
@@ -218,9 +214,10 @@ def main(argv=None) -> int:
     p.add_argument("--walks", type=int, help="study size the power is computed at (default: the study's walks)")
     p.add_argument("--seeds", type=int, default=100, help="simulated studies per point (default 100)")
     p.add_argument("--json", type=Path, help="also write the numbers to this JSON file")
-    args = p.parse_args(argv)
-    from emulator.errors import ExposimError
 
+
+def run(args: argparse.Namespace) -> int:
+    """Print (and write to ``--json``) what the study folder can decide; a bad folder: one line on stderr, exit 1."""
     try:
         kind, units = study_units(args.folder, args.run)
         result = {"folder": str(args.folder), "kind": kind, "run": args.run if kind == "live" else None,
@@ -233,11 +230,10 @@ def main(argv=None) -> int:
         return 1
     print(markdown(result), end="")
     if args.json:
-        from emulator.io.files import to_jsonable, write_results
-
         write_results(args.json, to_jsonable(result))
     return 0
 
 
-if __name__ == "__main__":
-    raise SystemExit(main())
+#: ``exposim validate study-power``.
+STUDY = Study("study-power", "what a finished live or AE study can decide, from its own walks: the agreement "
+              "verdicts' power and the paper-sized findings' power", add_arguments, run)

@@ -1,4 +1,4 @@
-"""Reproduce the calibration tables of docs/verdicts.md: ``python -m validation.verdicts.calibrate``.
+"""Reproduce the calibration tables of docs/verdicts.md: ``exposim validate verdict-rates``.
 
 Prints, for simulated metric tables (no renders), the verdict rates of a perfect, a random
 and a tied emulator and of one whose true omega2 is exactly the margin, at several study
@@ -15,13 +15,17 @@ from __future__ import annotations
 import argparse
 import time
 
+import numpy as np
+
+from emulator.core.stats import percentile_interval, rng_of
+from validation.protocol import Study
 from validation.verdicts import NOISE_TO_METHOD_SD
-from validation.verdicts.agreement import OMEGA2_MAX
+from validation.verdicts.agreement import OMEGA2_MAX, omega2_untruncated
 from validation.verdicts.findings import FINDINGS, false_holds_rates, finding_power
 from validation.verdicts.power import verdict_rates
-from validation.verdicts.simulate import Scales
+from validation.verdicts.simulate import Scales, simulate_tables
 
-__all__ = ["main"]
+__all__ = ["STUDY", "add_arguments", "run", "interval_table", "findings_tables"]
 
 
 def _pct(r: dict) -> str:
@@ -31,12 +35,6 @@ def _pct(r: dict) -> str:
 def interval_table(n_studies: int, n_resamples: int = 400) -> None:
     """How often each one-sided 95 % bound of omega2 lies on the wrong side of the truth (nominal 5 %): plain and
     bias-corrected percentiles of the untruncated statistic, on studies whose true omega2 is exact."""
-    import numpy as np
-
-    from emulator.core.stats import percentile_interval, rng_of
-    from validation.verdicts.agreement import omega2_untruncated
-    from validation.verdicts.simulate import simulate_tables
-
     rng = rng_of(0)
     for o in (0.0, OMEGA2_MAX, 1.0):
         for noise, w in ((1.0, 30), (1.0, 56), (NOISE_TO_METHOD_SD["rpe"], 56)):
@@ -74,15 +72,18 @@ def findings_tables(n_studies: int, walks=(30, 56)) -> None:
                 f"{100 * p:.0f} % at {w} walks" for p, w in zip(pw, (56, 120, 240))), flush=True)
 
 
-def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m validation.verdicts.calibrate", description=__doc__.split("\n\n")[0])
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The options of ``exposim validate verdict-rates``."""
     p.add_argument("--seeds", type=int, default=300, help="simulated studies per cell (default 300)")
     p.add_argument("--walks", type=lambda s: [int(x) for x in s.split(",")], default=[10, 30, 56, 120],
                    help="study sizes (default 10,30,56,120)")
     p.add_argument("--findings", action="store_true", help="also the AE findings' tables")
     p.add_argument("--no-agreement", action="store_true", help="skip the live-versus-emulated tables")
     p.add_argument("--intervals", action="store_true", help="also the one-sided bounds' error rates of omega2")
-    args = p.parse_args(argv)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Print the tables the options ask for and the time they took; exit code 0."""
     t0 = time.perf_counter()
     for label, noise in ({} if args.no_agreement else NOISE_TO_METHOD_SD).items():
         sc = Scales(sd_method=1.0, sd_walk_method=0.5, sd_noise=noise)
@@ -102,5 +103,8 @@ def main(argv=None) -> int:
     return 0
 
 
-if __name__ == "__main__":
-    raise SystemExit(main())
+_HELP = ("the verdict rule's rates on simulated metric tables (no renders): a perfect, a random, a tied emulator and "
+         "one at the margin, by study size and noise scale")
+
+#: ``exposim validate verdict-rates``: simulated tables only (the verdict rule's own check, not a study's).
+STUDY = Study("verdict-rates", _HELP, add_arguments, run)

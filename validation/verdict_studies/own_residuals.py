@@ -21,23 +21,34 @@ study whose true omega2 is the observed one is judged as the estimate points in 
 at that level.
 
 Only seeds whose every walk is complete for the metric (in both tables) are drawn.  Like the plasmode,
-it knows only the study's scenes and seeds.  ``python -m validation.verdicts.own_residuals OUT`` prints
+it knows only the study's scenes and seeds.  ``exposim validate own-residuals OUT`` prints
 it for a study folder's ``walks.csv`` without writing into the folder.
 """
 
 from __future__ import annotations
 
+import argparse
 import math
+import sys
+import time
+from pathlib import Path
 
 import numpy as np
 
 from emulator.core.stats import rng_of, variance_components
+from emulator.errors import ExposimError
+from emulator.io.files import read_results
+from validation.live.config import COMPARISONS, HEADLINE_COMPARISONS, HEADLINE_METRICS, RESEEDED
+from validation.live.headline import with_derived
+from validation.live.table_check import read_folder_table
+from validation.protocol import Study
 from validation.verdicts.agreement import ALPHA, MIN_WALKS, OMEGA2_MAX, judge_batch, omega2_untruncated
 from validation.verdicts.plasmode import TARGET, WALK_CANDIDATES, _residual_sd, first_reaching
 from validation.verdicts.ranking import cluster_plan
+from validation.verdict_studies.study_calibration import check_options, emit
 
-__all__ = ["SCENARIOS", "STUDIES", "own_residuals", "scenario_rates", "metric_own_calibration",
-           "study_own_calibration"]
+__all__ = ["SCENARIOS", "STUDIES", "STUDY", "own_residuals", "scenario_rates", "metric_own_calibration",
+           "study_own_calibration", "markdown", "add_arguments", "run"]
 
 #: True omega2 of the scenarios: perfect, half the margin, the margin, beyond it.
 SCENARIOS = (0.0, 0.1, 0.2, 0.3)
@@ -244,32 +255,19 @@ def markdown(cal: dict, gaussian: dict | None = None) -> str:
     return "\n".join(lines)
 
 
-def main(argv=None) -> int:
-    """``python -m validation.verdicts.own_residuals OUT``: the calibration of a live study folder's headline on its
-    emulator's own residuals, printed (and written to a new ``--json`` file); the folder is not touched."""
-    import argparse
-    import sys
-    import time
-    from pathlib import Path
-
-    from emulator.errors import ExposimError
-
-    p = argparse.ArgumentParser(prog="python -m validation.verdicts.own_residuals",
-                                description="How often the live-versus-emulated verdict rule is right when the "
-                                            "emulator's own residuals are the noise.")
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The options of ``exposim validate own-residuals``."""
     p.add_argument("folder", type=Path, help="a live study folder with walks.csv")
     p.add_argument("--studies", type=int, default=STUDIES, help=f"drawn studies per scenario and size "
                    f"(default {STUDIES})")
     p.add_argument("--seed", type=int, default=0, help="seed of the draws (default 0)")
     p.add_argument("--json", type=Path, help="also write the numbers to this new JSON file")
-    args = p.parse_args(argv)
-    try:
-        from emulator.io.files import read_results
-        from validation.live.config import COMPARISONS, HEADLINE_COMPARISONS, HEADLINE_METRICS, RESEEDED
-        from validation.live.headline import with_derived
-        from validation.live.table_check import read_folder_table
-        from validation.verdicts.study_calibration import check_options, emit
 
+
+def run(args: argparse.Namespace) -> int:
+    """The calibration of a live study folder's headline on its emulator's own residuals, printed (and written to a
+    new ``--json`` file); the folder is not touched.  A bad folder or option: one line on stderr, exit code 1."""
+    try:
         check_options(args.studies, args.json)
         walks, _, tables = read_folder_table(args.folder)
         tables = with_derived(tables)
@@ -288,5 +286,7 @@ def main(argv=None) -> int:
                 f"{wall:.1f} s\n", args.json, cal)
 
 
-if __name__ == "__main__":
-    raise SystemExit(main())
+#: ``exposim validate own-residuals``.
+STUDY = Study("own-residuals", "how often the live-versus-emulated verdict rule is right when the emulator's own "
+              "residuals are the noise, on a finished live study's walks.csv (the folder is not touched)",
+              add_arguments, run)
