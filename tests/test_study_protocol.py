@@ -66,7 +66,7 @@ def test_a_study_of_another_distribution_follows_and_runs(monkeypatch, capsys):
 def test_a_broken_study_is_offered_and_says_why(value, why):
     studies = load_studies([metadata.EntryPoint("ghost", value, STUDY_GROUP)])
     assert studies[0][0] == "ghost" and why in studies[0][1]
-    args = _validate_parser(studies).parse_args(["validate", "ghost", "-o", "x"])
+    args = _validate_parser(studies).parse_args(["validate", "ghost", "x"])
     with pytest.raises(ExposimError, match="this study is broken"):
         args.func(args)
 
