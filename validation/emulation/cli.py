@@ -1,7 +1,7 @@
 """Command line of the emulation study: ``python -m validation.emulation OUT [options]``.
 
 The same as ``exposim validate emulation -o OUT [options]`` (the options, their defaults and
-the run live in :mod:`validation.commands.validate` and :func:`validation.report.run_experiment`).
+the run live in :mod:`validation.commands.experiments` and :func:`validation.report.run_experiment`).
 """
 
 from __future__ import annotations
