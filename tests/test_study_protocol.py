@@ -77,3 +77,16 @@ def test_a_moved_study_runs_through_validate_and_names_a_bad_folder(tmp_path, ca
         assert main(["validate", name, str(tmp_path / "nowhere")]) == 1
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and err[0].startswith(f"{prefix}: ") and "nowhere" in err[0], err
+
+
+def test_the_calibration_study_runs_through_validate_and_records_its_command(tmp_path, monkeypatch, capsys):
+    from validation.calibration_study import cli
+
+    seen = {}
+    monkeypatch.setattr(cli, "run_study", lambda output, **kw: seen.update(output=output, **kw))
+    assert main(["validate", "calibration", "-o", str(tmp_path / "cal"), "--quick", "--parts", "static, real"]) == 0
+    assert seen["output"] == tmp_path / "cal" and seen["quick"] and not seen["force"]
+    assert seen["parts"] == ("static", "real") and seen["radiance_source"] == "static_lab"
+    assert seen["command"] == (f"exposim validate calibration -o {tmp_path / 'cal'} --quick --radiance static_lab "
+                               "--parts 'static, real'")
+    assert capsys.readouterr().out.startswith(f"wrote {tmp_path / 'cal' / 'results.json'}")
