@@ -11,6 +11,8 @@ import shlex
 import sys
 from pathlib import Path
 
+from tqdm import tqdm
+
 from emulator.commands import argtypes
 from emulator.commands.progress import add_json, add_quiet, bars_enabled, print_json
 from emulator.io.files import read_results
@@ -89,8 +91,6 @@ def run(args) -> int:
     bar = None
     progress = None
     if bars_enabled(args.quiet):
-        from tqdm import tqdm  # the bar's library, on a terminal only
-
         bar = tqdm(total=config.n_steps(), desc=f"validate {args.experiment}", unit="step", file=sys.stderr)
         progress = bar.update
     try:

@@ -8,6 +8,8 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
+from tqdm import tqdm
+
 from emulator.commands.progress import add_json, add_quiet, bars_enabled, print_json
 from emulator.commands import argtypes
 from emulator.errors import ExposimError
@@ -103,8 +105,6 @@ def config_from_args(args: argparse.Namespace) -> RenderStudyConfig:
 def run_from_args(args: argparse.Namespace, command: str) -> dict:
     """Run the study of parsed :func:`add_arguments` options with a progress bar; return the results."""
     config = config_from_args(args)
-    from tqdm import tqdm
-
     with tqdm(total=total_steps(config), desc="render study", unit="step", disable=not bars_enabled(args.quiet),
               file=sys.stderr) as bar:
         return run_render_study(args.output, config, force=args.force, progress=bar.update, command=command)
