@@ -152,12 +152,12 @@ def test_a_walk_keeps_one_renderer_per_camera_and_sweep_up_to_a_bound():
     from dataclasses import replace
 
     from validation.live.config import CONFIGS
-    from validation.live.walks import MAX_RENDERERS_KEPT, _renderers_kept
+    from validation.live.walk_memory import MAX_RENDERERS_KEPT, renderers_kept
 
     cfg = CONFIGS["full"]
-    assert _renderers_kept(replace(cfg, n_cycles=8, render_per="cycle")) == 18
-    assert _renderers_kept(replace(cfg, n_cycles=8, render_per="shot")) == MAX_RENDERERS_KEPT
-    assert _renderers_kept(replace(cfg, n_cycles=3, render_per="cycle")) == 8
+    assert renderers_kept(replace(cfg, n_cycles=8, render_per="cycle")) == 18
+    assert renderers_kept(replace(cfg, n_cycles=8, render_per="shot")) == MAX_RENDERERS_KEPT
+    assert renderers_kept(replace(cfg, n_cycles=3, render_per="cycle")) == 8
 
 
 def test_a_walk_keeps_fewer_renderers_of_a_larger_image():
@@ -167,14 +167,14 @@ def test_a_walk_keeps_fewer_renderers_of_a_larger_image():
 
     from scenes.walkshots import KEEP_RENDERERS
     from validation.live.config import CONFIGS
-    from validation.live.walks import MAX_RENDERER_BYTES, RENDERER_BYTES_PER_PX, _renderers_kept
+    from validation.live.walk_memory import MAX_RENDERER_BYTES, RENDERER_BYTES_PER_PX, renderers_kept
 
     cfg = replace(CONFIGS["full"], n_cycles=40, render_per="cycle")
-    assert _renderers_kept(cfg) == 64  # the study's 480x300: every sweep's, as before
+    assert renderers_kept(cfg) == 64  # the study's 480x300: every sweep's, as before
     big = replace(cfg, width=1920, height=1200)
-    assert _renderers_kept(big) == 9
-    assert _renderers_kept(big) * RENDERER_BYTES_PER_PX * 1920 * 1200 <= MAX_RENDERER_BYTES
-    assert _renderers_kept(replace(cfg, width=4096, height=3072)) == KEEP_RENDERERS  # never below the default
+    assert renderers_kept(big) == 9
+    assert renderers_kept(big) * RENDERER_BYTES_PER_PX * 1920 * 1200 <= MAX_RENDERER_BYTES
+    assert renderers_kept(replace(cfg, width=4096, height=3072)) == KEEP_RENDERERS  # never below the default
 
 
 def test_the_shots_a_walk_shares_are_bounded_in_memory():
@@ -183,14 +183,14 @@ def test_the_shots_a_walk_shares_are_bounded_in_memory():
     from dataclasses import replace
 
     from validation.live.config import CONFIGS
-    from validation.live.walks import MAX_SHARED_SHOT_BYTES, _shots_shared
+    from validation.live.walk_memory import MAX_SHARED_SHOT_BYTES, shots_shared
 
     cfg = CONFIGS["full"]
-    assert _shots_shared(cfg, 7, 4) == 56 and _shots_shared(cfg, 7, 2) == 28
+    assert shots_shared(cfg, 7, 4) == 56 and shots_shared(cfg, 7, 2) == 28
     big = replace(cfg, width=1920, height=1200)
-    assert _shots_shared(big, 7, 4) == 19
-    assert _shots_shared(big, 7, 4) * 3 * 4 * 1920 * 1200 <= MAX_SHARED_SHOT_BYTES
-    assert _shots_shared(replace(cfg, width=16384, height=16384), 7, 4) == 1
+    assert shots_shared(big, 7, 4) == 19
+    assert shots_shared(big, 7, 4) * 3 * 4 * 1920 * 1200 <= MAX_SHARED_SHOT_BYTES
+    assert shots_shared(replace(cfg, width=16384, height=16384), 7, 4) == 1
 
 
 def test_run_images_written_fast_read_the_same_and_dropped_after_measuring(static, tmp_path):

@@ -11,29 +11,14 @@ from pathlib import Path
 
 import pytest
 
-from test_size import MAX_FUNCTION_LOC, MAX_MODULE_LINES, _key, offenders
+from test_size import MAX_FUNCTION_LOC, MAX_MODULE_LINES, offenders
 
 ROOT = Path(__file__).resolve().parents[1]
 LAYERS = ("scenes", "synth", "validation")
 
-#: Functions over the limit in packages the loop helper (issue 23) splits at the same time
-#: (``validation/live``, ``validation/ae_study``); drop an entry once it complies
-#: (``test_known_offenders_are_current`` names it).  A new offender fails the test.
-KNOWN_OFFENDERS = frozenset({
-    "validation/live/report.py:report_markdown",
-    "validation/live/verdicts.py:assemble",
-})
-
-
 def test_layers_keep_their_size():
-    bad = [o for layer in LAYERS for o in offenders(ROOT, layer) if _key(o) not in KNOWN_OFFENDERS]
+    bad = [o for layer in LAYERS for o in offenders(ROOT, layer)]
     assert bad == []
-
-
-@pytest.mark.parametrize("entry", sorted(KNOWN_OFFENDERS))
-def test_known_offenders_are_current(entry):
-    found = {_key(o) for o in offenders(ROOT, entry.split("/", 1)[0])}
-    assert entry in found, f"{entry} complies now: remove it from KNOWN_OFFENDERS"
 
 
 @pytest.mark.parametrize("layer", LAYERS)

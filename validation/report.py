@@ -26,26 +26,25 @@ from emulator.io.files import (
 from emulator.report.figures import subplots
 from emulator.report.html import write_report
 from validation.common import ValidationError, provenance
+from validation.emulation import EmulationConfig, run_emulation
 from validation.emulation.report import _emulation_figures, _emulation_md, emulation_verdict
+from validation.motion import MotionConfig, run_motion
+from validation.selectors import SelectorsConfig, run_selectors
+from validation.speed import SpeedConfig, run_speed
 from emulator.cells import format_number
 
 __all__ = ["EXPERIMENTS", "make_config", "run_experiment", "emulation_verdict"]
 
 EXPERIMENTS = ("emulation", "selectors", "motion", "speed")
+#: Each experiment's configuration class.
+_CONFIGS = {"emulation": EmulationConfig, "selectors": SelectorsConfig, "motion": MotionConfig, "speed": SpeedConfig}
 
 
 def make_config(name: str, *, quick: bool = False, **overrides):
     """The configuration object of experiment ``name`` (quick or full), with overrides."""
     overrides = {k: v for k, v in overrides.items() if v is not None}
-    if name == "emulation":
-        from validation.emulation import EmulationConfig as C
-    elif name == "selectors":
-        from validation.selectors import SelectorsConfig as C
-    elif name == "motion":
-        from validation.motion import MotionConfig as C
-    elif name == "speed":
-        from validation.speed import SpeedConfig as C
-    else:
+    C = _CONFIGS.get(name)
+    if C is None:
         raise ValidationError(f"unknown experiment {name!r}; choose from {', '.join(EXPERIMENTS)}")
     import dataclasses
 
@@ -77,26 +76,18 @@ def run_experiment(name: str, output, *, config=None, quick: bool = False, force
         config = make_config(name, quick=quick, **overrides)
     folder = prepare_output(output, force=force)
     if name == "emulation":
-        from validation.emulation import run_emulation
-
         out = run_emulation(config, progress=progress)
         figures = _emulation_figures(out, folder)
         md = _emulation_md(out["results"], figures)
     elif name == "selectors":
-        from validation.selectors import run_selectors
-
         out = run_selectors(config, progress=progress)
         figures = _selectors_figures(out, folder)
         md = _selectors_md(out["results"], figures)
     elif name == "motion":
-        from validation.motion import run_motion
-
         out = run_motion(config, progress=progress)
         figures = _motion_figures(out, folder)
         md = _motion_md(out["results"], figures)
     else:
-        from validation.speed import run_speed
-
         out = run_speed(config, progress=progress)
         figures = _speed_figures(out, folder)
         md = _speed_md(out["results"], figures)

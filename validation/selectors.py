@@ -39,6 +39,7 @@ from validation.common import (
     summary_stats,
     to_percent,
 )
+from validation.emulation import choose_brackets, sweep_static
 
 __all__ = [
     "NoiseModel",
@@ -145,8 +146,6 @@ def evaluate_choices(err: np.ndarray, choices: Mapping[str, np.ndarray]) -> dict
 
 
 def _selector_choices(sweep, response, noise, clip_weight: float) -> dict:
-    from validation.emulation import choose_brackets
-
     out = {name: choose_brackets(sweep, name) for name in ("higher-no-sat", "closest", "reference")}
     out["predicted-error"] = _selector_choices_predicted_only(sweep, response, noise, clip_weight)
     return out
@@ -193,8 +192,6 @@ def run_selectors(config: SelectorsConfig, *, progress=None) -> dict:
 
     Returns ``{"results": JSON-ready dict, "arrays": {...}}``.
     """
-    from validation.emulation import sweep_static
-
     tick = Progress(progress)
     exposures = gt_exposures(config.n_exposures, config.lo_ms, config.hi_ms)
     scenes_all = (*config.train_scenes, *config.test_scenes)

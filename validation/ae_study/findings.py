@@ -12,6 +12,7 @@ import numpy as np
 
 from emulator.cells import format_number
 from validation.ae_study.config import GRADIENT_METHODS, PAPER_NAMES, SIMILAR_RPE_RATIO
+from validation.verdicts.findings import evaluate, unit_tables
 
 __all__ = ["evaluate_findings", "findings_with_evidence", "findings_paragraph"]
 
@@ -314,8 +315,6 @@ def findings_with_evidence(summary: dict, findings: list[dict], taus=(5, 100), s
     undetermined / by-construction, the last not counted), ``n_walks``, ``effect_definition``
     and ``verdict_reason``.  ``holds`` stays the point comparison of issue 7.
     """
-    from validation.verdicts.findings import evaluate, unit_tables
-
     units = list(summary["per_scene"].values())
     methods = [m for m in summary["overall"]]
     ev = {r["id"]: r for r in evaluate(unit_tables(units, methods, hi_tau=max(int(t) for t in taus)), methods,

@@ -13,8 +13,9 @@ from emulator.io.files import REPORT_FILE, RESULTS_FILE, prepare_output, read_re
 from emulator.report.html import run_folder_pages, write_report
 from validation.ae_study.config import CONFIGS, PAPER, VO_CONFIGURATION_NOTE, StudyConfig, StudyError, config_from_dict
 from validation.ae_study.findings import evaluate_findings, findings_paragraph, findings_with_evidence
-from validation.ae_study.report import plot_summary, report_markdown
+from validation.ae_study.report import method_intervals, method_intervals_markdown, plot_summary, report_markdown
 from validation.ae_study.summary import summarise
+from validation.verdicts.findings import FAMILY
 
 __all__ = ["REPLICATES_DIR", "run_study", "run_replicated_study", "finish_replicated_study", "redraw"]
 
@@ -197,9 +198,6 @@ def finish_replicated_study(out, studies: list[dict], command: str | None = None
         lines.append(f"| {f['id']} | {f['verdict']} | {format_number(f['effect'])} | {format_number(ci[0])}..{format_number(ci[1])} | "
                      f"{format_number(f['p_adjusted'], '.2g')} | {f.get('n_walks') if f.get('n_walks') is not None else '-'} | "
                      f"{f.get('effect_definition') or f.get('verdict_reason')} |")
-    from validation.ae_study.report import method_intervals, method_intervals_markdown
-    from validation.verdicts.findings import FAMILY
-
     lines += ["", f"Each claim is tested as stated (every comparison it needs must reject). Family: {FAMILY}."]
     results["method_intervals"] = method_intervals(per_scene)
     lines += [""] + method_intervals_markdown(per_scene)

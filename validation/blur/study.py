@@ -9,6 +9,8 @@ import numpy as np
 
 from validation.blur import measure
 from validation.blur.config import BlurConfig, default_real_imu
+from validation.blur.report import report_markdown
+from validation.blur.versus import run_versus
 from validation.common import Progress, make_camera, provenance
 from emulator.cells import median_finite
 
@@ -72,7 +74,6 @@ def run_study(config: BlurConfig, out_dir, *, command: str = "", force: bool = F
     """
     import scenes
     from emulator.io.files import prepare_output, write_results, write_text
-    from validation.blur.report import report_markdown
 
     out = prepare_output(Path(out_dir), force=force)
     tick = Progress(progress)
@@ -102,8 +103,6 @@ def run_study(config: BlurConfig, out_dir, *, command: str = "", force: bool = F
     tick(1)
     versus_result = None
     if config.versus_walks > 0:
-        from validation.blur.versus import run_versus
-
         versus_result = run_versus(out, config, tick=tick)
     results = {
         **summarise(rows_ref, cost, rates, rows_sharp, cost_median),

@@ -33,6 +33,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import validation.ae_study as ae_study
+from validation.live.config import EQUIVALENCE_MARGINS
+from validation.live.loops import iter_emulated, iter_live, write_run_folder
 
 __all__ = ["SCENE_BLUR", "RUNS", "METRICS", "record_walk", "walk_runs", "bench_walk", "compare", "run_versus"]
 
@@ -75,7 +78,6 @@ def walk_runs(scene, ds: Path, cfg, seed: int) -> dict:
     from emulator.playback import RunConfig
     from scenes.walkshots import walk_radiance
     from synth.sequence import load_camera
-    from validation.live.loops import iter_emulated, iter_live
 
     seq = load_sequence(ds)
     response = sequence_response(seq)
@@ -97,7 +99,6 @@ def bench_walk(out: Path, scene_name: str, ds: Path, runs: dict, cfg, seed: int)
     from emulator.io.borealhdr import load_sequence
     from emulator.metrics.bench import bench_features, bench_vo
     from emulator.metrics.vo import VOParameters
-    import validation.ae_study as ae_study
 
     seq = load_sequence(ds)
     names = list(cfg.versus_methods)
@@ -124,8 +125,6 @@ def _median_or_none(values) -> float | None:
 
 
 def write_run_folder_for(folder: Path, ds: Path, cycles, names, seq) -> Path:
-    from validation.live.loops import write_run_folder
-
     return write_run_folder(folder, ds, cycles, names, white_level=seq.white_level, black_level=seq.black_level)
 
 
@@ -157,7 +156,6 @@ def compare(walks: list[dict], methods, *, seed: int = 0) -> dict:
     ``walks``: one record per walk, ``{"walk": name, "by_blur": {blur: bench_walk(...)}}``.
     """
     from emulator.core.stats import difference_interval
-    from validation.live.config import EQUIVALENCE_MARGINS
 
     table: dict = {}
     for blur in SCENE_BLUR:

@@ -11,6 +11,7 @@ from emulator.calibration import response_error
 from emulator.io.pcalib import PCALIB_TABLE_TOP
 from emulator.core.response import CameraResponse
 from validation.calibration_study.config import BRACKETS_MS, DN_RANGE
+from validation.common import static_radiance
 
 __all__ = ["study_radiance", "electrons_per_ms", "stack_exposures", "capture_stack", "opencv_curves", "codes_to_dn_curve", "curve_error", "code_curve_error", "emulation_check"]
 
@@ -20,8 +21,6 @@ def study_radiance(width: int, height: int, spp: int, source: str, cache_dir=Non
     """static_lab radiance (Mitsuba), or the procedural synth chart when asked or when Mitsuba fails."""
     if source == "static_lab":
         try:
-            from validation.common import static_radiance
-
             return static_radiance("static_lab", width=width, height=height, spp=spp, cache_dir=cache_dir), \
                 f"static_lab (Mitsuba render {width}x{height}, {spp} spp)"
         except Exception as exc:  # noqa: BLE001 - fall back, and say so in the results

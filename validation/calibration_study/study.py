@@ -34,14 +34,13 @@ from validation.calibration_study.measure import (
     study_radiance,
 )
 from validation.calibration_study.report import _plots, _report
+from validation.common import make_camera, provenance
 
 __all__ = ["static_part", "borealhdr_check", "insitu_synthetic", "real_sample_part", "run_study"]
 
 
 # ---------------------------------------------------------------------------- part 1-3: stacks
 def static_part(cfg: dict, radiance: np.ndarray, out: Path, progress) -> tuple[dict, dict]:
-    from validation.common import make_camera
-
     h, w = radiance.shape[:2]
     results, arrays = {}, {}
     for k, preset in enumerate(PRESETS):
@@ -133,7 +132,6 @@ def insitu_synthetic(cfg: dict, out: Path, progress) -> tuple[dict, dict]:
     from synth.procedural import WALK_SPEED_M_S, TranslatingChart
 
     from emulator.io.borealhdr import load_sequence, write_frame
-    from validation.common import make_camera
 
     w, h, n_sweeps = cfg["insitu_width"], cfg["insitu_height"], cfg["insitu_sweeps"]
     duration = n_sweeps * len(BRACKETS_MS) * SHOT_INTERVAL_S + 0.1
@@ -235,7 +233,6 @@ def run_study(out, *, quick: bool = False, force: bool = False, radiance_source:
               parts=("static", "insitu", "real"), command: str = "", progress=None) -> dict:
     """Run the study into folder ``out``; returns the results dict (also written to results.json)."""
     from emulator.io.files import prepare_output, write_arrays, write_results, write_text
-    from validation.common import provenance
 
     out = prepare_output(out, force=force)
     cfg = dict(CONFIGS["quick" if quick else "full"])

@@ -54,10 +54,12 @@ them.  An existing ``OUT`` that is not empty is never overwritten: the next free
 Modules: :mod:`~validation.live.config` (the configuration), :mod:`~validation.live.loops`
 (live and emulated loops, run folders), :mod:`~validation.live.compare` (per-cycle
 comparisons, Kendall tau, noise variance ratio), :mod:`~validation.live.verdicts` (the
-numbers of results.json, flip causes), :mod:`~validation.live.report` (figures, report.md),
+numbers of results.json, flip causes), :mod:`~validation.live.report` (figures, report.md;
+the verdicts' sections in :mod:`~validation.live.evidence_report`),
 :mod:`~validation.live.walks` (one walk as one task: serial, local Dask cluster or a scheduler
-address; resume), :mod:`~validation.live.experiment` (the study, each seed's ``raw.json``,
-:func:`redraw`), :mod:`~validation.live.cli`.
+address; resume; its memory budget in :mod:`~validation.live.walk_memory`),
+:mod:`~validation.live.experiment` (the study, each seed's ``raw.json``, :func:`redraw`; the
+verdicts over the walks in :mod:`~validation.live.study_verdicts`), :mod:`~validation.live.cli`.
 """
 
 import importlib

@@ -26,6 +26,7 @@ from emulator.core.stats import percentile_interval, rng_of
 from validation.live.config import (
     COMPARISONS,
     CONDITIONS,
+    CONFIG_CHANGES,
     CONTROL,
     EQUIVALENCE_MARGINS,
     HEADLINE_COMPARISONS,
@@ -33,7 +34,13 @@ from validation.live.config import (
     JUDGED_METRICS,
     REFERENCE_LIVE,
     RESEEDED,
+    LiveError,
 )
+from validation.live.headline import apply_family, headlines, walks_to_decide, with_derived
+from validation.verdicts.agreement import ALPHA, MIN_WALKS, judge
+from validation.verdicts.plasmode import CALIBRATION_FILE, STUDIES, calibrate
+from validation.verdicts.power import power_summary, scales_from_tables
+from validation.verdicts.ranking import cluster_plan, over_plan
 
 __all__ = ["WALK_METRICS", "WALKS_TABLE", "walk_value", "walk_values", "walk_labels", "walks_table_csv",
            "parse_walks_table", "store_walks_table", "condition_table", "metric_scales", "judge_metrics",
@@ -125,8 +132,6 @@ def parse_walks_table(text: str, name: str = WALKS_TABLE) -> tuple[list[str], li
 
     A malformed table is a :class:`~validation.live.config.LiveError` naming the file and the line.
     """
-    from validation.live.config import LiveError
-
     rows = [r for r in text.splitlines() if r.strip()]
     head = tuple(rows[0].split(",")) if rows else ()
     metrics = head[len(_TABLE_HEAD):]
@@ -171,7 +176,6 @@ def store_walks_table(out, walks, tables: dict, methods, name: str = WALKS_TABLE
     from pathlib import Path
 
     from emulator.io.files import read_text, write_text
-    from validation.live.config import LiveError
 
     path = Path(out) / name
     text = walks_table_csv(walks, tables, methods)
@@ -189,8 +193,6 @@ def store_walks_table(out, walks, tables: dict, methods, name: str = WALKS_TABLE
 def condition_table(table: np.ndarray, methods, *, n_resamples: int = 1000, seed=0, clusters=None) -> dict:
     """Per method: the walk mean of one metric with its bootstrap 95 % interval (walks with a value; the walks
     of one ``clusters`` label, the seed, drawn together)."""
-    from validation.verdicts.ranking import cluster_plan, over_plan
-
     t = np.asarray(table, dtype=np.float64)
     out = {}
     rng = rng_of(seed)
@@ -219,8 +221,6 @@ def metric_scales(tables: dict, metric: str, *, min_walks: int = 2, reference: s
     rest of the reference's residual is walk x method.  Without a control all of the
     residual counts as noise (conservative).
     """
-    from validation.verdicts.power import scales_from_tables
-
     ref = reference or CONDITIONS[REFERENCE_LIVE]
     live = tables.get(ref, {}).get(metric)
     if live is None:
@@ -272,11 +272,6 @@ def judge_metrics(tables: dict, methods, *, n_resamples: int = 1000, seed: int =
     emulator and size, the default where None, none where 0).  ``headline_exclusions``: headline metrics left out
     of the family (metric -> reason; a pre-registered study's).
     """
-    from validation.verdicts.agreement import ALPHA, MIN_WALKS, judge
-    from validation.verdicts.power import power_summary
-
-    from validation.live.headline import apply_family, headlines, with_derived
-
     names = list(methods)
     clusters = None if walks is None else walk_labels(walks)[1]
     tables = with_derived(tables)
@@ -359,8 +354,6 @@ def _decide_nothing(comparisons: dict, why: str) -> None:
 def pilot_reason(config) -> str | None:
     """Why a study of this configuration decides nothing (walks as short as ``--quick``'s: a pipeline check),
     or None."""
-    from validation.live.config import CONFIG_CHANGES
-
     n = CONFIG_CHANGES["quick"]["n_cycles"]
     if config.n_cycles <= n:
         return (f"walks of {config.n_cycles} cycles (--quick's length, {n} or fewer) are a pipeline check and "
@@ -371,9 +364,6 @@ def pilot_reason(config) -> str | None:
 def _walks_to_decide(tables: dict, comparisons: dict, power_seeds: int, seed: int, alpha: float) -> None:
     """Each undetermined headline verdict gets ``walks_to_decide`` (:func:`validation.live.headline.walks_to_decide`
     with the variance components of its reference live run), in place."""
-    from validation.live.headline import walks_to_decide
-    from validation.verdicts.agreement import MIN_WALKS
-
     for k, label in enumerate(HEADLINE_COMPARISONS):
         c = comparisons.get(label) or {}
         if c.get("status") != "run":
@@ -404,8 +394,6 @@ def _seed_floor(r: dict, min_units: int) -> None:
 def calibration(tables: dict, walks, methods, *, seed: int = 0, n_studies: int | None = None) -> dict:
     """results.json's ``calibration``: the plasmode calibration of the verdict rule on the study's own walks
     (:func:`validation.verdicts.plasmode.calibrate`) for every live condition that was run re-seeded."""
-    from validation.verdicts.plasmode import STUDIES, calibrate
-
     n = STUDIES if n_studies is None else int(n_studies)
     if n <= 0 or walks is None:
         return {"status": "not computed", "reason": "no plasmode studies asked for" if n <= 0 else
@@ -419,7 +407,6 @@ def store_calibration(out, cal: dict) -> str:
     from pathlib import Path
 
     from emulator.io.files import write_results
-    from validation.verdicts.plasmode import CALIBRATION_FILE
 
     write_results(Path(out) / CALIBRATION_FILE, cal)
     return CALIBRATION_FILE

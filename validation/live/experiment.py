@@ -5,27 +5,37 @@ as one task (:mod:`validation.live.walks`: record, emulated and live loops, comp
 run folders, benchmarks, noise variance ratio; serial, local Dask cluster or a scheduler
 address), pool each seed's walks into its ``raw.json`` (:func:`assemble_raw`); :func:`finish`
 turns that record into ``results.json``, ``report.md``
-and the figures (:func:`redraw` does it again from ``raw.json`` alone).  All files go
-through :mod:`emulator.io`.
+and the figures (:func:`redraw` does it again from ``raw.json`` alone), with the verdicts over the walks
+from :mod:`validation.live.study_verdicts`.  All files go through :mod:`emulator.io`.
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from dataclasses import replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 
+from emulator.errors import OutputExistsError
 from emulator.io.files import RESULTS_FILE, first_free, read_results, read_text, write_results
-from emulator.report.html import write_report
+from emulator.io.runfolder import read_run_json, read_tables
+from emulator.report.html import run_contact_sheet, write_report
+import validation.ae_study as ae_study
 from validation.live.compare import measure_noise_variance_ratio
 from validation.live.config import BRIGHTENING_PAIRS, CONFIGS, LiveConfig, LiveError, config_from_dict
-from validation.live.evidence import WALKS_TABLE
+from validation.live.evidence import WALK_METRICS, WALKS_TABLE, parse_walks_table
+from validation.live.loops import has_run_images
+from validation.live.native import native_emulation_summary, native_markdown, native_rate_loop
 from validation.live.portable import folder_check, folder_markdown, relative_command
-from validation.live.report import plot_metrics, plot_trajectories, report_markdown
+from validation.live.preregistration import preregistration, read_preregistration, write_preregistration
+from validation.live.report import evidence_markdown, plot_metrics, plot_trajectories, report_markdown
+from validation.live.study_verdicts import POWER_FILE, evidence, judge_study, store_power
+from validation.live.table_check import canonical_order, check_walks_table, record_walks
 from validation.live.verdicts import assemble, ratio_use
-from validation.live.walks import NATIVE_RUN
+from validation.live.walks import NATIVE_RUN, read_walk, run_walks
 
 __all__ = ["RAW_FILE", "REPLICATES_DIR", "STUDY_FILE", "POWER_FILE", "NATIVE_RUN", "numbered_output",
            "run_live_experiment", "run_study", "assemble_raw", "finish", "evidence", "store_power", "run_replicated",
@@ -39,7 +49,6 @@ REPLICATES_DIR = "replicates"
 STUDY_FILE = "study.json"
 
 
-
 def numbered_output(out) -> Path:
     """``out`` if it does not exist or is empty, else the first free ``out-2``, ``out-3`` ... (never overwrite)."""
     out = Path(out)
@@ -50,8 +59,6 @@ def numbered_output(out) -> Path:
 
 def _check_output(out: Path, resume: bool, study: dict) -> None:
     """Refuse a non-empty ``out`` (unless ``resume`` and it holds a study of the same configuration)."""
-    from emulator.errors import OutputExistsError
-
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
         if not resume:
             raise OutputExistsError(f"{out}: exists and is not empty; refusing to overwrite (choose another folder, "
@@ -74,10 +81,6 @@ def _check_output(out: Path, resume: bool, study: dict) -> None:
 
 def _default_native(cfg: LiveConfig, native_loop):
     if native_loop is None and cfg.native:
-        from functools import partial
-
-        from validation.live.native import native_rate_loop
-
         return partial(native_rate_loop, latency_frames=cfg.latency_frames, frame_rate_hz=cfg.frame_rate_hz)
     return native_loop
 
@@ -96,8 +99,6 @@ def assemble_raw(experiment, cfg: LiveConfig, failed: dict[str, str], command: s
     """``raw.json`` of one experiment (one seed) from its walk records; ``failed``: scene -> error of the walks
     without one.  The walks' figures are pooled as one experiment over its scenes always was."""
     from emulator import __version__
-    import validation.ae_study as ae_study
-    from validation.live.walks import read_walk
 
     walks = [read_walk(experiment, s) for s in cfg.scenes if s not in failed]
     present = [w["scene"] for w in walks]
@@ -135,8 +136,6 @@ def run_study(experiments: list[tuple[Path, LiveConfig]], *, command: str | None
     is read, not run again.  Returns the experiments' raw records (one whose walks all failed
     has an empty ``per_scene`` and its ``failed_walks``).  ``keep_run_images`` False: each walk deletes its runs'
     images once its benchmarks have read them (:func:`validation.live.walks.run_walk`)."""
-    from validation.live.walks import run_walks
-
     done, todo = {}, []
     for exp, cfg in experiments:
         path = exp / RAW_FILE
@@ -222,8 +221,6 @@ def _lead(results: dict) -> dict:
 def _add_native(results: dict, records: list[dict], cfg: LiveConfig) -> None:
     """results.json's ``native_emulation`` over every walk of ``records`` (one experiment's raw record, or the
     replicates'), in place; nothing where no walk ran the emulated native-rate condition."""
-    from validation.live.native import native_emulation_summary
-
     native = native_emulation_summary({f"{s}/seed{r['config']['seed']}": sc.get("native_emulation")
                                        for r in records for s, sc in (r.get("per_scene") or {}).items()},
                                       list(cfg.methods), seed=cfg.seed)
@@ -251,8 +248,6 @@ def finish(out, raw: dict) -> dict:
     results["noise_variance_ratio_brightening"] = {"plain": nvr_up["plain"], "consistent": nvr_up["consistent"]}
     results["noise_variance_ratio_brightening_detail"] = nvr_up
     results["emulation_ratio_use"] = ratio_use(per_scene, list(cfg.methods))
-    from validation.live.native import native_markdown
-
     _add_native(results, [raw], cfg)
     results.update({
         "experiment": "live versus emulated",
@@ -278,76 +273,6 @@ def finish(out, raw: dict) -> dict:
     return results
 
 
-def evidence(cfg: LiveConfig, records: list[dict], power_seeds: int = 100, folder=None,
-             calibration_studies: int | None = None) -> dict:
-    """results.json's replicated verdicts (:func:`validation.live.evidence.judge_metrics`) over the walks of
-    ``records`` (one experiment, or the replicates of :func:`run_replicated`); with ``folder``, the per-walk
-    table is stored there (:func:`validation.live.evidence.store_walks_table`; the walks in their key's order,
-    :func:`validation.live.table_check.canonical_order`, whatever the records' order), and the calibration
-    (``calibration_studies`` plasmode studies; :func:`validation.live.evidence.store_calibration`)."""
-    from validation.live.evidence import store_walks_table, walk_values
-    from validation.live.seeds import loop_names, split_seeds, store_seeds_table
-    from validation.live.table_check import canonical_order
-
-    names = loop_names(cfg.methods, cfg.stochastic_seeds)  # k > 1: each seed of a stochastic method, then the mean
-    walks, tables = walk_values(records, names)
-    walks, _, tables = canonical_order(walks, names, tables, scenes=cfg.scenes, method_order=names)
-    out = {"walks": walks, "n_walks": len(walks)}
-    if tables and cfg.stochastic_seeds > 1:
-        tables, seed_names, seed_tables = split_seeds(tables, names, cfg.methods, cfg.stochastic_seeds)
-        out["seeds_table"] = None if folder is None else store_seeds_table(folder, walks, seed_names, seed_tables)
-    if tables and folder is not None:
-        out["walks_table"] = store_walks_table(folder, walks, tables, cfg.methods)
-    if tables:
-        out.update(_judged(cfg, tables, cfg.methods, walks, folder, power_seeds, calibration_studies))
-        out["n_walks"] = len(walks)
-    else:
-        out.update({"metrics": {}, "reason": "no benchmark metrics in this experiment (metrics off)"})
-    return out
-
-
-def _judged(cfg: LiveConfig, tables: dict, methods, walks, folder, power_seeds: int,
-            calibration_studies: int | None) -> dict:
-    """The verdicts over ``walks`` (:func:`validation.live.evidence.judge_metrics`); with ``folder``, the
-    calibration and the power analysis are also stored there (their file names in the result)."""
-    from validation.live.evidence import judge_metrics, pilot_reason, store_calibration
-    from validation.live.preregistration import PREREG_FILE, interim_reason, read_preregistration
-
-    prereg = None if folder is None else read_preregistration(folder)
-    interim = interim_reason(prereg, len(walks))
-    kw = {} if prereg is None else {"n_resamples": int(prereg["bootstrap_resamples"]),
-                                    "headline_exclusions": prereg["excluded_from_headline"]}
-    out = judge_metrics(tables, methods, seed=cfg.seed, power=power_seeds > 0, power_seeds=power_seeds, walks=walks,
-                        pilot=pilot_reason(cfg) or interim, calibration_studies=calibration_studies, **kw)
-    if prereg is not None:  # a pre-registered study (format 3): verdicts at the planned walks only
-        out["preregistration"] = {"file": PREREG_FILE, "format": prereg["format"], "n_walks_planned": prereg["n_walks"],
-                                  "look": "final" if interim is None else "interim: futility only", "reason": interim}
-    if folder is not None:
-        out["calibration_file"] = store_calibration(folder, out["calibration"])
-        out["power_file"] = store_power(folder, out)
-        if prereg is not None or cfg.stochastic_seeds > 1:  # new folders: the methods' shares of the residual
-            from validation.live.seeds import store_shares
-
-            out["residual_shares_file"] = store_shares(folder, cfg, tables, methods)
-    return out
-
-
-#: The power analysis of a study folder (per metric what the study's size decides, per undetermined headline
-#: verdict the walks that would decide it).
-POWER_FILE = "power.json"
-
-
-def store_power(folder, results: dict) -> str:
-    """Write :data:`POWER_FILE` into ``folder`` from results.json's ``power`` and the headline's walks to decide;
-    returns its name (recomputed from the same walks, it is the same bytes)."""
-    walks_to_decide = {label: {m: r["walks_to_decide"] for m, r in (c.get("metrics") or {}).items()
-                               if "walks_to_decide" in r}
-                       for label, c in (results.get("headlines") or {}).get("comparisons", {}).items()}
-    write_results(Path(folder) / POWER_FILE, {"n_walks": results.get("n_walks"), "power": results.get("power", {}),
-                                              "walks_to_decide": walks_to_decide})
-    return POWER_FILE
-
-
 def run_replicated(out, config: LiveConfig | None = None, replicates: int = 1, *, command: str | None = None,
                    resume: bool = False, calibration_studies: int | None = None, **kwargs) -> dict:
     """The experiment on ``replicates`` seeds (``config.seed``, ``+1``, ...), each scene of each one an
@@ -359,15 +284,11 @@ def run_replicated(out, config: LiveConfig | None = None, replicates: int = 1, *
     one task of one batch (:func:`run_study`); ``kwargs`` (scheduler, n_workers, cache_dir,
     log, progress, native_loop, keep_run_images) go there.  ``resume``: finish the study already in ``out``.
     """
-    from dataclasses import replace
-
     cfg = CONFIGS["full"] if config is None else config
     if replicates < 1:
         raise LiveError(f"replicates must be >= 1, got {replicates}")
     out = Path(out)
     _check_output(out, resume, {"config": cfg.to_dict(), "replicates": int(replicates)})
-    from validation.live.preregistration import preregistration, read_preregistration, write_preregistration
-
     if not resume or read_preregistration(out) is not None:  # before the first walk; a resume may not change it
         write_preregistration(out, preregistration(cfg, replicates))
     t0 = time.perf_counter()
@@ -385,8 +306,6 @@ def finish_replicated(out, records: list[dict], command: str | None = None, powe
                       wall_s: float | None = None, calibration_studies: int | None = None) -> dict:
     """``results.json`` and ``report.md`` of the verdicts over the replicates' walks (``power_seeds``:
     simulated studies per point of the power functions)."""
-    from validation.live.report import evidence_markdown
-
     out = Path(out)
     failed = [f for r in records for f in r.get("failed_walks", [])]
     records = [r for r in records if r.get("per_scene", True)]  # a replicate whose every walk failed: failed only
@@ -401,8 +320,6 @@ def finish_replicated(out, records: list[dict], command: str | None = None, powe
                            **({} if wall_s is None else {"wall_s": float(wall_s)})},
                "failed_walks": failed, **{k: records[0][k] for k in ("method_processes",) if k in records[0]}}
     results.update(evidence(cfg, records, power_seeds=power_seeds, folder=out, calibration_studies=calibration_studies))
-    from validation.live.native import native_markdown
-
     _add_native(results, records, cfg)
     results["study_folder"] = folder_check(out)
     write_report(out, "# Live versus emulated, replicated\n\n"
@@ -420,10 +337,6 @@ def finish_replicated(out, records: list[dict], command: str | None = None, powe
 def _live_sheets(out: Path, scene: str) -> str:
     """Contact sheets of the first scene: what each method saw in every run (emulated and live); runs whose
     images were deleted (``--no-run-images``) are left out."""
-    from emulator.io.runfolder import read_run_json, read_tables
-    from emulator.report.html import run_contact_sheet
-    from validation.live.loops import has_run_images
-
     parts = []
     folder = Path(out) / "runs" / scene
     for run_dir in sorted(p for p in folder.glob("*") if (p / "run.json").is_file() and has_run_images(p)):
@@ -439,11 +352,6 @@ def verdicts_from_table(out, power_seeds: int = 100, calibration_studies: int | 
     configuration): results.json's evidence and report.md recomputed from ``walks.csv``, read strictly against the
     study's record and put in the walks' key order first (:mod:`validation.live.table_check`): the same rows in
     any order give the same bytes."""
-    from validation.live.evidence import WALK_METRICS, parse_walks_table
-    from validation.live.native import native_markdown
-    from validation.live.report import evidence_markdown
-    from validation.live.table_check import canonical_order, check_walks_table, record_walks
-
     out = Path(out)
     prev = read_results(out / RESULTS_FILE) if (out / RESULTS_FILE).is_file() else {}
     if "config" not in prev:
@@ -457,7 +365,7 @@ def verdicts_from_table(out, power_seeds: int = 100, calibration_studies: int | 
                                     "native_emulation", "method_processes") if k in prev}  # not in the table
     results.update({"walks": walks, "n_walks": len(walks), "walks_table": WALKS_TABLE})
     results["command"] = relative_command(results.get("command"), out)
-    results.update(_judged(cfg, tables, methods, walks, out, power_seeds, calibration_studies))
+    results.update(judge_study(cfg, tables, methods, walks, out, power_seeds, calibration_studies))
     results["study_folder"] = folder_check(out)
     write_report(out, f"# Live versus emulated, recomputed from {WALKS_TABLE}\n\n{len(walks)} walks. Command "
                  f"(paths relative to this folder): `{results.get('command')}`\n\n"

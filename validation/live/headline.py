@@ -28,6 +28,8 @@ from validation.live.config import (
     LIVE_LIVE,
     RPE_RANK,
 )
+from validation.verdicts.agreement import OMEGA2_MAX, VERDICTS, judge_batch
+from validation.verdicts.simulate import simulate_tables
 from emulator.cells import format_number
 
 __all__ = ["rpe_rank_table", "with_derived", "HEADLINE_FAMILY", "OWN_FAMILY", "apply_family", "walks_to_decide",
@@ -123,8 +125,6 @@ def apply_family(comparisons: dict, alpha: float = 0.05, min_walks: int = 10, ex
 def _decided_rate(scales, n_walks: int, omega2: float, target: str, alpha: float, n_seeds: int,
                   n_resamples: int, seed) -> float:
     from emulator.core.stats import rng_of
-    from validation.verdicts.agreement import VERDICTS, judge_batch
-    from validation.verdicts.simulate import simulate_tables
 
     rng = rng_of(seed)
     t = simulate_tables("exact", n_walks, scales, n_seeds=n_seeds, seed=rng, omega2_true=omega2)
@@ -139,8 +139,6 @@ def walks_to_decide(scales, omega2_hat: float | None, *, alpha: float = 0.05, n_
     the margin, ``disagrees`` above) in at least 80 % of ``n_seeds`` simulated studies at level ``alpha`` (the
     headline family's Bonferroni level ``0.05 / size``: Holm's strictest step, so the count is an upper bound
     for the family's verdict)."""
-    from validation.verdicts.agreement import OMEGA2_MAX
-
     if omega2_hat is None or not math.isfinite(omega2_hat) or scales is None or scales.sd_method <= 0:
         return {"walks": None, "towards": None, "reason": "no measured method effect or omega2 to simulate from"}
     target = "agrees" if omega2_hat <= OMEGA2_MAX else "disagrees"

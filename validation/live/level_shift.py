@@ -22,6 +22,8 @@ from __future__ import annotations
 import numpy as np
 
 from emulator.core.stats import percentile_interval, variance_components
+from validation.live.config import COMPARISONS, HEADLINE_COMPARISONS
+from validation.live.monte_carlo import headline_family
 from validation.verdicts.agreement import omega2_untruncated
 from validation.verdicts.ranking import cluster_plan, over_plan
 
@@ -92,8 +94,6 @@ def per_scene(live, emulated, scenes) -> dict:
 def leave_one_scene_out(tables: dict, walks, methods, *, seed: int = 0, n_resamples: int = 1000) -> dict:
     """Per headline verdict (``"<comparison>: <metric>"``): its family verdict on every walk, on the walks of each
     scene but one (``without``: scene -> verdict), and ``carried_by``: the scenes whose leaving out changes it."""
-    from validation.live.monte_carlo import headline_family
-
     walks = list(walks)
     scenes = [str(w).rpartition("/seed")[0] for w in walks]
     full = headline_family(tables, walks, methods, seed=seed, n_resamples=n_resamples)

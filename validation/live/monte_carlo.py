@@ -26,8 +26,16 @@ import numpy as np
 from emulator.core.stats import holm, rng_of
 from validation.live.config import COMPARISONS, HEADLINE_COMPARISONS, HEADLINE_METRICS, JUDGED_METRICS
 from validation.live.headline import apply_family, with_derived
-from validation.verdicts.agreement import ALPHA, MIN_WALKS, OMEGA2_MAX, complete_walks, judge_batch, \
-    omega2_over_plan, pvalues_of_fraction
+from validation.verdicts.agreement import (
+    ALPHA,
+    MIN_WALKS,
+    OMEGA2_MAX,
+    VERDICTS,
+    complete_walks,
+    judge_batch,
+    omega2_over_plan,
+    pvalues_of_fraction,
+)
 from validation.verdicts.ranking import cluster_plan
 
 __all__ = ["MC_CONFIDENCE", "wilson", "pvalue_interval", "headline_family", "verdict_stability"]
@@ -70,8 +78,6 @@ def pvalue_interval(replicates, estimate, omega2_max: float = OMEGA2_MAX,
 def _member(live, emulated, clusters, n_resamples: int, seed) -> dict:
     """One headline verdict at its own level as :func:`validation.verdicts.agreement.judge` draws it (the same
     random stream), with its replicates' Monte Carlo interval."""
-    from validation.verdicts.agreement import VERDICTS
-
     L, E = np.asarray(live, dtype=np.float64), np.asarray(emulated, dtype=np.float64)
     ok = complete_walks(L, E)
     L, E = L[ok], E[ok]

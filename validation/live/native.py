@@ -42,6 +42,7 @@ from dataclasses import replace
 import numpy as np
 
 from validation.live.config import FIXED_INSTANT_BRACKET_INDEX, LiveError
+from validation.live.loops import live_setup, make_shoot
 from emulator.cells import median_finite
 
 __all__ = ["NATIVE_FRAME_RATE_HZ", "NATIVE_LATENCY_FRAMES", "GRID_TOLERANCE_NS", "EMULATED_NATIVE_RUN", "shot_timestamps",
@@ -128,7 +129,6 @@ def native_rate_loop(sequence, radiance: Callable, camera, methods, *, seed: int
 
     from emulator.playback import LiveRateProvider, closed_loop
     from emulator.playback.workers import start_methods
-    from validation.live.loops import live_setup, make_shoot
 
     if isinstance(latency_frames, bool) or not isinstance(latency_frames, (int, np.integer)) or latency_frames < 0:
         raise LiveError(f"latency_frames must be an integer >= 0, got {latency_frames!r}")

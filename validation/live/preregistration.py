@@ -26,6 +26,8 @@ from validation.live.config import (
     LiveConfig,
     LiveError,
 )
+from validation.live.level_shift import LEVEL_MARGIN
+from validation.verdicts.agreement import ALPHA, OMEGA2_MAX
 
 __all__ = ["PREREG_FILE", "FORMAT", "MIN_SEGMENTS", "PLANNED_RESAMPLES", "segments_per_walk", "headline_exclusions",
            "preregistration", "write_preregistration", "read_preregistration", "check_preregistration",
@@ -64,9 +66,6 @@ def preregistration(cfg: LiveConfig, replicates: int, *, draws: int | None = Non
                     n_resamples: int = PLANNED_RESAMPLES) -> dict:
     """The study's plan (see the module); ``draws``: seeds per walk and condition of a method that draws random
     numbers (``k``; None: the configuration's ``stochastic_seeds``), recorded only when it is not 1."""
-    from validation.live.level_shift import LEVEL_MARGIN
-    from validation.verdicts.agreement import ALPHA, OMEGA2_MAX
-
     draws = int(cfg.stochastic_seeds if draws is None else draws)
     if replicates < 1 or draws < 1:
         raise LiveError(f"replicates and draws must be >= 1, got {replicates} and {draws}")

@@ -19,6 +19,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from validation.live.config import COMPARISONS, LiveError
+from validation.live.evidence import parse_walks_table, store_walks_table
+from validation.live.headline import with_derived
 
 __all__ = ["SEEDS_TABLE", "SEED_MARK", "stochastic_methods", "seeded_name", "loop_names", "loop_items",
            "split_seeds", "residual_shares", "seed_noise", "recommended_seeds", "SHARES_FILE", "store_seeds_table",
@@ -153,8 +156,6 @@ SHARES_FILE = "residual_shares.json"
 
 def store_seeds_table(folder, walks, seed_names, seed_tables) -> str:
     """Write the per-seed rows (:data:`SEEDS_TABLE`, the layout of ``walks.csv``); returns its name."""
-    from validation.live.evidence import store_walks_table
-
     return store_walks_table(folder, walks, seed_tables, seed_names, name=SEEDS_TABLE)
 
 
@@ -163,8 +164,6 @@ def read_seeds_table(folder) -> tuple[list[str], list[str], dict] | None:
     from pathlib import Path
 
     from emulator.io.files import read_text
-    from validation.live.config import LiveError
-    from validation.live.evidence import parse_walks_table
 
     path = Path(folder) / SEEDS_TABLE
     if not path.is_file():
@@ -178,9 +177,6 @@ def shares_summary(cfg, tables: dict, methods, folder=None) -> dict:
     method's seed noise (:func:`seed_noise`) and per comparison and metric the k that brings its seed noise in
     the per-walk mean below the other methods' residual SD (:func:`recommended_seeds`; the seed SD of a comparison
     is the root mean square of its two runs')."""
-    from validation.live.config import COMPARISONS
-    from validation.live.headline import with_derived
-
     k = int(cfg.stochastic_seeds)
     out = {"stochastic_methods": stochastic_methods(methods), "seeds_per_walk": k,
            "definition": "share: a method's sum of squares of the double-centred (walk x method) residual of "
@@ -211,9 +207,6 @@ def shares_summary(cfg, tables: dict, methods, folder=None) -> dict:
 def shares_by_seeds(tables: dict, methods, seed_names, seed_tables: dict, k: int) -> dict:
     """Per stochastic method, comparison and metric: its residual share (:func:`residual_shares`, RPE rank derived)
     when its per-walk value is the mean of its first j seeds, j = 1 .. k (j = k: the study's own table)."""
-    from validation.live.config import COMPARISONS
-    from validation.live.headline import with_derived
-
     methods, seed_names = list(methods), list(seed_names)
     out: dict = {}
     for m in stochastic_methods(methods):

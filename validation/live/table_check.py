@@ -19,6 +19,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from validation.live.config import PREREG_FILE, LiveError
+from validation.live.evidence import WALKS_TABLE, parse_walks_table
 
 __all__ = ["record_walks", "check_walks_table", "walk_key", "canonical_order", "read_folder_table"]
 
@@ -62,8 +64,6 @@ def check_walks_table(text: str, name: str, *, metrics, methods=None, walks=None
         The study's record: every method of the configuration and every walk it judged; the table must
         hold exactly these (an extra one names its first line, a missing one is named).
     """
-    from validation.live.config import LiveError
-
     rows = text.splitlines()
     head = ",".join(_HEAD + tuple(metrics))
     if not rows or rows[0] != head:
@@ -125,8 +125,6 @@ def read_folder_table(folder) -> tuple[list[str], list[str], dict]:
     from pathlib import Path
 
     from emulator.io.files import read_text
-    from validation.live.config import PREREG_FILE, LiveError
-    from validation.live.evidence import WALKS_TABLE, parse_walks_table
 
     if (Path(folder) / PREREG_FILE).is_file():  # its family leaves metrics out and resamples 4000 times
         raise LiveError(f"{folder}: a pre-registered study ({PREREG_FILE}); these analyses judge the headline family "

@@ -26,7 +26,7 @@ from validation.live.config import (
     LiveConfig,
 )
 
-__all__ = ["assemble", "live_spread", "FLIP_CAUSES", "flip_causes", "flip_cause_counts", "ratio_use"]
+__all__ = ["assemble", "HEADLINE_DEFINITIONS", "live_spread", "FLIP_CAUSES", "flip_causes", "flip_cause_counts", "ratio_use"]
 
 
 def _value(overall: dict, method: str, path: tuple):
@@ -36,9 +36,25 @@ def _value(overall: dict, method: str, path: tuple):
     return None if v is None or not math.isfinite(float(v)) else float(v)
 
 
-def assemble(cfg: LiveConfig, per_scene: dict, summaries: dict, findings: dict, nvr: dict, names) -> dict:
-    """results.json's numbers from the per-scene comparisons and the per-run benchmark summaries."""
-    variants = VARIANTS + ((CONTROL,) if cfg.control else ())
+#: What each headline figure of results.json is (its ``headline_definitions``).
+HEADLINE_DEFINITIONS = {
+    "headline_noise": "the emulation noise option declared primary (PRIMARY_NOISE: plain, the benchmark's "
+                      "default), whatever its figures; never the better of the two",
+    "exposure_log2_error_median": "same-instant live vs emulated (headline noise), |log2(emulated_ms / "
+                                  "live_ms)| pooled over scenes, methods and cycles 1..",
+    "exposure_log2_error_max": "the same, maximum",
+    "image_rmse_percent_median": "same-instant, left images, emulation's valid pixels, % of the DN range",
+    "rank_kendall_tau": "per metric, Kendall tau-b of the methods' values live vs emulated, worst of the "
+                        "two timing variants (headline noise)",
+    "rank_kendall_tau_min": "minimum over the metrics of rank_kendall_tau (undefined taus left out)",
+    "noise_variance_ratio": "median over intensity bins of emulated / live capture noise variance, "
+                            "darkening pairs (source cleaner than target), measured",
+}
+
+
+def _exposure_and_images(cfg: LiveConfig, per_scene: dict, names, variants) -> tuple[dict, dict, dict | None]:
+    """(exposure, images, control exposure): the per-cycle exposure and image errors of each comparison, pooled
+    over the scenes per method and over the methods; the live control's exposure differences (None without)."""
     exposure, images = {}, {}
     for opt in NOISE_OPTIONS:
         for v in variants:
@@ -66,26 +82,37 @@ def assemble(cfg: LiveConfig, per_scene: dict, summaries: dict, findings: dict, 
         ce = np.concatenate([per_scene[s]["comparison"]["live/control"][m]["exposure_log2_error"]
                              for s in per_scene for m in names])
         control_exposure = stats(ce)
+    return exposure, images, control_exposure
 
+
+def _rankings(cfg: LiveConfig, summaries: dict, findings: dict, names, variants) -> tuple[dict, dict, dict]:
+    """(values, taus, flips): each run's metric values per method, Kendall tau of each comparison per metric,
+    and the paper's findings that flip per comparison (all empty without benchmark summaries)."""
     values, taus, flips = {}, {}, {}
-    if summaries:
-        for r, summ in summaries.items():
-            values[r] = {metric: {m: _value(summ["overall"], m, path) for m in names}
-                         for metric, (path, _) in METRICS.items()}
-        for opt in NOISE_OPTIONS:
-            for v in variants:
-                taus[f"{opt}/{v}"] = {metric: kendall_tau(values[f"live-{v}"][metric],
-                                                          values[f"emulated-{opt}"][metric]) for metric in METRICS}
-        if cfg.control:
-            taus["live/control"] = {metric: kendall_tau(values["live-same-instant"][metric],
-                                                        values[f"live-{CONTROL}"][metric]) for metric in METRICS}
-        for opt in NOISE_OPTIONS:
-            for v in variants:
-                live_f = {f["id"]: f["holds"] for f in findings[f"live-{v}"]}
-                emu_f = {f["id"]: f["holds"] for f in findings[f"emulated-{opt}"]}
-                flips[f"{opt}/{v}"] = [{"id": fid, "live": live_f[fid], "emulated": emu_f.get(fid)}
-                                       for fid in live_f if emu_f.get(fid) != live_f[fid]]
+    if not summaries:
+        return values, taus, flips
+    for r, summ in summaries.items():
+        values[r] = {metric: {m: _value(summ["overall"], m, path) for m in names}
+                     for metric, (path, _) in METRICS.items()}
+    for opt in NOISE_OPTIONS:
+        for v in variants:
+            taus[f"{opt}/{v}"] = {metric: kendall_tau(values[f"live-{v}"][metric],
+                                                      values[f"emulated-{opt}"][metric]) for metric in METRICS}
+    if cfg.control:
+        taus["live/control"] = {metric: kendall_tau(values["live-same-instant"][metric],
+                                                    values[f"live-{CONTROL}"][metric]) for metric in METRICS}
+    for opt in NOISE_OPTIONS:
+        for v in variants:
+            live_f = {f["id"]: f["holds"] for f in findings[f"live-{v}"]}
+            emu_f = {f["id"]: f["holds"] for f in findings[f"emulated-{opt}"]}
+            flips[f"{opt}/{v}"] = [{"id": fid, "live": live_f[fid], "emulated": emu_f.get(fid)}
+                                   for fid in live_f if emu_f.get(fid) != live_f[fid]]
+    return values, taus, flips
 
+
+def _worst_taus(taus: dict) -> tuple[dict, dict]:
+    """(per noise option the worst tau of the timing variants per metric, per noise option the smallest of
+    those); both empty without taus."""
     def worst(opt):
         out = {}
         for metric in METRICS:
@@ -97,6 +124,29 @@ def assemble(cfg: LiveConfig, per_scene: dict, summaries: dict, findings: dict, 
     tau_by_noise = {opt: worst(opt) for opt in NOISE_OPTIONS} if taus else {}
     tau_min_by_noise = {opt: (min([t for t in d.values() if t is not None], default=None)) for opt, d in
                         tau_by_noise.items()}
+    return tau_by_noise, tau_min_by_noise
+
+
+def _add_flip_causes(results: dict, values: dict, taus: dict, names) -> None:
+    """results.json's live spread, flip causes and their counts, and per comparison and metric the discordant
+    pairs beyond the live spread (into ``taus``), in place."""
+    results["live_spread"] = live_spread(values) if values else {}
+    rows = flip_causes(results, names) if taus else []
+    results["flip_causes"] = rows
+    results["flip_cause_counts"] = flip_cause_counts(rows)
+    for key, per_metric in taus.items():
+        for metric, res in per_metric.items():
+            res["discordant_beyond_live_spread"] = sum(
+                1 for r in rows if f"{r['noise']}/{r['variant']}" == key and r["metric"] == metric
+                and r["cause"] != FLIP_CAUSES[0])
+
+
+def assemble(cfg: LiveConfig, per_scene: dict, summaries: dict, findings: dict, nvr: dict, names) -> dict:
+    """results.json's numbers from the per-scene comparisons and the per-run benchmark summaries."""
+    variants = VARIANTS + ((CONTROL,) if cfg.control else ())
+    exposure, images, control_exposure = _exposure_and_images(cfg, per_scene, names, variants)
+    values, taus, flips = _rankings(cfg, summaries, findings, names, variants)
+    tau_by_noise, tau_min_by_noise = _worst_taus(taus)
     best = PRIMARY_NOISE  # declared before the data: never the better of the two options
     same = exposure[f"{best}/same-instant"]["pooled"]
     worst_max = max((exposure[f"{best}/{v}"]["pooled"]["max"] or 0.0) for v in VARIANTS)
@@ -108,19 +158,7 @@ def assemble(cfg: LiveConfig, per_scene: dict, summaries: dict, findings: dict, 
         "rank_kendall_tau": tau_by_noise.get(best, {}),
         "rank_kendall_tau_min": tau_min_by_noise.get(best),
         "noise_variance_ratio": {"plain": nvr["plain"], "consistent": nvr["consistent"]},
-        "headline_definitions": {
-            "headline_noise": "the emulation noise option declared primary (PRIMARY_NOISE: plain, the benchmark's "
-                              "default), whatever its figures; never the better of the two",
-            "exposure_log2_error_median": "same-instant live vs emulated (headline noise), |log2(emulated_ms / "
-                                          "live_ms)| pooled over scenes, methods and cycles 1..",
-            "exposure_log2_error_max": "the same, maximum",
-            "image_rmse_percent_median": "same-instant, left images, emulation's valid pixels, % of the DN range",
-            "rank_kendall_tau": "per metric, Kendall tau-b of the methods' values live vs emulated, worst of the "
-                                "two timing variants (headline noise)",
-            "rank_kendall_tau_min": "minimum over the metrics of rank_kendall_tau (undefined taus left out)",
-            "noise_variance_ratio": "median over intensity bins of emulated / live capture noise variance, "
-                                    "darkening pairs (source cleaner than target), measured",
-        },
+        "headline_definitions": dict(HEADLINE_DEFINITIONS),
         "goals": {
             "rank_kendall_tau_min_ge_0.9": None if tau_min_by_noise.get(best) is None
             else tau_min_by_noise[best] >= GOAL_TAU_MIN,
@@ -141,15 +179,7 @@ def assemble(cfg: LiveConfig, per_scene: dict, summaries: dict, findings: dict, 
                      for r, fl in findings.items()},
         "noise_variance_ratio_detail": nvr,
     }
-    results["live_spread"] = live_spread(values) if values else {}
-    rows = flip_causes(results, names) if taus else []
-    results["flip_causes"] = rows
-    results["flip_cause_counts"] = flip_cause_counts(rows)
-    for key, per_metric in taus.items():
-        for metric, res in per_metric.items():
-            res["discordant_beyond_live_spread"] = sum(
-                1 for r in rows if f"{r['noise']}/{r['variant']}" == key and r["metric"] == metric
-                and r["cause"] != FLIP_CAUSES[0])
+    _add_flip_causes(results, values, taus, names)
     return results
 
 

@@ -19,12 +19,13 @@ import shutil
 import sys
 import time
 from collections.abc import Callable
-from functools import partial
 from pathlib import Path
 
 import numpy as np
 
 from emulator.io.files import read_results, to_jsonable, write_results
+from validation.live import loops, native
+from validation.live.compare import exposure_log2_errors, image_errors, measure_noise_variance_ratio
 from validation.live.config import (
     BRIGHTENING_PAIRS,
     CONTROL,
@@ -34,6 +35,8 @@ from validation.live.config import (
     LiveConfig,
     config_from_dict,
 )
+from validation.live.seeds import loop_items, loop_names
+from validation.live.walk_memory import live_window_ms, renderers_kept, shared_radiance
 
 __all__ = ["WALKS_DIR", "NATIVE_RUN", "CONTROL_STREAM", "RESEEDED_STREAMS", "control_seed", "walk_record_path",
            "walk_name", "run_walk", "run_walks", "read_walk"]
@@ -92,14 +95,10 @@ def control_seed(seed: int, scene: str, stream: int = CONTROL_STREAM) -> int:
 def _loop_items(cfg: LiveConfig, mode: str) -> Callable[[], list]:
     """What each loop of the walk is given to run, fresh per call: the methods, and each stochastic method's
     seeds 1 .. k - 1 as instances of their own (:func:`validation.live.seeds.loop_items`)."""
-    from validation.live.seeds import loop_items
-
     return lambda: loop_items(cfg.methods, cfg.stochastic_seeds, mode)
 
 
 def _n_loop_methods(cfg: LiveConfig) -> int:
-    from validation.live.seeds import loop_names
-
     return len(loop_names(cfg.methods, cfg.stochastic_seeds))
 
 
@@ -131,7 +130,6 @@ def _loops(cfg: LiveConfig, seq, radiance, camera, model, response, native_loop,
     (:class:`~validation.live.loops.SharedRadiance`); each run is what it is alone."""
     native_out = {} if native_out is None else native_out
     from emulator.playback import RunConfig
-    from validation.live.loops import iter_emulated, iter_live, lockstep
 
     common = dict(config=RunConfig(initial_ms=cfg.initial_ms, selector=cfg.selector), response=response)
     names = _loop_items(cfg, common["config"].mode)
@@ -139,18 +137,19 @@ def _loops(cfg: LiveConfig, seq, radiance, camera, model, response, native_loop,
     t0 = time.perf_counter()
     for opt, mode in NOISE_OPTIONS.items():
         cycles[f"emulated-{opt}"] = _collect(
-            iter_emulated(seq, names(), noise=mode, noise_model=model, seed=cfg.seed, **common), len(seq.cycles),
-            f"{tag}: emulated loop ({opt})", progress)
+            loops.iter_emulated(seq, names(), noise=mode, noise_model=model, seed=cfg.seed, **common),
+            len(seq.cycles), f"{tag}: emulated loop ({opt})", progress)
     timings[f"emulated_{scene}_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     live_runs = [(v, v, cfg.seed) for v in VARIANTS]
     if cfg.control:  # each cycle-rate live run again, with capture-noise streams of its own
         live_runs += [(RESEEDED[f"live-{v}"].removeprefix("live-"), v,
                        control_seed(cfg.seed, scene, RESEEDED_STREAMS[RESEEDED[f"live-{v}"]])) for v in VARIANTS]
-    shared = _shared_radiance(radiance, cfg, _n_loop_methods(cfg), len(live_runs))
+    shared = shared_radiance(radiance, cfg, _n_loop_methods(cfg), len(live_runs))
     with _bar(len(seq.cycles) * len(live_runs), f"{tag}: live loops ({len(live_runs)} runs)", progress) as bar:
-        got = lockstep([iter_live(seq, shared, camera, names(), timing=timing, noise=cfg.capture_noise, seed=seed,
-                                  **common) for _, timing, seed in live_runs], on_step=lambda: bar.update(1))
+        got = loops.lockstep([loops.iter_live(seq, shared, camera, names(), timing=timing, noise=cfg.capture_noise,
+                                              seed=seed, **common) for _, timing, seed in live_runs],
+                             on_step=lambda: bar.update(1))
     for (label, _, _), steps in zip(live_runs, got):
         cycles[f"live-{label}"] = steps
     if native_loop is not None:
@@ -166,22 +165,20 @@ def _native_loops(cfg: LiveConfig, seq, radiance, camera, names: Callable, nativ
     """The native-rate live run (every frame) and, with the control, its re-seeded twin advanced with it (only
     the frames the benchmarks use kept); then the emulated native-rate condition (:func:`_emulated_native`)."""
     from emulator.playback import RunConfig
-    from validation.live.loops import lockstep
-    from validation.live.native import cycle_picks, native_provider
 
     kw = dict(noise=cfg.capture_noise, initial_ms=cfg.initial_ms, selector=cfg.selector, response=response,
               every_frame=True)
     seeds = [cfg.seed] + ([control_seed(cfg.seed, scene, RESEEDED_STREAMS[RESEEDED[NATIVE_RUN]])]
                           if cfg.control else [])
-    shared = _shared_radiance(radiance, cfg, _n_loop_methods(cfg), len(seeds))
-    loops = [native_loop(seq, shared, camera, names(), seed=s, **kw) for s in seeds]
+    shared = shared_radiance(radiance, cfg, _n_loop_methods(cfg), len(seeds))
+    runs = [native_loop(seq, shared, camera, names(), seed=s, **kw) for s in seeds]
     if cfg.control:  # the re-seeded frames are streamed: only the benchmarked ones are kept
         config = RunConfig(initial_ms=cfg.initial_ms, selector=cfg.selector, rate="native",
                            latency_frames=cfg.latency_frames, native_warp="rotation")
-        loops[1] = _thinned(loops[1], set(cycle_picks(native_provider(seq, response, config))))
-    with _bar(len(seq.cycles) * 6 * len(loops), f"{tag}: live loop (native rate, {len(loops)} runs)",
+        runs[1] = _thinned(runs[1], set(native.cycle_picks(native.native_provider(seq, response, config))))
+    with _bar(len(seq.cycles) * 6 * len(runs), f"{tag}: live loop (native rate, {len(runs)} runs)",
               progress) as bar:
-        got = lockstep(loops, on_step=lambda: bar.update(1))
+        got = loops.lockstep(runs, on_step=lambda: bar.update(1))
     timings[f"live_{scene}_s"] = time.perf_counter() - t0
     _emulated_native(cfg, seq, response, got[0], cycles, native_out, timings, scene,
                      (lambda: got[1]) if cfg.control else None, names)
@@ -203,32 +200,26 @@ def _emulated_native(cfg: LiveConfig, seq, response, every: list, cycles: dict, 
     without the warp) at the exposures the native live camera applied.  ``reseeded``: the re-seeded
     native-rate live loop (every frame), benchmarked on the same frames."""
     from emulator.playback import RunConfig
-    from validation.live.native import (EMULATED_NATIVE_RUN, cycle_picks, emulated_native_loop,
-                                        native_image_errors, per_cycle)
 
     names = list(cfg.methods)
     t0 = time.perf_counter()
     config = RunConfig(initial_ms=cfg.initial_ms, selector=cfg.selector, rate="native",
                        latency_frames=cfg.latency_frames, native_warp="rotation")
-    provider, emulated = emulated_native_loop(seq, names if items is None else items(), response, config)
-    picks = cycle_picks(provider)
-    cycles[NATIVE_RUN] = per_cycle(every, picks)
-    cycles[EMULATED_NATIVE_RUN] = per_cycle(emulated, picks)
+    provider, emulated = native.emulated_native_loop(seq, names if items is None else items(), response, config)
+    picks = native.cycle_picks(provider)
+    cycles[NATIVE_RUN] = native.per_cycle(every, picks)
+    cycles[native.EMULATED_NATIVE_RUN] = native.per_cycle(emulated, picks)
     timings[f"emulated_native_{scene}_s"] = time.perf_counter() - t0
     if reseeded is not None:  # its frames were streamed with the live runs (their time is in live_<scene>_s)
-        cycles[RESEEDED[NATIVE_RUN]] = per_cycle(reseeded(), picks)  # only the picked frames are kept
+        cycles[RESEEDED[NATIVE_RUN]] = native.per_cycle(reseeded(), picks)  # only the picked frames are kept
     t0 = time.perf_counter()
-    native_out.update(native_image_errors(seq, every, response, config, names))
-    from validation.live.compare import exposure_log2_errors
-
+    native_out.update(native.native_image_errors(seq, every, response, config, names))
     for m, err in exposure_log2_errors(emulated, every, names).items():
         native_out[m]["exposure_log2_error"] = err.tolist()  # every frame after the first
     timings[f"native_image_errors_{scene}_s"] = time.perf_counter() - t0
 
 
 def _comparisons(cfg: LiveConfig, cycles: dict, seq, response) -> dict:
-    from validation.live.compare import exposure_log2_errors, image_errors
-
     names = list(cfg.methods)
     comp: dict = {}
     for opt in NOISE_OPTIONS:
@@ -264,55 +255,41 @@ def _benchmarks(cfg: LiveConfig, exp: Path, scene: str, runs: list[str], progres
     return {"features": features, "vo": vo, "feature_taus": taus}
 
 
-def _live_window_ms() -> float:
-    """The longest exposure a live shot can have (the AE clamp range's upper end): the walk's renders are
-    sized for it, so that no live shot needs a render of its own."""
-    from emulator.playback import RunConfig
+def _recording(ds: Path) -> tuple:
+    """(sequence, response, camera, noise model) of the walk's recording ``ds``: the noise model is synth's
+    camera's (:func:`synth.noise_model.noise_model_of`) through the recording's response."""
+    from emulator.io.borealhdr import load_sequence, sequence_response
+    from emulator.noise import NoiseModel
+    from synth.noise_model import noise_model_of
+    from synth.sequence import load_camera
 
-    return float(RunConfig().range_ms[1])
-
-
-#: Most renderers a walk keeps for its live runs (each holds a render with its margin and its depth: about
-#: 3.4 MB at 480x300).
-MAX_RENDERERS_KEPT = 64
-#: Memory the kept renderers of a walk may take, bytes, whatever the image size.
-MAX_RENDERER_BYTES = 512 << 20
-#: A renderer's memory per pixel of the image, bytes (its render with margin and its depth: about 3.4 MB at 480x300).
-RENDERER_BYTES_PER_PX = 24
-
-
-#: Memory the integrated shots shared by a walk's live runs may take, bytes, whatever the image size.
-MAX_SHARED_SHOT_BYTES = 512 << 20
+    seq = load_sequence(ds)
+    response = sequence_response(seq)
+    camera = load_camera(ds)
+    synth_model = noise_model_of(camera)
+    model = NoiseModel(response, synth_model.gain_e_per_h, synth_model.read_noise_e, synth_model.name)
+    return seq, response, camera, model
 
 
-def _shots_shared(cfg: LiveConfig, n_methods: int, n_runs: int) -> int:
-    """Integrated shots the live runs advanced together share (:class:`~validation.live.loops.SharedRadiance`):
-    one round of theirs (two cameras per method and run), at most as many as :data:`MAX_SHARED_SHOT_BYTES` holds
-    at the walk's image size (RGB float32; a shot dropped is integrated again)."""
-    fit = MAX_SHARED_SHOT_BYTES // (3 * 4 * cfg.width * cfg.height)
-    return max(1, min(2 * n_methods * n_runs, fit))
+def _trajectories(cycles: dict, methods) -> dict:
+    """{run: {method: timestamps, targets and brackets per cycle}} of the walk's runs (results.json's
+    trajectories)."""
+    return {r: {m: {"timestamp_ns": [cs.steps[m].timestamp_ns for cs in steps if m in cs.steps],
+                    "target_ms": [cs.steps[m].target_ms for cs in steps if m in cs.steps],
+                    "bracket_ms": [cs.steps[m].bracket_ms for cs in steps if m in cs.steps]}
+                for m in methods} for r, steps in cycles.items()}
 
 
-def _shared_radiance(radiance, cfg: LiveConfig, n_methods: int, n_runs: int):
-    """``radiance`` for live runs advanced together: an exposure-aware one behind a
-    :class:`~validation.live.loops.SharedRadiance` of :func:`_shots_shared` shots, any other as it is."""
-    from validation.live.loops import SharedRadiance
-
-    if not getattr(radiance, "exposure_aware", False):
-        return radiance
-    return SharedRadiance(radiance, keep=_shots_shared(cfg, n_methods, n_runs))
-
-
-def _renderers_kept(cfg: LiveConfig) -> int:
-    """Renderers the walk's live runs keep: one per camera and sweep (or shot) of the walk, at most
-    :data:`MAX_RENDERERS_KEPT` and as many as :data:`MAX_RENDERER_BYTES` holds at the walk's image size
-    (a larger image keeps fewer: a dropped renderer is prepared again), so that each is prepared once for all
-    the runs."""
-    from scenes.walkshots import KEEP_RENDERERS
-
-    per_sweep = 2 * (1 if cfg.render_per == "cycle" else 6)
-    fit = MAX_RENDERER_BYTES // (RENDERER_BYTES_PER_PX * cfg.width * cfg.height)
-    return max(KEEP_RENDERERS, min(MAX_RENDERERS_KEPT, fit, per_sweep * (cfg.n_cycles + 1)))
+def _noise_ratios(ratio_input: tuple, cfg: LiveConfig, scene_name: str, timings: dict) -> tuple[dict, dict]:
+    """The noise variance ratios of the walk's first left radiance (:func:`measure_noise_variance_ratio`): the
+    usual pairs and the brightening ones."""
+    t0 = time.perf_counter()
+    nvr = measure_noise_variance_ratio(*ratio_input, repeats=cfg.noise_repeats, seed=cfg.seed)
+    nvr_up = measure_noise_variance_ratio(*ratio_input, repeats=cfg.noise_repeats, seed=cfg.seed,
+                                          pairs=BRIGHTENING_PAIRS)
+    nvr["input"] = nvr_up["input"] = f"first left radiance of {scene_name}"
+    timings[f"noise_ratio_{scene_name}_s"] = time.perf_counter() - t0
+    return nvr, nvr_up
 
 
 def run_walk(config: dict, scene_name: str, experiment: str, cache_dir=None, native_loop: Callable | None = None,
@@ -327,14 +304,8 @@ def run_walk(config: dict, scene_name: str, experiment: str, cache_dir=None, nat
     Returns ``{"walk", "seconds"}``; the record itself is ``walks/<scene>.json``.
     """
     import scenes
-    from emulator.io.borealhdr import load_sequence, sequence_response
-    from emulator.noise import NoiseModel
     from scenes.synthesize import synthesize
     from scenes.walkshots import walk_radiance
-    from synth.noise_model import noise_model_of
-    from synth.sequence import load_camera
-    from validation.live.compare import measure_noise_variance_ratio
-    from validation.live.loops import DatasetRadiance, drop_run_images, write_run_folder
 
     cfg = config_from_dict(config)
     exp = Path(experiment)
@@ -351,20 +322,16 @@ def run_walk(config: dict, scene_name: str, experiment: str, cache_dir=None, nat
         synthesize(scene, ds, n_cycles=cfg.n_cycles, width=cfg.width, height=cfg.height, spp=cfg.spp, stereo=True,
                    seed=cfg.seed, render_seed=cfg.seed, noise=cfg.capture_noise,
                    save_radiance=cfg.keep_radiance or scene.is_static,  # a walk's live shots integrate the renders
-                   render_per=cfg.render_per, denoise=cfg.denoise, max_window_ms=_live_window_ms(),
+                   render_per=cfg.render_per, denoise=cfg.denoise, max_window_ms=live_window_ms(),
                    cache_dir=cache_dir,
                    progress=lambda d, n: bar.update(d - bar.n))
     timings[f"record_{scene_name}_s"] = time.perf_counter() - t_start
     say(f"{tag}: recorded {cfg.n_cycles} cycles in {timings[f'record_{scene_name}_s']:.0f} s")
-    seq = load_sequence(ds)
-    response = sequence_response(seq)
-    camera = load_camera(ds)
-    synth_model = noise_model_of(camera)
-    model = NoiseModel(response, synth_model.gain_e_per_h, synth_model.read_noise_e, synth_model.name)
+    seq, response, camera, model = _recording(ds)
     first_ms = seq.cycles[0].available(("left",))[0]
     first = seq.cycles[0].frames["left"][first_ms].timestamp_ns
     # live shots blurred over their windows; the renders (and depths) of the walk are kept for all its live runs
-    radiance = walk_radiance(ds, scene, cache_dir=cache_dir, keep=_renderers_kept(cfg)) or DatasetRadiance(ds)
+    radiance = walk_radiance(ds, scene, cache_dir=cache_dir, keep=renderers_kept(cfg)) or loops.DatasetRadiance(ds)
     # the first left shot's radiance, as the recording captured it (the radiance files are written only for a
     # still scene, whose shots are not integrated, or when they are kept)
     ratio_input = (radiance(first, "left", first_ms) if getattr(radiance, "exposure_aware", False)
@@ -374,34 +341,24 @@ def run_walk(config: dict, scene_name: str, experiment: str, cache_dir=None, nat
                     native_errors)
     runs = list(cycles)
     comp = _comparisons(cfg, cycles, seq, response)
-    from validation.live.seeds import loop_names
-
     names = loop_names(cfg.methods, cfg.stochastic_seeds)  # every seed of a stochastic method is benchmarked
     summaries = {}
     try:  # the run images go with --no-run-images whether the walk ends here or fails on its way
         for r in runs:
-            write_run_folder(exp / "runs" / scene_name / r, ds, cycles[r], names, white_level=seq.white_level,
-                             black_level=seq.black_level, description={"run": r, "scene": scene_name},
-                             png_level=1 if keep_run_images else 0)
+            loops.write_run_folder(exp / "runs" / scene_name / r, ds, cycles[r], names,
+                                   white_level=seq.white_level, black_level=seq.black_level,
+                                   description={"run": r, "scene": scene_name}, png_level=1 if keep_run_images else 0)
             summaries[r] = _runs_summary(cycles[r], names)
-        trajectories = {r: {m: {"timestamp_ns": [cs.steps[m].timestamp_ns for cs in cycles[r] if m in cs.steps],
-                                "target_ms": [cs.steps[m].target_ms for cs in cycles[r] if m in cs.steps],
-                                "bracket_ms": [cs.steps[m].bracket_ms for cs in cycles[r] if m in cs.steps]}
-                            for m in cfg.methods} for r in runs}
+        trajectories = _trajectories(cycles, cfg.methods)
         del cycles
-        t0 = time.perf_counter()
-        nvr = measure_noise_variance_ratio(*ratio_input, repeats=cfg.noise_repeats, seed=cfg.seed)
-        nvr_up = measure_noise_variance_ratio(*ratio_input, repeats=cfg.noise_repeats, seed=cfg.seed,
-                                              pairs=BRIGHTENING_PAIRS)
-        nvr["input"] = nvr_up["input"] = f"first left radiance of {scene_name}"
-        timings[f"noise_ratio_{scene_name}_s"] = time.perf_counter() - t0
+        nvr, nvr_up = _noise_ratios(ratio_input, cfg, scene_name, timings)
         if not cfg.keep_radiance:
             shutil.rmtree(ds / "ground_truth" / "radiance", ignore_errors=True)
         bench = _benchmarks(cfg, exp, scene_name, runs, progress, command, timings) if cfg.metrics else None
     finally:
         if not keep_run_images:  # the benchmarks have read them (or the walk failed: nothing will)
             for r in runs:
-                drop_run_images(exp / "runs" / scene_name / r)
+                loops.drop_run_images(exp / "runs" / scene_name / r)
     timings[f"walk_{scene_name}_s"] = time.perf_counter() - t_start
     record = {"walk": tag, "scene": scene_name, "config": cfg.to_dict(), "runs": runs,
               "render_variant": scenes.choose_variant(), "comparison": comp, "trajectories": trajectories,

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from validation.common import ValidationError, provenance
 from validation.native_loo.measure import GOOD_MATCH_PX, MOTION_CLASSES, crop_sequence, leave_one_out
 from emulator.cells import format_number, median_finite
 
@@ -108,7 +109,6 @@ def run_study(sequence, out_dir, config: NativeLooConfig = NativeLooConfig(), *,
     from emulator.playback import RunConfig
     from emulator.playback.native import NativeProvider, recording_stamp
     from emulator.playback.offline import resolve_sequence
-    from validation.common import ValidationError, provenance
 
     bad = [w for w in config.warps if w not in WARP_MODES]
     if bad or not config.warps:

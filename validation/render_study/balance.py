@@ -30,7 +30,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from validation.common import ValidationError
+from validation.common import ValidationError, study_scene
 
 __all__ = ["GOAL_TOLERANCE_POINTS", "parse_setting", "t_interval", "balance_at_pose", "noise_balance", "pareto_table", "radiance_bias"]
 
@@ -142,7 +142,6 @@ def noise_balance(setting: str, *, scene_key: str = "forest_winter", width: int 
     """
     import scenes
     from scenes.image_stats import synthetic_camera
-    from validation.common import study_scene
 
     preset = _preset(setting)
     label, spp, settings = str(setting), preset.spp, preset.denoise
@@ -255,7 +254,6 @@ def radiance_bias(setting: str, *, scene_key: str = "forest_winter", reference: 
     from scenes.dynamic_range import luminance
     from scenes.image_stats import synthetic_camera
     from scenes.walkshots import shot_time_s
-    from validation.common import study_scene
 
     test, ref = _preset(setting), _preset(reference)
     spec = study_scene(scene_key)

@@ -2,7 +2,8 @@
 findings tested as stated (intersection-union tests, Holm), the simulated tables they are calibrated on,
 and the power functions that size the studies.
 
-Modules: :mod:`~validation.verdicts.agreement` (omega2, the verdict per metric),
+Modules: :mod:`~validation.verdicts.agreement` (the verdict per metric),
+:mod:`~validation.verdicts.interaction` (omega2 and its one-sided bootstrap bounds),
 :mod:`~validation.verdicts.findings` (the AE study's findings as statistics),
 :mod:`~validation.verdicts.simulate` (synthetic metric tables with known truth),
 :mod:`~validation.verdicts.power` (verdict rates, smallest detectable interaction, walks needed).

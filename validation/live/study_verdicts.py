@@ -1,0 +1,83 @@
+"""The verdicts of a study over its walks, and what a study folder keeps of them.
+
+:func:`evidence` pools the walks of one experiment or of the replicates into the per-walk tables
+(:func:`validation.live.evidence.walk_values`, in the walks' key order), stores them (``walks.csv``, and the
+seeds' table of a stochastic method) and judges them with :func:`judge_study`: the verdicts
+(:func:`validation.live.evidence.judge_metrics`), read against a pre-registration where the folder has one,
+and with a folder the calibration, the power analysis (:func:`store_power`) and the methods' shares of the
+residual.  :mod:`validation.live.experiment` calls it when it finishes or redraws a study.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from emulator.io.files import write_results
+from validation.live.config import LiveConfig
+from validation.live.evidence import judge_metrics, pilot_reason, store_calibration, store_walks_table, walk_values
+from validation.live.preregistration import PREREG_FILE, interim_reason, read_preregistration
+from validation.live.seeds import loop_names, split_seeds, store_seeds_table, store_shares
+from validation.live.table_check import canonical_order
+
+__all__ = ["POWER_FILE", "evidence", "judge_study", "store_power"]
+
+
+def evidence(cfg: LiveConfig, records: list[dict], power_seeds: int = 100, folder=None,
+             calibration_studies: int | None = None) -> dict:
+    """results.json's replicated verdicts (:func:`validation.live.evidence.judge_metrics`) over the walks of
+    ``records`` (one experiment, or the replicates of :func:`validation.live.experiment.run_replicated`); with ``folder``, the per-walk
+    table is stored there (:func:`validation.live.evidence.store_walks_table`; the walks in their key's order,
+    :func:`validation.live.table_check.canonical_order`, whatever the records' order), and the calibration
+    (``calibration_studies`` plasmode studies; :func:`validation.live.evidence.store_calibration`)."""
+    names = loop_names(cfg.methods, cfg.stochastic_seeds)  # k > 1: each seed of a stochastic method, then the mean
+    walks, tables = walk_values(records, names)
+    walks, _, tables = canonical_order(walks, names, tables, scenes=cfg.scenes, method_order=names)
+    out = {"walks": walks, "n_walks": len(walks)}
+    if tables and cfg.stochastic_seeds > 1:
+        tables, seed_names, seed_tables = split_seeds(tables, names, cfg.methods, cfg.stochastic_seeds)
+        out["seeds_table"] = None if folder is None else store_seeds_table(folder, walks, seed_names, seed_tables)
+    if tables and folder is not None:
+        out["walks_table"] = store_walks_table(folder, walks, tables, cfg.methods)
+    if tables:
+        out.update(judge_study(cfg, tables, cfg.methods, walks, folder, power_seeds, calibration_studies))
+        out["n_walks"] = len(walks)
+    else:
+        out.update({"metrics": {}, "reason": "no benchmark metrics in this experiment (metrics off)"})
+    return out
+
+
+def judge_study(cfg: LiveConfig, tables: dict, methods, walks, folder, power_seeds: int,
+                calibration_studies: int | None) -> dict:
+    """The verdicts over ``walks`` (:func:`validation.live.evidence.judge_metrics`); with ``folder``, the
+    calibration and the power analysis are also stored there (their file names in the result)."""
+    prereg = None if folder is None else read_preregistration(folder)
+    interim = interim_reason(prereg, len(walks))
+    kw = {} if prereg is None else {"n_resamples": int(prereg["bootstrap_resamples"]),
+                                    "headline_exclusions": prereg["excluded_from_headline"]}
+    out = judge_metrics(tables, methods, seed=cfg.seed, power=power_seeds > 0, power_seeds=power_seeds, walks=walks,
+                        pilot=pilot_reason(cfg) or interim, calibration_studies=calibration_studies, **kw)
+    if prereg is not None:  # a pre-registered study (format 3): verdicts at the planned walks only
+        out["preregistration"] = {"file": PREREG_FILE, "format": prereg["format"], "n_walks_planned": prereg["n_walks"],
+                                  "look": "final" if interim is None else "interim: futility only", "reason": interim}
+    if folder is not None:
+        out["calibration_file"] = store_calibration(folder, out["calibration"])
+        out["power_file"] = store_power(folder, out)
+        if prereg is not None or cfg.stochastic_seeds > 1:  # new folders: the methods' shares of the residual
+            out["residual_shares_file"] = store_shares(folder, cfg, tables, methods)
+    return out
+
+
+#: The power analysis of a study folder (per metric what the study's size decides, per undetermined headline
+#: verdict the walks that would decide it).
+POWER_FILE = "power.json"
+
+
+def store_power(folder, results: dict) -> str:
+    """Write :data:`POWER_FILE` into ``folder`` from results.json's ``power`` and the headline's walks to decide;
+    returns its name (recomputed from the same walks, it is the same bytes)."""
+    walks_to_decide = {label: {m: r["walks_to_decide"] for m, r in (c.get("metrics") or {}).items()
+                               if "walks_to_decide" in r}
+                       for label, c in (results.get("headlines") or {}).get("comparisons", {}).items()}
+    write_results(Path(folder) / POWER_FILE, {"n_walks": results.get("n_walks"), "power": results.get("power", {}),
+                                              "walks_to_decide": walks_to_decide})
+    return POWER_FILE
