@@ -33,6 +33,7 @@ which also writes the description files and lists every file in ``exposim-files.
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 import shutil
@@ -44,6 +45,7 @@ import numpy as np
 from emulator.io.borealhdr import CAMERA_FOLDERS, exposure_folder_name, write_frame, write_recording_metadata
 from emulator.io.camera_info import write_camera_info
 from emulator.io.exr import write_exr
+from emulator.io.imu import IMU_FILE, write_imu
 from emulator.io.pcalib import write_pcalib
 from emulator.io.png import write_png16
 from emulator.io.tum import write_tum
@@ -59,8 +61,8 @@ from synth.dataset import (
 )
 from synth.errors import RadianceError, SourceError, SynthError
 from synth.imaging import capture
-from synth.pose import check_pose
 from synth.presets import response_table
+from synth.source import check_rig, describe_source, frame_getter, source_frame
 
 __all__ = [
     "BRACKETS_MS",
@@ -85,8 +87,6 @@ BASELINE_M = 0.18
 GT_CAPTURES = {"noiseless": ("noiseless",), "noisy": ("noisy",), "both": ("noiseless", "noisy")}
 #: Name recorded in ``exposim.json``.
 GENERATOR = "exposim.synth.capture_sequence"
-#: Tolerances of the stereo-rig check on the source's poses (m, and rotation entries).
-_RIG_TOL = 1e-6
 
 
 @dataclass(frozen=True)
@@ -171,48 +171,6 @@ def shot_schedule(
         offset_ns = int(round(k * 1e9 / fps))
         shots.append(Shot(k, int(start_time_ns) + offset_ns, brackets[pos % n], pos // n, pos % n, offset_ns * 1e-9))
     return shots
-
-
-# ---------------------------------------------------------------------------- sources
-def _frame_getter(source, stereo: bool):
-    """``get(shot, side) -> (radiance, pose)`` and the number of frames (None: unbounded)."""
-    if callable(source):
-        if getattr(source, "exposure_aware", False):  # integrates over each shot's own exposure window
-            return (lambda shot, side, exposure_ms=None: source(
-                shot.time_s, side, shot.exposure_ms if exposure_ms is None else exposure_ms)), None
-        return (lambda shot, side, exposure_ms=None: source(shot.time_s, side)), None
-    if isinstance(source, (list, tuple)):
-        frames = source
-
-        def get(shot, side, exposure_ms=None):
-            item = frames[shot.index]
-            if isinstance(item, dict):
-                if side not in item:
-                    raise SourceError(f"frame {shot.index} has no {side!r} entry (keys: {', '.join(map(str, item))})")
-                item = item[side]
-            elif stereo:
-                raise SourceError(
-                    f"frame {shot.index}: a stereo capture needs {{'left': (radiance, pose), 'right': ...}} "
-                    f"per frame, got {type(item).__name__}"
-                )
-            return item
-
-        return get, len(frames)
-    raise SourceError(
-        f"source must be a callable (timestamp_s, camera) -> (radiance, pose) or a list of frames, "
-        f"got {type(source).__name__}"
-    )
-
-
-def _describe(source, description) -> object:
-    if description is not None:
-        return description
-    describe = getattr(source, "describe", None)
-    if callable(describe):
-        return describe()
-    if isinstance(source, (list, tuple)):
-        return {"type": "precomputed frames", "n_frames": len(source)}
-    return {"type": getattr(source, "__qualname__", type(source).__qualname__)}
 
 
 # ---------------------------------------------------------------------------- writer
@@ -319,13 +277,7 @@ def capture_sequence(
     out_dir = Path(out_dir)
     check_target(out_dir, overwrite)
     sides = ("left", "right") if stereo else ("left",)
-    if stereo:
-        try:
-            baseline_m = float(baseline_m)
-        except (TypeError, ValueError):
-            raise SynthError(f"baseline_m must be a number of metres, got {baseline_m!r}") from None
-        if not (math.isfinite(baseline_m) and baseline_m > 0):
-            raise SynthError(f"baseline_m must be finite and positive, got {baseline_m!r}")
+    baseline_m = _check_baseline(baseline_m) if stereo else baseline_m
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise SynthError(f"seed must be a non-negative integer, got {seed!r}")
     if gt_captures not in GT_CAPTURES:
@@ -335,41 +287,18 @@ def capture_sequence(
     if not gt_sides or not set(gt_sides) <= set(sides):
         raise SynthError(f"gt_cameras must name some of the recorded cameras ({', '.join(sides)}), got {gt_cameras!r}")
     brackets = _check_brackets(brackets_ms)
-    get_frame, n_frames = _frame_getter(source, stereo)
-    if n_shots is None:
-        if n_cycles is not None:
-            if isinstance(n_cycles, bool) or not isinstance(n_cycles, (int, np.integer)) or n_cycles < 1:
-                raise SynthError(f"n_cycles must be a positive integer, got {n_cycles!r}")
-            n_shots = int(n_cycles) * len(brackets) - int(start_bracket_index)
-        elif n_frames is not None:
-            n_shots = n_frames
-        else:
-            raise SynthError("give n_cycles or n_shots for a callable source")
-    if n_frames is not None and n_shots > n_frames:
-        raise SourceError(f"{n_shots} shots need {n_shots} frames, the source list has {n_frames}")
+    get_frame, n_frames = frame_getter(source, stereo)
+    n_shots = _count_shots(n_shots, n_cycles, n_frames, len(brackets), start_bracket_index)
     shots = shot_schedule(n_shots, brackets_ms=brackets, fps=fps, start_bracket_index=start_bracket_index,
                           start_time_ns=start_time_ns)
 
     staging = new_staging(out_dir)
     try:
-        poses = {side: [] for side in sides}
-        for shot in shots:
-            left_pose = None
-            for c, side in enumerate(sides):
-                where = f"shot {shot.index} ({side} camera, t = {shot.time_s:.6f} s)"
-                radiance, pose = _source_frame(get_frame, shot, side, where)
-                if side == "left":
-                    left_pose = pose
-                else:
-                    _check_rig(left_pose, pose, baseline_m, where)
-                poses[side].append(pose)
-                _write_shot(staging, shot, side, c, radiance, where, camera=camera, seed=seed, noise=noise,
-                            save_radiance=save_radiance, gt_kinds=GT_CAPTURES[gt_captures],
-                            gt_exposures=gt_exposures if side in gt_sides else (),
-                            gt_radiance=get_frame if getattr(source, "exposure_aware", False) else None)
-            if progress is not None:
-                progress(shot.index + 1, len(shots))
-
+        write = functools.partial(_write_shot, camera=camera, seed=seed, noise=noise, save_radiance=save_radiance,
+                                  gt_kinds=GT_CAPTURES[gt_captures],
+                                  gt_radiance=get_frame if getattr(source, "exposure_aware", False) else None)
+        poses = _write_shots(staging, shots, sides, get_frame, write, baseline_m=baseline_m,
+                             gt_sides=gt_sides, gt_exposures=gt_exposures, progress=progress)
         _write_ground_truth(staging, camera, shots, poses, imu=imu, baseline_m=baseline_m if stereo else 0.0)
         meta = recording_metadata(camera, shots, brackets, generator=GENERATOR,
                                   gt_captures_kinds=GT_CAPTURES[gt_captures], fps=fps, stereo=stereo,
@@ -377,7 +306,7 @@ def capture_sequence(
                                   gt_cameras=[s for s in sides if s in gt_sides],
                                   save_radiance=save_radiance, start_time_ns=start_time_ns,
                                   start_bracket_index=start_bracket_index,
-                                  source=_describe(source, source_description),
+                                  source=describe_source(source, source_description),
                                   timestamps_note=getattr(source, "timestamps_note", None))
         write_recording_metadata(staging, meta)
         write_manifest(staging)
@@ -388,16 +317,53 @@ def capture_sequence(
     return out_dir
 
 
-def _source_frame(get_frame, shot, side: str, where: str) -> tuple:
-    """The ``(radiance, pose)`` of one shot and camera from the source, the pose checked."""
-    item = get_frame(shot, side)
+def _check_baseline(baseline_m) -> float:
+    """The stereo baseline as a finite, positive float (m); anything else raises :class:`SynthError`."""
     try:
-        radiance, pose = item
+        baseline_m = float(baseline_m)
     except (TypeError, ValueError):
-        raise SourceError(
-            f"{where}: the source must return (radiance, pose), got {type(item).__name__}"
-        ) from None
-    return radiance, check_pose(pose, where)
+        raise SynthError(f"baseline_m must be a number of metres, got {baseline_m!r}") from None
+    if not (math.isfinite(baseline_m) and baseline_m > 0):
+        raise SynthError(f"baseline_m must be finite and positive, got {baseline_m!r}")
+    return baseline_m
+
+
+def _count_shots(n_shots, n_cycles, n_frames, n_brackets: int, start_bracket_index: int) -> int:
+    """How many shots a capture takes: ``n_shots``, else enough to end sweep ``n_cycles - 1``, else every
+    frame of a list source (``n_frames``); more shots than the list has frames raise :class:`SourceError`."""
+    if n_shots is None:
+        if n_cycles is not None:
+            if isinstance(n_cycles, bool) or not isinstance(n_cycles, (int, np.integer)) or n_cycles < 1:
+                raise SynthError(f"n_cycles must be a positive integer, got {n_cycles!r}")
+            n_shots = int(n_cycles) * n_brackets - int(start_bracket_index)
+        elif n_frames is not None:
+            n_shots = n_frames
+        else:
+            raise SynthError("give n_cycles or n_shots for a callable source")
+    if n_frames is not None and n_shots > n_frames:
+        raise SourceError(f"{n_shots} shots need {n_shots} frames, the source list has {n_frames}")
+    return n_shots
+
+
+def _write_shots(staging: Path, shots, sides, get_frame, write, *, baseline_m: float, gt_sides, gt_exposures,
+                 progress) -> dict[str, list]:
+    """Ask the source for every shot of every camera, check the rig and write each (``write``: :func:`_write_shot`
+    with the capture's settings); returns each camera's poses, in shot order."""
+    poses = {side: [] for side in sides}
+    for shot in shots:
+        left_pose = None
+        for c, side in enumerate(sides):
+            where = f"shot {shot.index} ({side} camera, t = {shot.time_s:.6f} s)"
+            radiance, pose = source_frame(get_frame, shot, side, where)
+            if side == "left":
+                left_pose = pose
+            else:
+                check_rig(left_pose, pose, baseline_m, where)
+            poses[side].append(pose)
+            write(staging, shot, side, c, radiance, where, gt_exposures=gt_exposures if side in gt_sides else ())
+        if progress is not None:
+            progress(shot.index + 1, len(shots))
+    return poses
 
 
 def _write_shot(staging: Path, shot, side: str, c: int, radiance, where: str, *, camera: Camera, seed: int,
@@ -429,8 +395,6 @@ def _write_ground_truth(staging: Path, camera: Camera, shots, poses: dict, *, im
     """The IMU, the ground-truth poses and the calibration (response table, camera info) of a recording."""
     sides = tuple(poses)
     if imu is not None:
-        from emulator.io.imu import IMU_FILE, write_imu
-
         write_imu(staging.joinpath(*IMU_FILE), imu)
     gt_dir = staging / "ground_truth"
     for side in sides:
@@ -440,15 +404,3 @@ def _write_ground_truth(staging: Path, camera: Camera, shots, poses: dict, *, im
     write_pcalib(calib / "response.txt", response_table(camera.response, camera.white_level))
     for side in sides:
         write_camera_info(calib / f"{side}.yaml", camera_info(camera, side, baseline_m))
-
-
-def _check_rig(left: np.ndarray, right: np.ndarray, baseline_m: float, where: str) -> None:
-    expected = left[:3, 3] + baseline_m * left[:3, 0]
-    if not np.allclose(right[:3, :3], left[:3, :3], atol=_RIG_TOL) or not np.allclose(
-        right[:3, 3], expected, atol=_RIG_TOL
-    ):
-        raise SourceError(
-            f"{where}: the right camera must have the left one's orientation and sit baseline_m = "
-            f"{baseline_m:g} m along its x axis (expected position {expected.tolist()}, got "
-            f"{right[:3, 3].tolist()})"
-        )

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 import scenes.camera
-from emulator.cells import MISSING, format_number, median_finite
+from emulator.cells import DASH, MISSING, format_number, median_finite
+from emulator.report.verdicts import DASH_NOTE, dash_cell
 from synth.errors import PoseError
 from synth.pose import check_pose
 from validation.blur.measure import sharpness
@@ -36,6 +37,30 @@ def test_format_number_spells_a_missing_value_one_way():
     assert format_number(float("nan")) == "nan"
     assert (format_number(True), format_number(False)) == ("yes", "no")
     assert format_number("agrees") == "agrees"
+
+
+def test_the_reports_that_print_a_dash_use_the_one_formatter():
+    """A missing value prints as ``missing`` and nothing else changes: the dash tables (run, bench, VO reports,
+    whose notes explain a "-" cell) go through format_number too."""
+    assert DASH == "-" and '"-" cell' in DASH_NOTE
+    assert format_number(None, missing=DASH) == format_number(None, "+.1%", missing=DASH) == "-"
+    assert format_number(2.345, ".2f", missing=DASH) == format_number(2.345, ".2f") == "2.35"
+    assert format_number(np.int64(7), "d", missing=DASH) == "7"  # an integer spec: the bench's matches
+    assert format_number(7, "3d") == "  7"
+    assert (dash_cell(None), dash_cell(12.25), dash_cell(5, "d")) == ("-", "12.2", "5")
+    for value, spec in [(None, ".3g"), (0.0123456, ".3g"), (np.float32(1.5), ".1f"), (3, ".0f"), (1e-7, ".3g")]:
+        assert dash_cell(value, spec) == format_number(value, spec, missing="-")
+
+
+def test_a_run_report_prints_a_missing_figure_as_a_dash():
+    from emulator.report.run import run_markdown
+
+    method = {"mode": "paper", "cycles": 0, "mean_exposure_ms": None, "median_exposure_ms": None,
+              "min_exposure_ms": None, "max_exposure_ms": None, "mean_saturated_fraction": None,
+              "mean_valid_fraction": 0.5, "non_finite_proposals": 0, "method_ms_per_frame": 1.25}
+    text = run_markdown({"sequence": "/x/seq", "status": "complete"}, {"methods": {"zhang": method}})
+    row = next(line for line in text.splitlines() if line.startswith("| zhang |"))
+    assert row == "| zhang | paper | 0 | - | - | - | - | - | 50.00 | 0 | 1.2 |"
 
 
 def test_one_pose_check_for_synth_and_scenes():

@@ -22,12 +22,15 @@ Each unit runs :func:`run_unit`: it writes its run folder under a staging name
 is killed mid-way (a worker that dies) leaves no partial folder under the final name, and a
 retry starts from scratch; a unit whose folder already exists is not recomputed (resume,
 or a duplicate attempt).  :func:`run_dataset` plans the units, runs them serially or on
-Dask (:mod:`emulator.orchestration.distributed`) and writes the summary.  Nothing here prints.
+Dask (:mod:`emulator.orchestration.distributed`) and writes the summary, with the run's throughput
+(:mod:`emulator.orchestration.throughput`).  Nothing here prints.
 """
 
 from __future__ import annotations
 
 import contextlib
+import hashlib
+import json
 import os
 import shutil
 import time
@@ -36,8 +39,18 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
-
+from emulator.autoexposure.methodset import parse_methods
+from emulator.autoexposure.registry import is_import_path, plugin_from_path
 from emulator.errors import ExposimError, OutputExistsError
+from emulator.io.borealhdr import is_recording, load_sequence
+from emulator.io.files import RESULTS_FILE, read_metadata, read_results, write_metadata
+from emulator.io.runfolder import RUN_FILE, RunLock, read_run_json
+from emulator.orchestration.distributed import check_scheduler, is_client, open_client, run_tasks
+from emulator.orchestration.runner import write_run
+from emulator.orchestration.throughput import BOREALHDR_FULL, project_throughput, throughput
+from emulator.playback import RunConfig
+from emulator.report.dataset import write_dataset_report
+from emulator.report.run import write_run_report
 
 __all__ = [
     "DATASET_FILE",
@@ -58,9 +71,6 @@ __all__ = [
 
 #: The configuration file of a dataset run folder.
 DATASET_FILE = "dataset.json"
-#: The full BorealHDR dataset as published: trajectories, images (one per shot of a sweep,
-#: a stereo pair counted once: 6 per cycle at the recorder's 3.66 cycles/s) and duration.
-BOREALHDR_FULL = {"trajectories": 55, "images": 393_238, "duration_s": 5 * 3600.0}
 _STAGING = ".staging-"
 
 
@@ -89,8 +99,6 @@ def discover_sequences(root: str | os.PathLike, selection: str = "all") -> dict[
     ``selection`` is ``all`` or comma-separated names (a zip's name is its stem); an
     unknown name raises :class:`DatasetRunError` listing the names found.
     """
-    from emulator.io.borealhdr import is_recording
-
     root = Path(root)
     if not root.exists():
         raise FileNotFoundError(f"{root}: dataset folder not found")
@@ -133,8 +141,6 @@ MAX_GROUP_NAME_BYTES = 200
 def _group_name(methods: tuple[str, ...]) -> str:
     """``"m1+m2+..."``; a name over :data:`MAX_GROUP_NAME_BYTES` is cut and made unique by a hash
     of the whole (the unit's record keeps the full method list)."""
-    import hashlib
-
     name = "+".join(methods)
     raw = name.encode()
     if len(raw) <= MAX_GROUP_NAME_BYTES:
@@ -158,10 +164,6 @@ def count_images(sequence) -> int:
 
 def _unit_record(unit: Unit, folder: Path, reused: bool) -> dict:
     """The record of a unit whose folder exists (a resumed or duplicate unit): read from it."""
-    from emulator.io.files import RESULTS_FILE, read_results
-    from emulator.io.runfolder import read_run_json
-    from emulator.report.run import write_run_report
-
     info = read_run_json(folder)
     if not (folder / RESULTS_FILE).is_file():  # killed between the rename and the report
         write_run_report(folder)
@@ -188,8 +190,6 @@ def _record(unit: Unit, folder: Path, reused: bool, info: dict, results: dict, w
 
 
 def _is_complete(folder: Path) -> bool:
-    from emulator.io.runfolder import RUN_FILE, read_run_json
-
     return (folder / RUN_FILE).is_file() and read_run_json(folder).get("status") == "complete"
 
 
@@ -203,10 +203,6 @@ def run_unit(unit: Unit, out_dir: str | os.PathLike, config) -> dict:
     results, cycles, images, loop seconds), built from what the run returned (nothing is
     read back).
     """
-    from emulator.io.borealhdr import load_sequence
-    from emulator.report.run import write_run_report
-    from emulator.orchestration.runner import write_run
-
     out_dir = Path(out_dir)
     final = out_dir / unit.sequence / unit.group
     if _is_complete(final):
@@ -246,80 +242,6 @@ def remove_stale_staging(out_dir: str | os.PathLike) -> list[Path]:
                 shutil.rmtree(p, ignore_errors=True)
                 removed.append(p)
     return removed
-
-
-# ---------------------------------------------------------------------------- throughput
-def project_throughput(seconds_per_cycle: float, images_per_cycle: float, n_workers: int, *,
-                       n_units_per_trajectory: int = 1, dataset: Mapping = BOREALHDR_FULL) -> dict:
-    """Projected wall time of a dataset run from the measured cost of one cycle.
-
-    ``seconds_per_cycle`` is the worker-seconds one cycle costs with every method (the sum
-    over the method groups); the dataset has ``images / images_per_cycle`` cycles.  Units
-    are (trajectory, group), so at most ``trajectories * n_units_per_trajectory`` workers
-    are busy: ``wall = cycles * seconds_per_cycle / min(n_workers, units)`` (units taken as
-    equal; a lower bound when they are not).  Real-time factor: dataset duration / wall.
-    """
-    if not (seconds_per_cycle > 0 and images_per_cycle > 0 and int(n_workers) >= 1):
-        raise ValueError("seconds_per_cycle and images_per_cycle must be > 0 and n_workers >= 1")
-    cycles = dataset["images"] / images_per_cycle
-    units = int(dataset["trajectories"]) * int(n_units_per_trajectory)
-    busy = min(int(n_workers), units)
-    wall = cycles * seconds_per_cycle / busy
-    return {
-        "n_workers": int(n_workers),
-        "busy_workers": busy,
-        "dataset_cycles": cycles,
-        "dataset_images": int(dataset["images"]),
-        "worker_hours": cycles * seconds_per_cycle / 3600.0,
-        "wall_hours": wall / 3600.0,
-        "cycles_per_s": cycles / wall,
-        "images_per_s": dataset["images"] / wall,
-        "real_time_factor": dataset["duration_s"] / wall,
-    }
-
-
-def throughput(records: list[dict], wall_s: float, n_groups: int, workers: list[int] = (1, 2, 8, 16, 55)) -> dict:
-    """Measured throughput of a dataset run and its projection to the full BorealHDR dataset.
-
-    Cost: the summed closed-loop seconds of every unit (``run.json`` timing, reused units
-    included) per cycle of their sequences; ``wall_s`` is this invocation's elapsed time
-    (units computed now only).
-    """
-    per_seq: dict[str, dict] = {}
-    for r in records:
-        s = per_seq.setdefault(r["sequence"], {"cycles": r["n_cycles"] or 0, "images": r["n_images"] or 0,
-                                               "loop_s": 0.0})
-        s["loop_s"] += r["loop_s"] or 0.0
-    cycles = sum(s["cycles"] for s in per_seq.values())
-    images = sum(s["images"] for s in per_seq.values())
-    loop_s = sum(s["loop_s"] for s in per_seq.values())
-    computed = [r for r in records if not r["reused"]]
-    c_cycles = sum(r["n_cycles"] or 0 for r in computed) / max(n_groups, 1)
-    c_images = sum(r["n_images"] or 0 for r in computed) / max(n_groups, 1)
-    out = {
-        "cycles": cycles,
-        "images": images,
-        "worker_s": loop_s,
-        "seconds_per_cycle": loop_s / cycles if cycles else None,
-        "cycles_per_s_one_worker": cycles / loop_s if loop_s > 0 else None,
-        "images_per_s_one_worker": images / loop_s if loop_s > 0 else None,
-        "wall_s": wall_s,
-        "units_computed": len(computed),
-        "cycles_per_s_wall": c_cycles / wall_s if computed and wall_s > 0 else None,
-        "images_per_s_wall": c_images / wall_s if computed and wall_s > 0 else None,
-        "per_sequence": {name: {**s, "cycles_per_s": s["cycles"] / s["loop_s"] if s["loop_s"] > 0 else None,
-                                "images_per_s": s["images"] / s["loop_s"] if s["loop_s"] > 0 else None}
-                         for name, s in per_seq.items()},
-        "projection": [],
-    }
-    # images per full cycle: the brackets of a sweep (partial cycles of a short sample would
-    # otherwise inflate the dataset's cycle count); the measured ratio when unknown
-    per_cycle = max((r.get("n_brackets") or 0 for r in records), default=0) or (images / cycles if cycles else 0)
-    out["images_per_cycle"] = per_cycle
-    if cycles and per_cycle and loop_s > 0:
-        out["projection"] = [project_throughput(loop_s / cycles, per_cycle, n, n_units_per_trajectory=n_groups)
-                             for n in workers]
-    return out
 
 
 # ---------------------------------------------------------------------------- the run
@@ -369,16 +291,8 @@ def run_dataset(
     bytes written are the same on every path.
     ``progress(done, total)`` after each unit.
     """
-    from emulator.autoexposure.methodset import parse_methods
-    from emulator.orchestration.distributed import open_client, run_tasks
-    from emulator.io.files import read_metadata, write_metadata
-    from emulator.playback import RunConfig
-    from emulator.report.dataset import write_dataset_report
-
     out = Path(os.path.abspath(out_dir))  # absolute: a plugin's os.chdir cannot move the output
     cfg = RunConfig.from_kwargs(config, **settings)
-    from emulator.orchestration.distributed import check_scheduler, is_client
-
     if scheduler_file is not None and scheduler in ("serial", None):
         scheduler = "file"
     if scheduler not in ("file", "threads"):
@@ -391,25 +305,12 @@ def run_dataset(
     config_json = _config(root, found, names, group_size, cfg)
     units = plan_units(found, names, group_size)
     cfg_path = out / DATASET_FILE
-    if cfg_path.is_file():
-        if not resume:
-            raise OutputExistsError(f"{out}: holds a dataset run; use --resume to continue it or another -o")
-        old = read_metadata(cfg_path, DatasetRunError)
-        diff = [k for k in config_json if old.get(k) != to_plain(config_json[k])]
-        if diff:
-            raise DatasetRunError(f"{cfg_path}: --resume with a different configuration ({', '.join(diff)})")
-    else:
-        if out.exists() and any(out.iterdir()):
-            raise OutputExistsError(f"{out}: exists and is not empty; refusing to overwrite")
-        if resume:
-            raise DatasetRunError(f"{cfg_path}: no dataset run to resume")
+    _check_output(out, config_json, resume)
 
     in_process = scheduler in ("serial", "threads")
     ctx = contextlib.nullcontext() if in_process else open_client(
         scheduler, scheduler_file=None if scheduler_file is None else str(scheduler_file), n_workers=n_workers,
         retries=retries)
-    from emulator.io.runfolder import RunLock
-
     out.mkdir(parents=True, exist_ok=True)
     # one process per dataset folder: a concurrent --resume is refused and never removes a live run's staging
     with RunLock.acquire(out), ctx as client:  # a scheduler that cannot be reached fails before anything is written
@@ -424,12 +325,38 @@ def run_dataset(
                              threads=(n_workers or 2) if scheduler == "threads" else 1, retries=retries,
                              progress=progress, keys=[u.key for u in units])
         remove_stale_staging(out)  # attempts of units that were killed and ran again (under the lock)
+    wall_s = time.perf_counter() - t0
+    summary = _summary(config_json["root"], found, names, group_size, scheduler_name, outcomes, wall_s)
+    return write_dataset_report(out, summary)
+
+
+def _check_output(out: Path, config_json: Mapping, resume: bool) -> None:
+    """Refuse an output folder a dataset run cannot start (or resume) in: one that holds a dataset run
+    without ``resume`` or with another configuration, a non-empty folder, a resume with nothing to resume."""
+    cfg_path = out / DATASET_FILE
+    if cfg_path.is_file():
+        if not resume:
+            raise OutputExistsError(f"{out}: holds a dataset run; use --resume to continue it or another -o")
+        old = read_metadata(cfg_path, DatasetRunError)
+        diff = [k for k in config_json if old.get(k) != to_plain(config_json[k])]
+        if diff:
+            raise DatasetRunError(f"{cfg_path}: --resume with a different configuration ({', '.join(diff)})")
+    else:
+        if out.exists() and any(out.iterdir()):
+            raise OutputExistsError(f"{out}: exists and is not empty; refusing to overwrite")
+        if resume:
+            raise DatasetRunError(f"{cfg_path}: no dataset run to resume")
+
+
+def _summary(root: str, found: Mapping, names: list, group_size: int, scheduler_name: str, outcomes,
+             wall_s: float) -> dict:
+    """The dataset summary (``results.json``) from the units' outcomes: per-sequence results, errors,
+    throughput and the methods that failed everywhere."""
     records = [o.result for o in outcomes if o.error is None]
     errors = [{"unit": o.key, "error": o.error} for o in outcomes if o.error is not None]
-    wall_s = time.perf_counter() - t0
     run_names = _run_names(names)
     summary = {
-        "root": config_json["root"],
+        "root": root,
         "sequences": list(found),
         "methods": run_names,
         "method_specs": {n: spec for spec, n in zip(names, run_names) if n != spec},
@@ -443,14 +370,12 @@ def run_dataset(
     for r in records:
         summary["per_sequence"][r["sequence"]].update(r["results"])
     summary["failed_methods"] = _failed_everywhere(summary["per_sequence"], run_names)
-    return write_dataset_report(out, summary)
+    return summary
 
 
 def _run_names(specs) -> list[str]:
     """The name each method runs under (an import path ``pkg.mod:Class`` -> its plugin name), so
     that the summary finds its results, which the units record under that name."""
-    from emulator.autoexposure.registry import is_import_path, plugin_from_path
-
     return [plugin_from_path(s).name if isinstance(s, str) and is_import_path(s) else s for s in specs]
 
 
@@ -466,7 +391,5 @@ def _failed_everywhere(per_sequence: Mapping, names) -> dict[str, str]:
 
 def to_plain(value):
     """``value`` as it reads back from JSON (tuples -> lists), for comparing configurations."""
-    import json
-
     return json.loads(json.dumps(value, default=str))
 

@@ -3,10 +3,10 @@
 Every closed-loop run takes a :class:`RunConfig`: ``exposim run`` (single sequence and
 dataset), :func:`emulator.orchestration.runner.run_to_folder`, :func:`emulator.playback.iter_run`, the
 dataset units (:mod:`emulator.orchestration.datasetrun`) and the studies.  The constructor checks every
-field and refuses a bad one with a :class:`~emulator.errors.PlaybackError` naming it; no
-other place repeats these checks.  What the configuration cannot know alone (the
-recording's levels, its response and noise model) is resolved by :meth:`RunConfig.response_for`
-and :meth:`RunConfig.noise_for`, once per run.
+field (:mod:`emulator.playback.checks`) and refuses a bad one with a
+:class:`~emulator.errors.PlaybackError` naming it; no other place repeats these checks.  What the
+configuration cannot know alone (the recording's levels, its response and noise model) is resolved
+by :meth:`RunConfig.response_for` and :meth:`RunConfig.noise_for`, once per run.
 
 Each setting is one field, declared once with its flag, help, ``run.json`` key and resume rule
 (:mod:`emulator.playback.settings`).  The ``--resume`` rule lives here too
@@ -18,19 +18,21 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from emulator.autoexposure import DEFAULT_RANGE_MS
+from emulator.core.emulate import _check_noise_model
+from emulator.core.native import DEFAULT_NATIVE_WARP, NATIVE_RATE, RATES, is_native_run
 from emulator.errors import PlaybackError
+from emulator.io.borealhdr import sequence_response
+from emulator.io.noisemodel import noise_model_from_metadata, read_noise_model
 from emulator.io.runfolder import SAVE_MODES
-from emulator.core.native import DEFAULT_NATIVE_WARP, NATIVE_RATE, RATES, WARP_MODES, is_native_run
-from emulator.playback import settings
+from emulator.noise import NoiseModel
+from emulator.playback import motion, settings
+from emulator.playback.checks import MODES, WORKER_MODES, checked_fields
 from emulator.playback.runjson import (blur_json, common_figures, noise_json, recorded_blur, recorded_noise_model,
                                        recorded_response, same_file)
 from emulator.playback.settings import parse_option, parse_options, setting
@@ -47,30 +49,14 @@ __all__ = [
 #: First exposure of every method, ms.
 DEFAULT_INITIAL_MS = 4.0
 DEFAULT_SELECTOR = "higher-no-sat"
-MODES = ("paper", "borealhdr")
 #: Per-call limit of a method in a worker when ``--method-timeout-s`` is not given, seconds: far
 #: above any built-in's call (under 0.1 s on a 1920x1200 frame), so only a stuck method meets it.
 DEFAULT_METHOD_TIMEOUT_S = 120.0
-#: ``process``: each method in its own worker process (the default); ``inline``: in the run's process.
-WORKER_MODES = ("process", "inline")
-#: Longest per-call limit, s: the longest wait the system's poll() takes (2**31 - 1 ms, 24.8 days).
-MAX_METHOD_TIMEOUT_S = 2_147_483.0
-#: Largest exposure latency, frames (a recording's frame count bounds it further, at native rate).
-MAX_LATENCY_FRAMES = 1_000_000
 
 
 def _plain(value):
     """``value`` as it reads back from JSON (tuples -> lists), for comparing configurations."""
     return json.loads(json.dumps(value, sort_keys=True, default=str))
-
-
-def _number(value, name: str) -> float:
-    if isinstance(value, bool):
-        raise PlaybackError(f"{name} must be a number, got {value!r}")
-    try:
-        return float(value)
-    except (TypeError, ValueError):
-        raise PlaybackError(f"{name} must be a number, got {value!r}") from None
 
 
 #: The image provider of each rate; each provider's module declares its own (:func:`provides_rate`), so that
@@ -221,88 +207,8 @@ class RunConfig:
              "the gyro (docs/native.md)")
 
     def __post_init__(self) -> None:
-        from emulator.core.select import SELECTORS
-
-        put = object.__setattr__
-        initial = _number(self.initial_ms, "initial_ms")
-        if not (math.isfinite(initial) and initial > 0):
-            raise PlaybackError(f"initial_ms must be a finite, positive number of ms, got {self.initial_ms!r}")
-        put(self, "initial_ms", initial)
-        try:
-            lo, hi = (float(v) for v in self.range_ms)
-        except (TypeError, ValueError):
-            raise PlaybackError(f"range_ms must be (low_ms, high_ms), got {self.range_ms!r}") from None
-        if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo <= hi):
-            raise PlaybackError(f"range_ms must satisfy 0 < low <= high (ms), got {self.range_ms!r}")
-        put(self, "range_ms", (lo, hi))
-        if self.selector not in SELECTORS:
-            raise PlaybackError(f"unknown selector {self.selector!r}; choose one of {', '.join(SELECTORS)}")
-        if self.mode not in MODES:
-            raise PlaybackError(f"mode must be one of {', '.join(MODES)}, got {self.mode!r}")
-        if not isinstance(self.options, Mapping) or not all(isinstance(v, Mapping) for v in self.options.values()):
-            raise PlaybackError(f"options must map a method name to {{key: value}}, got {self.options!r}")
-        put(self, "options", {str(k): dict(v) for k, v in self.options.items()})
-        if isinstance(self.jobs, bool) or not isinstance(self.jobs, (int, np.integer)) or int(self.jobs) < 1:
-            raise PlaybackError(f"jobs must be an integer >= 1, got {self.jobs!r}")
-        put(self, "jobs", int(self.jobs))
-        if self.workers not in WORKER_MODES:
-            raise PlaybackError(f"workers must be process or inline, got {self.workers!r}")
-        if self.save not in SAVE_MODES:
-            raise PlaybackError(f"save must be one of {', '.join(SAVE_MODES)}, got {self.save!r}")
-        from emulator.core.emulate import NOISE_MODES
-
-        if self.noise not in NOISE_MODES:
-            raise PlaybackError(f"noise must be one of {', '.join(NOISE_MODES)}, got {self.noise!r}")
-        seed = self.noise_seed
-        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-            raise PlaybackError(f"noise_seed must be a non-negative integer, got {seed!r}")
-        put(self, "noise_seed", int(seed))
-        if self.method_timeout_s is not None:
-            value = _number(self.method_timeout_s, "method_timeout_s")
-            if not (math.isfinite(value) and value > 0):
-                raise PlaybackError(f"method_timeout_s must be finite and positive (seconds), got "
-                                    f"{self.method_timeout_s!r}")
-            if value > MAX_METHOD_TIMEOUT_S:
-                raise PlaybackError(f"method_timeout_s must be at most {MAX_METHOD_TIMEOUT_S:.0f} s (24.8 days, the "
-                                    f"longest wait the system's poll() takes), got {self.method_timeout_s!r}")
-            put(self, "method_timeout_s", value)
-        if self.response_path is not None:
-            put(self, "response_path", str(self.response_path))
-        if isinstance(self.png_level, bool) or not isinstance(self.png_level, (int, np.integer)) \
-                or not 0 <= self.png_level <= 9:
-            raise PlaybackError(f"png_level must be an integer 0..9, got {self.png_level!r}")
-        put(self, "png_level", int(self.png_level))
-        from emulator.core.blur import BLUR_MODES
-
-        if self.blur not in BLUR_MODES:
-            raise PlaybackError(f"blur must be one of {', '.join(BLUR_MODES)}, got {self.blur!r}")
-        put(self, "blur_aware", bool(self.blur_aware))
-        if self.blur_aware and self.blur != "consistent":
-            raise PlaybackError("blur_aware: the blur-aware selection needs blur 'consistent' (--blur consistent)")
-        if self.blur_aware and self.selector != "higher-no-sat":
-            raise PlaybackError(f"blur_aware: the blur-aware selection refines selector higher-no-sat, not "
-                                f"{self.selector!r}")
-        if not isinstance(self.skip_partial, (bool, np.bool_)):
-            raise PlaybackError(f"skip_partial must be true or false, got {self.skip_partial!r}")
-        put(self, "skip_partial", bool(self.skip_partial))
-        if isinstance(self.noise_model, Path):
-            put(self, "noise_model", str(self.noise_model))
-        if self.rate not in RATES:
-            raise PlaybackError(f"rate must be one of {', '.join(RATES)}, got {self.rate!r}")
-        lat = self.latency_frames
-        if isinstance(lat, bool) or not isinstance(lat, (int, np.integer)) or not 0 <= lat <= MAX_LATENCY_FRAMES:
-            raise PlaybackError(f"latency_frames must be an integer >= 0, at most {MAX_LATENCY_FRAMES} and below "
-                                f"the recording's frame count, got {lat!r}")
-        put(self, "latency_frames", int(lat))
-        if self.native_warp is None and _is_native(self):
-            put(self, "native_warp", DEFAULT_NATIVE_WARP)
-        elif not _is_native(self) and self.native_warp == DEFAULT_NATIVE_WARP:  # a native run's default, carried
-            put(self, "native_warp", None)  # over (a resume asked at cycle rate is refused for its rate)
-        if self.native_warp is not None and self.native_warp not in WARP_MODES:
-            raise PlaybackError(f"native_warp must be one of {', '.join(WARP_MODES)}, got {self.native_warp!r}")
-        put(self, "native_blur_aware", bool(self.native_blur_aware))
-        if not _is_native(self) and (self.native_warp not in (None, "rotation") or self.native_blur_aware):
-            raise PlaybackError("native_warp and native_blur_aware: used only at native rate (--rate native)")
+        for name, value in checked_fields(self).items():  # every field checked, once (emulator.playback.checks)
+            object.__setattr__(self, name, value)
 
     # ------------------------------------------------------------------ derived values
     @property
@@ -378,8 +284,6 @@ class RunConfig:
     # ------------------------------------------------------------------ the recording's side
     def response_for(self, sequence, response=None):
         """The run's response at the recording's levels (the one place a response is re-levelled)."""
-        from emulator.io.borealhdr import sequence_response
-
         if response is None:
             response = sequence_response(sequence, self.response_path)
         white, black = int(sequence.white_level), int(sequence.black_level)
@@ -400,10 +304,6 @@ class RunConfig:
         The model is :attr:`noise_model` (a NoiseModel or a noise-model JSON), or the one
         the recording's ``exposim.json`` carries; it must refer to ``response``.
         """
-        from emulator.core.emulate import _check_noise_model
-        from emulator.io.noisemodel import noise_model_from_metadata, read_noise_model
-        from emulator.noise import NoiseModel
-
         if self.noise == "none":
             return None, None
         if isinstance(self.noise_model, NoiseModel):
@@ -425,9 +325,7 @@ class RunConfig:
         """The run's blur hook (:class:`emulator.playback.motion.BlurHook`), or None for ``blur="none"``."""
         if self.blur == "none":
             return None
-        from emulator.playback.motion import blur_hook
-
-        return blur_hook(self.blur, sequence, response, blur_aware=self.blur_aware)
+        return motion.blur_hook(self.blur, sequence, response, blur_aware=self.blur_aware)
 
     # ------------------------------------------------------------------ run.json
     def to_json(self, noise_model=None, blur_hook=None) -> dict:

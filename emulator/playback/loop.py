@@ -181,6 +181,98 @@ def _serial_ticks(provider, methods, step_one, failed, stats) -> Iterator[CycleS
         stats.wall_s = time.perf_counter() - start
 
 
+class _Schedule:
+    """The state of :func:`_pipelined_ticks`: the ticks read so far, each method's next tick, the steps done
+    and in flight, and the oldest tick not yet yielded."""
+
+    def __init__(self, provider, methods, failed: dict, last_s: dict, stats: RunStats, jobs: int) -> None:
+        self.ahead = max(0, int(getattr(provider, "ticks_ahead", 0)))
+        self.methods, self.failed, self.last_s, self.stats, self.jobs = methods, failed, last_s, stats, jobs
+        self.order = {name: i for i, name in enumerate(methods)}
+        self.source = iter(provider.ticks())
+        self.ticks: list = []  # by position; None once yielded
+        self.exhausted = False
+        self.position = {name: 0 for name in methods}  # each method's next tick
+        self.stopped: set[str] = set()  # failed or raised: no further ticks
+        self.results: dict[int, dict] = {}  # position -> {name: MethodStep | MethodFailed | BaseException}
+        self.waiting: set[str] = set()  # methods whose next tick is beyond the window
+        self.ready: set[str] = set()
+        self.inflight: dict = {}
+        self.oldest = 0
+
+    def tick_at(self, p: int):
+        """The tick at position ``p`` (read from the provider as needed), None past the last one."""
+        while len(self.ticks) <= p and not self.exhausted:
+            try:
+                self.ticks.append(next(self.source))
+            except StopIteration:
+                self.exhausted = True
+        return self.ticks[p] if p < len(self.ticks) else None
+
+    def place(self, name: str) -> None:
+        """Move ``name`` past skipped ticks and put it in ``ready`` or ``waiting`` (or nowhere: done)."""
+        while True:
+            tick = self.tick_at(self.position[name])
+            if tick is None:
+                return
+            if not tick.skipped:
+                break
+            self.position[name] += 1
+        (self.ready if self.position[name] <= self.oldest + self.ahead else self.waiting).add(name)
+
+    def complete(self, p: int) -> bool:
+        """Every method is done with tick ``p`` (or stopped)."""
+        return all(name in self.stopped or self.position[name] > p for name in self.methods)
+
+    def finish_oldest(self, tick, start: float) -> CycleStep:
+        """The oldest tick's :class:`CycleStep` (every method done with it), the window moved on by one;
+        raises the first method's exception other than :class:`MethodFailed`, as one job would."""
+        res = self.results.pop(self.oldest, {})
+        errors = [res[name] for name in self.methods if isinstance(res.get(name), BaseException)
+                  and not isinstance(res[name], MethodFailed)]
+        if errors:
+            raise errors[0]
+        self.stats.cycles += 1
+        if tick.skipped:
+            cs = CycleStep(tick.index, {}, tick.missing, skipped=tick.skipped)
+        else:
+            names = [name for name in self.methods if name in res]
+            steps, now_failed = _advance(self.failed, names, [res[n] for n in names], tick.index)
+            self.stats.wall_s = time.perf_counter() - start
+            if self.stats.startup_s is None:
+                self.stats.startup_s = self.stats.wall_s
+            cs = CycleStep(tick.index, steps, tick.missing, failed=now_failed)
+        self.ticks[self.oldest] = None  # its images are freed once the consumer drops the step
+        self.oldest += 1
+        for name in [n for n in self.waiting if self.position[n] <= self.oldest + self.ahead]:
+            self.waiting.discard(name)
+            self.ready.add(name)
+        return cs
+
+    def dispatch(self, pool: ThreadPoolExecutor, step_one) -> None:
+        """Submit ready steps up to ``jobs`` in flight: oldest tick first, then the slowest method (its last call)."""
+        while self.ready and len(self.inflight) < self.jobs:
+            name = min(self.ready, key=lambda n: (self.position[n], -self.last_s.get(n, 0.0), self.order[n]))
+            self.ready.discard(name)
+            p = self.position[name]
+            self.inflight[pool.submit(step_one, name, self.ticks[p])] = (name, p)
+        if not self.inflight:  # pragma: no cover - a scheduling bug, not a user error
+            raise RuntimeError(f"closed loop stalled at tick {self.oldest}")
+
+    def collect(self, done) -> None:
+        """Record the finished steps ``done`` (futures) and place their methods on their next tick."""
+        for fut in done:
+            name, p = self.inflight.pop(fut)
+            exc = fut.exception()
+            st = exc if exc is not None else fut.result()
+            self.results.setdefault(p, {})[name] = st
+            self.position[name] = p + 1
+            if isinstance(st, BaseException):
+                self.stopped.add(name)
+            else:
+                self.place(name)
+
+
 def _pipelined_ticks(provider, methods, step_one, failed, last_s, stats, jobs: int,
                      abort=None) -> Iterator[CycleStep]:
     """``jobs`` threads; each method goes on to its next tick as soon as its own step is done.
@@ -195,96 +287,25 @@ def _pipelined_ticks(provider, methods, step_one, failed, last_s, stats, jobs: i
     first (by its last call), so the slow methods start at once and the cheap ones fill the
     other threads, including the tail of a tick.  An exception other than
     :class:`MethodFailed` is raised when its tick would be yielded (the first method's, in
-    method order), as one job raises it.
+    method order), as one job raises it.  The bookkeeping is :class:`_Schedule`'s.
     """
-    ahead = max(0, int(getattr(provider, "ticks_ahead", 0)))
-    order = {name: i for i, name in enumerate(methods)}
-    source = iter(provider.ticks())
-    ticks: list = []  # by position; None once yielded
-    exhausted = False
-
-    def tick_at(p: int):
-        nonlocal exhausted
-        while len(ticks) <= p and not exhausted:
-            try:
-                ticks.append(next(source))
-            except StopIteration:
-                exhausted = True
-        return ticks[p] if p < len(ticks) else None
-
-    position = {name: 0 for name in methods}  # each method's next tick
-    stopped: set[str] = set()  # failed or raised: no further ticks
-    results: dict[int, dict] = {}  # position -> {name: MethodStep | MethodFailed | BaseException}
-    waiting: set[str] = set()  # methods whose next tick is beyond the window
-    ready: set[str] = set()
-    inflight: dict = {}
-    oldest = 0
-
-    def place(name: str) -> None:
-        """Move ``name`` past skipped ticks and put it in ``ready`` or ``waiting`` (or nowhere: done)."""
-        while True:
-            tick = tick_at(position[name])
-            if tick is None:
-                return
-            if not tick.skipped:
-                break
-            position[name] += 1
-        (ready if position[name] <= oldest + ahead else waiting).add(name)
-
-    def complete(p: int) -> bool:
-        return all(name in stopped or position[name] > p for name in methods)
-
+    schedule = _Schedule(provider, methods, failed, last_s, stats, jobs)
     pool = ThreadPoolExecutor(max_workers=jobs, thread_name_prefix="exposim-run")
     start = time.perf_counter()
     try:
         with single_thread_pools(user_api="blas"):  # results independent of the machine's cores
             for name in methods:
-                place(name)
+                schedule.place(name)
             while True:
-                tick = tick_at(oldest)
-                while tick is not None and complete(oldest):
-                    res = results.pop(oldest, {})
-                    errors = [res[name] for name in methods if isinstance(res.get(name), BaseException)
-                              and not isinstance(res[name], MethodFailed)]
-                    if errors:
-                        raise errors[0]
-                    stats.cycles += 1
-                    if tick.skipped:
-                        cs = CycleStep(tick.index, {}, tick.missing, skipped=tick.skipped)
-                    else:
-                        names = [name for name in methods if name in res]
-                        steps, now_failed = _advance(failed, names, [res[n] for n in names], tick.index)
-                        stats.wall_s = time.perf_counter() - start
-                        if stats.startup_s is None:
-                            stats.startup_s = stats.wall_s
-                        cs = CycleStep(tick.index, steps, tick.missing, failed=now_failed)
-                    ticks[oldest] = None  # its images are freed once the consumer drops the step
-                    oldest += 1
-                    for name in [n for n in waiting if position[n] <= oldest + ahead]:
-                        waiting.discard(name)
-                        ready.add(name)
-                    yield cs
-                    tick = tick_at(oldest)
+                tick = schedule.tick_at(schedule.oldest)
+                while tick is not None and schedule.complete(schedule.oldest):
+                    yield schedule.finish_oldest(tick, start)
+                    tick = schedule.tick_at(schedule.oldest)
                 if tick is None:
                     return
-                while ready and len(inflight) < jobs:
-                    name = min(ready, key=lambda n: (position[n], -last_s.get(n, 0.0), order[n]))
-                    ready.discard(name)
-                    p = position[name]
-                    inflight[pool.submit(step_one, name, ticks[p])] = (name, p)
-                if not inflight:  # pragma: no cover - a scheduling bug, not a user error
-                    raise RuntimeError(f"closed loop stalled at tick {oldest}")
-                done, _ = wait(inflight, return_when=FIRST_COMPLETED)
-                for fut in done:
-                    name, p = inflight.pop(fut)
-                    exc = fut.exception()
-                    st = exc if exc is not None else fut.result()
-                    results.setdefault(p, {})[name] = st
-                    position[name] = p + 1
-                    if isinstance(st, BaseException):
-                        stopped.add(name)
-                    else:
-                        place(name)
+                schedule.dispatch(pool, step_one)
+                done, _ = wait(schedule.inflight, return_when=FIRST_COMPLETED)
+                schedule.collect(done)
     except BaseException:  # Ctrl-C, an error, or the consumer stopped: calls in flight end with their workers
         if abort is not None:
             abort()

@@ -33,7 +33,8 @@ Each step carries a :class:`NativeInfo` (``MethodStep.native``): the recorder cy
 the frame, whether it is the frame the benchmarks use (the cycle's first shot present for
 every camera: the instant of the native-rate live condition), the source frame's offset and
 timestamp and the warp's angle.  Frames are decoded once each (a sliding window of them is
-kept), and methods with the same target in a frame share one image.
+kept), and methods with the same target in a frame share one image.  The frames' index and the
+ticks are :mod:`emulator.playback.native_ticks`.
 """
 
 from __future__ import annotations
@@ -41,135 +42,36 @@ from __future__ import annotations
 import math
 import threading
 import warnings
-from dataclasses import dataclass
 
 import numpy as np
 
 from emulator.autoexposure.isolation import readonly_view
+from emulator.core.blur import DEFAULT_STAMP, _window_blur, as_angular_velocity, exposure_window_s, rotation_homography
 from emulator.core.dataset import CAMERAS
-from emulator.errors import CalibrationError, PlaybackError
 from emulator.core.gyro import GYRO_HOLE_S
+from emulator.core.native import (BLUR_STOPS_PER_PX, MOTION_STOPS_PER_FRAME, NATIVE_RATE, SATURATION_LIMIT,
+                                  SHARP_MOTION_PX, WARP_MODES, WARP_RESAMPLE, WINDOW_CYCLES, flow_velocity,
+                                  median_motion_px, radiance_gray, rotation_between, warp_to_instant, warp_with_flow)
+from emulator.errors import CalibrationError, PlaybackError
 from emulator.io.runcsv import NATIVE_COLUMNS
-from emulator.core.native import (BLUR_STOPS_PER_PX, MOTION_STOPS_PER_FRAME, NATIVE_RATE, SATURATION_LIMIT, SHARP_MOTION_PX, WARP_MODES, WARP_RESAMPLE,
-                             WINDOW_CYCLES, NativeCandidate, flow_velocity, invalid_fraction, median_motion_px,
-                             native_select, radiance_gray, rotation_between, warp_to_instant, warp_with_flow)
 from emulator.playback.config import RunConfig, provides_rate
-from emulator.playback.emulated import METHOD_CAMERA, _CycleImages, _fractions, _Memo
-from emulator.playback.loop import Shot
+from emulator.playback.emulated import METHOD_CAMERA, _CycleImages
+from emulator.playback.motion import find_camera_calibration, recording_motion
+from emulator.playback.native_ticks import NativeInfo, NativeTick, RecordedFrames
 from emulator.playback.records import RunStats
 
-__all__ = ["NativeProvider", "NativeInfo", "NativeWarpWarning", "recording_stamp"]
+__all__ = ["NativeProvider", "NativeInfo", "NativeTick", "NativeWarpWarning", "recording_stamp"]
 
 
 class NativeWarpWarning(UserWarning):
     """A native-rate run on a recording without a gyro (or calibration): neighbour frames are not warped."""
 
 
-@dataclass(frozen=True)
-class NativeInfo:
-    """What a native-rate step adds to its row (``exposures.csv``'s native columns)."""
-
-    recorder_cycle: int
-    benchmarked: bool
-    source_offset: int
-    source_timestamp_ns: int
-    warp_deg: float  #: rotation undone by the warp, degrees (0: own frame or at rest; NaN: not warped)
-
-
 def recording_stamp(sequence) -> str:
     """Where a frame's timestamp lies in its window: the trigger (``start``) for a synthetic recording
     (its ``exposim.json`` says so), else the blur model's default (docs/blur.md)."""
-    from emulator.core.blur import DEFAULT_STAMP
-
     note = str((getattr(sequence, "metadata", None) or {}).get("timestamps", ""))
     return "start" if note.startswith("trigger instant") else DEFAULT_STAMP
-
-
-class _Frames:
-    """The recording's frames of the first camera, in time order, with what each has for every camera."""
-
-    def __init__(self, sequence, cameras) -> None:
-        lead = cameras[0]
-        rows = []
-        for cycle in sequence.cycles:
-            for e, fr in cycle.frames.get(lead, {}).items():
-                rows.append((int(fr.timestamp_ns), float(e), cycle))
-        rows.sort(key=lambda r: r[0])
-        self.timestamps = [r[0] for r in rows]
-        self.exposures = [r[1] for r in rows]
-        self.cycles = [r[2] for r in rows]
-        # every camera's shot at this instant (same exposure, same timestamp)
-        self.complete = [all(c in cyc.frames and cyc.frames[c].get(e) is not None
-                             and int(cyc.frames[c][e].timestamp_ns) == ts for c in cameras)
-                         for ts, e, cyc in rows]
-        self.index = {ts: k for k, ts in enumerate(self.timestamps)}
-        first = set()
-        for cycle in sequence.cycles:  # the instant of the native-rate live condition (its first shot)
-            avail = cycle.available(tuple(cameras))
-            if avail:
-                first.add(self.index.get(int(cycle.frames[lead][avail[0]].timestamp_ns)))
-        self.benchmarked = first
-
-    def __len__(self) -> int:
-        return len(self.timestamps)
-
-
-class NativeTick(_Memo):
-    """One recorded frame of a :class:`NativeProvider` (see :meth:`shot`)."""
-
-    def __init__(self, provider: "NativeProvider", k: int, hidden: bool = False) -> None:
-        p = self.provider = provider
-        fr = p.frames
-        self.index = k
-        cycle, e = fr.cycles[k], fr.exposures[k]
-        self.missing = {c: [e] for c in p.cameras if not (c in cycle.frames and e in cycle.frames[c])}
-        lo, hi = max(0, k - p.window), min(len(fr) - 1, k + p.window)
-        self.sources = [j for j in range(lo, hi + 1) if fr.complete[j] and not (hidden and j == k)]
-        self.skipped = None if self.sources else "no frame within one cycle has every camera's shot"
-        if self.skipped is None and p.skip_partial and cycle.missing_by_camera(p.cameras):
-            self.skipped = "frame of a partial cycle left out (--skip-partial)"
-        self._memo_init()
-
-    def select(self, target_ms: float) -> int:
-        """The source frame (index) of ``target_ms``."""
-        p, fr = self.provider, self.provider.frames
-        cands = []
-        for j in self.sources:
-            e = fr.exposures[j]
-            _, hist = p.images(j).get(p.cameras[0], e)
-            lost = invalid_fraction(hist, target_ms / e, white_level=p.white, black_level=p.black)
-            excess = 0.0 if p.blur_stops_per_px is None else p.excess_blur_px(j, self.index, target_ms)
-            cands.append(NativeCandidate(j - self.index, e, lost, excess))
-        best = native_select(target_ms, cands, motion_stops_per_frame=p.motion_stops_per_frame,
-                             saturation_limit=p.saturation_limit, blur_stops_per_px=p.blur_stops_per_px)
-        return self.index + best.offset
-
-    def shot(self, target_ms: float, want_right: bool = False) -> Shot:
-        p, fr = self.provider, self.provider.frames
-        k = self.index
-        j = self._memo(("select", float(target_ms)), lambda: self.select(target_ms))
-        e = fr.exposures[j]
-        ratio = target_ms / e
-        table, valid = p.response.lut(ratio)
-        lead, other = p.cameras[0], (p.cameras[1] if len(p.cameras) > 1 else None)
-        images = p.images(j)
-        _, hist = images.get(lead, e)
-        left, inside, angle = self._memo((lead, j, ratio), lambda: p.emulate(lead, j, k, ratio, table, target_ms))
-        sat, val = _fractions(hist, table, valid, p.white, p.black)
-        info = NativeInfo(int(fr.cycles[k].index), k in fr.benchmarked, j - k, fr.timestamps[j], angle)
-        shot = Shot(timestamp_ns=fr.timestamps[k], exposure_ms=float(target_ms), bracket_ms=float(e), ratio=float(ratio),
-                    left=left, saturated_fraction=sat, valid_fraction=val * inside,
-                    bracket_saturated_fraction=images.saturated(lead, e),
-                    missing_left_ms=tuple(self.missing.get(lead, ())),
-                    missing_right_ms=tuple(self.missing.get(other, ())) if other else (), native=info)
-        if other is not None:
-            _, rhist = images.get(other, e)
-            rsat, rval = _fractions(rhist, table, valid, p.white, p.black)
-            shot.saturated_fraction_right, shot.valid_fraction_right = rsat, rval * inside
-            if want_right:
-                shot.right = self._memo((other, j, ratio),
-                                        lambda: p.emulate(other, j, k, ratio, table, target_ms))[0]
-        return shot
 
 
 @provides_rate(NATIVE_RATE)
@@ -230,7 +132,7 @@ class NativeProvider:
         self.latency_ticks = int(getattr(config, "latency_frames", 1))
         self.motion_stops_per_frame = float(motion_stops_per_frame)
         self.saturation_limit = float(saturation_limit)
-        self.frames = _Frames(sequence, self.cameras)
+        self.frames = RecordedFrames(sequence, self.cameras)
         if self.latency_ticks >= len(self.frames):  # no proposal would ever be used: refused, not ranked
             raise PlaybackError(f"latency_frames {self.latency_ticks}: must be below the recording's frame count "
                                 f"({len(self.frames)} frames at native rate; --latency-frames)")
@@ -255,8 +157,6 @@ class NativeProvider:
             return motion
         if self.blur is not None:
             return self.blur.motion
-        from emulator.playback.motion import recording_motion
-
         why = None
         if getattr(self.sequence, "imu", None) is None:
             why = "no imu/imu.csv"
@@ -264,8 +164,6 @@ class NativeProvider:
             try:
                 return recording_motion(self.sequence, stamp=recording_stamp(self.sequence))
             except CalibrationError as exc:  # none found, or one that cannot be read: say which
-                from emulator.playback.motion import find_camera_calibration
-
                 why = "no camera calibration (left.yaml)" if find_camera_calibration(self.sequence) is None \
                     else f"invalid camera calibration ({exc})"
         warnings.warn(f"{self.sequence.path}: {why}; at native rate a neighbour frame is used without undoing the "
@@ -318,8 +216,6 @@ class NativeProvider:
 
     def _window_s(self, j: int, exposure_ms: float) -> tuple[float, float]:
         """The window (s, the gyro's clock) of an image of ``exposure_ms`` stamped at frame ``j``'s timestamp."""
-        from emulator.core.blur import exposure_window_s
-
         return exposure_window_s(self.motion.t_s(self.frames.timestamps[j]), exposure_ms, self.motion.stamp)
 
     def rotation(self, j: int, k: int, source_ms: float, target_ms: float):
@@ -363,8 +259,6 @@ class NativeProvider:
 
     def _geometry(self, camera: str, j: int, k: int, source_ms: float, target_ms: float, shape):
         """``(R, H, displacement)`` of :meth:`geometry`; ``(None, None, None)`` where the image is not moved."""
-        from emulator.core.blur import rotation_homography
-
         if j == k or self.motion is None or self.warp_mode == "none":
             return None, None, None
         R = self.rotation(j, k, source_ms, target_ms)
@@ -402,8 +296,6 @@ class NativeProvider:
         """Image velocity at frame ``k`` (full-resolution px/s on the binned grid) from the nearest frames before and
         after it present on every camera, each turned to frame k's instant (never frame k's own image); None
         where one side has none or the gyro does not cover them.  Memoised per camera and frame."""
-        from emulator.core.blur import rotation_homography
-
         key = (camera, k)
         with self._lock:
             if key in self._velocity:
@@ -433,8 +325,6 @@ class NativeProvider:
     def excess_blur_px(self, j: int, k: int, target_ms: float) -> float:
         """Predicted blur of frame ``j``'s window beyond a capture of ``target_ms`` at frame ``k`` (px, largest over
         the image's 3x3 grid, the first camera; 0 without a gyro, or where it does not cover the windows)."""
-        from emulator.core.blur import _window_blur, as_angular_velocity
-
         if self.motion is None:
             return 0.0
         cam = self.cameras[0]

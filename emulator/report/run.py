@@ -1,21 +1,28 @@
 """The report of a run folder: ``results.json`` (summary), ``exposure.png`` and ``report.md``.
 
 Everything comes from ``run.json`` and the per-method CSVs (:mod:`emulator.io.runfolder`),
-so :func:`write_run_report` redraws a run's report without recomputing anything.
+so :func:`write_run_report` redraws a run's report without recomputing anything.  What a run
+emulated from less than a full sweep (partial cycles, large upward ratios) is :mod:`emulator.report.flags`.
 """
 
 from __future__ import annotations
 
+import functools
 import os
 from pathlib import Path
 
 import numpy as np
 
-from emulator.io.files import REPORT_FILE, RESULTS_FILE, write_results, write_text
-from emulator.report.html import run_contact_sheet, write_report
-from emulator.io.runfolder import read_run_json, read_tables
+from emulator.cells import DASH, format_number
 from emulator.core.native import is_native_run, native_record, run_rate, tick_unit
-from emulator.report.figures import legend_outside, log_ticks_at, new_figure, plural, same_as, save
+from emulator.core.settling import TREND_MIN_CHANGE_FRACTION, trending_methods
+from emulator.core.stats import compare_methods, statistic_interval
+from emulator.io.files import RESULTS_FILE, write_results
+from emulator.io.runfolder import read_run_json, read_tables
+from emulator.report.figures import legend_outside, log_ticks_at, new_figure, same_as, save
+from emulator.report.flags import flags_markdown, run_flags
+from emulator.report.html import run_contact_sheet, write_report
+from emulator.report.intervals import comparison_table, mark_trending
 from emulator.report.words import mode_words, selector_words
 
 __all__ = ["PLOT_FILE", "summarise_run", "run_flags", "exposure_figure", "plot_exposure", "run_markdown",
@@ -71,8 +78,6 @@ def summarise_run(run_dir: str | os.PathLike, info: dict | None = None, tables: 
             "fallback_cycles": [int(c) for c in t["cycle"][t["guarded"].astype(bool)]] if n else [],
             **_source_offsets(t),
         }
-    from emulator.core.stats import compare_methods, statistic_interval
-
     unit = tick_unit(info)
     intervals = {
         "definition": f"per method over the run's {unit}, circular block bootstrap (blocks of n^(1/3) consecutive "
@@ -105,8 +110,6 @@ def summarise_run(run_dir: str | os.PathLike, info: dict | None = None, tables: 
     flags = run_flags(info, tables)
     if flags is not None:  # only where something is flagged: other runs' results stay as they were
         summary["flags"] = flags
-    from emulator.core.settling import trending_methods
-
     trending = trending_methods({n: per_recorder_cycle(tables[n])["target_ms"] for n in names})
     if trending:  # only where a method had not settled: other runs' results stay as they were
         summary["still_trending"] = trending
@@ -131,63 +134,6 @@ def _source_offsets(t: dict) -> dict:
     offsets, counts = np.unique(t["source_offset"], return_counts=True)
     unwarped = int(np.sum((t["source_offset"] != 0) & np.isnan(t["warp_deg"])))
     return {"source_offsets": {str(int(o)): int(c) for o, c in zip(offsets, counts)}, "unwarped_neighbours": unwarped}
-
-
-def run_flags(info: dict, tables: dict) -> dict | None:
-    """What a run emulated from less than a full sweep, or None when nothing needs a flag.
-
-    ``partial_cycles``: the recording's cycles missing a bracket on either camera, with what
-    was missing (``run.json``); per method, how many of its cycles were partial, how many
-    were emulated upwards by more than :data:`~emulator.core.emulate.UPWARD_RATIO_FLAG`, and its
-    largest upward ratio (None when it never emulated upwards).
-    """
-    from emulator.core.emulate import UPWARD_RATIO_FLAG
-
-    partial = list(info.get("partial_cycles") or [])
-    partial_set = {int(p["cycle"]) for p in partial}
-    per_method = {}
-    for name, t in tables.items():
-        ratio = np.asarray(t["ratio"], dtype=float)
-        up = ratio[ratio > 1.0]
-        per_method[name] = {
-            "partial_cycles_used": int(sum(int(c) in partial_set for c in t.get("recorder_cycle", t["cycle"]))),
-            "cycles_above_ratio_bound": int(np.sum(ratio > UPWARD_RATIO_FLAG)),
-            "worst_upward_ratio": float(up.max()) if up.size else None,
-        }
-    if not partial and not any(m["cycles_above_ratio_bound"] for m in per_method.values()):
-        return None
-    skipped = {int(s["cycle"]) for s in info.get("skipped_cycles") or [] if isinstance(s, dict)}
-    return {
-        "upward_ratio_bound": UPWARD_RATIO_FLAG,
-        "partial_cycles": partial,
-        "partial_cycles_skipped": sum(int(p["cycle"]) in skipped for p in partial),
-        "methods": per_method,
-    }
-
-
-def _flags_markdown(flags: dict, unit: str = "cycles") -> list[str]:
-    """The report's section on partial cycles and large upward ratios (``unit``: what a row of the run is,
-    ``cycles`` or, at native rate, ``frames``)."""
-    from emulator.core.dataset import missing_text
-
-    bound = flags["upward_ratio_bound"]
-    partial = flags["partial_cycles"]
-    lines = ["", "Flags (partial cycles and large upward ratios):", ""]
-    if partial:
-        lines.append(f"Partial cycles (a bracket missing on either camera): {len(partial)}"
-                     + (f", {flags['partial_cycles_skipped']} of them left out (--skip-partial)"
-                        if flags["partial_cycles_skipped"] else
-                        "; their images come from the brackets that are there (--skip-partial leaves them out)"))
-        lines += [f"- cycle {p['cycle']}: {missing_text(p['missing'])}" for p in partial]
-        lines.append("")
-    lines += [f"Emulating up by a ratio k stretches one bracket DN into k DN and raises the noise by about sqrt(k); "
-              f"ratios above {bound:g} are flagged (with brackets a factor 2 apart and the default clamp, a "
-              "complete sweep never needs more than 2).", "",
-              f"| method | {unit} from partial cycles | {unit} with ratio > {bound:g} | largest upward ratio |",
-              "| --- | ---: | ---: | ---: |"]
-    lines += [f"| {n} | {m['partial_cycles_used']} | {m['cycles_above_ratio_bound']} | "
-              f"{_fmt(m['worst_upward_ratio'], '.3g')} |" for n, m in flags["methods"].items()]
-    return lines
 
 
 def _mode(info: dict, name: str) -> str:
@@ -235,8 +181,8 @@ def plot_exposure(info: dict, tables: dict, path: str | os.PathLike) -> Path:
     return save(exposure_figure(info, tables), path)
 
 
-def _fmt(v, spec=".3g"):
-    return "-" if v is None else format(v, spec)
+#: A cell of this report: a missing figure prints "-" (the note under the table says what a "-" means).
+_fmt = functools.partial(format_number, missing=DASH)
 
 
 def _rate_lines(info: dict, summary: dict) -> list[str]:
@@ -296,8 +242,6 @@ def _trending_note(summary: dict, unit: str) -> list[str]:
     trending = summary.get("still_trending")
     if not trending:
         return []
-    from emulator.core.settling import TREND_MIN_CHANGE_FRACTION
-
     k = next(iter(trending.values()))["steps"]
     return ["", f"**Too short to settle:** {len(trending)} of {len(summary['methods'])} method(s) were still "
             f"moving one way over the last {k} recorder cycles (by {100 * TREND_MIN_CHANGE_FRACTION:g} % or more): "
@@ -311,13 +255,7 @@ def run_markdown(info: dict, summary: dict, tables: dict | None = None) -> str:
     native = is_native_run(summary)
     unit = tick_unit(summary)
     flags = summary.get("flags")
-    flagged = ""
-    if flags is not None:
-        above = sum(1 for m in flags["methods"].values() if m["cycles_above_ratio_bound"])
-        flagged = (f" ({len(flags['partial_cycles'])} partial"
-                   + (f", {flags['partial_cycles_skipped']} left out" if flags["partial_cycles_skipped"] else "")
-                   + (f"; {above} method(s) emulated up by more than {flags['upward_ratio_bound']:g}x" if above else "")
-                   + ": see Flags)")
+    flagged = _flagged_words(flags)
     lines = [
         f"# AE closed-loop run: {Path(info.get('sequence', '')).name}",
         "",
@@ -342,10 +280,36 @@ def run_markdown(info: dict, summary: dict, tables: dict | None = None) -> str:
         "The paper (section V-D) compares the methods through features and VO, and shows no",
         "exposure-against-time figure; this plot is the run's own record.",
         "",
-        f"| method | mode | {unit} | mean ms | median ms | min ms | max ms | mean saturated (%) | mean valid (%) | "
-        "non-finite | ms/frame |",
-        "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
+        *_methods_table(summary, unit),
     ]
+    lines += _intervals_lines(summary)
+    lines += ["", "Saturated: pixels at the black or the white level in the emulated image; valid: pixels the emulation "
+              "could reconstruct (not clipped in the source bracket: a black source pixel emulated upwards is not valid). \"-\": no cycle of that method (or no timing recorded)."]
+    lines += _fixed_note(info, summary, tables)
+    lines += _trending_note(summary, unit)
+    lines += _status_lines(summary, unit)
+    if flags is not None:
+        lines += flags_markdown(flags, unit)
+    lines += _timing_lines(summary.get("timing") or {}, unit)
+    return "\n".join(lines) + "\n"
+
+
+def _flagged_words(flags: dict | None) -> str:
+    """The status line's pointer to the Flags section ("" when nothing is flagged)."""
+    if flags is None:
+        return ""
+    above = sum(1 for m in flags["methods"].values() if m["cycles_above_ratio_bound"])
+    return (f" ({len(flags['partial_cycles'])} partial"
+            + (f", {flags['partial_cycles_skipped']} left out" if flags["partial_cycles_skipped"] else "")
+            + (f"; {above} method(s) emulated up by more than {flags['upward_ratio_bound']:g}x" if above else "")
+            + ": see Flags)")
+
+
+def _methods_table(summary: dict, unit: str) -> list[str]:
+    """The report's table of each method's exposure, saturation, validity and speed."""
+    lines = [f"| method | mode | {unit} | mean ms | median ms | min ms | max ms | mean saturated (%) | mean valid (%) | "
+             "non-finite | ms/frame |",
+             "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
     pct = lambda v: None if v is None else 100.0 * v  # noqa: E731
     for name, m in summary["methods"].items():
         lines.append(
@@ -353,24 +317,27 @@ def run_markdown(info: dict, summary: dict, tables: dict | None = None) -> str:
             f"{_fmt(m['min_exposure_ms'])} | {_fmt(m['max_exposure_ms'])} | {_fmt(pct(m['mean_saturated_fraction']), '.2f')} | "
             f"{_fmt(pct(m['mean_valid_fraction']), '.2f')} | {m['non_finite_proposals']} | {_fmt(m['method_ms_per_frame'], '.1f')} |"
         )
+    return lines
+
+
+def _intervals_lines(summary: dict) -> list[str]:
+    """The mean exposures with their intervals and the saturation comparison (none for a summary without them)."""
     iv = summary.get("intervals")
-    if iv:
-        from emulator.report.intervals import comparison_table
+    if not iv:
+        return []
+    lines = ["", "Mean exposure per method with its 95 % interval (" + iv["definition"] + "): "
+             + ", ".join(f"{n} {_fmt(r['estimate'])} ms [{_fmt(r['ci95'][0] if r['ci95'] else None)}, "
+                         f"{_fmt(r['ci95'][1] if r['ci95'] else None)}]" for n, r in iv["mean_exposure_ms"].items())
+             + ".", "", "Mean saturated fraction (%), lower is better:", ""]
+    return lines + comparison_table(mark_trending(iv["mean_saturated_fraction"], summary.get("still_trending") or {}),
+                                    "mean saturated (%)", spec=".2f", scale=100.0)
 
-        lines += ["", "Mean exposure per method with its 95 % interval (" + iv["definition"] + "): "
-                  + ", ".join(f"{n} {_fmt(r['estimate'])} ms [{_fmt(r['ci95'][0] if r['ci95'] else None)}, "
-                              f"{_fmt(r['ci95'][1] if r['ci95'] else None)}]" for n, r in iv["mean_exposure_ms"].items())
-                  + ".", "", "Mean saturated fraction (%), lower is better:", ""]
-        from emulator.report.intervals import mark_trending
 
-        lines += comparison_table(mark_trending(iv["mean_saturated_fraction"], summary.get("still_trending") or {}),
-                                  "mean saturated (%)", spec=".2f", scale=100.0)
-    lines += ["", "Saturated: pixels at the black or the white level in the emulated image; valid: pixels the emulation "
-              "could reconstruct (not clipped in the source bracket: a black source pixel emulated upwards is not valid). \"-\": no cycle of that method (or no timing recorded)."]
-    lines += _fixed_note(info, summary, tables)
-    lines += _trending_note(summary, unit)
+def _status_lines(summary: dict, unit: str) -> list[str]:
+    """The methods that fell back or failed, and the skipped cycles (or frames)."""
     failed = {n: m["status"] for n, m in summary["methods"].items() if m.get("status", "ok").startswith("failed")}
     fell = {n: m["status"] for n, m in summary["methods"].items() if m.get("status", "ok").startswith("fell back")}
+    lines = []
     if fell:
         lines += ["", f"Methods that fell back (kept their exposure; column `guarded`): {len(fell)}"]
         lines += [f"- {n}: {why}" for n, why in fell.items()]
@@ -381,18 +348,20 @@ def run_markdown(info: dict, summary: dict, tables: dict | None = None) -> str:
     lines += ["", f"Skipped {unit}: {len(skipped)}"]
     for s in skipped:
         lines.append(f"- {unit[:-1]} {s['cycle']}: {s['reason']}")
-    if flags is not None:
-        lines += _flags_markdown(flags, unit)
-    timing = summary.get("timing") or {}
-    if timing:
-        lines += [
-            "",
-            f"Timing: {timing.get('cycles')} {unit} in {_fmt(timing.get('wall_s'))} s "
-            f"({_fmt(timing.get('cycles_per_s'))} {unit}/s), {timing.get('decodes')} PNG decodes "
-            f"({_fmt(timing.get('decode_ms_per_image'), '.1f')} ms each), {timing.get('emulations')} emulations "
-            f"({_fmt(timing.get('emulate_ms_per_image'), '.1f')} ms each).",
-        ]
-    return "\n".join(lines) + "\n"
+    return lines
+
+
+def _timing_lines(timing: dict, unit: str) -> list[str]:
+    """The run's speed: ticks per second, decodes and emulations (none when no timing was recorded)."""
+    if not timing:
+        return []
+    return [
+        "",
+        f"Timing: {timing.get('cycles')} {unit} in {_fmt(timing.get('wall_s'))} s "
+        f"({_fmt(timing.get('cycles_per_s'))} {unit}/s), {timing.get('decodes')} PNG decodes "
+        f"({_fmt(timing.get('decode_ms_per_image'), '.1f')} ms each), {timing.get('emulations')} emulations "
+        f"({_fmt(timing.get('emulate_ms_per_image'), '.1f')} ms each).",
+    ]
 
 
 def write_run_report(run_dir: str | os.PathLike, info: dict | None = None, tables: dict | None = None) -> dict:

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
+from emulator.cells import DASH, format_number
+
 __all__ = [
     "PAPER_IMAGE_WH",
     "PAPER_MEDIAN_MATCHES_FIXED",
@@ -53,12 +55,13 @@ def dash_note(symbol: str = "-") -> str:
 
 
 #: The note under every table that may hold a "-" cell.
-DASH_NOTE = dash_note("-")
+DASH_NOTE = dash_note(DASH)
 
 
 def dash_cell(value, spec: str = ".1f") -> str:
-    """A table cell: ``value`` formatted by ``spec``, or ``-`` where it is missing (None; :data:`DASH_NOTE`)."""
-    return "-" if value is None else format(value, spec)
+    """A table cell: ``value`` formatted by ``spec``, or ``-`` where it is missing (None; :data:`DASH_NOTE`):
+    :func:`emulator.cells.format_number` with ``missing=DASH``."""
+    return format_number(value, spec, missing=DASH)
 
 
 def _pixels(wh) -> int:
