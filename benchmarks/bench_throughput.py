@@ -35,7 +35,7 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-sys.path.insert(0, str(HERE.parent / "tests"))
+sys.path.insert(0, str(HERE.parent / "tests" / "emulator" / "autoexposure"))
 
 from emulator.autoexposure import METHOD_NAMES  # noqa: E402
 from emulator.io.borealhdr import load_sequence, sequence_response  # noqa: E402

@@ -16,10 +16,10 @@ import pytest
 from emulator.commands.cli import build_parser, main
 from emulator.commands.progress import bars_enabled, progress_bar
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 try:
-    from test_playback import write_static_sequence
+    from tests.emulator.playback.test_playback import write_static_sequence
 except ImportError:  # tests collected as a package
     from tests.test_playback import write_static_sequence
 

@@ -18,7 +18,7 @@ import pytest
 from emulator.errors import ExposimError, MissingExtraError
 from emulator.extras import EXTRAS, MODULE_EXTRA, missing_extra_message, missing_modules, require
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SYNTH_AND_DASK = "mitsuba,drjit,OpenEXR,Imath,colour,pyoidn,dask,distributed"
 
 SHIM = """import os, sys

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 #: Lowest first: a package may import the ones before it in this tuple, never those after.
 LAYERS = ("emulator", "synth", "scenes", "validation")
 #: Third-party top-level modules allowed only inside one package.

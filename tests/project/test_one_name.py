@@ -31,11 +31,11 @@ from emulator.metrics.features import load_gray8
 from emulator.core.response import BOREALHDR_BLACK_LEVEL, BOREALHDR_WHITE_LEVEL, CameraResponse
 
 try:
-    from test_playback import write_static_sequence
+    from tests.emulator.playback.test_playback import write_static_sequence
 except ImportError:  # tests collected as a package
     from tests.test_playback import write_static_sequence
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 PACKAGES = ("emulator", "synth", "scenes", "validation")
 
 

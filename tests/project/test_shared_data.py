@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from conftest import in_ci, missing_shared
+from tests.conftest import in_ci, missing_shared
 
 
 @pytest.mark.parametrize("value, ci", [("true", True), ("1", True), ("TRUE", True), ("", False), ("false", False)])

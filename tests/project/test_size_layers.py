@@ -11,9 +11,9 @@ from pathlib import Path
 
 import pytest
 
-from test_size import MAX_FUNCTION_LOC, MAX_MODULE_LINES, _key, offenders
+from tests.project.test_size import MAX_FUNCTION_LOC, MAX_MODULE_LINES, _key, offenders
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 LAYERS = ("scenes", "synth", "validation")
 
 #: Functions over the limit in packages the loop helper (issue 23) splits at the same time

@@ -18,7 +18,7 @@ from scenes.errors import RenderError, SceneError
 from scenes.presets import LEGACY_STUDY_PRESET, RENDER_PRESETS, parse_setting
 from validation.render_study import balance as bal
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 pytestmark = pytest.mark.usefixtures("default_render_env")

@@ -76,7 +76,7 @@ def _marker_scene(point, radius=0.05) -> Scene:
 def test_import_is_cheap():
     code = ("import sys, scenes; bad = [m for m in ('mitsuba', 'drjit', 'colour', 'OpenEXR') if m in sys.modules];"
             "assert not bad, bad")
-    subprocess.run([sys.executable, "-c", code], check=True, cwd=os.path.dirname(os.path.dirname(__file__)))
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=os.path.dirname(os.path.dirname(os.path.dirname(__file__))))
 
 
 def test_registry_holds_the_five_scenes():

@@ -12,7 +12,7 @@ from scenes import trajectory as tr
 from scenes import walks
 from scenes.errors import SceneError
 
-SHARED_IMU = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "borealhdr_sample" / \
+SHARED_IMU = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "borealhdr_sample" / \
     "backpack_2023-09-25-15-05-03" / "imu" / "imu.csv"
 _IMU_CANDIDATES = (SHARED_IMU, Path("/work/shared/data/borealhdr_sample/backpack_2023-09-25-15-05-03/imu/imu.csv"))
 
@@ -21,7 +21,7 @@ def _real_imu() -> Path:
     for p in _IMU_CANDIDATES:
         if p.is_file():
             return p
-    from conftest import missing_shared
+    from tests.conftest import missing_shared
 
     missing_shared("the shared BorealHDR sample's imu/imu.csv is not here")
 

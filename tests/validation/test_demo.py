@@ -14,7 +14,7 @@ from emulator.errors import OutputExistsError
 from validation.demo import demo_config, demo_dataset, demo_dataset_key, new_output_dir, run_demo
 
 pytestmark = [pytest.mark.render, pytest.mark.slow]
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _tree(root: Path) -> dict[str, tuple[int, int]]:

@@ -1,6 +1,6 @@
 """Every method in borealhdr mode against the published BorealHDR code's own exposure sequences.
 
-``tests/data/published_sequences.json`` holds what the published loop proposed, run from its
+``tests/validation/data/published_sequences.json`` holds what the published loop proposed, run from its
 repository by ``scripts/published_sequences.py`` (dependency versions recorded with each entry).
 Here exposim's methods are driven through the same frames (:mod:`validation.published`) and must
 propose the same exposures, to the last bit: a dependency update or a code change that moves any
@@ -21,8 +21,8 @@ import pytest
 
 from validation.published import REF_METHODS, drive, make_ref_method, replay_layout
 
-REPO = Path(__file__).resolve().parents[1]
-STORE = json.loads((REPO / "tests" / "data" / "published_sequences.json").read_text())["entries"]
+REPO = Path(__file__).resolve().parents[2]
+STORE = json.loads((REPO / "tests" / "validation" / "data" / "published_sequences.json").read_text())["entries"]
 UPSTREAM = os.environ.get("EXPOSIM_BOREALHDR_REPO")
 
 

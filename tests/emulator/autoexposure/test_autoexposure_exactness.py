@@ -14,7 +14,7 @@ import math
 import numpy as np
 import pytest
 
-import ae_reference as ref
+from tests.emulator.autoexposure import ae_reference as ref
 from emulator.autoexposure import METHOD_NAMES, Kim2018, Shim2014, Zhang2017, to_gray
 from emulator.autoexposure import kim as kim_mod
 from emulator.autoexposure import shim as shim_mod

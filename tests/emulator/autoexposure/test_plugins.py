@@ -22,9 +22,9 @@ from emulator.autoexposure.methodset import build_methods, parse_methods
 from emulator.errors import PlaybackError
 from emulator.playback import run
 from emulator.orchestration.runner import run_to_folder
-from test_playback import K_DN_PER_MS, write_static_sequence
+from tests.emulator.playback.test_playback import K_DN_PER_MS, write_static_sequence
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[3]
 PLUGINS_DOC = (ROOT / "docs" / "plugins.md").read_text(encoding="utf-8")  # the plugin guide
 GROUP = "exposim.methods"
 

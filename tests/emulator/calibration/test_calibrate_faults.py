@@ -25,7 +25,7 @@ from emulator.io.pcalib import PCALIB_ORIGIN_TOLERANCE, read_response, write_pca
 from emulator.io.stack import write_stack
 from emulator.core.response import CameraResponse
 
-from test_calibrate import stack_arrays
+from tests.emulator.calibration.test_calibrate import stack_arrays
 
 
 # ---------------------------------------------------------------------------- (a) shifted inverse responses

@@ -10,7 +10,7 @@ from emulator.io.stack import write_stack
 from emulator.core.response import CameraResponse
 
 try:
-    from test_calibrate import stack_arrays
+    from tests.emulator.calibration.test_calibrate import stack_arrays
 except ImportError:  # tests collected as a package
     from tests.test_calibrate import stack_arrays
 

@@ -19,7 +19,7 @@ from emulator.io.runfolder import read_run_folder
 from emulator.io.tum import read_tum, write_tum
 
 try:
-    from test_metrics_vo import SHARED, make_synthetic_run
+    from tests.emulator.metrics.test_metrics_vo import SHARED, make_synthetic_run
 except ImportError:  # tests collected as a package
     from tests.test_metrics_vo import SHARED, make_synthetic_run
 
@@ -274,7 +274,7 @@ def test_bench_vo_bad_reference(short_run, tmp_path, capsys):
 
 def test_bench_vo_calibration_size_mismatch(short_run, tmp_path, capsys):
     if not SHARED.is_dir():
-        from conftest import missing_shared
+        from tests.conftest import missing_shared
 
         missing_shared("shared BorealHDR sample not available")
     code, out, err = run_cli(capsys, "bench", "vo", str(short_run["run"]), "--calibration",

@@ -16,9 +16,9 @@ import pytest
 
 from emulator.commands.cli import main
 from emulator.orchestration.runner import run_to_folder
-from conftest import static_chart_recording  # noqa: E402
+from tests.conftest import static_chart_recording  # noqa: E402
 
-EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+EXAMPLES = Path(__file__).resolve().parents[3] / "examples"
 
 
 @pytest.fixture(scope="module")
@@ -93,7 +93,7 @@ def test_compare_refuses_mixed_inputs_in_one_line(runs, tmp_path, capsys):
 
 def test_features_folders_compare_on_matches_and_keep_a_shared_method_apart(tmp_path, capsys):
     try:
-        from test_metrics_vo import make_synthetic_run
+        from tests.emulator.metrics.test_metrics_vo import make_synthetic_run
     except ImportError:  # tests collected as a package
         from tests.test_metrics_vo import make_synthetic_run
 

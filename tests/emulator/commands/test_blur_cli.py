@@ -99,7 +99,7 @@ def test_run_blur_consistent_records_and_resumes(sample_seq, tmp_path, capsys):
 
 def test_info_without_imu_says_so_and_nothing_else_changes(tmp_path, capsys):
     try:
-        from test_playback import write_static_sequence
+        from tests.emulator.playback.test_playback import write_static_sequence
     except ImportError:
         from tests.test_playback import write_static_sequence
     seq, _ = write_static_sequence(tmp_path / "seq", n_cycles=2, shape=(8, 8))

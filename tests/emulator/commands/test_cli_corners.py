@@ -11,7 +11,7 @@ import pytest
 
 from emulator.commands.cli import main
 from emulator.io.imu import ImuMissingWarning
-from test_playback import write_static_sequence
+from tests.emulator.playback.test_playback import write_static_sequence
 
 
 @pytest.fixture(scope="module")
@@ -94,7 +94,7 @@ def test_the_test_extra_brings_pytest_and_all_does_not():
     import tomllib
     from pathlib import Path
 
-    optional = tomllib.loads((Path(__file__).resolve().parents[1] / "pyproject.toml").read_text())["project"][
+    optional = tomllib.loads((Path(__file__).resolve().parents[3] / "pyproject.toml").read_text())["project"][
         "optional-dependencies"]
     assert any(d.startswith("pytest") for d in optional["test"])
     assert not any("test" in d or "pytest" in d for d in optional["all"])

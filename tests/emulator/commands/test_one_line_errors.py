@@ -13,7 +13,7 @@ import warnings
 import pytest
 
 from emulator.commands.cli import main
-from test_playback import write_static_sequence
+from tests.emulator.playback.test_playback import write_static_sequence
 
 
 @pytest.fixture(scope="module")

@@ -12,7 +12,7 @@ from emulator.commands.cli import main
 from emulator.errors import PlaybackError
 from emulator.io.runfolder import CSV_COLUMNS
 from emulator.orchestration.runner import run_to_folder
-from test_playback import write_static_sequence
+from tests.emulator.playback.test_playback import write_static_sequence
 
 METHODS = "classical-50,kim,zhang,fixed"
 
@@ -251,7 +251,7 @@ def test_fixed_is_explained_in_help_readme_and_report(clean_run):
     methods_help = " ".join(next(a for a in sub["run"]._actions if "--methods" in a.option_strings).help.split())
     assert f"'fixed' runs classical-50 for its first {n} frames ({n + 1} with --mode borealhdr) and then freezes" \
         in methods_help
-    readme = " ".join((Path(__file__).resolve().parents[1] / "docs" / "commands.md").read_text().split())
+    readme = " ".join((Path(__file__).resolve().parents[3] / "docs" / "commands.md").read_text().split())
     assert f"`fixed` (runs `classical-50` for its first {n} frames, {n + 1} with `--mode borealhdr`, then freezes" \
         in readme
     report = (clean_run / "report.md").read_text()

@@ -10,7 +10,7 @@ import yaml
 from emulator.errors import CalibrationError
 from emulator.io.camera_info import read_camera_info
 
-from conftest import SAMPLE, missing_shared
+from tests.conftest import SAMPLE, missing_shared
 
 SEPT = SAMPLE / "calibration" / "september_2023"
 

@@ -15,7 +15,7 @@ from emulator.core.gray import bayer_to_gray8
 from emulator.io.camera_info import read_camera_info
 
 try:
-    from test_metrics_vo import make_synthetic_run
+    from tests.emulator.metrics.test_metrics_vo import make_synthetic_run
 except ImportError:  # tests collected as a package
     from tests.test_metrics_vo import make_synthetic_run
 

@@ -19,7 +19,7 @@ from emulator.io.borealhdr import find_response, load_sequence, sequence_respons
 from emulator.io.layout import choose_stereo_calibration, recording_date, search_roots
 from emulator.metrics.stereo import choose_calibration
 
-from conftest import SAMPLE, SAMPLE_SEQ, missing_shared
+from tests.conftest import SAMPLE, SAMPLE_SEQ, missing_shared
 
 NAME = SAMPLE_SEQ.name
 CALIB = SAMPLE / "calibration"

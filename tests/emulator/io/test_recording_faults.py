@@ -14,7 +14,7 @@ from emulator.errors import DatasetError
 from emulator.io.borealhdr import load_sequence, png_size
 from emulator.io.png import encode_png, write_png16
 from emulator.playback import iter_run
-from test_playback import write_static_sequence
+from tests.emulator.playback.test_playback import write_static_sequence
 
 SHAPE = (16, 24)  # rows, columns
 

@@ -19,7 +19,7 @@ import pytest
 from emulator.commands.cli import main
 from emulator.errors import RunLockedError
 from emulator.io.runfolder import LOCK_FILE, RunLock
-from test_playback import write_static_sequence
+from tests.emulator.playback.test_playback import write_static_sequence
 
 METHODS = "classical-50,fixed"
 #: Holds the lock of argv[1] and prints its PID, then waits until stdin closes (or it is killed).

@@ -14,7 +14,7 @@ from emulator.errors import DatasetError
 from emulator.io.borealhdr import ZipSource, load_sequence, read_frame
 
 try:
-    from test_playback import write_static_sequence
+    from tests.emulator.playback.test_playback import write_static_sequence
 except ImportError:  # tests collected as a package
     from tests.test_playback import write_static_sequence
 

@@ -14,10 +14,10 @@ from emulator.commands.cli import main
 from emulator.metrics.bench import no_reference_note, REFINE_THRESHOLD_FRACTION, bench_vo, evo_result_path
 from emulator.metrics.vo import VOParameters
 
-from conftest import SAMPLE_SEQ, missing_shared
+from tests.conftest import SAMPLE_SEQ, missing_shared
 
 try:
-    from test_metrics_vo import make_synthetic_run
+    from tests.emulator.metrics.test_metrics_vo import make_synthetic_run
 except ImportError:  # tests collected as a package
     from tests.test_metrics_vo import make_synthetic_run
 

@@ -25,7 +25,7 @@ from emulator.io.tum import write_tum
 from emulator.metrics.rpe import rpe_by_length
 from emulator.metrics.trajectory import associate, read_trajectory, trajectory_from_poses
 
-from conftest import SHARED as _SHARED, missing_shared  # noqa: E402
+from tests.conftest import SHARED as _SHARED, missing_shared  # noqa: E402
 
 SHARED = _SHARED / "data" / "borealhdr_sample" / "calibration"
 

@@ -18,7 +18,7 @@ from emulator.io.noisemodel import read_noise_model
 from emulator.noise import bracket_groups, estimate_noise_model
 from synth.noise_model import noise_model_of
 
-from test_noise_insitu import _recording
+from tests.emulator.noise.test_noise_insitu import _recording
 
 GROUPS = 6
 
@@ -71,7 +71,7 @@ def test_readme_row_names_the_noise_option():
 
     from emulator.commands.cli import build_parser
 
-    readme = (Path(__file__).resolve().parents[1] / "docs" / "commands.md").read_text(encoding="utf-8")
+    readme = (Path(__file__).resolve().parents[3] / "docs" / "commands.md").read_text(encoding="utf-8")
     row = next(line for line in readme.splitlines() if line.startswith("| `exposim calibrate "))
     assert "`--noise SEQ -o noise.json`" in row
     sub = build_parser()._subparsers._group_actions[0].choices  # noqa: SLF001 - argparse has no public accessor

@@ -15,7 +15,7 @@ from emulator.orchestration.distributed import (SchedulerError, check_scheduler,
                                   resolve_scheduler)
 
 try:
-    from test_datasetrun import csv_bytes, make_dataset
+    from tests.emulator.orchestration.test_datasetrun import csv_bytes, make_dataset
 except ImportError:  # tests collected as a package
     from tests.test_datasetrun import csv_bytes, make_dataset
 

@@ -13,8 +13,8 @@ from emulator.orchestration.datasetrun import (BOREALHDR_FULL, DatasetRunError, 
                                  project_throughput, throughput)
 
 try:
-    from test_playback import write_static_sequence
-    from test_zip import zip_folder
+    from tests.emulator.playback.test_playback import write_static_sequence
+    from tests.emulator.io.test_zip import zip_folder
 except ImportError:  # tests collected as a package
     from tests.test_playback import write_static_sequence
     from tests.test_zip import zip_folder

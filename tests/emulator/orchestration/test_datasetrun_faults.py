@@ -9,7 +9,7 @@ import sys
 import pytest
 
 from emulator.commands.cli import main
-from test_playback import write_static_sequence
+from tests.emulator.playback.test_playback import write_static_sequence
 
 PLUG = '''
 class Steady:

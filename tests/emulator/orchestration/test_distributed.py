@@ -12,7 +12,7 @@ from emulator.orchestration.datasetrun import run_dataset
 from emulator.orchestration.distributed import run_tasks
 
 try:
-    from test_datasetrun import csv_bytes, make_dataset
+    from tests.emulator.orchestration.test_datasetrun import csv_bytes, make_dataset
 except ImportError:  # tests collected as a package
     from tests.test_datasetrun import csv_bytes, make_dataset
 

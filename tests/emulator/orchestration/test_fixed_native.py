@@ -16,7 +16,7 @@ from emulator.autoexposure import make_method
 from emulator.autoexposure.classical import Fixed
 from emulator.autoexposure.methodset import latency_options
 from emulator.orchestration.runner import run_to_folder
-from conftest import static_chart_recording  # noqa: E402
+from tests.conftest import static_chart_recording  # noqa: E402
 
 LATENCIES = (0, 1, 3)
 

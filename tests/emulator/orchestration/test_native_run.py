@@ -11,7 +11,7 @@ import pytest
 from emulator.commands.cli import main
 from emulator.io.runcsv import CSV_COLUMNS, EXTRA_COLUMNS, NATIVE_COLUMNS
 from emulator.orchestration.runner import run_to_folder
-from conftest import static_chart_recording  # noqa: E402
+from tests.conftest import static_chart_recording  # noqa: E402
 
 W, H = 40, 24
 METHODS = "classical-50,shim,zhang,fixed"
@@ -109,7 +109,7 @@ def test_benchmarks_read_one_frame_per_recorder_cycle(recording, tmp_path):
 
 
 def test_dataset_run_on_threads_with_a_zip_gives_the_single_runs_tables(tmp_path, capsys):
-    from test_datasetrun import make_dataset
+    from tests.emulator.orchestration.test_datasetrun import make_dataset
 
     root = make_dataset(tmp_path / "root")
     out = tmp_path / "out"

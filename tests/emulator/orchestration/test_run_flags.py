@@ -19,7 +19,7 @@ from emulator.core.emulate import UPWARD_RATIO_FLAG
 from emulator.io.runfolder import read_csv_rows
 from emulator.playback import RunConfig
 from emulator.orchestration.runner import run_to_folder
-from test_playback import write_static_sequence
+from tests.emulator.playback.test_playback import write_static_sequence
 
 PARTIAL = [{"cycle": 0, "missing": {"right": [1.0]}},
            {"cycle": 4, "missing": {"left": [2.0, 4.0, 8.0, 16.0, 32.0], "right": [2.0, 4.0, 8.0, 16.0, 32.0]}}]

@@ -15,7 +15,7 @@ import time
 import pytest
 
 from emulator.commands.cli import main
-from test_playback import write_static_sequence
+from tests.emulator.playback.test_playback import write_static_sequence
 
 SLOW = '''
 import time

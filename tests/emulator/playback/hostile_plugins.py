@@ -1,4 +1,4 @@
-"""Hostile AE plugins for tests/test_hostile_*.py (written independently of the fault suite).
+"""Hostile AE plugins for test_plugins_faults.py and test_workers_faults.py beside this file (imported as ``hostile_plugins``).
 
 Every class here misbehaves in one way; a run that includes it must give the other methods
 exactly the bytes they get without it.

@@ -21,10 +21,10 @@ from pathlib import Path
 import pytest
 
 from emulator.commands.cli import main
-from test_faults_workers import BUILTINS, alone  # noqa: F401 - the built-ins' bytes without a plugin, on this seq
-from test_playback import write_static_sequence
+from tests.emulator.playback.test_workers_faults import BUILTINS, alone  # noqa: F401 - the built-ins' bytes without a plugin, on this seq
+from tests.emulator.playback.test_playback import write_static_sequence
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[3]
 
 PLUGINS = '''
 import enum, os, signal

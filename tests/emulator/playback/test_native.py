@@ -21,7 +21,7 @@ from synth.sequence import load_camera
 from validation.common import quantisation_bound
 from validation.live import DatasetRadiance
 from validation.live.native import native_rate_loop, shot_timestamps
-from conftest import static_chart_recording  # noqa: E402
+from tests.conftest import static_chart_recording  # noqa: E402
 
 W, H = 40, 24
 PROPOSALS = (1.5, 3.0, 6.0, 12.0, 2.5, 5.0, 9.0, 24.0, 0.7)

@@ -16,7 +16,7 @@ from emulator.playback import (DEFAULT_RANGE_MS, LiveCycleProvider, LiveRateProv
                                closed_loop, iter_run, parse_options)
 
 try:
-    from test_playback import write_static_sequence
+    from tests.emulator.playback.test_playback import write_static_sequence
 except ImportError:  # tests collected as a package
     from tests.test_playback import write_static_sequence
 

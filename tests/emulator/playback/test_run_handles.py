@@ -16,9 +16,9 @@ from emulator.core.native import NATIVE_RATE, is_native_run, native_record, run_
 from emulator.playback import EmulatedProvider, NativeProvider, RunConfig, closed_loop, prepare_run, resolve_sequence
 from emulator.playback.seam import InlineMethod, MethodHandle, as_handle, call_method
 from emulator.playback.workers import start_methods
-from test_playback import write_static_sequence
+from tests.emulator.playback.test_playback import write_static_sequence
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[3]
 
 
 @pytest.fixture(scope="module")

@@ -15,7 +15,7 @@ from emulator.errors import PlaybackError
 from emulator.playback import RunConfig, settings
 from emulator.playback.config import CONFIG_KEYS, DEFAULT_METHOD_TIMEOUT_S
 from emulator.playback.settings import setting
-from test_playback import write_static_sequence
+from tests.emulator.playback.test_playback import write_static_sequence
 
 
 @pytest.fixture

@@ -42,7 +42,7 @@ RUN_THEN_PROBE = '''
 import resource, sys
 sys.path.insert(0, sys.argv[3])
 from pathlib import Path
-from test_playback import write_static_sequence
+from tests.emulator.playback.test_playback import write_static_sequence
 from emulator.playback import run
 root, _ = write_static_sequence(Path(sys.argv[2]) / "seq", n_cycles=2, shape=(32, 48))
 run(root, "classical-50,shim", workers=sys.argv[1])  # the user's own process runs a benchmark, then goes on

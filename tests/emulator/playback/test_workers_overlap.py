@@ -13,7 +13,7 @@ from emulator.errors import DatasetError
 from emulator.io.borealhdr import load_sequence
 from emulator.playback import RunConfig, run
 from emulator.playback.emulated import EmulatedProvider
-from test_playback import write_static_sequence
+from tests.emulator.playback.test_playback import write_static_sequence
 
 FIELDS = [f.name for f in dataclasses.fields(__import__("emulator.playback.loop", fromlist=["Shot"]).Shot)]
 

@@ -16,7 +16,7 @@ from emulator.report.html import (HTML_REPORT_FILE, Thumb, _sample, contact_shee
 from emulator.orchestration.runner import run_to_folder
 
 try:
-    from test_playback import write_static_sequence
+    from tests.emulator.playback.test_playback import write_static_sequence
 except ImportError:  # tests collected as a package
     from tests.test_playback import write_static_sequence
 
@@ -134,7 +134,7 @@ def test_run_report_opens_in_chromium_with_every_image_decoded_and_no_error(run_
 
 def test_dataset_report_links_every_unit_page_and_shows_the_first_sheet(tmp_path):
     try:
-        from test_datasetrun import make_dataset
+        from tests.emulator.orchestration.test_datasetrun import make_dataset
     except ImportError:  # tests collected as a package
         from tests.test_datasetrun import make_dataset
     from emulator.orchestration.datasetrun import run_dataset

@@ -9,7 +9,7 @@ import time
 
 import numpy as np
 import pytest
-from conftest import SynthesizeCalled
+from tests.conftest import SynthesizeCalled
 
 from emulator.errors import OutputExistsError
 from validation.ae_study import (
@@ -294,7 +294,7 @@ def test_scheduler_reaches_the_renders_and_a_bad_one_creates_nothing(tmp_path, s
 
 
 def test_ae_study_replicates_shift_every_seed(tmp_path, stop_at_synthesize):
-    from conftest import SynthesizeCalled
+    from tests.conftest import SynthesizeCalled
 
     from validation.ae_study.cli import main as ae_main
 

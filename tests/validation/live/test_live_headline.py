@@ -112,7 +112,7 @@ def test_the_report_says_when_a_walk_is_one_segment_and_the_level_walks_to_decid
 
     from validation.live.headline import headlines_markdown
 
-    study = Path(__file__).resolve().parents[1] / "docs" / "results" / "live-study-2026-11-28" / "results.json"
+    study = Path(__file__).resolve().parents[3] / "docs" / "results" / "live-study-2026-11-28" / "results.json"
     results = json.loads(study.read_text())  # a study of 8-cycle walks, segments of 10 pairs
     assert (results["config"]["n_cycles"], results["config"]["segment_pairs"]) == (8, 10)
     short = headlines_markdown(results)

@@ -12,7 +12,7 @@ from synth.sequence import load_camera
 from validation.live import DatasetRadiance, iter_live
 from validation.live.config import LiveError
 from validation.live.native import native_rate_loop, shot_timestamps
-from conftest import static_chart_recording  # noqa: E402
+from tests.conftest import static_chart_recording  # noqa: E402
 
 W, H = 40, 24
 PROPOSALS = (1.5, 3.0, 6.0, 12.0, 2.5, 5.0, 9.0)  # distinct: an off-by-one frame cannot pass

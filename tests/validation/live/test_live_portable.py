@@ -2,7 +2,7 @@
 
 import json
 
-from test_live_evidence import _records
+from tests.validation.live.test_live_evidence import _records
 
 from validation.live.config import CONDITIONS
 from validation.live.portable import ABSOLUTE_PATH, REPOSITORY, outside_paths, relative_command

@@ -10,7 +10,7 @@ import pytest
 from validation.live.config import CONDITIONS, METHODS, SCENES, LiveConfig, LiveError
 from validation.verdicts.simulate import Scales, simulate_tables
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[3]
 COMMITTED = sorted(p.parent for p in (ROOT / "docs" / "results").glob("*/walks.csv"))
 OUTPUTS = ("results.json", "report.md", "power.json", "calibration.json")
 

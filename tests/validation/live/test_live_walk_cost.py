@@ -251,7 +251,7 @@ def test_a_native_run_folder_has_its_native_columns_in_the_header_as_in_every_ro
 
 def test_no_run_images_reaches_every_walk_and_stays_out_of_the_command(tmp_path, monkeypatch):
     import emulator.orchestration.distributed
-    from conftest import SynthesizeCalled
+    from tests.conftest import SynthesizeCalled
 
     from validation.live.cli import build_parser, command_line, main
 
@@ -277,7 +277,7 @@ def test_a_walk_that_fails_after_writing_its_runs_leaves_no_run_images(tmp_path,
     """--no-run-images: a walk that fails once its run folders are written (its benchmarks, here) deletes
     their images too (written uncompressed, they would stay until the walk is run again)."""
     import validation.live.walks as walks
-    from test_validation_live import TINY
+    from tests.validation.live.test_validation_live import TINY
     from validation.live.experiment import run_live_experiment
 
     monkeypatch.setenv("EXPOSIM_DENOISE", "off")

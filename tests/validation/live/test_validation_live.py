@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import SynthesizeCalled
+from tests.conftest import SynthesizeCalled
 
 import synth
 from emulator.autoexposure import make_method

@@ -17,7 +17,7 @@ from scenes.image_stats import keypoint_points, keypoint_repeatability, syntheti
 from validation.common import ValidationError
 from validation.render_study import balance as bal
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[3]
 
 
 pytestmark = pytest.mark.usefixtures("default_render_env")
