@@ -95,7 +95,7 @@ def test_fit_inverse_response_on_nan_is_a_calibration_error():
 
 
 # ------------------------------------------------------------------------------------------------
-# Public-API misuse (issue 24), written independently of tests/test_faults_*.py: each call
+# Public-API misuse (issue 24), written independently of the suite above: each call
 # raises one ``ExposimError`` subclass whose message names the argument, never a bare
 # NumPy/Python error or a wrong answer.
 # ------------------------------------------------------------------------------------------------

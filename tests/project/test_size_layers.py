@@ -1,6 +1,6 @@
 """Size limits of the synthetic and validation layers (issue 23): ``scenes/``, ``synth/``, ``validation/``.
 
-No module over 500 lines, no function over 100 lines of code, counted as ``tests/test_size.py``
+No module over 500 lines, no function over 100 lines of code, counted as ``tests/project/test_size.py``
 counts them for ``emulator/`` (its checker is used here: lines without blank lines,
 comment-only lines and the function's docstring; nested functions count in their parent too).
 """

@@ -1,5 +1,5 @@
 """The throughput work changes no method's output: optimised arithmetic against the frozen
-pre-change implementations (tests/ae_reference.py) on real BorealHDR frames, bit for bit.
+pre-change implementations (tests/emulator/autoexposure/ae_reference.py) on real BorealHDR frames, bit for bit.
 
 Frames: the sample's left-camera brackets and emulations of them at off-bracket targets
 (what the closed loop hands the methods), through both gray conversions.  Then the whole
@@ -96,7 +96,7 @@ def test_zhang_derivatives_equal_frozen(frames, sample):
 def test_kim_metrics_equal_frozen(frames):
     # borealhdr: the frozen float64 table form ends in a 2.3M-element BLAS dot whose last bits
     # follow OpenBLAS's kernel and thread count; the library now rounds REF's formula once
-    # (tests/test_autoexposure_kim.py::test_metric_ref_is_ref_formula_correctly_rounded), so the
+    # (tests/emulator/autoexposure/test_autoexposure_kim.py::test_metric_ref_is_ref_formula_correctly_rounded), so the
     # two agree to the frozen form's own accuracy, not bit for bit.
     for name, _, y in _grays(frames, REF_BAYER_CODE):
         assert kim_mod.metric_ref(y) == pytest.approx(ref.metric_ref(y), rel=1e-13, abs=0), name

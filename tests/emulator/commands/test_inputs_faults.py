@@ -236,7 +236,7 @@ class {c.upper()}:
 
 
 # ------------------------------------------------------------------------------------------------
-# Bounded inputs (issue 24), written independently of tests/test_faults_*.py.
+# Bounded inputs (issue 24), written independently of the suite above.
 #
 # Each bad flag gives exit code 1 or 2, one error line naming the flag or the value, nothing
 # written, and costs neither time nor memory (the risky ones run in a child process with a

@@ -153,7 +153,7 @@ def test_a_bad_render_cache_entry_is_rendered_again_and_replaced(tmp_path):
 
 # ------------------------------------------------------------------------------------------------
 # Swapped and corrupted frame-cache and render-cache entries (issue 24), written
-# independently of tests/test_faults_*.py.
+# independently of the suite above.
 #
 # Outcome asserted: a run through a damaged frame cache gives the bytes of a run without a cache;
 # ``exposim cache`` rebuilds what is bad; a damaged render-cache entry is never returned.

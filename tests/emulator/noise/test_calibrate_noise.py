@@ -1,6 +1,6 @@
 """``exposim calibrate --noise SEQ -o noise.json``: the in-situ noise model, printed and written.
 
-The recording is synth's BorealHDR-like camera (the builder of tests/test_noise_insitu.py:
+The recording is synth's BorealHDR-like camera (the builder of tests/emulator/noise/test_noise_insitu.py:
 320x240, static textured chart, three sweeps), whose gain is known: the in-situ estimate
 is within 5 % of it there (+3.1 % measured, about 4 standard errors allowed).  The CLI must
 print the estimator's own values and write a file that reads back to the same model.

@@ -102,7 +102,7 @@ def test_dask_runs_equal_serial_and_survive_a_killed_worker(tmp_path, killer_mod
 
         # The killer's first call kills its process with a partial staging folder behind; methods run
         # inline here, so that process is the Dask worker (in their own processes, the default, the
-        # killer fails alone: tests/test_faults_workers.py); the scheduler runs the task again on a
+        # killer fails alone: tests/emulator/playback/test_workers_faults.py); the scheduler runs the task again on a
         # fresh worker.
         marker.unlink()
         killed = run_dataset(root, tmp_path / "killed", methods=methods, group_size=4, scheduler=address,

@@ -85,7 +85,7 @@ def test_resume_of_valid_tables_repairs_nothing(seq, clean, tmp_path):
 
 
 # ------------------------------------------------------------------------------------------------
-# Damaged run folders under --resume, written independently of tests/test_faults_*.py (issue 24).
+# Damaged run folders under --resume, written independently of the suite above (issue 24).
 #
 # An interrupted run's tables are damaged the ways a crash, an editor or a copy can damage them;
 # ``--resume`` must then give exactly the bytes of an uninterrupted run, or refuse in one line

@@ -256,7 +256,7 @@ def test_call_method_contract():
 
 
 # ------------------------------------------------------------------------------------------------
-# Hostile AE plugins, written independently of tests/test_faults_*.py (issue 24).
+# Hostile AE plugins, written independently of the suite above (issue 24).
 #
 # Each hostile method runs FIRST beside classical-50 and shim on a small synthetic recording;
 # the outcome asserted is that classical-50's and shim's files are byte-identical to a run

@@ -365,8 +365,8 @@ def _state(pid: int) -> str:
 
 
 # ------------------------------------------------------------------------------------------------
-# Whole runs under hostile conditions (issue 24), written independently of
-# tests/test_faults_*.py: Ctrl-C and SIGTERM mid-run, then --resume; hostile plugins in dataset
+# Whole runs under hostile conditions (issue 24), written independently of the suite above:
+# Ctrl-C and SIGTERM mid-run, then --resume; hostile plugins in dataset
 # runs.
 # ------------------------------------------------------------------------------------------------
 HERE = Path(__file__).resolve().parent
