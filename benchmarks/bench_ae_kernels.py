@@ -1,4 +1,4 @@
-"""Per-frame arithmetic of shim, zhang and kim: pre-change (tests/ae_reference.py) vs now; not a test.
+"""Per-frame arithmetic of shim, zhang and kim: pre-change (tests/emulator/autoexposure/ae_reference.py) vs now; not a test.
 
 Usage: python benchmarks/bench_ae_kernels.py [SEQUENCE] [--repeat N]
 
@@ -22,7 +22,7 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-sys.path.insert(0, str(HERE.parent / "tests"))
+sys.path.insert(0, str(HERE.parent / "tests" / "emulator" / "autoexposure"))
 
 import ae_reference as ref  # noqa: E402
 from emulator.autoexposure import Zhang2017  # noqa: E402

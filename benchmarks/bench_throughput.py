@@ -10,7 +10,7 @@ spreads over all of them), best of ``--repeat``:
   with the PNGs decoded (``png``) and from the decoded-frame cache (``cache``, built into
   ``--cache-dir`` or a temporary folder at the start, timed separately);
 * ``pre-change``: the same loop with the methods' per-frame arithmetic of before the
-  throughput work (tests/ae_reference.py patched in, no per-frame gray memo), PNGs decoded;
+  throughput work (tests/emulator/autoexposure/ae_reference.py patched in, no per-frame gray memo), PNGs decoded;
 * ``published`` (borealhdr only): the published reference loop as bench_playback.py's naive
   loop with REF-style methods: methods one after another, every bracket of both cameras
   decoded every cycle, per-pixel ``np.interp`` emulation, REF's per-pixel method code.
@@ -35,7 +35,7 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-sys.path.insert(0, str(HERE.parent / "tests"))
+sys.path.insert(0, str(HERE.parent / "tests" / "emulator" / "autoexposure"))
 
 from emulator.autoexposure import METHOD_NAMES  # noqa: E402
 from emulator.io.borealhdr import load_sequence, sequence_response  # noqa: E402

@@ -10,7 +10,7 @@ method runs with the same kernels whatever ``--jobs`` is.  The run's own process
 kernels (NumPy reads the switch once, at import).
 
 A sort gives the same values whichever kernel sorts, and the other methods' tables were the
-same bytes with and without the switch (tests/test_numpy_dispatch.py states the check).  Other
+same bytes with and without the switch (tests/emulator/test_numpy_dispatch.py states the check).  Other
 kernels change with it too (a vectorised sum may round differently), and Kim's closed loop can
 amplify that: over the live study's 48 walks, Kim's emulated runs differed in 2 between code with
 and without the switch, and one of them, run again, gives either result by the switch alone

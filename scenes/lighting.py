@@ -29,7 +29,7 @@ __all__ = [
 ]
 
 #: Rec.709 / sRGB luminance weights (the Y row of the RGB -> XYZ matrix, D65).
-#: ``tests/test_scenes.py`` checks them against colour-science.
+#: ``tests/scenes/test_scenes.py`` checks them against colour-science.
 LUMINANCE_WEIGHTS_REC709 = (0.2126, 0.7152, 0.0722)
 
 #: Apparent diameter of the sun seen from the earth, degrees.

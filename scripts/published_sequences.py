@@ -1,7 +1,7 @@
 """Run the published BorealHDR AE loop itself and store every method's exposure sequence.
 
     python scripts/published_sequences.py --borealhdr-repo CLONE --name upstream-complete \
-        --recording DIR [--replay-from DIR --pattern 0,1,2,...] [--kim-seeds 0,1,6] -o tests/data/published_sequences.json
+        --recording DIR [--replay-from DIR --pattern 0,1,2,...] [--kim-seeds 0,1,6] -o tests/validation/data/published_sequences.json
 
 CLONE is a checkout of github.com/norlab-ulaval/BorealHDR (its ``scripts/`` and
 ``calibration_files/pcalib_inside1.txt`` are used; none of its code is part of exposim).  The

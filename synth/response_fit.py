@@ -21,7 +21,7 @@ table is well above one unit, absolute in the toe where it is not, so that neith
 dominates.  Every term is increasing for x > 0 with the bounds used, so the curve is
 strictly increasing (checked at every integer DN by :class:`~emulator.core.response.CameraResponse`).
 
-Measured against the table (the test ``tests/test_synth_camera.py`` recomputes them):
+Measured against the table (the test ``tests/synth/test_synth_camera.py`` recomputes them):
 maximum absolute error 2.35 table units (0.92 % of g(4095) = 255), at sample 215
 (DN 3453, inside the knee); maximum mixed error 2.11 %; RMS 0.82 units; g(0) = 0.1729
 (table: 0.1729).

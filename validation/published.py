@@ -9,7 +9,7 @@ proposal is the exposure of column k + 1; the last column is never shown.
 
 ``scripts/published_sequences.py`` runs that code itself (from a checkout given on the command
 line: no published code is part of exposim) and stores every method's exposure sequence, with
-the dependency versions, in ``tests/data/published_sequences.json``.  This module re-creates the
+the dependency versions, in ``tests/validation/data/published_sequences.json``.  This module re-creates the
 loop's *frames* from the description above (:class:`PublishedFrames`), so that a test can drive
 exposim's methods in ``borealhdr`` mode through exactly those frames (:func:`drive`) and compare
 their proposals with the stored sequences: any drift of a method, or of this re-creation, shows.

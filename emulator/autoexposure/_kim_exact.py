@@ -3,7 +3,7 @@
 :func:`emulator.autoexposure.kim.metric_ref` reduces the image to the Y_8 histogram and the
 exact integer sum of Q per bin (:func:`_bin_sums`); :func:`_metric_ref_bins` evaluates REF's
 formula on those 256 bins in 30-digit decimal arithmetic and rounds once to float64, so the
-metric has the same bits on every machine (tests/test_autoexposure_kim.py checks it against a
+metric has the same bits on every machine (tests/emulator/autoexposure/test_autoexposure_kim.py checks it against a
 direct 50-digit evaluation).
 """
 

@@ -9,5 +9,5 @@ the camera response and levels, the emulation itself (:mod:`~emulator.core.emula
 in-memory recording (:mod:`~emulator.core.dataset`) and the statistics the reports use
 (:mod:`~emulator.core.stats`, :mod:`~emulator.core.settling`).  :mod:`emulator.noise` and
 :mod:`emulator.autoexposure` sit on this floor too.  Nothing here imports a higher floor
-(``tests/test_import_contract.py``).
+(``tests/project/test_import_contract.py``).
 """

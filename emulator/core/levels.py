@@ -5,7 +5,7 @@ one below the 12-bit maximum), are defined here once, in a leaf module, and are 
 through :mod:`emulator.io.borealhdr` (the reader whose fallback they are).  They cannot be
 defined in ``emulator/io/borealhdr.py`` itself: :mod:`emulator.core.response` needs them for its
 constructors' defaults, and ``io.borealhdr -> io.pcalib -> response`` already runs the other
-way, so that would be an import circle (``tests/test_import_contract.py``).
+way, so that would be an import circle (``tests/project/test_import_contract.py``).
 ``emulator.core.response.BOREALHDR_WHITE_LEVEL`` / ``BOREALHDR_BLACK_LEVEL`` stay as aliases of
 these two numbers for the many callers that use them.
 """

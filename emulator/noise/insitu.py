@@ -4,7 +4,7 @@
 :func:`estimate_noise_model` fits the conversion gain and read noise from them
 (:class:`NoiseEstimate`).  Against synth's known camera the gain error is +3.1 % for a
 static scene, -1.1 % at 1.5 px motion per shot and -13.6 % at the worst case (half a Bayer
-cell per shot) (tests/test_noise_insitu.py).  On the real BorealHDR sample the gain comes
+cell per shot) (tests/emulator/noise/test_noise_insitu.py).  On the real BorealHDR sample the gain comes
 out 7.87 +- 0.25 e- per unit of h (full well ~2005 e-) and the read-noise fit is <= 0:
 the read noise is not trustworthy in absolute terms there.
 

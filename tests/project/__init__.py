@@ -1,0 +1,1 @@
+"""Tests of the project as a whole: import contract, sizes, docs, README, extras, packaging, public API, command-line conventions, shared data, and the test tree's own layout."""

@@ -1,0 +1,1 @@
+"""Tests of validation/commands/ (exposim validate, its study protocol)."""
