@@ -4,6 +4,7 @@ the cell formats the live study's reports share (:func:`fmt`, :func:`ci_text`)."
 
 from __future__ import annotations
 
+from emulator.cells import format_number
 from validation.live.headline import headlines_markdown
 from validation.verdicts.agreement import OMEGA2_MAX
 from validation.verdicts.plasmode import calibration_markdown
@@ -11,13 +12,8 @@ from validation.verdicts.plasmode import calibration_markdown
 __all__ = ["fmt", "ci_text", "family_short", "evidence_markdown"]
 
 
-def fmt(v, spec=".3g") -> str:
-    """A figure for the report: ``n/a`` for None, yes/no for a flag."""
-    if v is None:
-        return "n/a"
-    if isinstance(v, bool):
-        return "yes" if v else "no"
-    return format(float(v), spec)
+#: A figure for the report: ``n/a`` for None, yes/no for a flag (the house rule, one copy).
+fmt = format_number
 
 
 def ci_text(iv, spec=".3g") -> str:
