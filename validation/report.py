@@ -26,7 +26,7 @@ from emulator.io.files import (
 from emulator.report.figures import subplots
 from emulator.report.html import write_report
 from validation.common import ValidationError, provenance
-from validation.emulation.report import _emulation_figures, _emulation_md, emulation_verdict
+from validation.emulation.report import emulation_figures as _emulation_figures, emulation_markdown as _emulation_md, emulation_verdict
 from emulator.cells import format_number
 
 __all__ = ["EXPERIMENTS", "make_config", "run_experiment", "emulation_verdict"]

@@ -44,7 +44,7 @@ from importlib import metadata
 
 import numpy as np
 
-from emulator.autoexposure._base import AutoExposureError, MethodFailed
+from emulator.autoexposure.base import AutoExposureError, MethodFailed
 
 __all__ = [
     "ENTRY_POINT_GROUP",
@@ -267,8 +267,8 @@ def _names_param(factory: Callable, key: str) -> bool:
         return False
 
 
-def _describe(exc: BaseException) -> str:
-    from emulator.autoexposure.isolation import _describe as describe
+def describe_error(exc: BaseException) -> str:
+    from emulator.autoexposure.isolation import describe_error as describe
 
     return describe(exc)
 
@@ -318,23 +318,23 @@ class PluginMethod:
     def guard_count(self) -> int:
         """The plugin's own fallback count, read isolated: a property that raises or exits
         fails this method alone (MethodFailed), never the run."""
-        from emulator.autoexposure.isolation import _isolated
+        from emulator.autoexposure.isolation import run_isolated
 
-        value = _isolated(lambda: getattr(self.method, "guard_count", 0), self.name,
-                          lambda exc: MethodFailed(f"guard_count: {_describe(exc)}"))
+        value = run_isolated(lambda: getattr(self.method, "guard_count", 0), self.name,
+                          lambda exc: MethodFailed(f"guard_count: {describe_error(exc)}"))
         if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
             raise MethodFailed(f"guard_count is {value!r}, not an integer")
         return int(value)
 
     def config(self) -> dict:
-        from emulator.autoexposure.isolation import _isolated
+        from emulator.autoexposure.isolation import run_isolated
 
         inner = getattr(type(self.method), "config", None)
         cfg = {}
         if callable(inner):
             try:
-                cfg = dict(_isolated(self.method.config, self.name,
-                                     lambda exc: MethodFailed(f"config(): {_describe(exc)}")))
+                cfg = dict(run_isolated(self.method.config, self.name,
+                                     lambda exc: MethodFailed(f"config(): {describe_error(exc)}")))
             except MethodFailed as exc:
                 cfg = {"config_error": str(exc)}
             except (TypeError, ValueError) as exc:

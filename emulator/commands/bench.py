@@ -13,6 +13,7 @@ import shutil
 import sys
 from pathlib import Path
 
+from emulator.commands.argtypes import refine_mode
 from emulator.commands.progress import add_quiet, progress_arg
 
 __all__ = ["register"]
@@ -59,16 +60,6 @@ def _floats(value: str) -> list[float]:
         raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {value!r}") from None
 
 
-def _refine_mode(value: str):
-    if value.strip().lower() == "auto":
-        return "auto"
-    try:
-        n = int(value)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected 'auto' or a number of stereo pairs, got {value!r}") from None
-    if n < 0:
-        raise argparse.ArgumentTypeError(f"expected 'auto', 0 or a positive number of stereo pairs, got {n}")
-    return n
 
 
 @contextlib.contextmanager
@@ -337,7 +328,7 @@ def _add_vo(sub) -> None:
                    "the recording's date: <sequence>/calibration, calibration/<month>_<year>/ beside the recording, "
                    "or calibration_files/calibration_vo/<month>_<year>/ of a BorealHDR clone)")
     v.add_argument("--baseline-m", type=float, help="override the calibration's stereo baseline (m)")
-    v.add_argument("--refine-extrinsics", type=_refine_mode, default="auto", metavar="auto|N",
+    v.add_argument("--refine-extrinsics", type=refine_mode, default="auto", metavar="auto|N",
                    help="re-estimate the rig's relative rotation from left-right matches: 'auto' (default) when "
                    "the median epipolar residual of 2 stereo pairs under the calibration exceeds half the row "
                    "tolerance (the BorealHDR Sept. 2023 files: 17 px); N > 0: always, from N pairs; 0: never")

@@ -91,9 +91,9 @@ def register(subparsers) -> None:
     p.add_argument("--calibration", help="folder with left.yaml, right.yaml (default: chosen from the recording's "
                    "layout and date, as bench vo; none is written when none is found)")
     p.add_argument("--no-calibration", action="store_true", help="write no calibration files or camera_info")
-    from emulator.commands.bench import _refine_mode
+    from emulator.commands.argtypes import refine_mode
 
-    p.add_argument("--refine-extrinsics", type=_refine_mode, default="auto", metavar="auto|N",
+    p.add_argument("--refine-extrinsics", type=refine_mode, default="auto", metavar="auto|N",
                    help="check the calibration's stereo extrinsics on the method's left-right pairs as bench vo does: "
                         "'auto' (default) refines them when the epipolar residual needs it, N always refines from N "
                         "pairs, 0 writes the calibration as given")

@@ -37,6 +37,7 @@ __all__ = [
     "check_raw",
     "NOISE_MODES",
     "UPWARD_RATIO_FLAG",
+    "check_noise_model",
 ]
 
 #: Noise options of :func:`emulate`.
@@ -173,7 +174,7 @@ def emulate(
             return out
         return out, validity_mask(raw, target_ms / source_ms, response)
     ratio = float(target_ms) / float(source_ms)
-    model = _check_noise_model(noise_model, response, noise, return_excess)
+    model = check_noise_model(noise_model, response, noise, return_excess)
     if noise == "consistent":
         from emulator.noise.tables import check_rng, consistent_noise
 
@@ -188,7 +189,8 @@ def emulate(
     return tuple(results) if len(results) > 1 else results[0]
 
 
-def _check_noise_model(noise_model, response: CameraResponse, noise: str, return_excess: bool):
+def check_noise_model(noise_model, response: CameraResponse, noise: str, return_excess: bool):
+    """``noise_model`` if it is a NoiseModel of ``response``, else an EmulationError naming what is wrong."""
     from emulator.noise.model import NoiseModel
 
     why = f'noise="{noise}"' if noise != "none" else "return_excess"

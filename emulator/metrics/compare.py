@@ -179,7 +179,7 @@ def bench_compare(folders, out_dir: str | os.PathLike, *, force: bool = False, c
         The content of ``results.json``: the inputs, every row (method, rate, folder), the comparisons
         with 95 % intervals and the ranking (best first).
     """
-    from emulator.metrics.bench_common import _version
+    from emulator.version import __version__
 
     folders = [Path(f) for f in folders]
     if not folders:
@@ -194,7 +194,7 @@ def bench_compare(folders, out_dir: str | os.PathLike, *, force: bool = False, c
                      reverse=cmp["primary"] == "median_matches")
     results = {
         "benchmark": "compare",
-        "exposim_version": _version(),
+        "exposim_version": __version__,
         "command": command,
         "kind": inputs[0]["kind"],
         "unit": "recorder cycle" if inputs[0]["kind"] == "run" else "consecutive image pair (matches), image "

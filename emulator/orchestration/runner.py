@@ -34,7 +34,7 @@ from emulator.playback import METHOD_CAMERA, MethodStep, RunConfig, RunStats, cl
     resolve_sequence
 from emulator.io.runwatch import watch_run
 from emulator.playback.shmblock import SharedMemoryWarning, shortage_note
-from emulator.playback._worker_child import plain  # inline methods' config() as JSON, as a worker sends it
+from emulator.playback.worker_child import plain  # inline methods' config() as JSON, as a worker sends it
 
 __all__ = ["run_to_folder", "write_run", "saved_image", "RUN_JSON_EVERY"]
 

@@ -400,7 +400,7 @@ class RunConfig:
         The model is :attr:`noise_model` (a NoiseModel or a noise-model JSON), or the one
         the recording's ``exposim.json`` carries; it must refer to ``response``.
         """
-        from emulator.core.emulate import _check_noise_model
+        from emulator.core.emulate import check_noise_model as _check_noise_model
         from emulator.io.noisemodel import noise_model_from_metadata, read_noise_model
         from emulator.noise import NoiseModel
 

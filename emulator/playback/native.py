@@ -54,7 +54,7 @@ from emulator.core.native import (BLUR_STOPS_PER_PX, MOTION_STOPS_PER_FRAME, NAT
                              WINDOW_CYCLES, NativeCandidate, flow_velocity, invalid_fraction, median_motion_px,
                              native_select, radiance_gray, rotation_between, warp_to_instant, warp_with_flow)
 from emulator.playback.config import RunConfig, provides_rate
-from emulator.playback.emulated import METHOD_CAMERA, _CycleImages, _fractions, _Memo
+from emulator.playback.emulated import METHOD_CAMERA, CycleImages as _CycleImages, Memo as _Memo, clip_fractions as _fractions
 from emulator.playback.loop import Shot
 from emulator.playback.records import RunStats
 
@@ -433,7 +433,7 @@ class NativeProvider:
     def excess_blur_px(self, j: int, k: int, target_ms: float) -> float:
         """Predicted blur of frame ``j``'s window beyond a capture of ``target_ms`` at frame ``k`` (px, largest over
         the image's 3x3 grid, the first camera; 0 without a gyro, or where it does not cover the windows)."""
-        from emulator.core.blur import _window_blur, as_angular_velocity
+        from emulator.core.blur import as_angular_velocity, window_blur as _window_blur
 
         if self.motion is None:
             return 0.0

@@ -41,9 +41,9 @@ import weakref
 
 import numpy as np
 
-from emulator.autoexposure._base import AutoExposureError, MethodFailed
+from emulator.autoexposure.base import AutoExposureError, MethodFailed
 from emulator.errors import PlaybackError
-from emulator.playback._worker_child import _child_main, _label
+from emulator.playback.worker_child import child_main, method_label
 from emulator.playback.config import DEFAULT_METHOD_TIMEOUT_S, WORKER_MODES
 from emulator.playback.seam import InlineMethod, MethodHandle, stop_methods
 from emulator.playback.shmblock import reserve_block
@@ -54,7 +54,7 @@ __all__ = ["MethodWorker", "start_methods", "stop_methods", "DEFAULT_METHOD_TIME
 
 #: Largest reply a worker may send, bytes (what a method printed is kept up to 64 KiB, its config's values cut).
 MAX_REPLY_BYTES = 16 << 20
-_PRELOAD = ["emulator.playback._worker_preload"]  # imports the worker side too
+_PRELOAD = ["emulator.playback.worker_preload"]  # imports the worker side too
 _ctx = None
 _ctx_lock = threading.Lock()
 
@@ -151,7 +151,7 @@ class MethodWorker(MethodHandle):
     def __init__(self, item, *, mode: str, response, options: dict, timeout_s: float) -> None:
         ctx = _context()
         self.timeout_s = float(timeout_s)
-        self.label = _label(item)
+        self.label = method_label(item)
         self.name = self.label
         self.failed: str | None = None
         self._guard = 0
@@ -161,7 +161,7 @@ class MethodWorker(MethodHandle):
         self.shm_shortage: int | None = None  # bytes of the image block /dev/shm had no room for
         self._ahead = None  # (raw, exposure_ms, monotonic time) of a call sent ahead
         self._conn, child = ctx.Pipe()
-        self._proc = ctx.Process(target=_child_main, args=(child, os.getpid()), daemon=True, name="exposim-method")
+        self._proc = ctx.Process(target=child_main, args=(child, os.getpid()), daemon=True, name="exposim-method")
         _start(self._proc)
         child.close()
         self._finalizer = weakref.finalize(self, _release, self._proc, self._shm_box)
@@ -308,8 +308,8 @@ class MethodWorker(MethodHandle):
         own conversion and memo: the same bytes the method would compute)."""
         if self._gray_code is None or raw.ndim != 2 or raw.dtype != np.uint16:
             return None
-        from emulator.autoexposure._base import to_gray
-        from emulator.autoexposure._frame import FRAME_MEMO
+        from emulator.autoexposure.base import to_gray
+        from emulator.autoexposure.frame import FRAME_MEMO
 
         code = self._gray_code
         gray = FRAME_MEMO.get(raw, ("gray", code), lambda: to_gray(raw, code))

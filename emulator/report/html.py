@@ -26,7 +26,8 @@ import numpy as np
 from emulator.io.files import REPORT_FILE, write_text
 
 __all__ = ["HTML_REPORT_FILE", "Thumb", "markdown_to_html", "png_data_uri", "thumbnail", "contact_sheet",
-           "render_page", "write_report", "run_contact_sheet", "run_folder_pages"]
+           "render_page", "write_report", "run_contact_sheet", "run_folder_pages",
+           "spread_indices"]
 
 #: File name of the HTML report, beside ``report.md``.
 HTML_REPORT_FILE = "report.html"
@@ -282,10 +283,10 @@ def write_report(folder: str | os.PathLike, markdown: str, *,
 
 
 # ---------------------------------------------------------------------------- run folders
-def _sample(n: int, k: int) -> list[int]:
+def spread_indices(n: int, k: int) -> list[int]:
     """``k`` indices spread evenly over ``range(n)``, first and last included.
 
-    >>> _sample(10, 4), _sample(3, 6), _sample(0, 3)
+    >>> spread_indices(10, 4), spread_indices(3, 6), spread_indices(0, 3)
     ([0, 3, 6, 9], [0, 1, 2], [])
     """
     if n <= 0:
@@ -313,7 +314,7 @@ def run_contact_sheet(run_dir: str | os.PathLike, methods: Sequence[str], tables
         cols = tables.get(name) or {}
         n = len(cols.get("cycle", ()))
         cells = []
-        for idx in _sample(n, n_cycles):
+        for idx in spread_indices(n, n_cycles):
             row = {key: values[idx] for key, values in cols.items()}
             sat = float(row["saturated_fraction"]) * 100.0
             caption = (f"cycle {int(row['cycle'])}: {float(row['target_ms']):.2f} ms "

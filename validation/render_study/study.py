@@ -17,11 +17,11 @@ from validation.render_study.config import (
     RenderStudyConfig,
     TARGET_REPEATABILITY,
     TARGET_TOLERANCE,
-    _DENOISED,
-    _MODES,
+    DENOISED as _DENOISED,
+    MODES as _MODES,
 )
-from validation.render_study.measure import _real_stats, _within, bright_errors, speedups, walk_repeatability
-from validation.render_study.report import _plot, render_study_table
+from validation.render_study.measure import real_stats as _real_stats, within_real as _within, bright_errors, speedups, walk_repeatability
+from validation.render_study.report import plot_render_study as _plot, render_study_table
 
 __all__ = ["run_render_study", "total_steps"]
 

@@ -33,7 +33,7 @@ import numpy as np
 
 from emulator.core.stats import rng_of, variance_components
 from validation.verdicts.agreement import ALPHA, MIN_WALKS, OMEGA2_MAX, judge_batch, omega2_untruncated
-from validation.verdicts.plasmode import TARGET, WALK_CANDIDATES, _residual_sd, first_reaching
+from validation.verdicts.plasmode import TARGET, WALK_CANDIDATES, residual_sd as _residual_sd, first_reaching
 from validation.verdicts.ranking import cluster_plan
 
 __all__ = ["SCENARIOS", "STUDIES", "own_residuals", "scenario_rates", "metric_own_calibration",
