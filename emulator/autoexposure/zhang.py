@@ -40,6 +40,7 @@ from emulator.autoexposure.base import MAX_DN, AutoExposureError, AutoExposureMe
 from emulator.autoexposure.classical import Classical
 from emulator.autoexposure.shim import row_blocks
 from emulator.numpy_dispatch import avx512_sort_slow_in_this_process as _avx512_sort_slow_here
+from emulator.core.response import CameraResponse
 
 __all__ = [
     "Zhang2017",
@@ -278,8 +279,6 @@ class Zhang2017(AutoExposureMethod):
             self._h = ref_icrf_derivative(_ref_knots(response))
         else:
             if response is None:
-                from emulator.core.response import CameraResponse
-
                 response = CameraResponse.linear()
             self._dlogt = paper_dlogt_table(response)
 

@@ -15,6 +15,13 @@ from pathlib import Path
 
 from emulator.commands.argtypes import refine_mode
 from emulator.commands.progress import add_quiet, progress_arg
+from emulator.io.files import to_jsonable, strict_json
+from emulator.metrics.bench import bench_features, bench_vo
+from emulator.metrics.compare import bench_compare
+from emulator.metrics.features import RATIO_TEST
+from emulator.metrics.rpe import looks_like_estimate, rpe_files
+from emulator.metrics.vo import VOParameters
+from emulator.report.bench import features_verdicts, vo_verdicts
 
 __all__ = ["register"]
 
@@ -44,8 +51,6 @@ _RATIO_TEST = 0.8
 
 
 def _ratio(args) -> float:
-    from emulator.metrics.features import RATIO_TEST
-
     return RATIO_TEST if args.ratio is None else args.ratio
 
 
@@ -76,16 +81,10 @@ def _removed_on_failure(output):
 
 
 def _print_json(results: dict) -> None:
-    from emulator.io.files import to_jsonable
-
-    from emulator.io.files import strict_json
-
     print(strict_json(to_jsonable(results), indent=1))
 
 
 def _features(args: argparse.Namespace) -> int:
-    from emulator.metrics.bench import bench_features
-
     with _removed_on_failure(args.output), progress_arg("exposim bench features", args.quiet) as progress:
         results = _bench_features(args, bench_features, progress)
     if args.json:
@@ -120,7 +119,6 @@ def _features_summary(args, results) -> int:
                 f"median matches {m['median_matches']}, min matches {m['min_matches']}",
                 file=sys.stderr,
             )
-        from emulator.report.bench import features_verdicts
 
         for verdict in features_verdicts(results):
             print(f"verdict: {verdict}", file=sys.stderr)
@@ -129,9 +127,6 @@ def _features_summary(args, results) -> int:
 
 
 def _vo(args: argparse.Namespace) -> int:
-    from emulator.metrics.bench import bench_vo
-    from emulator.metrics.vo import VOParameters
-
     params = VOParameters(
         ratio=_ratio(args),
         n_features=args.n_features,
@@ -198,7 +193,6 @@ def _vo_summary(args, results) -> int:
                         f"{first['rot_deg_per_m']['median']:.3f} deg/m"
                     )
             print(line, file=sys.stderr)
-        from emulator.report.bench import vo_verdicts
 
         for verdict in vo_verdicts(results):
             print(f"verdict: {verdict}", file=sys.stderr)
@@ -211,8 +205,6 @@ def _vo_summary(args, results) -> int:
 
 
 def _compare(args: argparse.Namespace) -> int:
-    from emulator.metrics.compare import bench_compare
-
     with _removed_on_failure(args.output):
         results = bench_compare(args.folders, args.output, force=args.force,
                                 command=_command_line(args, ("folders",)))
@@ -234,8 +226,6 @@ def _compare(args: argparse.Namespace) -> int:
 
 
 def _rpe(args: argparse.Namespace) -> int:
-    from emulator.metrics.rpe import looks_like_estimate, rpe_files
-
     # The order is evo's (REF EST); swapping the two changes the numbers, so say which
     # file is which and flag a likely swap.
     ref_why = looks_like_estimate(args.ref)
@@ -258,8 +248,6 @@ def _rpe(args: argparse.Namespace) -> int:
               "does not; the order is REF EST as in evo_rpe: swap the files if they are the wrong way round",
               file=sys.stderr)
     if args.json:
-        from emulator.io.files import strict_json
-
         print(strict_json({"rmse": stats["rmse"], "mean": stats["mean"], "median": stats["median"]}))
     else:
         unit = "frames" if args.delta_unit == "f" else "m"

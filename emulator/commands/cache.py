@@ -6,6 +6,9 @@ import argparse
 from pathlib import Path
 
 from emulator.commands.progress import add_quiet, bars_enabled
+from emulator.io.files import strict_json
+from emulator.io.framecache import MIN_FAST_LEVEL
+from emulator.orchestration.framecache import build_frame_cache
 
 __all__ = ["register"]
 
@@ -43,9 +46,6 @@ register.order = 15  # after info
 def _cache(args) -> int:
     from tqdm import tqdm
 
-    from emulator.io.framecache import MIN_FAST_LEVEL
-    from emulator.orchestration.framecache import build_frame_cache
-
     if not (1 <= args.level <= 22 or MIN_FAST_LEVEL <= args.level <= -1):
         raise SystemExit(f"exposim cache: error: --level must be 1..22, or -1..{MIN_FAST_LEVEL} for zstd's fast "
                          f"levels, got {args.level}")
@@ -56,8 +56,6 @@ def _cache(args) -> int:
 
         s = build_frame_cache(args.sequence, args.frame_cache, level=args.level, progress=progress)
     if args.json:
-        from emulator.io.files import strict_json
-
         print(strict_json({k: str(v) if isinstance(v, Path) else v for k, v in s.items()}, indent=1))
         return 0
     ratio = s["cache_bytes"] / s["png_bytes"] if s["png_bytes"] else float("nan")

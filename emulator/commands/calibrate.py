@@ -21,6 +21,15 @@ import json
 from pathlib import Path
 
 from emulator.commands.progress import add_quiet, bars_enabled
+from emulator.calibration import calibrate_from_recording, calibrate_stack, cross_bracket_error
+from emulator.errors import ExposimError, OutputExistsError
+from emulator.io.borealhdr import find_response, load_sequence, sequence_response
+from emulator.io.files import strict_json
+from emulator.io.noisemodel import write_noise_model
+from emulator.io.pcalib import write_response
+from emulator.io.stack import read_stack
+from emulator.noise import bracket_groups, estimate_noise_model, json_safe
+from emulator.report.calibration import plot_calibration
 
 __all__ = ["register"]
 
@@ -104,8 +113,6 @@ def _progress_bar(enabled: bool):
 def _check_levels(args) -> None:
     """--white-level / --black-level only where they are used: a STACK folder (whose reader
     checks 0 <= black < white <= 4095); a recording has its own levels in exposim.json."""
-    from emulator.errors import ExposimError
-
     white = getattr(args, "white_level", None)
     black = getattr(args, "black_level", None)
     given = [f for f, v in (("--white-level", white), ("--black-level", black)) if v is not None]
@@ -118,8 +125,6 @@ def _fit_response(args, progress):
     """The response fitted from ``args.stack`` or ``args.from_recording``, with the recording's cross-bracket
     scores (recovered and existing response; None with --no-score or a stack) and the existing response:
     ``(result, score, reference)``."""
-    from emulator.calibration import calibrate_from_recording, calibrate_stack, cross_bracket_error
-
     score = None
     reference = None
     if args.stack is not None:
@@ -128,7 +133,6 @@ def _fit_response(args, progress):
             kw["n_knots"] = args.knots
         if args.smoothness is not None:
             kw["smoothness"] = args.smoothness
-        from emulator.io.stack import read_stack
 
         stack = read_stack(args.stack, white_level=args.white_level, black_level=args.black_level)
         result = calibrate_stack(
@@ -136,8 +140,6 @@ def _fit_response(args, progress):
             progress=progress, **kw,
         )
     else:
-        from emulator.io.borealhdr import find_response, load_sequence, sequence_response
-
         seq = load_sequence(args.from_recording)
         cams = None if args.camera == "both" else (args.camera,)
         kw = {"margin_dn": args.margin, "stride": args.stride}
@@ -186,10 +188,6 @@ def _print_result(args, result, score) -> None:
 
 
 def _calibrate(args) -> int:
-    from emulator.errors import ExposimError, OutputExistsError
-    from emulator.io.pcalib import write_response
-    from emulator.report.calibration import plot_calibration
-
     if sum(x is not None for x in (args.stack, args.from_recording, args.noise)) != 1:
         raise ExposimError("give one of a STACK folder, --from-recording SEQ or --noise SEQ")
     _check_levels(args)
@@ -220,7 +218,6 @@ def _calibrate(args) -> int:
         if score:
             d["cross_bracket"] = {k: {"response": v.response_name, "median_pct": v.median_pct,
                                       "mean_pct": v.mean_pct, "n_pairs": len(v.pairs)} for k, v in score.items()}
-        from emulator.io.files import strict_json
 
         print(strict_json(d))
         return 0
@@ -231,11 +228,6 @@ def _calibrate(args) -> int:
 
 def _calibrate_noise(args) -> int:
     """``--noise SEQ``: in-situ noise model of a recording, written as JSON."""
-    from emulator.errors import ExposimError, OutputExistsError
-    from emulator.io.borealhdr import load_sequence, sequence_response
-    from emulator.io.noisemodel import write_noise_model
-    from emulator.noise import bracket_groups, estimate_noise_model, json_safe
-
     out = args.output
     if out.exists() and not args.force:
         raise OutputExistsError(f"{out}: exists; refusing to overwrite (use --force)")
@@ -258,7 +250,6 @@ def _calibrate_noise(args) -> int:
         d = json_safe(estimate.to_dict())
         d.update(output=str(out), sequence=str(seq.path), response=response.name,
                  full_well_std=json_safe(full_well_std))
-        from emulator.io.files import strict_json
 
         print(strict_json(d))
         return 0

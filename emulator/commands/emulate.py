@@ -7,7 +7,15 @@ import json
 import math
 from pathlib import Path
 
-from emulator.errors import ExposimError
+from emulator.errors import ExposimError, DatasetError
+from emulator.core.blur import emulate_blur_consistent
+from emulator.core.emulate import check_exposure, emulate
+from emulator.core.select import saturated_fraction, blur_aware, select
+from emulator.io.borealhdr import sequence_response, load_sequence
+from emulator.io.files import strict_json
+from emulator.io.png import write_png8, write_png16
+from emulator.orchestration.runner import saved_image
+from emulator.playback.motion import blur_hook, recording_motion, find_camera_calibration
 
 __all__ = ["register", "emulate_cycle"]
 
@@ -85,11 +93,6 @@ def emulate_cycle(
     ``blur_mismatch_px`` (source minus target: > 0 is blur the emulated image keeps; with
     ``consistent`` the added blur makes it 0 where the target is longer).
     """
-    from emulator.core.emulate import check_exposure
-    from emulator.errors import DatasetError
-    from emulator.io.borealhdr import sequence_response
-    from emulator.core.select import saturated_fraction
-
     exposure_ms = check_exposure(exposure_ms, "--exposure-ms")
     cycle, available = _cycle_brackets(sequence, cycle_index, cameras)
     response = response or sequence_response(sequence)
@@ -112,7 +115,6 @@ def emulate_cycle(
             raise ExposimError(f"--from-ms {from_ms:g}: cycle {cycle_index} of {sequence.path} has no {from_ms:g} ms "
                                f"bracket for {' and '.join(cameras)} (present: {', '.join(f'{b:g}' for b in available)})")
         chosen = from_ms
-    from emulator.playback.motion import blur_hook, recording_motion
 
     hook = blur_hook(blur, sequence, response, calibration=calibration, stamp=stamp)
     motion = hook.motion if hook is not None else (
@@ -165,8 +167,6 @@ def _select_bracket(selector: str, exposure_ms: float, fractions: dict, levels: 
                     lead: str) -> float:
     """The bracket ``selector`` picks from the lead camera's saturated ``fractions`` (bracket -> callable);
     ``blur-aware`` weighs each bracket's excess blur from the recording's gyro (``motion``)."""
-    from emulator.core.select import blur_aware, select
-
     if selector == "blur-aware":
         if motion is None:
             raise ExposimError(f"--selector blur-aware needs the recording's gyro (imu/imu.csv); {sequence.path} has none")
@@ -177,10 +177,6 @@ def _select_bracket(selector: str, exposure_ms: float, fractions: dict, levels: 
 
 def _emulate_camera(cam: str, frame, raw, chosen: float, exposure_ms: float, response, levels: dict, hook, motion):
     """One camera's emulated image (blur-consistent with a blur ``hook``) and its entry of ``info["cameras"]``."""
-    from emulator.core.blur import emulate_blur_consistent
-    from emulator.core.emulate import emulate
-    from emulator.core.select import saturated_fraction
-
     if hook is not None:
         Hs, ws = motion.homographies(cam, frame.timestamp_ns, chosen, exposure_ms, (raw.shape[1], raw.shape[0]))
         img, valid = emulate_blur_consistent(raw, chosen, exposure_ms, response, Hs, ws)
@@ -219,16 +215,10 @@ def _blur_info(motion, cam: str, timestamp_ns: int, source_ms: float, target_ms:
 
 
 def _has_calibration(sequence, calibration) -> bool:
-    from emulator.playback.motion import find_camera_calibration
-
     return find_camera_calibration(sequence, calibration) is not None
 
 
 def _emulate(args) -> int:
-    from emulator.io.borealhdr import load_sequence, sequence_response
-    from emulator.io.png import write_png8, write_png16
-    from emulator.orchestration.runner import saved_image
-
     seq = load_sequence(args.sequence, frame_cache=args.frame_cache)
     cams = ("left", "right") if args.camera == "both" else (args.camera,)
     if args.camera == "both":
@@ -255,8 +245,6 @@ def _emulate(args) -> int:
         info["cameras"][cam]["output"] = str(path)
     info["save"] = args.save
     if args.json:
-        from emulator.io.files import strict_json
-
         print(strict_json(info, indent=1))
     else:
         print(

@@ -8,15 +8,23 @@ from __future__ import annotations
 import argparse
 import sys
 
+from emulator.commands.argtypes import refine_mode
+from emulator.errors import CalibrationError
+from emulator.io.export import export_method
+from emulator.io.files import strict_json
+from emulator.io.runfolder import read_run_folder
+from emulator.metrics.stereo import (
+    choose_calibration,
+    load_stereo_calibration,
+    StereoCalibration,
+    rectified_camera_infos,
+)
+from emulator.metrics.vo_bench import check_extrinsics
+
 __all__ = ["register"]
 
 
 def _export(args: argparse.Namespace) -> int:
-    from emulator.errors import CalibrationError
-    from emulator.io.export import export_method
-    from emulator.io.runfolder import read_run_folder
-    from emulator.metrics.stereo import choose_calibration, load_stereo_calibration
-
     run = read_run_folder(args.run_dir, [args.method])
     calib, note, written = None, "", {"written": "none (--no-calibration)"}
     if not args.no_calibration:
@@ -36,8 +44,6 @@ def _export(args: argparse.Namespace) -> int:
     summary = export_method(run, args.method, args.output, args.format, calibration=calib, mono8=args.mono8,
                             metadata={"calibration_written": written})
     if args.json:
-        from emulator.io.files import strict_json
-
         print(strict_json(summary))
     else:
         print(f"exported {summary['n_images']} images of {args.method} ({', '.join(summary['cameras'])}; "
@@ -49,9 +55,6 @@ def _export(args: argparse.Namespace) -> int:
 def _checked_extrinsics(calib, run, args):
     """``bench vo``'s extrinsics check on the exported method's stereo pairs (the same code): the
     calibration to write (the refined pose as the rectification R, P of both cameras) and its record."""
-    from emulator.metrics.stereo import StereoCalibration, rectified_camera_infos
-    from emulator.metrics.vo_bench import check_extrinsics
-
     frames = run.methods[args.method].frames
     if args.refine_extrinsics == 0:
         return calib, {"written": "given", "line": "written as given (--refine-extrinsics 0: not checked)"}
@@ -91,7 +94,6 @@ def register(subparsers) -> None:
     p.add_argument("--calibration", help="folder with left.yaml, right.yaml (default: chosen from the recording's "
                    "layout and date, as bench vo; none is written when none is found)")
     p.add_argument("--no-calibration", action="store_true", help="write no calibration files or camera_info")
-    from emulator.commands.argtypes import refine_mode
 
     p.add_argument("--refine-extrinsics", type=refine_mode, default="auto", metavar="auto|N",
                    help="check the calibration's stereo extrinsics on the method's left-right pairs as bench vo does: "

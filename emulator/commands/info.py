@@ -5,6 +5,13 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from emulator.errors import CalibrationError
+from emulator.io.borealhdr import load_sequence, find_response
+from emulator.io.files import strict_json
+from emulator.io.imu import ImuMissingWarning
+from emulator.metrics.stereo_calibration import choose_calibration
+from emulator.playback.motion import blur_table, recording_motion
+
 __all__ = ["register"]
 
 
@@ -31,11 +38,7 @@ register.order = 10  # place in `exposim --help`
 
 
 def _info(args) -> int:
-    from emulator.io.borealhdr import load_sequence
-
     import warnings
-
-    from emulator.io.imu import ImuMissingWarning
 
     with warnings.catch_warnings():  # info reports the IMU itself ("imu": null / "imu  none")
         warnings.simplefilter("ignore", ImuMissingWarning)
@@ -44,8 +47,6 @@ def _info(args) -> int:
     desc["imu"], desc["blur"] = _motion(seq, args)
     desc["response"], desc["calibration"] = _found_files(seq, args.calibration)
     if args.json:
-        from emulator.io.files import strict_json
-
         print(strict_json(desc, indent=1))
         return 0
     print(f"sequence   {seq.path}")
@@ -69,10 +70,6 @@ def _info(args) -> int:
 
 def _found_files(seq, calibration) -> tuple[str | None, dict]:
     """(the response file a run would use, the stereo calibration bench vo and export would use, and why)."""
-    from emulator.errors import CalibrationError
-    from emulator.io.borealhdr import find_response
-    from emulator.metrics.stereo_calibration import choose_calibration
-
     response = find_response(seq.path)
     try:
         choice = choose_calibration(seq.path, calibration, seq.cycles[0].timestamp_ns if seq.cycles else None)
@@ -86,9 +83,6 @@ def _found_files(seq, calibration) -> tuple[str | None, dict]:
 
 def _motion(seq, args) -> tuple[dict | None, dict | None]:
     """(IMU summary, predicted blur per left frame) for ``info``; (None, None) without an IMU."""
-    from emulator.errors import CalibrationError
-    from emulator.playback.motion import blur_table, recording_motion
-
     if seq.imu is None:
         return None, None
     try:

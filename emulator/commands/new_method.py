@@ -16,6 +16,8 @@ from pathlib import Path
 from string import Template
 
 from emulator.errors import ExposimError, OutputExistsError
+from emulator.autoexposure.registry import check_method_name
+from emulator.io.files import write_text
 
 __all__ = ["register", "render", "METHOD_TEMPLATE", "TEST_TEMPLATE"]
 
@@ -98,8 +100,6 @@ def _shadows_a_module(module: str) -> bool:
 
 def render(name: str, class_name: str | None = None) -> dict[str, str]:
     """File name -> text of a new method ``name`` (checked like a plugin's name) and its test."""
-    from emulator.autoexposure.registry import check_method_name
-
     check_method_name(name, f"new-method {name!r}")
     module = name.replace("-", "_")
     if not module.isidentifier() or module[0].isdigit():
@@ -137,8 +137,6 @@ register.order = 35  # place in `exposim --help`, after run
 
 
 def _new_method(args) -> int:
-    from emulator.io.files import write_text
-
     files = render(args.name, args.class_name)
     out = Path(args.output)
     existing = [str(out / f) for f in files if (out / f).exists()]

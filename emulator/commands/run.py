@@ -15,14 +15,21 @@ from emulator.errors import ExposimError, PlaybackError
 from emulator.core.native import NATIVE_RATE
 from emulator.playback.config import WORKER_MODES, RunConfig, parse_options
 from emulator.playback.settings import add_arguments, command_words, flag_of, given, settings_of, values_from_json
+from emulator.autoexposure import METHOD_NAMES, installed_methods
+from emulator.autoexposure.classical import N_AUTO_FRAMES
+from emulator.autoexposure.methodset import build_methods
+from emulator.commands.argtypes import SEED_MAX
+from emulator.io.borealhdr import load_sequence, is_recording
+from emulator.io.files import read_metadata, strict_json
+from emulator.io.runfolder import RUN_FILE, read_run_json
+from emulator.orchestration.datasetrun import discover_sequences, DATASET_FILE, run_dataset
+from emulator.orchestration.runner import run_to_folder
+from emulator.playback.workers import start_methods, stop_methods
 
 __all__ = ["register", "config_from_args"]
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from emulator.autoexposure import METHOD_NAMES
-    from emulator.autoexposure.classical import N_AUTO_FRAMES
-
     p = sub.add_parser(
         "run",
         help="run AE methods in closed loop on a recording and write a run folder",
@@ -79,8 +86,6 @@ register.order = 30  # place in `exposim --help`
 
 def _add_plugin_arguments(p: argparse.ArgumentParser) -> None:
     """AE method plugins: the installed ones (and broken ones) in --methods' help; failure options."""
-    from emulator.autoexposure import installed_methods
-
     plugins = installed_methods()
     ok = [n for n, pl in plugins.items() if pl.error is None]
     broken = [f"{n} ({pl.error})" for n, pl in plugins.items() if pl.error is not None]
@@ -96,8 +101,6 @@ def _add_plugin_arguments(p: argparse.ArgumentParser) -> None:
 
 def _warn_broken_plugins() -> None:
     """One stderr line per installed AE method plugin that cannot load (never swallowed)."""
-    from emulator.autoexposure import installed_methods
-
     for name, plugin in installed_methods().items():
         if plugin.error is not None:
             print(f"exposim run: warning: AE method plugin '{name}' is broken ({plugin.error})", file=sys.stderr)
@@ -172,8 +175,6 @@ def config_from_args(args, recorded=None):
 
 def _check_args(args) -> None:
     """What only the command line can get wrong (the values are RunConfig's to check)."""
-    from emulator.commands.argtypes import SEED_MAX
-
     for flag, seed in (("--seed", args.seed), ("--noise-seed", args.noise_seed)):
         if seed is not None and not 0 <= seed <= SEED_MAX:
             raise ExposimError(f"{flag} {seed}: must be in 0..{SEED_MAX}")
@@ -229,8 +230,6 @@ def _run(args) -> int:
         raise ExposimError(f"--scheduler {args.scheduler or 'file'}: a single sequence runs serially; "
                            "pass --sequences all for a dataset run")
     _refuse_dataset_root(args.sequence)
-    from emulator.io.runfolder import RUN_FILE, read_run_json
-    from emulator.orchestration.runner import run_to_folder
 
     methods = args.methods
     recorded = None
@@ -249,8 +248,6 @@ def _run(args) -> int:
 
     source = args.sequence
     if args.frame_cache is not None:  # a frame cache elsewhere (a read-only recording)
-        from emulator.io.borealhdr import load_sequence
-
         source = load_sequence(args.sequence, frame_cache=args.frame_cache, imu_warning=config.blur != "none")
     _warn_broken_plugins()
     progress = None
@@ -283,9 +280,6 @@ def _run(args) -> int:
 
 def _refuse_dataset_root(path: Path) -> None:
     """A folder of recordings given as one recording: say which recordings and how to run them."""
-    from emulator.orchestration.datasetrun import discover_sequences
-    from emulator.io.borealhdr import is_recording
-
     if not path.is_dir() or is_recording(path):
         return
     try:
@@ -304,23 +298,17 @@ def _check_methods_once(methods: str, config: RunConfig) -> None:
     writes anything (it would otherwise fail in every unit and leave a dataset.json behind)."""
     import warnings
 
-    from emulator.autoexposure.methodset import build_methods
-
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         if config.workers == WORKER_MODES[1]:
             build_methods(methods, mode=config.mode, response=None, options=config.options)
             return
-        from emulator.playback.workers import start_methods, stop_methods
 
         stop_methods(start_methods(methods, config, None))  # built in worker processes, as the run builds them
 
 
 def _run_dataset(args) -> int:
     """``exposim run ROOT --sequences ...``: every (sequence, method group) unit, then the dataset summary."""
-    from emulator.orchestration.datasetrun import DATASET_FILE, run_dataset
-    from emulator.io.files import read_metadata
-
     recorded = read_metadata(args.output / DATASET_FILE) if args.resume else {}
     config = config_from_args(args, recorded.get("config"))
     methods = args.methods or ",".join(recorded.get("methods", [])) or "all"
@@ -349,8 +337,6 @@ def _run_dataset(args) -> int:
         if bar is not None:
             bar.close()
     if args.json:
-        from emulator.io.files import strict_json
-
         print(strict_json(summary, indent=1), file=getattr(args, "json_stream", None) or sys.stdout)
     else:
         t = summary["throughput"]

@@ -49,6 +49,7 @@ import numpy as np
 
 from emulator.core.lut import forward_dn
 from emulator.errors import EmulationError
+from emulator.core.blur import as_angular_velocity, integrate_rotation
 
 __all__ = [
     "NATIVE_RATE",
@@ -216,8 +217,6 @@ def native_select(target_ms: float, candidates: Iterable[NativeCandidate], *,
 # ============================================================================ the warp
 def rotation_between(omega, t_from_s: float, t_to_s: float) -> np.ndarray | None:
     """The camera's rotation from ``t_from_s`` to ``t_to_s`` (3x3), or None where the gyro does not cover it."""
-    from emulator.core.blur import as_angular_velocity, integrate_rotation
-
     omega = as_angular_velocity(omega)
     if not omega.covers(t_from_s, t_to_s):
         return None

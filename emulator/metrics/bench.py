@@ -43,6 +43,9 @@ from emulator.metrics.vo_bench import (  # re-exported: the VO benchmark lives i
 )
 from emulator.report import bench as report
 from emulator.report.html import write_report
+from emulator.core.settling import trending_methods
+from emulator.io.runcsv import read_tables
+from emulator.report.run import per_recorder_cycle
 
 __all__ = [
     "bench_features",
@@ -76,10 +79,6 @@ def tau_grid(max_min_matches: int, *, n: int = 100) -> list[int]:
 def _still_trending(run_dir, names: list[str]) -> dict:
     """``{"still_trending": ...}`` of the run's methods whose exposure was still moving one way at its end
     (:mod:`emulator.core.settling`, per recorder cycle); empty where all settled or the tables cannot tell."""
-    from emulator.io.runcsv import read_tables
-    from emulator.report.run import per_recorder_cycle
-    from emulator.core.settling import trending_methods
-
     try:
         tables = read_tables(run_dir, names)
     except (OSError, ValueError, KeyError):  # a folder without usable tables: nothing to say

@@ -11,6 +11,8 @@ from emulator.errors import MetricsError
 from emulator.io.runfolder import MethodRun
 from emulator.metrics.features import load_gray8
 from emulator.core.native import is_native_run
+from emulator.io.runcsv import read_tables
+from emulator.report.html import Thumb, spread_indices, contact_sheet, thumbnail
 
 __all__ = ["CONVERSION", "benchmark_frames", "progress_iter", "method_frames", "features_sheet"]
 
@@ -52,8 +54,6 @@ def benchmark_frames(run, every_frame: bool = False):
     """
     from dataclasses import replace
 
-    from emulator.io.runcsv import read_tables
-
     if every_frame or not is_native_run(run.meta):
         return run
     tables = read_tables(run.path, list(run.methods))
@@ -80,8 +80,6 @@ def method_frames(method: MethodRun, max_frames: int | None):
 
 def features_sheet(run, result: dict, max_frames, n_cycles: int = 6) -> str:
     """Contact sheet of the images a benchmark compared (first run): sampled left frames per method."""
-    from emulator.report.html import Thumb, spread_indices, contact_sheet, thumbnail
-
     rows = []
     for name, method in run.methods.items():
         frames = method_frames(method, max_frames)

@@ -29,6 +29,7 @@ from emulator.playback.config import RATES, RunConfig, provides_rate
 from emulator.playback.loop import Shot
 from emulator.playback.records import RunStats
 from emulator.core.select import select
+from emulator.noise import consistent_noise
 
 __all__ = ["EmulatedProvider", "EmulatedTick", "METHOD_CAMERA", "Memo", "CycleImages", "clip_fractions"]
 
@@ -112,8 +113,6 @@ class CycleImages(Memo):
     def _add_noise(self, camera: str, exposure_ms: float, ratio: float, raw: np.ndarray, plain: np.ndarray):
         """Noise-consistent emulation (``emulator.core.emulate``, ``noise="consistent"``), seeded by
         (seed, cycle, camera, bracket, ratio): independent of threads and of which method asks."""
-        from emulator.noise import consistent_noise
-
         model, seed = self.noise
         words = np.array([exposure_ms, ratio], dtype=np.float64).view(np.uint32).tolist()
         rng = np.random.default_rng(np.random.SeedSequence([int(seed), int(self.cycle.index),

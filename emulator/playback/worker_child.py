@@ -25,6 +25,19 @@ import numpy as np
 from emulator.autoexposure.base import AutoExposureError, MethodFailed
 from emulator.errors import PlaybackError
 from emulator.io.files import read_bytes
+from emulator.autoexposure import METHOD_NAMES
+from emulator.autoexposure.frame import FRAME_MEMO
+from emulator.autoexposure.isolation import describe_error, captured_output, call_method
+from emulator.autoexposure.methodset import build_methods
+from emulator.autoexposure.registry import (
+    is_import_path,
+    plugin_from_path,
+    MethodPlugin,
+    build_plugin,
+    load_import_path,
+)
+from emulator.pools import single_thread_pools
+import emulator.pools as pools
 
 _FORK_EXIT = 70  # exit status of the child of an os.fork inside a worker (it exits at once)
 
@@ -210,8 +223,6 @@ class _Child:
         self.conn.send_bytes(data)
 
     def _left_threads(self) -> list[str]:
-        import emulator.pools as pools
-
         pool = getattr(pools, "_LUT_POOL", None)
         ours = set(getattr(pool, "_threads", ()) or ())
         return [t.name for t in threading.enumerate() if t not in self.allowed and t not in ours and t.is_alive()]
@@ -240,8 +251,6 @@ class _Child:
         return None
 
     def do_build(self, item, mode, response, options, sys_path, cwd, environ):
-        from emulator.autoexposure.isolation import describe_error
-
         sys.path[:] = sys_path  # the run's, now (the fork server has those of its start)
         os.environ.clear()
         os.environ.update(environ)
@@ -271,8 +280,6 @@ class _Child:
         if data is not None:  # through the pipe (no room in /dev/shm): already this worker's own bytes
             raw = np.frombuffer(data, dtype=np.dtype(dtype), count=int(np.prod(shape))).reshape(shape)
             if gray_nbytes:
-                from emulator.autoexposure.frame import FRAME_MEMO
-
                 gray = np.frombuffer(data[nbytes:nbytes + gray_nbytes], dtype=np.uint16).reshape(shape)
                 FRAME_MEMO.put(raw, ("gray", self.gray_code), gray)
             return raw
@@ -283,21 +290,14 @@ class _Child:
         data = bytes(self.shm.buf[:nbytes])  # this worker's own immutable copy
         raw = np.frombuffer(data, dtype=np.dtype(dtype)).reshape(shape)
         if gray_nbytes:  # the run's gray image of this frame: what AutoExposureMethod.gray would compute
-            from emulator.autoexposure.frame import FRAME_MEMO
-
             gray = np.frombuffer(bytes(self.shm.buf[nbytes:nbytes + gray_nbytes]), dtype=np.uint16).reshape(shape)
             FRAME_MEMO.put(raw, ("gray", self.gray_code), gray)
         return raw
 
     def _output(self) -> tuple[str, int]:
-        from emulator.autoexposure.isolation import captured_output
-
         return captured_output(self.name, clear=True)
 
     def do_call(self, shm_name, nbytes, shape, dtype, exposure_ms, raw, gray_nbytes=0, data=None):
-        from emulator.autoexposure.isolation import describe_error, call_method
-        from emulator.pools import single_thread_pools
-
         if self.pending is not None:
             return ("fatal", self.pending, "", 0)
         if shape is not None:
@@ -395,13 +395,7 @@ def method_label(item) -> str:
 
 def _build_one(item, mode, response, options):
     """(name, method) of one ``--methods`` item, built as :func:`build_methods` builds it."""
-    from emulator.autoexposure import METHOD_NAMES
-    from emulator.autoexposure.methodset import build_methods
-    from emulator.autoexposure.registry import is_import_path, plugin_from_path
-
     if isinstance(item, tuple):  # an installed plugin: (name, entry point value), as the run found it
-        from emulator.autoexposure.registry import MethodPlugin, build_plugin, load_import_path
-
         name, value = item
         plugin = MethodPlugin(name, value, load_import_path(value))
         return name, build_plugin(plugin, mode=mode, response=response, options=options.get(name))
