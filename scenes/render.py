@@ -21,7 +21,7 @@ import warnings
 
 import numpy as np
 
-from scenes._interrupt import render_array
+from scenes.render_interrupts import render_array
 from scenes.adaptive import AdaptiveSampling, parse_adaptive, render_adaptive
 from scenes.base import Scene, get_scene
 from scenes.cache import KEY_ATTRIBUTE, cache_path, canonical_json, load_entry, render_key, resolve_cache_dir, \
@@ -43,7 +43,7 @@ _lock = threading.RLock()
 
 def effective_spp(spp: int) -> int:
     """Samples per pixel a render with ``spp`` actually takes (the sampler's stratification)."""
-    from scenes._mitsuba import sampler_spp
+    from scenes.mitsuba_objects import sampler_spp
 
     return sampler_spp(spp)
 
@@ -73,7 +73,7 @@ def _render_uncached(scene: Scene, pose: np.ndarray, *, width: int, height: int,
                      fov_deg: float, variant: str, adaptive: AdaptiveSampling | None = None) -> np.ndarray:
     import mitsuba as mi
 
-    from scenes._mitsuba import sensor_dict
+    from scenes.mitsuba_objects import sensor_dict
 
     with _lock:
         if mi.variant() != variant:
@@ -99,7 +99,7 @@ def _render_aux_uncached(scene: Scene, pose: np.ndarray, *, width: int, height: 
     """(albedo, shading normal) of the first hit, float32 (H, W, 3) each, from Mitsuba's aov integrator."""
     import mitsuba as mi
 
-    from scenes._mitsuba import aov_integrator_dict, sensor_dict
+    from scenes.mitsuba_objects import aov_integrator_dict, sensor_dict
 
     with _lock:
         if mi.variant() != variant:
@@ -328,7 +328,7 @@ def render_depth(scene: Scene | str, pose, *, width: int, height: int, fov_deg: 
     """
     import mitsuba as mi
 
-    from scenes._mitsuba import sensor_dict
+    from scenes.mitsuba_objects import sensor_dict
 
     if isinstance(scene, str):
         scene = get_scene(scene)
