@@ -52,7 +52,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("-o", "--output", type=Path, required=True, help="output folder for the PNG(s) (created)")
     p.add_argument("--force", action="store_true", help="overwrite existing output files")
     p.add_argument("--json", action="store_true", help="print the result as one JSON object")
-    p.set_defaults(func=CommandBody("emulator.commands.emulate_body:emulate"))
+    p.set_defaults(func=CommandBody("emulator.commands.emulate_body:emulate_command"))
 
 
 register.order = 20  # place in `exposim --help`

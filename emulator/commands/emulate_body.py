@@ -14,7 +14,7 @@ from emulator.io.png import write_png8, write_png16
 from emulator.orchestration.runner import saved_image
 from emulator.playback.motion import blur_hook, recording_motion, find_camera_calibration
 
-__all__ = ["emulate", "emulate_cycle"]
+__all__ = ["emulate_command", "emulate_cycle"]
 
 
 def emulate_cycle(
@@ -167,7 +167,7 @@ def _has_calibration(sequence, calibration) -> bool:
     return find_camera_calibration(sequence, calibration) is not None
 
 
-def emulate(args) -> int:
+def emulate_command(args) -> int:
     seq = load_sequence(args.sequence, frame_cache=args.frame_cache)
     cams = ("left", "right") if args.camera == "both" else (args.camera,)
     if args.camera == "both":
