@@ -28,7 +28,7 @@ import ae_reference as ref  # noqa: E402
 from emulator.autoexposure import Zhang2017  # noqa: E402
 from emulator.autoexposure import kim as kim_mod  # noqa: E402
 from emulator.autoexposure import shim as shim_mod  # noqa: E402
-from emulator.autoexposure._base import REF_BAYER_CODE, RGGB_BAYER_CODE  # noqa: E402
+from emulator.autoexposure.base import REF_BAYER_CODE, RGGB_BAYER_CODE  # noqa: E402
 from emulator.io.borealhdr import load_sequence, sequence_response  # noqa: E402
 from _timing import SAMPLE_SEQ  # noqa: E402
 

@@ -52,7 +52,7 @@ def pre_change():
     """Patch the frozen pre-change per-frame arithmetic into the library (and no gray memo)."""
     import ae_reference as ref
 
-    from emulator.autoexposure import _frame
+    from emulator.autoexposure import frame as frame_mod
     from emulator.autoexposure import kim as kim_mod
     from emulator.autoexposure import shim as shim_mod
     from emulator.autoexposure.zhang import Zhang2017
@@ -64,7 +64,7 @@ def pre_change():
         (Zhang2017, "_paper_derivative", lambda self, y, t, *a, **k: ref._paper_derivative(self, y, t)),
         (kim_mod, "metric_ref", lambda y, *a, **k: ref.metric_ref(y)),
         (kim_mod, "metric_paper", lambda y, *a, **k: ref.metric_paper(y)),
-        (_frame.FRAME_MEMO, "get", lambda frame, key, compute: compute()),
+        (frame_mod.FRAME_MEMO, "get", lambda frame, key, compute: compute()),
     ]
     saved = [(obj, name, getattr(obj, name)) for obj, name, _ in patches]
     try:

@@ -32,7 +32,7 @@ SCENES: dict[str, Callable[..., "Scene"]] = {}
 # Modules whose source decides the pixels of a render; their hash is part of the
 # render cache key, so editing a scene invalidates its cached renders.
 _PIXEL_MODULES = ("textures.py", "texture_base.py", "geometry.py", "lighting.py", "description.py", "library",
-                  "_mitsuba.py", "camera.py")
+                  "mitsuba_objects.py", "camera.py")
 
 
 @functools.lru_cache(maxsize=1)
@@ -144,7 +144,7 @@ class Scene:
 
     def mitsuba_dict(self) -> dict:
         """The Mitsuba scene dictionary (imports Mitsuba; a variant must be set)."""
-        from scenes._mitsuba import scene_dict
+        from scenes.mitsuba_objects import scene_dict
 
         return scene_dict(self.describe(), dict(self.emitter_weights))
 

@@ -18,7 +18,8 @@ import numpy as np
 from scenes.errors import RenderError
 from synth.pose import check_pose
 
-__all__ = ["DEFAULT_FOV_DEG", "intrinsics", "intrinsics_matrix", "pose_to_mitsuba", "check_pose", "project"]
+__all__ = ["DEFAULT_FOV_DEG", "intrinsics", "intrinsics_matrix", "pose_to_mitsuba", "check_pose", "project",
+           "check_size", "check_fov"]
 
 #: Horizontal field of view matching the BorealHDR cameras (fx ~ 1180 px at
 #: 1920 px wide): 2 * atan(960 / 1180) = 78.26 degrees.
@@ -28,13 +29,15 @@ DEFAULT_FOV_DEG = math.degrees(2.0 * math.atan(960.0 / 1180.0))
 _CV_TO_MITSUBA = np.diag([-1.0, -1.0, 1.0, 1.0])
 
 
-def _check_size(width: int, height: int) -> None:
+def check_size(width: int, height: int) -> None:
+    """A RenderError unless ``width`` and ``height`` are positive integers."""
     for name, v in (("width", width), ("height", height)):
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
             raise RenderError(f"{name} must be a positive integer, got {v!r}")
 
 
-def _check_fov(fov_deg: float) -> float:
+def check_fov(fov_deg: float) -> float:
+    """``fov_deg`` as a float, or a RenderError unless it is finite and in [1, 170] degrees."""
     f = float(fov_deg)
     if not (math.isfinite(f) and 1.0 <= f <= 170.0):
         raise RenderError(f"fov_deg must be in [1, 170] degrees, got {fov_deg!r}")
@@ -63,8 +66,8 @@ def intrinsics(width: int, height: int, fov_deg: float = DEFAULT_FOV_DEG) -> tup
     >>> round(fx), cx, cy
     (1180, 959.5, 599.5)
     """
-    _check_size(width, height)
-    f = _check_fov(fov_deg)
+    check_size(width, height)
+    f = check_fov(fov_deg)
     fx = (width / 2.0) / math.tan(math.radians(f) / 2.0)
     return fx, fx, (width - 1) / 2.0, (height - 1) / 2.0
 

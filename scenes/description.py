@@ -1,6 +1,6 @@
 """A renderer-neutral description of a scene (numpy only).
 
-Scene builders produce a :class:`SceneDescription`; ``scenes._mitsuba`` turns it
+Scene builders produce a :class:`SceneDescription`; ``scenes.mitsuba_objects`` turns it
 into a Mitsuba scene dictionary.  Keeping the two apart means building a scene
 (textures, geometry, daylight colours) never imports Mitsuba, and a test can
 inspect a scene without rendering it.

@@ -21,12 +21,12 @@ import warnings
 
 import numpy as np
 
-from scenes._interrupt import render_array
+from scenes.render_interrupts import render_array
 from scenes.adaptive import AdaptiveSampling, parse_adaptive, render_adaptive
 from scenes.base import Scene, get_scene
 from scenes.cache import KEY_ATTRIBUTE, cache_path, canonical_json, load_entry, render_key, resolve_cache_dir, \
     store_entry
-from scenes.camera import DEFAULT_FOV_DEG, _check_fov, _check_size, check_pose
+from scenes.camera import DEFAULT_FOV_DEG, check_fov, check_size, check_pose
 from scenes.denoise import DenoiseSettings, denoise_oidn, effective_denoise, resolve_denoise, warn_unavailable
 from scenes.errors import RenderError
 from scenes.variant import check_variant_name, choose_variant, ensure_variant
@@ -43,7 +43,7 @@ _lock = threading.RLock()
 
 def effective_spp(spp: int) -> int:
     """Samples per pixel a render with ``spp`` actually takes (the sampler's stratification)."""
-    from scenes._mitsuba import sampler_spp
+    from scenes.mitsuba_objects import sampler_spp
 
     return sampler_spp(spp)
 
@@ -73,7 +73,7 @@ def _render_uncached(scene: Scene, pose: np.ndarray, *, width: int, height: int,
                      fov_deg: float, variant: str, adaptive: AdaptiveSampling | None = None) -> np.ndarray:
     import mitsuba as mi
 
-    from scenes._mitsuba import sensor_dict
+    from scenes.mitsuba_objects import sensor_dict
 
     with _lock:
         if mi.variant() != variant:
@@ -99,7 +99,7 @@ def _render_aux_uncached(scene: Scene, pose: np.ndarray, *, width: int, height: 
     """(albedo, shading normal) of the first hit, float32 (H, W, 3) each, from Mitsuba's aov integrator."""
     import mitsuba as mi
 
-    from scenes._mitsuba import aov_integrator_dict, sensor_dict
+    from scenes.mitsuba_objects import aov_integrator_dict, sensor_dict
 
     with _lock:
         if mi.variant() != variant:
@@ -244,12 +244,12 @@ def render_with_info(
         scene = get_scene(scene)
     if not isinstance(scene, Scene):
         raise RenderError(f"scene must be a scenes.Scene or a scene name, got {type(scene).__name__}")
-    _check_size(width, height)
+    check_size(width, height)
     if width * height > 1 << 26:
         raise RenderError(f"image too large: {width}x{height}")
     spp = effective_spp(_check_int("spp", spp, 1, MAX_SPP))
     seed = _check_int("seed", seed, 0, 2**32 - 1)
-    fov = _check_fov(fov_deg)
+    fov = check_fov(fov_deg)
     m = check_pose(pose)
     settings = resolve_denoise(denoise)  # bad names raise before anything else happens
     if isinstance(adaptive, str):
@@ -328,14 +328,14 @@ def render_depth(scene: Scene | str, pose, *, width: int, height: int, fov_deg: 
     """
     import mitsuba as mi
 
-    from scenes._mitsuba import sensor_dict
+    from scenes.mitsuba_objects import sensor_dict
 
     if isinstance(scene, str):
         scene = get_scene(scene)
-    _check_size(width, height)
+    check_size(width, height)
     spp = effective_spp(_check_int("spp", spp, 1, MAX_SPP))
     seed = _check_int("seed", seed, 0, 2**32 - 1)
-    fov = _check_fov(fov_deg)
+    fov = check_fov(fov_deg)
     m = check_pose(pose)
     variant = check_variant_name(variant) if variant is not None else choose_variant()
     ensure_variant(variant)

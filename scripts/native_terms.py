@@ -140,12 +140,12 @@ def _flow_warp(src_dn, ref_dn, H, response):
     import cv2
 
     from emulator.core.lut import forward_dn
-    from emulator.core.native import _plane_homography
+    from emulator.core.native import plane_homography
 
     ls, lr = (response.inverse(x).astype(np.float32) for x in (src_dn, ref_dn))
     quad = lambda a: 0.25 * (a[0::2, 0::2] + a[1::2, 0::2] + a[0::2, 1::2] + a[1::2, 1::2])  # noqa: E731
     h, w = ls.shape
-    moved = cv2.warpPerspective(quad(ls), _plane_homography(H, 0.5, 0.5), (w // 2, h // 2), flags=cv2.INTER_LINEAR,
+    moved = cv2.warpPerspective(quad(ls), plane_homography(H, 0.5, 0.5), (w // 2, h // 2), flags=cv2.INTER_LINEAR,
                                 borderMode=cv2.BORDER_REPLICATE)
     logs = [np.log(np.maximum(x, 1e-6)) for x in (quad(lr), moved)]
     lo, hi = np.percentile(np.concatenate([x.ravel() for x in logs]), [1, 99])
@@ -155,7 +155,7 @@ def _flow_warp(src_dn, ref_dn, H, response):
     mx, my = xs + flow[..., 0], ys + flow[..., 1]
     out = np.empty_like(ls)
     for px, py in ((0, 0), (1, 0), (0, 1), (1, 1)):
-        Hi = np.linalg.inv(_plane_homography(H, px, py))
+        Hi = np.linalg.inv(plane_homography(H, px, py))
         den = Hi[2, 0] * mx + Hi[2, 1] * my + Hi[2, 2]
         sx, sy = (((Hi[i, 0] * mx + Hi[i, 1] * my + Hi[i, 2]) / den).astype(np.float32) for i in (0, 1))
         out[py::2, px::2] = cv2.remap(np.ascontiguousarray(ls[py::2, px::2]), sx, sy, cv2.INTER_LINEAR,

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from emulator.autoexposure._base import MAX_DN
+from emulator.autoexposure.base import MAX_DN
 from emulator.core.levels import BOREALHDR_LEVELS
 
 __all__ = ["REF_BRACKETS_MS", "REF_INITIAL_MS", "REF_METHODS", "PublishedFrames", "columns", "drive",

@@ -27,7 +27,7 @@ from emulator.report.figures import subplots
 from emulator.report.html import write_report
 from validation.common import ValidationError, provenance
 from validation.emulation import EmulationConfig, run_emulation
-from validation.emulation.report import _emulation_figures, _emulation_md, emulation_verdict
+from validation.emulation.report import emulation_figures, emulation_markdown, emulation_verdict
 from validation.motion import MotionConfig, run_motion
 from validation.selectors import SelectorsConfig, run_selectors
 from validation.speed import SpeedConfig, run_speed
@@ -77,8 +77,8 @@ def run_experiment(name: str, output, *, config=None, quick: bool = False, force
     folder = prepare_output(output, force=force)
     if name == "emulation":
         out = run_emulation(config, progress=progress)
-        figures = _emulation_figures(out, folder)
-        md = _emulation_md(out["results"], figures)
+        figures = emulation_figures(out, folder)
+        md = emulation_markdown(out["results"], figures)
     elif name == "selectors":
         out = run_selectors(config, progress=progress)
         figures = _selectors_figures(out, folder)

@@ -29,7 +29,7 @@ More methods come as plugins (:mod:`emulator.autoexposure.registry`): an import 
 
 from __future__ import annotations
 
-from emulator.autoexposure._base import (
+from emulator.autoexposure.base import (
     DEFAULT_RANGE_MS,
     MODES,
     AutoExposure,

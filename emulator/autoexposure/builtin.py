@@ -8,7 +8,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from emulator.autoexposure._base import AutoExposureError, AutoExposureMethod
+from emulator.autoexposure.base import AutoExposureError, AutoExposureMethod
 from emulator.autoexposure.classical import Classical, Fixed
 from emulator.autoexposure.kim import Kim2018
 from emulator.autoexposure.shim import Shim2014

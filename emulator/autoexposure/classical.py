@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-from emulator.autoexposure._base import FULL_SCALE_DN, AutoExposureError, AutoExposureMethod
+from emulator.autoexposure.base import FULL_SCALE_DN, AutoExposureError, AutoExposureMethod
 
 __all__ = [
     "Classical",

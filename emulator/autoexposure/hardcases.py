@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from emulator.autoexposure._base import MAX_DN
+from emulator.autoexposure.base import MAX_DN
 
 __all__ = ["hard_cases", "FLAT_LEVELS"]
 

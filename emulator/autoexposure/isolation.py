@@ -7,7 +7,7 @@ method does can change what another method, or the run, sees:
   and which OpenCV refuses as ``dst=``, so decoded brackets and emulated images shared
   between methods cannot be written through it.  The closed loops hand out such views of
   the arrays they own (:func:`readonly_view`; no copy, the same view for every method, so
-  per-frame values such as the gray image stay shared, :mod:`emulator.autoexposure._frame`);
+  per-frame values such as the gray image stay shared, :mod:`emulator.autoexposure.frame`);
   any other input (a writeable array, an array owning its data) is replaced by a view of an
   immutable ``bytes`` copy (:func:`frozen`, one per source array).  A plugin
   (``private_images``) gets a private ``bytes`` copy on every call, so that even a write
@@ -42,12 +42,13 @@ from pathlib import Path
 
 import numpy as np
 
-from emulator.autoexposure._base import AutoExposureError
-from emulator.autoexposure._base import MethodFailed
-from emulator.autoexposure._frame import is_immutable
+from emulator.autoexposure.base import AutoExposureError
+from emulator.autoexposure.base import MethodFailed
+from emulator.autoexposure.frame import is_immutable
 
 __all__ = ["call_method", "call_factory", "frozen", "is_frozen", "readonly_view", "is_readonly_view",
-           "absolute", "captured_output", "keep_output", "MAX_CAPTURED_CHARS"]
+           "absolute", "captured_output", "keep_output", "MAX_CAPTURED_CHARS",
+           "describe_error", "run_isolated"]
 
 #: Characters of a method's printed output kept per method (the rest is counted, not kept).
 MAX_CAPTURED_CHARS = 65536
@@ -230,13 +231,15 @@ def captured_output(name: str | None = None, *, clear: bool = False):
 
 
 # ---------------------------------------------------------------- the calls
-def _describe(exc: BaseException) -> str:
+def describe_error(exc: BaseException) -> str:
+    """What a method did, in words: ``raised ValueError: ...`` or ``called sys.exit(2)``."""
     if isinstance(exc, SystemExit):
         return f"called sys.exit({exc.code!r})"
     return f"raised {type(exc).__name__}: {exc}"
 
 
-def _isolated(fn, name: str, on_error):
+def run_isolated(fn, name: str, on_error):
+    """``fn()`` with its output kept under ``name`` and NumPy's error state restored; a failure becomes ``on_error(exc)``."""
     err = np.geterr()  # NumPy's error state is per thread
     errcall = np.geterrcall()
     parts: list = []
@@ -280,12 +283,12 @@ def call_method(method, raw, exposure_ms):
         image = _bytes_view(raw)
     else:
         image = raw if is_readonly_view(raw) else frozen(raw)
-    return _isolated(lambda: method.next_exposure(image, exposure_ms), name,
-                     lambda exc: MethodFailed(_describe(exc)))
+    return run_isolated(lambda: method.next_exposure(image, exposure_ms), name,
+                     lambda exc: MethodFailed(describe_error(exc)))
 
 
 def call_factory(factory, name: str, source: str, **kwargs):
     """``factory(**kwargs)``, isolated; any failure, ``SystemExit`` included, is an
     :class:`AutoExposureError` naming the method and where it comes from."""
-    return _isolated(lambda: factory(**kwargs), name, lambda exc: AutoExposureError(
-        f"AE method {name!r} ({source}) could not be built: {_describe(exc)}"))
+    return run_isolated(lambda: factory(**kwargs), name, lambda exc: AutoExposureError(
+        f"AE method {name!r} ({source}) could not be built: {describe_error(exc)}"))

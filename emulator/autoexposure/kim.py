@@ -49,8 +49,8 @@ import warnings
 import cv2
 import numpy as np
 
-from emulator.autoexposure._base import MAX_DN, AutoExposureError, AutoExposureMethod, check_seed
-from emulator.autoexposure._kim_exact import _bin_sums, _metric_ref_bins
+from emulator.autoexposure.base import MAX_DN, AutoExposureError, AutoExposureMethod, check_seed
+from emulator.autoexposure.kim_exact import bin_sums, metric_ref_bins
 from emulator.autoexposure.kim_gp import STEP_POOLS, fast_gpr_class, merge_repeats
 from emulator.pools import single_thread_pools
 
@@ -169,7 +169,7 @@ def metric_ref(y: np.ndarray, *, alpha=ACTIVATION_ALPHA, tau=ACTIVATION_TAU,
 
     Every per-pixel quantity of REF depends on the pixel only through its Y_8 bin (except Q),
     so E = sum_b W_b Q_b + mean(Q) sum_b n_b A_b M_b W_b over the 256 bins, with Q_b the exact
-    integer sum of Q over bin b (:mod:`emulator.autoexposure._kim_exact`).  The 256-term arithmetic
+    integer sum of Q over bin b (:mod:`emulator.autoexposure.kim_exact`).  The 256-term arithmetic
     runs in 30-digit decimal (exp by :mod:`decimal`, ln from float64's log and one Newton step),
     so E is the exact value of REF's formula rounded once
     to float64: the same bits on every machine, BLAS and thread count.  Why it matters: GP-MI
@@ -187,8 +187,8 @@ def metric_ref(y: np.ndarray, *, alpha=ACTIVATION_ALPHA, tau=ACTIVATION_TAU,
     gx, gy = _sobel_16u_xy(y8)
     q_img = np.multiply(gx, gx, out=gx)  # uint16: wraps mod 65536 like REF
     q_img += np.multiply(gy, gy, out=gy)
-    q_bin = _bin_sums(y8, q_img)
-    return _metric_ref_bins(counts, q_bin, s, alpha, tau, threshold)
+    q_bin = bin_sums(y8, q_img)
+    return metric_ref_bins(counts, q_bin, s, alpha, tau, threshold)
 
 
 def local_entropy(img8: np.ndarray, size: int = LOCAL_ENTROPY_SIZE) -> np.ndarray:

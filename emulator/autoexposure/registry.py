@@ -44,7 +44,10 @@ from importlib import metadata
 
 import numpy as np
 
-from emulator.autoexposure._base import AutoExposureError, MethodFailed
+from emulator.autoexposure.base import AutoExposureError, MethodFailed
+from emulator.autoexposure.builtin import METHODS
+from emulator.autoexposure.isolation import call_factory, describe_error as describe, run_isolated
+from emulator.autoexposure.probe import probe_entry_points
 
 __all__ = [
     "ENTRY_POINT_GROUP",
@@ -86,8 +89,6 @@ def is_import_path(text: str) -> bool:
 
 def check_method_name(name, source: str) -> str:
     """A plugin's name, checked against :data:`NAME_RE` and the built-in names."""
-    from emulator.autoexposure.builtin import METHODS
-
     if not isinstance(name, str) or not NAME_RE.match(name):
         raise AutoExposureError(f"AE method plugin {source}: bad method name {name!r} (letters, digits, '-' and '_' "
                                 "only, starting with a letter or digit, at most 200 characters)")
@@ -148,8 +149,6 @@ def _load_entry_points(entry_points: Iterable, *, here: bool = True) -> dict[str
     entry_points = list(entry_points)
     probed = {}
     if not here:
-        from emulator.autoexposure.probe import probe_entry_points
-
         probed = probe_entry_points(list({ep.name: ep for ep in entry_points if NAME_RE.match(ep.name)}.values()))
     for ep in entry_points:
         known = out.get(ep.name)
@@ -236,7 +235,6 @@ def build_plugin(plugin: MethodPlugin, *, mode: str = "paper", response=None,
         if key not in options and _names_param(factory, key):
             kwargs[key] = value
     kwargs.update(options)
-    from emulator.autoexposure.isolation import call_factory
 
     try:
         method = call_factory(factory, plugin.name, plugin.value, **kwargs)  # SystemExit included
@@ -267,9 +265,7 @@ def _names_param(factory: Callable, key: str) -> bool:
         return False
 
 
-def _describe(exc: BaseException) -> str:
-    from emulator.autoexposure.isolation import _describe as describe
-
+def describe_error(exc: BaseException) -> str:
     return describe(exc)
 
 
@@ -318,23 +314,19 @@ class PluginMethod:
     def guard_count(self) -> int:
         """The plugin's own fallback count, read isolated: a property that raises or exits
         fails this method alone (MethodFailed), never the run."""
-        from emulator.autoexposure.isolation import _isolated
-
-        value = _isolated(lambda: getattr(self.method, "guard_count", 0), self.name,
-                          lambda exc: MethodFailed(f"guard_count: {_describe(exc)}"))
+        value = run_isolated(lambda: getattr(self.method, "guard_count", 0), self.name,
+                          lambda exc: MethodFailed(f"guard_count: {describe_error(exc)}"))
         if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
             raise MethodFailed(f"guard_count is {value!r}, not an integer")
         return int(value)
 
     def config(self) -> dict:
-        from emulator.autoexposure.isolation import _isolated
-
         inner = getattr(type(self.method), "config", None)
         cfg = {}
         if callable(inner):
             try:
-                cfg = dict(_isolated(self.method.config, self.name,
-                                     lambda exc: MethodFailed(f"config(): {_describe(exc)}")))
+                cfg = dict(run_isolated(self.method.config, self.name,
+                                     lambda exc: MethodFailed(f"config(): {describe_error(exc)}")))
             except MethodFailed as exc:
                 cfg = {"config_error": str(exc)}
             except (TypeError, ValueError) as exc:

@@ -24,7 +24,7 @@ import math
 import cv2
 import numpy as np
 
-from emulator.autoexposure._base import FULL_SCALE_DN, MAX_DN, AutoExposureError, AutoExposureMethod
+from emulator.autoexposure.base import FULL_SCALE_DN, MAX_DN, AutoExposureError, AutoExposureMethod
 
 __all__ = [
     "Shim2014",
@@ -42,6 +42,7 @@ __all__ = [
     "update_nonlinear",
     "gamma_metrics_ref",
     "gamma_metrics_paper",
+    "row_blocks",
 ]
 
 #: The gamma set of Shim 2014 (gamma < 1 brightens).
@@ -91,7 +92,7 @@ def _mbar_f32(m: np.ndarray, delta: float, lam: float, n_norm: float) -> np.ndar
     return out
 
 
-def _row_blocks(height: int, rows: int):
+def row_blocks(height: int, rows: int):
     """(a0, a1, s0, s1): a block of rows [a0, a1) with a one-row halo, and its own rows [s0, s1) inside.
 
     A 3x3 filter over the block gives exactly the full-image result on the block's own rows
@@ -141,7 +142,7 @@ def gamma_metrics_ref(y: np.ndarray, gammas=GAMMAS, *, delta=DELTA, lam=LAMBDA, 
     values[:lo] = 0.0
     tables = _gamma_tables(values, gammas)
     counts = np.zeros((len(gammas), 25), dtype=np.float64)
-    for a0, a1, s0, s1 in _row_blocks(y.shape[0], BLOCK_ROWS):
+    for a0, a1, s0, s1 in row_blocks(y.shape[0], BLOCK_ROWS):
         block = y[a0:a1]
         for j, table in enumerate(tables):
             img = cv2.LUT(block, table)
@@ -190,7 +191,7 @@ def gamma_metrics_paper(y: np.ndarray, gammas=GAMMAS, *, delta=DELTA, lam=LAMBDA
     scale = np.float32(lam / (SOBEL_MAX * math.sqrt(2.0)))
     tables = _paper_tables(float(full_dn), tuple(float(g) for g in gammas))
     one = np.float32(1.0)
-    for a0, a1, s0, s1 in _row_blocks(y.shape[0], BLOCK_ROWS):
+    for a0, a1, s0, s1 in row_blocks(y.shape[0], BLOCK_ROWS):
         block = y[a0:a1]
         for j, table in enumerate(tables):
             img = cv2.LUT(block, table)

@@ -36,10 +36,11 @@ import warnings
 import cv2
 import numpy as np
 
-from emulator.autoexposure._base import MAX_DN, AutoExposureError, AutoExposureMethod
+from emulator.autoexposure.base import MAX_DN, AutoExposureError, AutoExposureMethod
 from emulator.autoexposure.classical import Classical
-from emulator.autoexposure.shim import _row_blocks
+from emulator.autoexposure.shim import row_blocks
 from emulator.numpy_dispatch import avx512_sort_slow_in_this_process as _avx512_sort_slow_here
+from emulator.core.response import CameraResponse
 
 __all__ = [
     "Zhang2017",
@@ -278,8 +279,6 @@ class Zhang2017(AutoExposureMethod):
             self._h = ref_icrf_derivative(_ref_knots(response))
         else:
             if response is None:
-                from emulator.core.response import CameraResponse
-
                 response = CameraResponse.linear()
             self._dlogt = paper_dlogt_table(response)
 
@@ -315,7 +314,7 @@ class Zhang2017(AutoExposureMethod):
         lut[table.size :] = table[-1]
         d = np.empty((h, w), dtype=np.float64)
         g2 = np.empty((h, w), dtype=np.float64) if with_g2 else None
-        for a0, a1, s0, s1 in _row_blocks(h, BLOCK_ROWS):
+        for a0, a1, s0, s1 in row_blocks(h, BLOCK_ROWS):
             block = y[a0:a1]
             ix = cv2.Scharr(block, cv2.CV_64F, 1, 0, borderType=cv2.BORDER_REFLECT)[s0:s1]
             iy = cv2.Scharr(block, cv2.CV_64F, 0, 1, borderType=cv2.BORDER_REFLECT)[s0:s1]

@@ -32,6 +32,8 @@ from emulator.calibration.result import (
 from emulator.calibration.solver import Knots, blas_single_thread, comparametric_irls, finish_response, robust_scale
 from emulator.errors import CalibrationError
 from emulator.core.levels import BOREALHDR_LEVELS
+from emulator.core.dataset import Sequence
+from emulator.io.borealhdr import load_sequence
 
 __all__ = ["comparagram_pairs", "fit_comparametric", "calibrate_from_recording"]
 
@@ -210,9 +212,6 @@ def calibrate_from_recording(
     every ``stride``-th pixel of each Bayer plane.  See :func:`comparagram_pairs` and
     :func:`fit_comparametric`.
     """
-    from emulator.core.dataset import Sequence
-    from emulator.io.borealhdr import load_sequence
-
     seq = sequence if isinstance(sequence, Sequence) else load_sequence(sequence)
     pairs = comparagram_pairs(
         seq, cameras=cameras, stride=stride, n_levels=n_levels, margin_dn=margin_dn, tail=tail, rng=rng,

@@ -18,6 +18,9 @@ from emulator.calibration.result import Progress, planes_of, sweep_neighbours
 from emulator.errors import CalibrationError
 from emulator.io.pcalib import PCALIB_TOP_VALUE
 from emulator.core.response import CameraResponse
+from emulator.core.dataset import Sequence
+from emulator.core.emulate import emulate
+from emulator.io.borealhdr import load_sequence
 
 __all__ = ["CrossBracketError", "cross_bracket_error", "response_error", "DEFAULT_QUANTILES"]
 
@@ -70,10 +73,6 @@ def cross_bracket_error(
     clipped to the recording's levels.  Motion between the brackets (~46 ms) barely changes
     the distributions, so this needs no alignment.
     """
-    from emulator.core.dataset import Sequence
-    from emulator.io.borealhdr import load_sequence
-    from emulator.core.emulate import emulate
-
     seq = sequence if isinstance(sequence, Sequence) else load_sequence(sequence)
     qs = DEFAULT_QUANTILES if quantiles is None else np.asarray(quantiles, float)
     resp = response

@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import argparse
 
-__all__ = ["size", "names", "ints", "floats", "seed", "positive_int", "SEED_MAX", "MIN_SIDE_PX", "MAX_PIXELS"]
+__all__ = ["size", "names", "ints", "floats", "seed", "positive_int", "SEED_MAX", "MIN_SIDE_PX", "MAX_PIXELS",
+           "refine_mode"]
 
 #: Largest seed NumPy's legacy ``RandomState`` (Kim's optimizer restarts) takes: 2**32 - 1.
 SEED_MAX = 2**32 - 1
@@ -82,3 +83,16 @@ def positive_int(text: str) -> int:
     if value < 1:
         raise argparse.ArgumentTypeError(f"must be >= 1, got {text!r}")
     return value
+
+
+def refine_mode(value: str):
+    """``--refine-extrinsics``: ``auto`` or a number of stereo pairs (0 or more)."""
+    if value.strip().lower() == "auto":
+        return "auto"
+    try:
+        n = int(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected 'auto' or a number of stereo pairs, got {value!r}") from None
+    if n < 0:
+        raise argparse.ArgumentTypeError(f"expected 'auto', 0 or a positive number of stereo pairs, got {n}")
+    return n

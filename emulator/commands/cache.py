@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from emulator.commands.progress import add_quiet, bars_enabled
+from emulator.commands.progress import add_quiet
+from emulator.commands.body import CommandBody
 
 __all__ = ["register"]
 
@@ -34,33 +35,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="zstandard level: 1..22 (default %(default)s; higher packs smaller), or one of zstd's fast "
                         "levels -1..-100 (entries 1.2-1.8x larger, read in about half the time: 2.5-3.7 ms "
                         "instead of 6.7-7.8 ms for a 1920x1200 frame)")
-    p.set_defaults(func=_cache)
+    p.set_defaults(func=CommandBody("emulator.commands.cache_body:cache"))
 
 
 register.order = 15  # after info
-
-
-def _cache(args) -> int:
-    from tqdm import tqdm
-
-    from emulator.io.framecache import MIN_FAST_LEVEL
-    from emulator.orchestration.framecache import build_frame_cache
-
-    if not (1 <= args.level <= 22 or MIN_FAST_LEVEL <= args.level <= -1):
-        raise SystemExit(f"exposim cache: error: --level must be 1..22, or -1..{MIN_FAST_LEVEL} for zstd's fast "
-                         f"levels, got {args.level}")
-    with tqdm(total=None, unit="frame", desc="cache", disable=not bars_enabled(args.quiet)) as bar:
-        def progress(done, total):
-            bar.total = total
-            bar.update(done - bar.n)
-
-        s = build_frame_cache(args.sequence, args.frame_cache, level=args.level, progress=progress)
-    if args.json:
-        from emulator.io.files import strict_json
-
-        print(strict_json({k: str(v) if isinstance(v, Path) else v for k, v in s.items()}, indent=1))
-        return 0
-    ratio = s["cache_bytes"] / s["png_bytes"] if s["png_bytes"] else float("nan")
-    print(f"{s['cache_dir']}: {s['frames']} frames ({s['written']} written, {s['kept']} kept, "
-          f"{s['removed']} stale removed, {s['rebuilt']} bad rebuilt), {s['cache_bytes'] / 1e6:.1f} MB ({ratio:.2f} x the PNGs)")
-    return 0

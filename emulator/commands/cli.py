@@ -29,6 +29,8 @@ from importlib import metadata
 
 from emulator.errors import ExposimError
 from emulator.extras import missing_extra_message, require
+from emulator.orchestration.interrupts import watchdog
+from emulator.version import __version__
 
 __all__ = ["main", "build_parser", "load_commands", "ENTRY_POINT_GROUP", "Command"]
 
@@ -89,8 +91,6 @@ def _broken(cmd: Command):
 
 def build_parser(commands: list[Command] | None = None) -> argparse.ArgumentParser:
     """The ``exposim`` parser with every registered command (see :func:`load_commands`)."""
-    from emulator.version import __version__
-
     commands = load_commands() if commands is None else commands
     parser = argparse.ArgumentParser(
         prog="exposim",
@@ -171,7 +171,6 @@ def main(argv: list[str] | None = None) -> int:
     previous = None
     if threading.current_thread() is threading.main_thread():
         previous = signal.signal(signal.SIGTERM, _on_sigterm)
-    from emulator.orchestration.interrupts import watchdog
 
     shown = warnings.showwarning
     warnings.showwarning = _one_line_warning

@@ -15,6 +15,8 @@ import contextlib
 import sys
 import threading
 
+from emulator.io.files import to_jsonable
+
 __all__ = ["add_quiet", "add_json", "print_json", "bars_enabled", "progress_bar", "log_lines", "progress_arg",
            "LOG_EVERY_S"]
 
@@ -36,8 +38,6 @@ def add_json(parser: argparse.ArgumentParser, help: str = "print results.json to
 def print_json(results) -> None:
     """Print ``results`` as JSON on stdout (paths and numpy values made plain)."""
     import json
-
-    from emulator.io.files import to_jsonable
 
     print(json.dumps(to_jsonable(results), indent=1))
 

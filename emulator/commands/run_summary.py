@@ -5,6 +5,7 @@ from __future__ import annotations
 import sys
 
 from emulator.core.native import is_native_run
+from emulator.io.files import strict_json
 
 __all__ = ["print_run_summary"]
 
@@ -14,8 +15,6 @@ def print_run_summary(args, summary: dict) -> int:
     failed = {n: m["status"] for n, m in summary["methods"].items() if m.get("status", "ok").startswith("failed")}
     rc = 1 if failed and args.strict else 0
     if args.json:
-        from emulator.io.files import strict_json
-
         print(strict_json(summary, indent=1), file=getattr(args, "json_stream", None) or sys.stdout)
         return rc
     print(f"run folder  {args.output}")

@@ -82,6 +82,7 @@ __all__ = [
     "STRUCTURE_SIGMA_PX",
     "STRUCTURE_FILTERS",
     "structure_of",
+    "window_blur",
 ]
 
 #: Where a frame's timestamp lies in its exposure window.
@@ -216,7 +217,8 @@ class FrameBlur:
 _NAN_BLUR = FrameBlur(math.nan, math.nan, math.nan, math.nan)
 
 
-def _window_blur(omega: AngularVelocity, K, size, t0_s, t1_s) -> FrameBlur:
+def window_blur(omega: AngularVelocity, K, size, t0_s, t1_s) -> FrameBlur:
+    """The blur of an exposure window [t0_s, t1_s] from the gyro (NaN where the gyro does not cover it)."""
     if not omega.covers(t0_s, t1_s):
         return _NAN_BLUR
     _, R = integrate_rotation(omega, t0_s, t1_s)
@@ -235,7 +237,7 @@ def predict_blur(omega, K: np.ndarray, size: tuple[int, int], t_s: float, exposu
     ``K``: (3, 3) intrinsics for images of ``size`` = (width, height) pixels.
     """
     t0, t1 = exposure_window_s(t_s, exposure_ms, stamp)
-    return _window_blur(as_angular_velocity(omega), K, size, t0, t1)
+    return window_blur(as_angular_velocity(omega), K, size, t0, t1)
 
 
 def blur_mismatch_px(omega, K, size, t_s: float, source_ms: float, target_ms: float,
@@ -246,8 +248,8 @@ def blur_mismatch_px(omega, K, size, t_s: float, source_ms: float, target_ms: fl
     negative: blur plain emulation leaves out (target longer).
     """
     omega = as_angular_velocity(omega)
-    src = _window_blur(omega, K, size, *exposure_window_s(t_s, source_ms, stamp))
-    tgt = _window_blur(omega, K, size, *exposure_window_s(t_s, target_ms, stamp))
+    src = window_blur(omega, K, size, *exposure_window_s(t_s, source_ms, stamp))
+    tgt = window_blur(omega, K, size, *exposure_window_s(t_s, target_ms, stamp))
     return src.max_px - tgt.max_px
 
 

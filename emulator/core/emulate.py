@@ -27,6 +27,8 @@ import numpy as np
 from emulator.errors import EmulationError
 from emulator.core.lut import apply_lut, check_exposure, check_raw  # re-exported: the DN lookups live in emulator.core.lut
 from emulator.core.response import CameraResponse
+from emulator.noise.model import NoiseModel
+from emulator.noise.tables import check_rng, consistent_noise, excess_map
 
 __all__ = [
     "emulate",
@@ -37,6 +39,7 @@ __all__ = [
     "check_raw",
     "NOISE_MODES",
     "UPWARD_RATIO_FLAG",
+    "check_noise_model",
 ]
 
 #: Noise options of :func:`emulate`.
@@ -173,24 +176,19 @@ def emulate(
             return out
         return out, validity_mask(raw, target_ms / source_ms, response)
     ratio = float(target_ms) / float(source_ms)
-    model = _check_noise_model(noise_model, response, noise, return_excess)
+    model = check_noise_model(noise_model, response, noise, return_excess)
     if noise == "consistent":
-        from emulator.noise.tables import check_rng, consistent_noise
-
         out = consistent_noise(raw, out, ratio, model, check_rng(rng))
     results = [out]
     if return_mask:
         results.append(validity_mask(raw, ratio, response))
     if return_excess:
-        from emulator.noise.tables import excess_map
-
         results.append(excess_map(raw, ratio, model, consistent=noise == "consistent"))
     return tuple(results) if len(results) > 1 else results[0]
 
 
-def _check_noise_model(noise_model, response: CameraResponse, noise: str, return_excess: bool):
-    from emulator.noise.model import NoiseModel
-
+def check_noise_model(noise_model, response: CameraResponse, noise: str, return_excess: bool):
+    """``noise_model`` if it is a NoiseModel of ``response``, else an EmulationError naming what is wrong."""
     why = f'noise="{noise}"' if noise != "none" else "return_excess"
     if noise_model is None:
         raise EmulationError(

@@ -49,6 +49,7 @@ import numpy as np
 
 from emulator.core.lut import forward_dn
 from emulator.errors import EmulationError
+from emulator.core.blur import as_angular_velocity, integrate_rotation
 
 __all__ = [
     "NATIVE_RATE",
@@ -79,6 +80,7 @@ __all__ = [
     "SHARP_MOTION_PX",
     "DEFAULT_NATIVE_WARP",
     "median_motion_px",
+    "plane_homography",
 ]
 
 #: Candidate source frames lie within this many recorder cycles (sweeps) of frame k, each side.
@@ -215,8 +217,6 @@ def native_select(target_ms: float, candidates: Iterable[NativeCandidate], *,
 # ============================================================================ the warp
 def rotation_between(omega, t_from_s: float, t_to_s: float) -> np.ndarray | None:
     """The camera's rotation from ``t_from_s`` to ``t_to_s`` (3x3), or None where the gyro does not cover it."""
-    from emulator.core.blur import as_angular_velocity, integrate_rotation
-
     omega = as_angular_velocity(omega)
     if not omega.covers(t_from_s, t_to_s):
         return None
@@ -224,7 +224,8 @@ def rotation_between(omega, t_from_s: float, t_to_s: float) -> np.ndarray | None
     return R[-1] if np.all(np.isfinite(R[-1])) else None
 
 
-def _plane_homography(H: np.ndarray, px: int, py: int) -> np.ndarray:
+def plane_homography(H: np.ndarray, px: int, py: int) -> np.ndarray:
+    """Homography ``H`` of full-resolution pixels as one on the half-resolution Bayer plane at offset (px, py)."""
     A = np.array([[2.0, 0.0, px], [0.0, 2.0, py], [0.0, 0.0, 1.0]])
     return np.linalg.inv(A) @ H @ A
 
@@ -266,7 +267,7 @@ def warp_to_instant(image: np.ndarray, H: np.ndarray, response, *, bayer: bool =
     for px, py in phases:
         sl = (slice(None), slice(None)) if px is None else (slice(py, None, 2), slice(px, None, 2))
         plane = np.ascontiguousarray(h[sl])
-        Hp = H if px is None else _plane_homography(H, px, py)
+        Hp = H if px is None else plane_homography(H, px, py)
         out[sl] = cv2.warpPerspective(plane, Hp, (plane.shape[1], plane.shape[0]), flags=RESAMPLERS[resample],
                                       borderMode=cv2.BORDER_REPLICATE)
     return forward_dn(response, out, _DN_GRID), _inside_fraction(H, width, height)

@@ -31,6 +31,8 @@ import numpy as np
 
 from emulator.errors import DatasetError
 from emulator.io.crc import crc32
+from emulator.io.files import atomic_write_bytes
+from emulator.io.png import white_level_message
 
 __all__ = [
     "encode_entry",
@@ -109,8 +111,6 @@ def encode_entry(img: np.ndarray, level: int, key: str) -> bytes:
 
 def write_cached_frame(path, img: np.ndarray, *, level: int = DEFAULT_LEVEL) -> Path:
     """Write the cache entry of a decoded frame at ``path`` (atomically; its key from ``path``)."""
-    from emulator.io.files import atomic_write_bytes
-
     return atomic_write_bytes(path, encode_entry(img, level, entry_key(path)), overwrite=True)
 
 
@@ -179,8 +179,6 @@ def read_cached_frame(path, *, png_path=None, white_level: int | None = None) ->
     if white_level is not None:
         top = int(img.max())
         if top > white_level:
-            from emulator.io.png import white_level_message
-
             raise DatasetError(white_level_message(png_path or path, top, white_level))
     return img
 

@@ -21,6 +21,7 @@ import numpy as np
 
 from emulator.errors import DatasetError
 from emulator.io.files import atomic_write_bytes
+from emulator.io.crc import crc32
 
 __all__ = ["decode_png16", "read_png16", "write_png16", "write_png8", "read_image", "encode_png", "white_level_message"]
 
@@ -41,8 +42,6 @@ def png_structure_problem(data: bytes) -> str | None:
     libpng prints on stderr.  Costs one CRC pass over the file (zlib-ng's: about 0.02 ms per MB; zlib's: 0.23).
     """
     import struct
-
-    from emulator.io.crc import crc32
 
     view = memoryview(data)  # slices without copies
     unpack = struct.unpack_from

@@ -20,7 +20,8 @@ import numpy as np
 from emulator.errors import MetricsError
 from emulator.io.files import RESULTS_FILE, prepare_output, write_results
 from emulator.io.runfolder import RunFolder, read_run_folder
-from emulator.metrics.bench_common import CONVERSION, _features_sheet, _frames, _progress, _version, benchmark_frames
+from emulator.metrics.bench_common import CONVERSION, features_sheet, method_frames, progress_iter, benchmark_frames
+from emulator.version import __version__
 from emulator.metrics.features import (
     DEFAULT_TAUS,
     GRID_CELLS,
@@ -42,6 +43,9 @@ from emulator.metrics.vo_bench import (  # re-exported: the VO benchmark lives i
 )
 from emulator.report import bench as report
 from emulator.report.html import write_report
+from emulator.core.settling import trending_methods
+from emulator.io.runcsv import read_tables
+from emulator.report.run import per_recorder_cycle
 
 __all__ = [
     "bench_features",
@@ -75,10 +79,6 @@ def tau_grid(max_min_matches: int, *, n: int = 100) -> list[int]:
 def _still_trending(run_dir, names: list[str]) -> dict:
     """``{"still_trending": ...}`` of the run's methods whose exposure was still moving one way at its end
     (:mod:`emulator.core.settling`, per recorder cycle); empty where all settled or the tables cannot tell."""
-    from emulator.io.runcsv import read_tables
-    from emulator.report.run import per_recorder_cycle
-    from emulator.core.settling import trending_methods
-
     try:
         tables = read_tables(run_dir, names)
     except (OSError, ValueError, KeyError):  # a folder without usable tables: nothing to say
@@ -92,11 +92,11 @@ def _run_features(run: RunFolder, max_frames: int | None, progress, **analysis) 
     its keywords) on the left images, and whether the method was still trending."""
     per_method = {}
     for name, method in run.methods.items():
-        frames = _frames(method, max_frames)
+        frames = method_frames(method, max_frames)
         images = (
             (f.timestamp_ns, f.exposure_ms, load_gray8(f.left, white_level=run.white_level,
                                                        black_level=run.black_level))
-            for f in _progress(frames, progress, f"features {name}", len(frames))
+            for f in progress_iter(frames, progress, f"features {name}", len(frames))
         )
         per_method[name] = analyse_sequence(images, **analysis).to_dict()
     return {
@@ -190,7 +190,7 @@ def bench_features(
     summary, rates = pool_feature_runs(run_results, taus)
     results = {
         "benchmark": "features",
-        "exposim_version": _version(),
+        "exposim_version": __version__,
         "command": command,
         "parameters": parameters,
         "n_runs": len(run_results),
@@ -201,7 +201,7 @@ def bench_features(
         "report": "report.md",
     }
     report.plot_features(results, out / "fig4_features.png")
-    sheet = _features_sheet(runs[0], run_results[0], max_frames)
+    sheet = features_sheet(runs[0], run_results[0], max_frames)
     write_report(out, report.features_report(results, "fig4_features.png"), figures=["fig4_features.png"],
                  sheets=[sheet])
     write_results(out / RESULTS_FILE, results)

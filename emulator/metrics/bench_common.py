@@ -11,8 +11,10 @@ from emulator.errors import MetricsError
 from emulator.io.runfolder import MethodRun
 from emulator.metrics.features import load_gray8
 from emulator.core.native import is_native_run
+from emulator.io.runcsv import read_tables
+from emulator.report.html import Thumb, spread_indices, contact_sheet, thumbnail
 
-__all__ = ["CONVERSION", "benchmark_frames"]
+__all__ = ["CONVERSION", "benchmark_frames", "progress_iter", "method_frames", "features_sheet"]
 
 #: The 12-bit to 8-bit conversion, as stated in the results.
 CONVERSION = (
@@ -22,13 +24,7 @@ CONVERSION = (
 )
 
 
-def _version() -> str:
-    from emulator.version import __version__
-
-    return __version__
-
-
-def _progress(iterable, progress, desc: str, total: int):
+def progress_iter(iterable, progress, desc: str, total: int):
     """``iterable`` with progress: a tqdm bar when ``progress`` is True; when it is a callable, it is called
     as ``progress(desc, done, total)`` before each item and after the last (the command line turns that
     into log lines); nothing when False."""
@@ -58,8 +54,6 @@ def benchmark_frames(run, every_frame: bool = False):
     """
     from dataclasses import replace
 
-    from emulator.io.runcsv import read_tables
-
     if every_frame or not is_native_run(run.meta):
         return run
     tables = read_tables(run.path, list(run.methods))
@@ -74,7 +68,8 @@ def benchmark_frames(run, every_frame: bool = False):
     return replace(run, methods=methods)
 
 
-def _frames(method: MethodRun, max_frames: int | None):
+def method_frames(method: MethodRun, max_frames: int | None):
+    """The frames of ``method`` a benchmark reads: the first ``max_frames`` (at least 2) or all of them."""
     frames = method.frames
     if max_frames is not None:
         if max_frames < 2:
@@ -83,16 +78,14 @@ def _frames(method: MethodRun, max_frames: int | None):
     return frames
 
 
-def _features_sheet(run, result: dict, max_frames, n_cycles: int = 6) -> str:
+def features_sheet(run, result: dict, max_frames, n_cycles: int = 6) -> str:
     """Contact sheet of the images a benchmark compared (first run): sampled left frames per method."""
-    from emulator.report.html import Thumb, _sample, contact_sheet, thumbnail
-
     rows = []
     for name, method in run.methods.items():
-        frames = _frames(method, max_frames)
+        frames = method_frames(method, max_frames)
         per = {} if result is None else result["methods"].get(name, {})
         cells = []
-        for i in _sample(len(frames), n_cycles):
+        for i in spread_indices(len(frames), n_cycles):
             f = frames[i]
             gray = load_gray8(f.left, white_level=run.white_level, black_level=run.black_level)
             exposure = "?" if f.exposure_ms is None else f"{f.exposure_ms:.2f} ms"

@@ -27,6 +27,12 @@ from emulator.io.files import RESULTS_FILE, prepare_output, read_metadata, write
 from emulator.io.runcsv import read_tables
 from emulator.io.runfolder import RUN_FILE, read_run_json
 from emulator.core.native import is_native_run, run_rate
+from emulator.core.settling import trending_methods
+from emulator.core.stats import compare_methods, statistic_interval
+from emulator.report.compare import compare_markdown
+from emulator.report.html import write_report
+from emulator.report.run import per_recorder_cycle
+from emulator.version import __version__
 
 __all__ = ["bench_compare", "load_inputs", "row_labels"]
 
@@ -37,8 +43,6 @@ def _recording(info: dict) -> str | None:
 
 
 def _run_input(folder: Path) -> dict:
-    from emulator.report.run import per_recorder_cycle
-
     info = read_run_json(folder)
     names = list(info["methods"])
     tables = read_tables(folder, names)
@@ -134,9 +138,6 @@ def _paired(rows: dict, key: str) -> tuple[dict, int]:
 
 
 def _comparisons(kind: str, rows: dict) -> dict:
-    from emulator.core.settling import trending_methods
-    from emulator.core.stats import compare_methods, statistic_interval
-
     if kind == "run":
         sat, n_common = _paired(rows, "saturated_fraction")
         exp, _ = _paired(rows, "exposure_ms")
@@ -179,8 +180,6 @@ def bench_compare(folders, out_dir: str | os.PathLike, *, force: bool = False, c
         The content of ``results.json``: the inputs, every row (method, rate, folder), the comparisons
         with 95 % intervals and the ranking (best first).
     """
-    from emulator.metrics.bench_common import _version
-
     folders = [Path(f) for f in folders]
     if not folders:
         raise MetricsError("give at least one folder to compare")
@@ -194,7 +193,7 @@ def bench_compare(folders, out_dir: str | os.PathLike, *, force: bool = False, c
                      reverse=cmp["primary"] == "median_matches")
     results = {
         "benchmark": "compare",
-        "exposim_version": _version(),
+        "exposim_version": __version__,
         "command": command,
         "kind": inputs[0]["kind"],
         "unit": "recorder cycle" if inputs[0]["kind"] == "run" else "consecutive image pair (matches), image "
@@ -208,8 +207,6 @@ def bench_compare(folders, out_dir: str | os.PathLike, *, force: bool = False, c
         "report": "report.md",
     }
     out = prepare_output(out_dir, force=force)
-    from emulator.report.compare import compare_markdown
-    from emulator.report.html import write_report
 
     write_report(out, compare_markdown(results), figures=[])
     write_results(out / RESULTS_FILE, results)

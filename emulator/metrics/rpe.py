@@ -28,6 +28,7 @@ import numpy as np
 
 from emulator.errors import MetricsError, TrajectoryError
 from emulator.metrics.trajectory import EVO_T_MAX_DIFF_S, associate, read_trajectory
+from emulator.io.tum import read_tum_comments
 
 __all__ = [
     "rpe_files",
@@ -135,8 +136,6 @@ def looks_like_estimate(path: str | Path) -> str | None:
     at exactly the identity is no evidence, since a synthetic or re-based reference starts
     there as often as a VO estimate does.
     """
-    from emulator.io.tum import read_tum_comments
-
     comments = read_tum_comments(Path(path))
     if comments and ("# " + comments[0]).startswith(ESTIMATE_HEADER):
         return "it was written by exposim bench vo as an estimate"

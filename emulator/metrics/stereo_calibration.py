@@ -14,6 +14,7 @@ import numpy as np
 
 from emulator.errors import CalibrationError
 from emulator.io.camera_info import CameraInfo, read_camera_info
+from emulator.io.layout import CalibrationChoice, choose_stereo_calibration
 
 __all__ = [
     "rotation_angle_deg",
@@ -143,8 +144,6 @@ def choose_calibration(
     CalibrationError
         When nothing holds ``left.yaml`` and ``right.yaml``, or the date cannot choose.
     """
-    from emulator.io.layout import CalibrationChoice, choose_stereo_calibration
-
     if override is not None:
         folder = Path(override)
         if not ((folder / "left.yaml").is_file() and (folder / "right.yaml").is_file()):

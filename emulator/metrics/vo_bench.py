@@ -18,7 +18,8 @@ from emulator.io.borealhdr import read_recording_metadata
 from emulator.io.files import RESULTS_FILE, prepare_output
 from emulator.io.runfolder import RunFolder, read_run_folder
 from emulator.io.tum import write_tum
-from emulator.metrics.bench_common import CONVERSION, _features_sheet, _frames, _progress, _version, benchmark_frames
+from emulator.metrics.bench_common import CONVERSION, features_sheet, method_frames, progress_iter, benchmark_frames
+from emulator.version import __version__
 from emulator.metrics.features import load_gray8
 from emulator.metrics.rpe import ESTIMATE_HEADER, pair_segments, rpe_by_length
 from emulator.metrics.stereo import choose_calibration, load_stereo_calibration, stereo_rectification
@@ -123,7 +124,7 @@ def _check_inputs(run_dir, out_dir, methods, max_frames, calibration, baseline_m
     if (Path(out_dir) / RESULTS_FILE).exists() and not force:
         prepare_output(out_dir, force=force)  # refuses, naming the file
     run = benchmark_frames(read_run_folder(run_dir, list(methods) if methods else None, require_right=True), every_frame)
-    selected = {name: _frames(m, max_frames) for name, m in run.methods.items()}
+    selected = {name: method_frames(m, max_frames) for name, m in run.methods.items()}
     first_ns = min((fr[0].timestamp_ns for fr in selected.values() if fr), default=None)
     choice = choose_calibration(run.sequence, calibration, first_ns)
     calib = load_stereo_calibration(choice.folder, baseline_m=baseline_m)
@@ -168,7 +169,7 @@ def _vo_method(name, frames, run, rect, parameters, out, progress, ref_traj, ref
         (f.timestamp_ns,
          load_gray8(f.left, white_level=run.white_level, black_level=run.black_level),
          load_gray8(f.right, white_level=run.white_level, black_level=run.black_level))
-        for f in _progress(frames, progress, f"VO {name}", len(frames))
+        for f in progress_iter(frames, progress, f"VO {name}", len(frames))
     )
     vo = run_stereo_vo(stream, rect, parameters)
     write_tum(out / f"{name}.txt", vo.timestamps_ns, vo.poses,
@@ -390,7 +391,7 @@ def bench_vo(
         ref_xyz = _reference_over_run(ref_traj, method_results, max_diff_s)
     results = {
         "benchmark": "vo",
-        "exposim_version": _version(),
+        "exposim_version": __version__,
         "command": command,
         "run_dir": str(run.path),
         "sequence": None if run.sequence is None else str(run.sequence),
@@ -421,5 +422,5 @@ def bench_vo(
         "report": "report.md",
     }
     write_vo_report(out, results, aligned_xyz, ref_xyz if ref_traj is not None else None,
-                    _features_sheet(run, None, max_frames), with_rpe=ref_traj is not None)
+                    features_sheet(run, None, max_frames), with_rpe=ref_traj is not None)
     return results

@@ -23,6 +23,7 @@ import numpy as np
 
 from emulator.errors import EmulationError
 from emulator.core.response import CameraResponse
+from emulator.pools import lut_pool
 
 if TYPE_CHECKING:
     from emulator.noise.model import NoiseModel
@@ -336,8 +337,6 @@ def consistent_noise(raw: np.ndarray, plain: np.ndarray, ratio: float, model: No
             out[sl] = block
 
     if raw.size >= _THREAD_MIN_PIXELS and height >= 2 * rows:
-        from emulator.pools import lut_pool
-
         half = height // 2
         list(lut_pool().map(lambda ab: work(*ab), [(0, half), (half, height)]))
     else:

@@ -38,6 +38,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from emulator.errors import ExposimError
+from emulator.extras import missing_modules, require
 
 __all__ = ["SchedulerError", "ENV_ADDRESS", "SCHEDULER_HELP", "default_workers", "is_address", "is_client",
            "check_scheduler", "resolve_scheduler", "local_client", "connect", "open_client", "run_tasks", "Outcome"]
@@ -109,8 +110,6 @@ def resolve_scheduler(scheduler: str | None, scheduler_file=None, *, default: st
             raise SchedulerError(f"${ENV_ADDRESS}={env!r} is not tcp://HOST:PORT or tls://HOST:PORT")
         return env, None
     if default == "local":
-        from emulator.extras import missing_modules
-
         if missing_modules("dask"):
             return "serial", None
     return check_scheduler(default), None
@@ -137,8 +136,6 @@ def local_client(n_workers: int | None = None, *, allowed_failures: int = 3):
     such a pause, and three pauses failed the walk (``KilledWorker``).
     """
     import tempfile
-
-    from emulator.extras import require
 
     require("dask", "a Dask scheduler")
     import dask
@@ -172,8 +169,6 @@ def connect(address: str | None = None, *, scheduler_file: str | None = None, ti
 
     :class:`SchedulerError` if it cannot be reached or has no worker.
     """
-    from emulator.extras import require
-
     require("dask", "a Dask scheduler")
     from dask.distributed import Client
 

@@ -28,13 +28,26 @@ import numpy as np
 from emulator.autoexposure.methodset import parse_methods
 from emulator.errors import PlaybackError
 from emulator.core.gray import bayer_to_gray8
-from emulator.io.runfolder import CSV_COLUMNS, CSV_FILE, RUN_FILE, RunWriter, format_row, tables_from_rows
+from emulator.io.runfolder import (
+    CSV_COLUMNS,
+    CSV_FILE,
+    RUN_FILE,
+    RunWriter,
+    format_row,
+    tables_from_rows,
+    EXTRA_COLUMNS,
+)
 import emulator.numpy_dispatch as numpy_dispatch
 from emulator.playback import METHOD_CAMERA, MethodStep, RunConfig, RunStats, closed_loop, prepare_run, \
     resolve_sequence
 from emulator.io.runwatch import watch_run
 from emulator.playback.shmblock import SharedMemoryWarning, shortage_note
-from emulator.playback._worker_child import plain  # inline methods' config() as JSON, as a worker sends it
+from emulator.playback.worker_child import plain  # inline methods' config() as JSON, as a worker sends it
+from emulator.autoexposure.isolation import captured_output
+from emulator.io.files import atomic_write_bytes
+from emulator.io.runcsv import read_csv_rows
+from emulator.report.run import summarise_run, write_run_report
+from emulator.version import __version__
 
 __all__ = ["run_to_folder", "write_run", "saved_image", "RUN_JSON_EVERY"]
 
@@ -135,8 +148,6 @@ class _ImageSaver:
 
 def _new_run_json(config: RunConfig, identity: dict, seq, built, method_specs, model, model_source, command,
                   created, blur_hook=None) -> dict:
-    from emulator.version import __version__
-
     run_json = {
         **identity,
         **config.to_json(model, blur_hook),
@@ -202,8 +213,6 @@ def run_to_folder(
     ``method_status`` (name -> ``"ok"`` or ``"failed: <reason> at cycle N"``).
     ``run_json_extra``: more keys for a new folder's ``run.json``.
     """
-    from emulator.report.run import summarise_run, write_run_report
-
     run_json, tables = write_run(sequence, methods, out_dir, config, response=response, resume=resume,
                                  resume_given=resume_given, progress=progress, command=command,
                                  run_json_extra=run_json_extra, **settings)
@@ -340,8 +349,6 @@ class TablesChangedWarning(UserWarning):
 
 def _tables_changed(out: Path, rows: dict) -> list[str]:
     """The methods whose ``exposures.csv`` no longer holds exactly the rows of ``rows`` (what the run wrote)."""
-    from emulator.io.runcsv import read_csv_rows
-
     changed = []
     for name, written in rows.items():
         try:
@@ -377,8 +384,6 @@ def _reserve_image_blocks(seq, built: dict) -> tuple[list[str], str] | None:
 
 def _resume_mismatch(path: Path, cycle: int, recorded: list[str], replayed: list[str]) -> str:
     """One line naming the columns where a resumed folder's row and the replay differ."""
-    from emulator.io.runfolder import EXTRA_COLUMNS
-
     names = list(CSV_COLUMNS) + list(EXTRA_COLUMNS)
     n = max(len(recorded), len(replayed))
     cell = lambda row, i: row[i] if i < len(row) else "(none)"  # noqa: E731
@@ -396,9 +401,6 @@ METHOD_OUTPUT_FILE = "output.txt"
 
 def _write_method_output(out: Path, names) -> None:
     """Write each method's captured output (:mod:`emulator.autoexposure.isolation`) to its folder."""
-    from emulator.autoexposure.isolation import captured_output
-    from emulator.io.files import atomic_write_bytes
-
     for name in names:
         text, total = captured_output(name, clear=True)
         if total:

@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from emulator.autoexposure import DEFAULT_RANGE_MS
-from emulator.core.emulate import _check_noise_model
+from emulator.core.emulate import check_noise_model
 from emulator.core.native import DEFAULT_NATIVE_WARP, NATIVE_RATE, RATES, is_native_run
 from emulator.errors import PlaybackError
 from emulator.io.borealhdr import sequence_response
@@ -319,7 +319,7 @@ class RunConfig:
                     f"camera in {meta_path.name}); pass --noise-model FILE.json (written by `exposim calibrate "
                     "--noise`)")
             source = str(meta_path.resolve())
-        return _check_noise_model(model, response, self.noise, False), source
+        return check_noise_model(model, response, self.noise, False), source
 
     def blur_for(self, sequence, response):
         """The run's blur hook (:class:`emulator.playback.motion.BlurHook`), or None for ``blur="none"``."""

@@ -29,14 +29,15 @@ from emulator.playback.config import RATES, RunConfig, provides_rate
 from emulator.playback.loop import Shot
 from emulator.playback.records import RunStats
 from emulator.core.select import select
+from emulator.noise import consistent_noise
 
-__all__ = ["EmulatedProvider", "EmulatedTick", "METHOD_CAMERA"]
+__all__ = ["EmulatedProvider", "EmulatedTick", "METHOD_CAMERA", "Memo", "CycleImages", "clip_fractions"]
 
 #: Camera whose emulated image the methods read and whose saturation selects the bracket.
 METHOD_CAMERA = "left"
 
 
-class _Memo:
+class Memo:
     """``compute()`` once per key, whichever thread asks first (one lock per key)."""
 
     def _memo_init(self) -> None:
@@ -54,7 +55,7 @@ class _Memo:
             return hit
 
 
-class _CycleImages(_Memo):
+class CycleImages(Memo):
     """Decoded brackets of one cycle, each decoded at most once (thread-safe), with histograms."""
 
     def __init__(self, cycle, white_level: int, black_level: int, stats: RunStats, noise=None,
@@ -112,8 +113,6 @@ class _CycleImages(_Memo):
     def _add_noise(self, camera: str, exposure_ms: float, ratio: float, raw: np.ndarray, plain: np.ndarray):
         """Noise-consistent emulation (``emulator.core.emulate``, ``noise="consistent"``), seeded by
         (seed, cycle, camera, bracket, ratio): independent of threads and of which method asks."""
-        from emulator.noise import consistent_noise
-
         model, seed = self.noise
         words = np.array([exposure_ms, ratio], dtype=np.float64).view(np.uint32).tolist()
         rng = np.random.default_rng(np.random.SeedSequence([int(seed), int(self.cycle.index),
@@ -126,7 +125,7 @@ class _CycleImages(_Memo):
         return n / float(hist.sum())
 
 
-def _fractions(hist: np.ndarray, table: np.ndarray, valid: np.ndarray, white: int, black: int) -> tuple[float, float]:
+def clip_fractions(hist: np.ndarray, table: np.ndarray, valid: np.ndarray, white: int, black: int) -> tuple[float, float]:
     """(saturated fraction of the emulated image, valid fraction) from the source histogram."""
     n = float(hist.sum())
     tab = table[: hist.size]
@@ -147,7 +146,7 @@ class EmulatedTick:
         self.skipped = None if avail else "no bracket present for every camera"
         if self.skipped is None and p.skip_partial and any(self.missing.values()):
             self.skipped = "partial cycle left out (--skip-partial): " + missing_text(self.missing)
-        self.images = images = _CycleImages(cycle, p.white, p.black, p.stats, p.noise, shapes, p.blur)
+        self.images = images = CycleImages(cycle, p.white, p.black, p.stats, p.noise, shapes, p.blur)
         lead = p.cameras[0]
         # the closures hold the images, not the tick: no reference cycle, so a cycle's decoded
         # and emulated images are freed as soon as the loop drops the tick (a cycle through
@@ -181,7 +180,7 @@ class EmulatedTick:
         ratio = target_ms / key
         table, valid = p.response.lut(ratio)  # thread-safe, cached per ratio
         left = self.images.emulated(lead, key, ratio, table, p.stats)
-        sat, val = _fractions(hist, table, valid, p.white, p.black)
+        sat, val = clip_fractions(hist, table, valid, p.white, p.black)
         shot = Shot(timestamp_ns=int(frame.timestamp_ns), exposure_ms=float(target_ms), bracket_ms=float(key),
                     ratio=float(ratio), left=left, saturated_fraction=sat, valid_fraction=val,
                     bracket_saturated_fraction=self.images.saturated(lead, key),
@@ -198,7 +197,7 @@ class EmulatedTick:
                     f"{lead} timestamp {frame.timestamp_ns} for bracket {key} ms"
                 )
             _, rhist = self.images.get(other, key)
-            shot.saturated_fraction_right, shot.valid_fraction_right = _fractions(rhist, table, valid, p.white,
+            shot.saturated_fraction_right, shot.valid_fraction_right = clip_fractions(rhist, table, valid, p.white,
                                                                                     p.black)
             if want_right:
                 shot.right = self.images.emulated(other, key, ratio, table, p.stats)

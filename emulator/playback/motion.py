@@ -37,6 +37,9 @@ from emulator.core.blur import (
     scale_intrinsics,
 )
 from emulator.errors import CalibrationError, EmulationError
+from emulator.core.select import blur_aware, select
+from emulator.io.blurtable import write_blur_table
+from emulator.io.camera_info import read_camera_info
 
 __all__ = ["RecordingMotion", "recording_motion", "find_camera_calibration", "blur_table", "BlurHook", "blur_hook"]
 
@@ -137,8 +140,6 @@ def recording_motion(sequence, calibration=None, *, stamp: str = DEFAULT_STAMP, 
     BorealHDR sample 0.4-0.8 deg/s, as much as the sample's cycles turn).  ``intrinsics``:
     camera -> (K (3x3), (width, height)) instead of calibration files (synthetic cameras).
     """
-    from emulator.io.camera_info import read_camera_info
-
     if stamp not in STAMP_CONVENTIONS:
         raise EmulationError(f"stamp must be one of {', '.join(STAMP_CONVENTIONS)}, got {stamp!r}")
     if omega is None:
@@ -208,8 +209,6 @@ class BlurHook:
     def select(self, selector: str, cycle, camera: str, target_ms: float, brackets, select_kw: dict):
         """The loop's bracket choice: ``selector``, or :func:`emulator.core.select.blur_aware` when
         :attr:`blur_aware` (``selector`` must then be ``higher-no-sat``)."""
-        from emulator.core.select import blur_aware, select
-
         if not self.blur_aware:
             return select(selector, target_ms, brackets, **select_kw)
         if selector != "higher-no-sat":
@@ -245,8 +244,6 @@ class BlurHook:
 
     def write_table(self, run_dir) -> Path:
         """Write the recorded rows to ``<run_dir>/blur.csv`` (:mod:`emulator.io.blurtable`)."""
-        from emulator.io.blurtable import write_blur_table
-
         return write_blur_table(run_dir, self.rows())
 
     def emulate(self, camera: str, timestamp_ns: int, raw: np.ndarray, source_ms: float, target_ms: float):

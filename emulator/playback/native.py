@@ -46,7 +46,7 @@ import warnings
 import numpy as np
 
 from emulator.autoexposure.isolation import readonly_view
-from emulator.core.blur import DEFAULT_STAMP, _window_blur, as_angular_velocity, exposure_window_s, rotation_homography
+from emulator.core.blur import DEFAULT_STAMP, window_blur, as_angular_velocity, exposure_window_s, rotation_homography
 from emulator.core.dataset import CAMERAS
 from emulator.core.gyro import GYRO_HOLE_S
 from emulator.core.native import (BLUR_STOPS_PER_PX, MOTION_STOPS_PER_FRAME, NATIVE_RATE, SATURATION_LIMIT,
@@ -55,7 +55,7 @@ from emulator.core.native import (BLUR_STOPS_PER_PX, MOTION_STOPS_PER_FRAME, NAT
 from emulator.errors import CalibrationError, PlaybackError
 from emulator.io.runcsv import NATIVE_COLUMNS
 from emulator.playback.config import RunConfig, provides_rate
-from emulator.playback.emulated import METHOD_CAMERA, _CycleImages
+from emulator.playback.emulated import METHOD_CAMERA, CycleImages
 from emulator.playback.motion import find_camera_calibration, recording_motion
 from emulator.playback.native_ticks import NativeInfo, NativeTick, RecordedFrames
 from emulator.playback.records import RunStats
@@ -195,13 +195,13 @@ class NativeProvider:
     def tick_indices(self) -> list[int]:
         return list(range(len(self.frames)))
 
-    def images(self, j: int) -> _CycleImages:
+    def images(self, j: int) -> CycleImages:
         """The decoded images of frame ``j``'s cycle (each bracket decoded once)."""
         cycle = self.frames.cycles[j]
         with self._lock:
             hit = self._images.get(cycle.index)
             if hit is None:
-                hit = self._images[cycle.index] = _CycleImages(cycle, self.white, self.black, self.stats, self.noise,
+                hit = self._images[cycle.index] = CycleImages(cycle, self.white, self.black, self.stats, self.noise,
                                                                self._shapes, self.blur)
             return hit
 
@@ -336,7 +336,7 @@ class NativeProvider:
             with self._lock:
                 hit = self._blur.get(key)
             if hit is None:
-                hit = _window_blur(omega, K, size, t0, t1).max_px
+                hit = window_blur(omega, K, size, t0, t1).max_px
                 with self._lock:
                     self._blur[key] = hit
             return hit

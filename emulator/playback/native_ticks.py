@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from emulator.core.native import NativeCandidate, invalid_fraction, native_select
-from emulator.playback.emulated import _fractions, _Memo
+from emulator.playback.emulated import clip_fractions, Memo
 from emulator.playback.loop import Shot
 
 if TYPE_CHECKING:  # the provider module imports this one
@@ -63,7 +63,7 @@ class RecordedFrames:
         return len(self.timestamps)
 
 
-class NativeTick(_Memo):
+class NativeTick(Memo):
     """One recorded frame of a :class:`NativeProvider` (see :meth:`shot`)."""
 
     def __init__(self, provider: "NativeProvider", k: int, hidden: bool = False) -> None:
@@ -104,7 +104,7 @@ class NativeTick(_Memo):
         images = p.images(j)
         _, hist = images.get(lead, e)
         left, inside, angle = self._memo((lead, j, ratio), lambda: p.emulate(lead, j, k, ratio, table, target_ms))
-        sat, val = _fractions(hist, table, valid, p.white, p.black)
+        sat, val = clip_fractions(hist, table, valid, p.white, p.black)
         info = NativeInfo(int(fr.cycles[k].index), k in fr.benchmarked, j - k, fr.timestamps[j], angle)
         shot = Shot(timestamp_ns=fr.timestamps[k], exposure_ms=float(target_ms), bracket_ms=float(e), ratio=float(ratio),
                     left=left, saturated_fraction=sat, valid_fraction=val * inside,
@@ -113,7 +113,7 @@ class NativeTick(_Memo):
                     missing_right_ms=tuple(self.missing.get(other, ())) if other else (), native=info)
         if other is not None:
             _, rhist = images.get(other, e)
-            rsat, rval = _fractions(rhist, table, valid, p.white, p.black)
+            rsat, rval = clip_fractions(rhist, table, valid, p.white, p.black)
             shot.saturated_fraction_right, shot.valid_fraction_right = rsat, rval * inside
             if want_right:
                 shot.right = self._memo((other, j, ratio),

@@ -14,6 +14,8 @@ from emulator.core.dataset import Sequence
 from emulator.playback.config import RunConfig
 from emulator.playback.loop import closed_loop
 from emulator.playback.records import CycleStep, MethodStep, RunResult, RunStats
+from emulator.io.borealhdr import load_sequence
+from emulator.playback import workers  # called through the module: tests replace workers.start_methods
 
 __all__ = ["iter_run", "run", "prepare_run", "at_rate", "Prepared", "resolve_sequence"]
 
@@ -21,8 +23,6 @@ __all__ = ["iter_run", "run", "prepare_run", "at_rate", "Prepared", "resolve_seq
 def resolve_sequence(sequence, *, imu_warning: bool = True) -> Sequence:
     """A loaded :class:`~emulator.core.dataset.Sequence`, or the recording at this path (``imu_warning``:
     :func:`~emulator.io.borealhdr.load_sequence`'s)."""
-    from emulator.io.borealhdr import load_sequence
-
     return sequence if isinstance(sequence, Sequence) else load_sequence(sequence, imu_warning=imu_warning)
 
 
@@ -45,18 +45,16 @@ def prepare_run(sequence, methods, config: RunConfig, response=None, *, stats: R
     own worker process unless ``config.workers == "inline"``; :mod:`emulator.playback.workers`),
     the noise model, the blur hook (``blur``, else ``config``'s), and the image provider of ``config.rate``.  The
     workers stop when the closed loop over them ends (or :func:`~emulator.playback.workers.stop_methods`)."""
-    from emulator.playback.workers import start_methods, stop_methods
-
     seq = resolve_sequence(sequence, imu_warning=config.blur != "none")  # the IMU is read only for blur
     response = config.response_for(seq, response)
-    built = start_methods(methods, config, response)  # one worker process per method (config.workers)
+    built = workers.start_methods(methods, config, response)  # one worker process per method (config.workers)
     try:
         model, source = config.noise_for(seq, response)
         hook = blur if blur is not None else config.blur_for(seq, response)
         provider = config.provider_for(seq, response, noise=None if model is None else (model, config.noise_seed),
                                        stats=stats, blur=hook)  # a tick per bracket sweep, or per recorded frame
     except BaseException:
-        stop_methods(built)
+        workers.stop_methods(built)
         raise
     return Prepared(seq, response, built, provider, model, source, hook)
 

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from emulator.core.blur import DEFAULT_PLACEMENT
+
 __all__ = ["noise_json", "blur_json", "recorded_blur", "common_figures", "recorded_noise_model", "recorded_response", "same_file"]
 
 
@@ -23,8 +25,6 @@ def noise_json(config, ctx) -> dict:
 
 
 def blur_json(config, ctx) -> dict:
-    from emulator.core.blur import DEFAULT_PLACEMENT
-
     hook = ctx.get("blur_hook")
     if hook is not None:
         return {"blur": hook.describe()}

@@ -41,20 +41,25 @@ import weakref
 
 import numpy as np
 
-from emulator.autoexposure._base import AutoExposureError, MethodFailed
+from emulator.autoexposure.base import AutoExposureError, MethodFailed, to_gray
 from emulator.errors import PlaybackError
-from emulator.playback._worker_child import _child_main, _label
+from emulator.playback.worker_child import child_main, method_label
 from emulator.playback.config import DEFAULT_METHOD_TIMEOUT_S, WORKER_MODES
 from emulator.playback.seam import InlineMethod, MethodHandle, stop_methods
 from emulator.playback.shmblock import reserve_block
 from emulator.numpy_dispatch import forkserver_env
+from emulator.autoexposure import METHOD_NAMES
+from emulator.autoexposure.frame import FRAME_MEMO
+from emulator.autoexposure.isolation import call_method as isolated_call, keep_output
+from emulator.autoexposure.methodset import build_methods, latency_options, parse_methods
+from emulator.autoexposure.registry import installed_methods
 
 __all__ = ["MethodWorker", "start_methods", "stop_methods", "DEFAULT_METHOD_TIMEOUT_S",
            "WORKER_MODES"]
 
 #: Largest reply a worker may send, bytes (what a method printed is kept up to 64 KiB, its config's values cut).
 MAX_REPLY_BYTES = 16 << 20
-_PRELOAD = ["emulator.playback._worker_preload"]  # imports the worker side too
+_PRELOAD = ["emulator.playback.worker_preload"]  # imports the worker side too
 _ctx = None
 _ctx_lock = threading.Lock()
 
@@ -151,7 +156,7 @@ class MethodWorker(MethodHandle):
     def __init__(self, item, *, mode: str, response, options: dict, timeout_s: float) -> None:
         ctx = _context()
         self.timeout_s = float(timeout_s)
-        self.label = _label(item)
+        self.label = method_label(item)
         self.name = self.label
         self.failed: str | None = None
         self._guard = 0
@@ -161,7 +166,7 @@ class MethodWorker(MethodHandle):
         self.shm_shortage: int | None = None  # bytes of the image block /dev/shm had no room for
         self._ahead = None  # (raw, exposure_ms, monotonic time) of a call sent ahead
         self._conn, child = ctx.Pipe()
-        self._proc = ctx.Process(target=_child_main, args=(child, os.getpid()), daemon=True, name="exposim-method")
+        self._proc = ctx.Process(target=child_main, args=(child, os.getpid()), daemon=True, name="exposim-method")
         _start(self._proc)
         child.close()
         self._finalizer = weakref.finalize(self, _release, self._proc, self._shm_box)
@@ -276,8 +281,6 @@ class MethodWorker(MethodHandle):
         return shot
 
     def propose(self, raw, exposure_ms: float):
-        from emulator.autoexposure.isolation import call_method as isolated_call
-
         return isolated_call(self, raw, exposure_ms)
 
     def next_exposure(self, raw, exposure_ms):
@@ -292,7 +295,6 @@ class MethodWorker(MethodHandle):
             msg, sent_at = self._message(raw, exposure_ms), None
         reply = self._ask(msg, sent_at)
         kind = reply[0]
-        from emulator.autoexposure.isolation import keep_output
 
         keep_output(self.name, reply[-2], reply[-1])
         if kind == "answer":
@@ -308,8 +310,6 @@ class MethodWorker(MethodHandle):
         own conversion and memo: the same bytes the method would compute)."""
         if self._gray_code is None or raw.ndim != 2 or raw.dtype != np.uint16:
             return None
-        from emulator.autoexposure._base import to_gray
-        from emulator.autoexposure._frame import FRAME_MEMO
 
         code = self._gray_code
         gray = FRAME_MEMO.get(raw, ("gray", code), lambda: to_gray(raw, code))
@@ -344,9 +344,6 @@ def start_methods(spec, config, response) -> dict:
     """The run's methods by name, as handles that keep the run's limit (:attr:`RunConfig.method_timeout_applied_s`):
     :class:`MethodWorker` s (``config.workers`` ``process``), or :class:`~emulator.playback.seam.InlineMethod` s
     built in this process (``inline``); ``spec`` as for :func:`~emulator.autoexposure.methodset.build_methods`."""
-    from emulator.autoexposure import METHOD_NAMES
-    from emulator.autoexposure.methodset import build_methods, latency_options, parse_methods
-
     latency = config.latency_ticks
     options = latency_options(config.options, latency)  # fixed freezes one exposure with proposals in flight
     timeout = config.method_timeout_applied_s
@@ -361,8 +358,6 @@ def start_methods(spec, config, response) -> dict:
     plugins = None
     for i, item in enumerate(items):
         if isinstance(item, str) and item not in METHOD_NAMES and ":" not in item:
-            from emulator.autoexposure.registry import installed_methods
-
             plugins = installed_methods() if plugins is None else plugins
             parse_methods([item], plugins=plugins)  # an unknown or broken plugin name: refused here, in one line
             items[i] = (item, plugins[item].value)

@@ -14,7 +14,9 @@ import numpy as np
 
 from emulator.io.files import REPORT_FILE, RESULTS_FILE, write_results, write_text
 from emulator.report.figures import new_figure, save
-from emulator.report.html import write_report
+from emulator.report.html import write_report, run_folder_pages
+from emulator.core.stats import compare_methods
+from emulator.report.intervals import comparison_table
 
 __all__ = ["PLOT_FILE", "per_method_table", "method_intervals", "plot_methods", "dataset_markdown", "write_dataset_report"]
 
@@ -50,8 +52,6 @@ def method_intervals(per_sequence: dict, methods: list[str]) -> dict:
     """Per method over the sequences (the independent units): mean exposure and mean saturated fraction with
     95 % bootstrap intervals, and each method's difference from the best (least saturated), paired by sequence
     (:func:`emulator.core.stats.compare_methods`).  A sequence missing a method leaves the pairs unaligned."""
-    from emulator.core.stats import compare_methods
-
     seqs = list(per_sequence)
 
     def col(key):
@@ -114,8 +114,6 @@ def dataset_markdown(summary: dict) -> str:
                      f"{r['non_finite_proposals']} | {r['clamped']} | {_fmt(r['method_ms_per_frame'], '.1f')} |")
     iv = summary.get("method_intervals")
     if iv and len(summary["per_sequence"]) >= 2:
-        from emulator.report.intervals import comparison_table
-
         lines += ["", f"## Methods compared over sequences ({iv['definition']})", "",
                   "Mean saturated fraction (%) per sequence, lower is better:", ""]
         lines += comparison_table(iv["mean_saturated_fraction"], "mean saturated (%)", spec=".2f", scale=100.0)
@@ -168,6 +166,4 @@ def write_dataset_report(out_dir: str | os.PathLike, summary: dict) -> dict:
 
 def _unit_pages(out: Path, summary: dict) -> str:
     """HTML: a link to every unit's own report.html, and the first unit's contact sheet."""
-    from emulator.report.html import run_folder_pages
-
     return run_folder_pages(out, [(f"{u['sequence']} / {u['group']}", u["folder"]) for u in summary["units"]])

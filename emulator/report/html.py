@@ -23,10 +23,13 @@ from pathlib import Path
 
 import numpy as np
 
-from emulator.io.files import REPORT_FILE, write_text
+from emulator.io.files import REPORT_FILE, write_text, read_bytes
+from emulator.io.png import encode_png, read_image
+from emulator.io.runfolder import read_run_json, read_tables
 
 __all__ = ["HTML_REPORT_FILE", "Thumb", "markdown_to_html", "png_data_uri", "thumbnail", "contact_sheet",
-           "render_page", "write_report", "run_contact_sheet", "run_folder_pages"]
+           "render_page", "write_report", "run_contact_sheet", "run_folder_pages",
+           "spread_indices"]
 
 #: File name of the HTML report, beside ``report.md``.
 HTML_REPORT_FILE = "report.html"
@@ -85,8 +88,6 @@ def thumbnail(image: np.ndarray, *, white_level: int | None = None, width_px: in
 
 
 def _encode(image: np.ndarray) -> bytes:
-    from emulator.io.png import encode_png
-
     return encode_png(np.ascontiguousarray(image), "thumbnail")
 
 
@@ -240,8 +241,6 @@ def render_page(title: str, body: str) -> str:
 
 
 def _figures(folder: Path, names: Iterable[str] | None) -> dict[str, str]:
-    from emulator.io.files import read_bytes
-
     if names is None:
         names = sorted(p.name for p in folder.glob("*.png"))
     return {name: png_data_uri(read_bytes(folder / name)) for name in names if (folder / name).is_file()}
@@ -282,10 +281,10 @@ def write_report(folder: str | os.PathLike, markdown: str, *,
 
 
 # ---------------------------------------------------------------------------- run folders
-def _sample(n: int, k: int) -> list[int]:
+def spread_indices(n: int, k: int) -> list[int]:
     """``k`` indices spread evenly over ``range(n)``, first and last included.
 
-    >>> _sample(10, 4), _sample(3, 6), _sample(0, 3)
+    >>> spread_indices(10, 4), spread_indices(3, 6), spread_indices(0, 3)
     ([0, 3, 6, 9], [0, 1, 2], [])
     """
     if n <= 0:
@@ -304,8 +303,6 @@ def run_contact_sheet(run_dir: str | os.PathLike, methods: Sequence[str], tables
     ``bracket_ms``, ``saturated_fraction``).  A run saved
     with ``--save none`` has no images: the sheet says so.
     """
-    from emulator.io.png import read_image
-
     run_dir = Path(run_dir)
     rows = []
     any_image = False
@@ -313,7 +310,7 @@ def run_contact_sheet(run_dir: str | os.PathLike, methods: Sequence[str], tables
         cols = tables.get(name) or {}
         n = len(cols.get("cycle", ()))
         cells = []
-        for idx in _sample(n, n_cycles):
+        for idx in spread_indices(n, n_cycles):
             row = {key: values[idx] for key, values in cols.items()}
             sat = float(row["saturated_fraction"]) * 100.0
             caption = (f"cycle {int(row['cycle'])}: {float(row['target_ms']):.2f} ms "
@@ -336,8 +333,6 @@ def run_folder_pages(out: str | os.PathLike, folders: Sequence[tuple[str, str | 
                      n_sheets: int = 1) -> str:
     """HTML for a report over several run folders: a link to each one's ``report.html`` and the
     contact sheets of the first ``n_sheets`` of them (every page stays a few MB at most)."""
-    from emulator.io.runfolder import read_run_json, read_tables
-
     out = Path(out).resolve()
     folders = [(label, Path(folder)) for label, folder in folders if (Path(folder) / HTML_REPORT_FILE).is_file()]
     if not folders:

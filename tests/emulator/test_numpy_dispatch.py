@@ -116,7 +116,7 @@ _SHIM_DIGEST = """
 import hashlib, sys
 import numpy as np
 from emulator.autoexposure import shim, to_gray
-from emulator.autoexposure._base import RGGB_BAYER_CODE
+from emulator.autoexposure.base import RGGB_BAYER_CODE
 from emulator.io.borealhdr import load_sequence
 cycle = load_sequence(sys.argv[1])[1]
 h = hashlib.sha256(b"".join(t.tobytes() for t in shim._paper_tables(4095.0, shim.GAMMAS)))

@@ -1,4 +1,4 @@
-"""Ctrl-C during a Mitsuba render reaches Python (scenes._interrupt).
+"""Ctrl-C during a Mitsuba render reaches Python (scenes.render_interrupts).
 
 Mitsuba's render installs a C-level SIGINT handler of its own that only sets the integrator's
 stop flag; a Ctrl-C it caught never reached Python, and a command went on rendering."""
@@ -12,7 +12,7 @@ import time
 
 import pytest
 
-from scenes._interrupt import keep_interrupts_for_python, render_array
+from scenes.render_interrupts import keep_interrupts_for_python, render_array
 
 
 class _Integrator:

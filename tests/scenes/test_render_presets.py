@@ -60,7 +60,7 @@ def test_emitter_weights_enter_the_key_only_when_set_and_reach_mitsuba():
     for bad in ({"moon": 2.0}, {"sun": 0.0}, {"sun": -1.0}, {"sun": float("inf")}, {"sun": True}, {"sun": "2"}):
         with pytest.raises(SceneError, match="emitter"):
             scene.with_emitter_weights(bad)
-    from scenes._mitsuba import scene_dict
+    from scenes.mitsuba_objects import scene_dict
     from scenes.variant import choose_variant, ensure_variant
 
     import mitsuba as mi

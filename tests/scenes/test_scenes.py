@@ -229,7 +229,7 @@ def test_a_point_projects_where_the_intrinsics_say(offset):
 def test_effective_spp_matches_the_mitsuba_sampler():
     import mitsuba as mi
 
-    from scenes._mitsuba import SAMPLER
+    from scenes.mitsuba_objects import SAMPLER
 
     if mi.variant() is None:
         mi.set_variant("scalar_rgb")

@@ -219,11 +219,11 @@ def test_cli_writes_folder_and_refuses_overwrite(tmp_path, capsys):
 
 def test_emulation_report_gives_a_verdict_beside_the_paper(emulation_run):
     from validation.common import PAPER_MAX_RMSE_PERCENT, PAPER_MEDIAN_RMSE_PERCENT
-    from validation.report import _emulation_md, emulation_verdict
+    from validation.emulation.report import emulation_markdown, emulation_verdict
 
     _, out = emulation_run
     r = out["results"]
-    md = _emulation_md(r, [])
+    md = emulation_markdown(r, [])
     assert "| figure | this study (% of the DN range) | paper (%) | verdict |" in md
     for which, paper in (("median", PAPER_MEDIAN_RMSE_PERCENT), ("max", PAPER_MAX_RMSE_PERCENT)):
         verdict = emulation_verdict(r, which)

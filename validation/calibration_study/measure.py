@@ -13,7 +13,7 @@ from emulator.core.response import CameraResponse
 from validation.calibration_study.config import BRACKETS_MS, DN_RANGE
 from validation.common import static_radiance
 
-__all__ = ["study_radiance", "electrons_per_ms", "stack_exposures", "capture_stack", "opencv_curves", "codes_to_dn_curve", "curve_error", "code_curve_error", "emulation_check"]
+__all__ = ["study_radiance", "electrons_per_ms", "stack_exposures", "capture_stack", "opencv_curves", "codes_to_dn_curve", "curve_error", "code_curve_error", "emulation_check", "capture_image"]
 
 
 # ---------------------------------------------------------------------------- inputs
@@ -54,7 +54,7 @@ def stack_exposures(e1: np.ndarray, camera, n: int, *, low_dn: int = 8, jitter: 
     return t
 
 
-def _capture(radiance, exposure_ms, camera, *, seed, noise=True) -> np.ndarray:
+def capture_image(radiance, exposure_ms, camera, *, seed, noise=True) -> np.ndarray:
     """synth's forward model (:func:`synth.imaging.capture`)."""
     from synth.imaging import capture
 
@@ -62,7 +62,7 @@ def _capture(radiance, exposure_ms, camera, *, seed, noise=True) -> np.ndarray:
 
 
 def capture_stack(radiance, camera, exposures_ms, *, seed: int, noise: bool = True) -> np.ndarray:
-    return np.stack([_capture(radiance, t, camera, seed=seed + i, noise=noise) for i, t in enumerate(exposures_ms)])
+    return np.stack([capture_image(radiance, t, camera, seed=seed + i, noise=noise) for i, t in enumerate(exposures_ms)])
 
 
 # ---------------------------------------------------------------------------- OpenCV
@@ -128,12 +128,12 @@ def emulation_check(radiance, camera, e1, recovered: CameraResponse, *, seed: in
                                                                     black_level=camera.black_level)
     t_long = camera.full_well_e / float(np.percentile(e1[e1 > 0], 97))
     brackets = [t_long / 32.0 * b for b in BRACKETS_MS]
-    shots = {b: _capture(radiance, b, camera, seed=seed + i, noise=True) for i, b in enumerate(brackets)}
+    shots = {b: capture_image(radiance, b, camera, seed=seed + i, noise=True) for i, b in enumerate(brackets)}
     span = camera.white_level - camera.black_level
     rows = []
     for lo, hi in zip(brackets[:-1], brackets[1:]):
         target = math.sqrt(lo * hi)
-        gt = _capture(radiance, target, camera, seed=None, noise=False).astype(np.float64)
+        gt = capture_image(radiance, target, camera, seed=None, noise=False).astype(np.float64)
         for src in (lo, hi):
             em_t, mask = emulate(shots[src], src, target, true, return_mask=True)
             em_r = emulate(shots[src], src, target, rec)

@@ -13,7 +13,8 @@ from validation.calibration_study.config import DN_RANGE, PRESETS
 
 
 # ---------------------------------------------------------------------------- report
-def _plots(results: dict, arrays: dict, out: Path) -> list[str]:
+def calibration_plots(results: dict, arrays: dict, out: Path) -> list[str]:
+    """The calibration study's plots written into ``out``; their file names."""
     names = []
     presets = [p for p in PRESETS if f"{p}_truth" in arrays]
     if presets:
@@ -86,7 +87,8 @@ def _f(v, d=3):
     return "n/a" if v is None else f"{v:.{d}f}"
 
 
-def _report(results: dict, figures: list[str]) -> str:
+def calibration_markdown(results: dict, figures: list[str]) -> str:
+    """The calibration study's ``report.md`` text."""
     cfg = results["config"]
     lines = ["# Inverse-response calibration: validation", "",
              f"Command: `{results['command']}`  ", f"Radiance of the static stacks: {results['radiance']}  ",

@@ -22,7 +22,7 @@ from emulator.core.response import CameraResponse
 from emulator.report.html import write_report
 from validation.calibration_study.config import BRACKETS_MS, CONFIGS, DN_RANGE, PRESETS, SHOT_INTERVAL_S
 from validation.calibration_study.measure import (
-    _capture,
+    capture_image as _capture,
     capture_stack,
     code_curve_error,
     codes_to_dn_curve,
@@ -33,7 +33,7 @@ from validation.calibration_study.measure import (
     stack_exposures,
     study_radiance,
 )
-from validation.calibration_study.report import _plots, _report
+from validation.calibration_study.report import calibration_plots, calibration_markdown
 from validation.common import make_camera, provenance
 
 __all__ = ["static_part", "borealhdr_check", "insitu_synthetic", "real_sample_part", "run_study"]
@@ -255,7 +255,7 @@ def run_study(out, *, quick: bool = False, force: bool = False, radiance_source:
         arrays.update(a)
     results["seconds"] = time.perf_counter() - t0
     write_arrays(out / "curves.npz", arrays)
-    figures = _plots(results, arrays, out)
+    figures = calibration_plots(results, arrays, out)
     write_results(out / "results.json", results, float_digits=12)
-    write_report(out, _report(results, figures))
+    write_report(out, calibration_markdown(results, figures))
     return results

@@ -21,7 +21,7 @@ from validation.common import (
 )
 from validation.emulation.config import BOUND_TOL_DN, HARD_EXPOSURES_MS, HIST_BINS, METRICS
 
-__all__ = ["SweepResult", "sweep_static", "choose_brackets", "hard_cases"]
+__all__ = ["SweepResult", "sweep_static", "choose_brackets", "hard_cases", "selector_series", "stats_block"]
 
 
 # ---------------------------------------------------------------------------------- the sweep
@@ -219,7 +219,7 @@ def _nan_to_none(a) -> list:
     return [None if not np.isfinite(v) else float(v) for v in np.asarray(a, dtype=np.float64)]
 
 
-def _selector_series(sweep: SweepResult, idx: np.ndarray, idx_clean: np.ndarray) -> dict:
+def selector_series(sweep: SweepResult, idx: np.ndarray, idx_clean: np.ndarray) -> dict:
     """Per-exposure percent figures of the selector's choice (lists, None where undefined)."""
     p = lambda a: to_percent(a, sweep.white_level, sweep.black_level)  # noqa: E731
     m = sweep.metrics
@@ -248,7 +248,8 @@ def _selector_series(sweep: SweepResult, idx: np.ndarray, idx_clean: np.ndarray)
     }
 
 
-def _stats_block(series: dict) -> dict:
+def stats_block(series: dict) -> dict:
+    """Summary statistics of each per-exposure series and whether the bound excess stays within tolerance."""
     out = {}
     for key in ("sub_valid", "sub_all", "sub_pair_valid", "sub_pair_all", "sub_linear_valid", "sub_linear_all",
                 "raw_valid", "raw_all", "pair_valid", "pair_all",

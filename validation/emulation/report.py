@@ -11,7 +11,7 @@ from emulator.report.figures import subplots
 from validation.common import PAPER_MAX_RMSE_PERCENT, PAPER_MEDIAN_RMSE_PERCENT
 from emulator.cells import format_number
 
-__all__ = ["emulation_verdict"]
+__all__ = ["emulation_verdict", "emulation_figures", "emulation_markdown"]
 
 
 # ------------------------------------------------------------------------------------------ emulation
@@ -32,7 +32,8 @@ def emulation_verdict(r: dict, which: str) -> str:
             "show where the error comes from")
 
 
-def _emulation_figures(out: dict, folder: Path) -> list[str]:
+def emulation_figures(out: dict, folder: Path) -> list[str]:
+    """The study's figures written into ``folder``; their file names."""
     r, a = out["results"], out["arrays"]
     exposures = a["exposures_ms"]
     brackets = a["brackets_ms"]
@@ -160,7 +161,8 @@ def _per_camera_figure(r: dict, folder: Path) -> str:
     return "summary_per_camera.png"
 
 
-def _emulation_md(r: dict, figures: list[str]) -> str:
+def emulation_markdown(r: dict, figures: list[str]) -> str:
+    """The emulation study's ``report.md`` text."""
     cfg = r.get("provenance", {}).get("config", {})
     main = r["main_camera"]
     L = ["# Emulation accuracy on synthetic ground truth (paper section V-B, Fig. 3)", ""]

@@ -22,8 +22,8 @@ from validation.common import (
 )
 from validation.emulation.config import EmulationConfig
 from validation.emulation.measure import (
-    _selector_series,
-    _stats_block,
+    selector_series as _selector_series,
+    stats_block as _stats_block,
     choose_brackets,
     hard_cases,
     sweep_static,

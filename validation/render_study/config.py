@@ -7,7 +7,8 @@ from pathlib import Path
 
 from validation.common import SHOT_INTERVAL_MS, ValidationError, study_scene
 
-__all__ = ["DEFAULT_REAL_SEQUENCE", "TARGET_TOLERANCE", "TARGET_REPEATABILITY", "RenderStudyConfig", "CONFIGS"]
+__all__ = ["DEFAULT_REAL_SEQUENCE", "TARGET_TOLERANCE", "TARGET_REPEATABILITY", "RenderStudyConfig", "CONFIGS", "MODES",
+           "DENOISED"]
 
 
 def _shared_folder() -> Path:
@@ -26,8 +27,8 @@ TARGET_TOLERANCE = 0.25
 #: Keypoint repeatability target between two renders of one pose (issue 13).
 TARGET_REPEATABILITY = 0.80
 #: Render paths compared: the raw estimate and every named denoiser (:data:`scenes.denoise.DENOISERS`).
-_MODES = ("off", "oidn", "oidn-fast")
-_DENOISED = _MODES[1:]
+MODES = ("off", "oidn", "oidn-fast")
+DENOISED = MODES[1:]
 
 
 @dataclass(frozen=True)

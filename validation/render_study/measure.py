@@ -8,7 +8,7 @@ import numpy as np
 
 from validation.render_study.config import TARGET_TOLERANCE
 
-__all__ = ["bright_errors", "walk_repeatability", "speedups"]
+__all__ = ["bright_errors", "walk_repeatability", "speedups", "real_stats", "within_real"]
 
 
 # ------------------------------------------------------------------------------------------ measures
@@ -102,7 +102,8 @@ def speedups(rows: list[dict]) -> list[dict]:
 
 
 # ------------------------------------------------------------------------------------------ the study
-def _real_stats(sequence, size, exposure_ms) -> dict | None:
+def real_stats(sequence, size, exposure_ms) -> dict | None:
+    """Keypoint density and median gradient of the real sequence's frames at ``exposure_ms`` (None without one)."""
     from scenes.image_stats import image_stats, real_frames_gray8
 
     if sequence is None or not Path(sequence).is_dir():
@@ -114,7 +115,8 @@ def _real_stats(sequence, size, exposure_ms) -> dict | None:
             "n_frames": len(st), "per_frame": [s.to_dict() for s in st]}
 
 
-def _within(value, real) -> bool | None:
+def within_real(value, real) -> bool | None:
+    """Whether ``value`` is within TARGET_TOLERANCE of the real figure (None when either is missing)."""
     if real is None or value is None:
         return None
     return bool(abs(value / real - 1.0) <= TARGET_TOLERANCE)

@@ -8,7 +8,7 @@ import numpy as np
 
 from validation.render_study.config import TARGET_REPEATABILITY, TARGET_TOLERANCE
 
-__all__ = ["render_study_table"]
+__all__ = ["render_study_table", "plot_render_study"]
 
 
 # ------------------------------------------------------------------------------------------ report
@@ -80,7 +80,8 @@ def render_study_table(results: dict) -> str:
     return "\n".join(lines)
 
 
-def _plot(results: dict, path: Path) -> None:
+def plot_render_study(results: dict, path: Path) -> None:
+    """The render study's figure, written to ``path``."""
     from emulator.report.figures import new_figure, save
 
     keys = list(results["scenes"])

@@ -17,11 +17,11 @@ from validation.render_study.config import (
     RenderStudyConfig,
     TARGET_REPEATABILITY,
     TARGET_TOLERANCE,
-    _DENOISED,
-    _MODES,
+    DENOISED as _DENOISED,
+    MODES as _MODES,
 )
-from validation.render_study.measure import _real_stats, _within, bright_errors, speedups, walk_repeatability
-from validation.render_study.report import _plot, render_study_table
+from validation.render_study.measure import real_stats, within_real, bright_errors, speedups, walk_repeatability
+from validation.render_study.report import plot_render_study, render_study_table
 
 __all__ = ["run_render_study", "total_steps"]
 
@@ -142,8 +142,8 @@ def _texture(key: str, config: RenderStudyConfig, size, tmp_cache: Path, tick, r
            "real_median_gradient": None if real is None else real["median_gradient"]}
     out["kp_ratio"] = None if real is None else kp / real["kp_per_mp"]
     out["gradient_ratio"] = None if real is None else grad / real["median_gradient"]
-    out["kp_met"] = _within(kp, out["real_kp_per_mp"])
-    out["gradient_met"] = _within(grad, out["real_median_gradient"])
+    out["kp_met"] = within_real(kp, out["real_kp_per_mp"])
+    out["gradient_met"] = within_real(grad, out["real_median_gradient"])
     out["repeat_met"] = bool(rep >= TARGET_REPEATABILITY)
     return out
 
@@ -163,7 +163,7 @@ def run_render_study(output, config: RenderStudyConfig | None = None, *, force: 
     def real_at(size):
         key = tuple(int(v) for v in size)
         if key not in reals:
-            reals[key] = _real_stats(config.real_sequence, key, config.exposure_ms)
+            reals[key] = real_stats(config.real_sequence, key, config.exposure_ms)
         return reals[key]
 
     rows, meta, textures = [], {}, []
@@ -188,7 +188,7 @@ def run_render_study(output, config: RenderStudyConfig | None = None, *, force: 
         "timings": {"total_s": time.perf_counter() - t_start},
     }
     write_results(folder / "results.json", results, float_digits=12)
-    _plot(results, folder / "time_vs_error.png")
+    plot_render_study(results, folder / "time_vs_error.png")
     write_report(folder, render_study_table(results) + "\n")
     return results
 

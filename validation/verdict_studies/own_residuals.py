@@ -43,7 +43,7 @@ from validation.live.headline import with_derived
 from validation.live.table_check import read_folder_table
 from validation.protocol import Study
 from validation.verdicts.agreement import ALPHA, MIN_WALKS, OMEGA2_MAX, judge_batch, omega2_untruncated
-from validation.verdicts.plasmode import TARGET, WALK_CANDIDATES, _residual_sd, first_reaching
+from validation.verdicts.plasmode import TARGET, WALK_CANDIDATES, residual_sd, first_reaching
 from validation.verdicts.ranking import cluster_plan
 from validation.verdict_studies.study_calibration import check_options, emit
 
@@ -175,14 +175,14 @@ def metric_own_calibration(live, emulated, scenes, seeds, *, reseeded=None, fami
                 "nothing to resample"}
     live_var = float(variance_components(L[ok])[0])
     est = float(omega2_untruncated(L[ok], E[ok]))
-    own_sd = _residual_sd(L[ok], E[ok])
+    own_sd = residual_sd(L[ok], E[ok])
     out.update(status="computed", live_method_variance=live_var, omega2_untruncated=est if math.isfinite(est) else None,
                residual_sd={"emulated": float(np.sqrt(np.mean(own_sd ** 2)))})
     if reseeded is not None:
         R = np.asarray(reseeded, dtype=np.float64)
         both = ok & np.all(np.isfinite(R), axis=1)
         if both.sum() >= 4:
-            rs = float(np.sqrt(np.mean(_residual_sd(L[both], R[both]) ** 2)))
+            rs = float(np.sqrt(np.mean(residual_sd(L[both], R[both]) ** 2)))
             out["residual_sd"].update(reseeded=rs, ratio=out["residual_sd"]["emulated"] / rs if rs > 0 else None)
     if live_var <= 0:
         return {**out, "status": "not computed", "reason": "live shows no method effect on these walks"}

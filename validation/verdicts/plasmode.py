@@ -43,7 +43,7 @@ from validation.verdicts.agreement import MIN_WALKS, VERDICTS, judge
 
 __all__ = ["STUDIES", "INJECTED_OMEGA2", "NOISY_FACTOR", "TARGET", "RESEEDED_SUFFIX", "WALK_CANDIDATES",
            "CALIBRATION_FILE", "first_reaching", "control_pairs", "seed_clusters", "draw_study", "scenario_tables",
-           "metric_calibration", "calibrate", "calibration_markdown"]
+           "metric_calibration", "calibrate", "calibration_markdown", "residual_sd"]
 
 #: Plasmode studies per emulator and size (``validate live --calibration-studies``).
 STUDIES = 100
@@ -91,7 +91,7 @@ def draw_study(clusters, k: int, rng) -> tuple[np.ndarray, np.ndarray]:
     return rows, labels
 
 
-def _residual_sd(live, reseeded) -> np.ndarray:
+def residual_sd(live, reseeded) -> np.ndarray:
     """Per method, the SD of the walk x method residual of ``reseeded - live`` (complete walks); its squares
     average to the two-way residual mean square."""
     d = reseeded - live
@@ -195,7 +195,7 @@ def metric_calibration(live, reseeded, seeds, methods, *, n_studies: int = STUDI
                          f"{MIN_SEEDS} seeds and {MIN_COMPLETE_WALKS} complete walks to resample")
         return out
     live_var = float(variance_components(L[ok])[0])
-    noise = _residual_sd(L[ok], R[ok])
+    noise = residual_sd(L[ok], R[ok])
     # the re-seeded run's method means minus live's, over these walks, are noise; resampled, they would become a
     # true interaction of the plasmode's population: removed, so that the perfect emulator's is exactly 0
     bias = (R[ok] - L[ok]).mean(axis=0)

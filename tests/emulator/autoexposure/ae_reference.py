@@ -13,7 +13,7 @@ import math
 import cv2
 import numpy as np
 
-from emulator.autoexposure._base import MAX_DN, AutoExposureError
+from emulator.autoexposure.base import MAX_DN, AutoExposureError
 from emulator.autoexposure.kim import ACTIVATION_ALPHA, ACTIVATION_TAU, BIT_SHIFT, ENTROPY_THRESHOLD, \
     LOCAL_ENTROPY_SIZE, PAPER_SCALE, softmax_weights
 from emulator.autoexposure.shim import DELTA, GAMMAS, LAMBDA, N_NORM, SOBEL_MAX
@@ -29,7 +29,7 @@ def _mbar_f32(m: np.ndarray, delta: float, lam: float, n_norm: float) -> np.ndar
     return out
 
 
-def _row_blocks(height: int, rows: int):
+def row_blocks(height: int, rows: int):
     """(a0, a1, s0, s1): a block of rows [a0, a1) with a one-row halo, and its own rows [s0, s1) inside.
 
     A 3x3 filter over the block gives exactly the full-image result on the block's own rows
@@ -53,7 +53,7 @@ def gamma_metrics_ref(y: np.ndarray, gammas=GAMMAS, *, delta=DELTA, lam=LAMBDA, 
     """
     lo, hi = int(y.min()), int(y.max())
     counts = np.zeros((len(gammas), 5, 5), dtype=np.float64)
-    for a0, a1, s0, s1 in _row_blocks(y.shape[0], BLOCK_ROWS):
+    for a0, a1, s0, s1 in row_blocks(y.shape[0], BLOCK_ROWS):
         base = y[a0:a1].astype(np.float64)
         base -= lo
         base /= float(hi - lo)
@@ -91,7 +91,7 @@ def gamma_metrics_paper(y: np.ndarray, gammas=GAMMAS, *, delta=DELTA, lam=LAMBDA
     """
     metrics = np.zeros(len(gammas))
     scale = np.float32(lam / (SOBEL_MAX * math.sqrt(2.0)))
-    for a0, a1, s0, s1 in _row_blocks(y.shape[0], BLOCK_ROWS):
+    for a0, a1, s0, s1 in row_blocks(y.shape[0], BLOCK_ROWS):
         base = np.minimum(y[a0:a1], full_dn).astype(np.float32)
         base *= np.float32(1.0 / full_dn)
         for j, g in enumerate(gammas):

@@ -21,7 +21,7 @@ from emulator.autoexposure import (
     make_method,
     to_gray,
 )
-from emulator.autoexposure._base import REF_BAYER_CODE, RGGB_BAYER_CODE
+from emulator.autoexposure.base import REF_BAYER_CODE, RGGB_BAYER_CODE
 from emulator.errors import ExposimError
 from emulator.core.response import CameraResponse
 

@@ -18,7 +18,7 @@ from tests.emulator.autoexposure import ae_reference as ref
 from emulator.autoexposure import METHOD_NAMES, Kim2018, Shim2014, Zhang2017, to_gray
 from emulator.autoexposure import kim as kim_mod
 from emulator.autoexposure import shim as shim_mod
-from emulator.autoexposure._base import REF_BAYER_CODE, RGGB_BAYER_CODE
+from emulator.autoexposure.base import REF_BAYER_CODE, RGGB_BAYER_CODE
 
 
 @pytest.fixture(scope="module")

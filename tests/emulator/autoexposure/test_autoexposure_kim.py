@@ -376,7 +376,7 @@ def test_metric_ref_fast_exact_path_equals_50_digit_reference():
     30 digits) gives the bits of the direct 50-digit evaluation: on adversarial histograms (a
     dominant bin with single-pixel bins, heavy tails, two bins, every bin) and on images whose Q
     wraps mod 65536, of odd sizes."""
-    from emulator.autoexposure.kim import _bin_sums, _metric_ref_bins, _sobel_16u, _sobel_16u_xy, _y8
+    from emulator.autoexposure.kim import bin_sums, metric_ref_bins, _sobel_16u, _sobel_16u_xy, _y8
 
     rng = np.random.default_rng(23)
     cases = []
@@ -396,7 +396,7 @@ def test_metric_ref_fast_exact_path_equals_50_digit_reference():
         cases.append((counts.tolist(), q_bin, int(counts.sum())))
     finite = 0
     for counts, q_bin, s in cases:
-        fast = _metric_ref_bins(counts, q_bin, s, 16.0, 4.0, 0.6)
+        fast = metric_ref_bins(counts, q_bin, s, 16.0, 4.0, 0.6)
         ref = _metric_from_bins_50_digits(counts, q_bin, s)
         assert (math.isnan(fast) and math.isnan(ref)) or fast == ref, (counts, q_bin)
         finite += not math.isnan(fast)
@@ -410,7 +410,7 @@ def test_metric_ref_fast_exact_path_equals_50_digit_reference():
         exact = [0] * 256
         for b, v in zip(y8.ravel().tolist(), q.ravel().tolist()):
             exact[b] += v
-        assert _bin_sums(y8, q) == exact
+        assert bin_sums(y8, q) == exact
         counts = np.bincount(y8.ravel(), minlength=256).tolist()
         assert metric_ref(y) == _metric_from_bins_50_digits(counts, exact, y.size)
 

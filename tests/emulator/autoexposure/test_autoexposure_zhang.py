@@ -137,7 +137,7 @@ def test_paper_mode_converges_from_both_sides(pcalib):
 
 def test_percentile_is_named_as_the_fraction_it_is_and_the_old_name_still_works(pcalib):
     from emulator.autoexposure import make_method
-    from emulator.autoexposure._base import AutoExposureError
+    from emulator.autoexposure.base import AutoExposureError
 
     new = make_method("zhang", mode="paper", percentile_fraction=0.6)
     old = make_method("zhang", mode="paper", percentile=0.6)  # deprecated alias (--option zhang.percentile=0.6)

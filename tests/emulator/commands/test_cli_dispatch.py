@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import argparse
+import subprocess
 import sys
 import types
 from importlib.metadata import EntryPoint
@@ -9,6 +11,7 @@ from importlib.metadata import EntryPoint
 import pytest
 
 from emulator.commands import cli
+from emulator.commands.body import CommandBody
 
 GROUP = cli.ENTRY_POINT_GROUP
 
@@ -95,3 +98,38 @@ def test_installed_commands_all_load():
     assert broken == {}
     names = {c.name for c in parser.commands}
     assert {"info", "emulate", "run", "demo", "synth", "validate", "calibrate"} <= names
+
+
+def _bodies(parser) -> dict[str, object]:
+    """``{"info": func, "bench features": func, ...}``: the func default of every (sub-)sub-command."""
+    found = {}
+
+    def walk(p, prefix):
+        for action in p._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for name, sub in action.choices.items():
+                    func = sub.get_default("func")
+                    if func is not None:
+                        found[f"{prefix}{name}"] = func
+                    walk(sub, f"{prefix}{name} ")
+
+    walk(parser, "")
+    return found
+
+
+def test_emulator_commands_name_their_bodies_and_help_imports_none():
+    """Each emulator command's func is a CommandBody that loads a callable; building the parser imports no body."""
+    code = ("import sys\nfrom emulator.commands.cli import build_parser\nbuild_parser()\n"
+            "print(sorted(m for m in sys.modules if m.startswith('emulator.commands.') and m.endswith('_body')))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]"
+    bodies = {k: v for k, v in _bodies(cli.build_parser()).items() if isinstance(v, CommandBody)}
+    assert {"info", "cache", "emulate", "run", "new-method", "export", "calibrate", "bench features", "bench vo",
+            "bench rpe", "bench compare"} <= set(bodies)
+    assert all(b.path.startswith("emulator.commands.") and callable(b.load()) for b in bodies.values())
+
+
+def test_a_command_body_is_named_module_colon_function():
+    assert CommandBody("emulator.commands.info_body:info").load().__name__ == "info"
+    with pytest.raises(ValueError, match="module:function"):
+        CommandBody("emulator.commands.info_body.info")

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from emulator.autoexposure.registry import MethodFailed
-from emulator.commands.emulate import emulate_cycle
+from emulator.commands.emulate_body import emulate_cycle
 from emulator.errors import DatasetError, PlaybackError
 from emulator.io.borealhdr import load_sequence
 from emulator.playback import (DEFAULT_RANGE_MS, LiveCycleProvider, LiveRateProvider, RunConfig, call_method,

@@ -13,7 +13,7 @@ pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="gl
 
 PROBE = '''
 import resource, sys
-from emulator.playback import _worker_child as w
+from emulator.playback import worker_child as w
 if sys.argv[1] == "worker":
     w._keep_freed_memory()
 def faults_of_a_call():  # what a Zhang call does: three 18 MiB arrays at once (derivatives, sort), all freed
@@ -72,7 +72,7 @@ def test_keeping_freed_memory_needs_glibc_and_ctypes(monkeypatch):
     """Elsewhere (another C library, a Python without ctypes) a worker starts as it would without it."""
     import ctypes
 
-    from emulator.playback import _worker_child as w
+    from emulator.playback import worker_child as w
 
     calls = []
 

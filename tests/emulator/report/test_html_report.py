@@ -11,7 +11,7 @@ import subprocess
 import numpy as np
 import pytest
 
-from emulator.report.html import (HTML_REPORT_FILE, Thumb, _sample, contact_sheet, markdown_to_html, png_data_uri,
+from emulator.report.html import (HTML_REPORT_FILE, Thumb, spread_indices, contact_sheet, markdown_to_html, png_data_uri,
                                   thumbnail, write_report)
 from emulator.orchestration.runner import run_to_folder
 
@@ -79,7 +79,7 @@ def test_sheet_and_report_files(tmp_path):
     srcs = re.findall(r'<img src="([^"]+)"', text)
     assert len(srcs) == 3 and all(s.startswith("data:image/png;base64,") for s in srcs)
     assert base64.b64decode(srcs[0].split(",", 1)[1]) == (tmp_path / "a.png").read_bytes()
-    assert _sample(10, 4) == [0, 3, 6, 9]
+    assert spread_indices(10, 4) == [0, 3, 6, 9]
 
 
 def test_figures_after_the_text_carry_their_captions_not_their_paths(tmp_path):

@@ -1,6 +1,6 @@
 """Translation of a :class:`~scenes.description.SceneDescription` into Mitsuba objects.
 
-Private: the only module besides :mod:`scenes.render` that imports Mitsuba, and
+The only module besides :mod:`scenes.render` that imports Mitsuba, and
 only inside functions, after :mod:`scenes.variant` has made sure the variant is
 safe to load in this process.
 """

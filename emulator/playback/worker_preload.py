@@ -15,7 +15,7 @@ with contextlib.suppress(ImportError):  # an environment without them still runs
     import sklearn.gaussian_process.kernels  # noqa: F401  (Kim)
 
 import emulator.autoexposure.builtin  # noqa: E402,F401
-import emulator.playback._worker_child  # noqa: E402,F401
+import emulator.playback.worker_child  # noqa: E402,F401
 from emulator.pools import single_thread_pools  # noqa: E402
 
 with single_thread_pools(user_api="blas"):  # the controller lists the loaded libraries once, here

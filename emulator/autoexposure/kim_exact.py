@@ -1,7 +1,7 @@
 """Kim's REF metric, the exact part: per-bin sums and the 256-bin arithmetic, correctly rounded.
 
 :func:`emulator.autoexposure.kim.metric_ref` reduces the image to the Y_8 histogram and the
-exact integer sum of Q per bin (:func:`_bin_sums`); :func:`_metric_ref_bins` evaluates REF's
+exact integer sum of Q per bin (:func:`bin_sums`); :func:`metric_ref_bins` evaluates REF's
 formula on those 256 bins in 30-digit decimal arithmetic and rounds once to float64, so the
 metric has the same bits on every machine (tests/emulator/autoexposure/test_autoexposure_kim.py checks it against a
 direct 50-digit evaluation).
@@ -14,18 +14,18 @@ import math
 
 import numpy as np
 
-__all__: list[str] = []
+__all__: list[str] = ["bin_sums", "metric_ref_bins"]
 
 #: Decimal digits of the 256-bin arithmetic of :func:`metric_ref` (float64 has 17; 30 keeps
 #: the result correctly rounded but for values within 1e-13 ulp of a rounding boundary).
 _DECIMAL_DIGITS = 30
 
 
-#: Rows per block of :func:`_bin_sums` (a block's float64 weights stay in the CPU cache).
+#: Rows per block of :func:`bin_sums` (a block's float64 weights stay in the CPU cache).
 _BIN_BLOCK_ROWS = 32
 
 
-def _bin_sums(y8: np.ndarray, q: np.ndarray) -> list:
+def bin_sums(y8: np.ndarray, q: np.ndarray) -> list:
     """Exact per-bin sums of ``q`` (uint16) over the bins ``y8`` (uint8), as 256 Python ints.
 
     ``np.bincount`` with float64 weights, in row blocks: every partial sum is an integer below
@@ -55,7 +55,7 @@ def _ln(x: decimal.Decimal) -> decimal.Decimal:
     return y0 + (d - d * d / 2)
 
 
-def _metric_ref_bins(counts: list, q_bin: list, s: int, alpha, tau, threshold) -> float:
+def metric_ref_bins(counts: list, q_bin: list, s: int, alpha, tau, threshold) -> float:
     """REF's metric from the Y_8 histogram and per-bin Q sums (ints), in 30-digit decimal arithmetic."""
     with decimal.localcontext(decimal.Context(prec=_DECIMAL_DIGITS, Emax=999999, Emin=-999999)):
         D = decimal.Decimal

@@ -22,9 +22,22 @@ from multiprocessing import shared_memory
 
 import numpy as np
 
-from emulator.autoexposure._base import AutoExposureError, MethodFailed
+from emulator.autoexposure.base import AutoExposureError, MethodFailed
 from emulator.errors import PlaybackError
 from emulator.io.files import read_bytes
+from emulator.autoexposure import METHOD_NAMES
+from emulator.autoexposure.frame import FRAME_MEMO
+from emulator.autoexposure.isolation import describe_error, captured_output, call_method
+from emulator.autoexposure.methodset import build_methods
+from emulator.autoexposure.registry import (
+    is_import_path,
+    plugin_from_path,
+    MethodPlugin,
+    build_plugin,
+    load_import_path,
+)
+from emulator.pools import single_thread_pools
+import emulator.pools as pools
 
 _FORK_EXIT = 70  # exit status of the child of an os.fork inside a worker (it exits at once)
 
@@ -151,7 +164,8 @@ def leftover_processes() -> list[tuple[int, str]]:
     return sorted(found)
 
 
-def _child_main(conn, run_pid: int) -> None:
+def child_main(conn, run_pid: int) -> None:
+    """The method worker's main loop: build methods and answer calls over ``conn`` until told to stop or the run dies."""
     _adopt_orphans()
     _keep_freed_memory()
     try:
@@ -209,8 +223,6 @@ class _Child:
         self.conn.send_bytes(data)
 
     def _left_threads(self) -> list[str]:
-        import emulator.pools as pools
-
         pool = getattr(pools, "_LUT_POOL", None)
         ours = set(getattr(pool, "_threads", ()) or ())
         return [t.name for t in threading.enumerate() if t not in self.allowed and t not in ours and t.is_alive()]
@@ -239,8 +251,6 @@ class _Child:
         return None
 
     def do_build(self, item, mode, response, options, sys_path, cwd, environ):
-        from emulator.autoexposure.isolation import _describe
-
         sys.path[:] = sys_path  # the run's, now (the fork server has those of its start)
         os.environ.clear()
         os.environ.update(environ)
@@ -253,13 +263,13 @@ class _Child:
         except BaseException as exc:  # noqa: BLE001 - KeyboardInterrupt included: Ctrl-C never reaches a worker
             where = "importing or building it" if isinstance(item, str) else "building it"
             return ("error", "AutoExposureError",
-                    f"AE method {_label(item)}: {where} {_describe(exc).rstrip(': ')} in its worker process")
+                    f"AE method {method_label(item)}: {where} {describe_error(exc).rstrip(': ')} in its worker process")
         config = {}
         if hasattr(self.method, "config"):
             try:
                 config = dict(self.method.config())
             except BaseException as exc:  # noqa: BLE001
-                config = {"config_error": f"config(): {_describe(exc)}"}
+                config = {"config_error": f"config(): {describe_error(exc)}"}
         self.pending = self._hostile("after it was built")
         # a built-in's gray image is computed once per image by the run and handed over with it
         code = None if getattr(type(self.method), "private_images", False) else getattr(self.method, "gray_code", None)
@@ -270,8 +280,6 @@ class _Child:
         if data is not None:  # through the pipe (no room in /dev/shm): already this worker's own bytes
             raw = np.frombuffer(data, dtype=np.dtype(dtype), count=int(np.prod(shape))).reshape(shape)
             if gray_nbytes:
-                from emulator.autoexposure._frame import FRAME_MEMO
-
                 gray = np.frombuffer(data[nbytes:nbytes + gray_nbytes], dtype=np.uint16).reshape(shape)
                 FRAME_MEMO.put(raw, ("gray", self.gray_code), gray)
             return raw
@@ -282,21 +290,14 @@ class _Child:
         data = bytes(self.shm.buf[:nbytes])  # this worker's own immutable copy
         raw = np.frombuffer(data, dtype=np.dtype(dtype)).reshape(shape)
         if gray_nbytes:  # the run's gray image of this frame: what AutoExposureMethod.gray would compute
-            from emulator.autoexposure._frame import FRAME_MEMO
-
             gray = np.frombuffer(bytes(self.shm.buf[nbytes:nbytes + gray_nbytes]), dtype=np.uint16).reshape(shape)
             FRAME_MEMO.put(raw, ("gray", self.gray_code), gray)
         return raw
 
     def _output(self) -> tuple[str, int]:
-        from emulator.autoexposure.isolation import captured_output
-
         return captured_output(self.name, clear=True)
 
     def do_call(self, shm_name, nbytes, shape, dtype, exposure_ms, raw, gray_nbytes=0, data=None):
-        from emulator.autoexposure.isolation import _describe, call_method
-        from emulator.pools import single_thread_pools
-
         if self.pending is not None:
             return ("fatal", self.pending, "", 0)
         if shape is not None:
@@ -310,7 +311,7 @@ class _Child:
             bad = self._hostile("in next_exposure")
             return ("fatal" if bad else "failed", bad or str(exc), *self._output())
         except BaseException as exc:  # noqa: BLE001 - KeyboardInterrupt raised by a method included
-            return ("failed", _describe(exc), *self._output())
+            return ("failed", describe_error(exc), *self._output())
         bad = self._hostile("in next_exposure")  # forks: in the call; threads: still running after it
         if bad:
             return ("fatal", bad, *self._output())
@@ -385,7 +386,8 @@ def _number(value):
     return number if type(number) is float else None
 
 
-def _label(item) -> str:
+def method_label(item) -> str:
+    """A ``--methods`` item (name, tuple or method object) as a short repr for messages."""
     if isinstance(item, tuple):
         return repr(item[0])
     return repr(item) if isinstance(item, str) else repr(getattr(item, "name", type(item).__name__))
@@ -393,13 +395,7 @@ def _label(item) -> str:
 
 def _build_one(item, mode, response, options):
     """(name, method) of one ``--methods`` item, built as :func:`build_methods` builds it."""
-    from emulator.autoexposure import METHOD_NAMES
-    from emulator.autoexposure.methodset import build_methods
-    from emulator.autoexposure.registry import is_import_path, plugin_from_path
-
     if isinstance(item, tuple):  # an installed plugin: (name, entry point value), as the run found it
-        from emulator.autoexposure.registry import MethodPlugin, build_plugin, load_import_path
-
         name, value = item
         plugin = MethodPlugin(name, value, load_import_path(value))
         return name, build_plugin(plugin, mode=mode, response=response, options=options.get(name))

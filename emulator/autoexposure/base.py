@@ -29,7 +29,7 @@ from typing import Protocol, runtime_checkable
 import cv2
 import numpy as np
 
-from emulator.autoexposure._frame import FRAME_MEMO
+from emulator.autoexposure.frame import FRAME_MEMO
 from emulator.errors import ExposimError
 
 __all__ = [
@@ -229,7 +229,7 @@ class AutoExposureMethod:
         """The mode's gray conversion of a mosaic (uint16).
 
         For a read-only frame the result is computed once and shared, read-only, by every
-        method reading the same frame (:data:`emulator.autoexposure._frame.FRAME_MEMO`).
+        method reading the same frame (:data:`emulator.autoexposure.frame.FRAME_MEMO`).
         """
         code = self.gray_code
         return FRAME_MEMO.get(raw, ("gray", code), lambda: to_gray(raw, code))
