@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from emulator.cells import DASH, format_number
 from emulator.errors import CalibrationError
 from emulator.io.borealhdr import load_sequence, find_response
 from emulator.io.files import strict_json
@@ -79,7 +80,7 @@ def _motion(seq, args) -> tuple[dict | None, dict | None]:
 
 
 def _cell(row: dict | None) -> str:
-    text = "-" if row is None else "{:.2f}/{:.2f}".format(row["max_px"], row["centre_px"])
+    text = DASH if row is None else f"{format_number(row['max_px'], '.2f')}/{format_number(row['centre_px'], '.2f')}"
     return f"{text:>14s}"
 
 

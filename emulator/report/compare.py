@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from emulator.cells import DASH, format_number
 from emulator.report.intervals import comparison_table, mark_trending
 
 __all__ = ["compare_markdown", "by_rate_table"]
@@ -18,10 +19,10 @@ _LABELS = {
 
 def _cell(r: dict | None, spec: str, scale: float) -> str:
     if not r or r.get("estimate") is None:
-        return "-"
+        return DASH
     iv = r.get("ci95")
-    text = format(scale * r["estimate"], spec)
-    return text + (f" [{format(scale * iv[0], spec)}, {format(scale * iv[1], spec)}]" if iv else "")
+    text = format_number(scale * r["estimate"], spec)
+    return text + (f" [{format_number(scale * iv[0], spec)}, {format_number(scale * iv[1], spec)}]" if iv else "")
 
 
 def by_rate_table(results: dict, key: str, label: str, spec: str, scale: float) -> list[str]:

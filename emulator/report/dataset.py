@@ -8,10 +8,12 @@ projection to the full BorealHDR dataset (:func:`emulator.orchestration.datasetr
 from __future__ import annotations
 
 import os
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 
+from emulator.cells import DASH, format_number
 from emulator.io.files import REPORT_FILE, RESULTS_FILE, write_results, write_text
 from emulator.report.figures import new_figure, save
 from emulator.report.html import write_report, run_folder_pages
@@ -86,8 +88,8 @@ def plot_methods(summary: dict, path: str | os.PathLike) -> Path:
     return save(fig, path)
 
 
-def _fmt(v, spec=".3g"):
-    return "-" if v is None else format(v, spec)
+#: A figure of the dataset report: the house rule, a missing value as ``-`` (the report's tables always printed it so).
+_fmt = partial(format_number, missing=DASH)
 
 
 def dataset_markdown(summary: dict) -> str:
