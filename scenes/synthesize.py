@@ -130,7 +130,7 @@ def synthesize(
     -------
     Path of the written dataset.
     """
-    import scenes
+    from scenes.variant import choose_variant
     import synth
     from scenes import trajectory as tr
 
@@ -145,7 +145,7 @@ def synthesize(
     blur = bool(blur) and not scene.is_static
     if render_per not in ("shot", "cycle"):
         raise ExposimError(f"render_per must be 'shot' or 'cycle', got {render_per!r}")
-    render_variant = variant or scenes.choose_variant()
+    render_variant = variant or choose_variant()
     settings, fallback = effective_denoise(denoise)
     render = dict(width=width, height=height, spp=spp, fov_deg=cam.fov_x_deg, cache_dir=cache_dir,
                   variant=render_variant, denoise=settings)
@@ -174,11 +174,11 @@ def synthesize(
 def _scene_and_camera(scene, camera, width: int, height: int, n_cycles: int, saturate_ms: float):
     """The scene (a name takes its defaults) and the camera resized to ``width`` x ``height`` and scaled to
     saturate on the scene's reference radiance at ``saturate_ms``, the arguments checked."""
-    import scenes
+    from scenes.base import get_scene
     import synth
 
     if isinstance(scene, str):
-        scene = scenes.get_scene(scene)
+        scene = get_scene(scene)
     if n_cycles < 1:
         raise ExposimError(f"n_cycles must be >= 1, got {n_cycles}")
     if not (math.isfinite(saturate_ms) and saturate_ms > 0):
@@ -208,7 +208,7 @@ def _providers(scene, traj, shots: WalkShots, *, baseline_m: float, render_seed:
     ``shot_renderer(t, camera)`` the :class:`scenes.blur.ShotRenderer` of a blurred one.
     Shots are numbered in the order they are first asked for.
     """
-    import scenes
+    from scenes.render import render as render_radiance
     from scenes import trajectory as tr
 
     shot_index: dict[float, int] = {}
@@ -246,7 +246,7 @@ def _providers(scene, traj, shots: WalkShots, *, baseline_m: float, render_seed:
         job = render_job(timestamp_s, camera_name, idx)
         radiance = prefetched.pop((round(timestamp_s, 9), camera_name), None)
         if radiance is None:
-            radiance = scenes.render(**job)
+            radiance = render_radiance(**job)
         return radiance, np.asarray(job["pose"], dtype=np.float64)
 
     return source, blurred_source, render_job, shot_renderer, prefetched

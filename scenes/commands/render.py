@@ -177,13 +177,13 @@ def _checked_output(out: Path, cameras: list[str], stamps_ns: list[int], *, ster
 def _spp(value, scene, pose, width: int, height: int, fov: float, variant: str, cache_dir):
     """``--spp``: an integer, or ``auto`` (:func:`scenes.select_spp` on ``pose``): ``(spp, selection record or
     None)``."""
-    import scenes
+    from scenes.spp import select_spp
 
     if str(value).lower() == "auto":
         # measured on the first pose, at no more than 160 px wide to keep it affordable
         sel_w = min(width, 160)
         sel_h = max(1, round(height * sel_w / width))
-        selection = scenes.select_spp(scene, pose, width=sel_w, height=sel_h, fov_deg=fov, variant=variant,
+        selection = select_spp(scene, pose, width=sel_w, height=sel_h, fov_deg=fov, variant=variant,
                                       candidates=(4, 9, 16, 36, 64, 144, 256), cache_dir=cache_dir)
         return selection.spp, selection.to_dict()
     try:
@@ -196,18 +196,20 @@ def run_render(args: argparse.Namespace) -> int:
     """Body of ``exposim render``."""
     import numpy as np
 
-    import scenes
+    from scenes.base import get_scene
+    from scenes.camera import DEFAULT_FOV_DEG, intrinsics
+    from scenes.dynamic_range import dynamic_range_db
     from emulator.io.exr import write_exr
     from emulator.io.files import write_metadata
     from emulator.io.tum import write_tum
     from scenes import trajectory as tr
     from scenes.cache import library_versions, resolve_cache_dir
     from scenes.denoise import effective_denoise
-    from scenes.variant import check_variant_name
+    from scenes.variant import check_variant_name, choose_variant
 
     width, height = parse_size(args.size)
-    fov = scenes.DEFAULT_FOV_DEG if args.fov is None else args.fov
-    scene = scenes.get_scene(args.scene, seed=args.seed, **parse_params(args.param))
+    fov = DEFAULT_FOV_DEG if args.fov is None else args.fov
+    scene = get_scene(args.scene, seed=args.seed, **parse_params(args.param))
     ts, poses = _timestamps_and_poses(scene, args)
     baseline = tr.BASELINE_M if args.baseline is None else float(args.baseline)
     cameras = ["left", "right"] if args.stereo else ["left"]
@@ -222,7 +224,7 @@ def run_render(args: argparse.Namespace) -> int:
     scheduler = check_scheduler(getattr(args, "scheduler", None))
     cache_dir = False if args.no_cache else args.cache
     denoise, denoise_fallback = effective_denoise(args.denoise)
-    variant = check_variant_name(args.variant) if args.variant else scenes.choose_variant()
+    variant = check_variant_name(args.variant) if args.variant else choose_variant()
     spp, spp_info = _spp(args.spp, scene, poses[0], width, height, fov, variant, cache_dir)
 
     for cam in cameras:
@@ -243,12 +245,12 @@ def run_render(args: argparse.Namespace) -> int:
         for (i, cam), seed, img in zip(jobs, seeds, render_many(tasks, scheduler=scheduler, progress=bar.update)):
             write_exr(out / "frames" / cam / f"{stamps_ns[i]}.exr", img, overwrite=True)
             frames.append({"camera": cam, "timestamp_ns": stamps_ns[i], "seed": seed,
-                           "dynamic_range_db": round(scenes.dynamic_range_db(img), 3)})
+                           "dynamic_range_db": round(dynamic_range_db(img), 3)})
 
     write_tum(out / "poses_left.txt", stamps_ns, poses)
     if args.stereo:
         write_tum(out / "poses_right.txt", stamps_ns, np.stack([tr.stereo_right(p, baseline) for p in poses]))
-    fx, fy, cx, cy = scenes.intrinsics(width, height, fov)
+    fx, fy, cx, cy = intrinsics(width, height, fov)
     drs = [f["dynamic_range_db"] for f in frames]
     info = {
         "scene": scene.name,

@@ -73,7 +73,7 @@ register.order = 70  # place in `exposim --help`
 def _run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
-    import scenes
+    from scenes.base import get_scene
     from emulator.errors import ExposimError
     from scenes.commands.render import parse_params, parse_size
     from scenes.parallel import check_scheduler
@@ -84,7 +84,7 @@ def _run(args: argparse.Namespace) -> int:
         gt = tuple(float(x) for x in args.gt_exposures.split(",") if x.strip())
     except ValueError:
         raise ExposimError(f"--gt-exposures must be comma-separated numbers, got {args.gt_exposures!r}") from None
-    scene = scenes.get_scene(args.scene, seed=args.seed, **parse_params(args.param))
+    scene = get_scene(args.scene, seed=args.seed, **parse_params(args.param))
     scheduler = check_scheduler(args.scheduler)
     render_bar = None
     if scheduler is not None:
