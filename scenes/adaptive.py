@@ -21,6 +21,12 @@ The selection looks at the samples it then keeps, which biases a selected tile's
 less than its noise (docs/results/render-adaptive-2026-12-04.md measures the mean radiance).
 Written in a setting string as ``~xFACTOR:PERCENT%`` (:mod:`scenes.presets`), e.g.
 ``oidn-hq@64+sun=16~x4:25%``; tile size other than :data:`DEFAULT_TILE` as ``~x4:25%/60``.
+
+Where much of a frame clips at the exposures a study sees (the sun disk and its glints, a bright
+sky), the brightest tiles would win extra samples the sensor then throws away.  ``@MSms`` (e.g.
+``~x16:20%@32ms``) makes the score blind above the luminance that saturates the synthetic camera at
+``MS`` ms (the scene's reference radiance fills the well at :data:`scenes.camera.DEFAULT_SATURATE_MS`):
+both passes' luminance is clamped there before the variance and the radiance are summed.
 """
 
 from __future__ import annotations
@@ -31,6 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from scenes.camera import DEFAULT_SATURATE_MS
 from scenes.dynamic_range import luminance
 from scenes.errors import RenderError
 
@@ -48,11 +55,16 @@ MERGE_SAMPLES = 1_500_000
 
 @dataclass(frozen=True)
 class AdaptiveSampling:
-    """``factor`` times the spp in the ``fraction`` of tiles (side ``tile`` px) with the worst relative variance."""
+    """``factor`` times the spp in the ``fraction`` of tiles (side ``tile`` px) with the worst relative variance.
+
+    ``clip_ms``: the score ignores luminance above what saturates the synthetic camera at that exposure
+    (None: nothing is clamped).
+    """
 
     factor: int
     fraction: float
     tile: int = DEFAULT_TILE
+    clip_ms: float | None = None
 
     def __post_init__(self):
         if isinstance(self.factor, bool) or not isinstance(self.factor, (int, np.integer)) or not 2 <= self.factor <= 64:
@@ -61,31 +73,49 @@ class AdaptiveSampling:
             raise RenderError(f"adaptive sampling: fraction must be in (0, 1], got {self.fraction!r}")
         if isinstance(self.tile, bool) or not isinstance(self.tile, (int, np.integer)) or not 4 <= self.tile <= 1024:
             raise RenderError(f"adaptive sampling: tile must be an integer in [4, 1024] px, got {self.tile!r}")
+        if self.clip_ms is not None and not (isinstance(self.clip_ms, (int, float)) and not isinstance(self.clip_ms, bool)
+                                             and math.isfinite(self.clip_ms) and 0.0 < float(self.clip_ms) <= 1e6):
+            raise RenderError(f"adaptive sampling: clip_ms must be a finite exposure in (0, 1e6] ms, got {self.clip_ms!r}")
+
+    def clip_luminance(self, reference_radiance: float) -> float:
+        """The luminance above which the score is blind: ``inf`` without ``clip_ms``."""
+        if self.clip_ms is None:
+            return math.inf
+        return float(reference_radiance) * DEFAULT_SATURATE_MS / float(self.clip_ms)
 
     @property
     def text(self) -> str:
-        """The ``xFACTOR:PERCENT%[/TILE]`` form that :func:`parse_adaptive` reads back."""
+        """The ``xFACTOR:PERCENT%[/TILE][@MSms]`` form that :func:`parse_adaptive` reads back."""
         out = f"x{int(self.factor)}:{100.0 * float(self.fraction):g}%"
-        return out if self.tile == DEFAULT_TILE else f"{out}/{int(self.tile)}"
+        out = out if self.tile == DEFAULT_TILE else f"{out}/{int(self.tile)}"
+        return out if self.clip_ms is None else f"{out}@{float(self.clip_ms):g}ms"
 
     def key_material(self) -> dict:
         """What enters a render's cache key."""
-        return {"factor": int(self.factor), "fraction": round(float(self.fraction), 9), "tile": int(self.tile),
-                "floor": FLOOR_FRACTION, "scheme": 1}
+        out = {"factor": int(self.factor), "fraction": round(float(self.fraction), 9), "tile": int(self.tile),
+               "floor": FLOOR_FRACTION, "scheme": 1}
+        if self.clip_ms is not None:  # absent otherwise: the keys of earlier renders stay as they were
+            out.update(clip_ms=round(float(self.clip_ms), 9), saturate_ms=DEFAULT_SATURATE_MS)
+        return out
 
 
 def parse_adaptive(text: str, setting: str = "") -> AdaptiveSampling:
-    """``"x4:25%"`` or ``"x4:25%/60"`` -> :class:`AdaptiveSampling` (a clear error naming ``setting`` otherwise)."""
-    body, slash, tile = str(text).partition("/")
+    """``"x4:25%"``, ``"x4:25%/60"`` or ``"x16:20%@32ms"`` -> :class:`AdaptiveSampling` (a clear error
+    naming ``setting`` otherwise)."""
+    head, at, clip = str(text).partition("@")
+    body, slash, tile = head.partition("/")
     factor, colon, percent = body.partition(":")
     try:
-        if not (factor.startswith("x") and colon and percent.endswith("%")) or (slash and not tile.isdigit()):
+        if not (factor.startswith("x") and colon and percent.endswith("%")) or (slash and not tile.isdigit()) or (
+                at and not clip.endswith("ms")):
             raise ValueError
-        return AdaptiveSampling(int(factor[1:]), float(percent[:-1]) / 100.0, int(tile) if slash else DEFAULT_TILE)
+        clip_ms = float(clip[:-2]) if at else None
+        return AdaptiveSampling(int(factor[1:]), float(percent[:-1]) / 100.0, int(tile) if slash else DEFAULT_TILE,
+                                clip_ms)
     except (ValueError, RenderError) as exc:
         why = f": {exc}" if isinstance(exc, RenderError) else ""
-        raise RenderError(f"render setting {setting or text!r}: expected ~xFACTOR:PERCENT%[/TILE] after '~', "
-                          f"e.g. ~x4:25%, got {text!r}{why}") from None
+        raise RenderError(f"render setting {setting or text!r}: expected ~xFACTOR:PERCENT%[/TILE][@MSms] after '~', "
+                          f"e.g. ~x4:25% or ~x16:20%@32ms, got {text!r}{why}") from None
 
 
 def pass_seed(seed: int, index: int) -> int:
@@ -94,9 +124,10 @@ def pass_seed(seed: int, index: int) -> int:
     return int.from_bytes(digest[:4], "little")
 
 
-def tile_scores(a: np.ndarray, b: np.ndarray, tile: int) -> np.ndarray:
-    """(rows, cols) score of each tile: summed variance of the mean of ``a`` and ``b`` over summed floored luminance."""
-    la, lb = luminance(a), luminance(b)
+def tile_scores(a: np.ndarray, b: np.ndarray, tile: int, clip: float = math.inf) -> np.ndarray:
+    """(rows, cols) score of each tile: summed variance of the mean of ``a`` and ``b`` over summed floored luminance
+    (both luminances clamped at ``clip`` first)."""
+    la, lb = np.minimum(luminance(a), clip), np.minimum(luminance(b), clip)
     var = 0.25 * (la - lb) ** 2
     mean = 0.5 * (la + lb)
     floor = FLOOR_FRACTION * max(float(mean.mean()), 1e-12)
@@ -163,17 +194,22 @@ def combine_passes(width: int, height: int, passes) -> np.ndarray:
 
 
 def render_adaptive(render_pass, spec: AdaptiveSampling, *, width: int, height: int, spp: int, seed: int,
-                    effective_spp=lambda n: n) -> tuple[np.ndarray, dict]:
+                    effective_spp=lambda n: n, reference_radiance: float | None = None) -> tuple[np.ndarray, dict]:
     """The adaptive estimate and ``{"tiles", "crops", "extra_pixels", "mean_spp"}``.
 
     ``render_pass(spp, seed, crop)`` renders the frame (crop None) or the ``(x, y, w, h)``
     crop and returns (h, w, 3) radiance; ``effective_spp`` maps a requested count to the
-    sampler's (the weights use it).
+    sampler's (the weights use it); ``reference_radiance``, the scene's, is needed with ``spec.clip_ms``.
     """
+    if spec.clip_ms is not None and not (reference_radiance is not None and math.isfinite(reference_radiance)
+                                         and reference_radiance > 0):
+        raise RenderError(f"adaptive sampling {spec.text}: clipping needs the scene's reference radiance > 0, "
+                          f"got {reference_radiance!r}")
+    clip = spec.clip_luminance(reference_radiance) if spec.clip_ms is not None else math.inf
     half = effective_spp(max(1, int(spp) // 2))
     a = render_pass(half, pass_seed(seed, 0), None)
     b = render_pass(half, pass_seed(seed, 1), None)
-    mask = select_tiles(tile_scores(a, b, spec.tile), spec.fraction)
+    mask = select_tiles(tile_scores(a, b, spec.tile, clip), spec.fraction)
     extra = effective_spp(max(1, (int(spec.factor) - 1) * int(spp)))
     crops = tile_crops(mask, spec.tile, width, height, merge_px=MERGE_SAMPLES // extra)
     passes = [(a, half, None), (b, half, None)]

@@ -18,12 +18,17 @@ import numpy as np
 from scenes.errors import RenderError
 from synth.pose import check_pose
 
-__all__ = ["DEFAULT_FOV_DEG", "intrinsics", "intrinsics_matrix", "pose_to_mitsuba", "check_pose", "project",
+__all__ = ["DEFAULT_FOV_DEG", "DEFAULT_SATURATE_MS", "intrinsics", "intrinsics_matrix", "pose_to_mitsuba", "check_pose", "project",
            "check_size", "check_fov"]
 
 #: Horizontal field of view matching the BorealHDR cameras (fx ~ 1180 px at
 #: 1920 px wide): 2 * atan(960 / 1180) = 78.26 degrees.
 DEFAULT_FOV_DEG = math.degrees(2.0 * math.atan(960.0 / 1180.0))
+
+#: A white surface facing the sun (a scene's reference radiance) fills the synthetic camera's well at
+#: this exposure (ms) by default (scenes.synthesize, scenes.image_stats, scenes.adaptive): sunlit snow
+#: then sits near the top of the 1 ms bracket and deep shade needs the 32 ms one.
+DEFAULT_SATURATE_MS = 1.0
 
 #: OpenCV camera frame -> Mitsuba camera frame (half turn about z).
 _CV_TO_MITSUBA = np.diag([-1.0, -1.0, 1.0, 1.0])

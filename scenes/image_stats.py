@@ -194,10 +194,10 @@ def synthetic_camera(scene, width: int, height: int, *, camera: str = "borealhdr
     """The synthetic camera :func:`scenes.synthesize.synthesize` uses for a scene, at a size.
 
     Its gain puts the scene's reference radiance (white surface facing the main light) at
-    full well at ``saturate_ms`` (default :data:`scenes.synthesize.DEFAULT_SATURATE_MS`).
+    full well at ``saturate_ms`` (default :data:`scenes.camera.DEFAULT_SATURATE_MS`).
     """
     import synth
-    from scenes.synthesize import DEFAULT_SATURATE_MS
+    from scenes.camera import DEFAULT_SATURATE_MS
 
     t = DEFAULT_SATURATE_MS if saturate_ms is None else float(saturate_ms)
     cam = synth.Camera.preset(camera, width=int(width), height=int(height))

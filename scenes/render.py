@@ -91,7 +91,7 @@ def _render_uncached(scene: Scene, pose: np.ndarray, *, width: int, height: int,
         if adaptive is None:
             return one(spp, seed, None)
         return render_adaptive(one, adaptive, width=width, height=height, spp=spp, seed=seed,
-                               effective_spp=effective_spp)[0]
+                               effective_spp=effective_spp, reference_radiance=scene.reference_radiance)[0]
 
 
 def _render_aux_uncached(scene: Scene, pose: np.ndarray, *, width: int, height: int, spp: int, seed: int,

@@ -13,15 +13,12 @@ from pathlib import Path
 import numpy as np
 
 from emulator.errors import ExposimError
+from scenes.camera import DEFAULT_SATURATE_MS
 from scenes.denoise import effective_denoise
 from scenes.walks import CAMERA_FROM_IMU, DEFAULT_WALK
 from scenes.walkshots import WalkShots
 
-__all__ = ["synthesize", "DEFAULT_SATURATE_MS"]
-
-#: A white surface facing the sun fills the well at this exposure (ms) by default: sunlit
-#: snow then sits near the top of the 1 ms bracket and deep shade needs the 32 ms one.
-DEFAULT_SATURATE_MS = 1.0
+__all__ = ["synthesize"]
 
 
 def synthesize(

@@ -17,7 +17,7 @@ __all__ = ["register", "stop_between_images"]
 def register(subparsers) -> None:
     from scenes.base import SCENES
     from scenes.commands.render import add_scheduler_option, add_denoise_option
-    from scenes.synthesize import DEFAULT_SATURATE_MS
+    from scenes.camera import DEFAULT_SATURATE_MS
 
     p = subparsers.add_parser(
         "synth",
