@@ -7,7 +7,7 @@ Usage:
         [--cache-dir DIR]
 
 For each scene and each setting (a preset of scenes.presets, or DENOISER@SPP[/AUX_SPP][+LIGHT=WEIGHT,...]
-[~xFACTOR:PERCENT%], the last an adaptive sample count, scenes.adaptive):
+[~xFACTOR:PERCENT%[/TILE][@MSms]], the last an adaptive sample count, scenes.adaptive):
 keypoint repeatability between two render seeds (same sensor noise) and between two sensor-noise draws (same
 render), at each exposure, mean and 95 % interval over the walk's sweeps, and the renders' seconds per sweep and
 camera. The baseline setting (default study-oidn8, the live study's former renders) is measured first on each

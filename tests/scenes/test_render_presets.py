@@ -232,6 +232,51 @@ def test_tiles_are_chosen_where_the_variance_against_radiance_is_highest():
     assert tile_crops(mask, 10, 25, 28, merge_px=371) == [(0, 0, 25, 28)]
 
 
+def test_a_clipping_exposure_is_read_back_keyed_and_refused_when_malformed():
+    from scenes.adaptive import AdaptiveSampling, render_adaptive
+    from scenes.camera import DEFAULT_SATURATE_MS
+
+    p = parse_setting("oidn-hq@64+sun=16~x16:20%@32ms")
+    assert p.adaptive == AdaptiveSampling(16, 0.2, 30, 32.0) and p.adaptive.text == "x16:20%@32ms"
+    assert parse_setting(p.setting) == p and parse_setting("off@8~x2:50%/10@8.5ms").adaptive.text == "x2:50%/10@8.5ms"
+    # the key grows only when clipping is asked for: renders keyed before keep their keys
+    assert p.record()["adaptive"] == {"factor": 16, "fraction": 0.2, "tile": 30, "floor": 0.05, "scheme": 1,
+                                      "clip_ms": 32.0, "saturate_ms": DEFAULT_SATURATE_MS}
+    assert AdaptiveSampling(16, 0.2).key_material() == {"factor": 16, "fraction": 0.2, "tile": 30, "floor": 0.05,
+                                                        "scheme": 1}
+    # the luminance that fills the well at 32 ms when the reference radiance fills it at 1 ms
+    assert p.adaptive.clip_luminance(320.0) == pytest.approx(320.0 * DEFAULT_SATURATE_MS / 32.0)
+    assert AdaptiveSampling(4, 0.25).clip_luminance(320.0) == float("inf")
+    for bad, words in (("oidn@8~x4:25%@32", "MSms"), ("oidn@8~x4:25%@0ms", "clip_ms"),
+                       ("oidn@8~x4:25%@nanms", "clip_ms"), ("oidn@8~x4:25%@-8ms", "clip_ms")):
+        with pytest.raises(RenderError, match=words) as err:
+            parse_setting(bad)
+        assert repr(bad) in str(err.value)
+    with pytest.raises(RenderError, match="reference radiance"):  # before any render is paid for
+        render_adaptive(lambda *a: pytest.fail("rendered"), p.adaptive, width=8, height=8, spp=4, seed=0)
+
+
+def test_a_clipping_score_sends_the_samples_to_the_shade_the_sensor_sees():
+    from scenes.adaptive import select_tiles, tile_scores
+
+    rng = np.random.default_rng(3)
+    mean = np.full((20, 30, 3), 1.0)
+    noise = np.full((20, 30, 1), 0.05)
+    mean[0:10, 0:10], noise[0:10, 0:10] = 400.0, 300.0  # tile (0, 0): a sun disk, far above the clip level
+    noise[10:20, 20:30] = 0.5  # tile (1, 2): noisy shade
+    d = rng.choice([-1.0, 1.0], size=(20, 30, 1)) * noise
+    a, b = mean + d, mean - d
+    plain, clipped = tile_scores(a, b, 10), tile_scores(a, b, 10, clip=10.0)
+    assert np.array_equal(select_tiles(plain, 1 / 6), [[True, False, False], [False, False, False]])
+    assert np.array_equal(select_tiles(clipped, 1 / 6), [[False, False, False], [False, False, True]])
+    # both passes clamp to the same value: the disk's tile has no variance left; the shade's is d^2 over its
+    # radiance, and its floor (5 % of the frame's mean) comes from the clamped frame too: the disk no longer
+    # lifts it above the shade (plain: 0.05 * (400 * 100 + 1 * 500) / 600 = 3.375 per pixel)
+    assert clipped[0, 0] == 0.0 and clipped[1, 2] == pytest.approx(0.25)
+    assert plain[1, 2] == pytest.approx(0.25 / (0.05 * (400.0 * 100 + 500) / 600))
+    assert np.array_equal(tile_scores(a, b, 10, clip=float("inf")), plain)
+
+
 def test_adaptive_render_is_the_spp_weighted_mean_of_its_passes(monkeypatch):
     from scenes import adaptive
 
@@ -266,3 +311,9 @@ def test_adaptive_render_is_the_spp_weighted_mean_of_its_passes(monkeypatch):
     assert np.array_equal(img, again)  # deterministic seeds: the same bytes
     x, y, w, h = crops[0]
     assert passes[2][0].shape == (h, w, 3)
+    passes.clear()  # a clipping score gets the scene's reference radiance from the render path
+    seen = []
+    monkeypatch.setattr(sr, "render_adaptive",
+                        lambda render_pass, spec, **kw: seen.append(kw["reference_radiance"]) or recording(render_pass, spec, **kw))
+    clipped = scenes.render(scene, pose, adaptive="x3:25%/8@32ms", **kw)
+    assert seen == [scene.reference_radiance] and clipped.shape == img.shape and np.all(np.isfinite(clipped))
