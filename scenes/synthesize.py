@@ -14,7 +14,9 @@ import numpy as np
 
 from emulator.errors import ExposimError
 from scenes.camera import DEFAULT_SATURATE_MS
+from scenes.adaptive import AdaptiveSampling, parse_adaptive
 from scenes.denoise import effective_denoise
+from scenes.errors import RenderError
 from scenes.walks import CAMERA_FROM_IMU, DEFAULT_WALK
 from scenes.walkshots import WalkShots
 
@@ -54,6 +56,7 @@ def synthesize(
     cache_dir=None,
     variant: str | None = None,
     denoise=None,
+    adaptive=None,
     overwrite: bool = False,
     progress=None,
     scheduler: str | None = None,
@@ -113,6 +116,9 @@ def synthesize(
         ``$EXPOSIM_DENOISE`` when set.  When OIDN cannot run
         here, a :class:`scenes.denoise.DenoiserUnavailableWarning` says why, every frame
         is the raw estimate and the dataset's description records the reason.
+    adaptive : str or scenes.adaptive.AdaptiveSampling, optional
+        A spatially adaptive sample count for every render (``"x16:20%@32ms"``,
+        :mod:`scenes.adaptive`); recorded in the description only when set.
     scheduler : str, optional
         ``"local"`` or ``"tcp://HOST:PORT"``: render every shot first as a Dask task
         (:mod:`scenes.parallel`), then capture; the renders land in the same cache
@@ -144,8 +150,9 @@ def synthesize(
         raise ExposimError(f"render_per must be 'shot' or 'cycle', got {render_per!r}")
     render_variant = variant or choose_variant()
     settings, fallback = effective_denoise(denoise)
+    adaptive = _adaptive(adaptive)
     render = dict(width=width, height=height, spp=spp, fov_deg=cam.fov_x_deg, cache_dir=cache_dir,
-                  variant=render_variant, denoise=settings)
+                  variant=render_variant, denoise=settings, **({} if adaptive is None else {"adaptive": adaptive}))
     shots = WalkShots(scene, traj, render=dict(render, render_seed=render_seed), fps=fps, n_brackets=len(brackets_ms),
                       max_window_ms=_window_ms(brackets_ms, gt_exposures_ms, max_window_ms), baseline_m=baseline,
                       render_per=render_per, integrate=integrate, margin_step_px=margin_step_px)
@@ -157,8 +164,8 @@ def synthesize(
                   brackets_ms=brackets_ms, fps=fps, start_time_ns=start_time_ns, stereo=stereo,
                   progress=render_progress)
     description = _description(scene, cam, shots, width=width, height=height, spp=spp, render_seed=render_seed,
-                               variant=render_variant, denoise=settings, fallback=fallback, blur=blur,
-                               render_per=render_per, saturate_ms=saturate_ms, speed_mps=speed_mps, walk=walk,
+                               variant=render_variant, denoise=settings, fallback=fallback, adaptive=adaptive,
+                               blur=blur, render_per=render_per, saturate_ms=saturate_ms, speed_mps=speed_mps, walk=walk,
                                imu=imu, imu_rate_hz=imu_rate_hz)
     return synth.capture_sequence(
         blurred_source if blur else source, out_dir, cam, brackets_ms=tuple(brackets_ms), fps=fps, n_cycles=n_cycles,
@@ -182,6 +189,18 @@ def _scene_and_camera(scene, camera, width: int, height: int, n_cycles: int, sat
         raise ExposimError(f"saturate_ms must be finite and positive, got {saturate_ms!r}")
     cam = synth.Camera.preset(camera, width=width, height=height) if isinstance(camera, str) else camera
     return scene, cam.replace(width=width, height=height).saturating_at(scene.reference_radiance, saturate_ms)
+
+
+def _adaptive(adaptive) -> AdaptiveSampling | None:
+    """None, an :class:`scenes.adaptive.AdaptiveSampling` or its ``xFACTOR:PERCENT%...`` text, checked."""
+    if adaptive is None or isinstance(adaptive, AdaptiveSampling):
+        return adaptive
+    if isinstance(adaptive, str):
+        try:
+            return parse_adaptive(adaptive)
+        except RenderError as exc:
+            raise ExposimError(str(exc)) from None
+    raise ExposimError(f"adaptive must be None, a string like 'x4:25%' or an AdaptiveSampling, got {adaptive!r}")
 
 
 def _window_ms(brackets_ms, gt_exposures_ms, max_window_ms) -> float:
@@ -219,7 +238,8 @@ def _providers(scene, traj, shots: WalkShots, *, baseline_m: float, render_seed:
         frame_seed = (int(render_seed) * 1_000_003 + 2 * idx + (camera_name == "right")) % (1 << 32)
         return dict(scene=scene, pose=pose, width=render["width"], height=render["height"], spp=render["spp"],
                     seed=frame_seed, fov_deg=render["fov_deg"], cache_dir=render["cache_dir"],
-                    variant=render["variant"], denoise=render["denoise"])
+                    variant=render["variant"], denoise=render["denoise"],
+                    **({"adaptive": render["adaptive"]} if "adaptive" in render else {}))
 
     def shot_renderer(timestamp_s: float, camera_name: str):
         """The :class:`scenes.blur.ShotRenderer` serving one shot (or its whole cycle) and camera."""
@@ -277,7 +297,7 @@ def _prefetch(job_of, prefetched: dict, *, keep: bool, scheduler: str, cache_dir
 
 
 def _description(scene, cam, shots: WalkShots, *, width: int, height: int, spp: int, render_seed: int, variant: str,
-                 denoise, fallback, blur: bool, render_per: str, saturate_ms: float, speed_mps, walk, imu,
+                 denoise, fallback, adaptive: AdaptiveSampling | None, blur: bool, render_per: str, saturate_ms: float, speed_mps, walk, imu,
                  imu_rate_hz: float) -> dict:
     """The dataset's source description (``exposim.json``): scene, render settings, trajectory, IMU."""
     return {
@@ -287,6 +307,8 @@ def _description(scene, cam, shots: WalkShots, *, width: int, height: int, spp: 
         "render": {"width": width, "height": height, "spp": spp, "render_seed": render_seed,
                    "variant": variant, "fov_deg": cam.fov_x_deg,
                    "denoise": denoise.key_material(), "denoise_fallback": fallback,
+                   # only when set: the descriptions of earlier datasets stay as they were
+                   **({} if adaptive is None else {"adaptive": adaptive.text}),
                    "exposure_integration": ("none (trigger instant)" if not blur else
                                             f"scenes.blur (warped sub-instants of one render per {render_per})"
                                             if shots.integrate else

@@ -87,8 +87,9 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
                         "GPU ('cuda_ad_rgb'), 'off' with --spp 2048 meets it (3.2 s a sweep and camera on an H200)")
     p.add_argument("--render", metavar="PRESET",
                    help="a render preset (study-oidn8: the default settings; study-sun64; study-hq) or a setting "
-                        "DENOISER@SPP[+LIGHT=WEIGHT,...]: sets --spp, --denoise and the renders' choice of lights "
-                        "together (docs/results/render.md measures them); not with --spp or --denoise")
+                        "DENOISER@SPP[+LIGHT=WEIGHT,...][~xFACTOR:PERCENT%[@MSms]]: sets --spp, --denoise, the "
+                        "renders' choice of lights and an adaptive sample count together (docs/results/render.md "
+                        "measures them); not with --spp or --denoise")
     p.add_argument("--stochastic-seeds", type=int, metavar="K",
                    help="seeds per walk and condition of each AE method that draws random numbers (kim): the same K "
                         "seeds in every condition, the verdicts on their mean per walk, the per-seed rows in "
@@ -126,7 +127,7 @@ def build_parser(prog: str = "python -m validation.live") -> argparse.ArgumentPa
 
 
 def _render_changes(args) -> dict:
-    """``--render PRESET`` as the configuration's spp, denoiser and emitter weights."""
+    """``--render PRESET`` as the configuration's spp, denoiser, emitter weights and adaptive sample count."""
     if args.spp is not None or args.denoise is not None:
         raise LiveError("--render sets spp and the denoiser: give --render, or --spp and --denoise, not both")
     try:
@@ -136,10 +137,8 @@ def _render_changes(args) -> dict:
     if preset.denoise.enabled and preset.denoise != resolve_denoise(preset.denoise.name):
         raise LiveError(f"--render {args.render}: a study's denoiser is a named one ({preset.denoise.name} with its own "
                         f"albedo/normal spp); use a preset or DENOISER@SPP without /AUX_SPP")
-    if preset.adaptive is not None:
-        raise LiveError(f"--render {args.render}: the live study does not carry adaptive sampling (~{preset.adaptive.text}); "
-                        f"it is measured with scripts/render_noise_balance.py")
-    return {"spp": preset.spp, "denoise": preset.denoise.name, "emitter_weights": preset.emitter_weights}
+    return {"spp": preset.spp, "denoise": preset.denoise.name, "emitter_weights": preset.emitter_weights,
+            "adaptive": None if preset.adaptive is None else preset.adaptive.text}
 
 
 def config_from_args(args) -> LiveConfig:

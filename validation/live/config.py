@@ -244,6 +244,7 @@ class LiveConfig:
     denoise: str | None = None
     emitter_weights: tuple = ()
     stochastic_seeds: int = 1
+    adaptive: str | None = None
 
     def __post_init__(self) -> None:
         import os
@@ -300,6 +301,14 @@ class LiveConfig:
         except (TypeError, ValueError, ExposimError) as exc:
             raise LiveError(str(exc)) from None
         object.__setattr__(self, "emitter_weights", weights)
+        if self.adaptive is not None:
+            from scenes.adaptive import parse_adaptive
+            from scenes.errors import RenderError
+
+            try:  # kept as its canonical text: the record and the render cache key read the same
+                object.__setattr__(self, "adaptive", parse_adaptive(self.adaptive).text)
+            except (RenderError, TypeError) as exc:
+                raise LiveError(f"adaptive: {exc}") from None
 
     @property
     def duration_s(self) -> float:
@@ -321,6 +330,8 @@ class LiveConfig:
             d["emitter_weights"] = {k: float(v) for k, v in weights}
         if d["stochastic_seeds"] == 1:  # recorded only when set: the records of earlier studies stay as they were
             del d["stochastic_seeds"]
+        if d["adaptive"] is None:  # recorded only when set: the records of earlier studies stay as they were
+            del d["adaptive"]
         d["scene_parameters"] = {s: self.scene_parameters(s) for s in self.scenes}
         d["renders"] = self.n_cycles * (12 if self.render_per == "shot" else 2) * len(self.scenes)
         d["fixed_instant"] = "timestamp of the cycle's first shot (bracket index 0, the 1 ms bracket)"

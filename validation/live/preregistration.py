@@ -82,7 +82,8 @@ def preregistration(cfg: LiveConfig, replicates: int, *, draws: int | None = Non
             "render": {**{k: getattr(cfg, k) for k in ("n_cycles", "width", "height", "spp", "denoise", "render_per",
                                                        "frame_rate_hz", "latency_frames")},
                        **({"emitter_weights": {k: float(v) for k, v in cfg.emitter_weights}}
-                          if cfg.emitter_weights else {})},
+                          if cfg.emitter_weights else {}),
+                       **({"adaptive": cfg.adaptive} if cfg.adaptive else {})},
             **({DRAWS_KEY: draws} if draws != 1 else {}), "bootstrap_resamples": int(n_resamples),
             "monte_carlo": "each p's 99 % Monte Carlo interval (Wilson); a verdict whose Holm-adjusted p's interval "
                            "holds the level is undetermined",

@@ -323,6 +323,7 @@ def run_walk(config: dict, scene_name: str, experiment: str, cache_dir=None, nat
                    seed=cfg.seed, render_seed=cfg.seed, noise=cfg.capture_noise,
                    save_radiance=cfg.keep_radiance or scene.is_static,  # a walk's live shots integrate the renders
                    render_per=cfg.render_per, denoise=cfg.denoise, max_window_ms=live_window_ms(),
+                   adaptive=cfg.adaptive,
                    cache_dir=cache_dir,
                    progress=lambda d, n: bar.update(d - bar.n))
     timings[f"record_{scene_name}_s"] = time.perf_counter() - t_start

@@ -67,3 +67,60 @@ def test_a_walk_sized_for_the_clamp_range_renders_nothing_for_long_live_shots(tm
     with pytest.raises(ExposimError, match=r"max_window_ms must be a number >= the longest exposure \(32 ms\)"):
         synthesize(scene, tmp_path / "bad", cache_dir=tmp_path / "c", max_window_ms=20.0, **kw)
     assert not (tmp_path / "bad").exists()
+
+
+def test_an_adaptive_sample_count_is_configured_recorded_only_when_set_and_refused_when_malformed(monkeypatch):
+    from validation.live.cli import build_parser, config_from_args
+    from validation.live.preregistration import preregistration
+
+    monkeypatch.delenv("EXPOSIM_DENOISE", raising=False)
+    plain = LiveConfig()
+    assert plain.adaptive is None and "adaptive" not in plain.to_dict()  # earlier records stay as they were
+    assert config_from_dict(plain.to_dict()) == plain
+    cfg = config_from_args(build_parser().parse_args(["-o", "/tmp/x", "--render", "oidn-hq@64+sun=16~x16:20%@32ms"]))
+    assert (cfg.spp, cfg.denoise, dict(cfg.emitter_weights), cfg.adaptive) == (64, "oidn-hq", {"sun": 16.0},
+                                                                                "x16:20%@32ms")
+    assert cfg.to_dict()["adaptive"] == "x16:20%@32ms" and config_from_dict(cfg.to_dict()) == cfg
+    assert LiveConfig(adaptive="x16:20%/30@32.0ms").adaptive == "x16:20%@32ms"  # one canonical text
+    assert preregistration(cfg, replicates=2)["render"]["adaptive"] == "x16:20%@32ms"
+    assert "adaptive" not in preregistration(plain, replicates=2)["render"]
+    for bad in ("x1:20%", "16:20%", "x4:25%@32"):
+        with pytest.raises(LiveError, match="adaptive"):
+            LiveConfig(adaptive=bad)
+
+
+@pytest.mark.render
+def test_a_walk_with_an_adaptive_sample_count_records_it_and_its_live_shots_render_with_it(tmp_path, monkeypatch):
+    import sys
+
+    from scenes.synthesize import synthesize
+    from scenes.walkshots import walk_radiance
+
+    sr = sys.modules["scenes.render"]
+    specs = []
+    real = sr.render_adaptive
+
+    def recording(render_pass, spec, **kw):
+        specs.append(spec.text)
+        return real(render_pass, spec, **kw)
+
+    monkeypatch.setattr(sr, "render_adaptive", recording)
+    scene = scenes.get_scene("forest_summer")
+    kw = dict(n_cycles=1, width=32, height=20, spp=4, denoise="off", stereo=False, render_per="cycle")
+    cache = tmp_path / "cache"
+    out = synthesize(scene, tmp_path / "ds", cache_dir=cache, adaptive="x2:50%/10@32ms", **kw)
+    assert json.loads((out / "exposim.json").read_text())["source"]["render"]["adaptive"] == "x2:50%/10@32ms"
+    assert specs and set(specs) == {"x2:50%/10@32ms"}
+    plain = synthesize(scene, tmp_path / "plain", cache_dir=tmp_path / "c2", **kw)
+    assert "adaptive" not in json.loads((plain / "exposim.json").read_text())["source"]["render"]
+    # the live shots are rebuilt from the description: the writer's adaptive renders, read from the cache
+    specs.clear()
+    live = walk_radiance(out, scene, cache_dir=cache)
+    first = sorted(int(p.stem) for p in (out / "camera_left" / "1.0").glob("*.png"))[0]
+    before = sorted(cache.rglob("*.exr"))
+    img = live(first, "left", 1.0)
+    assert img.shape == (20, 32, 3) and np.all(np.isfinite(img))
+    assert sorted(cache.rglob("*.exr")) == before and not specs  # cache hits: the same key, nothing rendered
+    with pytest.raises(ExposimError, match="expected ~xFACTOR"):
+        synthesize(scene, tmp_path / "bad", cache_dir=tmp_path / "c3", adaptive="x2", **kw)
+    assert not (tmp_path / "bad").exists()
