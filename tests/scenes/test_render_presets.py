@@ -98,8 +98,13 @@ def test_the_live_study_takes_a_preset_and_keeps_earlier_records():
     assert (cfg.spp, cfg.denoise, cfg.emitter_weights) == (32, "oidn", (("sun", 16.0),))
     assert cfg.to_dict()["emitter_weights"] == {"sun": 16.0} and config_from_dict(cfg.to_dict()) == cfg
     assert "--render oidn@32+sun=16" in command_line(args, "exposim validate live")
-    plain = config_from_args(build_parser().parse_args(["-o", "OUT"]))
-    assert "emitter_weights" not in plain.to_dict()  # a study without weights records what it always did
+    assert cfg.adaptive is None and "adaptive" not in cfg.to_dict()  # a setting without one replaces the default's
+    plain = config_from_args(build_parser().parse_args(["-o", "OUT", "--render", "study-oidn8"]))
+    d = plain.to_dict()  # the study's former renders record what they always did
+    assert (d["spp"], d["denoise"]) == (8, "oidn") and "emitter_weights" not in d and "adaptive" not in d
+    default = config_from_args(build_parser().parse_args(["-o", "OUT"]))
+    assert (default.spp, default.denoise, default.emitter_weights, default.adaptive) == (
+        64, "oidn-hq", (("sun", 16.0),), "x16:20%@32ms")  # the preset study-clean
     hq = config_from_args(build_parser().parse_args(["-o", "OUT", "--render", "study-hq"]))
     assert (hq.spp, hq.denoise) == (256, "oidn-hq")
     for argv, words in ((["--render", "oidn@8", "--spp", "4"], "not both"),

@@ -21,7 +21,7 @@ from emulator.errors import ExposimError
 from scenes.denoise import DENOISERS, resolve_denoise
 from scenes.errors import RenderError
 from scenes.presets import parse_setting
-from validation.live.config import CONFIG_CHANGES, CONFIGS, DEFAULTS, STUDY_DENOISE, LiveConfig, LiveError
+from validation.live.config import CONFIG_CHANGES, CONFIGS, DEFAULTS, STUDY_DENOISE, STUDY_PRESET, LiveConfig, LiveError
 from validation.live.experiment import numbered_output, redraw, run_live_experiment, run_replicated
 from validation.live.report import headline
 from validation.protocol import Study
@@ -55,7 +55,8 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument("--cycles", type=int,
                    help=f"bracket cycles per scene (default {full.n_cycles}; --quick {quick.n_cycles})")
     p.add_argument("--size", type=argtypes.size, help=f"image size WxH (default {full.width}x{full.height})")
-    p.add_argument("--spp", type=int, help=f"render samples per pixel (default {full.spp})")
+    p.add_argument("--spp", type=int, help=f"render samples per pixel (default {full.spp}; the other render "
+                        "settings stay the default's: --render sets them all)")
     p.add_argument("--seed", type=int, help=f"scene, render, camera and live-capture seed (default {full.seed})")
     p.add_argument("--methods", type=argtypes.names,
                    help=f"comma-separated AE methods (default all {len(full.methods)}: {', '.join(full.methods)})")
@@ -82,12 +83,14 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
                         f"to every shot (a sixth of the renders) (default {full.render_per})")
     p.add_argument("--denoise", choices=DENOISERS,
                    help="denoiser of the renders (default $EXPOSIM_DENOISE when set, else "
-                        f"{STUDY_DENOISE}); 'oidn-hq' with --spp 256: render noise no worse than the sensor's "
-                        "for SIFT (docs/results/render.md), about 15x the render time of the default; on an NVIDIA "
-                        "GPU ('cuda_ad_rgb'), 'off' with --spp 2048 meets it (3.2 s a sweep and camera on an H200)")
+                        f"{STUDY_DENOISE}, the preset {STUDY_PRESET}'s); on an NVIDIA GPU ('cuda_ad_rgb'), 'off' with "
+                        "--spp 2048 keeps render noise below the sensor's on forest_winter (3.2 s a sweep and camera "
+                        "on an H200; docs/results/render.md)")
     p.add_argument("--render", metavar="PRESET",
-                   help="a render preset (study-oidn8: the default settings; study-sun64; study-hq) or a setting "
-                        "DENOISER@SPP[+LIGHT=WEIGHT,...][~xFACTOR:PERCENT%[@MSms]]: sets --spp, --denoise, the "
+                   help=f"a render preset ({STUDY_PRESET}, the default: render noise below the sensor's for SIFT on "
+                        "every study scene; study-oidn8: the study's renders until 2026-12, about a twentieth of the "
+                        "render time; study-sun64; study-hq) or a setting "
+                        "DENOISER@SPP[+LIGHT=WEIGHT,...][~xFACTOR:PERCENT%%[@MSms]]: sets --spp, --denoise, the "
                         "renders' choice of lights and an adaptive sample count together (docs/results/render.md "
                         "measures them); not with --spp or --denoise")
     p.add_argument("--stochastic-seeds", type=int, metavar="K",

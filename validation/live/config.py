@@ -33,8 +33,11 @@ __all__ = [
     "GOAL_EXPOSURE_LOG2_MEDIAN",
     "STUDY_WIDTH",
     "STUDY_HEIGHT",
+    "STUDY_PRESET",
     "STUDY_SPP",
     "STUDY_DENOISE",
+    "STUDY_EMITTER_WEIGHTS",
+    "STUDY_ADAPTIVE",
     "STUDY_RENDER_PER",
     "MAX_STOCHASTIC_SEEDS",
     "LiveError",
@@ -144,11 +147,17 @@ LIVE_LIVE = {"live-fixed-instant": "cycle-rate live re-seeded vs cycle-rate live
 #: Goals of issue 14.
 GOAL_TAU_MIN = 0.9
 GOAL_EXPOSURE_LOG2_MEDIAN = 0.05
-#: The study's render settings: 480x300, one render per bracket sweep and camera warped to its shots, OIDN's
-#: full denoiser (docs/results/render.md, "Render noise against sensor noise").
+#: The study's render settings: 480x300, one render per bracket sweep and camera warped to its shots, and the
+#: render preset whose noise is below the sensor's for SIFT on every study scene (scenes.presets, docs/results/
+#: render.md): 64 spp with the sun weighted 16x, 16x the samples in the fifth of the frame where render noise
+#: is worst against what the 32 ms bracket sees, OIDN's high-quality denoiser.  The study's renders until
+#: 2026-12 are the preset study-oidn8 (``--render study-oidn8``).
 STUDY_WIDTH, STUDY_HEIGHT = 480, 300
-STUDY_SPP = 8
-STUDY_DENOISE = "oidn"
+STUDY_PRESET = "study-clean"
+STUDY_SPP = 64
+STUDY_DENOISE = "oidn-hq"
+STUDY_EMITTER_WEIGHTS = (("sun", 16.0),)
+STUDY_ADAPTIVE = "x16:20%@32ms"
 STUDY_RENDER_PER = "cycle"
 
 
@@ -214,7 +223,11 @@ class LiveConfig:
     emitter_weights : tuple of (str, float)
         How the renders' next-event estimation picks a light (:meth:`scenes.Scene.with_emitter_weights`);
         empty: uniform (recorded in ``results.json`` only when set).  ``--render PRESET`` sets it with
-        ``spp`` and ``denoise`` (:mod:`scenes.presets`).
+        ``spp``, ``denoise`` and ``adaptive`` (:mod:`scenes.presets`).
+    adaptive : str or None
+        A spatially adaptive sample count (``"x16:20%@32ms"``, :mod:`scenes.adaptive`); None: the same
+        ``spp`` everywhere (recorded only when set).  The defaults of ``spp``, ``denoise``,
+        ``emitter_weights`` and ``adaptive`` are the preset :data:`STUDY_PRESET`.
     stochastic_seeds : int
         Seeds k per walk and condition of each method that draws random numbers (:mod:`validation.live.seeds`;
         the verdicts use its mean over them); 1 (the default, recorded only when other): its default seed alone.
@@ -242,9 +255,9 @@ class LiveConfig:
     frame_rate_hz: float = 22.0
     render_per: str = STUDY_RENDER_PER
     denoise: str | None = None
-    emitter_weights: tuple = ()
+    emitter_weights: tuple = STUDY_EMITTER_WEIGHTS
     stochastic_seeds: int = 1
-    adaptive: str | None = None
+    adaptive: str | None = STUDY_ADAPTIVE
 
     def __post_init__(self) -> None:
         import os
@@ -339,7 +352,7 @@ class LiveConfig:
 
 
 #: The changes of each named configuration to the defaults: ``full``: 40 cycles (11 s, ~6 m
-#: of walk) per scene at the study's render settings (480x300, 8 spp, ``oidn``, one render per
+#: of walk) per scene at the study's render settings (480x300, the preset ``study-clean``, one render per
 #: sweep); ``quick``: 3 cycles per scene (a pipeline check).
 CONFIG_CHANGES = {"full": {}, "quick": {"n_cycles": 3, "noise_repeats": 8}}
 #: The defaults of :class:`LiveConfig` (read without building one: ``exposim --help`` stays light).
@@ -373,6 +386,9 @@ def config_from_dict(d: dict) -> LiveConfig:
     """The :class:`LiveConfig` recorded by :meth:`LiveConfig.to_dict` (extra keys ignored)."""
     kw = {f.name: d[f.name] for f in fields(LiveConfig) if f.name in d}
     kw.setdefault("render_per", "shot")  # records from before the option rendered every shot
+    # recorded only when set: a record without them rendered with uniform lights and samples
+    kw.setdefault("emitter_weights", ())
+    kw.setdefault("adaptive", None)
     for k in ("scenes", "methods", "taus"):
         if k in kw:
             kw[k] = tuple(kw[k])

@@ -233,7 +233,8 @@ def test_a_tiny_study_with_two_kim_seeds_judges_their_mean(tmp_path, monkeypatch
 
     monkeypatch.setenv("EXPOSIM_DENOISE", "off")
     cfg = LiveConfig(scenes=("forest_winter",), n_cycles=3, width=64, height=40, spp=2, methods=("fixed", "kim"),
-                     noise_repeats=4, render_per="shot", denoise="off", stochastic_seeds=2)
+                     noise_repeats=4, render_per="shot", denoise="off", stochastic_seeds=2, emitter_weights=(),
+                     adaptive=None)
     res = run_live_experiment(tmp_path / "out", cfg, progress=False, cache_dir=tmp_path / "cache")
     out = tmp_path / "out"
     assert res["config"]["stochastic_seeds"] == 2 and res["method_processes"]["workers"] == "process"

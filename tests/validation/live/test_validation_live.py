@@ -195,9 +195,10 @@ def test_numbered_output_and_cli_errors(tmp_path, capsys):
     assert CONFIGS["quick"].n_cycles == 3
 
 
-#: The tiny configuration of the end-to-end tests (one scene, 3 cycles, 64x40 px, two methods).
+#: The tiny configuration of the end-to-end tests (one scene, 3 cycles, 64x40 px, two methods; raw renders with
+#: uniform lights and samples, not the default preset's).
 TINY = LiveConfig(scenes=("forest_winter",), n_cycles=3, width=64, height=40, spp=2, methods=("fixed", "classical-50"),
-                  noise_repeats=4, render_per="shot", denoise="off")
+                  noise_repeats=4, render_per="shot", denoise="off", emitter_weights=(), adaptive=None)
 REQUIRED_KEYS = ("exposure_log2_error_median", "exposure_log2_error_max", "image_rmse_percent_median",
                  "rank_kendall_tau", "rank_kendall_tau_min", "noise_variance_ratio")
 
