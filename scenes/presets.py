@@ -149,10 +149,11 @@ for _p in (
     _preset("study-sun64", "oidn-hq@64+sun=16", "the weighted sun at 64 spp: within 3 points of sensor noise at 8 ms "
                                                  "on the study's scenes, 3-9 points short at 32 ms; about 7x the "
                                                  "time of study-oidn8 (docs/results/render.md)"),
-    _preset("study-clean", "oidn-hq@64+sun=16~x16:20%@32ms",
-            "the live study's default since 2026-12: render noise below sensor noise for SIFT (the whole 95 % "
-            "interval above -3 points) on all four study scenes at 8 and 32 ms; about 20x the time of study-oidn8 "
-            "(docs/results/render-clip-2026-12-04.md)"),
+    _preset("study-adaptive", "oidn-hq@64+sun=16~x16:20%@32ms",
+            "the weighted sun at 64 spp and 16x the samples where render noise is worst against what 32 ms sees: "
+            "render noise within 3 points of sensor noise for SIFT (whole 95 % interval) at 8 and 32 ms on "
+            "forest_edge, sun_glare and forest_winter, forest_summer's 32 ms interval reaching -3.9; about 20-29x "
+            "the time of study-oidn8 (docs/results/render-clip-2026-12-04.md)"),
 ):
     RENDER_PRESETS[_p.name] = _p
 del _p

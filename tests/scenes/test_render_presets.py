@@ -103,8 +103,10 @@ def test_the_live_study_takes_a_preset_and_keeps_earlier_records():
     d = plain.to_dict()  # the study's former renders record what they always did
     assert (d["spp"], d["denoise"]) == (8, "oidn") and "emitter_weights" not in d and "adaptive" not in d
     default = config_from_args(build_parser().parse_args(["-o", "OUT"]))
-    assert (default.spp, default.denoise, default.emitter_weights, default.adaptive) == (
-        64, "oidn-hq", (("sun", 16.0),), "x16:20%@32ms")  # the preset study-clean
+    assert (default.spp, default.denoise, default.emitter_weights, default.adaptive) == (8, "oidn", (), None)
+    adaptive = config_from_args(build_parser().parse_args(["-o", "OUT", "--render", "study-adaptive"]))
+    assert (adaptive.spp, adaptive.denoise, adaptive.emitter_weights, adaptive.adaptive) == (
+        64, "oidn-hq", (("sun", 16.0),), "x16:20%@32ms")
     hq = config_from_args(build_parser().parse_args(["-o", "OUT", "--render", "study-hq"]))
     assert (hq.spp, hq.denoise) == (256, "oidn-hq")
     for argv, words in ((["--render", "oidn@8", "--spp", "4"], "not both"),

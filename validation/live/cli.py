@@ -87,9 +87,9 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
                         "--spp 2048 keeps render noise below the sensor's on forest_winter (3.2 s a sweep and camera "
                         "on an H200; docs/results/render.md)")
     p.add_argument("--render", metavar="PRESET",
-                   help=f"a render preset ({STUDY_PRESET}, the default: render noise below the sensor's for SIFT on "
-                        "every study scene; study-oidn8: the study's renders until 2026-12, about a twentieth of the "
-                        "render time; study-sun64; study-hq) or a setting "
+                   help=f"a render preset ({STUDY_PRESET}: the default; study-adaptive: render noise within 3 points of "
+                        "the sensor's for SIFT on three of the four study scenes, about 20x the render time of the "
+                        "default; study-sun64; study-hq) or a setting "
                         "DENOISER@SPP[+LIGHT=WEIGHT,...][~xFACTOR:PERCENT%%[@MSms]]: sets --spp, --denoise, the "
                         "renders' choice of lights and an adaptive sample count together (docs/results/render.md "
                         "measures them); not with --spp or --denoise")

@@ -148,16 +148,14 @@ LIVE_LIVE = {"live-fixed-instant": "cycle-rate live re-seeded vs cycle-rate live
 GOAL_TAU_MIN = 0.9
 GOAL_EXPOSURE_LOG2_MEDIAN = 0.05
 #: The study's render settings: 480x300, one render per bracket sweep and camera warped to its shots, and the
-#: render preset whose noise is below the sensor's for SIFT on every study scene (scenes.presets, docs/results/
-#: render.md): 64 spp with the sun weighted 16x, 16x the samples in the fifth of the frame where render noise
-#: is worst against what the 32 ms bracket sees, OIDN's high-quality denoiser.  The study's renders until
-#: 2026-12 are the preset study-oidn8 (``--render study-oidn8``).
+#: render preset study-oidn8 (8 spp, OIDN's full denoiser).  It stays the default until a preset meets the render
+#: noise goal on every study scene (docs/results/render.md); ``--render study-adaptive`` is the closest measured.
 STUDY_WIDTH, STUDY_HEIGHT = 480, 300
-STUDY_PRESET = "study-clean"
-STUDY_SPP = 64
-STUDY_DENOISE = "oidn-hq"
-STUDY_EMITTER_WEIGHTS = (("sun", 16.0),)
-STUDY_ADAPTIVE = "x16:20%@32ms"
+STUDY_PRESET = "study-oidn8"
+STUDY_SPP = 8
+STUDY_DENOISE = "oidn"
+STUDY_EMITTER_WEIGHTS = ()
+STUDY_ADAPTIVE = None
 STUDY_RENDER_PER = "cycle"
 
 
@@ -352,7 +350,7 @@ class LiveConfig:
 
 
 #: The changes of each named configuration to the defaults: ``full``: 40 cycles (11 s, ~6 m
-#: of walk) per scene at the study's render settings (480x300, the preset ``study-clean``, one render per
+#: of walk) per scene at the study's render settings (480x300, the preset ``study-oidn8``, one render per
 #: sweep); ``quick``: 3 cycles per scene (a pipeline check).
 CONFIG_CHANGES = {"full": {}, "quick": {"n_cycles": 3, "noise_repeats": 8}}
 #: The defaults of :class:`LiveConfig` (read without building one: ``exposim --help`` stays light).

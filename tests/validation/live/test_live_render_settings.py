@@ -19,17 +19,18 @@ def test_the_defaults_are_the_study_render_settings(monkeypatch):
 
     monkeypatch.delenv("EXPOSIM_DENOISE", raising=False)
     cfg = LiveConfig()
-    assert (cfg.width, cfg.height, cfg.spp, cfg.denoise, cfg.render_per) == (480, 300, 64, "oidn-hq", "cycle")
-    assert (STUDY_WIDTH, STUDY_HEIGHT, STUDY_SPP, STUDY_DENOISE, STUDY_RENDER_PER) == (480, 300, 64, "oidn-hq", "cycle")
+    assert (cfg.width, cfg.height, cfg.spp, cfg.denoise, cfg.render_per) == (480, 300, 8, "oidn", "cycle")
+    assert (STUDY_WIDTH, STUDY_HEIGHT, STUDY_SPP, STUDY_DENOISE, STUDY_RENDER_PER) == (480, 300, 8, "oidn", "cycle")
     # the render defaults are the preset's, field by field (kept as literals so that --help imports no scenes)
     preset = RENDER_PRESETS[STUDY_PRESET]
-    assert (preset.spp, preset.denoise.name, preset.emitter_weights, preset.adaptive.text) == (
+    assert (preset.spp, preset.denoise.name, preset.emitter_weights, preset.adaptive) == (
         STUDY_SPP, STUDY_DENOISE, STUDY_EMITTER_WEIGHTS, STUDY_ADAPTIVE)
-    assert preset.setting == "oidn-hq@64+sun=16~x16:20%@32ms" and preset.denoise == resolve_denoise("oidn-hq")
-    assert (cfg.emitter_weights, cfg.adaptive) == ((("sun", 16.0),), "x16:20%@32ms")
+    assert preset.setting == "oidn@8" and preset.denoise == resolve_denoise("oidn")
+    assert (cfg.emitter_weights, cfg.adaptive) == ((), None)
     d = cfg.to_dict()
-    assert (d["denoise"], d["emitter_weights"], d["adaptive"], d["renders"]) == ("oidn-hq", {"sun": 16.0},
-                                                                                 "x16:20%@32ms", 40 * 2 * 4)
+    assert (d["denoise"], d["renders"]) == ("oidn", 40 * 2 * 4) and "emitter_weights" not in d and "adaptive" not in d
+    closest = RENDER_PRESETS["study-adaptive"]  # the closest to the render-noise goal measured (not yet the default)
+    assert closest.setting == "oidn-hq@64+sun=16~x16:20%@32ms" and closest.denoise == resolve_denoise("oidn-hq")
     # a record without lights or an adaptive count (every study before 2026-12) rendered without them
     old = config_from_dict({"spp": 8, "denoise": "oidn", "render_per": "cycle"})
     assert (old.emitter_weights, old.adaptive) == ((), None)
@@ -89,7 +90,7 @@ def test_an_adaptive_sample_count_is_configured_recorded_only_when_set_and_refus
     from validation.live.preregistration import preregistration
 
     monkeypatch.delenv("EXPOSIM_DENOISE", raising=False)
-    plain = LiveConfig(adaptive=None)
+    plain = LiveConfig()
     assert plain.adaptive is None and "adaptive" not in plain.to_dict()  # earlier records stay as they were
     assert config_from_dict(plain.to_dict()) == plain
     cfg = config_from_args(build_parser().parse_args(["-o", "/tmp/x", "--render", "oidn-hq@64+sun=16~x16:20%@32ms"]))
@@ -102,8 +103,8 @@ def test_an_adaptive_sample_count_is_configured_recorded_only_when_set_and_refus
     for bad in ("x1:20%", "16:20%", "x4:25%@32"):
         with pytest.raises(LiveError, match="adaptive"):
             LiveConfig(adaptive=bad)
-    text = build_parser().format_help()  # argparse formats help with %: the setting's % must be escaped
-    assert "~xFACTOR:PERCENT%[@MSms]" in text and "study-clean, the default" in " ".join(text.split())
+    text = "".join(build_parser().format_help().split())  # argparse formats help with %: the setting's % escaped
+    assert "~xFACTOR:PERCENT%[@MSms]" in text and "study-oidn8:thedefault" in text
 
 
 @pytest.mark.render

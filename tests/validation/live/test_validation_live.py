@@ -280,7 +280,7 @@ def test_exposim_validate_live_cli(tmp_path, render_cache, capsys, monkeypatch):
     # the defaults are shown, and they are the configuration's
     full, quick = CONFIGS["full"], CONFIGS["quick"]
     assert f"(default {full.n_cycles}; --quick {quick.n_cycles})" in text
-    assert f"(default {full.width}x{full.height})" in text and f"(default {full.spp})" in text
+    assert f"(default {full.width}x{full.height})" in text and f"(default {full.spp};" in text
 
     out = tmp_path / "live"
     assert exposim(["validate", "live", "-o", str(out), "--cycles", "2", "--no-progress"]) == 1
