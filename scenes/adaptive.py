@@ -41,7 +41,7 @@ from scenes.camera import DEFAULT_SATURATE_MS
 from scenes.dynamic_range import luminance
 from scenes.errors import RenderError
 
-__all__ = ["AdaptiveSampling", "parse_adaptive", "pass_seed", "tile_scores", "select_tiles", "tile_crops",
+__all__ = ["AdaptiveSampling", "parse_adaptive", "as_adaptive", "pass_seed", "tile_scores", "select_tiles", "tile_crops",
            "combine_passes", "render_adaptive", "DEFAULT_TILE", "FLOOR_FRACTION", "MERGE_SAMPLES"]
 
 #: Tile side in render pixels (16 x 10 tiles at the study's 480x300).
@@ -116,6 +116,15 @@ def parse_adaptive(text: str, setting: str = "") -> AdaptiveSampling:
         why = f": {exc}" if isinstance(exc, RenderError) else ""
         raise RenderError(f"render setting {setting or text!r}: expected ~xFACTOR:PERCENT%[/TILE][@MSms] after '~', "
                           f"e.g. ~x4:25% or ~x16:20%@32ms, got {text!r}{why}") from None
+
+
+def as_adaptive(value) -> AdaptiveSampling | None:
+    """None, an :class:`AdaptiveSampling` or its ``xFACTOR:PERCENT%...`` text -> None or the sampling (checked)."""
+    if isinstance(value, str):
+        return parse_adaptive(value)
+    if value is not None and not isinstance(value, AdaptiveSampling):
+        raise RenderError(f"adaptive must be None, a string like 'x4:25%' or an AdaptiveSampling, got {value!r}")
+    return value
 
 
 def pass_seed(seed: int, index: int) -> int:
@@ -205,7 +214,7 @@ def render_adaptive(render_pass, spec: AdaptiveSampling, *, width: int, height: 
                                          and reference_radiance > 0):
         raise RenderError(f"adaptive sampling {spec.text}: clipping needs the scene's reference radiance > 0, "
                           f"got {reference_radiance!r}")
-    clip = spec.clip_luminance(reference_radiance) if spec.clip_ms is not None else math.inf
+    clip = spec.clip_luminance(reference_radiance)
     half = effective_spp(max(1, int(spp) // 2))
     a = render_pass(half, pass_seed(seed, 0), None)
     b = render_pass(half, pass_seed(seed, 1), None)

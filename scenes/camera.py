@@ -18,8 +18,8 @@ import numpy as np
 from scenes.errors import RenderError
 from synth.pose import check_pose
 
-__all__ = ["DEFAULT_FOV_DEG", "DEFAULT_SATURATE_MS", "intrinsics", "intrinsics_matrix", "pose_to_mitsuba", "check_pose", "project",
-           "check_size", "check_fov"]
+__all__ = ["DEFAULT_FOV_DEG", "DEFAULT_SATURATE_MS", "intrinsics", "intrinsics_matrix", "pose_to_mitsuba", "check_pose",
+           "project", "check_size", "check_fov"]
 
 #: Horizontal field of view matching the BorealHDR cameras (fx ~ 1180 px at
 #: 1920 px wide): 2 * atan(960 / 1180) = 78.26 degrees.

@@ -22,7 +22,7 @@ import warnings
 import numpy as np
 
 from scenes.render_interrupts import render_array
-from scenes.adaptive import AdaptiveSampling, parse_adaptive, render_adaptive
+from scenes.adaptive import AdaptiveSampling, as_adaptive, render_adaptive
 from scenes.base import Scene, get_scene
 from scenes.cache import KEY_ATTRIBUTE, cache_path, canonical_json, load_entry, render_key, resolve_cache_dir, \
     store_entry
@@ -252,10 +252,7 @@ def render_with_info(
     fov = check_fov(fov_deg)
     m = check_pose(pose)
     settings = resolve_denoise(denoise)  # bad names raise before anything else happens
-    if isinstance(adaptive, str):
-        adaptive = parse_adaptive(adaptive)
-    if adaptive is not None and not isinstance(adaptive, AdaptiveSampling):
-        raise RenderError(f"adaptive must be None, a string like 'x4:25%' or an AdaptiveSampling, got {adaptive!r}")
+    adaptive = as_adaptive(adaptive)
     # The variant only names the cache entry here; it is probed (for JIT variants, in a
     # child process) before this process loads it, i.e. on a cache miss.
     variant = check_variant_name(variant) if variant is not None else choose_variant()

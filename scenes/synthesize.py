@@ -14,9 +14,8 @@ import numpy as np
 
 from emulator.errors import ExposimError
 from scenes.camera import DEFAULT_SATURATE_MS
-from scenes.adaptive import AdaptiveSampling, parse_adaptive
+from scenes.adaptive import AdaptiveSampling, as_adaptive
 from scenes.denoise import effective_denoise
-from scenes.errors import RenderError
 from scenes.walks import CAMERA_FROM_IMU, DEFAULT_WALK
 from scenes.walkshots import WalkShots
 
@@ -150,9 +149,9 @@ def synthesize(
         raise ExposimError(f"render_per must be 'shot' or 'cycle', got {render_per!r}")
     render_variant = variant or choose_variant()
     settings, fallback = effective_denoise(denoise)
-    adaptive = _adaptive(adaptive)
+    adaptive = as_adaptive(adaptive)
     render = dict(width=width, height=height, spp=spp, fov_deg=cam.fov_x_deg, cache_dir=cache_dir,
-                  variant=render_variant, denoise=settings, **({} if adaptive is None else {"adaptive": adaptive}))
+                  variant=render_variant, denoise=settings, adaptive=adaptive)
     shots = WalkShots(scene, traj, render=dict(render, render_seed=render_seed), fps=fps, n_brackets=len(brackets_ms),
                       max_window_ms=_window_ms(brackets_ms, gt_exposures_ms, max_window_ms), baseline_m=baseline,
                       render_per=render_per, integrate=integrate, margin_step_px=margin_step_px)
@@ -165,8 +164,8 @@ def synthesize(
                   progress=render_progress)
     description = _description(scene, cam, shots, width=width, height=height, spp=spp, render_seed=render_seed,
                                variant=render_variant, denoise=settings, fallback=fallback, adaptive=adaptive,
-                               blur=blur, render_per=render_per, saturate_ms=saturate_ms, speed_mps=speed_mps, walk=walk,
-                               imu=imu, imu_rate_hz=imu_rate_hz)
+                               blur=blur, render_per=render_per, saturate_ms=saturate_ms, speed_mps=speed_mps,
+                               walk=walk, imu=imu, imu_rate_hz=imu_rate_hz)
     return synth.capture_sequence(
         blurred_source if blur else source, out_dir, cam, brackets_ms=tuple(brackets_ms), fps=fps, n_cycles=n_cycles,
         stereo=stereo, baseline_m=baseline, seed=seed, noise=noise, gt_exposures_ms=tuple(gt_exposures_ms),
@@ -189,18 +188,6 @@ def _scene_and_camera(scene, camera, width: int, height: int, n_cycles: int, sat
         raise ExposimError(f"saturate_ms must be finite and positive, got {saturate_ms!r}")
     cam = synth.Camera.preset(camera, width=width, height=height) if isinstance(camera, str) else camera
     return scene, cam.replace(width=width, height=height).saturating_at(scene.reference_radiance, saturate_ms)
-
-
-def _adaptive(adaptive) -> AdaptiveSampling | None:
-    """None, an :class:`scenes.adaptive.AdaptiveSampling` or its ``xFACTOR:PERCENT%...`` text, checked."""
-    if adaptive is None or isinstance(adaptive, AdaptiveSampling):
-        return adaptive
-    if isinstance(adaptive, str):
-        try:
-            return parse_adaptive(adaptive)
-        except RenderError as exc:
-            raise ExposimError(str(exc)) from None
-    raise ExposimError(f"adaptive must be None, a string like 'x4:25%' or an AdaptiveSampling, got {adaptive!r}")
 
 
 def _window_ms(brackets_ms, gt_exposures_ms, max_window_ms) -> float:
@@ -238,8 +225,7 @@ def _providers(scene, traj, shots: WalkShots, *, baseline_m: float, render_seed:
         frame_seed = (int(render_seed) * 1_000_003 + 2 * idx + (camera_name == "right")) % (1 << 32)
         return dict(scene=scene, pose=pose, width=render["width"], height=render["height"], spp=render["spp"],
                     seed=frame_seed, fov_deg=render["fov_deg"], cache_dir=render["cache_dir"],
-                    variant=render["variant"], denoise=render["denoise"],
-                    **({"adaptive": render["adaptive"]} if "adaptive" in render else {}))
+                    variant=render["variant"], denoise=render["denoise"], adaptive=render["adaptive"])
 
     def shot_renderer(timestamp_s: float, camera_name: str):
         """The :class:`scenes.blur.ShotRenderer` serving one shot (or its whole cycle) and camera."""
@@ -297,8 +283,8 @@ def _prefetch(job_of, prefetched: dict, *, keep: bool, scheduler: str, cache_dir
 
 
 def _description(scene, cam, shots: WalkShots, *, width: int, height: int, spp: int, render_seed: int, variant: str,
-                 denoise, fallback, adaptive: AdaptiveSampling | None, blur: bool, render_per: str, saturate_ms: float, speed_mps, walk, imu,
-                 imu_rate_hz: float) -> dict:
+                 denoise, fallback, adaptive: AdaptiveSampling | None, blur: bool, render_per: str, saturate_ms: float,
+                 speed_mps, walk, imu, imu_rate_hz: float) -> dict:
     """The dataset's source description (``exposim.json``): scene, render settings, trajectory, IMU."""
     return {
         "generator": "scenes.synthesize",

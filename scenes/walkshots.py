@@ -148,8 +148,7 @@ def walk_radiance(dataset, scene, *, cache_dir=None, keep: int = KEEP_RENDERERS)
     shots = WalkShots(scene, traj, render=dict(width=render["width"], height=render["height"], spp=render["spp"],
                                                fov_deg=render["fov_deg"], variant=render["variant"], denoise=settings,
                                                render_seed=render["render_seed"], cache_dir=cache_dir,
-                                               **({"adaptive": render["adaptive"]} if render.get("adaptive")
-                                                  else {})),
+                                               adaptive=render.get("adaptive")),
                       fps=blur["fps"], n_brackets=blur["n_brackets"], max_window_ms=blur["max_window_ms"],
                       baseline_m=blur["baseline_m"], render_per=blur["render_per"],
                       integrate=bool(blur.get("integrate", True)), margin_step_px=int(blur.get("margin_step_px", 1)),
