@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Issue 43: the committed measure over the four study scenes, at b0157cc, two processes one after the other.
+# Render noise against sensor noise: the committed measure over the four study scenes, at b0157cc, two processes one after the other.
 set -u
 cd /work/wt/r43  # a worktree at b0157cc
 . /work/main/.venv/bin/activate
