@@ -11,8 +11,10 @@ For each scene and each setting (a preset of scenes.presets, or DENOISER@SPP[/AU
 keypoint repeatability between two render seeds (same sensor noise) and between two sensor-noise draws (same
 render), at each exposure, mean and 95 % interval over the walk's sweeps, and the renders' seconds per sweep and
 camera. The baseline setting (default study-oidn8, the live study's former renders) is measured first on each
-scene in the same run, and every setting's seconds are also given as a ratio to it. Writes OUT.json (refuses an
-existing file) and OUT.md (the table), and prints one line per setting and exposure.
+scene in the same run, and every setting's seconds are also given as a ratio to it. A setting whose renders all
+came from the render cache (--cache-dir) is not timed: its seconds and ratio are left empty ("cached"). A setting
+meets the goal at an exposure when the difference's whole 95 % interval is at or above -3 points. Writes OUT.json
+(refuses an existing file) and OUT.md (the table), and prints one line per setting and exposure.
 """
 
 import argparse
@@ -119,8 +121,9 @@ def main(argv=None) -> int:
                 if baseline:
                     base = next(x for x in results + [r] if x["scene"] == key and x["setting"] == baseline)
                     r["baseline"] = baseline
+                    # None when either was read from the render cache: its seconds are not a render's
                     r["ratio_to_baseline"] = (r["seconds_per_sweep"] / base["seconds_per_sweep"]
-                                              if base["seconds_per_sweep"] else None)
+                                              if r["seconds_per_sweep"] and base["seconds_per_sweep"] else None)
                 if args.bias_reference:
                     r["radiance"] = radiance_bias(s, scene_key=key, reference=args.bias_reference,
                                                   width=args.size[0], height=args.size[1], cache_dir=own,
@@ -158,7 +161,8 @@ def _print(scene: str, setting: str, r: dict) -> None:
         ratio = r.get("ratio_to_baseline")
         print(f"{scene:>13} {setting:>22} {e:>3} ms  render-only {ro[0]:5.1f} [{ro[1]:5.1f}, {ro[2]:5.1f}]  sensor-only "
               f"{so[0]:5.1f} [{so[1]:5.1f}, {so[2]:5.1f}]  difference {d[0]:+5.1f} [{d[1]:+5.1f}, {d[2]:+5.1f}]"
-              f"  {'met' if v['met'] else 'NOT met'}  {r['seconds_per_sweep']:.2f} s/sweep"
+              f"  {'met' if v['met'] else 'NOT met'} (whole interval)  "
+              + ("cached, not timed" if r["seconds_per_sweep"] is None else f"{r['seconds_per_sweep']:.2f} s/sweep")
               + (f" ({ratio:.2f}x)" if ratio is not None else ""), flush=True)
     if "radiance" in r:
         b, d = r["radiance"]["difference_percent"], r["radiance"]["difference_percent_sun_excluded"]

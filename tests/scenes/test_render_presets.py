@@ -132,6 +132,12 @@ def test_the_pareto_table_marks_the_front_and_the_goal():
     assert cells["`edge`"][-1] == "front"  # as close as 'dear' at its worst exposure, and cheaper
     assert cells["`dear`"][4] == "yes" and cells["`edge`"][4] == "no"  # -3.5 leaves the goal
     assert cells["`dear`"][2] == "-1.0 [-2.0, +0.0]" and cells["`dear`"][6] == "15.00"
+    # a setting read from the render cache was not timed: no seconds, no ratio, never on the front, and the
+    # others' front is judged without it
+    cached = bal.pareto_table(rows + [_result("a", "cached", (0.0, -1.0, 1.0), (0.0, -1.0, 1.0), None, None)])
+    cells = {ln.split("|")[2].strip(): [c.strip() for c in ln.split("|")[1:-1]] for ln in cached.splitlines()[2:]}
+    assert cells["`cached`"][5:] == ["cached", "", ""] and cells["`cached`"][4] == "yes"
+    assert cells["`cheap`"][-1] == "front" and cells["`edge`"][-1] == "front"
 
 
 @pytest.mark.render
