@@ -103,7 +103,10 @@ def test_the_live_study_takes_a_preset_and_keeps_earlier_records():
     d = plain.to_dict()  # the study's former renders record what they always did
     assert (d["spp"], d["denoise"]) == (8, "oidn") and "emitter_weights" not in d and "adaptive" not in d
     default = config_from_args(build_parser().parse_args(["-o", "OUT"]))
-    assert (default.spp, default.denoise, default.emitter_weights, default.adaptive) == (8, "oidn", (), None)
+    assert (default.spp, default.denoise, default.emitter_weights, default.adaptive) == (
+        64, "oidn-hq", (("sun", 16.0),), "x16:30%@32ms")  # the preset study-adaptive30
+    quick = config_from_args(build_parser().parse_args(["-o", "OUT", "--quick", "--spp", "4"]))
+    assert (quick.spp, quick.denoise, quick.emitter_weights, quick.adaptive) == (4, "oidn", (), None)
     adaptive = config_from_args(build_parser().parse_args(["-o", "OUT", "--render", "study-adaptive"]))
     assert (adaptive.spp, adaptive.denoise, adaptive.emitter_weights, adaptive.adaptive) == (
         64, "oidn-hq", (("sun", 16.0),), "x16:20%@32ms")

@@ -50,12 +50,13 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
                    help="output folder (a non-empty one is never overwritten: OUT-2, OUT-3 ... is used)")
     p.add_argument("--quick", action="store_true",
                    help=f"reduced configuration: {quick.n_cycles} cycles per scene, {quick.noise_repeats} noise "
-                        "repeats (a pipeline check in minutes); other options still apply")
+                        f"repeats, the renders of the preset study-oidn8 ({quick.spp} spp, {quick.denoise}) (a "
+                        "pipeline check in minutes); other options still apply")
     p.add_argument("--scenes", type=argtypes.names, help=f"comma-separated scenes (default {','.join(full.scenes)})")
     p.add_argument("--cycles", type=int,
                    help=f"bracket cycles per scene (default {full.n_cycles}; --quick {quick.n_cycles})")
     p.add_argument("--size", type=argtypes.size, help=f"image size WxH (default {full.width}x{full.height})")
-    p.add_argument("--spp", type=int, help=f"render samples per pixel (default {full.spp}; the other render "
+    p.add_argument("--spp", type=int, help=f"render samples per pixel (default {full.spp}; --quick {quick.spp}; the other render "
                         "settings stay the default's: --render sets them all)")
     p.add_argument("--seed", type=int, help=f"scene, render, camera and live-capture seed (default {full.seed})")
     p.add_argument("--methods", type=argtypes.names,
@@ -87,9 +88,10 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
                         "--spp 2048 keeps render noise below the sensor's on forest_winter (3.2 s a sweep and camera "
                         "on an H200; docs/results/render.md)")
     p.add_argument("--render", metavar="PRESET",
-                   help=f"a render preset ({STUDY_PRESET}: the default; study-adaptive: render noise within 3 points of "
-                        "the sensor's for SIFT on three of the four study scenes, about 20x the render time of the "
-                        "default; study-sun64; study-hq) or a setting "
+                   help=f"a render preset ({STUDY_PRESET}: the default, render noise within 3 points of the "
+                        "sensor's for SIFT on all four study scenes, about 20-33x the render time of study-oidn8; "
+                        "study-oidn8: the renders of studies before 2026-12; study-adaptive; study-sun64; study-hq) "
+                        "or a setting "
                         "DENOISER@SPP[+LIGHT=WEIGHT,...][~xFACTOR:PERCENT%%[@MSms]]: sets --spp, --denoise, the "
                         "renders' choice of lights and an adaptive sample count together (docs/results/render.md "
                         "measures them); not with --spp or --denoise")

@@ -39,6 +39,7 @@ __all__ = [
     "STUDY_EMITTER_WEIGHTS",
     "STUDY_ADAPTIVE",
     "STUDY_RENDER_PER",
+    "LEGACY_STUDY_DENOISE",
     "MAX_STOCHASTIC_SEEDS",
     "LiveError",
     "LiveConfig",
@@ -148,15 +149,20 @@ LIVE_LIVE = {"live-fixed-instant": "cycle-rate live re-seeded vs cycle-rate live
 GOAL_TAU_MIN = 0.9
 GOAL_EXPOSURE_LOG2_MEDIAN = 0.05
 #: The study's render settings: 480x300, one render per bracket sweep and camera warped to its shots, and the
-#: render preset study-oidn8 (8 spp, OIDN's full denoiser).  It stays the default until a preset meets the render
-#: noise goal on every study scene (docs/results/render.md); ``--render study-adaptive`` is the closest measured.
+#: render preset study-adaptive30 (64 spp with the sun weighted 16x, 16x the samples on the 30 % of tiles whose
+#: render noise is worst against what 32 ms sees, OIDN with a 1024-spp albedo/normal pass): the cheapest setting
+#: measured whose render noise costs SIFT at most 3 points beyond sensor noise on every study scene
+#: (docs/results/render-clip-2026-12-04.md).  ``--render study-oidn8`` gives the renders of studies before 2026-12.
+#: Literals, not read from scenes.presets, so that ``exposim --help`` imports no scenes (a test checks they agree).
 STUDY_WIDTH, STUDY_HEIGHT = 480, 300
-STUDY_PRESET = "study-oidn8"
-STUDY_SPP = 8
-STUDY_DENOISE = "oidn"
-STUDY_EMITTER_WEIGHTS = ()
-STUDY_ADAPTIVE = None
+STUDY_PRESET = "study-adaptive30"
+STUDY_SPP = 64
+STUDY_DENOISE = "oidn-hq"
+STUDY_EMITTER_WEIGHTS = (("sun", 16.0),)
+STUDY_ADAPTIVE = "x16:30%@32ms"
 STUDY_RENDER_PER = "cycle"
+#: The denoiser of the studies before 2026-12 (the preset study-oidn8): what a record without one reads as.
+LEGACY_STUDY_DENOISE = "oidn"
 
 
 #: Most seeds per walk and condition of a method that draws random numbers (``LiveConfig.stochastic_seeds``).
@@ -215,7 +221,7 @@ class LiveConfig:
         and camera, warped with depth to every shot's exposure window: a sixth of the renders;
         :func:`scenes.synthesize.synthesize`).
     denoise : str or None
-        Denoiser of the renders (``"oidn"``, ``"oidn-fast"`` or ``"off"``, :mod:`scenes.denoise`);
+        Denoiser of the renders (``"oidn"``, ``"oidn-fast"``, ``"oidn-hq"`` or ``"off"``, :mod:`scenes.denoise`);
         None: ``$EXPOSIM_DENOISE`` when set, else :data:`STUDY_DENOISE`.  Resolved when the
         configuration is built, so ``results.json`` records the one the walks used.
     emitter_weights : tuple of (str, float)
@@ -223,7 +229,7 @@ class LiveConfig:
         empty: uniform (recorded in ``results.json`` only when set).  ``--render PRESET`` sets it with
         ``spp``, ``denoise`` and ``adaptive`` (:mod:`scenes.presets`).
     adaptive : str or None
-        A spatially adaptive sample count (``"x16:20%@32ms"``, :mod:`scenes.adaptive`); None: the same
+        A spatially adaptive sample count (``"x16:30%@32ms"``, :mod:`scenes.adaptive`); None: the same
         ``spp`` everywhere (recorded only when set).  The defaults of ``spp``, ``denoise``,
         ``emitter_weights`` and ``adaptive`` are the preset :data:`STUDY_PRESET`.
     stochastic_seeds : int
@@ -350,9 +356,11 @@ class LiveConfig:
 
 
 #: The changes of each named configuration to the defaults: ``full``: 40 cycles (11 s, ~6 m
-#: of walk) per scene at the study's render settings (480x300, the preset ``study-oidn8``, one render per
-#: sweep); ``quick``: 3 cycles per scene (a pipeline check).
-CONFIG_CHANGES = {"full": {}, "quick": {"n_cycles": 3, "noise_repeats": 8}}
+#: of walk) per scene at the study's render settings (480x300, the preset ``study-adaptive30``, one render per
+#: sweep); ``quick``: 3 cycles per scene with the renders of the preset ``study-oidn8`` (a pipeline check in
+#: minutes: the default preset's renders take 20-33x as long).
+CONFIG_CHANGES = {"full": {}, "quick": {"n_cycles": 3, "noise_repeats": 8, "spp": 8, "denoise": LEGACY_STUDY_DENOISE,
+                                        "emitter_weights": (), "adaptive": None}}
 #: The defaults of :class:`LiveConfig` (read without building one: ``exposim --help`` stays light).
 DEFAULTS = {f.name: f.default for f in fields(LiveConfig)}
 
@@ -387,6 +395,9 @@ def config_from_dict(d: dict) -> LiveConfig:
     # recorded only when set: a record without them rendered with uniform lights and samples
     kw.setdefault("emitter_weights", ())
     kw.setdefault("adaptive", None)
+    # records from before --denoise (2026-11-28) read as that option's first default, as they always have (not as
+    # today's default: a record's meaning does not move with STUDY_PRESET)
+    kw.setdefault("denoise", LEGACY_STUDY_DENOISE)
     for k in ("scenes", "methods", "taus"):
         if k in kw:
             kw[k] = tuple(kw[k])

@@ -9,8 +9,10 @@ import pytest
 
 import scenes
 from emulator.errors import ExposimError
-from validation.live.config import (STUDY_ADAPTIVE, STUDY_DENOISE, STUDY_EMITTER_WEIGHTS, STUDY_HEIGHT, STUDY_PRESET,
-                                    STUDY_RENDER_PER, STUDY_SPP, STUDY_WIDTH, LiveConfig, LiveError, config_from_dict)
+from scenes.presets import LEGACY_STUDY_PRESET, STUDY_ADAPTIVE_PRESET
+from validation.live.config import (CONFIGS, LEGACY_STUDY_DENOISE, STUDY_ADAPTIVE, STUDY_DENOISE, STUDY_EMITTER_WEIGHTS,
+                                    STUDY_HEIGHT, STUDY_PRESET, STUDY_RENDER_PER, STUDY_SPP, STUDY_WIDTH, LiveConfig,
+                                    LiveError, config_from_dict)
 
 
 def test_the_defaults_are_the_study_render_settings(monkeypatch):
@@ -19,22 +21,31 @@ def test_the_defaults_are_the_study_render_settings(monkeypatch):
 
     monkeypatch.delenv("EXPOSIM_DENOISE", raising=False)
     cfg = LiveConfig()
-    assert (cfg.width, cfg.height, cfg.spp, cfg.denoise, cfg.render_per) == (480, 300, 8, "oidn", "cycle")
-    assert (STUDY_WIDTH, STUDY_HEIGHT, STUDY_SPP, STUDY_DENOISE, STUDY_RENDER_PER) == (480, 300, 8, "oidn", "cycle")
+    assert (cfg.width, cfg.height, cfg.spp, cfg.denoise, cfg.render_per) == (480, 300, 64, "oidn-hq", "cycle")
+    assert (STUDY_WIDTH, STUDY_HEIGHT, STUDY_SPP, STUDY_DENOISE, STUDY_RENDER_PER) == (480, 300, 64, "oidn-hq",
+                                                                                         "cycle")
     # the render defaults are the preset's, field by field (kept as literals so that --help imports no scenes)
     preset = RENDER_PRESETS[STUDY_PRESET]
-    assert (preset.spp, preset.denoise.name, preset.emitter_weights, preset.adaptive) == (
+    assert STUDY_PRESET == STUDY_ADAPTIVE_PRESET == "study-adaptive30"
+    assert (preset.spp, preset.denoise.name, preset.emitter_weights, preset.adaptive.text) == (
         STUDY_SPP, STUDY_DENOISE, STUDY_EMITTER_WEIGHTS, STUDY_ADAPTIVE)
-    assert preset.setting == "oidn@8" and preset.denoise == resolve_denoise("oidn")
-    assert (cfg.emitter_weights, cfg.adaptive) == ((), None)
+    assert preset.setting == "oidn-hq@64+sun=16~x16:30%@32ms" and preset.denoise == resolve_denoise("oidn-hq")
+    assert (cfg.emitter_weights, cfg.adaptive) == ((("sun", 16.0),), "x16:30%@32ms")
     d = cfg.to_dict()
-    assert (d["denoise"], d["renders"]) == ("oidn", 40 * 2 * 4) and "emitter_weights" not in d and "adaptive" not in d
-    closest = RENDER_PRESETS["study-adaptive"]  # the closest to the render-noise goal measured (not yet the default)
-    assert closest.setting == "oidn-hq@64+sun=16~x16:20%@32ms" and closest.denoise == resolve_denoise("oidn-hq")
-    # a record without lights or an adaptive count (every study before 2026-12) rendered without them
+    assert (d["denoise"], d["renders"], d["emitter_weights"], d["adaptive"]) == (
+        "oidn-hq", 40 * 2 * 4, {"sun": 16.0}, "x16:30%@32ms")
+    legacy = RENDER_PRESETS[LEGACY_STUDY_PRESET]  # the renders of every study before 2026-12, still by name
+    assert legacy.setting == "oidn@8" and legacy.denoise == resolve_denoise("oidn")
+    # --quick, a pipeline check, renders as the legacy preset
+    quick = CONFIGS["quick"]
+    assert (quick.spp, quick.denoise, quick.emitter_weights, quick.adaptive) == (
+        legacy.spp, legacy.denoise.name, legacy.emitter_weights, legacy.adaptive)
+    # a record without lights or an adaptive count (every study before 2026-12) rendered without them, and one
+    # without a denoiser (before --denoise) reads as it did before the default moved
     old = config_from_dict({"spp": 8, "denoise": "oidn", "render_per": "cycle"})
     assert (old.emitter_weights, old.adaptive) == ((), None)
     assert "emitter_weights" not in old.to_dict() and "adaptive" not in old.to_dict()
+    assert config_from_dict({"spp": 8, "render_per": "shot"}).denoise == LEGACY_STUDY_DENOISE == "oidn"
     monkeypatch.setenv("EXPOSIM_DENOISE", "oidn-fast")  # the environment names the default, resolved and recorded
     assert LiveConfig().denoise == "oidn-fast" and LiveConfig(denoise="off").denoise == "off"
     monkeypatch.setenv("EXPOSIM_DENOISE", "median")
@@ -90,7 +101,7 @@ def test_an_adaptive_sample_count_is_configured_recorded_only_when_set_and_refus
     from validation.live.preregistration import preregistration
 
     monkeypatch.delenv("EXPOSIM_DENOISE", raising=False)
-    plain = LiveConfig()
+    plain = LiveConfig(adaptive=None)
     assert plain.adaptive is None and "adaptive" not in plain.to_dict()  # earlier records stay as they were
     assert config_from_dict(plain.to_dict()) == plain
     cfg = config_from_args(build_parser().parse_args(["-o", "/tmp/x", "--render", "oidn-hq@64+sun=16~x16:20%@32ms"]))
@@ -104,7 +115,7 @@ def test_an_adaptive_sample_count_is_configured_recorded_only_when_set_and_refus
         with pytest.raises(LiveError, match="adaptive"):
             LiveConfig(adaptive=bad)
     text = "".join(build_parser().format_help().split())  # argparse formats help with %: the setting's % escaped
-    assert "~xFACTOR:PERCENT%[@MSms]" in text and "study-oidn8:thedefault" in text
+    assert "~xFACTOR:PERCENT%[@MSms]" in text and "study-adaptive30:thedefault" in text
 
 
 @pytest.mark.render
