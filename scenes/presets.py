@@ -160,7 +160,7 @@ for _p in (
     _preset(STUDY_ADAPTIVE_PRESET, "oidn-hq@64+sun=16~x16:30%@32ms",
             "the live study's default: as study-adaptive with the extra samples on 30 % of the tiles; render noise "
             "within 3 points of sensor noise for SIFT (whole 95 % interval) at 8 and 32 ms on all four study "
-            "scenes; about 20-33x the time of study-oidn8 (docs/results/render-clip-2026-12-04.md)"),
+            "scenes; about 25-33x the time of study-oidn8 (docs/results/render-clip-2026-12-04.md)"),
 ):
     RENDER_PRESETS[_p.name] = _p
 del _p

@@ -89,7 +89,7 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
                         "on an H200; docs/results/render.md)")
     p.add_argument("--render", metavar="PRESET",
                    help=f"a render preset ({STUDY_PRESET}: the default, render noise within 3 points of the "
-                        "sensor's for SIFT on all four study scenes, about 20-33x the render time of study-oidn8; "
+                        "sensor's for SIFT on all four study scenes, about 25-33x the render time of study-oidn8; "
                         "study-oidn8: the renders of studies before 2026-12; study-adaptive; study-sun64; study-hq) "
                         "or a setting "
                         "DENOISER@SPP[+LIGHT=WEIGHT,...][~xFACTOR:PERCENT%%[@MSms]]: sets --spp, --denoise, the "

@@ -358,7 +358,7 @@ class LiveConfig:
 #: The changes of each named configuration to the defaults: ``full``: 40 cycles (11 s, ~6 m
 #: of walk) per scene at the study's render settings (480x300, the preset ``study-adaptive30``, one render per
 #: sweep); ``quick``: 3 cycles per scene with the renders of the preset ``study-oidn8`` (a pipeline check in
-#: minutes: the default preset's renders take 20-33x as long).
+#: minutes: the default preset's renders take 25-33x as long).
 CONFIG_CHANGES = {"full": {}, "quick": {"n_cycles": 3, "noise_repeats": 8, "spp": 8, "denoise": LEGACY_STUDY_DENOISE,
                                         "emitter_weights": (), "adaptive": None}}
 #: The defaults of :class:`LiveConfig` (read without building one: ``exposim --help`` stays light).
