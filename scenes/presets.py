@@ -28,7 +28,7 @@ from scenes.base import EMITTER_KINDS, Scene, check_emitter_weights
 from scenes.denoise import DenoiseSettings, resolve_denoise
 from scenes.errors import RenderError, SceneError
 
-__all__ = ["RenderPreset", "RENDER_PRESETS", "LEGACY_STUDY_PRESET", "STUDY_ADAPTIVE_PRESET", "parse_setting"]
+__all__ = ["RenderPreset", "RENDER_PRESETS", "LEGACY_STUDY_PRESET", "parse_setting"]
 
 
 @dataclass(frozen=True)
@@ -139,9 +139,6 @@ def _preset(name: str, setting: str, summary: str) -> RenderPreset:
 
 #: The live study's renders until 2026-12: 8 spp, OIDN with a 64-spp albedo/normal pass.
 LEGACY_STUDY_PRESET = "study-oidn8"
-#: The live study's renders from 2026-12 (validation.live.config.STUDY_PRESET): the cheapest setting measured whose
-#: render noise costs SIFT no more than 3 points of repeatability beyond sensor noise on every study scene.
-STUDY_ADAPTIVE_PRESET = "study-adaptive30"
 
 RENDER_PRESETS: dict[str, RenderPreset] = {}
 for _p in (
@@ -157,7 +154,7 @@ for _p in (
             "render noise within 3 points of sensor noise for SIFT (whole 95 % interval) at 8 and 32 ms on "
             "forest_edge, sun_glare and forest_winter, forest_summer's 32 ms interval reaching -3.9; about 20-29x "
             "the time of study-oidn8 (docs/results/render-clip-2026-12-04.md)"),
-    _preset(STUDY_ADAPTIVE_PRESET, "oidn-hq@64+sun=16~x16:30%@32ms",
+    _preset("study-adaptive30", "oidn-hq@64+sun=16~x16:30%@32ms",
             "the live study's default: as study-adaptive with the extra samples on 30 % of the tiles; render noise "
             "within 3 points of sensor noise for SIFT (whole 95 % interval) at 8 and 32 ms on all four study "
             "scenes; about 25-33x the time of study-oidn8 (docs/results/render-clip-2026-12-04.md)"),

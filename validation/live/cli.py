@@ -56,8 +56,8 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument("--cycles", type=int,
                    help=f"bracket cycles per scene (default {full.n_cycles}; --quick {quick.n_cycles})")
     p.add_argument("--size", type=argtypes.size, help=f"image size WxH (default {full.width}x{full.height})")
-    p.add_argument("--spp", type=int, help=f"render samples per pixel (default {full.spp}; --quick {quick.spp}; the other render "
-                        "settings stay the default's: --render sets them all)")
+    p.add_argument("--spp", type=int, help=f"render samples per pixel (default {full.spp}; --quick {quick.spp}; the "
+                        "other render settings stay the default's: --render sets them all)")
     p.add_argument("--seed", type=int, help=f"scene, render, camera and live-capture seed (default {full.seed})")
     p.add_argument("--methods", type=argtypes.names,
                    help=f"comma-separated AE methods (default all {len(full.methods)}: {', '.join(full.methods)})")

@@ -230,7 +230,7 @@ def pareto_table(results) -> str:
     for r in rows:
         peers = [q for q in rows if q["scene"] == r["scene"] and q is not r]
         timed = [q for q in peers if q["seconds_per_sweep"] is not None]
-        dominated = r["seconds_per_sweep"] is not None and any(
+        front = r["seconds_per_sweep"] is not None and not any(  # a setting read from the cache has no seconds
             q["seconds_per_sweep"] <= r["seconds_per_sweep"] and worst(q) >= worst(r) and (
                 q["seconds_per_sweep"] < r["seconds_per_sweep"] or worst(q) > worst(r)) for q in timed)
         whole = all(_whole_interval_at_least(r["exposures"][e]["difference"], -r["tolerance_points"])
@@ -243,7 +243,7 @@ def pareto_table(results) -> str:
                                          if "radiance" in r else ""] if bias else [])
                                      + ["cached" if r["seconds_per_sweep"] is None else f"{r['seconds_per_sweep']:.2f}",
                                         "" if ratio is None else f"{ratio:.2f}",
-                                        "" if dominated or r["seconds_per_sweep"] is None else "front"]) + " |")
+                                        "front" if front else ""]) + " |")
     return "\n".join(out)
 
 

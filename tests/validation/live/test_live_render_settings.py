@@ -9,7 +9,7 @@ import pytest
 
 import scenes
 from emulator.errors import ExposimError
-from scenes.presets import LEGACY_STUDY_PRESET, STUDY_ADAPTIVE_PRESET
+from scenes.presets import LEGACY_STUDY_PRESET
 from validation.live.config import (CONFIGS, LEGACY_STUDY_DENOISE, STUDY_ADAPTIVE, STUDY_DENOISE, STUDY_EMITTER_WEIGHTS,
                                     STUDY_HEIGHT, STUDY_PRESET, STUDY_RENDER_PER, STUDY_SPP, STUDY_WIDTH, LiveConfig,
                                     LiveError, config_from_dict)
@@ -26,7 +26,7 @@ def test_the_defaults_are_the_study_render_settings(monkeypatch):
                                                                                          "cycle")
     # the render defaults are the preset's, field by field (kept as literals so that --help imports no scenes)
     preset = RENDER_PRESETS[STUDY_PRESET]
-    assert STUDY_PRESET == STUDY_ADAPTIVE_PRESET == "study-adaptive30"
+    assert STUDY_PRESET == "study-adaptive30"
     assert (preset.spp, preset.denoise.name, preset.emitter_weights, preset.adaptive.text) == (
         STUDY_SPP, STUDY_DENOISE, STUDY_EMITTER_WEIGHTS, STUDY_ADAPTIVE)
     assert preset.setting == "oidn-hq@64+sun=16~x16:30%@32ms" and preset.denoise == resolve_denoise("oidn-hq")
