@@ -22,7 +22,7 @@ from scenes.denoise import DENOISERS, resolve_denoise
 from scenes.errors import RenderError
 from scenes.presets import parse_setting
 from validation.live.config import CONFIG_CHANGES, CONFIGS, DEFAULTS, STUDY_DENOISE, STUDY_PRESET, LiveConfig, LiveError
-from validation.live.experiment import numbered_output, redraw, run_live_experiment, run_replicated
+from validation.live.experiment import numbered_output, redraw, run_live_experiment, run_replicated, stop_study
 from validation.live.report import headline
 from validation.protocol import Study
 
@@ -120,6 +120,11 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
                         "own walks (default 100; 0 skips it; with --redraw, default: as many as the folder used)")
     add_quiet(p, "no progress bars")
     add_json(p)
+    p.add_argument("--stop", metavar="REASON",
+                   help="stop the pre-registered study in OUT before its planned walks, for REASON (a rule that does "
+                        "not read the data, e.g. its budget), and draw its verdicts once, on the seeds whose every "
+                        "walk is finished: writes stop.json first (when, why, the seeds judged, the walks left out); "
+                        "a stopped study is not resumed, --redraw recomputes it")
     p.add_argument("--redraw", action="store_true",
                    help="only recompute the verdicts and rewrite results.json, report.md and the figures of the "
                         "existing folder OUT from its raw.json (or from its per-walk table walks.csv where only that "
@@ -203,8 +208,12 @@ def run(args, prog: str = "exposim validate live") -> int:
 
     if args.calibration_studies is not None and args.calibration_studies < 0:
         raise ExposimError(f"--calibration-studies must be >= 0, got {args.calibration_studies}")
-    if args.redraw:
-        results = redraw(args.output, calibration_studies=args.calibration_studies)
+    if args.stop is not None and (args.redraw or args.resume):
+        raise ExposimError("--stop draws a stopped study's verdicts itself: not with --redraw or --resume")
+    if args.redraw or args.stop is not None:
+        results = (redraw(args.output, calibration_studies=args.calibration_studies) if args.redraw else
+                   stop_study(args.output, args.stop, command=f"{prog} -o {shlex.quote(str(args.output))} --stop "
+                              f"{shlex.quote(args.stop)}", calibration_studies=args.calibration_studies))
         if args.json:
             print_json(results)
             return 0

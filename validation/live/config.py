@@ -170,6 +170,8 @@ MAX_STOCHASTIC_SEEDS = 64
 
 #: A pre-registered study's plan, written into its folder before the first walk (validation.live.preregistration).
 PREREG_FILE = "preregistration.json"
+#: The record of a pre-registered study stopped before its planned walks (its final look).
+STOP_FILE = "stop.json"
 
 
 class LiveError(ExposimError):

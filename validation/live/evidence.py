@@ -37,6 +37,7 @@ from validation.live.config import (
     LiveError,
 )
 from validation.live.headline import apply_family, headlines, walks_to_decide, with_derived
+from validation.live.monte_carlo import apply_monte_carlo_rule, headline_family
 from validation.verdicts.agreement import ALPHA, MIN_WALKS, judge
 from validation.verdicts.plasmode import CALIBRATION_FILE, STUDIES, calibrate
 from validation.verdicts.power import power_summary, scales_from_tables
@@ -259,7 +260,8 @@ def _not_run_reason(cname: str, run: str) -> str:
 
 def judge_metrics(tables: dict, methods, *, n_resamples: int = 1000, seed: int = 0, power: bool = True,
                   power_seeds: int = 100, walks=None, pilot: str | None = None,
-                  calibration_studies: int | None = None, headline_exclusions: dict | None = None) -> dict:
+                  calibration_studies: int | None = None, headline_exclusions: dict | None = None,
+                  monte_carlo_rule: bool = False) -> dict:
     """results.json's ``metrics``, ``comparisons``, ``conditions``, ``power`` and ``n_walks`` from walk tables.
 
     ``tables``: :func:`walk_values`' second item.  ``walks``: their names (``<scene>/seed<S>``):
@@ -270,7 +272,9 @@ def judge_metrics(tables: dict, methods, *, n_resamples: int = 1000, seed: int =
     ``calibration``: the verdict
     rule calibrated on these walks (:func:`calibration`; ``calibration_studies`` plasmode studies per
     emulator and size, the default where None, none where 0).  ``headline_exclusions``: headline metrics left out
-    of the family (metric -> reason; a pre-registered study's).
+    of the family (metric -> reason; a pre-registered study's).  ``monte_carlo_rule``: a headline verdict whose
+    Holm-adjusted p's Monte Carlo interval holds the level is undetermined
+    (:func:`validation.live.monte_carlo.apply_monte_carlo_rule`; a pre-registered study's rule).
     """
     names = list(methods)
     clusters = None if walks is None else walk_labels(walks)[1]
@@ -298,6 +302,9 @@ def judge_metrics(tables: dict, methods, *, n_resamples: int = 1000, seed: int =
     if pilot:
         _decide_nothing(comparisons, pilot)
     family = apply_family(comparisons, alpha=ALPHA, min_walks=MIN_WALKS, excluded=headline_exclusions)
+    if monte_carlo_rule and walks is not None and not pilot:
+        apply_monte_carlo_rule(comparisons, headline_family(tables, walks, names, seed=seed, n_resamples=n_resamples,
+                                                            excluded=headline_exclusions))
     if power:
         _walks_to_decide(tables, comparisons, power_seeds, seed, ALPHA / max(family["size"], 1))
     headline = next(iter(COMPARISONS))
@@ -309,7 +316,7 @@ def judge_metrics(tables: dict, methods, *, n_resamples: int = 1000, seed: int =
                                                    "verdict", "reason", "family")}
             metrics[metric].update({k: res[k] for k in ("verdict_alone", "p_agrees", "p_disagrees",
                                                         "p_agrees_adjusted", "p_disagrees_adjusted",
-                                                        "walks_to_decide") if k in res})
+                                                        "adjusted_mc", "verdict_mc", "walks_to_decide") if k in res})
             metrics[metric].update({k: res[k] for k in ("n_walks", "omega2_untruncated", "omega2_interval",
                                                         "pairs_verdict", "margin_in_ranking_terms", "emulation_bias",
                                                         "disattenuated_correlation",

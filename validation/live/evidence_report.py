@@ -5,6 +5,7 @@ the cell formats the live study's reports share (:func:`fmt`, :func:`ci_text`)."
 from __future__ import annotations
 
 from emulator.cells import format_number
+from validation.live.final_checks import checks_markdown
 from validation.live.headline import headlines_markdown
 from validation.verdicts.agreement import OMEGA2_MAX
 from validation.verdicts.plasmode import calibration_markdown
@@ -33,9 +34,20 @@ def family_short(text) -> str:
     return "own, not corrected"
 
 
+def _look_lines(results: dict) -> list[str]:
+    """A pre-registered study's look (final, stopped, or interim: futility only), or nothing."""
+    pre = results.get("preregistration")
+    if not pre:
+        return []
+    stop = pre.get("stop")
+    return [f"Pre-registered ({pre['file']}, {pre['n_walks_planned']} walks planned); this look: {pre['look']}"
+            + ("" if not pre.get("reason") else f" ({pre['reason']})")
+            + ("" if not stop else f"; stopped {stop['stopped']} ({stop['file']}): {stop['reason']}") + ".", ""]
+
+
 def _verdicts_intro(results: dict) -> list[str]:
     """The headline, then the heading and the rule of the verdicts per metric."""
-    return [headlines_markdown(results).rstrip("\n"), "",
+    return [headlines_markdown(results).rstrip("\n"), "", *_look_lines(results),
             f"## Verdicts per metric, emulated vs {results.get('reference_condition')} (omega2, bootstrap over "
             "walks, the seeds as clusters)", "",
             f"{results.get('n_walks', 0)} independent walks ({', '.join(results.get('walks', []))}). Emulated "
@@ -157,4 +169,5 @@ def evidence_markdown(results: dict) -> str:
     if not_run:
         lines += ["", "Not run: " + "; ".join(not_run) + "."]
     lines += _conditions_table(results, metrics) + _power_table(results.get("power") or {})
-    return "\n".join(lines) + "\n" + calibration_markdown(results.get("calibration"))
+    return ("\n".join(lines) + "\n" + calibration_markdown(results.get("calibration"))
+            + ("" if "final_checks" not in results else "\n" + checks_markdown(results["final_checks"])))

@@ -30,7 +30,14 @@ from validation.live.evidence import WALK_METRICS, WALKS_TABLE, parse_walks_tabl
 from validation.live.loops import has_run_images
 from validation.live.native import native_emulation_summary, native_markdown, native_rate_loop
 from validation.live.portable import folder_check, folder_markdown, relative_command
-from validation.live.preregistration import preregistration, read_preregistration, write_preregistration
+from validation.live.preregistration import (
+    STOP_FILE,
+    preregistration,
+    read_preregistration,
+    read_stop,
+    stop_record,
+    write_preregistration,
+)
 from validation.live.report import evidence_markdown, plot_metrics, plot_trajectories, report_markdown
 from validation.live.study_verdicts import POWER_FILE, evidence, judge_study, store_power
 from validation.live.table_check import canonical_order, check_walks_table, record_walks
@@ -39,7 +46,7 @@ from validation.live.walks import NATIVE_RUN, read_walk, run_walks
 
 __all__ = ["RAW_FILE", "REPLICATES_DIR", "STUDY_FILE", "POWER_FILE", "NATIVE_RUN", "numbered_output",
            "run_live_experiment", "run_study", "assemble_raw", "finish", "evidence", "store_power", "run_replicated",
-           "finish_replicated", "redraw"]
+           "finish_replicated", "stop_study", "redraw"]
 
 #: What :func:`redraw` recomputes the verdicts from (per-cycle comparisons, benchmark summaries).
 RAW_FILE = "raw.json"
@@ -289,6 +296,10 @@ def run_replicated(out, config: LiveConfig | None = None, replicates: int = 1, *
         raise LiveError(f"replicates must be >= 1, got {replicates}")
     out = Path(out)
     _check_output(out, resume, {"config": cfg.to_dict(), "replicates": int(replicates)})
+    stop = read_stop(out) if resume else None
+    if stop is not None:
+        raise LiveError(f"{out / STOP_FILE}: the study was stopped {stop['stopped']} ({stop['reason']}) and judged at "
+                        f"{stop['n_walks']} walks; a stopped study is not resumed (--redraw recomputes its verdicts)")
     if not resume or read_preregistration(out) is not None:  # before the first walk; a resume may not change it
         write_preregistration(out, preregistration(cfg, replicates))
     t0 = time.perf_counter()
@@ -375,6 +386,41 @@ def verdicts_from_table(out, power_seeds: int = 100, calibration_studies: int | 
     return results
 
 
+def stop_study(out, reason: str, *, command: str | None = None, calibration_studies: int | None = None,
+               when: str | None = None) -> dict:
+    """Stop the pre-registered study in ``out`` before its planned walks, for ``reason`` (a rule that does not
+    read the data, such as its budget), and draw its verdicts: the stop record
+    (:func:`validation.live.preregistration.stop_record`: the seeds whose every walk is finished) is written first,
+    then each of those seeds' ``raw.json`` from its walk records (:func:`assemble_raw`, :func:`finish`), then the
+    study's results.json and report.md over their walks (:func:`finish_replicated`): its final look.  ``when``:
+    the stop's time (UTC, ISO 8601; default now).  Refused (:class:`LiveError`) for a folder without a study, a
+    plan, a complete seed, or with a stop record already."""
+    from datetime import datetime, timezone
+
+    out = Path(out)
+    if not (out / STUDY_FILE).is_file():
+        raise LiveError(f"{out / STUDY_FILE}: not found; {out} is not a live study folder")
+    before = read_stop(out)
+    if before is not None:
+        raise LiveError(f"{out / STOP_FILE}: the study was already stopped {before['stopped']} ({before['reason']}); "
+                        "--redraw recomputes its verdicts")
+    when = when or datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+    record = stop_record(out, reason, when=when)
+    cfg = config_from_dict(read_results(out / STUDY_FILE)["config"])
+    write_results(out / STOP_FILE, record, overwrite=False)
+    records = []
+    for seed in record["seeds"]:
+        exp = out / REPLICATES_DIR / f"seed{seed}"
+        if (exp / RAW_FILE).is_file():
+            records.append(read_results(exp / RAW_FILE))
+            continue
+        raw = assemble_raw(exp, replace(cfg, seed=seed), {}, command)
+        write_results(exp / RAW_FILE, raw)
+        finish(exp, raw)
+        records.append(raw)
+    return finish_replicated(out, records, command=command, calibration_studies=calibration_studies)
+
+
 def redraw(out, calibration_studies: int | None = None) -> dict:
     """Recompute the verdicts and rewrite ``results.json``, ``report.md``, ``calibration.json`` and the figures
     of an experiment folder from its ``raw.json`` (nothing is rendered, played back or measured again).
@@ -386,7 +432,10 @@ def redraw(out, calibration_studies: int | None = None) -> dict:
     path = Path(out) / RAW_FILE
     reps = Path(out) / REPLICATES_DIR
     if not path.is_file() and reps.is_dir():
-        records = [read_results(p / RAW_FILE) for p in sorted(reps.iterdir()) if (p / RAW_FILE).is_file()]
+        stop = read_stop(out)
+        chosen = (sorted(reps.iterdir()) if stop is None else  # a stopped study: the seeds its record names
+                  [reps / f"seed{seed}" for seed in stop["seeds"]])
+        records = [read_results(p / RAW_FILE) for p in chosen if (p / RAW_FILE).is_file()]
         if records:
             command = read_results(previous).get("command") if previous.is_file() else None
             return finish_replicated(out, records, command=command, calibration_studies=calibration_studies)

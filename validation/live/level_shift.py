@@ -23,7 +23,7 @@ import numpy as np
 
 from emulator.core.stats import percentile_interval, variance_components
 from validation.live.config import COMPARISONS, HEADLINE_COMPARISONS
-from validation.live.monte_carlo import headline_family
+from validation.live.monte_carlo import headline_family, ruled_verdict
 from validation.verdicts.agreement import omega2_untruncated
 from validation.verdicts.ranking import cluster_plan, over_plan
 
@@ -91,20 +91,25 @@ def per_scene(live, emulated, scenes) -> dict:
     return out
 
 
-def leave_one_scene_out(tables: dict, walks, methods, *, seed: int = 0, n_resamples: int = 1000) -> dict:
+def leave_one_scene_out(tables: dict, walks, methods, *, seed: int = 0, n_resamples: int = 1000,
+                        excluded: dict | None = None, monte_carlo_rule: bool = False) -> dict:
     """Per headline verdict (``"<comparison>: <metric>"``): its family verdict on every walk, on the walks of each
-    scene but one (``without``: scene -> verdict), and ``carried_by``: the scenes whose leaving out changes it."""
+    scene but one (``without``: scene -> verdict), and ``carried_by``: the scenes whose leaving out changes it.
+    ``excluded``, ``monte_carlo_rule``: a pre-registered study's family (metrics left out) and its verdicts after
+    the Monte Carlo rule (:func:`validation.live.monte_carlo.ruled_verdict`)."""
     walks = list(walks)
     scenes = [str(w).rpartition("/seed")[0] for w in walks]
-    full = headline_family(tables, walks, methods, seed=seed, n_resamples=n_resamples)
-    out = {k: {"verdict": r["verdict"], "without": {}, "carried_by": []} for k, r in full.items()}
+
+    def verdicts(tabs, names):
+        fam = headline_family(tabs, names, methods, seed=seed, n_resamples=n_resamples, excluded=excluded)
+        return {k: ruled_verdict(r) if monte_carlo_rule else r["verdict"] for k, r in fam.items()}
+
+    out = {k: {"verdict": v, "without": {}, "carried_by": []} for k, v in verdicts(tables, walks).items()}
     for s in dict.fromkeys(scenes):
         keep = np.array([x != s for x in scenes])
         sub = {run: {m: np.asarray(t)[keep] for m, t in per.items()} for run, per in tables.items()}
-        part = headline_family(sub, [w for w, k in zip(walks, keep) if k], methods, seed=seed,
-                               n_resamples=n_resamples)
-        for k, r in part.items():
-            out[k]["without"][s] = r["verdict"]
-            if r["verdict"] != out[k]["verdict"]:
+        for k, v in verdicts(sub, [w for w, k in zip(walks, keep) if k]).items():
+            out[k]["without"][s] = v
+            if v != out[k]["verdict"]:
                 out[k]["carried_by"].append(s)
     return out

@@ -38,10 +38,13 @@ from validation.verdicts.agreement import (
 )
 from validation.verdicts.ranking import cluster_plan
 
-__all__ = ["MC_CONFIDENCE", "wilson", "pvalue_interval", "headline_family", "verdict_stability"]
+__all__ = ["MC_CONFIDENCE", "MC_UNDETERMINED", "wilson", "pvalue_interval", "headline_family", "ruled_verdict",
+           "apply_monte_carlo_rule", "verdict_stability"]
 
 #: Confidence of the Monte Carlo interval of a p-value.
 MC_CONFIDENCE = 0.99
+#: A verdict whose Holm-adjusted p's Monte Carlo interval holds the level.
+MC_UNDETERMINED = "undetermined (Monte Carlo)"
 
 
 def wilson(k: float, n: int, confidence: float = MC_CONFIDENCE) -> tuple[float, float]:
@@ -75,29 +78,38 @@ def pvalue_interval(replicates, estimate, omega2_max: float = OMEGA2_MAX,
     return {"p_agrees": [a_lo, a_hi], "p_disagrees": [d_lo, d_hi]}
 
 
-def _member(live, emulated, clusters, n_resamples: int, seed) -> dict:
+def _member(live, emulated, clusters, n_resamples: int, seed, omega2_max: float = OMEGA2_MAX) -> dict:
     """One headline verdict at its own level as :func:`validation.verdicts.agreement.judge` draws it (the same
-    random stream), with its replicates' Monte Carlo interval."""
+    random stream), with its replicates' Monte Carlo interval (``omega2_max``: the margin it is judged at)."""
     L, E = np.asarray(live, dtype=np.float64), np.asarray(emulated, dtype=np.float64)
     ok = complete_walks(L, E)
     L, E = L[ok], E[ok]
     labels = np.asarray(list(clusters))[ok]
     units = int(np.unique(labels).size)
+    if L.shape[0] < 2 or L.shape[1] < 2:  # nothing to compare (judge's rule): undecidable, p = 1 in the family
+        return {"verdict": "undetermined", "reason": "", "n_walks": int(L.shape[0]), "n_clusters": units,
+                "live_method_p": None, "p_agrees": None, "p_disagrees": None, "omega2_untruncated": None,
+                "mc": {"p_agrees": [1.0, 1.0], "p_disagrees": [1.0, 1.0]}}
     rng = rng_of(seed)
     plan = cluster_plan(L.shape[0], n_resamples, rng, labels)
-    b = judge_batch(L[None], E[None], n_resamples=n_resamples, seed=rng, plan=plan, n_units=units)
+    b = judge_batch(L[None], E[None], n_resamples=n_resamples, seed=rng, omega2_max=omega2_max, plan=plan,
+                    n_units=units)
     boot = omega2_over_plan(plan, L, E)
     return {"verdict": VERDICTS[int(b["verdict"][0])], "reason": "", "n_walks": int(L.shape[0]),
             "n_clusters": units, "live_method_p": float(b["live_p"][0]), "p_agrees": float(b["p_agrees"][0]),
             "p_disagrees": float(b["p_disagrees"][0]),
-            "mc": pvalue_interval(boot, float(b["omega2_untruncated"][0]))}
+            "omega2_untruncated": float(b["omega2_untruncated"][0]),
+            "mc": pvalue_interval(boot, float(b["omega2_untruncated"][0]), omega2_max)}
 
 
 def headline_family(tables: dict, walks, methods, *, seed: int = 0, n_resamples: int = 1000,
-                    alpha: float = ALPHA) -> dict:
+                    alpha: float = ALPHA, excluded: dict | None = None, omega2_max: float = OMEGA2_MAX) -> dict:
     """``{"<comparison>: <metric>": {verdict, verdict_alone, p_agrees_adjusted, p_disagrees_adjusted, mc,
     adjusted_mc, verdict_mc}}`` of the headline family (``seed``: the study's; the same as results.json's
-    headline when it is the study's seed and ``n_resamples`` 1000)."""
+    headline when it is the study's seed and ``n_resamples`` the study's: 1000, or a pre-registered study's
+    ``bootstrap_resamples`` with its ``excluded_from_headline`` as ``excluded``).  ``omega2_max``: the margin the
+    family is judged at (the headline's 0.2; another one reports the verdicts at that margin)."""
+    excluded = excluded or {}
     tables = with_derived(tables)
     clusters = [int(str(w).rpartition("/seed")[2]) for w in walks]
     comparisons = {}
@@ -108,9 +120,9 @@ def headline_family(tables: dict, walks, methods, *, seed: int = 0, n_resamples:
         c = list(COMPARISONS).index(label)
         comparisons[label] = {"status": "run", "metrics": {
             m: _member(tables[ref][m], tables[other][m], clusters, n_resamples,
-                       [seed, 22_001, c, list(JUDGED_METRICS).index(m)])
-            for m in HEADLINE_METRICS if m in tables[ref] and m in tables[other]}}
-    apply_family(comparisons, alpha=alpha, min_walks=MIN_WALKS)
+                       [seed, 22_001, c, list(JUDGED_METRICS).index(m)], omega2_max)
+            for m in HEADLINE_METRICS if m in tables[ref] and m in tables[other] and m not in excluded}}
+    apply_family(comparisons, alpha=alpha, min_walks=MIN_WALKS, excluded=excluded)
     members = [(label, m, r) for label, c in comparisons.items() for m, r in c["metrics"].items()]
 
     def decidable(r):
@@ -125,22 +137,53 @@ def headline_family(tables: dict, walks, methods, *, seed: int = 0, n_resamples:
         key = {"agrees": "p_agrees", "disagrees": "p_disagrees"}.get(r["verdict_alone"])
         verdict_mc = r["verdict"]
         if key is not None and adj[key][0] <= alpha < adj[key][1]:
-            verdict_mc = "undetermined (Monte Carlo)"
-        out[f"{label}: {m}"] = {k: r[k] for k in ("verdict", "verdict_alone", "p_agrees", "p_disagrees",
-                                                  "p_agrees_adjusted", "p_disagrees_adjusted", "mc")}
+            verdict_mc = MC_UNDETERMINED
+        out[f"{label}: {m}"] = {k: r[k] for k in ("verdict", "verdict_alone", "omega2_untruncated", "p_agrees",
+                                                  "p_disagrees", "p_agrees_adjusted", "p_disagrees_adjusted", "mc")}
         out[f"{label}: {m}"].update(adjusted_mc=adj, verdict_mc=verdict_mc)
     return out
 
 
-def verdict_stability(tables: dict, walks, methods, *, seeds, n_resamples: int = 1000) -> dict:
+def ruled_verdict(member: dict) -> str:
+    """A family member's verdict under the Monte Carlo rule: ``undetermined`` where its adjusted p's Monte Carlo
+    interval holds the level, else its verdict."""
+    return "undetermined" if member["verdict_mc"] == MC_UNDETERMINED else member["verdict"]
+
+
+def apply_monte_carlo_rule(comparisons: dict, family: dict) -> None:
+    """The Monte Carlo rule on a judged headline, in place: each member of ``family`` (:func:`headline_family` of
+    the same tables, seed and resamples) gets its ``adjusted_mc`` and ``verdict_mc`` in ``comparisons``, and a
+    family verdict whose adjusted p's interval holds the level becomes ``undetermined`` with the reason.  A member
+    whose family verdict differs from ``comparisons``' (other tables or draws) is refused with ValueError."""
+    for key, r in family.items():
+        label, _, metric = key.partition(": ")
+        res = comparisons[label]["metrics"][metric]
+        if res["verdict"] != r["verdict"]:
+            raise ValueError(f"{key}: the Monte Carlo family says {r['verdict']}, the headline {res['verdict']}: "
+                             "not the same tables, seed or resamples")
+        res["adjusted_mc"], res["verdict_mc"] = r["adjusted_mc"], r["verdict_mc"]
+        if r["verdict_mc"] == MC_UNDETERMINED:
+            p = r["adjusted_mc"]["p_agrees" if r["verdict"] == "agrees" else "p_disagrees"]
+            res["verdict"] = "undetermined"
+            res["reason"] += (f"; but not beyond the bootstrap's Monte Carlo error (the Holm-adjusted p's "
+                              f"{MC_CONFIDENCE:.0%} interval [{p[0]:.2g}, {p[1]:.2g}] holds the level)")
+
+
+def verdict_stability(tables: dict, walks, methods, *, seeds, n_resamples: int = 1000,
+                      excluded: dict | None = None, monte_carlo_rule: bool = False) -> dict:
     """The headline family over bootstrap ``seeds``: per member the count of each verdict, and the members whose
-    verdict is not the same on every seed (``changed``) or is Monte Carlo undetermined on some seed."""
+    verdict is not the same on every seed (``changed``) or is Monte Carlo undetermined on some seed.
+    ``monte_carlo_rule``: the verdict counted is the one after the Monte Carlo rule (a pre-registered study's:
+    ``undetermined`` where the adjusted p's interval holds the level)."""
     seeds, counts, mc = list(seeds), {}, {}
     for s in seeds:
-        for key, r in headline_family(tables, walks, methods, seed=int(s), n_resamples=n_resamples).items():
+        for key, r in headline_family(tables, walks, methods, seed=int(s), n_resamples=n_resamples,
+                                      excluded=excluded).items():
+            if monte_carlo_rule:
+                r = {**r, "verdict": ruled_verdict(r)}
             counts.setdefault(key, {}).setdefault(r["verdict"], 0)
             counts[key][r["verdict"]] += 1
-            mc[key] = mc.get(key, 0) + (r["verdict_mc"] == "undetermined (Monte Carlo)")
+            mc[key] = mc.get(key, 0) + (r["verdict_mc"] == MC_UNDETERMINED)
     return {"n_seeds": len(seeds), "n_resamples": int(n_resamples), "counts": counts,
             "changed": sorted(k for k, v in counts.items() if len(v) > 1),
             "mc_undetermined_on_some_seed": sorted(k for k, v in mc.items() if v)}

@@ -10,8 +10,10 @@ another name).  :func:`write_preregistration` writes it into the study folder (:
 before the first walk; ``--resume`` checks it with :func:`check_preregistration` and refuses a plan that
 differs.  A folder with the file is a study of :data:`FORMAT` (verdicts v3): its verdicts are drawn at
 ``N`` walks only; at fewer, every look is an interim look, recorded in results.json as futility-only
-(:func:`interim_reason`: no ``agrees`` or ``disagrees``).  Folders without it (every study committed so
-far) are judged and redrawn as before.
+(:func:`interim_reason`: no ``agrees`` or ``disagrees``).  A study stopped before its planned walks by a rule
+that does not read the data (a budget) keeps a stop record (:data:`STOP_FILE`, :func:`stop_record`): the seeds
+whose every walk was finished then, the time and the reason; its one look, at those walks, is its final look.
+Folders without a plan (every study committed before 2026-12) are judged and redrawn as before.
 """
 
 from __future__ import annotations
@@ -23,15 +25,17 @@ from validation.live.config import (
     HEADLINE_COMPARISONS,
     HEADLINE_METRICS,
     PREREG_FILE,
+    STOP_FILE,
     LiveConfig,
     LiveError,
 )
 from validation.live.level_shift import LEVEL_MARGIN
+from validation.live.walks import walk_record_path
 from validation.verdicts.agreement import ALPHA, OMEGA2_MAX
 
-__all__ = ["PREREG_FILE", "FORMAT", "MIN_SEGMENTS", "PLANNED_RESAMPLES", "segments_per_walk", "headline_exclusions",
+__all__ = ["PREREG_FILE", "STOP_FILE", "FORMAT", "MIN_SEGMENTS", "PLANNED_RESAMPLES", "segments_per_walk", "headline_exclusions",
            "preregistration", "write_preregistration", "read_preregistration", "check_preregistration",
-           "interim_reason"]
+           "interim_reason", "complete_seeds", "stop_record", "read_stop"]
 
 #: The pre-registration's file in the study folder.
 #: The plan's draws per stochastic method (k), present only when k is not 1.
@@ -127,10 +131,56 @@ def check_preregistration(out, prereg: dict) -> None:
                         f"{', '.join(diff)}; a pre-registered plan is not changed (start a new study folder)")
 
 
-def interim_reason(prereg: dict | None, n_walks: int) -> str | None:
+def interim_reason(prereg: dict | None, n_walks: int, stop: dict | None = None) -> str | None:
     """Why a look at ``n_walks`` walks of a pre-registered study decides nothing (an interim look: futility only),
-    or None (the planned walks are there, or the study was not pre-registered)."""
+    or None (the planned walks are there, the walks the study was stopped at (``stop``, :func:`read_stop`), or the
+    study was not pre-registered).  A stopped study judged on other walks than its record names is refused."""
     if prereg is None or n_walks >= int(prereg["n_walks"]):
+        return None
+    if stop is not None:
+        if n_walks != int(stop["n_walks"]):
+            raise LiveError(f"{STOP_FILE}: the study was stopped at {stop['n_walks']} walks, but {n_walks} are judged")
         return None
     return (f"interim look at {n_walks} of the {prereg['n_walks']} pre-registered walks: futility only, verdicts are "
             "drawn at the planned size")
+
+
+def complete_seeds(out, prereg: dict) -> tuple[list[int], dict[int, list[str]]]:
+    """(seeds whose every scene has a walk record, {seed: its finished scenes} of the seeds begun but not complete)
+    of the pre-registered study in ``out`` (``replicates/seed<S>/walks/<scene>.json``)."""
+    done, partial = [], {}
+    for seed in prereg["seeds"]:
+        exp = Path(out) / "replicates" / f"seed{int(seed)}"
+        have = [s for s in prereg["scenes"] if walk_record_path(exp, s).is_file()]
+        if len(have) == len(prereg["scenes"]):
+            done.append(int(seed))
+        elif have:
+            partial[int(seed)] = have
+    return done, partial
+
+
+def stop_record(out, reason: str, *, when: str) -> dict:
+    """The stop record of the pre-registered study in ``out``, stopped now (``when``: UTC, ISO 8601) for ``reason``
+    (a rule that does not read the data): its final look judges the complete seeds (:func:`complete_seeds`); the
+    walks of a seed begun but not complete are left out and named.  Refused (:class:`LiveError`) without a plan,
+    without a reason, or without a complete seed."""
+    prereg = read_preregistration(out)
+    if prereg is None:
+        raise LiveError(f"{Path(out) / PREREG_FILE}: not found; only a pre-registered study is stopped")
+    if not str(reason).strip():
+        raise LiveError("a stop needs its reason (the rule that stopped the study, e.g. its budget)")
+    seeds, partial = complete_seeds(out, prereg)
+    if not seeds:
+        raise LiveError(f"{out}: no seed has every walk finished; nothing to judge")
+    n = len(seeds) * len(prereg["scenes"])
+    return {"stopped": when, "reason": str(reason).strip(), "n_walks": n, "n_walks_planned": int(prereg["n_walks"]),
+            "seeds": seeds, "left_out": {f"seed{k}": v for k, v in partial.items()},
+            "look": f"final: {n} of the {prereg['n_walks']} pre-registered walks, the seeds complete at the stop"}
+
+
+def read_stop(out) -> dict | None:
+    """The stop record of the study folder ``out`` (:func:`stop_record`), or None (not stopped)."""
+    from emulator.io.files import read_results
+
+    path = Path(out) / STOP_FILE
+    return read_results(path) if path.is_file() else None

@@ -15,9 +15,11 @@ from pathlib import Path
 from emulator.io.files import write_results
 from validation.live.config import LiveConfig
 from validation.live.evidence import judge_metrics, pilot_reason, store_calibration, store_walks_table, walk_values
-from validation.live.preregistration import PREREG_FILE, interim_reason, read_preregistration
+from validation.live.final_checks import final_checks
+from validation.live.preregistration import PREREG_FILE, STOP_FILE, interim_reason, read_preregistration, read_stop
 from validation.live.seeds import loop_names, split_seeds, store_seeds_table, store_shares
 from validation.live.table_check import canonical_order
+from validation.verdicts.plasmode import STUDIES
 
 __all__ = ["POWER_FILE", "evidence", "judge_study", "store_power"]
 
@@ -49,16 +51,26 @@ def evidence(cfg: LiveConfig, records: list[dict], power_seeds: int = 100, folde
 def judge_study(cfg: LiveConfig, tables: dict, methods, walks, folder, power_seeds: int,
                 calibration_studies: int | None) -> dict:
     """The verdicts over ``walks`` (:func:`validation.live.evidence.judge_metrics`); with ``folder``, the
-    calibration and the power analysis are also stored there (their file names in the result)."""
+    calibration and the power analysis are also stored there (their file names in the result).  A pre-registered
+    folder is judged by its plan: at its final look (the planned walks, or those its stop record names) with the
+    Monte Carlo rule and the final look's checks (:func:`validation.live.final_checks.final_checks`, results.json's
+    ``final_checks``), at any other look for futility only."""
     prereg = None if folder is None else read_preregistration(folder)
-    interim = interim_reason(prereg, len(walks))
+    stop = None if prereg is None else read_stop(folder)
+    interim = interim_reason(prereg, len(walks), stop)
     kw = {} if prereg is None else {"n_resamples": int(prereg["bootstrap_resamples"]),
-                                    "headline_exclusions": prereg["excluded_from_headline"]}
+                                    "headline_exclusions": prereg["excluded_from_headline"], "monte_carlo_rule": True}
     out = judge_metrics(tables, methods, seed=cfg.seed, power=power_seeds > 0, power_seeds=power_seeds, walks=walks,
                         pilot=pilot_reason(cfg) or interim, calibration_studies=calibration_studies, **kw)
     if prereg is not None:  # a pre-registered study (format 3): verdicts at the planned walks only
+        look = "interim: futility only" if interim is not None else "final" if stop is None else stop["look"]
         out["preregistration"] = {"file": PREREG_FILE, "format": prereg["format"], "n_walks_planned": prereg["n_walks"],
-                                  "look": "final" if interim is None else "interim: futility only", "reason": interim}
+                                  "look": look, "reason": interim,
+                                  **({} if stop is None else {"stop": {"file": STOP_FILE, "stopped": stop["stopped"],
+                                                                       "reason": stop["reason"]}})}
+        if interim is None and not pilot_reason(cfg):
+            out["final_checks"] = final_checks(tables, walks, methods, prereg=prereg, seed=cfg.seed,
+                                               calibration_studies=calibration_studies, plasmode_default=STUDIES)
     if folder is not None:
         out["calibration_file"] = store_calibration(folder, out["calibration"])
         out["power_file"] = store_power(folder, out)

@@ -128,6 +128,7 @@ def read_folder_table(folder) -> tuple[list[str], list[str], dict]:
 
     if (Path(folder) / PREREG_FILE).is_file():  # its family leaves metrics out and resamples 4000 times
         raise LiveError(f"{folder}: a pre-registered study ({PREREG_FILE}); these analyses judge the headline family "
-                        f"as the studies before pre-registration did and would not match its results.json")
+                        f"as the studies before pre-registration did and would not match its results.json, whose "
+                        f"final look holds them by its plan (final_checks, report.md)")
     path = Path(folder) / WALKS_TABLE
     return parse_walks_table(read_text(path, LiveError), str(path))
