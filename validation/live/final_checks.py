@@ -29,6 +29,7 @@ import numpy as np
 
 from emulator.cells import format_number
 from validation.live.config import COMPARISONS, HEADLINE_COMPARISONS, RESEEDED
+from validation.live.evidence import walk_labels
 from validation.live.headline import with_derived
 from validation.live.level_shift import SHIFT_METRICS, leave_one_scene_out, level_shift, per_scene
 from validation.live.monte_carlo import headline_family, ruled_verdict, verdict_stability
@@ -52,12 +53,8 @@ TARGETS = {"perfect_agrees_min": 0.80, "beyond_disagrees_min": 0.80, "margin_dis
 OWN_STUDIES_PER_PLASMODE = 2
 
 
-def _scenes_seeds(walks) -> tuple[list[str], list[int]]:
-    return ([str(w).rpartition("/seed")[0] for w in walks], [int(str(w).rpartition("/seed")[2]) for w in walks])
-
-
 def _level_shifts(tables: dict, walks, metrics, seed: int, n_resamples: int, margin: float) -> dict:
-    scenes, seeds = _scenes_seeds(walks)
+    scenes, seeds = walk_labels(walks)
     out: dict = {}
     for c, label in enumerate(HEADLINE_COMPARISONS):
         ref, other = COMPARISONS[label]
