@@ -44,7 +44,7 @@ from validation.verdicts.power import power_summary, scales_from_tables
 from validation.verdicts.ranking import cluster_plan, over_plan
 
 __all__ = ["WALK_METRICS", "WALKS_TABLE", "walk_value", "walk_values", "walk_labels", "walks_table_csv",
-           "parse_walks_table", "store_walks_table", "condition_table", "metric_scales", "judge_metrics",
+           "parse_walks_table", "store_walks_table", "table_refusal", "condition_table", "metric_scales", "judge_metrics",
            "pilot_reason", "calibration", "store_calibration"]
 
 #: The study's per-walk table in its folder: one row per walk, method and condition, every metric.
@@ -180,15 +180,28 @@ def store_walks_table(out, walks, tables: dict, methods, name: str = WALKS_TABLE
 
     path = Path(out) / name
     text = walks_table_csv(walks, tables, methods)
-    if path.is_file():
-        old = read_text(path)
-        if old == text:
-            return name
-        if not set(old.splitlines()) <= set(text.splitlines()):
-            raise LiveError(f"{path}: differs from the walks recomputed from this folder's raw records; move it "
-                            "away to write it again")
-    write_text(path, text, overwrite=True)
+    refusal = table_refusal(path, text)
+    if refusal is not None:
+        raise LiveError(refusal)
+    if not path.is_file() or read_text(path) != text:
+        write_text(path, text, overwrite=True)
     return name
+
+
+def table_refusal(path, text: str) -> str | None:
+    """Why the per-walk table ``text`` may not be written to ``path`` (a table there with a row ``text`` does not
+    keep), or None (no table, the same, or one that ``text`` completes)."""
+    from pathlib import Path
+
+    from emulator.io.files import read_text
+
+    path = Path(path)
+    if not path.is_file():
+        return None
+    old = read_text(path)
+    if old == text or set(old.splitlines()) <= set(text.splitlines()):
+        return None
+    return f"{path}: differs from the walks recomputed from this folder's raw records; move it away to write it again"
 
 
 def condition_table(table: np.ndarray, methods, *, n_resamples: int = 1000, seed=0, clusters=None) -> dict:
@@ -404,7 +417,7 @@ def calibration(tables: dict, walks, methods, *, seed: int = 0, n_studies: int |
     n = STUDIES if n_studies is None else int(n_studies)
     if n <= 0 or walks is None:
         return {"status": "not computed", "reason": "no plasmode studies asked for" if n <= 0 else
-                "the walks' scenes and seeds are not known"}
+                "the walks' scenes and seeds are not known", **({"n_studies": 0} if n <= 0 else {})}
     return calibrate(tables, walk_labels(walks)[1], methods, metrics=list(JUDGED_METRICS), n_studies=n, seed=seed)
 
 

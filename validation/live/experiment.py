@@ -29,8 +29,10 @@ from validation.live.config import BRIGHTENING_PAIRS, CONFIGS, LiveConfig, LiveE
 from validation.live.evidence import WALK_METRICS, WALKS_TABLE, parse_walks_table
 from validation.live.loops import has_run_images
 from validation.live.native import native_emulation_summary, native_markdown, native_rate_loop
-from validation.live.portable import folder_check, folder_markdown, relative_command
+from validation.live.portable import (check_plan_files, folder_check, folder_markdown, named_files, relative_command,
+                                     study_command)
 from validation.live.preregistration import (
+    PREREG_FILE,
     STOP_FILE,
     preregistration,
     read_preregistration,
@@ -39,7 +41,7 @@ from validation.live.preregistration import (
     write_preregistration,
 )
 from validation.live.report import evidence_markdown, plot_metrics, plot_trajectories, report_markdown
-from validation.live.study_verdicts import POWER_FILE, evidence, judge_study, store_power
+from validation.live.study_verdicts import POWER_FILE, evidence, judge_study, store_power, table_refusals
 from validation.live.table_check import canonical_order, check_walks_table, record_walks
 from validation.live.verdicts import assemble, ratio_use
 from validation.live.walks import NATIVE_RUN, read_walk, run_walks
@@ -324,6 +326,10 @@ def finish_replicated(out, records: list[dict], command: str | None = None, powe
         raise LiveError(f"{out}: no walk of the study ran (" + "; ".join(f"{f['walk']}: {f['error']}" for f in failed)
                         + ")")
     cfg = config_from_dict(records[0]["config"])
+    stop = read_stop(out)
+    if stop is not None and sorted(int(r["config"]["seed"]) for r in records) != sorted(int(s) for s in stop["seeds"]):
+        raise LiveError(f"{out / STOP_FILE}: the study was stopped with seeds {list(stop['seeds'])} judged; the "
+                        f"records given are of seeds {[r['config']['seed'] for r in records]}")
     command = relative_command(command, out)
     results = {"experiment": "live versus emulated, replicated", "command": command,
                "config": cfg.to_dict(), "replicates": [f"{REPLICATES_DIR}/seed{r['config']['seed']}" for r in records],
@@ -332,7 +338,7 @@ def finish_replicated(out, records: list[dict], command: str | None = None, powe
                "failed_walks": failed, **{k: records[0][k] for k in ("method_processes",) if k in records[0]}}
     results.update(evidence(cfg, records, power_seeds=power_seeds, folder=out, calibration_studies=calibration_studies))
     _add_native(results, records, cfg)
-    results["study_folder"] = folder_check(out)
+    results["study_folder"] = folder_check(out, named_files(results))
     write_report(out, "# Live versus emulated, replicated\n\n"
                  + f"{len(records)} replicate(s) of the experiment (seeds "
                  + ", ".join(str(r["config"]["seed"]) for r in records) + f"), {results['n_walks']} walks. "
@@ -377,7 +383,7 @@ def verdicts_from_table(out, power_seeds: int = 100, calibration_studies: int | 
     results.update({"walks": walks, "n_walks": len(walks), "walks_table": WALKS_TABLE})
     results["command"] = relative_command(results.get("command"), out)
     results.update(judge_study(cfg, tables, methods, walks, out, power_seeds, calibration_studies))
-    results["study_folder"] = folder_check(out)
+    results["study_folder"] = folder_check(out, named_files(results))
     write_report(out, f"# Live versus emulated, recomputed from {WALKS_TABLE}\n\n{len(walks)} walks. Command "
                  f"(paths relative to this folder): `{results.get('command')}`\n\n"
                  + folder_markdown(results["study_folder"]) + evidence_markdown(results) + native_markdown(results))
@@ -386,15 +392,48 @@ def verdicts_from_table(out, power_seeds: int = 100, calibration_studies: int | 
     return results
 
 
+def _stopped_records(out: Path, stop: dict, cfg: LiveConfig, command: str | None) -> list[tuple[Path, dict, bool]]:
+    """(seed folder, raw record, whether to write it) of each seed a stop record judges: its ``raw.json`` where it
+    holds every scene without a failed walk, else assembled from the seed's walk records (nothing is written)."""
+    out_records = []
+    for seed in stop["seeds"]:
+        exp = out / REPLICATES_DIR / f"seed{int(seed)}"
+        if (exp / RAW_FILE).is_file():
+            raw = read_results(exp / RAW_FILE)
+            if not raw.get("failed_walks") and sorted(raw.get("per_scene") or {}) == sorted(cfg.scenes):
+                out_records.append((exp, raw, False))
+                continue
+        out_records.append((exp, assemble_raw(exp, replace(cfg, seed=int(seed)), {}, command), True))
+    return out_records
+
+
+def _write_stopped(records: list[tuple[Path, dict, bool]]) -> list[dict]:
+    """Write the seeds' raw.json and results that :func:`_stopped_records` assembled; returns the raw records."""
+    out = []
+    for exp, raw, new in records:
+        if new:
+            write_results(exp / RAW_FILE, raw)
+            raw = read_results(exp / RAW_FILE)  # as a later --redraw reads it
+            finish(exp, read_results(exp / RAW_FILE))  # finish turns the record's lists into arrays in place
+        out.append(raw)
+    return out
+
+
 def stop_study(out, reason: str, *, command: str | None = None, calibration_studies: int | None = None,
                when: str | None = None) -> dict:
     """Stop the pre-registered study in ``out`` before its planned walks, for ``reason`` (a rule that does not
-    read the data, such as its budget), and draw its verdicts: the stop record
-    (:func:`validation.live.preregistration.stop_record`: the seeds whose every walk is finished) is written first,
-    then each of those seeds' ``raw.json`` from its walk records (:func:`assemble_raw`, :func:`finish`), then the
-    study's results.json and report.md over their walks (:func:`finish_replicated`): its final look.  ``when``:
-    the stop's time (UTC, ISO 8601; default now).  Refused (:class:`LiveError`) for a folder without a study, a
-    plan, a complete seed, or with a stop record already."""
+    read the data, such as its budget), and draw its verdicts, its final look.
+
+    The stop record (:func:`validation.live.preregistration.stop_record`: the seeds whose every walk is finished)
+    and each of those seeds' raw record (its ``raw.json`` where whole, else assembled from its walk records,
+    :func:`assemble_raw`) are made in memory and checked first (a ``walks.csv`` the judged walks would not keep is
+    refused); then ``stop.json`` (with ``command``, the stop's own command line) is written, then the seeds'
+    ``raw.json`` and results (:func:`finish`), then the study's results.json and report.md over their walks
+    (:func:`finish_replicated`), which record the command that ran the walks
+    (:func:`~validation.live.portable.study_command`).  A failure after ``stop.json`` is mended by ``--redraw``,
+    which assembles a judged seed's missing ``raw.json`` the same way.  ``when``: the stop's time (UTC, ISO 8601;
+    default now).  Refused (:class:`LiveError`), with nothing written, for a folder without a study, a plan, a
+    complete seed, with every planned seed complete, or with a stop record already."""
     from datetime import datetime, timezone
 
     out = Path(out)
@@ -406,19 +445,17 @@ def stop_study(out, reason: str, *, command: str | None = None, calibration_stud
                         "--redraw recomputes its verdicts")
     when = when or datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
     record = stop_record(out, reason, when=when)
+    if command is not None:
+        record["command"] = relative_command(command, out)
     cfg = config_from_dict(read_results(out / STUDY_FILE)["config"])
+    walks_command = study_command(out / REPLICATES_DIR, record["seeds"], cfg.scenes)
+    records = _stopped_records(out, record, cfg, walks_command)
+    refusals = table_refusals(out, cfg, [raw for _, raw, _ in records])
+    if refusals:
+        raise LiveError("; ".join(refusals) + " (nothing was written; the study is not stopped)")
     write_results(out / STOP_FILE, record, overwrite=False)
-    records = []
-    for seed in record["seeds"]:
-        exp = out / REPLICATES_DIR / f"seed{seed}"
-        if (exp / RAW_FILE).is_file():
-            records.append(read_results(exp / RAW_FILE))
-            continue
-        raw = assemble_raw(exp, replace(cfg, seed=seed), {}, command)
-        write_results(exp / RAW_FILE, raw)
-        finish(exp, raw)
-        records.append(raw)
-    return finish_replicated(out, records, command=command, calibration_studies=calibration_studies)
+    return finish_replicated(out, _write_stopped(records), command=walks_command,
+                             calibration_studies=calibration_studies)
 
 
 def redraw(out, calibration_studies: int | None = None) -> dict:
@@ -427,18 +464,23 @@ def redraw(out, calibration_studies: int | None = None) -> dict:
     ``calibration_studies``: plasmode studies of the calibration; None: as many as the folder's results.json
     used (the default where it has none)."""
     previous = Path(out) / RESULTS_FILE
-    if calibration_studies is None and previous.is_file():
-        calibration_studies = (read_results(previous).get("calibration") or {}).get("n_studies")
     path = Path(out) / RAW_FILE
     reps = Path(out) / REPLICATES_DIR
+    prev = read_results(previous) if previous.is_file() else {}
+    if calibration_studies is None:
+        calibration_studies = (prev.get("calibration") or {}).get("n_studies")
+    check_plan_files(Path(out), prev)
+    stop = read_stop(out)
+    if not path.is_file() and reps.is_dir() and stop is not None and (Path(out) / STUDY_FILE).is_file():
+        # a stopped study: the seeds its record names, a missing raw.json assembled as the stop assembles it
+        cfg = config_from_dict(read_results(Path(out) / STUDY_FILE)["config"])
+        command = study_command(Path(out) / REPLICATES_DIR, stop["seeds"], cfg.scenes)
+        records = _write_stopped(_stopped_records(Path(out), stop, cfg, command))
+        return finish_replicated(out, records, command=prev.get("command"), calibration_studies=calibration_studies)
     if not path.is_file() and reps.is_dir():
-        stop = read_stop(out)
-        chosen = (sorted(reps.iterdir()) if stop is None else  # a stopped study: the seeds its record names
-                  [reps / f"seed{seed}" for seed in stop["seeds"]])
-        records = [read_results(p / RAW_FILE) for p in chosen if (p / RAW_FILE).is_file()]
+        records = [read_results(p / RAW_FILE) for p in sorted(reps.iterdir()) if (p / RAW_FILE).is_file()]
         if records:
-            command = read_results(previous).get("command") if previous.is_file() else None
-            return finish_replicated(out, records, command=command, calibration_studies=calibration_studies)
+            return finish_replicated(out, records, command=prev.get("command"), calibration_studies=calibration_studies)
     if not path.is_file() and (Path(out) / WALKS_TABLE).is_file():
         return verdicts_from_table(out, calibration_studies=calibration_studies)  # the walks table alone
     if not path.is_file():

@@ -45,8 +45,9 @@ STABILITY_SEEDS = 20
 #: The second margin the headline family is judged at (beside the plan's 0.2).
 SECOND_MARGIN = 0.1
 #: What a study that decides shows: a perfect emulator (own residuals) ``agrees`` in at least 80 % of drawn studies
-#: and one at omega2 0.3 ``disagrees`` in at least 80 %, one at the margin ``disagrees`` in at most 5 %, each at
-#: the verdict's family level; a stochastic method carries at most 40 % of the residual.
+#: and one at omega2 0.3 ``disagrees`` in at least 80 %, each at the verdict's family level; one at the margin
+#: ``disagrees`` in at most 5 % at the verdict's own 5 % (the rule's error rate as a test: at the family's stricter
+#: level it would be met more easily); a stochastic method carries at most 40 % of the residual.
 TARGETS = {"perfect_agrees_min": 0.80, "beyond_disagrees_min": 0.80, "margin_disagrees_max": 0.05,
            "stochastic_share_max": 0.40}
 #: The own-residuals calibration draws this many times the plasmode's studies (100 by default: 200).
@@ -115,12 +116,14 @@ def final_checks(tables: dict, walks, methods, *, prereg: dict, seed: int, calib
     return out
 
 
-def _rate(cal: dict, label: str, metric: str, scenario: str, verdict: str):
+def _rate(cal: dict, label: str, metric: str, scenario: str, verdict: str, level: str = "family"):
+    """The rate of ``verdict`` in a scenario of the own-residuals calibration at its ``level`` ("family": the
+    family's, "own": the verdict's own 5 %), or None where not computed."""
     r = ((cal.get("comparisons") or {}).get(label, {}).get("metrics") or {}).get(metric) or {}
     if r.get("status") != "computed":
         return None
     sc = r["scenarios"][scenario]
-    return float(sc[[k for k in sc if k.startswith("family")][0]][verdict])
+    return float(sc[[k for k in sc if k.startswith(level)][0]][verdict])
 
 
 def targets(checks: dict) -> dict:
@@ -133,7 +136,7 @@ def targets(checks: dict) -> dict:
     for key in checks["monte_carlo"]:
         label, _, metric = key.partition(": ")
         perfect = _rate(cal, label, metric, "omega2 0", "agrees")
-        margin = _rate(cal, label, metric, "omega2 0.2", "disagrees")
+        margin = _rate(cal, label, metric, "omega2 0.2", "disagrees", level="own")
         beyond = _rate(cal, label, metric, "omega2 0.3", "disagrees")
         share = [v for v in ((checks["stochastic_shares"].get(label) or {}).get(metric) or {}).values()]
         worst = max((v for v in share if v is not None), default=None)
@@ -169,7 +172,7 @@ def checks_markdown(checks: dict) -> str:
              f"{checks['n_walks']} walks, {checks['bootstrap_resamples']} bootstrap resamples, Holm across "
              f"{checks['family_size']} headline verdicts at {checks['level']:.0%}. A verdict whose Holm-adjusted p's "
              "99 % Monte Carlo interval holds the level is undetermined (the plan's rule); the targets are judged at "
-             "each verdict's family level.", "",
+             "each verdict's family level, the margin's at its own 5 %.", "",
              "| verdict | family verdict | after the Monte Carlo rule | over 20 bootstrap seeds | at omega2 0.1 | "
              "perfect agrees (>= 80 %) | margin disagrees (<= 5 %) | 0.3 disagrees (>= 80 %) | stochastic share "
              "(<= 40 %) | walks to decide |", "|" + " --- |" * 10]

@@ -24,7 +24,7 @@ import math
 import numpy as np
 
 from emulator.core.stats import holm, rng_of
-from validation.live.config import COMPARISONS, HEADLINE_COMPARISONS, HEADLINE_METRICS, JUDGED_METRICS
+from validation.live.config import COMPARISONS, HEADLINE_COMPARISONS, HEADLINE_METRICS, JUDGED_METRICS, RESEEDED
 from validation.live.headline import apply_family, with_derived
 from validation.verdicts.agreement import (
     ALPHA,
@@ -78,11 +78,12 @@ def pvalue_interval(replicates, estimate, omega2_max: float = OMEGA2_MAX,
     return {"p_agrees": [a_lo, a_hi], "p_disagrees": [d_lo, d_hi]}
 
 
-def _member(live, emulated, clusters, n_resamples: int, seed, omega2_max: float = OMEGA2_MAX) -> dict:
+def _member(live, emulated, control, clusters, n_resamples: int, seed, omega2_max: float = OMEGA2_MAX) -> dict:
     """One headline verdict at its own level as :func:`validation.verdicts.agreement.judge` draws it (the same
+    walks: those complete in ``live``, ``emulated`` and the re-seeded ``control`` where there is one; the same
     random stream), with its replicates' Monte Carlo interval (``omega2_max``: the margin it is judged at)."""
     L, E = np.asarray(live, dtype=np.float64), np.asarray(emulated, dtype=np.float64)
-    ok = complete_walks(L, E)
+    ok = complete_walks(L, E, None if control is None else np.asarray(control, dtype=np.float64))
     L, E = L[ok], E[ok]
     labels = np.asarray(list(clusters))[ok]
     units = int(np.unique(labels).size)
@@ -95,10 +96,14 @@ def _member(live, emulated, clusters, n_resamples: int, seed, omega2_max: float 
     b = judge_batch(L[None], E[None], n_resamples=n_resamples, seed=rng, omega2_max=omega2_max, plan=plan,
                     n_units=units)
     boot = omega2_over_plan(plan, L, E)
+    def finite(v):  # as judge records them: a p or omega2 that is not finite is None
+        v = float(v)
+        return v if math.isfinite(v) else None
+
     return {"verdict": VERDICTS[int(b["verdict"][0])], "reason": "", "n_walks": int(L.shape[0]),
-            "n_clusters": units, "live_method_p": float(b["live_p"][0]), "p_agrees": float(b["p_agrees"][0]),
-            "p_disagrees": float(b["p_disagrees"][0]),
-            "omega2_untruncated": float(b["omega2_untruncated"][0]),
+            "n_clusters": units, "live_method_p": float(b["live_p"][0]), "p_agrees": finite(b["p_agrees"][0]),
+            "p_disagrees": finite(b["p_disagrees"][0]),
+            "omega2_untruncated": finite(b["omega2_untruncated"][0]),
             "mc": pvalue_interval(boot, float(b["omega2_untruncated"][0]), omega2_max)}
 
 
@@ -118,15 +123,17 @@ def headline_family(tables: dict, walks, methods, *, seed: int = 0, n_resamples:
         if ref not in tables or other not in tables:
             continue
         c = list(COMPARISONS).index(label)
+        control = tables.get(RESEEDED.get(ref))  # judge_metrics' control: its walks are judge's walks
         comparisons[label] = {"status": "run", "metrics": {
-            m: _member(tables[ref][m], tables[other][m], clusters, n_resamples,
+            m: _member(tables[ref][m], tables[other][m], None if control is None else control[m], clusters,
+                       n_resamples,
                        [seed, 22_001, c, list(JUDGED_METRICS).index(m)], omega2_max)
             for m in HEADLINE_METRICS if m in tables[ref] and m in tables[other] and m not in excluded}}
     apply_family(comparisons, alpha=alpha, min_walks=MIN_WALKS, excluded=excluded)
     members = [(label, m, r) for label, c in comparisons.items() for m, r in c["metrics"].items()]
 
-    def decidable(r):
-        return r["n_clusters"] >= MIN_WALKS and r["live_method_p"] < alpha
+    def decidable(r):  # no live p: fewer than two walks or methods, nothing to compare
+        return r["n_clusters"] >= MIN_WALKS and r["live_method_p"] is not None and r["live_method_p"] < alpha
 
     ends = {}
     for key in ("p_agrees", "p_disagrees"):
@@ -138,7 +145,7 @@ def headline_family(tables: dict, walks, methods, *, seed: int = 0, n_resamples:
         verdict_mc = r["verdict"]
         if key is not None and adj[key][0] <= alpha < adj[key][1]:
             verdict_mc = MC_UNDETERMINED
-        out[f"{label}: {m}"] = {k: r[k] for k in ("verdict", "verdict_alone", "omega2_untruncated", "p_agrees",
+        out[f"{label}: {m}"] = {k: r[k] for k in ("verdict", "verdict_alone", "n_walks", "omega2_untruncated", "p_agrees",
                                                   "p_disagrees", "p_agrees_adjusted", "p_disagrees_adjusted", "mc")}
         out[f"{label}: {m}"].update(adjusted_mc=adj, verdict_mc=verdict_mc)
     return out
@@ -153,17 +160,22 @@ def ruled_verdict(member: dict) -> str:
 def apply_monte_carlo_rule(comparisons: dict, family: dict) -> None:
     """The Monte Carlo rule on a judged headline, in place: each member of ``family`` (:func:`headline_family` of
     the same tables, seed and resamples) gets its ``adjusted_mc`` and ``verdict_mc`` in ``comparisons``, and a
-    family verdict whose adjusted p's interval holds the level becomes ``undetermined`` with the reason.  A member
-    whose family verdict differs from ``comparisons``' (other tables or draws) is refused with ValueError."""
+    family verdict (``agrees`` or ``disagrees``) whose adjusted p's interval holds the level becomes
+    ``undetermined`` with the reason: the interval of the p its verdict alone was read from.  A member whose
+    verdicts, walks or adjusted p's differ from ``comparisons``' (other tables or draws) is refused with
+    ValueError."""
     for key, r in family.items():
         label, _, metric = key.partition(": ")
         res = comparisons[label]["metrics"][metric]
-        if res["verdict"] != r["verdict"]:
-            raise ValueError(f"{key}: the Monte Carlo family says {r['verdict']}, the headline {res['verdict']}: "
-                             "not the same tables, seed or resamples")
+        differs = [k for k in ("verdict", "verdict_alone", "n_walks", "p_agrees_adjusted", "p_disagrees_adjusted")
+                   if res.get(k) != r.get(k)]
+        if differs:
+            raise ValueError(f"{key}: the Monte Carlo family and the headline differ in {', '.join(differs)} "
+                             f"({', '.join(f'{r.get(k)} against {res.get(k)}' for k in differs)}): not the same "
+                             "tables, walks, seed or resamples")
         res["adjusted_mc"], res["verdict_mc"] = r["adjusted_mc"], r["verdict_mc"]
-        if r["verdict_mc"] == MC_UNDETERMINED:
-            p = r["adjusted_mc"]["p_agrees" if r["verdict"] == "agrees" else "p_disagrees"]
+        if r["verdict_mc"] == MC_UNDETERMINED and r["verdict"] in ("agrees", "disagrees"):
+            p = r["adjusted_mc"]["p_agrees" if r["verdict_alone"] == "agrees" else "p_disagrees"]
             res["verdict"] = "undetermined"
             res["reason"] += (f"; but not beyond the bootstrap's Monte Carlo error (the Holm-adjusted p's "
                               f"{MC_CONFIDENCE:.0%} interval [{p[0]:.2g}, {p[1]:.2g}] holds the level)")

@@ -131,15 +131,21 @@ def check_preregistration(out, prereg: dict) -> None:
                         f"{', '.join(diff)}; a pre-registered plan is not changed (start a new study folder)")
 
 
-def interim_reason(prereg: dict | None, n_walks: int, stop: dict | None = None) -> str | None:
+def interim_reason(prereg: dict | None, n_walks: int, stop: dict | None = None, seeds=None) -> str | None:
     """Why a look at ``n_walks`` walks of a pre-registered study decides nothing (an interim look: futility only),
     or None (the planned walks are there, the walks the study was stopped at (``stop``, :func:`read_stop`), or the
-    study was not pre-registered).  A stopped study judged on other walks than its record names is refused."""
-    if prereg is None or n_walks >= int(prereg["n_walks"]):
+    study was not pre-registered).  A stopped study is judged on the walks its record names only: other walks
+    (their count, or ``seeds``, the seeds of the walks judged, where given) are refused, the planned size too."""
+    if prereg is None:
         return None
     if stop is not None:
         if n_walks != int(stop["n_walks"]):
             raise LiveError(f"{STOP_FILE}: the study was stopped at {stop['n_walks']} walks, but {n_walks} are judged")
+        if seeds is not None and sorted({int(s) for s in seeds}) != sorted(int(s) for s in stop["seeds"]):
+            raise LiveError(f"{STOP_FILE}: the study was stopped with seeds {list(stop['seeds'])} judged, but the "
+                            f"walks judged are of seeds {sorted({int(s) for s in seeds})}")
+        return None
+    if n_walks >= int(prereg["n_walks"]):
         return None
     return (f"interim look at {n_walks} of the {prereg['n_walks']} pre-registered walks: futility only, verdicts are "
             "drawn at the planned size")
@@ -163,7 +169,8 @@ def stop_record(out, reason: str, *, when: str) -> dict:
     """The stop record of the pre-registered study in ``out``, stopped now (``when``: UTC, ISO 8601) for ``reason``
     (a rule that does not read the data): its final look judges the complete seeds (:func:`complete_seeds`); the
     walks of a seed begun but not complete are left out and named.  Refused (:class:`LiveError`) without a plan,
-    without a reason, or without a complete seed."""
+    without a reason, without a complete seed, or with every planned seed complete (the study is then judged at its
+    planned size, no stop needed)."""
     prereg = read_preregistration(out)
     if prereg is None:
         raise LiveError(f"{Path(out) / PREREG_FILE}: not found; only a pre-registered study is stopped")
@@ -172,6 +179,9 @@ def stop_record(out, reason: str, *, when: str) -> dict:
     seeds, partial = complete_seeds(out, prereg)
     if not seeds:
         raise LiveError(f"{out}: no seed has every walk finished; nothing to judge")
+    if len(seeds) == len(prereg["seeds"]):
+        raise LiveError(f"{out}: every one of the {prereg['n_walks']} pre-registered walks is finished; the study is "
+                        "judged at its planned size (--resume or --redraw), not stopped")
     n = len(seeds) * len(prereg["scenes"])
     return {"stopped": when, "reason": str(reason).strip(), "n_walks": n, "n_walks_planned": int(prereg["n_walks"]),
             "seeds": seeds, "left_out": {f"seed{k}": v for k, v in partial.items()},

@@ -14,14 +14,24 @@ from pathlib import Path
 
 from emulator.io.files import write_results
 from validation.live.config import LiveConfig
-from validation.live.evidence import judge_metrics, pilot_reason, store_calibration, store_walks_table, walk_values
+from validation.live.evidence import (
+    WALKS_TABLE,
+    judge_metrics,
+    pilot_reason,
+    store_calibration,
+    store_walks_table,
+    table_refusal,
+    walk_labels,
+    walk_values,
+    walks_table_csv,
+)
 from validation.live.final_checks import final_checks
 from validation.live.preregistration import PREREG_FILE, STOP_FILE, interim_reason, read_preregistration, read_stop
-from validation.live.seeds import loop_names, split_seeds, store_seeds_table, store_shares
+from validation.live.seeds import SEEDS_TABLE, loop_names, split_seeds, store_seeds_table, store_shares
 from validation.live.table_check import canonical_order
 from validation.verdicts.plasmode import STUDIES
 
-__all__ = ["POWER_FILE", "evidence", "judge_study", "store_power"]
+__all__ = ["POWER_FILE", "evidence", "table_refusals", "judge_study", "store_power"]
 
 
 def evidence(cfg: LiveConfig, records: list[dict], power_seeds: int = 100, folder=None,
@@ -31,13 +41,10 @@ def evidence(cfg: LiveConfig, records: list[dict], power_seeds: int = 100, folde
     table is stored there (:func:`validation.live.evidence.store_walks_table`; the walks in their key's order,
     :func:`validation.live.table_check.canonical_order`, whatever the records' order), and the calibration
     (``calibration_studies`` plasmode studies; :func:`validation.live.evidence.store_calibration`)."""
-    names = loop_names(cfg.methods, cfg.stochastic_seeds)  # k > 1: each seed of a stochastic method, then the mean
-    walks, tables = walk_values(records, names)
-    walks, _, tables = canonical_order(walks, names, tables, scenes=cfg.scenes, method_order=names)
+    walks, tables, per_seed = _walk_tables(cfg, records)
     out = {"walks": walks, "n_walks": len(walks)}
-    if tables and cfg.stochastic_seeds > 1:
-        tables, seed_names, seed_tables = split_seeds(tables, names, cfg.methods, cfg.stochastic_seeds)
-        out["seeds_table"] = None if folder is None else store_seeds_table(folder, walks, seed_names, seed_tables)
+    if per_seed is not None:
+        out["seeds_table"] = None if folder is None else store_seeds_table(folder, walks, *per_seed)
     if tables and folder is not None:
         out["walks_table"] = store_walks_table(folder, walks, tables, cfg.methods)
     if tables:
@@ -46,6 +53,29 @@ def evidence(cfg: LiveConfig, records: list[dict], power_seeds: int = 100, folde
     else:
         out.update({"metrics": {}, "reason": "no benchmark metrics in this experiment (metrics off)"})
     return out
+
+
+def _walk_tables(cfg: LiveConfig, records: list[dict]) -> tuple[list[str], dict, tuple | None]:
+    """(walks, tables, (seed names, seed tables) or None): the per-walk tables of ``records`` in the walks' key
+    order, a stochastic method's k seeds (k > 1) split off into their own tables."""
+    names = loop_names(cfg.methods, cfg.stochastic_seeds)  # k > 1: each seed of a stochastic method, then the mean
+    walks, tables = walk_values(records, names)
+    walks, _, tables = canonical_order(walks, names, tables, scenes=cfg.scenes, method_order=names)
+    if tables and cfg.stochastic_seeds > 1:
+        tables, seed_names, seed_tables = split_seeds(tables, names, cfg.methods, cfg.stochastic_seeds)
+        return walks, tables, (seed_names, seed_tables)
+    return walks, tables, None
+
+
+def table_refusals(folder, cfg: LiveConfig, records: list[dict]) -> list[str]:
+    """Why :func:`evidence` would refuse to store the tables of ``records`` in ``folder`` (a ``walks.csv`` or seeds
+    table there whose rows differ, :func:`validation.live.evidence.table_refusal`), computed without writing: a
+    step that must not half-happen (a study's stop) checks it first."""
+    walks, tables, per_seed = _walk_tables(cfg, records)
+    texts = {} if not tables else {WALKS_TABLE: walks_table_csv(walks, tables, cfg.methods)}
+    if per_seed is not None:
+        texts[SEEDS_TABLE] = walks_table_csv(walks, per_seed[1], per_seed[0])
+    return [r for name, text in texts.items() if (r := table_refusal(Path(folder) / name, text)) is not None]
 
 
 def judge_study(cfg: LiveConfig, tables: dict, methods, walks, folder, power_seeds: int,
@@ -57,7 +87,7 @@ def judge_study(cfg: LiveConfig, tables: dict, methods, walks, folder, power_see
     ``final_checks``), at any other look for futility only."""
     prereg = None if folder is None else read_preregistration(folder)
     stop = None if prereg is None else read_stop(folder)
-    interim = interim_reason(prereg, len(walks), stop)
+    interim = interim_reason(prereg, len(walks), stop, seeds=walk_labels(walks)[1])
     kw = {} if prereg is None else {"n_resamples": int(prereg["bootstrap_resamples"]),
                                     "headline_exclusions": prereg["excluded_from_headline"], "monte_carlo_rule": True}
     out = judge_metrics(tables, methods, seed=cfg.seed, power=power_seeds > 0, power_seeds=power_seeds, walks=walks,

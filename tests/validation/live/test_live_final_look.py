@@ -24,9 +24,10 @@ from tests.validation.live.test_live_preregistration import _records
 WHEN = "2026-12-05T01:00:00Z"
 
 
-def _study(tmp_path, n_complete: int, partial: tuple = ()):
+def _study(tmp_path, n_complete: int, partial: tuple = (), command: str | None = None):
     """A pre-registered folder of 12 seeds (48 walks): seeds 0 .. n_complete-1 with every walk record and raw.json,
-    seed n_complete with the walk records of ``partial`` only."""
+    seed n_complete with the walk records of ``partial`` only; ``command``: the study's command line, recorded by
+    each complete walk's VO benchmark (``{out}`` is the folder)."""
     import validation.live.experiment as experiment
 
     cfg = replace(LiveConfig(scenes=tuple(SCENES), n_cycles=8), seed=0)
@@ -40,6 +41,10 @@ def _study(tmp_path, n_complete: int, partial: tuple = ()):
         (exp / "walks").mkdir(parents=True)
         for s in (SCENES if k < n_complete else partial):
             (exp / "walks" / f"{s}.json").write_text("{}")
+            if command is not None and k < n_complete:
+                (exp / "vo" / s / "live-same-instant").mkdir(parents=True)
+                (exp / "vo" / s / "live-same-instant" / "results.json").write_text(
+                    json.dumps({"command": command.format(out=out)}))
         if k < n_complete:
             (exp / "raw.json").write_text(json.dumps(recs[k]))
     return out
@@ -116,30 +121,52 @@ def test_a_stopped_study_is_judged_once_on_its_complete_seeds_and_redraws_to_the
     assert again["metrics"] == res["metrics"]
 
 
+def _judged(verdict, alone, pa, pd, n=40):
+    return {"verdict": verdict, "verdict_alone": alone, "n_walks": n, "p_agrees_adjusted": pa,
+            "p_disagrees_adjusted": pd}
+
+
 def test_the_monte_carlo_rule_leaves_undetermined_what_the_bootstrap_draws_decide():
-    comparisons = {"c": {"metrics": {"a": {"verdict": "agrees", "reason": "bounds"},
-                                     "b": {"verdict": "disagrees", "reason": "bounds"}}}}
-    family = {"c: a": {"verdict": "agrees", "verdict_mc": MC_UNDETERMINED,
+    comparisons = {"c": {"metrics": {"a": {**_judged("agrees", "agrees", 0.04, 1.0), "reason": "bounds"},
+                                     "b": {**_judged("disagrees", "disagrees", 1.0, 0.002), "reason": "bounds"},
+                                     "u": {**_judged("undetermined", "agrees", 0.07, 1.0), "reason": "family"}}}}
+    family = {"c: a": {**_judged("agrees", "agrees", 0.04, 1.0), "verdict_mc": MC_UNDETERMINED,
                        "adjusted_mc": {"p_agrees": [0.031, 0.062], "p_disagrees": [1.0, 1.0]}},
-              "c: b": {"verdict": "disagrees", "verdict_mc": "disagrees",
-                       "adjusted_mc": {"p_agrees": [1.0, 1.0], "p_disagrees": [0.001, 0.004]}}}
+              "c: b": {**_judged("disagrees", "disagrees", 1.0, 0.002), "verdict_mc": "disagrees",
+                       "adjusted_mc": {"p_agrees": [1.0, 1.0], "p_disagrees": [0.001, 0.004]}},
+              "c: u": {**_judged("undetermined", "agrees", 0.07, 1.0), "verdict_mc": MC_UNDETERMINED,
+                       "adjusted_mc": {"p_agrees": [0.045, 0.09], "p_disagrees": [1.0, 1.0]}}}
     apply_monte_carlo_rule(comparisons, family)
-    a, b = comparisons["c"]["metrics"]["a"], comparisons["c"]["metrics"]["b"]
+    a, b, u = (comparisons["c"]["metrics"][k] for k in "abu")
     assert a["verdict"] == "undetermined" and "interval [0.031, 0.062] holds the level" in a["reason"]
     assert b["verdict"] == "disagrees" and b["reason"] == "bounds" and b["adjusted_mc"]["p_disagrees"] == [0.001, 0.004]
-    assert [ruled_verdict(r) for r in family.values()] == ["undetermined", "disagrees"]
-    with pytest.raises(ValueError, match="the Monte Carlo family says agrees, the headline undetermined"):
+    # undetermined at the family level already: the rule changes nothing and adds no reason
+    assert u["verdict"] == "undetermined" and u["reason"] == "family" and u["verdict_mc"] == MC_UNDETERMINED
+    assert [ruled_verdict(r) for r in family.values()] == ["undetermined", "disagrees", "undetermined"]
+    with pytest.raises(ValueError, match="differ in verdict .agrees against undetermined"):
         apply_monte_carlo_rule(comparisons, family)  # 'a' was ruled undetermined: other draws than the family's
 
 
+@pytest.mark.parametrize("key,value", [("n_walks", 36), ("p_agrees_adjusted", 0.041), ("verdict_alone", "undetermined")])
+def test_the_monte_carlo_rule_refuses_a_family_of_other_walks_or_draws(key, value):
+    comparisons = {"c": {"metrics": {"a": {**_judged("agrees", "agrees", 0.04, 1.0), "reason": "bounds"}}}}
+    member = {**_judged("agrees", "agrees", 0.04, 1.0), "verdict_mc": "agrees",
+              "adjusted_mc": {"p_agrees": [0.03, 0.045], "p_disagrees": [1.0, 1.0]}, key: value}
+    with pytest.raises(ValueError, match=f"differ in {key} "):
+        apply_monte_carlo_rule(comparisons, {"c: a": member})
+    assert "adjusted_mc" not in comparisons["c"]["metrics"]["a"]
+
+
 def _checks(perfect, margin, beyond, share, changed=()):
-    def rates(agrees, disagrees):
-        return {"own 5 %": {"agrees": 1.0, "disagrees": 0.0}, "family: 5 % / 4": {"agrees": agrees,
-                                                                                 "disagrees": disagrees}}
+    def rates(agrees, disagrees, own_disagrees=0.0):
+        return {"own 5 %": {"agrees": 1.0, "disagrees": own_disagrees},
+                "family: 5 % / 4": {"agrees": agrees, "disagrees": disagrees}}
     cal = {"comparisons": {"c": {"metrics": {"m": {
         "status": "computed", "walks_to_decide": {"walks": 120, "towards": "agrees"},
         "scenarios": {"omega2 0": rates(perfect, 0.0), "omega2 0.1": rates(0.5, 0.0),
-                      "omega2 0.2": rates(0.1, margin), "omega2 0.3": rates(0.0, beyond)}}}}}}
+                      # the margin's target is read at the verdict's own 5 %; the family's rate is lower
+                      "omega2 0.2": rates(0.1, margin / 4, own_disagrees=margin),
+                      "omega2 0.3": rates(0.0, beyond, own_disagrees=0.99)}}}}}}
     return {"monte_carlo": {"c: m": {}}, "own_calibration": cal, "stability": {"changed": list(changed)},
             "stochastic_shares": {"c": {"m": {"kim": share}}}}
 
@@ -147,7 +174,7 @@ def _checks(perfect, margin, beyond, share, changed=()):
 @pytest.mark.parametrize("values,met", [((0.80, 0.05, 0.80, 0.40), True), ((0.79, 0.05, 0.80, 0.40), False),
                                          ((0.80, 0.06, 0.80, 0.40), False), ((0.80, 0.05, 0.79, 0.40), False),
                                          ((0.80, 0.05, 0.80, 0.41), False)])
-def test_each_target_is_judged_at_the_family_level_at_its_bound(values, met):
+def test_each_target_is_judged_at_its_level_at_its_bound(values, met):
     t = targets(_checks(*values))
     entry = t["per_verdict"]["c: m"]
     assert entry["perfect_agrees"]["value"] == values[0] and entry["margin_disagrees"]["value"] == values[1]
@@ -178,11 +205,137 @@ def test_the_checks_render_every_headline_verdict_with_its_targets(tmp_path):
 def test_the_command_line_stops_a_study_once_and_not_with_redraw_or_resume(tmp_path, capsys):
     from validation.live.cli import main
 
-    out = _study(tmp_path, 10)
+    out = _study(tmp_path, 10, command="exposim validate live -o {out} --cycles 8 --replicates 12")
     assert main(["-o", str(out), "--stop", "budget", "--redraw"]) == 1
     assert "--stop draws a stopped study's verdicts itself" in capsys.readouterr().err and not (out / STOP_FILE).exists()
     assert main(["-o", str(out), "--stop", "the budget: 24 h of two cores", "--calibration-studies", "0", "-q"]) == 0
+    # results.json keeps the command that ran the walks (it reproduces the study); stop.json the stop's own
     res = json.loads((out / "results.json").read_text())
-    assert res["command"] == "python -m validation.live -o . --stop 'the budget: 24 h of two cores'"
-    assert json.loads((out / STOP_FILE).read_text())["reason"] == "the budget: 24 h of two cores"
+    assert res["command"] == "exposim validate live -o . --cycles 8 --replicates 12"
+    stop = json.loads((out / STOP_FILE).read_text())
+    assert stop["reason"] == "the budget: 24 h of two cores"
+    assert stop["command"] == "python -m validation.live -o . --stop 'the budget: 24 h of two cores'"
     assert main(["-o", str(out), "--stop", "again"]) == 1 and "already stopped" in capsys.readouterr().err
+
+
+def _files(out):
+    return {str(p.relative_to(out)): p.read_bytes() for p in sorted(out.rglob("*")) if p.is_file()}
+
+
+def test_a_stop_checks_everything_before_it_writes_and_a_redraw_mends_one_cut_short(tmp_path, monkeypatch):
+    import validation.live.experiment as experiment
+
+    recs = _records(12, 8)
+    # a stale, larger walks.csv (an earlier look with another seed's walks): refused, nothing written
+    out = _study(tmp_path / "a", 10)
+    ref = _study(tmp_path / "r", 10)
+    experiment.stop_study(ref, "budget", calibration_studies=0, when=WHEN)
+    (out / "walks.csv").write_bytes((ref / "walks.csv").read_bytes() + b"lake/seed99,lake,99,fixed,live,1\n")
+    before = _files(out)
+    with pytest.raises(LiveError, match="walks.csv: differs from the walks recomputed.*nothing was written"):
+        experiment.stop_study(out, "budget", calibration_studies=0, when=WHEN)
+    assert _files(out) == before and not (out / STOP_FILE).exists()
+    # a seed's raw.json from a run with a failed walk is not reused: the seed is assembled from its walk records
+    out = _study(tmp_path / "b", 10)
+    stale = {**recs[3], "failed_walks": [{"walk": f"{SCENES[1]}/seed3", "error": "killed"}]}
+    (out / "replicates" / "seed3" / "raw.json").write_text(json.dumps(stale))
+    assembled, finished = [], []
+
+    def assemble(exp, cfg, failed, command=None):
+        assembled.append((exp.name, cfg.seed, failed))
+        return recs[cfg.seed]
+
+    monkeypatch.setattr(experiment, "assemble_raw", assemble)
+    monkeypatch.setattr(experiment, "finish", lambda exp, raw: finished.append(exp.name))
+    res = experiment.stop_study(out, "budget", calibration_studies=0, when=WHEN)
+    assert assembled == [("seed3", 3, {})] and finished == ["seed3"]
+    assert json.loads((out / "replicates" / "seed3" / "raw.json").read_text()) == recs[3]
+    assert (out / "results.json").read_bytes() == (ref / "results.json").read_bytes()
+    assert res["metrics"] == json.loads((ref / "results.json").read_text())["metrics"]
+    # cut short after stop.json (a seed's results fail): --redraw assembles what is missing, to the same bytes
+    out = _study(tmp_path / "c", 10)
+    (out / "replicates" / "seed7" / "raw.json").unlink()
+
+    def crash(exp, raw):
+        raise RuntimeError("disk full")
+
+    monkeypatch.setattr(experiment, "finish", crash)
+    with pytest.raises(RuntimeError, match="disk full"):
+        experiment.stop_study(out, "budget", calibration_studies=0, when=WHEN)
+    assert (out / STOP_FILE).read_bytes() == (ref / STOP_FILE).read_bytes() and not (out / "results.json").exists()
+    (out / "replicates" / "seed7" / "raw.json").unlink()  # as if the crash came before it was written
+    monkeypatch.setattr(experiment, "finish", lambda exp, raw: None)
+    experiment.redraw(out, calibration_studies=0)
+    for name in ("results.json", "walks.csv", "report.md", "power.json"):
+        assert (out / name).read_bytes() == (ref / name).read_bytes(), name
+
+
+def test_a_stopped_study_binds_every_later_look_to_its_seeds(tmp_path):
+    import validation.live.experiment as experiment
+
+    out = _study(tmp_path, 10)
+    plan = json.loads((out / PREREG_FILE).read_text())
+    rec = stop_record(out, "budget", when=WHEN)
+    # the planned size, or the stopped size on other seeds, is not the stopped study's look
+    with pytest.raises(LiveError, match="stopped at 40 walks, but 48 are judged"):
+        interim_reason(plan, 48, rec)
+    with pytest.raises(LiveError, match=r"stopped with seeds \[0, 1, .*9\] judged, but the walks judged are of "
+                                        r"seeds \[0, 1, .*8, 10\]"):
+        interim_reason(plan, 40, rec, seeds=[*range(9), 10])
+    assert interim_reason(plan, 40, rec, seeds=[k for k in range(10) for _ in SCENES]) is None
+    experiment.stop_study(out, "budget", calibration_studies=0, when=WHEN)
+    recs = _records(12, 8)
+    with pytest.raises(LiveError, match=r"stopped with seeds .* judged; the records given are of seeds"):
+        experiment.finish_replicated(out, recs[:9] + recs[10:11], calibration_studies=0)
+    # every planned seed finished: judged at its planned size, never stopped
+    full = _study(tmp_path / "full", 12)
+    with pytest.raises(LiveError, match="every one of the 48 pre-registered walks is finished"):
+        experiment.stop_study(full, "budget", when=WHEN)
+    assert not (full / STOP_FILE).exists()
+
+
+def test_a_copied_stopped_study_needs_its_plan_and_stop_and_redraws_with_its_calibration(tmp_path):
+    import validation.live.experiment as experiment
+
+    out = _study(tmp_path, 10)
+    res = experiment.stop_study(out, "budget", calibration_studies=0, when=WHEN)
+    assert res["study_folder"]["missing_files"] == []
+    cal = json.loads((out / "calibration.json").read_text())
+    assert cal["status"] == "not computed" and cal["n_studies"] == 0
+    before = _files(out)
+    experiment.redraw(out)  # the folder's own count of studies (0), not the default
+    assert _files(out) == before
+    for missing in (STOP_FILE, PREREG_FILE):
+        table = tmp_path / f"without-{missing}"
+        table.mkdir()
+        for name in ("results.json", "walks.csv", PREREG_FILE, STOP_FILE, "study.json"):
+            if name != missing:
+                shutil.copy(out / name, table / name)
+        copied = _files(table)
+        with pytest.raises(LiveError, match=f"{missing}: not found, but .*results.json was judged by it"):
+            experiment.redraw(table)
+        assert _files(table) == copied
+
+
+def test_a_stopped_study_with_the_own_calibration_on_judges_its_targets(tmp_path):
+    import validation.live.experiment as experiment
+
+    out = _study(tmp_path, 10)
+    res = experiment.stop_study(out, "budget", calibration_studies=3, when=WHEN)
+    checks = res["final_checks"]
+    own = checks["own_calibration"]
+    assert own["n_studies"] == 6 and own["family_size"] == 4  # twice the plasmode's drawn studies
+    per = own["comparisons"]["emulated vs cycle-rate live"]["metrics"]["median_matches"]
+    assert per["status"] == "computed" and per["n_resamples"] == 4000 and per["seeds_drawn_from"] == 10
+    t = checks["targets"]["per_verdict"]["emulated vs cycle-rate live: median_matches"]
+    fam = next(k for k in per["scenarios"]["omega2 0"] if k.startswith("family"))
+    assert t["perfect_agrees"]["value"] == per["scenarios"]["omega2 0"][fam]["agrees"]
+    assert t["beyond_disagrees"]["value"] == per["scenarios"]["omega2 0.3"][fam]["disagrees"]
+    assert t["margin_disagrees"]["value"] == per["scenarios"]["omega2 0.2"]["own 5 %"]["disagrees"]
+    for entry in (t["perfect_agrees"], t["beyond_disagrees"], t["margin_disagrees"]):  # rates of 6 drawn studies
+        assert entry["value"] in {k / 6 for k in range(7)}
+    share = checks["stochastic_shares"]["emulated vs cycle-rate live"]["median_matches"]["kim"]
+    assert t["stochastic_share"] == {"value": share, "met": share <= 0.40} and 0.0 < share < 1.0
+    before = _files(out)
+    experiment.redraw(out)
+    assert _files(out) == before
