@@ -41,7 +41,7 @@ from validation.live.monte_carlo import apply_monte_carlo_rule, headline_family
 from validation.verdicts.agreement import ALPHA, MIN_WALKS, judge
 from validation.verdicts.plasmode import CALIBRATION_FILE, STUDIES, calibrate
 from validation.verdicts.power import power_summary, scales_from_tables
-from validation.verdicts.ranking import cluster_plan, over_plan
+from validation.verdicts.ranking import cluster_plan, over_plan, walk_labels
 
 __all__ = ["WALK_METRICS", "WALKS_TABLE", "walk_value", "walk_values", "walk_labels", "walks_table_csv",
            "parse_walks_table", "store_walks_table", "table_refusal", "condition_table", "metric_scales", "judge_metrics",
@@ -97,18 +97,6 @@ def walk_values(records: list[dict], methods) -> tuple[list[str], dict[str, dict
     tables = {r: {metric: np.asarray(v, dtype=np.float64).reshape(len(walks), len(names))
                   for metric, v in per.items()} for r, per in rows.items()}
     return walks, tables
-
-
-def walk_labels(walks) -> tuple[list[str], list[int]]:
-    """(scenes, seeds) of walk names ``<scene>/seed<S>`` (:func:`walk_values`)."""
-    scenes, seeds = [], []
-    for w in walks:
-        scene, _, seed = str(w).rpartition("/seed")
-        if not scene or not seed.isdigit():
-            raise ValueError(f"walk name {w!r} is not <scene>/seed<S>")
-        scenes.append(scene)
-        seeds.append(int(seed))
-    return scenes, seeds
 
 
 _TABLE_HEAD = ("walk", "scene", "seed", "method", "condition")

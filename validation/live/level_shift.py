@@ -25,7 +25,7 @@ from emulator.core.stats import percentile_interval, variance_components
 from validation.live.config import COMPARISONS, HEADLINE_COMPARISONS
 from validation.live.monte_carlo import headline_family, ruled_verdict
 from validation.verdicts.agreement import omega2_untruncated
-from validation.verdicts.ranking import cluster_plan, over_plan
+from validation.verdicts.ranking import cluster_plan, over_plan, walk_labels
 
 __all__ = ["LEVEL_MARGIN", "SHIFT_METRICS", "level_shift", "per_scene", "leave_one_scene_out"]
 
@@ -98,7 +98,7 @@ def leave_one_scene_out(tables: dict, walks, methods, *, seed: int = 0, n_resamp
     ``excluded``, ``monte_carlo_rule``: a pre-registered study's family (metrics left out) and its verdicts after
     the Monte Carlo rule (:func:`validation.live.monte_carlo.ruled_verdict`)."""
     walks = list(walks)
-    scenes = [str(w).rpartition("/seed")[0] for w in walks]
+    scenes = walk_labels(walks)[0]
 
     def verdicts(tabs, names):
         fam = headline_family(tabs, names, methods, seed=seed, n_resamples=n_resamples, excluded=excluded)

@@ -36,7 +36,7 @@ from validation.verdicts.agreement import (
     omega2_over_plan,
     pvalues_of_fraction,
 )
-from validation.verdicts.ranking import cluster_plan
+from validation.verdicts.ranking import cluster_plan, walk_labels
 
 __all__ = ["MC_CONFIDENCE", "MC_UNDETERMINED", "wilson", "pvalue_interval", "headline_family", "ruled_verdict",
            "apply_monte_carlo_rule", "verdict_stability"]
@@ -116,7 +116,7 @@ def headline_family(tables: dict, walks, methods, *, seed: int = 0, n_resamples:
     family is judged at (the headline's 0.2; another one reports the verdicts at that margin)."""
     excluded = excluded or {}
     tables = with_derived(tables)
-    clusters = [int(str(w).rpartition("/seed")[2]) for w in walks]
+    clusters = walk_labels(walks)[1]
     comparisons = {}
     for label in HEADLINE_COMPARISONS:
         ref, other = COMPARISONS[label]

@@ -26,6 +26,7 @@ from validation.live.monte_carlo import headline_family, verdict_stability
 from validation.live.table_check import read_folder_table
 from validation.protocol import Study
 from validation.verdicts.agreement import omega2_untruncated
+from validation.verdicts.ranking import walk_labels
 
 __all__ = ["LEVEL_SHIFT", "MONTE_CARLO", "level_shift_markdown"]
 
@@ -37,8 +38,7 @@ def _level_shift_arguments(p: argparse.ArgumentParser) -> None:
 def level_shift_markdown(tables: dict, walks, methods, seed: int) -> str:
     """Level shifts, per-scene omega2 and the leave-one-scene-out check of a study's tables (walks x methods per
     run and metric, derived metrics included), as Markdown."""
-    seeds = [int(str(w).rpartition("/seed")[2]) for w in walks]
-    scenes = [str(w).rpartition("/seed")[0] for w in walks]
+    scenes, seeds = walk_labels(walks)
     lines = []
     for c, label in enumerate(HEADLINE_COMPARISONS):
         ref, other = COMPARISONS[label]

@@ -36,7 +36,7 @@ import numpy as np
 from emulator.core.stats import rng_of, variance_components
 from validation.verdicts.agreement import ALPHA, MIN_WALKS, OMEGA2_MAX, judge_batch, omega2_untruncated
 from validation.verdicts.plasmode import TARGET, WALK_CANDIDATES, first_reaching, residual_sd
-from validation.verdicts.ranking import cluster_plan
+from validation.verdicts.ranking import cluster_plan, walk_labels
 
 __all__ = ["SCENARIOS", "STUDIES", "RESAMPLES", "DEFINITION", "own_residuals", "scenario_rates",
            "metric_own_calibration", "study_own_calibration"]
@@ -199,8 +199,7 @@ def study_own_calibration(tables: dict, walks, *, comparisons: dict, metrics, fa
     """:func:`metric_own_calibration` for every comparison (label -> (reference run, compared run)) and metric of
     ``tables`` ({run: {metric: walks x methods}}); ``walks``: names ``<scene>/seed<S>``; ``reseeded``: reference
     run -> its re-seeded run."""
-    scenes = [str(w).rpartition("/seed")[0] for w in walks]
-    seeds = [int(str(w).rpartition("/seed")[2]) for w in walks]
+    scenes, seeds = walk_labels(walks)
     out = {"definition": DEFINITION, "scenarios": list(SCENARIOS),
            "n_studies": int(n_studies), "seed": int(seed), "family_size": int(family_size), "comparisons": {}}
     for c, (label, (ref, other)) in enumerate(comparisons.items()):

@@ -1,6 +1,7 @@
 """What the live-versus-emulated verdict needs beside omega2: the resampling plan over the study's design,
 the margin in ranking terms, each method's emulation bias, and the pairwise check.
 
+* :func:`walk_labels`: the scene and the seed of each walk name ``<scene>/seed<S>``;
 * :func:`cluster_plan`: bootstrap resamples of the walks with the seeds as clusters (the
   walks of one seed are drawn together, so every resample keeps each scene's share of the
   walks: stratified by scene); without labels every walk is its own cluster;
@@ -25,7 +26,20 @@ import numpy as np
 from emulator.core.stats import kendall_tau_b, percentile_interval, rng_of
 from validation.verdicts.claims import holm_rows, one_sided_p
 
-__all__ = ["cluster_plan", "over_plan", "margin_in_ranking_terms", "emulation_bias", "pairs_check"]
+__all__ = ["walk_labels", "cluster_plan", "over_plan", "margin_in_ranking_terms", "emulation_bias", "pairs_check"]
+
+
+def walk_labels(walks) -> tuple[list[str], list[int]]:
+    """(scenes, seeds) of walk names ``<scene>/seed<S>`` (the names of :mod:`validation.live.evidence`; the seed
+    is the walk's cluster in :func:`cluster_plan`); a malformed name is a ValueError."""
+    scenes, seeds = [], []
+    for w in walks:
+        scene, _, seed = str(w).rpartition("/seed")
+        if not scene or not seed.isdigit():
+            raise ValueError(f"walk name {w!r} is not <scene>/seed<S>")
+        scenes.append(scene)
+        seeds.append(int(seed))
+    return scenes, seeds
 
 
 def cluster_plan(n_walks: int, n_resamples: int, seed=0, clusters=None):
