@@ -213,7 +213,9 @@ def run(args, prog: str = "exposim validate live") -> int:
     if args.redraw or args.stop is not None:
         results = (redraw(args.output, calibration_studies=args.calibration_studies) if args.redraw else
                    stop_study(args.output, args.stop, command=f"{prog} -o {shlex.quote(str(args.output))} --stop "
-                              f"{shlex.quote(args.stop)}", calibration_studies=args.calibration_studies))
+                              f"{shlex.quote(args.stop)}" + ("" if args.calibration_studies is None else
+                                                              f" --calibration-studies {args.calibration_studies}"),
+                              calibration_studies=args.calibration_studies))
         if args.json:
             print_json(results)
             return 0

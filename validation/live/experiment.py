@@ -14,6 +14,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import replace
+from datetime import datetime, timezone
 from functools import partial
 from pathlib import Path
 
@@ -408,12 +409,14 @@ def _stopped_records(out: Path, stop: dict, cfg: LiveConfig, command: str | None
 
 
 def _write_stopped(records: list[tuple[Path, dict, bool]]) -> list[dict]:
-    """Write the seeds' raw.json and results that :func:`_stopped_records` assembled; returns the raw records."""
+    """Write the seeds' raw.json that :func:`_stopped_records` assembled, and the results of each seed without
+    them (:func:`finish` writes results.json last: one cut short is finished again); returns the raw records."""
     out = []
     for exp, raw, new in records:
         if new:
             write_results(exp / RAW_FILE, raw)
             raw = read_results(exp / RAW_FILE)  # as a later --redraw reads it
+        if new or not (exp / RESULTS_FILE).is_file():
             finish(exp, read_results(exp / RAW_FILE))  # finish turns the record's lists into arrays in place
         out.append(raw)
     return out
@@ -431,11 +434,10 @@ def stop_study(out, reason: str, *, command: str | None = None, calibration_stud
     ``raw.json`` and results (:func:`finish`), then the study's results.json and report.md over their walks
     (:func:`finish_replicated`), which record the command that ran the walks
     (:func:`~validation.live.portable.study_command`).  A failure after ``stop.json`` is mended by ``--redraw``,
-    which assembles a judged seed's missing ``raw.json`` the same way.  ``when``: the stop's time (UTC, ISO 8601;
-    default now).  Refused (:class:`LiveError`), with nothing written, for a folder without a study, a plan, a
-    complete seed, with every planned seed complete, or with a stop record already."""
-    from datetime import datetime, timezone
-
+    which assembles a judged seed's missing ``raw.json`` the same way, finishes a seed without results and draws
+    the look with the command and the count of calibration studies the stop used (``stop.json`` keeps it).
+    ``when``: the stop's time (UTC, ISO 8601; default now).  Refused (:class:`LiveError`), with nothing written,
+    for a folder without a study, a plan, a complete seed, every planned seed complete, or a stop record already."""
     out = Path(out)
     if not (out / STUDY_FILE).is_file():
         raise LiveError(f"{out / STUDY_FILE}: not found; {out} is not a live study folder")
@@ -447,12 +449,14 @@ def stop_study(out, reason: str, *, command: str | None = None, calibration_stud
     record = stop_record(out, reason, when=when)
     if command is not None:
         record["command"] = relative_command(command, out)
+    record["calibration_studies"] = calibration_studies  # the look's count, for a --redraw that mends it
     cfg = config_from_dict(read_results(out / STUDY_FILE)["config"])
     walks_command = study_command(out / REPLICATES_DIR, record["seeds"], cfg.scenes)
     records = _stopped_records(out, record, cfg, walks_command)
     refusals = table_refusals(out, cfg, [raw for _, raw, _ in records])
     if refusals:
-        raise LiveError("; ".join(refusals) + " (nothing was written; the study is not stopped)")
+        raise LiveError("; ".join(refusals) + " (an earlier look's table, with walks the stop leaves out: nothing was"
+                        " written and the study is not stopped; move the table away and stop again)")
     write_results(out / STOP_FILE, record, overwrite=False)
     return finish_replicated(out, _write_stopped(records), command=walks_command,
                              calibration_studies=calibration_studies)
@@ -461,24 +465,27 @@ def stop_study(out, reason: str, *, command: str | None = None, calibration_stud
 def redraw(out, calibration_studies: int | None = None) -> dict:
     """Recompute the verdicts and rewrite ``results.json``, ``report.md``, ``calibration.json`` and the figures
     of an experiment folder from its ``raw.json`` (nothing is rendered, played back or measured again).
-    ``calibration_studies``: plasmode studies of the calibration; None: as many as the folder's results.json
-    used (the default where it has none)."""
+    ``calibration_studies``: plasmode studies of the calibration; None: as many as a stopped study's stop used,
+    else as many as the folder's results.json used (the default where it has none)."""
     previous = Path(out) / RESULTS_FILE
     path = Path(out) / RAW_FILE
     reps = Path(out) / REPLICATES_DIR
     prev = read_results(previous) if previous.is_file() else {}
-    if calibration_studies is None:
-        calibration_studies = (prev.get("calibration") or {}).get("n_studies")
     check_plan_files(Path(out), prev)
     stop = read_stop(out)
+    if calibration_studies is None:
+        calibration_studies = (stop["calibration_studies"] if stop is not None and "calibration_studies" in stop
+                               else (prev.get("calibration") or {}).get("n_studies"))
     if not path.is_file() and reps.is_dir() and stop is not None and (Path(out) / STUDY_FILE).is_file():
         # a stopped study: the seeds its record names, a missing raw.json assembled as the stop assembles it
         cfg = config_from_dict(read_results(Path(out) / STUDY_FILE)["config"])
         command = study_command(Path(out) / REPLICATES_DIR, stop["seeds"], cfg.scenes)
         records = _write_stopped(_stopped_records(Path(out), stop, cfg, command))
-        return finish_replicated(out, records, command=prev.get("command"), calibration_studies=calibration_studies)
+        return finish_replicated(out, records, command=command, calibration_studies=calibration_studies)
     if not path.is_file() and reps.is_dir():
-        records = [read_results(p / RAW_FILE) for p in sorted(reps.iterdir()) if (p / RAW_FILE).is_file()]
+        judged = None if stop is None else {f"seed{int(s)}" for s in stop["seeds"]}  # a stop binds the redraw
+        records = [read_results(p / RAW_FILE) for p in sorted(reps.iterdir())
+                   if (p / RAW_FILE).is_file() and (judged is None or p.name in judged)]
         if records:
             return finish_replicated(out, records, command=prev.get("command"), calibration_studies=calibration_studies)
     if not path.is_file() and (Path(out) / WALKS_TABLE).is_file():

@@ -25,8 +25,8 @@ WHEN = "2026-12-05T01:00:00Z"
 
 
 def _study(tmp_path, n_complete: int, partial: tuple = (), command: str | None = None):
-    """A pre-registered folder of 12 seeds (48 walks): seeds 0 .. n_complete-1 with every walk record and raw.json,
-    seed n_complete with the walk records of ``partial`` only; ``command``: the study's command line, recorded by
+    """A pre-registered folder of 12 seeds (48 walks): seeds 0 .. n_complete-1 with every walk record, raw.json and
+    their results (an empty results.json), seed n_complete with the walk records of ``partial`` only; ``command``: the study's command line, recorded by
     each complete walk's VO benchmark (``{out}`` is the folder)."""
     import validation.live.experiment as experiment
 
@@ -47,6 +47,7 @@ def _study(tmp_path, n_complete: int, partial: tuple = (), command: str | None =
                     json.dumps({"command": command.format(out=out)}))
         if k < n_complete:
             (exp / "raw.json").write_text(json.dumps(recs[k]))
+            (exp / "results.json").write_text("{}")
     return out
 
 
@@ -214,7 +215,8 @@ def test_the_command_line_stops_a_study_once_and_not_with_redraw_or_resume(tmp_p
     assert res["command"] == "exposim validate live -o . --cycles 8 --replicates 12"
     stop = json.loads((out / STOP_FILE).read_text())
     assert stop["reason"] == "the budget: 24 h of two cores"
-    assert stop["command"] == "python -m validation.live -o . --stop 'the budget: 24 h of two cores'"
+    assert stop["command"] == ("python -m validation.live -o . --stop 'the budget: 24 h of two cores' "
+                               "--calibration-studies 0") and stop["calibration_studies"] == 0
     assert main(["-o", str(out), "--stop", "again"]) == 1 and "already stopped" in capsys.readouterr().err
 
 
@@ -226,19 +228,6 @@ def test_a_stop_checks_everything_before_it_writes_and_a_redraw_mends_one_cut_sh
     import validation.live.experiment as experiment
 
     recs = _records(12, 8)
-    # a stale, larger walks.csv (an earlier look with another seed's walks): refused, nothing written
-    out = _study(tmp_path / "a", 10)
-    ref = _study(tmp_path / "r", 10)
-    experiment.stop_study(ref, "budget", calibration_studies=0, when=WHEN)
-    (out / "walks.csv").write_bytes((ref / "walks.csv").read_bytes() + b"lake/seed99,lake,99,fixed,live,1\n")
-    before = _files(out)
-    with pytest.raises(LiveError, match="walks.csv: differs from the walks recomputed.*nothing was written"):
-        experiment.stop_study(out, "budget", calibration_studies=0, when=WHEN)
-    assert _files(out) == before and not (out / STOP_FILE).exists()
-    # a seed's raw.json from a run with a failed walk is not reused: the seed is assembled from its walk records
-    out = _study(tmp_path / "b", 10)
-    stale = {**recs[3], "failed_walks": [{"walk": f"{SCENES[1]}/seed3", "error": "killed"}]}
-    (out / "replicates" / "seed3" / "raw.json").write_text(json.dumps(stale))
     assembled, finished = [], []
 
     def assemble(exp, cfg, failed, command=None):
@@ -247,14 +236,41 @@ def test_a_stop_checks_everything_before_it_writes_and_a_redraw_mends_one_cut_sh
 
     monkeypatch.setattr(experiment, "assemble_raw", assemble)
     monkeypatch.setattr(experiment, "finish", lambda exp, raw: finished.append(exp.name))
+    # a stale, larger walks.csv (an earlier look with another seed's walks): refused before anything is written,
+    # the raw.json of a seed assembled for the stop included
+    out = _study(tmp_path / "a", 10)
+    ref = _study(tmp_path / "r", 10)
+    experiment.stop_study(ref, "budget", calibration_studies=0, when=WHEN)
+    (out / "walks.csv").write_bytes((ref / "walks.csv").read_bytes() + b"lake/seed99,lake,99,fixed,live,1\n")
+    (out / "replicates" / "seed2" / "raw.json").unlink()
+    before = _files(out)
+    with pytest.raises(LiveError, match="walks.csv: differs from the walks recomputed.*nothing was written"):
+        experiment.stop_study(out, "budget", calibration_studies=0, when=WHEN)
+    assert _files(out) == before and not (out / STOP_FILE).exists() and assembled == [("seed2", 2, {})]
+    assert finished == []
+    # a seed's raw.json from a run with a failed walk, or without a scene, is not reused: the seed is assembled
+    # from its walk records and finished; a whole one with its results is kept as it is
+    out = _study(tmp_path / "b", 10)
+    stale = {**recs[3], "failed_walks": [{"walk": f"{SCENES[1]}/seed3", "error": "killed"}]}
+    (out / "replicates" / "seed3" / "raw.json").write_text(json.dumps(stale))
+    short = {**recs[4], "per_scene": {s: {} for s in SCENES[:3]}}
+    (out / "replicates" / "seed4" / "raw.json").write_text(json.dumps(short))
+    assembled.clear()
     res = experiment.stop_study(out, "budget", calibration_studies=0, when=WHEN)
-    assert assembled == [("seed3", 3, {})] and finished == ["seed3"]
+    assert assembled == [("seed3", 3, {}), ("seed4", 4, {})] and finished == ["seed3", "seed4"]
     assert json.loads((out / "replicates" / "seed3" / "raw.json").read_text()) == recs[3]
     assert (out / "results.json").read_bytes() == (ref / "results.json").read_bytes()
     assert res["metrics"] == json.loads((ref / "results.json").read_text())["metrics"]
-    # cut short after stop.json (a seed's results fail): --redraw assembles what is missing, to the same bytes
-    out = _study(tmp_path / "c", 10)
-    (out / "replicates" / "seed7" / "raw.json").unlink()
+    # cut short after stop.json: seed7's results fail after its raw.json is written, seed8 is never reached; a
+    # plain --redraw finishes seed7, assembles seed8 and draws the look with the stop's walks command and count of
+    # calibration studies (stop.json keeps it), to the same bytes as a stop that was not cut short
+    cmd = "exposim validate live -o {out} --cycles 8 --replicates 12"
+    ref = _study(tmp_path / "rc", 10, command=cmd)
+    experiment.stop_study(ref, "budget", calibration_studies=0, when=WHEN)
+    out = _study(tmp_path / "c", 10, command=cmd)
+    for k in (7, 8):
+        for name in ("raw.json", "results.json"):
+            (out / "replicates" / f"seed{k}" / name).unlink()
 
     def crash(exp, raw):
         raise RuntimeError("disk full")
@@ -263,11 +279,16 @@ def test_a_stop_checks_everything_before_it_writes_and_a_redraw_mends_one_cut_sh
     with pytest.raises(RuntimeError, match="disk full"):
         experiment.stop_study(out, "budget", calibration_studies=0, when=WHEN)
     assert (out / STOP_FILE).read_bytes() == (ref / STOP_FILE).read_bytes() and not (out / "results.json").exists()
-    (out / "replicates" / "seed7" / "raw.json").unlink()  # as if the crash came before it was written
-    monkeypatch.setattr(experiment, "finish", lambda exp, raw: None)
-    experiment.redraw(out, calibration_studies=0)
-    for name in ("results.json", "walks.csv", "report.md", "power.json"):
+    assert (out / "replicates" / "seed7" / "raw.json").is_file()
+    assert not (out / "replicates" / "seed8" / "raw.json").exists()
+    finished.clear()
+    assembled.clear()
+    monkeypatch.setattr(experiment, "finish", lambda exp, raw: finished.append(exp.name))
+    experiment.redraw(out)
+    assert finished == ["seed7", "seed8"] and assembled == [("seed8", 8, {})]
+    for name in ("results.json", "walks.csv", "report.md", "power.json", "calibration.json"):
         assert (out / name).read_bytes() == (ref / name).read_bytes(), name
+    assert json.loads((out / "results.json").read_text())["command"] == cmd.format(out=".")
 
 
 def test_a_stopped_study_binds_every_later_look_to_its_seeds(tmp_path):
@@ -288,6 +309,12 @@ def test_a_stopped_study_binds_every_later_look_to_its_seeds(tmp_path):
     with pytest.raises(LiveError, match=r"stopped with seeds .* judged; the records given are of seeds"):
         experiment.finish_replicated(out, recs[:9] + recs[10:11], calibration_studies=0)
     # every planned seed finished: judged at its planned size, never stopped
+    # a stopped folder without study.json redraws the stop's seeds only, not a seed begun after the stop
+    before = (out / "results.json").read_bytes()
+    (out / "replicates" / "seed10" / "raw.json").write_text(json.dumps(recs[10]))
+    (out / "study.json").unlink()
+    experiment.redraw(out)
+    assert (out / "results.json").read_bytes() == before
     full = _study(tmp_path / "full", 12)
     with pytest.raises(LiveError, match="every one of the 48 pre-registered walks is finished"):
         experiment.stop_study(full, "budget", when=WHEN)
