@@ -19,10 +19,12 @@ runs (common random numbers) and cancels in their differences.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 
 from emulator.core.stats import percentile_interval, rng_of
+from emulator.io.files import read_text, write_results, write_text
 from validation.live.config import (
     COMPARISONS,
     CONDITIONS,
@@ -162,10 +164,6 @@ def store_walks_table(out, walks, tables: dict, methods, name: str = WALKS_TABLE
     keeps is completed (a resumed study adds walks); one whose rows differ is never
     overwritten (a :class:`~validation.live.config.LiveError` says so).
     """
-    from pathlib import Path
-
-    from emulator.io.files import read_text, write_text
-
     path = Path(out) / name
     text = walks_table_csv(walks, tables, methods)
     refusal = table_refusal(path, text)
@@ -179,10 +177,6 @@ def store_walks_table(out, walks, tables: dict, methods, name: str = WALKS_TABLE
 def table_refusal(path, text: str) -> str | None:
     """Why the per-walk table ``text`` may not be written to ``path`` (a table there with a row ``text`` does not
     keep), or None (no table, the same, or one that ``text`` completes)."""
-    from pathlib import Path
-
-    from emulator.io.files import read_text
-
     path = Path(path)
     if not path.is_file():
         return None
@@ -412,9 +406,5 @@ def calibration(tables: dict, walks, methods, *, seed: int = 0, n_studies: int |
 def store_calibration(out, cal: dict) -> str:
     """Write the calibration into the study folder ``out`` (:data:`~validation.verdicts.plasmode.CALIBRATION_FILE`,
     rewritten with results.json by ``--redraw``); returns its name."""
-    from pathlib import Path
-
-    from emulator.io.files import write_results
-
     write_results(Path(out) / CALIBRATION_FILE, cal)
     return CALIBRATION_FILE

@@ -36,7 +36,7 @@ from validation.verdicts.agreement import (
     omega2_over_plan,
     pvalues_of_fraction,
 )
-from validation.verdicts.ranking import cluster_plan, walk_labels
+from validation.verdicts.ranking import cluster_plan, finite_or_none, walk_labels
 
 __all__ = ["MC_CONFIDENCE", "MC_UNDETERMINED", "wilson", "pvalue_interval", "headline_family", "ruled_verdict",
            "apply_monte_carlo_rule", "verdict_stability"]
@@ -96,14 +96,10 @@ def _member(live, emulated, control, clusters, n_resamples: int, seed, omega2_ma
     b = judge_batch(L[None], E[None], n_resamples=n_resamples, seed=rng, omega2_max=omega2_max, plan=plan,
                     n_units=units)
     boot = omega2_over_plan(plan, L, E)
-    def finite(v):  # as judge records them: a p or omega2 that is not finite is None
-        v = float(v)
-        return v if math.isfinite(v) else None
-
     return {"verdict": VERDICTS[int(b["verdict"][0])], "reason": "", "n_walks": int(L.shape[0]),
-            "n_clusters": units, "live_method_p": float(b["live_p"][0]), "p_agrees": finite(b["p_agrees"][0]),
-            "p_disagrees": finite(b["p_disagrees"][0]),
-            "omega2_untruncated": finite(b["omega2_untruncated"][0]),
+            "n_clusters": units, "live_method_p": float(b["live_p"][0]), "p_agrees": finite_or_none(b["p_agrees"][0]),
+            "p_disagrees": finite_or_none(b["p_disagrees"][0]),
+            "omega2_untruncated": finite_or_none(b["omega2_untruncated"][0]),
             "mc": pvalue_interval(boot, float(b["omega2_untruncated"][0]), omega2_max)}
 
 
@@ -126,8 +122,7 @@ def headline_family(tables: dict, walks, methods, *, seed: int = 0, n_resamples:
         control = tables.get(RESEEDED.get(ref))  # judge_metrics' control: its walks are judge's walks
         comparisons[label] = {"status": "run", "metrics": {
             m: _member(tables[ref][m], tables[other][m], None if control is None else control[m], clusters,
-                       n_resamples,
-                       [seed, 22_001, c, list(JUDGED_METRICS).index(m)], omega2_max)
+                       n_resamples, [seed, 22_001, c, list(JUDGED_METRICS).index(m)], omega2_max)
             for m in HEADLINE_METRICS if m in tables[ref] and m in tables[other] and m not in excluded}}
     apply_family(comparisons, alpha=alpha, min_walks=MIN_WALKS, excluded=excluded)
     members = [(label, m, r) for label, c in comparisons.items() for m, r in c["metrics"].items()]
@@ -145,8 +140,9 @@ def headline_family(tables: dict, walks, methods, *, seed: int = 0, n_resamples:
         verdict_mc = r["verdict"]
         if key is not None and adj[key][0] <= alpha < adj[key][1]:
             verdict_mc = MC_UNDETERMINED
-        out[f"{label}: {m}"] = {k: r[k] for k in ("verdict", "verdict_alone", "n_walks", "omega2_untruncated", "p_agrees",
-                                                  "p_disagrees", "p_agrees_adjusted", "p_disagrees_adjusted", "mc")}
+        out[f"{label}: {m}"] = {k: r[k] for k in ("verdict", "verdict_alone", "n_walks", "omega2_untruncated",
+                                                  "p_agrees", "p_disagrees", "p_agrees_adjusted",
+                                                  "p_disagrees_adjusted", "mc")}
         out[f"{label}: {m}"].update(adjusted_mc=adj, verdict_mc=verdict_mc)
     return out
 

@@ -49,8 +49,6 @@ emulated against tau-b live vs control (its bootstrap distribution).
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from emulator.core.stats import (
@@ -73,7 +71,14 @@ from validation.verdicts.interaction import (
     one_sided_bounds,
     pvalues_of_fraction,
 )
-from validation.verdicts.ranking import cluster_plan, emulation_bias, margin_in_ranking_terms, over_plan, pairs_check
+from validation.verdicts.ranking import (
+    cluster_plan,
+    emulation_bias,
+    finite_or_none,
+    margin_in_ranking_terms,
+    over_plan,
+    pairs_check,
+)
 
 # ALPHA, OMEGA2_MAX and the omega2 statistics live in validation.verdicts.interaction; given here too, as before
 __all__ = ["ALPHA", "OMEGA2_MAX", "MIN_WALKS", "VERDICTS", "complete_walks", "omega2", "omega2_untruncated",
@@ -153,13 +158,9 @@ def judge_batch(live, emulated, *, n_resamples: int = 1000, seed=0, omega2_max: 
             "tied": tied, "p_agrees": p_agrees, "p_disagrees": p_disagrees}
 
 
-def _finite(v):
-    return None if v is None or not math.isfinite(float(v)) else float(v)
-
-
 def _interval(lo, hi):
     """[lo, hi] for results.json: an unbounded end is None (JSON has no infinity)."""
-    return [_finite(lo), _finite(hi)]
+    return [finite_or_none(lo), finite_or_none(hi)]
 
 
 def _covering(estimate, lo, hi):
@@ -256,12 +257,12 @@ def judge(live, emulated, control=None, *, methods=None, margin: float | None = 
                         min_walks=min_walks, plan=plan, n_units=units)
     F, p = _live_f_test(L)
     p = float(p)
-    out["live_method_f"], out["live_method_p"] = _finite(F), p
-    out["omega2"] = _finite(batch["omega2"][0])
-    out["omega2_untruncated"] = _finite(batch["omega2_untruncated"][0])
+    out["live_method_f"], out["live_method_p"] = finite_or_none(F), p
+    out["omega2"] = finite_or_none(batch["omega2"][0])
+    out["omega2_untruncated"] = finite_or_none(batch["omega2_untruncated"][0])
     lo, hi = float(batch["lo"][0]), float(batch["hi"][0])
     out["omega2_ci90"] = _interval(lo, hi)
-    out["p_agrees"], out["p_disagrees"] = _finite(batch["p_agrees"][0]), _finite(batch["p_disagrees"][0])
+    out["p_agrees"], out["p_disagrees"] = finite_or_none(batch["p_agrees"][0]), finite_or_none(batch["p_disagrees"][0])
     if detail:
         _details(out, L, E, C, plan, names, margin, higher_is_better, alpha, omega2_max, rng)
         if units < min_walks:
@@ -303,14 +304,14 @@ def _details(out, L, E, C, plan, names, margin, higher_is_better, alpha, omega2_
     from scipy.stats import ttest_1samp
 
     w, m = L.shape
-    out["disattenuated_correlation"] = _finite(_disattenuated(L, E))
+    out["disattenuated_correlation"] = finite_or_none(_disattenuated(L, E))
     out["disattenuated_correlation_ci95"] = _interval(*_nan_interval(over_plan(_disattenuated, plan, L, E), alpha))
     mean_l = L.mean(axis=0)
     tau, tle, ci = _tau_interval(L, E, plan, alpha)
-    out["tau_live_emulated"], out["tau_live_emulated_ci95"] = _finite(tau), ci
+    out["tau_live_emulated"], out["tau_live_emulated_ci95"] = finite_or_none(tau), ci
     if C is not None:
         tau, tll, ci = _tau_interval(L, C, plan, alpha)
-        out["tau_live_live"], out["tau_live_live_ci95"] = _finite(tau), ci
+        out["tau_live_live"], out["tau_live_live_ci95"] = finite_or_none(tau), ci
         both = np.isfinite(tle) & np.isfinite(tll)
         out["tau_emulated_below_control_fraction"] = float(np.mean(tle[both] < tll[both])) if both.any() else None
     out["margin_in_ranking_terms"] = margin_in_ranking_terms(mean_l, omega2_max, higher_is_better=higher_is_better,

@@ -26,7 +26,7 @@ import numpy as np
 from emulator.core.stats import kendall_tau_b, percentile_interval, rng_of
 from validation.verdicts.claims import holm_rows, one_sided_p
 
-__all__ = ["walk_labels", "cluster_plan", "over_plan", "margin_in_ranking_terms", "emulation_bias", "pairs_check"]
+__all__ = ["walk_labels", "finite_or_none", "cluster_plan", "over_plan", "margin_in_ranking_terms", "emulation_bias", "pairs_check"]
 
 
 def walk_labels(walks) -> tuple[list[str], list[int]]:
@@ -102,13 +102,14 @@ def emulation_bias(live, emulated, methods, plan, *, confidence: float = 0.95) -
     share = ss / ss.sum() if ss.sum() > 0 else np.full(d.shape[1], np.nan)
     out = {}
     for k, m in enumerate(methods):
-        out[m] = {"mean": float(d[:, k].mean()), "ci95": [_finite(lo[k]), _finite(hi[k])],
+        out[m] = {"mean": float(d[:, k].mean()), "ci95": [finite_or_none(lo[k]), finite_or_none(hi[k])],
                   "sd_over_walks": float(d[:, k].std(ddof=1)) if d.shape[0] > 1 else None,
-                  "residual_variance_share": _finite(share[k])}
+                  "residual_variance_share": finite_or_none(share[k])}
     return out
 
 
-def _finite(v):
+def finite_or_none(v) -> float | None:
+    """``v`` as a float, or None where it is None or not finite (how a verdict records a p or an omega2)."""
     return None if v is None or not math.isfinite(float(v)) else float(v)
 
 
