@@ -9,10 +9,14 @@ REPO="$(cd "$HERE/../.." && pwd)"
 OUT=/work/studies/live-study-v3
 DEST="$REPO/docs/results/live-study-v3-$2"
 [ -e "$DEST" ] && { echo "$DEST exists; not overwritten" >&2; exit 2; }
+WT=/work/wt/study
+# The study's processes: its command and every process it started (Dask's spawned workers, the method fork
+# servers), all of which run in the worktree.
+study_pids() { for p in /proc/[0-9]*; do [ "$(readlink "$p/cwd" 2>/dev/null)" = "$WT" ] && basename "$p"; done; true; }
 pkill -f "validate live -o $OUT" || true
 sleep 20
-if pgrep -f "validate live -o $OUT" > /dev/null || pgrep -f "dask.*worker|distributed.*nanny" > /dev/null; then
-  echo "the study's processes are still running; stop refused" >&2; exit 2
+if [ -n "$(study_pids)" ]; then
+  echo "the study's processes are still running ($(study_pids | tr '\n' ' ')); stop refused" >&2; exit 2
 fi
 cd "$REPO"
 EXPOSIM_CACHE=/work/cache-study .venv/bin/python -m emulator.commands.cli validate live -o "$OUT" \

@@ -26,7 +26,8 @@ import numpy as np
 from emulator.core.stats import kendall_tau_b, percentile_interval, rng_of
 from validation.verdicts.claims import holm_rows, one_sided_p
 
-__all__ = ["walk_labels", "finite_or_none", "cluster_plan", "over_plan", "margin_in_ranking_terms", "emulation_bias", "pairs_check"]
+__all__ = ["walk_labels", "finite_or_none", "cluster_plan", "over_plan", "margin_in_ranking_terms", "emulation_bias",
+           "pairs_check"]
 
 
 def walk_labels(walks) -> tuple[list[str], list[int]]:
