@@ -1,5 +1,5 @@
 #!/bin/bash
-# Runs (or resumes) the pre-registered live study v3 (issue 44) from the fixed commit 1bc3ebf, in the background.
+# Runs (or resumes) the pre-registered live study v3 from the fixed commit 1bc3ebf, in the background.
 # The study folder, worktree and render cache live outside the repository:
 #   worktree /work/wt/study (1bc3ebf, detached), output /work/studies/live-study-v3, cache /work/cache-study.
 # A walk in flight when the process ends is run again on --resume (its cached renders are reused when the cache
