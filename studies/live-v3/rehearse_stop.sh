@@ -4,14 +4,11 @@
 # 2 seeds); its folder is then cut to what a study ended mid-walk leaves (no derived file, the last seed one walk
 # short), main's `validate live --stop` draws the final look on it, and a copy is redrawn and compared byte for
 # byte. It checks that main reads 1bc3ebf's walk records, writes the final look's checks (report.md) and redraws
-# to the same bytes. About 7 min of walks and 3 min of stop at nice 19 beside the study.
+# to the same bytes. About 7 min of walks, 3 min of stop and 12 min of redraw at nice 19 beside the study.
 # Usage: rehearse_stop.sh [WORKDIR]   (default: a new temporary folder; the study's folders are not touched)
 set -euo pipefail
-HERE="$(cd "$(dirname "$0")" && pwd)"
-REPO="$(cd "$HERE/../.." && pwd)"
-WT=/work/wt/study
-[ -d "$WT" ] || git -C "$REPO" worktree add --detach "$WT" 1bc3ebf
-[ "$(git -C "$WT" rev-parse HEAD)" = "$(git -C "$REPO" rev-parse 1bc3ebf)" ] || { echo "worktree is not at 1bc3ebf" >&2; exit 2; }
+. "$(dirname "$0")/common.sh"
+ensure_worktree
 W="${1:-$(mktemp -d)}"
 [ -e "$W/study" ] && { echo "$W/study exists; not overwritten" >&2; exit 2; }
 mkdir -p "$W"

@@ -6,15 +6,8 @@
 # is still there). Finished walks are copied into studies/live-v3/progress/ by save.sh at the end of each session
 # and restored from there by this script when the machine is new (see README.md beside it).
 set -euo pipefail
-HERE="$(cd "$(dirname "$0")" && pwd)"
-WT=/work/wt/study
-OUT=/work/studies/live-study-v3
-CACHE=/work/cache-study
-REPO="$(cd "$HERE/../.." && pwd)"
-if [ ! -d "$WT" ]; then
-  git -C "$REPO" worktree add --detach "$WT" 1bc3ebf
-fi
-[ "$(git -C "$WT" rev-parse HEAD)" = "$(git -C "$REPO" rev-parse 1bc3ebf)" ] || { echo "worktree is not at 1bc3ebf" >&2; exit 2; }
+. "$(dirname "$0")/common.sh"
+ensure_worktree
 mkdir -p "$CACHE"
 if [ ! -d "$OUT" ] && [ -d "$HERE/progress" ]; then
   mkdir -p "$(dirname "$OUT")" && cp -r "$HERE/progress" "$OUT"

@@ -5,8 +5,7 @@
 # folders, benchmarks' folders and walks in flight are left out (a walk in flight is run again on --resume).
 # Nothing is read or summarised: the records are copied as bytes.
 set -euo pipefail
-HERE="$(cd "$(dirname "$0")" && pwd)"
-OUT=/work/studies/live-study-v3
+. "$(dirname "$0")/common.sh"
 [ -d "$OUT" ] || { echo "$OUT: no study folder" >&2; exit 2; }
 mkdir -p "$HERE/progress"
 cd "$OUT"

@@ -4,12 +4,9 @@
 # redraws to the same bytes. Usage: stop.sh go YYYY-MM-DD   (the word "go" guards against a stray call)
 set -euo pipefail
 [ "${1:-}" = go ] && [ -n "${2:-}" ] || { echo "usage: $0 go YYYY-MM-DD" >&2; exit 2; }
-HERE="$(cd "$(dirname "$0")" && pwd)"
-REPO="$(cd "$HERE/../.." && pwd)"
-OUT=/work/studies/live-study-v3
+. "$(dirname "$0")/common.sh"
 DEST="$REPO/docs/results/live-study-v3-$2"
 [ -e "$DEST" ] && { echo "$DEST exists; not overwritten" >&2; exit 2; }
-WT=/work/wt/study
 # The study's processes: its command and every process it started (Dask's spawned workers, the method fork
 # servers), all of which run in the worktree.
 study_pids() { for p in /proc/[0-9]*; do [ "$(readlink "$p/cwd" 2>/dev/null)" = "$WT" ] && basename "$p"; done; true; }
@@ -19,9 +16,9 @@ if [ -n "$(study_pids)" ]; then
   echo "the study's processes are still running ($(study_pids | tr '\n' ' ')); stop refused" >&2; exit 2
 fi
 cd "$REPO"
-EXPOSIM_CACHE=/work/cache-study .venv/bin/python -m emulator.commands.cli validate live -o "$OUT" \
+EXPOSIM_CACHE="$CACHE" .venv/bin/python -m emulator.commands.cli validate live -o "$OUT" \
   --stop "the budget: 24 h of two cores (DECISIONS.md)"
 mkdir -p "$DEST"
 find "$OUT" -maxdepth 1 -type f -exec cp -p -t "$DEST" {} +
-cp -p "$HERE/DECISIONS.md" "$HERE/run.sh" "$DEST/"
+cp -p "$HERE/DECISIONS.md" "$HERE/run.sh" "$HERE/common.sh" "$DEST/"
 "$HERE/redraw_check.sh" "$REPO" "live-study-v3-$2"
