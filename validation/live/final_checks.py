@@ -158,12 +158,21 @@ def _pct(v) -> str:
     return format_number(None if v is None else 100 * v, ".0f", missing="n/a") + ("" if v is None else " %")
 
 
+#: The targets read from the own-residuals calibration (None where it could not be computed for a verdict).
+CALIBRATION_TARGETS = ("perfect_agrees", "margin_disagrees", "beyond_disagrees")
+
+
 def _target_cell(t: dict, optional: bool) -> str:
     """A target's cell: the value and met / not met; an optional one not measured (no stochastic method, or no
-    walk complete for the metric) is 'n/a' alone."""
-    if t["value"] is None and optional:
-        return "n/a"
+    walk complete for the metric) is 'n/a' alone, a calibration target not computed is not met and says so."""
+    if t["value"] is None:
+        return "n/a" if optional else "not computed (not met)"
     return f"{_pct(t['value'])} ({'met' if t['met'] else 'not met'})"
+
+
+def _not_computed(per: dict) -> int:
+    """How many calibration targets of the verdicts ``per`` were not computed."""
+    return sum(e[k]["value"] is None for e in per.values() for k in CALIBRATION_TARGETS)
 
 
 def checks_markdown(checks: dict) -> str:
@@ -188,7 +197,10 @@ def checks_markdown(checks: dict) -> str:
               for k in ("perfect_agrees", "margin_disagrees", "beyond_disagrees", "stochastic_share")),
             "n/a" if t["walks_to_decide_towards"] is None else
             f"{wd if wd is not None else 'beyond the sizes tried'} ({t['walks_to_decide_towards']})"]) + " |")
-    lines += ["", f"Every target met: {'yes' if checks['targets']['all_met'] else 'no'}.", "",
+    missing = _not_computed(per)
+    lines += ["", f"Every target met: {'yes' if checks['targets']['all_met'] else 'no'}"
+              + (f" ({missing} calibration target(s) not computed, each counted as not met: the own-residuals "
+                 "calibration could not be drawn for that verdict)" if missing else "") + ".", "",
               "### Level shifts (emulated minus live, relative to live's mean) and scenes", "",
               "| comparison | metric | omega2 | level shift [95 %] | verdict | per scene: omega2 / shift |",
               "| --- | --- | --- | --- | --- | --- |"]

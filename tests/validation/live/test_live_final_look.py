@@ -189,6 +189,21 @@ def test_a_verdict_that_changes_with_the_bootstrap_seed_fails_its_target():
     assert t["per_verdict"]["c: m"]["stable"] == {"value": None, "met": False} and not t["all_met"]
 
 
+def test_a_calibration_target_not_computed_is_not_met_and_is_counted_apart():
+    from validation.live.final_checks import _not_computed, _target_cell
+
+    checks = _checks(0.9, 0.0, 0.9, None)
+    checks["monte_carlo"]["c: flat"] = {}  # a metric the own-residuals calibration could not draw
+    checks["own_calibration"]["comparisons"]["c"]["metrics"]["flat"] = {"status": "not computed"}
+    t = targets(checks)
+    per = t["per_verdict"]
+    assert per["c: flat"]["perfect_agrees"] == {"value": None, "met": False} and not t["all_met"]
+    assert _not_computed(per) == 3 and _not_computed({"c: m": per["c: m"]}) == 0
+    assert _target_cell(per["c: flat"]["beyond_disagrees"], False) == "not computed (not met)"
+    assert _target_cell(per["c: m"]["beyond_disagrees"], False) == "90 % (met)"
+    assert _target_cell(per["c: m"]["stochastic_share"], True) == "n/a"  # no stochastic method measured
+
+
 def test_the_checks_render_every_headline_verdict_with_its_targets(tmp_path):
     import validation.live.experiment as experiment
 
@@ -198,8 +213,9 @@ def test_the_checks_render_every_headline_verdict_with_its_targets(tmp_path):
     first = text.split("### Level shifts")[0]
     rows = [ln for ln in first.splitlines() if ln.startswith("| emulated vs cycle-rate live: ")]
     assert len(rows) == res["final_checks"]["family_size"] == 4
-    assert all("n/a (not met)" in r for r in rows)  # no own calibration asked for: no target can be met
-    assert "Every target met: no." in text and np.isfinite(res["final_checks"]["level_shifts"][
+    # no own calibration asked for: no target is computed, and none is met
+    assert all(r.count("not computed (not met)") == 3 for r in rows)
+    assert "Every target met: no (12 calibration target(s) not computed, each counted as not met" in text and np.isfinite(res["final_checks"]["level_shifts"][
         "emulated vs cycle-rate live"]["median_matches"]["shift"]["relative"])
 
 
