@@ -158,6 +158,10 @@ def _pct(v) -> str:
     return format_number(None if v is None else 100 * v, ".0f", missing="n/a") + ("" if v is None else " %")
 
 
+#: Which walks the level-shift table reads, in words (its omega2 can differ from the headline's).
+LEVEL_SHIFT_WALKS = ("This table reads the walks complete in live and emulated; the headline's omega2 reads those "
+                     "complete in the re-seeded live control too, so the two omega2 differ where a walk has no value "
+                     "in the control.")
 #: The targets read from the own-residuals calibration (None where it could not be computed for a verdict).
 CALIBRATION_TARGETS = ("perfect_agrees", "margin_disagrees", "beyond_disagrees")
 
@@ -202,6 +206,7 @@ def checks_markdown(checks: dict) -> str:
               + (f" ({missing} calibration target(s) not computed, each counted as not met: the own-residuals "
                  "calibration could not be drawn for that verdict)" if missing else "") + ".", "",
               "### Level shifts (emulated minus live, relative to live's mean) and scenes", "",
+              LEVEL_SHIFT_WALKS, "",
               "| comparison | metric | omega2 | level shift [95 %] | verdict | per scene: omega2 / shift |",
               "| --- | --- | --- | --- | --- | --- |"]
     for label, per_metric in checks["level_shifts"].items():

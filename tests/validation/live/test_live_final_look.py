@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from validation.live.config import SCENES, LiveConfig, LiveError
-from validation.live.final_checks import TARGETS, checks_markdown, targets
+from validation.live.final_checks import LEVEL_SHIFT_WALKS, TARGETS, checks_markdown, targets
 from validation.live.monte_carlo import MC_UNDETERMINED, apply_monte_carlo_rule, ruled_verdict
 from validation.live.preregistration import (
     PREREG_FILE,
@@ -204,6 +204,26 @@ def test_a_calibration_target_not_computed_is_not_met_and_is_counted_apart():
     assert _target_cell(per["c: m"]["stochastic_share"], True) == "n/a"  # no stochastic method measured
 
 
+def test_the_level_shift_table_reads_the_walks_complete_in_live_and_emulated_not_in_the_control():
+    from validation.live.final_checks import _level_shifts
+    from validation.verdicts.agreement import omega2_untruncated
+
+    rng = np.random.default_rng(7)
+    walks = [f"{s}/seed{k}" for k in range(6) for s in ("a", "b")]
+    L = rng.normal(0, 1, (12, 4)) + np.arange(4)
+    E = L + rng.normal(0, 0.3, (12, 4)) + 0.5
+    C = L + rng.normal(0, 0.3, (12, 4))
+    C[0, 1], E[3, 2] = np.nan, np.nan  # one walk without a value in the control, one in emulated
+    tables = {"live-fixed-instant": {"median_matches": L}, "emulated-plain": {"median_matches": E},
+              "live-fixed-instant-reseeded": {"median_matches": C}}
+    e = _level_shifts(tables, walks, ["median_matches"], 0, 200, 0.1)["emulated vs cycle-rate live"]["median_matches"]
+    keep = np.arange(12) != 3  # walk 0 stays: its control gap does not drop it here
+    assert e["omega2_untruncated"] == pytest.approx(float(omega2_untruncated(L[keep], E[keep])), abs=1e-12)
+    all3 = keep & (np.arange(12) != 0)  # the headline's walks: complete in the control too
+    assert e["omega2_untruncated"] != pytest.approx(float(omega2_untruncated(L[all3], E[all3])))
+    assert sum(v["n_walks"] for v in e["per_scene"].values()) == 11
+
+
 def test_the_checks_render_every_headline_verdict_with_its_targets(tmp_path):
     import validation.live.experiment as experiment
 
@@ -215,6 +235,7 @@ def test_the_checks_render_every_headline_verdict_with_its_targets(tmp_path):
     assert len(rows) == res["final_checks"]["family_size"] == 4
     # no own calibration asked for: no target is computed, and none is met
     assert all(r.count("not computed (not met)") == 3 for r in rows)
+    assert LEVEL_SHIFT_WALKS in text.split("### Level shifts")[1]
     assert "Every target met: no (12 calibration target(s) not computed, each counted as not met" in text and np.isfinite(res["final_checks"]["level_shifts"][
         "emulated vs cycle-rate live"]["median_matches"]["shift"]["relative"])
 
