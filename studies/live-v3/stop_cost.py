@@ -2,7 +2,7 @@
 its plan (preregistration.json: resamples, metrics).
 
 The per-walk tables are the rehearsal's (``rehearse_stop.sh``'s stopped folder, a tiny study of the same kind),
-tiled to the study's four scenes and ``--seeds`` seeds with a seeded jitter, so that the verdicts' arithmetic runs on
+tiled to the plan's scenes and ``--seeds`` seeds with a seeded jitter, so that the verdicts' arithmetic runs on
 tables of the stop's shape.  It times what the stop computes beyond reading records and writing files: the verdicts
 with the plasmode calibration and the power analysis (``judge_metrics``), then the final look's checks
 (``final_checks``: own-residuals calibration, 20 bootstrap seeds, leave-one-scene-out).  The numbers are wall and
@@ -24,14 +24,13 @@ from validation.verdicts.plasmode import STUDIES
 from validation.live.evidence import judge_metrics, parse_walks_table
 from validation.live.final_checks import final_checks
 
-SCENES = ["forest_winter", "sun_glare", "forest_edge", "forest_summer"]
 
-
-def tiled(tables: dict, n_rows: int, n_seeds: int, seed: int = 44) -> tuple[list[str], dict]:
-    """Walk names of ``n_seeds`` seeds x :data:`SCENES` and the tables' rows drawn (per walk, one of the
-    rehearsal's ``n_rows`` walks, the same row in every run) with a small seeded jitter on every finite cell."""
+def tiled(tables: dict, scenes, n_seeds: int, seed: int = 44) -> tuple[list[str], dict]:
+    """Walk names of ``n_seeds`` seeds x ``scenes`` and the tables' rows drawn (per walk, one of the rehearsal's
+    walks, the same row in every run) with a small seeded jitter on every finite cell."""
     rng = np.random.default_rng(seed)
-    walks = [f"{s}/seed{k}" for k in range(n_seeds) for s in SCENES]
+    walks = [f"{s}/seed{k}" for k in range(n_seeds) for s in scenes]
+    n_rows = len(next(iter(next(iter(tables.values())).values())))
     rows = rng.integers(0, n_rows, size=len(walks))
     out = {}
     for run, per in tables.items():
@@ -50,10 +49,10 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, nargs="+", default=[3, 6, 12])
     a = ap.parse_args()
     plan = json.loads(a.prereg.read_text())
-    walks0, methods, tables0 = parse_walks_table((a.rehearsal / "walks.csv").read_text())
+    _, methods, tables0 = parse_walks_table((a.rehearsal / "walks.csv").read_text())
     R = int(plan["bootstrap_resamples"])
     for n in a.seeds:
-        walks, tables = tiled(tables0, len(walks0), n)
+        walks, tables = tiled(tables0, plan["scenes"], n)
         t0, c0 = time.perf_counter(), time.process_time()
         judge_metrics(tables, methods, seed=0, walks=walks, n_resamples=R, calibration_studies=None,
                       headline_exclusions=plan["excluded_from_headline"], monte_carlo_rule=True)

@@ -197,8 +197,7 @@ def checks_markdown(checks: dict) -> str:
         wd = t["walks_to_decide"]
         lines.append(" | ".join([
             f"| {key}", mc["verdict"], mc["ruled"], seeds, checks["second_margin"]["verdicts"][key]["ruled"],
-            *(_target_cell(t[k], k == "stochastic_share")
-              for k in ("perfect_agrees", "margin_disagrees", "beyond_disagrees", "stochastic_share")),
+            *(_target_cell(t[k], k not in CALIBRATION_TARGETS) for k in (*CALIBRATION_TARGETS, "stochastic_share")),
             "n/a" if t["walks_to_decide_towards"] is None else
             f"{wd if wd is not None else 'beyond the sizes tried'} ({t['walks_to_decide_towards']})"]) + " |")
     missing = _not_computed(per)
