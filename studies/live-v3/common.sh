@@ -12,3 +12,7 @@ ensure_worktree() {
   [ "$(git -C "$WT" rev-parse HEAD)" = "$(git -C "$REPO" rev-parse "$COMMIT")" ] \
     || { echo "worktree $WT is not at $COMMIT" >&2; exit 2; }
 }
+
+# The study's processes: its command and every process it started (Dask's spawned workers, the method fork
+# servers), all of which run in the worktree.
+study_pids() { for p in /proc/[0-9]*; do [ "$(readlink "$p/cwd" 2>/dev/null)" = "$WT" ] && basename "$p"; done; true; }

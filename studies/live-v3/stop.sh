@@ -7,9 +7,6 @@ set -euo pipefail
 . "$(dirname "$0")/common.sh"
 DEST="$REPO/docs/results/live-study-v3-$2"
 [ -e "$DEST" ] && { echo "$DEST exists; not overwritten" >&2; exit 2; }
-# The study's processes: its command and every process it started (Dask's spawned workers, the method fork
-# servers), all of which run in the worktree.
-study_pids() { for p in /proc/[0-9]*; do [ "$(readlink "$p/cwd" 2>/dev/null)" = "$WT" ] && basename "$p"; done; true; }
 pkill -f "validate live -o $OUT" || true
 sleep 20
 if [ -n "$(study_pids)" ]; then
